@@ -1,0 +1,128 @@
+/* lighting.h — device functions shared by the stages: view rays and projections,
+ * incident light, phase function, shadow-map visibility. Radiometry as in
+ * DESIGN §1: Lin = I·exp(-σt·d)/d² (point, spot inside its cone), Lin = E (directional). */
+#ifndef CLRAYS_LIGHTING_H
+#define CLRAYS_LIGHTING_H
+#include "common.h"
+
+#define INV_FOUR_PI 0.0795774715459476679f
+
+/* Screen coordinates of sample (x + ox, y + oy) in [-1, 1], y up. */
+inline float2 view_screen(global const view_t* view, int x, int y, float2 offset)
+{
+    return (float2)(2.0f * ((float)x + offset.x) / (float)view->width - 1.0f,
+                    1.0f - 2.0f * ((float)y + offset.y) / (float)view->height);
+}
+
+/* The ray of a view sample: origin and unit direction. */
+inline void view_ray(global const view_t* view, float2 s, float3* origin, float3* dir)
+{
+    float3 right = view->right.xyz * (s.x * view->scale_x);
+    float3 up = view->up.xyz * (s.y * view->scale_y);
+    if (view->projection == PROJECTION_PERSPECTIVE) {
+        *origin = view->origin.xyz;
+        *dir = normalize(view->forward.xyz + right + up);
+    } else {
+        *origin = view->origin.xyz + right + up;
+        *dir = view->forward.xyz;
+    }
+}
+
+/* Project p into a view: continuous texel coordinates and depth (distance from the
+ * origin for perspective views, along forward for orthographic ones). Returns 0
+ * when p is behind a perspective view. */
+inline int view_project(global const view_t* view, float3 p, float2* texel, float* depth)
+{
+    float3 q = p - view->origin.xyz;
+    float x = dot(q, view->right.xyz), y = dot(q, view->up.xyz), z = dot(q, view->forward.xyz);
+    float sx, sy;
+    if (view->projection == PROJECTION_PERSPECTIVE) {
+        if (z <= 0.0f) return 0;
+        *depth = length(q);
+        sx = x / (z * view->scale_x);
+        sy = y / (z * view->scale_y);
+    } else {
+        *depth = z;
+        sx = x / view->scale_x;
+        sy = y / view->scale_y;
+    }
+    *texel = (float2)((sx + 1.0f) * 0.5f * (float)view->width, (1.0f - sy) * 0.5f * (float)view->height);
+    return 1;
+}
+
+/* Henyey-Greenstein (or isotropic) phase function of cos θ, θ between the light's
+ * propagation direction and the direction towards the eye. */
+inline float phase_function(global const frame_t* frame, float cos_theta)
+{
+    if (frame->phase_type == PHASE_ISOTROPIC) return INV_FOUR_PI;
+    float g = frame->phase_g;
+    float denom = 1.0f + g * g - 2.0f * g * cos_theta;
+    return INV_FOUR_PI * (1.0f - g * g) / (denom * sqrt(denom));
+}
+
+/* Incident radiance-carrying quantity at p (DESIGN §1) and the unit direction from p
+ * towards the light. */
+inline float3 light_incident(global const light_t* light, float3 sigma_t, float3 p, float3* to_light)
+{
+    if (light->type == LIGHT_DIRECTIONAL) {
+        *to_light = -light->direction.xyz;
+        return light->power.xyz;
+    }
+    float3 w = p - light->position.xyz;
+    float d2 = dot(w, w);
+    float d = sqrt(d2);
+    *to_light = d > 0.0f ? -w / d : (float3)(0.0f, 1.0f, 0.0f);
+    if (light->type == LIGHT_SPOT && dot(w, light->direction.xyz) < light->cos_cone * d)
+        return (float3)(0.0f);
+    /* d2 is clamped only where it underflows; the 1/d² peak itself is physical. */
+    return light->power.xyz * exp(-sigma_t * d) / fmax(d2, 1e-30f);
+}
+
+/* The shadow-map view of a light that holds p: the cube face of p's major axis
+ * (faces ordered +x, -x, +y, -y, +z, -z), or the single view. */
+inline int light_view_index(global const light_t* light, float3 p)
+{
+    if (light->view_count == 1) return light->first_view;
+    float3 w = p - light->position.xyz;
+    float3 a = fabs(w);
+    int axis = (a.x >= a.y && a.x >= a.z) ? 0 : (a.y >= a.z ? 1 : 2);
+    float component = axis == 0 ? w.x : (axis == 1 ? w.y : w.z);
+    return light->first_view + 2 * axis + (component < 0.0f ? 1 : 0);
+}
+
+/* Stored blocker depth at integer texel (tx, ty) of a view, clamped to the map. */
+inline float shadow_texel(global const view_t* view, global const uint* shadow_depth, int tx, int ty)
+{
+    tx = clamp(tx, 0, view->width - 1);
+    ty = clamp(ty, 0, view->height - 1);
+    return as_float(shadow_depth[view->depth_offset + ty * view->width + tx]);
+}
+
+/* World size of one shadow-map texel at depth d: the scale of the depth bias. */
+inline float shadow_texel_size(global const light_t* light, float depth)
+{
+    return light->type == LIGHT_DIRECTIONAL ? light->texel_angle : depth * light->texel_angle;
+}
+
+/* 1 where p sees the light through the shadow map, else 0; averaged over a
+ * (2·pcf + 1)² texel footprint when pcf > 0. Points outside the map are lit: a
+ * map covers every occluder (cube, cone, or the scene bounds). bias is in texels. */
+inline float shadow_visibility(global const light_t* light, global const view_t* views,
+                               global const uint* shadow_depth, float3 p, float bias, int pcf)
+{
+    global const view_t* view = views + light_view_index(light, p);
+    float2 texel;
+    float depth;
+    if (!view_project(view, p, &texel, &depth)) return 1.0f;
+    if (texel.x < 0.0f || texel.y < 0.0f || texel.x >= (float)view->width || texel.y >= (float)view->height)
+        return 1.0f;
+    float tolerance = bias * shadow_texel_size(light, depth);
+    int tx = (int)texel.x, ty = (int)texel.y;
+    float lit = 0.0f;
+    for (int j = -pcf; j <= pcf; ++j)
+        for (int i = -pcf; i <= pcf; ++i)
+            lit += depth <= shadow_texel(view, shadow_depth, tx + i, ty + j) + tolerance ? 1.0f : 0.0f;
+    return lit / (float)((2 * pcf + 1) * (2 * pcf + 1));
+}
+
+#endif

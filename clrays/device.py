@@ -1,0 +1,167 @@
+"""The OpenCL device: which one, its context and queue, and building the stage kernels.
+
+Device choice: `--device` or `CLRAYS_DEVICE` (an index like `0:1` for platform 0,
+device 1, or a case-insensitive substring of the platform or device name such as
+`pocl` or `nvidia`); by default the first GPU, else the first CPU device.
+"""
+from __future__ import annotations
+
+import os
+import warnings
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from .errors import DeviceError
+
+
+def kernel_dir() -> Path:
+    """Folder of the `.cl` sources: inside the installed package (wheel) or the
+    repository's `cl/` beside the package (editable install, source tree)."""
+    try:
+        packaged = Path(str(resources.files("clrays") / "cl"))
+        if (packaged / "common.h").is_file():
+            return packaged
+    except (ModuleNotFoundError, TypeError):
+        pass
+    source_tree = Path(__file__).resolve().parent.parent / "cl"
+    if (source_tree / "common.h").is_file():
+        return source_tree
+    raise DeviceError("OpenCL kernel sources not found (expected clrays/cl or cl/ beside the package)")
+
+
+def _import_cl():
+    try:
+        import pyopencl as cl
+    except ImportError as exc:  # pragma: no cover - install problem
+        raise DeviceError(f"pyopencl is not importable: {exc}") from exc
+    return cl
+
+
+def list_devices() -> list[tuple[int, int, object, object]]:
+    """(platform index, device index, platform, device) for every OpenCL device."""
+    cl = _import_cl()
+    try:
+        platforms = cl.get_platforms()
+    except cl.Error as exc:
+        raise DeviceError(f"no OpenCL platform found ({exc}); install pocl-binary-distribution") from exc
+    found = []
+    for p_index, platform in enumerate(platforms):
+        try:
+            devices = platform.get_devices()
+        except cl.Error:
+            continue
+        for d_index, device in enumerate(devices):
+            found.append((p_index, d_index, platform, device))
+    return found
+
+
+def select_device(spec: str | None = None):
+    """The device named by `spec` (or CLRAYS_DEVICE), else the first GPU, else the first device."""
+    cl = _import_cl()
+    spec = spec if spec is not None else os.environ.get("CLRAYS_DEVICE") or None
+    devices = list_devices()
+    if not devices:
+        raise DeviceError("no OpenCL device found; install pocl-binary-distribution for the CPU device")
+    if spec is None:
+        gpus = [d for d in devices if d[3].type & cl.device_type.GPU]
+        return (gpus or devices)[0][3]
+    if ":" in spec and all(part.isdigit() for part in spec.split(":", 1)):
+        p, d = (int(part) for part in spec.split(":", 1))
+        for entry in devices:
+            if entry[0] == p and entry[1] == d:
+                return entry[3]
+        raise DeviceError(f"device {spec}: no such platform:device (see `clrays info`)")
+    needle = spec.lower()
+    for entry in devices:
+        if needle in entry[2].name.lower() or needle in entry[3].name.lower():
+            return entry[3]
+    raise DeviceError(f"device {spec!r}: no platform or device name contains it (see `clrays info`)")
+
+
+@dataclass
+class StageTimer:
+    """Device time per stage label, from OpenCL profiling events."""
+
+    events: dict[str, list] = field(default_factory=dict)
+
+    def add(self, label: str, event) -> None:
+        self.events.setdefault(label, []).append(event)
+
+    def milliseconds(self) -> dict[str, float]:
+        times = {}
+        for label, events in self.events.items():
+            total = 0.0
+            for event in events:
+                event.wait()
+                total += (event.profile.end - event.profile.start) * 1e-6
+            times[label] = total
+        return times
+
+
+class Device:
+    """Context, profiling queue and a cache of built stage programs for one device."""
+
+    def __init__(self, spec: str | None = None):
+        cl = _import_cl()
+        self.cl = cl
+        self.device = select_device(spec)
+        self.context = cl.Context([self.device])
+        self.queue = cl.CommandQueue(self.context, properties=cl.command_queue_properties.PROFILING_ENABLE)
+        self._programs: dict[tuple, object] = {}
+        self._kernels: dict[tuple, object] = {}
+        self.allocated_bytes = 0
+
+    @property
+    def name(self) -> str:
+        return f"{self.device.platform.name.strip()} / {self.device.name.strip()}"
+
+    def program(self, stage: str, defines: dict[str, object] | None = None):
+        """Build (once) `cl/<stage>.cl` with `-I` on the kernel folder and `-D` defines."""
+        defines = defines or {}
+        key = (stage, tuple(sorted(defines.items())))
+        if key not in self._programs:
+            folder = kernel_dir()
+            path = folder / f"{stage}.cl"
+            options = [f"-I{folder}"] + [f"-D{k}={v}" for k, v in sorted(defines.items())]
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", self.cl.CompilerWarning)
+                    self._programs[key] = self.cl.Program(self.context, path.read_text()).build(options=options)
+            except self.cl.RuntimeError as exc:
+                raise DeviceError(f"{path}: build failed with options {' '.join(options)}:\n{exc}") from exc
+        return self._programs[key]
+
+    def kernel(self, stage: str, name: str, defines: dict[str, object] | None = None):
+        """The kernel `name` of `cl/<stage>.cl`, retrieved once and reused."""
+        key = (stage, name, tuple(sorted((defines or {}).items())))
+        if key not in self._kernels:
+            self._kernels[key] = self.cl.Kernel(self.program(stage, defines), name)
+        return self._kernels[key]
+
+    def buffer(self, array: np.ndarray | None = None, nbytes: int | None = None, writable: bool = True):
+        """A device buffer, filled from `array` or of `nbytes` uninitialised bytes."""
+        mf = self.cl.mem_flags
+        flags = mf.READ_WRITE if writable else mf.READ_ONLY
+        if array is not None:
+            array = np.ascontiguousarray(array)
+            size = max(array.nbytes, 1)
+            self.allocated_bytes += size
+            if array.nbytes == 0:
+                return self.cl.Buffer(self.context, flags, 16)
+            return self.cl.Buffer(self.context, flags | mf.COPY_HOST_PTR, hostbuf=array)
+        self.allocated_bytes += nbytes
+        return self.cl.Buffer(self.context, flags, max(int(nbytes), 16))
+
+    def fill(self, buffer, value: np.ndarray, nbytes: int, timer: StageTimer | None = None, label: str = "fill"):
+        event = self.cl.enqueue_fill_buffer(self.queue, buffer, value, 0, nbytes)
+        if timer is not None:
+            timer.add(label, event)
+        return event
+
+    def read(self, buffer, shape, dtype) -> np.ndarray:
+        out = np.empty(shape, dtype=dtype)
+        self.cl.enqueue_copy(self.queue, out, buffer).wait()
+        return out

@@ -1,0 +1,73 @@
+"""Writing images. The extension of the path decides the format:
+
+- `.png`: 8-bit sRGB, radiance × 2^exposure clamped to [0, 1] (opens anywhere);
+- `.exr`: float32 linear RGB (OpenEXR, ZIP compression);
+- `.npy`: float32 H×W×3 linear radiance, nothing applied.
+
+Writes are atomic: a temporary file beside the target, then a rename, so an
+interrupted or failed write never leaves a half-written image.
+"""
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from .errors import OutputError
+
+FORMATS = (".png", ".exr", ".npy")
+
+
+def check_output_path(path: str | Path) -> Path:
+    """Fail early (before rendering) on an unknown extension or an unwritable folder."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in FORMATS:
+        raise OutputError(f"{path}: unknown output extension {path.suffix or '(none)'!r}; "
+                          f"expected one of {', '.join(FORMATS)}")
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():
+        raise OutputError(f"{path}: folder {str(folder)!r} does not exist")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise OutputError(f"{path}: folder {str(folder)!r} is not writable")
+    if path.is_dir():
+        raise OutputError(f"{path}: is a folder, not a file")
+    return path
+
+
+def to_srgb8(radiance: np.ndarray, exposure: float = 0.0) -> np.ndarray:
+    """Linear radiance → 8-bit sRGB (IEC 61966-2-1 transfer curve)."""
+    x = np.clip(np.nan_to_num(radiance * (2.0**exposure), nan=0.0), 0.0, 1.0)
+    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+    return np.round(srgb * 255).astype(np.uint8)
+
+
+def write_image(path: str | Path, radiance: np.ndarray, exposure: float = 0.0) -> Path:
+    """Write (H, W, 3) linear radiance to `path` atomically; returns the path."""
+    path = check_output_path(path)
+    suffix = path.suffix.lower()
+    radiance = np.ascontiguousarray(radiance, dtype=np.float32)
+    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent or ".")
+    os.close(handle)
+    try:
+        if suffix == ".png":
+            from PIL import Image
+
+            Image.fromarray(to_srgb8(radiance, exposure), mode="RGB").save(temporary, format="PNG")
+        elif suffix == ".exr":
+            import OpenEXR
+
+            header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+            with OpenEXR.File(header, {"RGB": radiance}) as exr:
+                exr.write(temporary)
+        else:
+            np.save(temporary, radiance)
+        os.replace(temporary, path)
+    except OSError as exc:
+        raise OutputError(f"{path}: cannot write: {exc.strerror or exc}") from exc
+    finally:
+        if os.path.exists(temporary):
+            os.unlink(temporary)
+    return path

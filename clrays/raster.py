@@ -1,0 +1,58 @@
+"""Stage raster: triangles → camera depth and triangle ids, and every light's shadow map.
+
+Host side of `cl/raster.cl`. Depth is stored as the uint bits of a positive float
+(so `atomic_min` orders it) and starts at +inf (nothing hit).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import structs
+from .device import Device, StageTimer
+from .frame import FrameBuffers
+
+
+@dataclass
+class RasterResult:
+    camera_depth: object  # uint[H·W·spp]: as_uint(distance along the sample ray)
+    tri_id: object  # int[H·W·spp]: nearest triangle, -1 where nothing was hit
+    shadow_depth: object  # uint[shadow_texels]: every light's views, back to back
+
+
+def _rasterize(device: Device, buffers: FrameBuffers, view_index: int, offsets, sample_count: int,
+               depth, timer: StageTimer) -> None:
+    kernel = device.kernel("raster", "raster_depth")
+    count = buffers.inputs.tri_vertices.shape[0] // 3
+    if count == 0:
+        return
+    event = kernel(device.queue, (count,), None, buffers.tri_vertices, np.int32(count),
+                                 buffers.views, np.int32(view_index), offsets, np.int32(sample_count), depth)
+    timer.add("raster", event)
+
+
+def raster(device: Device, buffers: FrameBuffers, timer: StageTimer) -> RasterResult:
+    """Rasterize the camera view (every sample of every pixel) and all shadow-map views."""
+    inputs = buffers.inputs
+    samples = inputs.samples
+    camera_depth = device.buffer(nbytes=4 * samples)
+    tri_id = device.buffer(nbytes=4 * samples)
+    shadow_depth = device.buffer(nbytes=4 * max(inputs.shadow_texels, 1))
+    device.fill(camera_depth, structs.DEPTH_EMPTY, 4 * samples, timer, "raster")
+    device.fill(tri_id, np.int32(-1), 4 * samples, timer, "raster")
+    device.fill(shadow_depth, structs.DEPTH_EMPTY, 4 * max(inputs.shadow_texels, 1), timer, "raster")
+
+    spp = inputs.scene.image.spp
+    _rasterize(device, buffers, 0, buffers.offsets, spp, camera_depth, timer)
+    count = inputs.tri_vertices.shape[0] // 3
+    if count:
+        event = device.kernel("raster", "raster_resolve")(
+            device.queue, (count,), None, buffers.tri_vertices, np.int32(count), buffers.views, np.int32(0),
+            buffers.offsets, np.int32(spp), camera_depth, tri_id)
+        timer.add("raster", event)
+
+    centre = device.buffer(np.array([[0.5, 0.5]], dtype=np.float32), writable=False)
+    for view_index in range(1, len(inputs.views)):
+        _rasterize(device, buffers, view_index, centre, 1, shadow_depth, timer)
+    return RasterResult(camera_depth=camera_depth, tri_id=tri_id, shadow_depth=shadow_depth)

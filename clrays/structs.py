@@ -1,0 +1,53 @@
+"""numpy dtypes mirroring the structs of `cl/common.h`: same fields, same order.
+
+tests/test_layout.py asks the device for sizeof/offsetof of every field and
+compares them with these dtypes.
+"""
+import numpy as np
+
+PROJECTION_PERSPECTIVE = 0
+PROJECTION_ORTHOGRAPHIC = 1
+
+LIGHT_POINT = 0
+LIGHT_SPOT = 1
+LIGHT_DIRECTIONAL = 2
+
+PHASE_ISOTROPIC = 0
+PHASE_HG = 1
+
+DEPTH_EMPTY = np.uint32(0x7F800000)  # as_uint(+inf)
+
+_f4 = (np.float32, 4)
+
+view_dtype = np.dtype([
+    ("origin", _f4), ("right", _f4), ("up", _f4), ("forward", _f4),
+    ("scale_x", np.float32), ("scale_y", np.float32),
+    ("width", np.int32), ("height", np.int32),
+    ("projection", np.int32), ("depth_offset", np.int32),
+    ("_pad0", np.int32), ("_pad1", np.int32),
+])
+
+light_dtype = np.dtype([
+    ("position", _f4), ("direction", _f4), ("power", _f4),
+    ("type", np.int32), ("cos_cone", np.float32),
+    ("first_view", np.int32), ("view_count", np.int32),
+    ("texel_angle", np.float32),
+    ("_pad0", np.int32), ("_pad1", np.int32), ("_pad2", np.int32),
+])
+
+frame_dtype = np.dtype([
+    ("sigma_s", _f4), ("sigma_t", _f4), ("background", _f4),
+    ("phase_g", np.float32), ("phase_type", np.int32),
+    ("far", np.float32), ("light_count", np.int32),
+    ("width", np.int32), ("height", np.int32), ("spp", np.int32), ("steps", np.int32),
+    ("jitter", np.int32), ("pcf", np.int32),
+    ("_pad0", np.int32), ("_pad1", np.int32),
+])
+
+#: C struct name → dtype, for the layout test.
+STRUCTS = {"view_t": view_dtype, "light_t": light_dtype, "frame_t": frame_dtype}
+
+
+def float4(v, w: float = 0.0) -> np.ndarray:
+    """A 3-vector as float4 (w = 0 unless given)."""
+    return np.array([v[0], v[1], v[2], w], dtype=np.float32)

@@ -1,0 +1,68 @@
+"""Shared fixtures: one OpenCL device for the whole run (PoCL in CI), scene builders."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from clrays.scene import (Camera, DirectionalLight, Geometry, Image, Medium, Phase, PointLight, Render, Scene,
+                          SpotLight)
+
+
+@pytest.fixture(scope="session")
+def device():
+    from clrays.device import Device
+
+    return Device()
+
+
+@pytest.fixture(scope="session")
+def renderer(device):
+    from clrays.renderer import Renderer
+
+    return Renderer(device)
+
+
+def v3(*xs) -> np.ndarray:
+    return np.array(xs, dtype=np.float64)
+
+
+def box_triangles(lo, hi) -> np.ndarray:
+    """12 triangles of an axis-aligned box."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    c = np.array([[lo[0] if i & 1 == 0 else hi[0], lo[1] if i & 2 == 0 else hi[1], lo[2] if i & 4 == 0 else hi[2]]
+                  for i in range(8)])
+    quads = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+    return np.array([[c[a], c[b], c[d]] for a, b, cc, d in quads for (b, d) in [(b, cc), (cc, d)]])
+
+
+def grid_plane(y=0.0, half=6.0, n=4) -> np.ndarray:
+    """A horizontal square at height y, split into 2·n² triangles."""
+    xs = np.linspace(-half, half, n + 1)
+    tris = []
+    for i in range(n):
+        for j in range(n):
+            a, b = (xs[i], y, xs[j]), (xs[i + 1], y, xs[j])
+            c, d = (xs[i + 1], y, xs[j + 1]), (xs[i], y, xs[j + 1])
+            tris += [[a, b, c], [a, c, d]]
+    return np.array(tris, dtype=float)
+
+
+def make_scene(triangles=None, lights=None, width=32, height=24, spp=1, position=(0, 2, 8), look_at=(0, 1, 0),
+               fov_deg=50.0, far=30.0, sigma_s=0.05, sigma_a=0.01, phase=None, background=0.0, albedo=0.8,
+               **render) -> Scene:
+    """A small scene built directly (no YAML), for stage and method tests."""
+    triangles = np.zeros((0, 3, 3)) if triangles is None else np.asarray(triangles, dtype=float).reshape(-1, 3, 3)
+    lights = lights if lights is not None else [PointLight(v3(0, 4, 0), np.full(3, 30.0))]
+    geometry = Geometry(triangles, np.full((len(triangles), 3), albedo), np.zeros(len(triangles), np.int32))
+    return Scene(
+        image=Image(width, height, spp),
+        camera=Camera(v3(*position), v3(*look_at), v3(0, 1, 0), fov_deg, far),
+        lights=tuple(lights),
+        medium=Medium(np.full(3, float(sigma_s)), np.full(3, float(sigma_a)), phase or Phase()),
+        background=np.full(3, float(background)),
+        geometry=geometry,
+        render=Render(**render),
+    )
+
+
+__all__ = ["v3", "box_triangles", "grid_plane", "make_scene", "PointLight", "SpotLight", "DirectionalLight", "Phase"]
