@@ -75,4 +75,54 @@ typedef struct {
     int _pad1;
 } frame_t;
 
+/* The epipolar frame of one light for one frame (DESIGN §2, §3).
+ *
+ *            light l (or ω towards a directional light)
+ *              *
+ *             /|\        slice α: the half-plane through the eye-light line
+ *        γ   / | \       that holds u·cos α + w·sin α;
+ *           /  |  \      β: angle at the eye between a camera ray and axis;
+ *          /   |   \     γ: angle at the light between a light ray and l → e
+ *   eye e *----+----      (directional: distance from the eye's light line).
+ *          axis a
+ *
+ * The rectified texture S[α, γ] holds, per light ray, the β of its blocker: a
+ * point (β, γ) is lit iff β < S (S = π: unblocked; S = 0: carries no light). */
+typedef struct {
+    float4 axis;       /* a = (l - e)/|l - e|, or ω = -direction for directional lights */
+    float4 u;          /* slice frame, u ⟂ axis */
+    float4 w;          /* w = axis × u */
+    float d_el;        /* eye-light distance (point, spot) */
+    float alpha_min;   /* first slice's lower edge, rad */
+    float alpha_step;  /* slice spacing, rad */
+    int slices;
+    float gamma_step;  /* γ per texel: rad (point, spot) or length (directional) */
+    int gamma_samples; /* texels per row, a power of two */
+    int levels;        /* log2(gamma_samples): the mip chain has levels + 1 levels */
+    int light_index;
+    int full_circle;   /* slices wrap around: the epipole or anti-epipole is on screen */
+    int _pad0;
+    int _pad1;
+    int _pad2;
+} epipolar_t;
+
+/* The integrand tables of one light for one frame (DESIGN §4, clrays/integrand.py):
+ * what turns a lit interval [γ0, γ1) of ray β into radiance. */
+typedef struct {
+    float4 constant0;  /* analytic mode: per-channel constants, rgb */
+    float4 constant1;
+    float beta_min;    /* table/svd: β of the first row */
+    float beta_scale;  /* rows per radian: row = (β - beta_min)·beta_scale */
+    float gamma_scale; /* columns per unit γ: column = γ·gamma_scale */
+    int mode;          /* INTEGRAND_* */
+    int n_beta;
+    int n_gamma;
+    int rank;          /* svd terms */
+    int light_type;    /* LIGHT_* */
+} integrand_t;
+
+#define INTEGRAND_TABLE 0
+#define INTEGRAND_SVD 1
+#define INTEGRAND_ANALYTIC 2
+
 #endif

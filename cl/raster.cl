@@ -9,7 +9,11 @@
  * two-sided. Depth buffer layout per view: [height][width][samples]. */
 #include "lighting.h"
 
-/* Möller–Trumbore, two-sided, edges inclusive (no cracks between neighbours). */
+/* Barycentric slack: float32 rounding can put a ray through a shared edge outside
+ * both triangles; a relative 1e-5 overlap closes such cracks (depth test resolves it). */
+#define EDGE_SLACK 1e-5f
+
+/* Möller–Trumbore, two-sided, edges inclusive with EDGE_SLACK. */
 inline float intersect_triangle(float3 origin, float3 dir, float3 v0, float3 v1, float3 v2)
 {
     float3 e1 = v1 - v0, e2 = v2 - v0;
@@ -19,10 +23,10 @@ inline float intersect_triangle(float3 origin, float3 dir, float3 v0, float3 v1,
     float inv = 1.0f / det;
     float3 tv = origin - v0;
     float u = dot(tv, pv) * inv;
-    if (u < 0.0f || u > 1.0f) return INFINITY;
+    if (u < -EDGE_SLACK || u > 1.0f + EDGE_SLACK) return INFINITY;
     float3 qv = cross(tv, e1);
     float v = dot(dir, qv) * inv;
-    if (v < 0.0f || u + v > 1.0f) return INFINITY;
+    if (v < -EDGE_SLACK || u + v > 1.0f + EDGE_SLACK) return INFINITY;
     float t = dot(e2, qv) * inv;
     return t > 0.0f ? t : INFINITY;
 }

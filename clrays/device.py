@@ -86,9 +86,14 @@ class StageTimer:
     """Device time per stage label, from OpenCL profiling events."""
 
     events: dict[str, list] = field(default_factory=dict)
+    host_ms: dict[str, float] = field(default_factory=dict)
 
     def add(self, label: str, event) -> None:
         self.events.setdefault(label, []).append(event)
+
+    def add_host(self, label: str, milliseconds: float) -> None:
+        """Time of a stage that runs on the host (table construction)."""
+        self.host_ms[label] = self.host_ms.get(label, 0.0) + milliseconds
 
     def milliseconds(self) -> dict[str, float]:
         times = {}
@@ -98,6 +103,8 @@ class StageTimer:
                 event.wait()
                 total += (event.profile.end - event.profile.start) * 1e-6
             times[label] = total
+        for label, ms in self.host_ms.items():
+            times[label] = times.get(label, 0.0) + ms
         return times
 
 

@@ -44,8 +44,26 @@ frame_dtype = np.dtype([
     ("_pad0", np.int32), ("_pad1", np.int32),
 ])
 
+epipolar_dtype = np.dtype([
+    ("axis", _f4), ("u", _f4), ("w", _f4),
+    ("d_el", np.float32), ("alpha_min", np.float32), ("alpha_step", np.float32), ("slices", np.int32),
+    ("gamma_step", np.float32), ("gamma_samples", np.int32), ("levels", np.int32), ("light_index", np.int32),
+    ("full_circle", np.int32), ("_pad0", np.int32), ("_pad1", np.int32), ("_pad2", np.int32),
+])
+
+INTEGRAND_TABLE = 0
+INTEGRAND_SVD = 1
+INTEGRAND_ANALYTIC = 2
+
+integrand_dtype = np.dtype([
+    ("constant0", _f4), ("constant1", _f4),
+    ("beta_min", np.float32), ("beta_scale", np.float32), ("gamma_scale", np.float32),
+    ("mode", np.int32), ("n_beta", np.int32), ("n_gamma", np.int32), ("rank", np.int32), ("light_type", np.int32),
+])
+
 #: C struct name → dtype, for the layout test.
-STRUCTS = {"view_t": view_dtype, "light_t": light_dtype, "frame_t": frame_dtype}
+STRUCTS = {"view_t": view_dtype, "light_t": light_dtype, "frame_t": frame_dtype,
+           "epipolar_t": epipolar_dtype, "integrand_t": integrand_dtype}
 
 
 def float4(v, w: float = 0.0) -> np.ndarray:

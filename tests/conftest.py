@@ -4,6 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from clrays.primitives import box_triangles
+
 from clrays.scene import (Camera, DirectionalLight, Geometry, Image, Medium, Phase, PointLight, Render, Scene,
                           SpotLight)
 
@@ -24,15 +26,6 @@ def renderer(device):
 
 def v3(*xs) -> np.ndarray:
     return np.array(xs, dtype=np.float64)
-
-
-def box_triangles(lo, hi) -> np.ndarray:
-    """12 triangles of an axis-aligned box."""
-    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-    c = np.array([[lo[0] if i & 1 == 0 else hi[0], lo[1] if i & 2 == 0 else hi[1], lo[2] if i & 4 == 0 else hi[2]]
-                  for i in range(8)])
-    quads = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
-    return np.array([[c[a], c[b], c[d]] for a, b, cc, d in quads for (b, d) in [(b, cc), (cc, d)]])
 
 
 def grid_plane(y=0.0, half=6.0, n=4) -> np.ndarray:

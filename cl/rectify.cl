@@ -1,0 +1,90 @@
+/* rectify — the shadow map resampled into epipolar coordinates: for each slice α and
+ * light angle γ, the view angle β of the light ray's blocker, S[α, γ] (DESIGN §2, §3).
+ * Reads views, lights, shadow_depth, epipolar; writes level 0 of the min-max tree
+ * (float2 (S, S) per texel). rectify_bounds reads camera_depth and reduces the
+ * β and γ ranges the visible rays need.
+ *
+ *   tree row α: | level 0: N texels | level 1: N/2 | level 2: N/4 | ... | 1 | (float2 min, max)
+ *               0                   N            3N/2                    2N-1 */
+#include "lighting.h"
+
+#define PI_F 3.14159265358979f
+
+inline float3 slice_direction(global const epipolar_t* ep, float alpha)
+{
+    return ep->u.xyz * cos(alpha) + ep->w.xyz * sin(alpha);
+}
+
+/* β and γ of the point at distance s along unit eye ray dir (DESIGN §2, §3). */
+inline float2 epipolar_beta_gamma(global const epipolar_t* ep, int light_type, float3 dir, float s)
+{
+    float cos_beta = dot(dir, ep->axis.xyz);
+    float sin_beta = length(cross(dir, ep->axis.xyz));
+    float beta = atan2(sin_beta, cos_beta);
+    float gamma = light_type == LIGHT_DIRECTIONAL ? s * sin_beta
+                                                  : atan2(s * sin_beta, ep->d_el - s * cos_beta);
+    return (float2)(beta, gamma);
+}
+
+kernel void rectify_bounds(global const frame_t* frame, global const view_t* views,
+                           global const light_t* lights, global const epipolar_t* epipolar,
+                           global const uint* camera_depth, global const float2* offsets,
+                           global uint* bounds)
+{
+    int sample = get_global_id(0);
+    if (sample >= frame->width * frame->height * frame->spp) return;
+    int pixel = sample / frame->spp;
+    float3 origin, dir;
+    view_ray(views, view_screen(views, pixel % frame->width, pixel / frame->width, offsets[sample % frame->spp]),
+             &origin, &dir);
+    float distance = fmin(as_float(camera_depth[sample]), frame->far);
+    float2 bg = epipolar_beta_gamma(epipolar, lights[epipolar->light_index].type, dir, distance);
+    /* Non-negative floats order like their bit patterns, so uint atomics reduce them. */
+    atomic_min(bounds + 0, as_uint(bg.x));
+    atomic_max(bounds + 1, as_uint(bg.x));
+    atomic_max(bounds + 2, as_uint(bg.y));
+}
+
+kernel void rectify(global const view_t* views, global const light_t* lights,
+                    global const uint* shadow_depth, global const epipolar_t* epipolar,
+                    global float2* tree)
+{
+    int texel = get_global_id(0), slice = get_global_id(1);
+    global const epipolar_t* ep = epipolar;
+    if (texel >= ep->gamma_samples || slice >= ep->slices) return;
+    global const light_t* light = lights + ep->light_index;
+    float alpha = ep->alpha_min + ((float)slice + 0.5f) * ep->alpha_step;
+    float gamma = ((float)texel + 0.5f) * ep->gamma_step;
+    float3 r = slice_direction(ep, alpha);
+    float blocker_beta;
+    if (light->type == LIGHT_DIRECTIONAL) {
+        /* Light ray: γ·r + t·ω. The orthographic map stores depth along -ω from its
+         * origin o, so the blocker sits at t_b = -(depth + o·(-ω)); S = atan2(γ, t_b). */
+        global const view_t* view = views + light->first_view;
+        float2 texel_xy;
+        float unused;
+        view_project(view, gamma * r, &texel_xy, &unused);
+        float stored = INFINITY;
+        if (texel_xy.x >= 0.0f && texel_xy.y >= 0.0f && texel_xy.x < (float)view->width && texel_xy.y < (float)view->height)
+            stored = shadow_texel(view, shadow_depth, (int)texel_xy.x, (int)texel_xy.y);
+        float t_blocker = -(stored + dot(view->origin.xyz, view->forward.xyz));
+        blocker_beta = stored == INFINITY ? PI_F : atan2(gamma, t_blocker);
+    } else {
+        /* Light ray from l at angle γ to l → e, in slice α. */
+        float3 dir = -ep->axis.xyz * cos(gamma) + r * sin(gamma);
+        if (light->type == LIGHT_SPOT && dot(dir, light->direction.xyz) < light->cos_cone) {
+            blocker_beta = 0.0f; /* outside the cone: carries no light */
+        } else {
+            float3 probe = light->position.xyz + dir;
+            global const view_t* view = views + light_view_index(light, probe);
+            float2 texel_xy;
+            float unused;
+            float stored = INFINITY;
+            if (view_project(view, probe, &texel_xy, &unused))
+                stored = shadow_texel(view, shadow_depth, (int)texel_xy.x, (int)texel_xy.y);
+            blocker_beta = stored == INFINITY ? PI_F
+                                              : atan2(stored * sin(gamma), ep->d_el - stored * cos(gamma));
+        }
+    }
+    tree[(size_t)slice * 2 * ep->gamma_samples + texel] = (float2)(blocker_beta, blocker_beta);
+}

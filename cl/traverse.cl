@@ -1,0 +1,110 @@
+/* traverse — in-scattered radiance per camera sample: walk the min-max tree of the
+ * two slices nearest the sample's α over [0, γ_D), integrate the lit runs with the
+ * integrand tables, blend the two slices (DESIGN §4 "traverse").
+ * Reads frame, views, lights, epipolar, tree, integrand, tables, camera_depth,
+ * offsets; adds into scatter (float4 per camera sample).
+ *
+ * TRAVERSAL_TREE walks the tree without a stack: a node whose min > β is wholly lit,
+ * one whose max ≤ β wholly shadowed, else descend; after a node, move to the next
+ * one and climb while its index is even. TRAVERSAL_SCAN reads every texel. */
+#include "integrand.h"
+
+#define TRAVERSAL_TREE 0
+#define TRAVERSAL_SCAN 1
+#ifndef TRAVERSAL
+#define TRAVERSAL TRAVERSAL_TREE
+#endif
+
+inline int level_offset(int gamma_samples, int level)
+{
+    return 2 * gamma_samples - (2 * gamma_samples >> level);
+}
+
+/* Radiance of the lit part of [0, gamma_end) of ray beta along one row. Adjacent lit
+ * nodes merge into one run, so the integrand is evaluated once per lit run. */
+inline float3 walk_row(global const epipolar_t* ep, global const float2* row, float beta, float gamma_end,
+                       global const integrand_t* in, global const float* tables, global const frame_t* frame)
+{
+    int n = ep->gamma_samples;
+    int end = min(n, (int)ceil(gamma_end / ep->gamma_step));
+    float3 radiance = (float3)(0.0f);
+    int run_start = -1, run_end = 0;
+    int position = 0;
+    while (position < end) {
+        int size;
+        int lit;
+#if TRAVERSAL == TRAVERSAL_TREE
+        /* The largest node starting at position: climb while the index is even. */
+        int level = position == 0 ? ep->levels : min(ep->levels, 31 - clz(position & -position));
+        for (;;) {
+            float2 node = row[level_offset(n, level) + (position >> level)];
+            if (node.x > beta) { lit = 1; break; }
+            if (node.y <= beta) { lit = 0; break; }
+            --level; /* mixed: descend to the left child */
+        }
+        size = 1 << level;
+#else
+        lit = row[position].x > beta;
+        size = 1;
+#endif
+        if (lit) {
+            if (run_start < 0) run_start = position;
+            run_end = position + size;
+        } else if (run_start >= 0) {
+            radiance += segment_radiance(in, tables, frame, beta, run_start * ep->gamma_step,
+                                         fmin(run_end * ep->gamma_step, gamma_end));
+            run_start = -1;
+        }
+        position += size;
+    }
+    if (run_start >= 0)
+        radiance += segment_radiance(in, tables, frame, beta, run_start * ep->gamma_step,
+                                     fmin(run_end * ep->gamma_step, gamma_end));
+    return radiance;
+}
+
+kernel void traverse(global const frame_t* frame, global const view_t* views, global const light_t* lights,
+                     global const epipolar_t* epipolar, global const float2* tree,
+                     global const integrand_t* integrand, global const float* tables,
+                     global const uint* camera_depth, global const float2* offsets, global float4* scatter)
+{
+    int sample = get_global_id(0);
+    if (sample >= frame->width * frame->height * frame->spp) return;
+    global const epipolar_t* ep = epipolar;
+    int pixel = sample / frame->spp;
+    float3 origin, dir;
+    view_ray(views, view_screen(views, pixel % frame->width, pixel / frame->width, offsets[sample % frame->spp]),
+             &origin, &dir);
+    float distance = fmin(as_float(camera_depth[sample]), frame->far);
+    int light_type = lights[ep->light_index].type;
+
+    float cos_beta = dot(dir, ep->axis.xyz);
+    float sin_beta = length(cross(dir, ep->axis.xyz));
+    float beta = atan2(sin_beta, cos_beta);
+    float gamma_end = light_type == LIGHT_DIRECTIONAL ? distance * sin_beta
+                                                      : atan2(distance * sin_beta, ep->d_el - distance * cos_beta);
+    if (!(sin_beta > 0.0f) || !(gamma_end > 0.0f)) return; /* on the axis: no extent in γ */
+
+    /* Position between slice centres; wrap around when the slices close the circle. */
+    float alpha = atan2(dot(dir, ep->w.xyz), dot(dir, ep->u.xyz));
+    float offset = alpha - ep->alpha_min;
+    offset -= 2.0f * M_PI_F * floor(offset / (2.0f * M_PI_F));
+    /* A partial fan: angles in the gap before alpha_min count as negative offsets. */
+    if (!ep->full_circle && offset > M_PI_F + 0.5f * ep->alpha_step * (float)ep->slices)
+        offset -= 2.0f * M_PI_F;
+    float f = offset / ep->alpha_step - 0.5f;
+    int i0 = (int)floor(f);
+    float t = f - (float)i0;
+    int i1 = i0 + 1;
+    if (ep->full_circle) {
+        i0 = (i0 + ep->slices) % ep->slices;
+        i1 = i1 % ep->slices;
+    } else {
+        i0 = clamp(i0, 0, ep->slices - 1);
+        i1 = clamp(i1, 0, ep->slices - 1);
+    }
+    size_t stride = 2 * (size_t)ep->gamma_samples;
+    float3 near0 = walk_row(ep, tree + i0 * stride, beta, gamma_end, integrand, tables, frame);
+    float3 near1 = walk_row(ep, tree + i1 * stride, beta, gamma_end, integrand, tables, frame);
+    scatter[sample] += (float4)(mix(near0, near1, t), 0.0f);
+}
