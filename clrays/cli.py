@@ -74,7 +74,7 @@ def info(device: str | None) -> None:
 
 @main.command(epilog=EXAMPLES_RENDER)
 @click.argument("scene", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
+@click.option("-o", "--output", required=True, type=click.Path(path_type=Path),
               help="Output image: .png (8-bit sRGB), .exr (float RGB) or .npy (float32 linear H×W×3).")
 @click.option("--method", type=click.Choice(["minmax", "raymarch", "exact"]),
               help="Override render.method.")

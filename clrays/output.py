@@ -23,6 +23,8 @@ FORMATS = (".png", ".exr", ".npy")
 def check_output_path(path: str | Path) -> Path:
     """Fail early (before rendering) on an unknown extension or an unwritable folder."""
     path = Path(path)
+    if path.is_dir():
+        raise OutputError(f"{path}: is a folder, not a file")
     suffix = path.suffix.lower()
     if suffix not in FORMATS:
         raise OutputError(f"{path}: unknown output extension {path.suffix or '(none)'!r}; "
@@ -32,8 +34,6 @@ def check_output_path(path: str | Path) -> Path:
         raise OutputError(f"{path}: folder {str(folder)!r} does not exist")
     if not os.access(folder, os.W_OK | os.X_OK):
         raise OutputError(f"{path}: folder {str(folder)!r} is not writable")
-    if path.is_dir():
-        raise OutputError(f"{path}: is a folder, not a file")
     return path
 
 

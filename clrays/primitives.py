@@ -1,0 +1,124 @@
+"""Triangle tessellations of the scene's primitive objects, float64 numpy.
+
+Every function returns triangles of shape (T, 3, 3) in the object's local frame (the
+loader applies the object's transform afterwards). Surfaces are two-sided for the
+renderer, but closed shapes are still wound counter-clockwise seen from outside, so
+(b - a) x (c - a) is the outward normal; a plane's triangles face along its normal.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+MESH_SUFFIXES = (".obj", ".ply", ".stl")
+
+
+def indexed_triangles(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Gather (F, 3) integer faces over (V, 3) vertices into (F, 3, 3) triangles."""
+    v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    return v[f]
+
+
+def box_triangles(lo, hi) -> np.ndarray:
+    """The 12 triangles (2 per face) of the axis-aligned box [lo, hi], outward wound."""
+    lo = np.asarray(lo, dtype=np.float64)
+    hi = np.asarray(hi, dtype=np.float64)
+    # Corner i has x from bit 0, y from bit 1, z from bit 2 (0 = lo, 1 = hi).
+    corners = np.array([[(hi if i >> k & 1 else lo)[k] for k in range(3)] for i in range(8)])
+    quads = [  # each counter-clockwise seen from outside
+        (0, 4, 6, 2),  # -x
+        (1, 3, 7, 5),  # +x
+        (0, 1, 5, 4),  # -y
+        (2, 6, 7, 3),  # +y
+        (0, 2, 3, 1),  # -z
+        (4, 5, 7, 6),  # +z
+    ]
+    faces = [t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))]
+    return indexed_triangles(corners, faces)
+
+
+def sphere_triangles(center, radius: float, segments: int = 48) -> np.ndarray:
+    """A UV sphere: `segments` slices around the y axis and segments // 2 rings from pole
+    to pole, so 2 * segments * (rings - 1) triangles (2208 for the default 48)."""
+    if segments < 4:
+        raise ValueError(f"a sphere needs at least 4 segments, got {segments}")
+    rings = segments // 2
+    theta = np.linspace(0.0, np.pi, rings + 1)[1:-1]  # polar angle of the inner rings
+    phi = np.arange(segments) * (2.0 * np.pi / segments)
+    st, ct = np.sin(theta)[:, None], np.cos(theta)[:, None]
+    ring_pts = np.stack([st * np.sin(phi), np.broadcast_to(ct, (len(theta), segments)),
+                         st * np.cos(phi)], axis=-1).reshape(-1, 3)  # ring r, slice j -> r*segments+j
+    north, south = np.array([[0.0, 1.0, 0.0]]), np.array([[0.0, -1.0, 0.0]])
+    pts = np.concatenate([ring_pts, north, south]) * radius + np.asarray(center, dtype=np.float64)
+    n_idx, s_idx = len(ring_pts), len(ring_pts) + 1
+
+    def vid(ring, j):
+        return ring * segments + j % segments
+
+    faces = []
+    for j in range(segments):
+        faces.append((n_idx, vid(0, j), vid(0, j + 1)))
+        faces.append((s_idx, vid(rings - 2, j + 1), vid(rings - 2, j)))
+        for r in range(rings - 2):
+            a, b = vid(r, j), vid(r, j + 1)
+            c, d = vid(r + 1, j + 1), vid(r + 1, j)
+            faces.append((a, d, c))
+            faces.append((a, c, b))
+    return indexed_triangles(pts, faces)
+
+
+def plane_basis(normal) -> tuple[np.ndarray, np.ndarray]:
+    """Unit tangents (u, v) with u x v = normal (normal must be unit). u is built from the
+    world axis least aligned with the normal, so the choice is deterministic."""
+    n = np.asarray(normal, dtype=np.float64)
+    helper = np.eye(3)[int(np.argmin(np.abs(n)))]
+    u = np.cross(helper, n)
+    u /= np.linalg.norm(u)
+    return u, np.cross(n, u)
+
+
+def plane_triangles(center, normal, size: float, segments: int = 8) -> np.ndarray:
+    """A size x size square centred on `center`, perpendicular to the unit `normal`, as a
+    segments x segments grid: 2 * segments**2 triangles facing along the normal."""
+    u, v = plane_basis(normal)
+    s = np.linspace(-size / 2.0, size / 2.0, segments + 1)
+    grid = (np.asarray(center, dtype=np.float64)
+            + s[:, None, None] * u + s[None, :, None] * v)  # (i along u, j along v, 3)
+    p00, p10 = grid[:-1, :-1], grid[1:, :-1]
+    p11, p01 = grid[1:, 1:], grid[:-1, 1:]
+    tri_a = np.stack([p00, p10, p11], axis=-2).reshape(-1, 3, 3)
+    tri_b = np.stack([p00, p11, p01], axis=-2).reshape(-1, 3, 3)
+    return np.concatenate([tri_a, tri_b])
+
+
+def load_mesh_triangles(path: Path) -> np.ndarray:
+    """Read an OBJ, PLY or STL file with trimesh, as (T, 3, 3) triangles.
+
+    Raises ValueError with a one-line reason for an unknown suffix, a missing, unreadable
+    or corrupt file, a file without triangles, or non-finite vertices.
+    """
+    path = Path(path)
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise ValueError(f"unsupported mesh format {path.suffix or '(no suffix)'!r}")
+    if not path.is_file():
+        raise ValueError("no such file" if not path.exists() else "not a regular file")
+    import trimesh  # slow to import; only scenes with meshes pay for it
+
+    try:
+        mesh = trimesh.load(str(path), force="mesh", process=False)
+        vertices = np.asarray(mesh.vertices, dtype=np.float64)
+        faces = np.asarray(mesh.faces, dtype=np.int64)
+    except Exception as exc:  # trimesh raises many types for corrupt files
+        detail = " ".join(str(exc).split())
+        reason = f"{type(exc).__name__}: {detail}" if detail else type(exc).__name__
+        raise ValueError(f"not a valid {path.suffix.lower()[1:].upper()} file ({reason})") from None
+    if faces.ndim != 2 or faces.shape[0] == 0 or faces.shape[1] != 3:
+        raise ValueError("the file has no triangles")
+    if faces.min() < 0 or faces.max() >= len(vertices):
+        raise ValueError("a face refers to a vertex that does not exist")
+    tris = indexed_triangles(vertices, faces)
+    if not np.isfinite(tris).all():
+        raise ValueError("the file has non-finite vertex coordinates")
+    return tris
