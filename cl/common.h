@@ -109,16 +109,21 @@ typedef struct {
 /* The integrand tables of one light for one frame (DESIGN §4, clrays/integrand.py):
  * what turns a lit interval [γ0, γ1) of ray β into radiance. */
 typedef struct {
-    float4 constant0;  /* analytic mode: per-channel constants, rgb */
-    float4 constant1;
-    float beta_min;    /* table/svd: β of the first row */
-    float beta_scale;  /* rows per radian: row = (β - beta_min)·beta_scale */
-    float gamma_scale; /* columns per unit γ: column = γ·gamma_scale */
-    int mode;          /* INTEGRAND_* */
+    float4 amplitude; /* σs·I (point, spot) or σs·E (directional), rgb */
+    float4 sigma_t;   /* extinction, rgb */
+    float4 s_end;     /* directional rows: where a row ends in distance s, rgb */
+    float beta_min;   /* β range of the table rows */
+    float beta_max;
+    float d_el;       /* eye-light distance (point, spot) */
+    float g;          /* Henyey-Greenstein g (0: isotropic) */
+    int mode;         /* INTEGRAND_* */
     int n_beta;
     int n_gamma;
-    int rank;          /* svd terms */
-    int light_type;    /* LIGHT_* */
+    int rank;         /* svd terms */
+    int light_type;   /* LIGHT_* */
+    int _pad0;
+    int _pad1;
+    int _pad2;
 } integrand_t;
 
 #define INTEGRAND_TABLE 0

@@ -1,47 +1,83 @@
 /* integrand.h — radiance of a lit interval [γ0, γ1) of camera ray β, from the tables
- * that clrays/integrand.py builds per frame (DESIGN §4 "integrand"). The tables hold
- * G = sinβ·I(β, γ) (smooth as β → 0); the 1/sinβ factor is applied here exactly.
+ * clrays/integrand.py builds per frame; a line-by-line port of its segment_radiance
+ * (docs/integrand.md has the derivation and the measured errors). Every mode is
  *
- *   table:    tables = F[channel][n_beta][n_gamma], F(β, γ) = ∫0^γ G dγ'  (bilinear)
- *   svd:      tables = B[channel][rank][n_beta] then P[channel][rank][n_gamma],
- *             G ≈ Σ B_i(β)·Γ_i(γ), P_i(γ) = ∫0^γ Γ_i                       (linear)
- *   analytic: closed forms from constant0/constant1 (directional light; σt = 0). */
+ *     L = row_scale(β) · [F(β, x(β, γ1)) - F(β, x(β, γ0))]
+ *
+ * with x ∈ [0, 1] a per-row coordinate and F the prefix integral of a smooth integrand:
+ *   point/spot:  x = γ/(π-β)  (rows run to the ray's point at infinity), row_scale = (π-β)/sinβ
+ *   directional: x = s/s_end with s = γ/sinβ,                          row_scale = s_end
+ * Rows sit at β = beta_min + (beta_max - beta_min)·sin²(πt/2), t uniform in [0, 1].
+ *
+ *   table:  tables = F[channel][n_beta][n_gamma]                          (bilinear)
+ *   svd:    tables = B[channel][rank][n_beta], then P[channel][rank][n_gamma]
+ *           F ≈ Σ B_i(β)·P_i(x)                                            (linear)
+ *   analytic: closed forms (directional light; isotropic point light with σt = 0). */
 #ifndef CLRAYS_INTEGRAND_H
 #define CLRAYS_INTEGRAND_H
 #include "lighting.h"
 
-/* Linear interpolation position on a sample grid: index i and weight t, clamped. */
-inline int grid_position(float coordinate, int count, float* t)
+#define SIN_BETA_MIN 1e-9f
+
+/* Cell index in [0, n-2] and the fraction within it. */
+inline int grid_split(float coordinate, int n, float* fraction)
 {
-    float c = clamp(coordinate, 0.0f, (float)(count - 1));
-    int i = min((int)c, count - 2);
-    *t = c - (float)i;
+    int i = clamp((int)floor(coordinate), 0, n - 2);
+    *fraction = coordinate - (float)i;
     return i;
 }
 
-inline float table_prefix(global const float* tables, int channel, int n_beta, int n_gamma,
-                          int row, float row_t, float column)
+/* Fractional row index of β: the inverse of the sin² node spacing, precise at both ends. */
+inline float beta_coordinate(global const integrand_t* in, float beta)
 {
-    float column_t;
-    int col = grid_position(column, n_gamma, &column_t);
-    global const float* a = tables + ((size_t)channel * n_beta + row) * n_gamma + col;
-    global const float* b = a + n_gamma;
-    float top = mix(a[0], a[1], column_t), bottom = mix(b[0], b[1], column_t);
-    return mix(top, bottom, row_t);
+    float span = in->beta_max - in->beta_min;
+    if (!(span > 0.0f)) return 0.0f;
+    float lo = sqrt(clamp(beta - in->beta_min, 0.0f, span));
+    float hi = sqrt(clamp(in->beta_max - beta, 0.0f, span));
+    return M_2_PI_F * atan2(lo, hi) * (float)(in->n_beta - 1);
 }
 
-inline float svd_segment(global const integrand_t* in, global const float* tables, int channel,
-                         int row, float row_t, float column0, float column1)
+/* x(β, γ) per channel (only directional rows differ per channel, through s_end). */
+inline float3 row_coordinate(global const integrand_t* in, float beta, float sin_beta, float gamma)
+{
+    if (in->light_type == LIGHT_DIRECTIONAL)
+        return clamp((gamma / sin_beta) / in->s_end.xyz, 0.0f, 1.0f);
+    float delta = fmax(M_PI_F - beta, 0.0f);
+    float x = delta > 0.0f ? gamma / delta : (gamma > 0.0f ? 1.0f : 0.0f);
+    return (float3)(clamp(x, 0.0f, 1.0f));
+}
+
+inline float3 row_scale(global const integrand_t* in, float beta, float sin_beta)
+{
+    if (in->light_type == LIGHT_DIRECTIONAL) return in->s_end.xyz;
+    float delta = fmax(M_PI_F - beta, 0.0f);
+    return (float3)(delta > SIN_BETA_MIN ? delta / sin_beta : 1.0f); /* (π-β)/sinβ → 1 as β → π */
+}
+
+/* Bilinear F of one channel at row j + fj, column x·(n_gamma - 1). */
+inline float table_lookup(global const float* table, int n_beta, int n_gamma, int j, float fj, float x)
+{
+    float fk;
+    int k = grid_split(x * (float)(n_gamma - 1), n_gamma, &fk);
+    global const float* a = table + (size_t)j * n_gamma + k;
+    global const float* b = a + n_gamma;
+    return (1.0f - fj) * ((1.0f - fk) * a[0] + fk * a[1]) + fj * ((1.0f - fk) * b[0] + fk * b[1]);
+}
+
+inline float svd_difference(global const integrand_t* in, global const float* tables, int channel, int j,
+                            float fj, float x0, float x1)
 {
     global const float* basis = tables + (size_t)channel * in->rank * in->n_beta;
     global const float* prefix = tables + (size_t)3 * in->rank * in->n_beta + (size_t)channel * in->rank * in->n_gamma;
-    float t0, t1;
-    int c0 = grid_position(column0, in->n_gamma, &t0), c1 = grid_position(column1, in->n_gamma, &t1);
+    float f0, f1;
+    int k0 = grid_split(x0 * (float)(in->n_gamma - 1), in->n_gamma, &f0);
+    int k1 = grid_split(x1 * (float)(in->n_gamma - 1), in->n_gamma, &f1);
     float sum = 0.0f;
     for (int i = 0; i < in->rank; ++i) {
-        global const float* b = basis + i * in->n_beta + row;
+        global const float* b = basis + i * in->n_beta;
         global const float* p = prefix + i * in->n_gamma;
-        sum += mix(b[0], b[1], row_t) * (mix(p[c1], p[c1 + 1], t1) - mix(p[c0], p[c0 + 1], t0));
+        float b_i = (1.0f - fj) * b[j] + fj * b[j + 1];
+        sum += b_i * (((1.0f - f1) * p[k1] + f1 * p[k1 + 1]) - ((1.0f - f0) * p[k0] + f0 * p[k0 + 1]));
     }
     return sum;
 }
@@ -49,38 +85,38 @@ inline float svd_segment(global const integrand_t* in, global const float* table
 inline float3 segment_radiance(global const integrand_t* in, global const float* tables,
                                global const frame_t* frame, float beta, float gamma0, float gamma1)
 {
-    float sin_beta = sin(beta);
+    float sin_beta = fmax(sin(beta), SIN_BETA_MIN);
     if (in->mode == INTEGRAND_ANALYTIC) {
         if (in->light_type == LIGHT_DIRECTIONAL) {
-            /* σs·E·ρ(cos β)·(e^{-σt s0} - e^{-σt s1})/σt with s = γ/sin β (§3). */
-            float3 sigma_t = in->constant1.xyz;
-            float s0 = gamma0 / sin_beta, s1 = gamma1 / sin_beta;
-            float3 span = (float3)(s1 - s0);
-            float3 decay = sigma_t * span;
-            /* (1 - e^{-x})/x → 1 as x → 0: keep the σt = 0 limit exact. */
-            float3 factor = select(-expm1(-decay) / decay, (float3)(1.0f), isless(fabs(decay), (float3)(1e-6f)));
-            return in->constant0.xyz * phase_function(frame, cos(beta)) * exp(-sigma_t * s0) * span * factor;
+            /* σs·E·ρ(cos β)·e^{-σt·s0}·(1 - e^{-σt·Δs})/σt, → Δs as σt → 0 (s = γ/sin β). */
+            float3 sigma_t = in->sigma_t.xyz;
+            float s0 = fmax(gamma0, 0.0f) / sin_beta;
+            float ds = fmax(gamma1, 0.0f) / sin_beta - s0;
+            float3 tail = select((float3)(ds), -expm1(-sigma_t * ds) / sigma_t, isgreater(sigma_t, (float3)(0.0f)));
+            return in->amplitude.xyz * phase_function(frame, cos(beta)) * exp(-sigma_t * s0) * tail;
         }
-        /* σt = 0, isotropic point light: σs·I/(4π·d_el·sin β)·(γ1 - γ0). */
-        return in->constant0.xyz * ((gamma1 - gamma0) / sin_beta);
+        float delta = fmax(M_PI_F - beta, 0.0f);
+        float span = clamp(gamma1, 0.0f, delta) - clamp(gamma0, 0.0f, delta);
+        return in->amplitude.xyz * (span / (4.0f * M_PI_F * in->d_el * sin_beta));
     }
-    float row_t;
-    int row = grid_position((beta - in->beta_min) * in->beta_scale, in->n_beta, &row_t);
-    float column0 = gamma0 * in->gamma_scale, column1 = gamma1 * in->gamma_scale;
-    float3 out;
+    float fj;
+    int j = grid_split(beta_coordinate(in, beta), in->n_beta, &fj);
+    float3 x0 = row_coordinate(in, beta, sin_beta, gamma0), x1 = row_coordinate(in, beta, sin_beta, gamma1);
+    float3 difference;
     if (in->mode == INTEGRAND_TABLE) {
-        out.x = table_prefix(tables, 0, in->n_beta, in->n_gamma, row, row_t, column1)
-              - table_prefix(tables, 0, in->n_beta, in->n_gamma, row, row_t, column0);
-        out.y = table_prefix(tables, 1, in->n_beta, in->n_gamma, row, row_t, column1)
-              - table_prefix(tables, 1, in->n_beta, in->n_gamma, row, row_t, column0);
-        out.z = table_prefix(tables, 2, in->n_beta, in->n_gamma, row, row_t, column1)
-              - table_prefix(tables, 2, in->n_beta, in->n_gamma, row, row_t, column0);
+        size_t plane = (size_t)in->n_beta * in->n_gamma;
+        difference.x = table_lookup(tables, in->n_beta, in->n_gamma, j, fj, x1.x)
+                     - table_lookup(tables, in->n_beta, in->n_gamma, j, fj, x0.x);
+        difference.y = table_lookup(tables + plane, in->n_beta, in->n_gamma, j, fj, x1.y)
+                     - table_lookup(tables + plane, in->n_beta, in->n_gamma, j, fj, x0.y);
+        difference.z = table_lookup(tables + 2 * plane, in->n_beta, in->n_gamma, j, fj, x1.z)
+                     - table_lookup(tables + 2 * plane, in->n_beta, in->n_gamma, j, fj, x0.z);
     } else {
-        out = (float3)(svd_segment(in, tables, 0, row, row_t, column0, column1),
-                       svd_segment(in, tables, 1, row, row_t, column0, column1),
-                       svd_segment(in, tables, 2, row, row_t, column0, column1));
+        difference = (float3)(svd_difference(in, tables, 0, j, fj, x0.x, x1.x),
+                              svd_difference(in, tables, 1, j, fj, x0.y, x1.y),
+                              svd_difference(in, tables, 2, j, fj, x0.z, x1.z));
     }
-    return fmax(out, (float3)(0.0f)) / sin_beta;
+    return row_scale(in, beta, sin_beta) * difference;
 }
 
 #endif

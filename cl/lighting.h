@@ -78,6 +78,47 @@ inline float3 light_incident(global const light_t* light, float3 sigma_t, float3
     return light->power.xyz * exp(-sigma_t * d) / fmax(d2, 1e-30f);
 }
 
+/* The part [s0, s1] of the eye ray s·dir, s ∈ [0, far], inside a spot light's cone
+ * (|angle to the axis| ≤ cone, on the light's side). For a half-angle ≤ 90° the cone
+ * is convex, so this is one interval; returns 0 when the ray misses it. The candidate
+ * ends are the roots of (w·k)² = cos²·|w|² (w = p - l), the apex plane and the ray's
+ * ends; the pieces between them are tested at their midpoints. */
+inline int spot_interval(global const light_t* light, float3 dir, float far, float* s0, float* s1)
+{
+    float3 l = light->position.xyz, k = light->direction.xyz;
+    float c2 = light->cos_cone * light->cos_cone;
+    float a1 = dot(dir, k), a0 = -dot(l, k), vl = dot(dir, l);
+    float qa = a1 * a1 - c2, qb = 2.0f * (a1 * a0 + c2 * vl), qc = a0 * a0 - c2 * dot(l, l);
+    float cut[5] = {0.0f, far, 0.0f, 0.0f, 0.0f};
+    int count = 2;
+    float disc = qb * qb - 4.0f * qa * qc;
+    if (disc >= 0.0f && qa != 0.0f) {
+        /* numerically stable pair of roots */
+        float q = -0.5f * (qb + copysign(sqrt(disc), qb));
+        cut[count++] = q / qa;
+        if (q != 0.0f) cut[count++] = qc / q;
+    } else if (qa == 0.0f && qb != 0.0f) {
+        cut[count++] = -qc / qb;
+    }
+    if (a1 != 0.0f) cut[count++] = -a0 / a1;
+    for (int i = 0; i < count; ++i) cut[i] = clamp(cut[i], 0.0f, far);
+    for (int i = 1; i < count; ++i) /* insertion sort of at most 5 values */
+        for (int j = i; j > 0 && cut[j] < cut[j - 1]; --j) {
+            float t = cut[j]; cut[j] = cut[j - 1]; cut[j - 1] = t;
+        }
+    int found = 0;
+    for (int i = 0; i + 1 < count; ++i) {
+        if (!(cut[i + 1] > cut[i])) continue;
+        float3 w = 0.5f * (cut[i] + cut[i + 1]) * dir - l;
+        if (dot(w, k) >= light->cos_cone * length(w)) {
+            if (!found) *s0 = cut[i];
+            *s1 = cut[i + 1];
+            found = 1;
+        }
+    }
+    return found;
+}
+
 /* The shadow-map view of a light that holds p: the cube face of p's major axis
  * (faces ordered +x, -x, +y, -y, +z, -z), or the single view. */
 inline int light_view_index(global const light_t* light, float3 p)

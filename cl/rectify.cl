@@ -72,9 +72,10 @@ kernel void rectify(global const view_t* views, global const light_t* lights,
     } else {
         /* Light ray from l at angle γ to l → e, in slice α. */
         float3 dir = -ep->axis.xyz * cos(gamma) + r * sin(gamma);
-        if (light->type == LIGHT_SPOT && dot(dir, light->direction.xyz) < light->cos_cone) {
-            blocker_beta = 0.0f; /* outside the cone: carries no light */
-        } else {
+        {
+            /* Spot lights: outside the cone the map has no texel and the ray counts as
+             * unblocked; traverse clips each eye ray to the cone analytically, so the
+             * cone's edge is exact rather than a texel wide. */
             float3 probe = light->position.xyz + dir;
             global const view_t* view = views + light_view_index(light, probe);
             float2 texel_xy;

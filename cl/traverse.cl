@@ -20,16 +20,17 @@ inline int level_offset(int gamma_samples, int level)
     return 2 * gamma_samples - (2 * gamma_samples >> level);
 }
 
-/* Radiance of the lit part of [0, gamma_end) of ray beta along one row. Adjacent lit
- * nodes merge into one run, so the integrand is evaluated once per lit run. */
-inline float3 walk_row(global const epipolar_t* ep, global const float2* row, float beta, float gamma_end,
-                       global const integrand_t* in, global const float* tables, global const frame_t* frame)
+/* Radiance of the lit part of [gamma_begin, gamma_end) of ray beta along one row.
+ * Adjacent lit nodes merge into one run, so the integrand is evaluated once per run. */
+inline float3 walk_row(global const epipolar_t* ep, global const float2* row, float beta, float gamma_begin,
+                       float gamma_end, global const integrand_t* in, global const float* tables,
+                       global const frame_t* frame)
 {
     int n = ep->gamma_samples;
     int end = min(n, (int)ceil(gamma_end / ep->gamma_step));
     float3 radiance = (float3)(0.0f);
     int run_start = -1, run_end = 0;
-    int position = 0;
+    int position = clamp((int)floor(gamma_begin / ep->gamma_step), 0, n);
     while (position < end) {
         int size;
         int lit;
@@ -51,14 +52,14 @@ inline float3 walk_row(global const epipolar_t* ep, global const float2* row, fl
             if (run_start < 0) run_start = position;
             run_end = position + size;
         } else if (run_start >= 0) {
-            radiance += segment_radiance(in, tables, frame, beta, run_start * ep->gamma_step,
+            radiance += segment_radiance(in, tables, frame, beta, fmax(run_start * ep->gamma_step, gamma_begin),
                                          fmin(run_end * ep->gamma_step, gamma_end));
             run_start = -1;
         }
         position += size;
     }
     if (run_start >= 0)
-        radiance += segment_radiance(in, tables, frame, beta, run_start * ep->gamma_step,
+        radiance += segment_radiance(in, tables, frame, beta, fmax(run_start * ep->gamma_step, gamma_begin),
                                      fmin(run_end * ep->gamma_step, gamma_end));
     return radiance;
 }
@@ -81,9 +82,14 @@ kernel void traverse(global const frame_t* frame, global const view_t* views, gl
     float cos_beta = dot(dir, ep->axis.xyz);
     float sin_beta = length(cross(dir, ep->axis.xyz));
     float beta = atan2(sin_beta, cos_beta);
-    float gamma_end = light_type == LIGHT_DIRECTIONAL ? distance * sin_beta
-                                                      : atan2(distance * sin_beta, ep->d_el - distance * cos_beta);
-    if (!(sin_beta > 0.0f) || !(gamma_end > 0.0f)) return; /* on the axis: no extent in γ */
+    float begin = 0.0f, end = distance;
+    if (light_type == LIGHT_SPOT && !spot_interval(lights + ep->light_index, dir, distance, &begin, &end))
+        return; /* the ray never enters the cone */
+    float gamma_begin = light_type == LIGHT_DIRECTIONAL ? begin * sin_beta
+                                                        : atan2(begin * sin_beta, ep->d_el - begin * cos_beta);
+    float gamma_end = light_type == LIGHT_DIRECTIONAL ? end * sin_beta
+                                                      : atan2(end * sin_beta, ep->d_el - end * cos_beta);
+    if (!(sin_beta > 0.0f) || !(gamma_end > gamma_begin)) return; /* no extent in γ */
 
     /* Position between slice centres; wrap around when the slices close the circle. */
     float alpha = atan2(dot(dir, ep->w.xyz), dot(dir, ep->u.xyz));
@@ -104,7 +110,7 @@ kernel void traverse(global const frame_t* frame, global const view_t* views, gl
         i1 = clamp(i1, 0, ep->slices - 1);
     }
     size_t stride = 2 * (size_t)ep->gamma_samples;
-    float3 near0 = walk_row(ep, tree + i0 * stride, beta, gamma_end, integrand, tables, frame);
-    float3 near1 = walk_row(ep, tree + i1 * stride, beta, gamma_end, integrand, tables, frame);
+    float3 near0 = walk_row(ep, tree + i0 * stride, beta, gamma_begin, gamma_end, integrand, tables, frame);
+    float3 near1 = walk_row(ep, tree + i1 * stride, beta, gamma_begin, gamma_end, integrand, tables, frame);
     scatter[sample] += (float4)(mix(near0, near1, t), 0.0f);
 }

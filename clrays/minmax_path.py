@@ -7,6 +7,7 @@ import time
 import numpy as np
 
 from .device import Device, StageTimer
+from .errors import ClraysError
 from .frame import FrameBuffers
 from .integrand import build_integrand
 from .minmax import minmax
@@ -21,10 +22,15 @@ def integrand(scene, light, epipolar, timer: StageTimer):
     start = time.perf_counter()
     render, medium = scene.render, scene.medium
     directional = isinstance(light, DirectionalLight)
-    tables = build_integrand(
-        render.integrand, "directional" if directional else "point", medium.sigma_s, medium.sigma_t,
-        medium.phase, light.irradiance if directional else light.intensity, float(epipolar.params["d_el"]),
-        epipolar.beta_min, epipolar.beta_max, epipolar.gamma_max, rank=render.svd_rank)
+    try:
+        tables = build_integrand(
+            render.integrand, "directional" if directional else "point", medium.sigma_s, medium.sigma_t,
+            medium.phase, light.irradiance if directional else light.intensity, float(epipolar.params["d_el"]),
+            epipolar.beta_min, epipolar.beta_max, epipolar.gamma_max, rank=render.svd_rank,
+            s_max=scene.camera.far if directional and render.integrand != "analytic" else None)
+    except ValueError as exc:  # e.g. `analytic` where no closed form exists
+        where = f"{scene.source}: " if scene.source else ""
+        raise ClraysError(f"{where}render.integrand: {str(exc).removeprefix('integrand: ')}") from exc
     timer.add_host("integrand", (time.perf_counter() - start) * 1e3)
     return tables
 

@@ -78,7 +78,7 @@ class Medium:
 
 @dataclass(frozen=True)
 class Render:
-    method: Literal["raymarch", "exact", "minmax"] = "raymarch"
+    method: Literal["minmax", "raymarch", "exact"] = "minmax"
     steps: int = 256  # raymarch samples per pixel
     jitter: bool = False  # raymarch: jitter sample positions (seeded per pixel)
     shadow_map: int = 1024  # shadow map side, texels (cube maps: per face)

@@ -7,7 +7,7 @@ import numpy as np
 from . import structs
 from .device import Device, StageTimer
 from .frame import FrameBuffers
-from .integrand import IntegrandTables
+from .integrand import C_AMPLITUDE, C_D_EL, C_G, C_S_END, C_SIGMA_T, IntegrandTables
 from .raster import RasterResult
 from .rectify import Epipolar
 
@@ -17,24 +17,23 @@ _TRAVERSALS = {"tree": 0, "scan": 1}
 
 def pack_integrand(tables: IntegrandTables) -> tuple[np.ndarray, np.ndarray]:
     """integrand_t and the flat float32 table data that `cl/integrand.h` reads."""
+    c = tables.constants
     params = np.zeros((), dtype=structs.integrand_dtype)
+    params["amplitude"] = structs.float4(c[:, C_AMPLITUDE])
+    params["sigma_t"] = structs.float4(c[:, C_SIGMA_T])
+    params["s_end"] = structs.float4(c[:, C_S_END])
+    params["beta_min"], params["beta_max"] = tables.beta_min, tables.beta_max
+    params["d_el"], params["g"] = c[0, C_D_EL], c[0, C_G]
     params["mode"] = _MODES[tables.mode]
-    params["light_type"] = structs.LIGHT_DIRECTIONAL if tables.light_kind == "directional" else structs.LIGHT_POINT
     params["n_beta"], params["n_gamma"], params["rank"] = tables.n_beta, tables.n_gamma, tables.rank
-    params["beta_min"] = tables.beta_min
-    params["beta_scale"] = (tables.n_beta - 1) / max(tables.beta_max - tables.beta_min, 1e-30)
-    params["gamma_scale"] = (tables.n_gamma - 1) / max(tables.gamma_max, 1e-30)
-    constants = np.zeros((3, 8))
-    constants[:, : tables.constants.shape[1]] = tables.constants
-    params["constant0"] = structs.float4(constants[:, 0])
-    params["constant1"] = structs.float4(constants[:, 1])
+    params["light_type"] = structs.LIGHT_DIRECTIONAL if tables.light_kind == "directional" else structs.LIGHT_POINT
     if tables.mode == "table":
-        data = tables.prefix
+        data = tables.prefix.ravel()
     elif tables.mode == "svd":
         data = np.concatenate([tables.basis_beta.ravel(), tables.prefix_gamma.ravel()])
     else:
         data = np.zeros(1)
-    return params, np.ascontiguousarray(data, dtype=np.float32).ravel()
+    return params, np.ascontiguousarray(data, dtype=np.float32)
 
 
 def traverse(device: Device, buffers: FrameBuffers, rastered: RasterResult, epipolar: Epipolar,

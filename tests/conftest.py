@@ -1,6 +1,8 @@
 """Shared fixtures: one OpenCL device for the whole run (PoCL in CI), scene builders."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -56,6 +58,42 @@ def make_scene(triangles=None, lights=None, width=32, height=24, spp=1, position
         geometry=geometry,
         render=Render(**render),
     )
+
+
+def _hg(c, g):
+    return (1 - g * g) / (4 * math.pi * (1 + g * g - 2 * g * c) ** 1.5)
+
+
+def quadrature_pixel(eye, d, light_pos, intensity, sigma_s, sigma_t, g, far) -> float:
+    """∫0^far e^{-σt s}·σs·ρ(cosθ)·I·e^{-σt r}/r² ds by scipy, written out independently of clrays."""
+    from scipy.integrate import quad
+
+    def integrand(s):
+        x = eye + s * d
+        w = x - light_pos
+        r = math.sqrt(w @ w)
+        cos_theta = -(w / r) @ d  # light's propagation (w/r) against the way to the eye (-d)
+        return math.exp(-sigma_t * s) * sigma_s * _hg(cos_theta, g) * intensity * math.exp(-sigma_t * r) / (r * r)
+
+    closest = float(np.clip((light_pos - eye) @ d, 0, far))
+    return quad(integrand, 0, far, points=[closest], limit=400, epsabs=0, epsrel=1e-10)[0]
+
+
+def unoccluded_point_quadrature(scene) -> tuple[np.ndarray, np.ndarray]:
+    """Red channel of the in-scattered radiance of an empty scene lit by one point light,
+    per pixel centre, and the mask of pixels more than 2.5° from the light (the pixel
+    holding the light, ~π/h as h → 0, belongs to the stability suite)."""
+    from clrays.camera import primary_rays
+
+    light, medium = scene.lights[0], scene.medium
+    g = medium.phase.g if medium.phase.type == "hg" else 0.0
+    dirs = primary_rays(scene.camera, scene.image)[:, :, 0]
+    expected = np.array([[quadrature_pixel(scene.camera.position, d, light.position, light.intensity[0],
+                                           medium.sigma_s[0], medium.sigma_t[0], g, scene.camera.far)
+                          for d in row] for row in dirs])
+    to_light = light.position - scene.camera.position
+    angles = np.degrees(np.arccos(np.clip(dirs @ (to_light / np.linalg.norm(to_light)), -1, 1)))
+    return expected, angles > 2.5
 
 
 __all__ = ["v3", "box_triangles", "grid_plane", "make_scene", "PointLight", "SpotLight", "DirectionalLight", "Phase"]
