@@ -165,3 +165,20 @@ def test_degenerate_views_are_finite_and_non_negative(renderer, look_at, method)
     image = renderer.render(scene, method).image
     assert np.isfinite(image).all() and (image >= 0).all()
     assert image.max() > 0
+
+
+@pytest.mark.parametrize("method", ["minmax", "raymarch"])
+def test_lights_add_up(renderer, method):
+    lights = [CASES["point_in_view"]["lights"][0], CASES["spot"]["lights"][0], CASES["directional"]["lights"][0]]
+    alone = [renderer.render(make_scene(_slats(), [light], width=40, height=30), method).image for light in lights]
+    together = renderer.render(make_scene(_slats(), lights, width=40, height=30), method).image
+    np.testing.assert_allclose(together, sum(alone), rtol=1e-4, atol=1e-6 * together.max())
+
+
+def test_pcf_softens_surface_shadow_edges(renderer):
+    scene = _case_scene("point_behind_camera", pcf=0, shadow_map=128)
+    hard = renderer.render(scene, "minmax").image
+    soft = renderer.render(_case_scene("point_behind_camera", pcf=2, shadow_map=128), "minmax").image
+    changed = np.abs(soft - hard).max(axis=-1) > 1e-3 * hard.max()
+    # Filtering only touches pixels near shadow edges, and makes them partially lit.
+    assert 0 < changed.mean() < 0.2
