@@ -32,18 +32,14 @@ def _rasterize(device: Device, buffers: FrameBuffers, view_index: int, offsets, 
     timer.add("raster", event)
 
 
-def raster(device: Device, buffers: FrameBuffers, timer: StageTimer) -> RasterResult:
-    """Rasterize the camera view (every sample of every pixel) and all shadow-map views."""
+def raster_camera(device: Device, buffers: FrameBuffers, timer: StageTimer) -> tuple[object, object]:
+    """Camera depth and triangle id of every sample of every pixel."""
     inputs = buffers.inputs
-    samples = inputs.samples
+    samples, spp = inputs.samples, inputs.scene.image.spp
     camera_depth = device.buffer(nbytes=4 * samples)
     tri_id = device.buffer(nbytes=4 * samples)
-    shadow_depth = device.buffer(nbytes=4 * max(inputs.shadow_texels, 1))
     device.fill(camera_depth, structs.DEPTH_EMPTY, 4 * samples, timer, "raster")
     device.fill(tri_id, np.int32(-1), 4 * samples, timer, "raster")
-    device.fill(shadow_depth, structs.DEPTH_EMPTY, 4 * max(inputs.shadow_texels, 1), timer, "raster")
-
-    spp = inputs.scene.image.spp
     _rasterize(device, buffers, 0, buffers.offsets, spp, camera_depth, timer)
     count = inputs.tri_vertices.shape[0] // 3
     if count:
@@ -51,8 +47,22 @@ def raster(device: Device, buffers: FrameBuffers, timer: StageTimer) -> RasterRe
             device.queue, (count,), None, buffers.tri_vertices, np.int32(count), buffers.views, np.int32(0),
             buffers.offsets, np.int32(spp), camera_depth, tri_id)
         timer.add("raster", event)
+    return camera_depth, tri_id
 
+
+def raster_shadow_maps(device: Device, buffers: FrameBuffers, timer: StageTimer):
+    """Every light's shadow-map views, back to back in one depth buffer."""
+    inputs = buffers.inputs
+    texels = max(inputs.shadow_texels, 1)
+    shadow_depth = device.buffer(nbytes=4 * texels)
+    device.fill(shadow_depth, structs.DEPTH_EMPTY, 4 * texels, timer, "raster")
     centre = device.buffer(np.array([[0.5, 0.5]], dtype=np.float32), writable=False)
     for view_index in range(1, len(inputs.views)):
         _rasterize(device, buffers, view_index, centre, 1, shadow_depth, timer)
-    return RasterResult(camera_depth=camera_depth, tri_id=tri_id, shadow_depth=shadow_depth)
+    return shadow_depth
+
+
+def raster(device: Device, buffers: FrameBuffers, timer: StageTimer) -> RasterResult:
+    """Rasterize the camera view (every sample of every pixel) and all shadow-map views."""
+    camera_depth, tri_id = raster_camera(device, buffers, timer)
+    return RasterResult(camera_depth, tri_id, raster_shadow_maps(device, buffers, timer))
