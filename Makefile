@@ -4,12 +4,12 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-slow info clean
+.PHONY: demo test test-slow bench info clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e '.[test]'
+	$(BIN)/python -m pip install -q -e '.[test,bench]'
 	touch $(STAMP)
 
 demo: $(STAMP)
@@ -21,6 +21,10 @@ test: $(STAMP)
 
 test-slow: $(STAMP)
 	$(BIN)/python -m pytest -m slow
+
+# The run-time/error benchmark behind bench/RESULTS.md (tens of minutes on 2 cores).
+bench: $(STAMP)
+	$(BIN)/clrays bench -r 640x360 -r 1280x720 --out bench/out
 
 info: $(STAMP)
 	$(BIN)/clrays info

@@ -82,26 +82,47 @@ inline float svd_difference(global const integrand_t* in, global const float* ta
     return sum;
 }
 
-inline float3 segment_radiance(global const integrand_t* in, global const float* tables,
-                               global const frame_t* frame, float beta, float gamma0, float gamma1)
+/* What a segment lookup needs that depends only on the ray's β: computed once per
+ * pixel, used for every lit run of both slices. */
+typedef struct {
+    float beta;
+    float sin_beta;
+    float3 scale;    /* row_scale(β) */
+    int row;         /* table row j ... */
+    float row_t;     /* ... and the fraction towards row j + 1 */
+    float cos_beta;
+} integrand_row_t;
+
+inline integrand_row_t integrand_row(global const integrand_t* in, float beta, float sin_beta, float cos_beta)
 {
-    float sin_beta = fmax(sin(beta), SIN_BETA_MIN);
+    integrand_row_t r;
+    r.beta = beta;
+    r.sin_beta = fmax(sin_beta, SIN_BETA_MIN);
+    r.cos_beta = cos_beta;
+    r.scale = row_scale(in, beta, r.sin_beta);
+    r.row = in->mode == INTEGRAND_ANALYTIC ? 0 : grid_split(beta_coordinate(in, beta), in->n_beta, &r.row_t);
+    return r;
+}
+
+inline float3 segment_radiance(global const integrand_t* in, global const float* tables,
+                               global const frame_t* frame, const integrand_row_t* r, float gamma0, float gamma1)
+{
     if (in->mode == INTEGRAND_ANALYTIC) {
         if (in->light_type == LIGHT_DIRECTIONAL) {
             /* σs·E·ρ(cos β)·e^{-σt·s0}·(1 - e^{-σt·Δs})/σt, → Δs as σt → 0 (s = γ/sin β). */
             float3 sigma_t = in->sigma_t.xyz;
-            float s0 = fmax(gamma0, 0.0f) / sin_beta;
-            float ds = fmax(gamma1, 0.0f) / sin_beta - s0;
+            float s0 = fmax(gamma0, 0.0f) / r->sin_beta;
+            float ds = fmax(gamma1, 0.0f) / r->sin_beta - s0;
             float3 tail = select((float3)(ds), -expm1(-sigma_t * ds) / sigma_t, isgreater(sigma_t, (float3)(0.0f)));
-            return in->amplitude.xyz * phase_function(frame, cos(beta)) * exp(-sigma_t * s0) * tail;
+            return in->amplitude.xyz * phase_function(frame, r->cos_beta) * exp(-sigma_t * s0) * tail;
         }
-        float delta = fmax(M_PI_F - beta, 0.0f);
+        float delta = fmax(M_PI_F - r->beta, 0.0f);
         float span = clamp(gamma1, 0.0f, delta) - clamp(gamma0, 0.0f, delta);
-        return in->amplitude.xyz * (span / (4.0f * M_PI_F * in->d_el * sin_beta));
+        return in->amplitude.xyz * (span / (4.0f * M_PI_F * in->d_el * r->sin_beta));
     }
-    float fj;
-    int j = grid_split(beta_coordinate(in, beta), in->n_beta, &fj);
-    float3 x0 = row_coordinate(in, beta, sin_beta, gamma0), x1 = row_coordinate(in, beta, sin_beta, gamma1);
+    int j = r->row;
+    float fj = r->row_t;
+    float3 x0 = row_coordinate(in, r->beta, r->sin_beta, gamma0), x1 = row_coordinate(in, r->beta, r->sin_beta, gamma1);
     float3 difference;
     if (in->mode == INTEGRAND_TABLE) {
         size_t plane = (size_t)in->n_beta * in->n_gamma;
@@ -116,7 +137,7 @@ inline float3 segment_radiance(global const integrand_t* in, global const float*
                               svd_difference(in, tables, 1, j, fj, x0.y, x1.y),
                               svd_difference(in, tables, 2, j, fj, x0.z, x1.z));
     }
-    return row_scale(in, beta, sin_beta) * difference;
+    return r->scale * difference;
 }
 
 #endif

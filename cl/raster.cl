@@ -1,12 +1,13 @@
 /* raster — triangles → depth for one view (the camera or a shadow-map view).
  * Reads tri_vertices (3 float4 per triangle, eye space), views[view_index], offsets;
- * writes depth (as_uint(t), atomic min) and, in raster_resolve, tri_id (the nearest
- * triangle per sample, ties to the highest index).
+ * writes depth (as_uint(t), atomic min) and, for the camera, the nearest triangle:
+ * raster_nearest packs (depth, triangle) in one 64-bit atomic min and raster_split
+ * unpacks it; without 64-bit atomics, raster_resolve re-tests (ties: highest index).
  *
- * One work-item per triangle: it clips the triangle to the view's near side, takes
- * the bounding box of the projected polygon, and ray-tests every sample inside it.
- * The ray test (not interpolation) makes depth exact along the sample ray, and
- * two-sided. Depth buffer layout per view: [height][width][samples]. */
+ * One work-item per triangle: it clips the triangle to the view's near side,
+ * projects the polygon, and per pixel row ray-tests the samples in the row's span of
+ * the polygon. The ray test (not interpolation) makes depth exact along the sample
+ * ray, and two-sided. Depth buffer layout per view: [height][width][samples]. */
 #include "lighting.h"
 
 /* Barycentric slack: float32 rounding can put a ray through a shared edge outside
@@ -31,77 +32,98 @@ inline float intersect_triangle(float3 origin, float3 dir, float3 v0, float3 v1,
     return t > 0.0f ? t : INFINITY;
 }
 
-/* Screen-space bounds [x0, x1] × [y0, y1] (pixels, clamped) of a triangle; 0 if none. */
-inline int triangle_bounds(global const view_t* view, float3 v0, float3 v1, float3 v2,
-                           int* x0, int* x1, int* y0, int* y1)
+/* The triangle clipped to the view's near side and projected to pixel coordinates
+ * (x right, y down): a convex polygon of up to 4 corners. Returns the corner count. */
+inline int projected_polygon(global const view_t* view, float3 v0, float3 v1, float3 v2, float2 corner[4])
 {
-    float3 corner[3] = {v0, v1, v2};
+    float3 world[3] = {v0, v1, v2};
     float3 in_view[3];
     float extent = 0.0f;
     for (int k = 0; k < 3; ++k) {
-        float3 q = corner[k] - view->origin.xyz;
+        float3 q = world[k] - view->origin.xyz;
         in_view[k] = (float3)(dot(q, view->right.xyz), dot(q, view->up.xyz), dot(q, view->forward.xyz));
         extent = fmax(extent, fmax(fabs(in_view[k].x), fmax(fabs(in_view[k].y), fabs(in_view[k].z))));
     }
-    float2 lo = (float2)(INFINITY), hi = (float2)(-INFINITY);
+    float2 to_pixels = (float2)(0.5f * (float)view->width, 0.5f * (float)view->height);
+    int count = 0;
     if (view->projection == PROJECTION_PERSPECTIVE) {
-        /* Clip the polygon to z >= near (Sutherland–Hodgman, one plane): triangles
-         * through or behind the eye get exact bounds instead of the whole screen. */
-        float near = 1e-5f * extent;
-        int count = 0;
+        /* Sutherland–Hodgman against z >= near: triangles through or behind the eye
+         * get exact spans instead of the whole screen. */
+        float near_z = 1e-5f * extent;
         for (int k = 0; k < 3; ++k) {
             float3 a = in_view[k], b = in_view[(k + 1) % 3];
             float3 point[2];
             int n = 0;
-            if (a.z >= near) point[n++] = a;
-            if ((a.z >= near) != (b.z >= near)) point[n++] = a + (b - a) * ((near - a.z) / (b.z - a.z));
+            if (a.z >= near_z) point[n++] = a;
+            if ((a.z >= near_z) != (b.z >= near_z)) point[n++] = a + (b - a) * ((near_z - a.z) / (b.z - a.z));
             for (int m = 0; m < n; ++m) {
                 float2 s = (float2)(point[m].x / (point[m].z * view->scale_x), point[m].y / (point[m].z * view->scale_y));
-                lo = fmin(lo, s);
-                hi = fmax(hi, s);
-                ++count;
+                corner[count++] = (float2)(s.x + 1.0f, 1.0f - s.y) * to_pixels;
             }
         }
-        if (count == 0) return 0;
     } else {
         for (int k = 0; k < 3; ++k) {
             float2 s = (float2)(in_view[k].x / view->scale_x, in_view[k].y / view->scale_y);
-            lo = fmin(lo, s);
-            hi = fmax(hi, s);
+            corner[count++] = (float2)(s.x + 1.0f, 1.0f - s.y) * to_pixels;
         }
     }
-    /* screen [-1, 1] (y up) → pixel rows/columns, widened by one pixel: the ray test decides. */
-    float w = (float)view->width, h = (float)view->height;
-    float fx0 = clamp((lo.x + 1.0f) * 0.5f * w - 1.0f, -1.0f, w);
-    float fx1 = clamp((hi.x + 1.0f) * 0.5f * w + 1.0f, -1.0f, w);
-    float fy0 = clamp((1.0f - hi.y) * 0.5f * h - 1.0f, -1.0f, h);
-    float fy1 = clamp((1.0f - lo.y) * 0.5f * h + 1.0f, -1.0f, h);
-    *x0 = max((int)floor(fx0), 0);
-    *x1 = min((int)ceil(fx1), view->width - 1);
-    *y0 = max((int)floor(fy0), 0);
-    *y1 = min((int)ceil(fy1), view->height - 1);
-    return *x0 <= *x1 && *y0 <= *y1;
+    return count;
 }
 
-/* Visit every sample of every pixel a triangle may cover; BODY sees idx and t. */
-#define FOR_EACH_COVERED_SAMPLE(BODY)                                                     \
-    int tri = get_global_id(0);                                                           \
-    if (tri >= tri_count) return;                                                         \
-    global const view_t* view = views + view_index;                                       \
-    float3 v0 = tri_vertices[3 * tri].xyz, v1 = tri_vertices[3 * tri + 1].xyz,            \
-           v2 = tri_vertices[3 * tri + 2].xyz;                                            \
-    int x0, x1, y0, y1;                                                                   \
-    if (!triangle_bounds(view, v0, v1, v2, &x0, &x1, &y0, &y1)) return;                   \
-    for (int y = y0; y <= y1; ++y)                                                        \
-        for (int x = x0; x <= x1; ++x)                                                    \
-            for (int s = 0; s < sample_count; ++s) {                                      \
-                float3 origin, dir;                                                       \
-                view_ray(view, view_screen(view, x, y, offsets[s]), &origin, &dir);       \
-                float t = intersect_triangle(origin, dir, v0, v1, v2);                    \
-                if (t == INFINITY) continue;                                              \
-                int idx = view->depth_offset + (y * view->width + x) * sample_count + s;  \
-                BODY                                                                      \
+/* Columns [x0, x1] of pixel row y that the polygon may cover: the polygon cut by the
+ * strip [y, y + 1] (every sample offset of the row), widened by a pixel because the
+ * ray test decides. Returns 0 for an empty span. */
+inline int row_span(const float2 corner[4], int count, int y, int width, int* x0, int* x1)
+{
+    float top = (float)y, bottom = (float)(y + 1);
+    float lo = INFINITY, hi = -INFINITY;
+    for (int k = 0; k < count; ++k) {
+        float2 a = corner[k], b = corner[(k + 1) % count];
+        if (a.y >= top && a.y <= bottom) { lo = fmin(lo, a.x); hi = fmax(hi, a.x); }
+        if (a.y != b.y) {
+            for (int side = 0; side < 2; ++side) {
+                float edge_y = side ? bottom : top;
+                if ((a.y - edge_y) * (b.y - edge_y) <= 0.0f) {
+                    float x = a.x + (edge_y - a.y) * (b.x - a.x) / (b.y - a.y);
+                    lo = fmin(lo, x);
+                    hi = fmax(hi, x);
+                }
             }
+        }
+    }
+    if (!(lo <= hi)) return 0;
+    *x0 = max((int)floor(fmax(lo, -1.0f)) - 1, 0);
+    *x1 = min((int)ceil(fmin(hi, (float)width)) + 1, width - 1);
+    return *x0 <= *x1;
+}
+
+/* Visit every sample of every pixel a triangle may cover; BODY sees idx, t and tri. */
+#define FOR_EACH_COVERED_SAMPLE(BODY)                                                       \
+    int tri = get_global_id(0);                                                             \
+    if (tri >= tri_count) return;                                                           \
+    global const view_t* view = views + view_index;                                         \
+    float3 v0 = tri_vertices[3 * tri].xyz, v1 = tri_vertices[3 * tri + 1].xyz,              \
+           v2 = tri_vertices[3 * tri + 2].xyz;                                              \
+    float2 corner[4];                                                                       \
+    int count = projected_polygon(view, v0, v1, v2, corner);                                \
+    if (count < 3) return;                                                                  \
+    float top = INFINITY, bottom = -INFINITY;                                               \
+    for (int k = 0; k < count; ++k) { top = fmin(top, corner[k].y); bottom = fmax(bottom, corner[k].y); } \
+    int y0 = max((int)floor(fmax(top, -1.0f)) - 1, 0);                                      \
+    int y1 = min((int)ceil(fmin(bottom, (float)view->height)), view->height - 1);           \
+    for (int y = y0; y <= y1; ++y) {                                                        \
+        int x0, x1;                                                                         \
+        if (!row_span(corner, count, y, view->width, &x0, &x1)) continue;                   \
+        for (int x = x0; x <= x1; ++x)                                                      \
+            for (int s = 0; s < sample_count; ++s) {                                        \
+                float3 origin, dir;                                                         \
+                view_ray(view, view_screen(view, x, y, offsets[s]), &origin, &dir);         \
+                float t = intersect_triangle(origin, dir, v0, v1, v2);                      \
+                if (t == INFINITY) continue;                                                \
+                int idx = view->depth_offset + (y * view->width + x) * sample_count + s;    \
+                BODY                                                                        \
+            }                                                                               \
+    }
 
 kernel void raster_depth(global const float4* tri_vertices, int tri_count,
                          global const view_t* views, int view_index,
@@ -118,3 +140,25 @@ kernel void raster_resolve(global const float4* tri_vertices, int tri_count,
 {
     FOR_EACH_COVERED_SAMPLE(if (as_uint(t) == depth[idx]) atomic_max(tri_id + idx, tri);)
 }
+
+#ifdef RASTER_ATOMIC64
+#pragma OPENCL EXTENSION cl_khr_int64_extended_atomics : enable
+/* One pass for depth and triangle: the key (as_uint(t) << 32 | tri) orders by depth
+ * first (positive floats order like their bits), ties to the lowest index. */
+kernel void raster_nearest(global const float4* tri_vertices, int tri_count,
+                           global const view_t* views, int view_index,
+                           global const float2* offsets, int sample_count,
+                           global ulong* nearest)
+{
+    FOR_EACH_COVERED_SAMPLE(atom_min(nearest + idx, ((ulong)as_uint(t) << 32) | (ulong)tri);)
+}
+
+kernel void raster_split(global const ulong* nearest, int samples, global uint* depth, global int* tri_id)
+{
+    int i = get_global_id(0);
+    if (i >= samples) return;
+    ulong key = nearest[i];
+    depth[i] = (uint)(key >> 32);
+    tri_id[i] = depth[i] == DEPTH_EMPTY ? -1 : (int)(uint)key;
+}
+#endif

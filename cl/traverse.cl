@@ -22,10 +22,11 @@ inline int level_offset(int gamma_samples, int level)
 
 /* Radiance of the lit part of [gamma_begin, gamma_end) of ray beta along one row.
  * Adjacent lit nodes merge into one run, so the integrand is evaluated once per run. */
-inline float3 walk_row(global const epipolar_t* ep, global const float2* row, float beta, float gamma_begin,
-                       float gamma_end, global const integrand_t* in, global const float* tables,
-                       global const frame_t* frame)
+inline float3 walk_row(global const epipolar_t* ep, global const float2* row, const integrand_row_t* ray,
+                       float gamma_begin, float gamma_end, global const integrand_t* in,
+                       global const float* tables, global const frame_t* frame)
 {
+    float beta = ray->beta;
     int n = ep->gamma_samples;
     int end = min(n, (int)ceil(gamma_end / ep->gamma_step));
     float3 radiance = (float3)(0.0f);
@@ -52,14 +53,14 @@ inline float3 walk_row(global const epipolar_t* ep, global const float2* row, fl
             if (run_start < 0) run_start = position;
             run_end = position + size;
         } else if (run_start >= 0) {
-            radiance += segment_radiance(in, tables, frame, beta, fmax(run_start * ep->gamma_step, gamma_begin),
+            radiance += segment_radiance(in, tables, frame, ray, fmax(run_start * ep->gamma_step, gamma_begin),
                                          fmin(run_end * ep->gamma_step, gamma_end));
             run_start = -1;
         }
         position += size;
     }
     if (run_start >= 0)
-        radiance += segment_radiance(in, tables, frame, beta, fmax(run_start * ep->gamma_step, gamma_begin),
+        radiance += segment_radiance(in, tables, frame, ray, fmax(run_start * ep->gamma_step, gamma_begin),
                                      fmin(run_end * ep->gamma_step, gamma_end));
     return radiance;
 }
@@ -110,7 +111,8 @@ kernel void traverse(global const frame_t* frame, global const view_t* views, gl
         i1 = clamp(i1, 0, ep->slices - 1);
     }
     size_t stride = 2 * (size_t)ep->gamma_samples;
-    float3 near0 = walk_row(ep, tree + i0 * stride, beta, gamma_begin, gamma_end, integrand, tables, frame);
-    float3 near1 = walk_row(ep, tree + i1 * stride, beta, gamma_begin, gamma_end, integrand, tables, frame);
+    integrand_row_t ray = integrand_row(integrand, beta, sin_beta, cos_beta);
+    float3 near0 = walk_row(ep, tree + i0 * stride, &ray, gamma_begin, gamma_end, integrand, tables, frame);
+    float3 near1 = walk_row(ep, tree + i1 * stride, &ray, gamma_begin, gamma_end, integrand, tables, frame);
     scatter[sample] += (float4)(mix(near0, near1, t), 0.0f);
 }

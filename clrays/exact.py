@@ -385,5 +385,36 @@ def render_exact(scene: Scene, progress: bool = False, rows=None, *, panels: int
     return (total / len(offsets)).reshape(len(row_idx), image.width, 3)
 
 
-__all__ = ["raycast", "occluded", "triangle_normals", "shadow_halfspaces", "shadow_intervals", "lit_intervals",
+def exact_pixels(scene: Scene, ys, xs, progress: bool = False, *, panels: int = 8,
+                 tol: float | None = 1e-10) -> np.ndarray:
+    """Ground-truth radiance (N, 3) float64 of the pixels (ys[i], xs[i]) only: what
+    `render_exact` gives there, at a cost proportional to the number of pixels. For
+    measuring error on a fixed subset of a large image."""
+    image, camera = scene.image, scene.camera
+    ys, xs = np.asarray(ys, dtype=np.intp), np.asarray(xs, dtype=np.intp)
+    offsets = sample_offsets(image.spp)
+    eye = np.asarray(camera.position, dtype=np.float64)
+    tri = np.asarray(scene.geometry.triangles, dtype=np.float64).reshape(-1, 3, 3)
+    prepared = [(light, shadow_halfspaces(light, tri)) for light in scene.lights]
+    chunk = int(np.clip(_BUDGET_BYTES // (_CLIP_PAIR_BYTES * (len(tri) + 1)), 64, 16384))
+    starts = range(0, len(ys), chunk)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(offsets) * len(starts), desc="exact", unit="chunk")
+    quad = {"panels": panels, "tol": tol}
+    total = np.zeros((len(ys), 3))
+    for k in range(len(offsets)):
+        dirs = primary_rays(camera, image, offsets[k:k + 1])[ys, xs, 0, :]
+        for s in starts:
+            total[s:s + chunk] += _radiance(scene, eye, dirs[s:s + chunk], prepared, quad)
+            if bar is not None:
+                bar.update(1)
+    if bar is not None:
+        bar.close()
+    return total / len(offsets)
+
+
+__all__ = ["exact_pixels", "raycast", "occluded", "triangle_normals", "shadow_halfspaces", "shadow_intervals", "lit_intervals",
            "render_exact"]

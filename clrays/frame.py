@@ -8,7 +8,7 @@ precision however far the scene is from the world origin.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -64,6 +64,12 @@ class FrameInputs:
     tri_normal: np.ndarray  # (T, 4) float32, unit geometric normals
     tri_albedo: np.ndarray  # (T, 4) float32
     shadow_texels: int  # size of the shared shadow depth buffer
+    light_anchor_ws: np.ndarray  # (L, 3) float64: each light's shadow-map origin, world space
+
+    @property
+    def light_views(self) -> list[tuple[int, int]]:
+        """(first view, view count) of each light."""
+        return [(int(entry["first_view"]), int(entry["view_count"])) for entry in self.lights[:len(self.scene.lights)]]
 
     @property
     def samples(self) -> int:
@@ -75,14 +81,13 @@ def frame_inputs(scene: Scene) -> FrameInputs:
     eye_ws = np.asarray(scene.camera.position, dtype=np.float64)
     image, camera, medium = scene.image, scene.camera, scene.medium
     tris = scene.geometry.triangles - eye_ws  # float64 translation, then float32
-    lo, hi = scene.geometry.bounds()
-    lo, hi = lo - eye_ws, hi - eye_ws
+    lo, hi = scene.geometry.bounds()  # world space: the directional maps must not depend on the eye
 
     right, up, forward = camera_basis(camera)
     tan_half = math.tan(math.radians(camera.fov_deg) / 2)
     views = [_view(np.zeros(3), forward, up, tan_half * image.width / image.height, tan_half,
                    image.width, image.height, structs.PROJECTION_PERSPECTIVE, 0)]
-    lights = []
+    lights, anchors = [], []
     n = scene.render.shadow_map
     texels = 0
     for light in scene.lights:
@@ -94,11 +99,13 @@ def frame_inputs(scene: Scene) -> FrameInputs:
             entry["power"] = structs.float4(light.irradiance)
             # Orthographic map fitted to the bounding sphere of the scene.
             centre, radius = (lo + hi) / 2, max(np.linalg.norm(hi - lo) / 2, 1e-6) * 1.01
-            views.append(_view(centre - light.direction * radius, light.direction, _any_up(light.direction),
+            anchors.append(centre - light.direction * radius)
+            views.append(_view(anchors[-1] - eye_ws, light.direction, _any_up(light.direction),
                                radius, radius, n, n, structs.PROJECTION_ORTHOGRAPHIC, texels))
             entry["texel_angle"] = 2 * radius / n
             texels += n * n
         else:
+            anchors.append(np.asarray(light.position, dtype=np.float64))
             position = light.position - eye_ws
             entry["position"] = structs.float4(position)
             entry["power"] = structs.float4(light.intensity)
@@ -150,6 +157,7 @@ def frame_inputs(scene: Scene) -> FrameInputs:
         tri_normal=pad(normals),
         tri_albedo=pad(scene.geometry.albedo),
         shadow_texels=texels,
+        light_anchor_ws=np.array(anchors, dtype=np.float64).reshape(-1, 3),
     )
 
 
@@ -177,4 +185,36 @@ def upload(device: Device, inputs: FrameInputs) -> FrameBuffers:
         tri_vertices=device.buffer(inputs.tri_vertices, writable=False),
         tri_normal=device.buffer(inputs.tri_normal, writable=False),
         tri_albedo=device.buffer(inputs.tri_albedo, writable=False),
+    )
+
+
+def light_pass_inputs(inputs: FrameInputs, light_index: int) -> FrameInputs:
+    """The inputs of one light's shadow-map pass, anchored at the light.
+
+    Vertices and the light's views are translated (float64, on the host) so the map's
+    origin sits at zero: the map's depths are distances from that origin whatever the
+    eye space, so they depend only on the geometry and the light. That is what lets a
+    render session keep a static light's map while the camera moves (DESIGN §7). The
+    camera view stays in views[0]; the light's views follow from views[1], with depth
+    offsets from 0, and `shadow_texels` counts this light's texels only.
+    """
+    first, count = inputs.light_views[light_index]
+    anchor = inputs.light_anchor_ws[light_index]
+    views = inputs.views[first:first + count].copy()
+    views["origin"] = 0.0
+    views["depth_offset"] -= views["depth_offset"][0]
+    texels = int(sum(int(v["width"]) * int(v["height"]) for v in views))
+    light = inputs.lights[light_index:light_index + 1].copy()
+    light["first_view"] = 1
+    if light["type"][0] != structs.LIGHT_DIRECTIONAL:
+        light["position"] = 0.0
+    triangles = inputs.scene.geometry.triangles - anchor
+    vertices = triangles.reshape(-1, 3)
+    return replace(
+        inputs,
+        views=np.concatenate([inputs.views[:1], views]),
+        lights=light,
+        tri_vertices=np.concatenate([vertices, np.zeros((len(vertices), 1))], axis=1).astype(np.float32),
+        shadow_texels=texels,
+        light_anchor_ws=anchor.reshape(1, 3),
     )

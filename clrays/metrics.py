@@ -47,6 +47,26 @@ def depth_edges(depth: np.ndarray, relative: float = 0.05) -> np.ndarray:
     return edges
 
 
+def depth_edges_at(scene: Scene, ys, xs, relative: float = 0.05) -> np.ndarray:
+    """`depth_edges` for the pixels (ys[i], xs[i]) only, from float64 ray casts of each
+    pixel and its 4 neighbours: for error on a pixel subset of a large image."""
+    from .exact import raycast
+
+    ys, xs = np.asarray(ys), np.asarray(xs)
+    h, w = scene.image.height, scene.image.width
+    dirs = primary_rays(scene.camera, scene.image, np.array([[0.5, 0.5]]))[..., 0, :]
+    neighbours = [(0, 0), (-1, 0), (1, 0), (0, -1), (0, 1)]
+    cy = np.stack([np.clip(ys + dy, 0, h - 1) for dy, _ in neighbours])
+    cx = np.stack([np.clip(xs + dx, 0, w - 1) for _, dx in neighbours])
+    t, _ = raycast(scene.camera.position, dirs[cy.ravel(), cx.ravel()], scene.geometry.triangles,
+                   t_max=scene.camera.far)
+    depth = np.where(np.isfinite(t), t, -1.0).reshape(len(neighbours), -1)
+    centre, around = depth[0], depth[1:]
+    jump = ((centre < 0) != (around < 0)) | (np.abs(around - centre) > relative * np.maximum(np.abs(around),
+                                                                                              np.abs(centre)))
+    return jump.any(axis=0)
+
+
 @dataclass(frozen=True)
 class ImageError:
     mean: float  # mean relative luminance error over the compared pixels

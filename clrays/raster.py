@@ -32,16 +32,32 @@ def _rasterize(device: Device, buffers: FrameBuffers, view_index: int, offsets, 
     timer.add("raster", event)
 
 
+def _atomic64(device: Device) -> bool:
+    return "cl_khr_int64_extended_atomics" in device.device.extensions
+
+
 def raster_camera(device: Device, buffers: FrameBuffers, timer: StageTimer) -> tuple[object, object]:
     """Camera depth and triangle id of every sample of every pixel."""
     inputs = buffers.inputs
     samples, spp = inputs.samples, inputs.scene.image.spp
     camera_depth = device.buffer(nbytes=4 * samples)
     tri_id = device.buffer(nbytes=4 * samples)
+    count = inputs.tri_vertices.shape[0] // 3
+    if _atomic64(device):
+        # One pass: depth and triangle packed into a 64-bit key, then split.
+        defines = {"RASTER_ATOMIC64": 1}
+        nearest = device.buffer(nbytes=8 * samples)
+        device.fill(nearest, np.uint64((int(structs.DEPTH_EMPTY) << 32) | 0xFFFFFFFF), 8 * samples, timer, "raster")
+        if count:
+            timer.add("raster", device.kernel("raster", "raster_nearest", defines)(
+                device.queue, (count,), None, buffers.tri_vertices, np.int32(count), buffers.views, np.int32(0),
+                buffers.offsets, np.int32(spp), nearest))
+        timer.add("raster", device.kernel("raster", "raster_split", defines)(
+            device.queue, (samples,), None, nearest, np.int32(samples), camera_depth, tri_id))
+        return camera_depth, tri_id
     device.fill(camera_depth, structs.DEPTH_EMPTY, 4 * samples, timer, "raster")
     device.fill(tri_id, np.int32(-1), 4 * samples, timer, "raster")
     _rasterize(device, buffers, 0, buffers.offsets, spp, camera_depth, timer)
-    count = inputs.tri_vertices.shape[0] // 3
     if count:
         event = device.kernel("raster", "raster_resolve")(
             device.queue, (count,), None, buffers.tri_vertices, np.int32(count), buffers.views, np.int32(0),

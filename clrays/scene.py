@@ -9,9 +9,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal, Union
+from typing import TYPE_CHECKING, Literal, Union
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from .animation import Animation
 
 Vec3 = np.ndarray
 RGB = np.ndarray
@@ -121,3 +124,4 @@ class Scene:
     geometry: Geometry
     render: Render
     source: Path | None = None  # the YAML file, for messages and relative paths
+    animation: Animation | None = None  # keyframes (clrays.animation): `animation.scene_at(scene, frame)`

@@ -1,0 +1,158 @@
+"""What a render session keeps between frames: stage results keyed by a digest of
+exactly the inputs each stage reads (DESIGN §7 "skip what a scene doesn't need").
+
+A key is a BLAKE2b digest of numbers, strings, numpy arrays (dtype, shape and bytes)
+and dataclasses (field by field), so two frames share a stage result only when every
+input the stage reads is bit-identical; the stages are deterministic, so a reused
+result is the result the stage would compute again, and reuse never changes an image.
+"""
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+from collections import OrderedDict
+from pathlib import PurePath
+from typing import Any, Callable
+
+import numpy as np
+
+#: A stage's outcome in one frame, as `RenderResult.stage_status` reports it.
+COMPUTED, REUSED, SKIPPED = "computed", "reused", "skipped"
+
+
+def digest(*parts: Any) -> bytes:
+    """16-byte BLAKE2b of the parts (module docstring); `None` and tuples nest."""
+    h = hashlib.blake2b(digest_size=16)
+    _feed(h, parts)
+    return h.digest()
+
+
+def _feed(h, value: Any) -> None:
+    if isinstance(value, np.ndarray):
+        array = np.ascontiguousarray(value)
+        h.update(f"a{array.dtype.str}{array.shape}".encode())
+        h.update(array.tobytes())
+    elif isinstance(value, (bytes, bytearray)):
+        h.update(b"b%d:" % len(value) + bytes(value))
+    elif isinstance(value, (bool, int, float, str, type(None), np.generic, PurePath)):
+        text = repr(value.item() if isinstance(value, np.generic) else value)
+        h.update(f"{type(value).__name__}:{text};".encode())
+    elif isinstance(value, (tuple, list)):
+        h.update(b"(%d" % len(value))
+        for item in value:
+            _feed(h, item)
+        h.update(b")")
+    elif isinstance(value, dict):
+        h.update(b"{%d" % len(value))
+        for key in sorted(value, key=repr):
+            _feed(h, key)
+            _feed(h, value[key])
+        h.update(b"}")
+    elif dataclasses.is_dataclass(value) and not isinstance(value, type):
+        h.update(type(value).__name__.encode() + b"<")
+        for f in dataclasses.fields(value):
+            h.update(f.name.encode() + b"=")
+            _feed(h, getattr(value, f.name))
+        h.update(b">")
+    else:
+        raise TypeError(f"cannot digest a {type(value).__name__}")
+
+
+def scene_digest(scene, *, render: bool = True) -> bytes:
+    """Everything about a scene that can change an image (not its source path or its
+    animation, which only make other scenes). `render=False` leaves out the render
+    settings, for references whose own settings are given separately."""
+    return digest(scene.image, scene.camera, scene.lights, scene.medium, scene.background,
+                  scene.geometry.triangles, scene.geometry.albedo, scene.render if render else None)
+
+
+class StageCache:
+    """Least-recently-used results per stage label, a few entries each.
+
+    `capacity` entries per stage and light: a sequence needs one (the previous frame),
+    a sweep a few (its inner parameter's values), so the default keeps 3."""
+
+    def __init__(self, capacity: int = 3):
+        if capacity < 1:
+            raise ValueError(f"cache capacity: expected >= 1, got {capacity}")
+        self.capacity = capacity
+        self._entries: dict[str, OrderedDict[bytes, Any]] = {}
+
+    def get(self, stage: str, key: bytes) -> tuple[bool, Any]:
+        entries = self._entries.get(stage)
+        if entries is None or key not in entries:
+            return False, None
+        entries.move_to_end(key)
+        return True, entries[key]
+
+    def put(self, stage: str, key: bytes, value: Any, scale: int = 1) -> None:
+        """Keep `value`; `scale` multiplies the capacity (per-light stages pass the light count)."""
+        entries = self._entries.setdefault(stage, OrderedDict())
+        entries[key] = value
+        entries.move_to_end(key)
+        while len(entries) > self.capacity * max(scale, 1):
+            entries.popitem(last=False)
+
+    def clear(self) -> None:
+        self._entries.clear()
+
+    def __len__(self) -> int:
+        return sum(len(entries) for entries in self._entries.values())
+
+
+class StageRecord:
+    """Which stages of one frame were computed, reused or skipped, light by light."""
+
+    def __init__(self):
+        self._outcomes: dict[str, list[str]] = {}
+
+    def note(self, stage: str, outcome: str) -> None:
+        self._outcomes.setdefault(stage, []).append(outcome)
+
+    def status(self) -> dict[str, str]:
+        """stage → "computed", "reused", "skipped" or "reused k of n" (per-light stages)."""
+        status = {}
+        for stage, outcomes in self._outcomes.items():
+            ran = [o for o in outcomes if o != SKIPPED]
+            if not ran:
+                status[stage] = SKIPPED
+            elif all(o == REUSED for o in ran):
+                status[stage] = REUSED
+            elif all(o == COMPUTED for o in ran):
+                status[stage] = COMPUTED
+            else:
+                status[stage] = f"{REUSED} {ran.count(REUSED)} of {len(ran)}"
+        return status
+
+
+class Reuse:
+    """The reuse decisions of one frame: a cache (or None: compute everything) and the record."""
+
+    def __init__(self, cache: StageCache | None, record: StageRecord, scale: int = 1):
+        self.cache, self.record, self.scale = cache, record, scale
+
+    def stage(self, stage: str | tuple[str, ...], key: bytes, compute: Callable[[], Any]) -> Any:
+        """The stage's result for `key`: the kept one, or `compute()` (then kept). A tuple
+        of stage labels records one outcome for stages kept together (rectify + minmax)."""
+        labels = (stage,) if isinstance(stage, str) else stage
+        found, value = self.cache.get(labels[0], key) if self.cache is not None else (False, None)
+        if not found:
+            value = compute()
+            if self.cache is not None:
+                self.cache.put(labels[0], key, value, self.scale)
+        for label in labels:
+            self.record.note(label, REUSED if found else COMPUTED)
+        return value
+
+    def keep(self, name: str, key: bytes, compute: Callable[[], Any]) -> Any:
+        """Like `stage`, for intermediate results that are no stage of their own (not recorded)."""
+        found, value = self.cache.get(name, key) if self.cache is not None else (False, None)
+        if not found:
+            value = compute()
+            if self.cache is not None:
+                self.cache.put(name, key, value, self.scale)
+        return value
+
+    def skip(self, *stages: str) -> None:
+        for stage in stages:
+            self.record.note(stage, SKIPPED)
