@@ -21,7 +21,7 @@ from typing import Iterator, Literal, Mapping
 
 import numpy as np
 
-from .scene import DirectionalLight, Geometry, Medium, Phase, Scene
+from .scene import Geometry, Medium, Phase, Scene
 from .transforms import affine, quat_rotate, quat_to_matrix, slerp, transform_points
 
 #: Easing curves: the fraction of the way from one key to the next at t in [0, 1].
@@ -73,7 +73,7 @@ class Track:
             return slerp(a.value, b.value, u)
         if self.kind == "direction":
             return slerp_direction(a.value, b.value, u)
-        return a.value + (b.value - a.value) * u if isinstance(a.value, np.ndarray) else a.value + (b.value - a.value) * u
+        return a.value + (b.value - a.value) * u
 
 
 def slerp_direction(a: np.ndarray, b: np.ndarray, t: float) -> np.ndarray:
@@ -173,7 +173,3 @@ def frame_scenes(scene: Scene, frames=None) -> Iterator[tuple[int, Scene]]:
         return
     for frame in (frames if frames is not None else scene.animation.frames):
         yield frame, scene.animation.scene_at(scene, frame)
-
-
-def is_directional(light) -> bool:
-    return isinstance(light, DirectionalLight)

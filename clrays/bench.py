@@ -13,7 +13,7 @@ wall clock, host work included), the median device time per stage, the device me
 and the error against `exact`: relative RMSE of luminance and the 99th-percentile
 relative error, on pixels with at least 1% of the mean radiance, depth edges excluded
 (`clrays.metrics`). `exact` costs pixels × triangles, so the error is measured on a
-fixed, seeded random subset of pixels (`pixels`, default 2000), the same for every
+fixed, seeded random subset of pixels (`pixels`, default 4000), the same for every
 point; references are cached on disk by a hash of the scene and the subset.
 """
 from __future__ import annotations
@@ -56,10 +56,16 @@ class BenchPoint:
     stage_ms: dict[str, float] = field(default_factory=dict)
 
 
-def sweep(scene: Scene) -> list[tuple[str, str, dict]]:
-    """(method, label, render overrides) of every point for one scene."""
+def sweep(scene: Scene, quick: bool = False) -> list[tuple[str, str, dict]]:
+    """(method, label, render overrides) of every point for one scene; `quick` keeps
+    a handful (two raymarch points, minmax defaults and scan) for a smoke run."""
     from .scene import DirectionalLight
 
+    if quick:
+        return [("raymarch", "steps=32 shadow_map=256", {"steps": 32, "shadow_map": 256}),
+                ("raymarch", "steps=256 shadow_map=256", {"steps": 256, "shadow_map": 256}),
+                ("minmax", "shadow_map=256", {"shadow_map": 256}),
+                ("minmax", "shadow_map=256 traversal=scan", {"shadow_map": 256, "traversal": "scan"})]
     points = []
     for shadow_map in (512, 1024, 2048):
         for steps in (16, 32, 64, 128, 256, 512, 1024, 2048):
@@ -136,15 +142,16 @@ def measure(renderer: Renderer, scene: Scene, method: str, repeats: int):
     return median, (max(walls) - min(walls)) / median, stage_ms, result
 
 
-def run(scene_paths=DEFAULT_SCENES, resolutions=((640, 360),), repeats: int = 5, pixels: int = 2000,
-        cache: Path = Path(".cache/clrays"), device: str | None = None, progress=None, log=print) -> list[BenchPoint]:
+def run(scene_paths=DEFAULT_SCENES, resolutions=((640, 360),), repeats: int = 5, pixels: int = 4000,
+        cache: Path = Path(".cache/clrays"), device: str | None = None, progress=None, log=print,
+        quick: bool = False) -> list[BenchPoint]:
     """The whole sweep; `progress(points_done, points_total)` is called after each point."""
     renderer = Renderer(device, reuse=False)  # every frame computed from scratch
     plan = []
     for path in scene_paths:
         for width, height in resolutions:
             scene = load_scene(path, [f"image.width={width}", f"image.height={height}"])
-            plan.append((path, scene, sweep(scene)))
+            plan.append((path, scene, sweep(scene, quick)))
     total = sum(len(points) for _, _, points in plan)
     results, done = [], 0
     for path, scene, points in plan:

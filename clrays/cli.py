@@ -121,14 +121,18 @@ def _print_stats(result) -> None:
     click.echo(f"  device memory {result.device_bytes / 2**20:.1f} MiB")
 
 
-def _resolution(text: str) -> tuple[int, int]:
-    try:
-        width, height = (int(part) for part in text.lower().split("x"))
-        if width < 1 or height < 1:
-            raise ValueError
-    except ValueError:
-        raise click.BadParameter(f"expected WIDTHxHEIGHT like 640x360, got {text!r}") from None
-    return width, height
+def _resolutions(context, parameter, texts) -> list[tuple[int, int]]:
+    """Click callback: WIDTHxHEIGHT strings → (width, height) pairs, usage error otherwise."""
+    sizes = []
+    for text in texts:
+        try:
+            width, height = (int(part) for part in text.lower().split("x"))
+            if width < 1 or height < 1:
+                raise ValueError
+        except ValueError:
+            raise click.BadParameter(f"expected WIDTHxHEIGHT like 640x360, got {text!r}") from None
+        sizes.append((width, height))
+    return sizes
 
 
 @main.command(epilog="""
@@ -137,20 +141,22 @@ Examples:
   clrays bench                                  # every bench scene at 640x360
   clrays bench scenes/demo.yaml -r 1280x720 -r 640x360 --out bench/out
   clrays bench --repeats 3 --pixels 500         # a quicker, noisier run
+  clrays bench scenes/demo.yaml -r 64x36 --quick  # smoke run: does it all work?
 """)
 @click.argument("scenes", nargs=-1, type=click.Path(dir_okay=False, path_type=Path))
 @click.option("-r", "--resolution", "resolutions", multiple=True, default=["640x360"], show_default=True,
-              help="WIDTHxHEIGHT to render at (repeatable).")
+              callback=_resolutions, help="WIDTHxHEIGHT to render at (repeatable).")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("bench/out"),
               show_default=True, help="Folder for bench.csv, bench.png, summary.md, machine.json.")
 @click.option("--repeats", type=click.IntRange(1, 100), default=5, show_default=True,
               help="Timed frames per point (after one warm-up); the median is reported.")
-@click.option("--pixels", type=click.IntRange(16), default=2000, show_default=True,
+@click.option("--pixels", type=click.IntRange(16), default=4000, show_default=True,
               help="Pixels (fixed random subset) on which the error against exact is measured.")
 @click.option("--cache", type=click.Path(file_okay=False, path_type=Path), default=Path(".cache/clrays"),
               show_default=True, help="Where exact references are cached.")
+@click.option("--quick", is_flag=True, help="A handful of points per scene: a smoke run, not results.")
 @click.option("--device", envvar="CLRAYS_DEVICE", help="OpenCL device: 'P:D' index or name substring.")
-def bench(scenes, resolutions, out, repeats, pixels, cache, device) -> None:
+def bench(scenes, resolutions, out, repeats, pixels, cache, quick, device) -> None:
     """Time every method and setting against its error versus `exact`.
 
     Writes a CSV of every point, a log-log plot of error against time with the Pareto
@@ -159,13 +165,13 @@ def bench(scenes, resolutions, out, repeats, pixels, cache, device) -> None:
     try:
         from . import bench as bench_module
 
-        sizes = [_resolution(text) for text in resolutions]
+        sizes = resolutions
         paths = [str(path) for path in scenes] or list(bench_module.DEFAULT_SCENES)
         for path in paths:
             if not Path(path).is_file():
                 raise ClraysError(f"{path}: no such scene file")
         points = bench_module.run(paths, sizes, repeats=repeats, pixels=pixels, cache=cache, device=device,
-                                  log=lambda line: click.echo(line, err=True))
+                                  log=lambda line: click.echo(line, err=True), quick=quick)
         bench_module.save(points, out, {"repeats": repeats, "pixels": pixels,
                                         "resolutions": [f"{w}x{h}" for w, h in sizes], "scenes": paths})
         click.echo(bench_module.markdown_summary(points))

@@ -27,10 +27,11 @@ import numpy as np
 import yaml
 
 from . import primitives
+from .animation import EASINGS, Animation, Key, ObjectRig, Track
 from .errors import SceneError
 from .scene import (Camera, DirectionalLight, Geometry, Image, Light, Medium, Phase,
                     PointLight, Render, Scene, SpotLight)
-from .transforms import (affine, quat_to_matrix, rotation_axis_angle, rotation_euler,
+from .transforms import (affine, matrix_to_quat, quat_to_matrix, rotation_axis_angle, rotation_euler,
                          transform_points)
 
 FORMAT_VERSION = 1
@@ -47,6 +48,9 @@ MAX_PCF = 16
 SPHERE_SEGMENTS_RANGE = (4, 1024)
 PLANE_SEGMENTS_RANGE = (1, 1024)
 QUATERNION_TOLERANCE = 1e-6
+MAX_FRAME = 100_000  # animation frame numbers: [0, MAX_FRAME]
+MAX_FPS = 1000.0
+DEFAULT_FPS = 24.0
 PARALLEL_TOLERANCE = 1e-6  # |sin| of the angle between camera up and the view direction
 
 DEFAULT_SPHERE_SEGMENTS = 48
@@ -515,23 +519,31 @@ def _rotation(node: _Node) -> np.ndarray:
                     or order[0] == order[1] or order[1] == order[2]):
                 m["order"].fail("3 letters over 'xyz' with no adjacent repeats, like 'xyz' or 'zxz'")
         return rotation_euler(np.radians(angles), order)
-    q_node = m["quaternion"]
-    q = _numbers(q_node, 4, "a unit quaternion [w, x, y, z]")
+    return quat_to_matrix(_unit_quaternion(m["quaternion"]))
+
+
+def _unit_quaternion(node: _Node) -> np.ndarray:
+    q = _numbers(node, 4, "a unit quaternion [w, x, y, z]")
     norm = float(np.linalg.norm(q))
     if abs(norm - 1.0) > QUATERNION_TOLERANCE:
-        q_node.fail(f"a unit quaternion [w, x, y, z] (|q| = 1 within {QUATERNION_TOLERANCE:g})",
-                    f"{_show(q_node)} with |q| = {norm:.9g}")
-    return quat_to_matrix(q)
+        node.fail(f"a unit quaternion [w, x, y, z] (|q| = 1 within {QUATERNION_TOLERANCE:g})",
+                  f"{_show(node)} with |q| = {norm:.9g}")
+    return q
+
+
+def _transform_parts(node: _Node | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(translate (3,), rotation 3x3, scale (3,)); the identity for no transform."""
+    if node is None:
+        return np.zeros(3), np.eye(3), np.ones(3)
+    m = _mapping(node, optional=("translate", "rotate", "scale"))
+    translate = _vec3(m["translate"]) if "translate" in m else np.zeros(3)
+    rotate = _rotation(m["rotate"]) if "rotate" in m else np.eye(3)
+    return translate, rotate, _scale(m.get("scale"))
 
 
 def _transform(node: _Node | None) -> np.ndarray | None:
     """4x4 T @ R @ S (scale, then rotate, then translate), or None for no transform."""
-    if node is None:
-        return None
-    m = _mapping(node, optional=("translate", "rotate", "scale"))
-    translate = _vec3(m["translate"]) if "translate" in m else np.zeros(3)
-    rotate = _rotation(m["rotate"]) if "rotate" in m else np.eye(3)
-    return affine(translate, rotate, _scale(m.get("scale")))
+    return None if node is None else affine(*_transform_parts(node))
 
 
 def _triangles(m: dict[str, _Node]) -> np.ndarray:
@@ -588,22 +600,28 @@ _OBJECTS: dict[str, tuple[tuple[str, ...], tuple[str, ...], Callable[[dict, Path
 _OBJECT_COMMON = ("albedo", "transform")
 
 
-def _object(node: _Node, base_dir: Path) -> tuple[np.ndarray, np.ndarray]:
-    """(triangles (T, 3, 3) world space, albedo (3,)) of one object."""
+def _object(node: _Node, base_dir: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple]:
+    """(triangles (T, 3, 3) world space, albedo (3,), triangles before the transform,
+    transform parts (translate, rotation, scale)) of one object."""
     kind, m = _typed(node, {k: (req, opt) for k, (req, opt, _) in _OBJECTS.items()}, _OBJECT_COMMON)
     build = _OBJECTS[kind][2]
     albedo = _rgb(m.get("albedo"), 0.0, 1.0, default=DEFAULT_ALBEDO)
-    matrix = _transform(m.get("transform"))
-    tris = build(m, base_dir)
-    if matrix is not None:
-        tris = transform_points(matrix, tris)
-    return tris, albedo
+    parts = _transform_parts(m.get("transform"))
+    local = tris = build(m, base_dir)
+    if "transform" in m:
+        tris = transform_points(affine(*parts), tris)
+    return tris, albedo, local, parts
 
 
-def _geometry(node: _Node | None, base_dir: Path) -> Geometry:
+def _geometry(node: _Node | None, base_dir: Path, rigs: list | None = None) -> Geometry:
+    """All objects flattened; `rigs`, when given, receives each object's ObjectRig."""
     tris, albedo, ids = [np.zeros((0, 3, 3))], [np.zeros((0, 3))], [np.zeros(0, np.int32)]
+    start = 0
     for i, obj in enumerate(_list(node, "a list of objects") if node is not None else []):
-        t, a = _object(obj, base_dir)
+        t, a, local, (translate, rotate, scale) = _object(obj, base_dir)
+        if rigs is not None:
+            rigs.append(ObjectRig(local, slice(start, start + len(t)), translate, matrix_to_quat(rotate), scale))
+        start += len(t)
         tris.append(t)
         albedo.append(np.broadcast_to(a, (len(t), 3)))
         ids.append(np.full(len(t), i, dtype=np.int32))
@@ -612,10 +630,125 @@ def _geometry(node: _Node | None, base_dir: Path) -> Geometry:
                     object_id=np.concatenate(ids).astype(np.int32))
 
 
+# --------------------------------------------------------------------------- animation
+
+# Animated properties: name -> (reader, interpolation). Lights by type, like _LIGHTS.
+_Reader = tuple[Callable[[_Node], Any], str]
+_CAMERA_TRACKS: dict[str, _Reader] = {
+    "position": (_vec3, "linear"),
+    "look_at": (_vec3, "linear"),
+    "up": (_direction, "direction"),
+    "orientation": (_unit_quaternion, "rotation"),
+    "fov_deg": (lambda n: _number(n, 0.0, 180.0, lo_open=True, hi_open=True), "linear"),
+}
+_LIGHT_TRACKS: dict[str, dict[str, _Reader]] = {
+    "point": {"position": (_vec3, "linear"), "intensity": (_rgb, "linear")},
+    "spot": {"position": (_vec3, "linear"), "direction": (_direction, "direction"),
+             "cone_deg": (lambda n: _number(n, 0.0, 90.0, lo_open=True), "linear"), "intensity": (_rgb, "linear")},
+    "directional": {"direction": (_direction, "direction"), "irradiance": (_rgb, "linear")},
+}
+_OBJECT_TRACKS: dict[str, _Reader] = {
+    "translate": (_vec3, "linear"),
+    "rotate": (lambda n: matrix_to_quat(_rotation(n)), "rotation"),
+    "scale": (_scale, "linear"),
+}
+_MEDIUM_TRACKS: dict[str, _Reader] = {
+    "sigma_s": (_rgb, "linear"),
+    "sigma_a": (_rgb, "linear"),
+    "g": (lambda n: _number(n, -1.0, 1.0, lo_open=True, hi_open=True), "linear"),
+}
+
+
+def _keys(node: _Node, tracks: dict[str, _Reader], easing: str) -> tuple[dict[str, Track], dict[str, list[_Node]]]:
+    """A list of keys {frame, [easing], property: value, ...} → one Track per property
+    (and the value nodes of each, for later messages)."""
+    keys: dict[str, list[Key]] = {}
+    nodes: dict[str, list[_Node]] = {}
+    previous = None
+    for item in _list(node, "a list of at least 1 key {frame: ..., <property>: ...}", 1):
+        m = _mapping(item, required=("frame",), optional=("easing",) + tuple(tracks))
+        frame = _number(m["frame"])
+        if previous is not None and frame <= previous:
+            m["frame"].fail(f"a frame after {previous:g} (keys in increasing frame order)")
+        previous = frame
+        key_easing = _choice(m.get("easing"), tuple(EASINGS), easing)
+        names = [name for name in m if name in tracks]
+        if not names:
+            item.fail(f"a key that sets at least one of {', '.join(tracks)}")
+        for name in names:
+            reader, kind = tracks[name]
+            value = reader(m[name])
+            if kind == "direction" and keys.get(name) and float(value @ keys[name][-1].value) <= -1.0 + 1e-12:
+                m[name].fail("a direction not opposite to the previous key's (the way between them is undefined)")
+            keys.setdefault(name, []).append(Key(frame, value, key_easing))
+            nodes.setdefault(name, []).append(m[name])
+    return {name: Track(tracks[name][1], tuple(k)) for name, k in keys.items()}, nodes
+
+
+def _indexed_tracks(node: _Node, what: str, count: int, tracks_of: Callable[[int], dict[str, _Reader]],
+                    easing: str) -> dict[int, tuple[dict[str, Track], dict[str, list[_Node]]]]:
+    """A list of {<what>: index, keys: [...]} (a light or an object per entry)."""
+    found: dict[int, tuple[dict[str, Track], dict[str, list[_Node]]]] = {}
+    for entry in _list(node, f"a list of {{{what}: index, keys: [...]}}"):
+        m = _mapping(entry, required=(what, "keys"))
+        index = _integer(m[what], 0, count - 1) if count else m[what].fail(f"no {what} index (there are none)")
+        if index in found:
+            m[what].fail(f"each {what} animated once (merge its keys into one entry)", f"{index} again")
+        found[index] = _keys(m["keys"], tracks_of(index), easing)
+    return found
+
+
+def _animation(node: _Node, scene: Scene, rigs: list[ObjectRig]) -> Animation:
+    m = _mapping(node, required=("frames",), optional=("fps", "easing", "camera", "lights", "objects", "medium"))
+    fps = _number(m.get("fps"), 0.0, MAX_FPS, lo_open=True, default=DEFAULT_FPS)
+    frames = m["frames"]
+    if not isinstance(frames.value, list) or len(frames.value) != 2:
+        frames.fail("[first, last]: the first and last frame, inclusive")
+    first, last = (_integer(n, 0, MAX_FRAME) for n in frames.value)
+    if last < first:
+        frames.value[1].fail(f"a last frame >= the first, {first}")
+    easing = _choice(m.get("easing"), tuple(EASINGS), "linear")
+
+    camera, camera_nodes = _keys(m["camera"], _CAMERA_TRACKS, easing) if "camera" in m else ({}, {})
+    if "orientation" in camera:
+        for name in ("look_at", "up"):
+            if name in camera:
+                camera_nodes[name][0].fail("no look_at or up keys beside orientation keys (the orientation "
+                                           "points the camera)", f"{name} keys")
+    lights = _indexed_tracks(m["lights"], "light", len(scene.lights),
+                             lambda i: _LIGHT_TRACKS[scene.lights[i].type], easing) if "lights" in m else {}
+    objects = _indexed_tracks(m["objects"], "object", len(rigs), lambda i: _OBJECT_TRACKS,
+                              easing) if "objects" in m else {}
+    medium, medium_nodes = _keys(m["medium"], _MEDIUM_TRACKS, easing) if "medium" in m else ({}, {})
+    if "g" in medium and scene.medium.phase.type != "hg":
+        medium_nodes["g"][0].fail("a medium with phase {type: hg, g: ...} (only then is there a g to animate)",
+                                  f"{_show(medium_nodes['g'][0])} with phase {scene.medium.phase.type!r}")
+    animation = Animation(
+        fps=fps, first=first, last=last, camera=camera, medium=medium,
+        lights={i: tracks for i, (tracks, _) in lights.items()},
+        objects={i: (rigs[i], tracks) for i, (tracks, _) in objects.items()},
+    )
+    if camera.keys() & {"position", "look_at", "up"} and "orientation" not in camera:
+        _check_camera_path(m["camera"], animation, scene)
+    return animation
+
+
+def _check_camera_path(node: _Node, animation: Animation, scene: Scene) -> None:
+    """Every frame's camera must be valid, like a static one (look_at off the position,
+    up off the view direction)."""
+    for frame in animation.frames:
+        camera = animation._camera(scene, frame)
+        view = camera.look_at - camera.position
+        if not np.any(view):
+            node.fail("look_at away from position at every frame", f"look_at = position at frame {frame}")
+        if np.linalg.norm(np.cross(view / np.linalg.norm(view), camera.up)) < PARALLEL_TOLERANCE:
+            node.fail("up not parallel to look_at - position at every frame", f"parallel at frame {frame}")
+
+
 # --------------------------------------------------------------------------- entry points
 
 _TOP_REQUIRED = ("version", "image", "camera", "lights")
-_TOP_OPTIONAL = ("medium", "background", "objects", "render")
+_TOP_OPTIONAL = ("medium", "background", "objects", "render", "animation")
 
 
 def parse_scene(text: str, source: Path | str | None = None, overrides: Sequence[str] = ()) -> Scene:
@@ -645,16 +778,20 @@ def _parse(text: str, filename: str, source: Path | str | None, overrides: Seque
     m = _mapping(root, required=_TOP_REQUIRED, optional=_TOP_OPTIONAL)
 
     base_dir = Path(source).parent if source is not None else Path.cwd()
-    return Scene(  # sections are read (and fail) in the order the format lists them
+    rigs: list[ObjectRig] = []
+    scene = Scene(  # sections are read (and fail) in the order the format lists them
         image=_image(m["image"]),
         camera=_camera(m["camera"]),
         lights=tuple(_light(n) for n in _list(m["lights"], "a list of at least 1 light", 1)),
         medium=_medium(m.get("medium")),
         background=_rgb(m.get("background"), default=0.0),
-        geometry=_geometry(m.get("objects"), base_dir),
+        geometry=_geometry(m.get("objects"), base_dir, rigs if "animation" in m else None),
         render=_render(m.get("render")),
         source=Path(source) if source is not None else None,
     )
+    if "animation" in m:
+        scene = dataclasses.replace(scene, animation=_animation(m["animation"], scene, rigs))
+    return scene
 
 
 def load_scene(path: Path | str, overrides: Sequence[str] = ()) -> Scene:
