@@ -37,20 +37,20 @@ inline float beta_coordinate(global const integrand_t* in, float beta)
     return M_2_PI_F * atan2(lo, hi) * (float)(in->n_beta - 1);
 }
 
-/* x(β, γ) per channel (only directional rows differ per channel, through s_end). */
-inline float3 row_coordinate(global const integrand_t* in, float beta, float sin_beta, float gamma)
+/* x(β, γ) per channel (only directional rows differ per channel, through s_end).
+ * delta = π - β, taken from the geometry rather than from β: within float32's spacing of π
+ * (2.4e-7) the difference M_PI_F - β is all rounding, and x = γ/(π-β) with it. */
+inline float3 row_coordinate(global const integrand_t* in, float delta, float sin_beta, float gamma)
 {
     if (in->light_type == LIGHT_DIRECTIONAL)
         return clamp((gamma / sin_beta) / in->s_end.xyz, 0.0f, 1.0f);
-    float delta = fmax(M_PI_F - beta, 0.0f);
     float x = delta > 0.0f ? gamma / delta : (gamma > 0.0f ? 1.0f : 0.0f);
     return (float3)(clamp(x, 0.0f, 1.0f));
 }
 
-inline float3 row_scale(global const integrand_t* in, float beta, float sin_beta)
+inline float3 row_scale(global const integrand_t* in, float delta, float sin_beta)
 {
     if (in->light_type == LIGHT_DIRECTIONAL) return in->s_end.xyz;
-    float delta = fmax(M_PI_F - beta, 0.0f);
     return (float3)(delta > SIN_BETA_MIN ? delta / sin_beta : 1.0f); /* (π-β)/sinβ → 1 as β → π */
 }
 
@@ -86,6 +86,7 @@ inline float svd_difference(global const integrand_t* in, global const float* ta
  * pixel, used for every lit run of both slices. */
 typedef struct {
     float beta;
+    float delta;     /* π - β, precise as β → π */
     float sin_beta;
     float3 scale;    /* row_scale(β) */
     int row;         /* table row j ... */
@@ -99,7 +100,8 @@ inline integrand_row_t integrand_row(global const integrand_t* in, float beta, f
     r.beta = beta;
     r.sin_beta = fmax(sin_beta, SIN_BETA_MIN);
     r.cos_beta = cos_beta;
-    r.scale = row_scale(in, beta, r.sin_beta);
+    r.delta = atan2(r.sin_beta, -cos_beta);
+    r.scale = row_scale(in, r.delta, r.sin_beta);
     r.row = in->mode == INTEGRAND_ANALYTIC ? 0 : grid_split(beta_coordinate(in, beta), in->n_beta, &r.row_t);
     return r;
 }
@@ -116,13 +118,13 @@ inline float3 segment_radiance(global const integrand_t* in, global const float*
             float3 tail = select((float3)(ds), -expm1(-sigma_t * ds) / sigma_t, isgreater(sigma_t, (float3)(0.0f)));
             return in->amplitude.xyz * phase_function(frame, r->cos_beta) * exp(-sigma_t * s0) * tail;
         }
-        float delta = fmax(M_PI_F - r->beta, 0.0f);
-        float span = clamp(gamma1, 0.0f, delta) - clamp(gamma0, 0.0f, delta);
+        float span = clamp(gamma1, 0.0f, r->delta) - clamp(gamma0, 0.0f, r->delta);
         return in->amplitude.xyz * (span / (4.0f * M_PI_F * in->d_el * r->sin_beta));
     }
     int j = r->row;
     float fj = r->row_t;
-    float3 x0 = row_coordinate(in, r->beta, r->sin_beta, gamma0), x1 = row_coordinate(in, r->beta, r->sin_beta, gamma1);
+    float3 x0 = row_coordinate(in, r->delta, r->sin_beta, gamma0);
+    float3 x1 = row_coordinate(in, r->delta, r->sin_beta, gamma1);
     float3 difference;
     if (in->mode == INTEGRAND_TABLE) {
         size_t plane = (size_t)in->n_beta * in->n_gamma;

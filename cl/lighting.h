@@ -7,6 +7,19 @@
 
 #define INV_FOUR_PI 0.0795774715459476679f
 
+/* A point or spot light is a lamp: a ball of radius LAMP_RADIUS_REL·far around it holds no
+ * medium, which keeps a ray through the light and the eye at the light finite
+ * (clrays/radiometry.py, LAMP_RADIUS_REL, says why; the two values must agree). */
+#define LAMP_RADIUS_REL 1e-6f
+
+/* The eye (eye space's origin) is inside a point or spot light's lamp, d_el → 0: then every
+ * point the eye sees, the light sees too, and nothing visible is shadowed (DESIGN §6). A
+ * shadow-map test there would only add its texel-wide errors along every silhouette. */
+inline int eye_in_lamp(global const light_t* light, float far)
+{
+    return light->type != LIGHT_DIRECTIONAL && length(light->position.xyz) < LAMP_RADIUS_REL * far;
+}
+
 /* Screen coordinates of sample (x + ox, y + oy) in [-1, 1], y up. */
 inline float2 view_screen(global const view_t* view, int x, int y, float2 offset)
 {

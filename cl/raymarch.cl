@@ -1,6 +1,7 @@
 /* raymarch — the brute-force reference: in-scattered radiance per camera sample by
- * `steps` uniform (optionally jittered) samples from the eye to the surface, with a
- * shadow-map lookup per sample and light.
+ * `steps` uniform (optionally jittered) samples per light from the eye to the surface
+ * (for a spot light, over the part of the ray inside its cone), with a shadow-map
+ * lookup per sample.
  * Reads frame, views, lights, shadow_depth, camera_depth, offsets; writes scatter
  * (one float4 per camera sample, rgb radiance). */
 #include "lighting.h"
@@ -10,6 +11,14 @@ inline float hash_unit(uint a)
 {
     a ^= a >> 16; a *= 0x7feb352du; a ^= a >> 15; a *= 0x846ca68bu; a ^= a >> 16;
     return (float)(a >> 8) * (1.0f / 16777216.0f);
+}
+
+/* ∫ e^{-k·v} dv over a step of length dt, per channel: (1 - e^{-k·dt})/k, → dt as k → 0.
+ * Below k·dt = 1e-6 the limit is exact to 5e-7 and avoids 0/0 where k·dt underflows. */
+inline float3 step_integral(float3 k, float dt)
+{
+    float3 kdt = k * dt;
+    return select((float3)(dt), -expm1(-kdt) / k, isgreater(kdt, (float3)(1e-6f)));
 }
 
 kernel void raymarch(global const frame_t* frame, global const view_t* views,
@@ -25,23 +34,41 @@ kernel void raymarch(global const frame_t* frame, global const view_t* views,
     view_ray(views, view_screen(views, x, y, offsets[sample % frame->spp]), &origin, &dir);
     float distance = fmin(as_float(camera_depth[sample]), frame->far);
 
-    float3 sigma_s = frame->sigma_s.xyz, sigma_t = frame->sigma_t.xyz;
-    float dt = distance / (float)frame->steps;
+    float3 sigma_t = frame->sigma_t.xyz;
     float u = frame->jitter ? hash_unit((uint)sample * 0x9e3779b9u + 0x85ebca6bu) : 0.5f;
     float3 radiance = (float3)(0.0f);
-    for (int i = 0; i < frame->steps; ++i) {
-        float t = ((float)i + u) * dt;
-        float3 p = origin + t * dir;
-        float3 at_point = (float3)(0.0f);
-        for (int l = 0; l < frame->light_count; ++l) {
+    for (int l = 0; l < frame->light_count; ++l) {
+        global const light_t* light = lights + l;
+        /* A spot light is marched only inside its cone: the hard edge is then exact and
+         * no step is spent where the light does not reach. */
+        float begin = 0.0f, end = distance;
+        if (light->type == LIGHT_SPOT && !spot_interval(light, dir, distance, &begin, &end)) continue;
+        float dt = (end - begin) / (float)frame->steps;
+        int directional = light->type == LIGHT_DIRECTIONAL;
+        int unshadowed = eye_in_lamp(light, frame->far);
+        for (int i = 0; i < frame->steps; ++i) {
+            float t = begin + ((float)i + u) * dt;
+            float3 p = origin + t * dir;
+            float d = directional ? 0.0f : length(p - light->position.xyz);
+            if (!directional && d < LAMP_RADIUS_REL * frame->far) continue; /* no medium in the lamp */
             float3 to_light;
-            float3 incident = light_incident(lights + l, sigma_t, p, &to_light);
+            /* Unattenuated here: both exponentials are integrated over the step below. */
+            float3 incident = light_incident(light, (float3)(0.0f), p, &to_light);
             if (incident.x + incident.y + incident.z == 0.0f) continue;
-            float visible = shadow_visibility(lights + l, views, shadow_depth, p, 1.0f, 0);
+            /* No depth bias: a sample in the medium is on no surface, so it cannot shadow
+             * itself, and a bias would light a texel-thick layer behind every occluder. */
+            float visible = unshadowed ? 1.0f : shadow_visibility(light, views, shadow_depth, p, 0.0f, 0);
+            if (visible == 0.0f) continue;
+            /* The light's path e^{-σt·(s + d(s))}, d the distance to the light (0 for a
+             * directional light), is linear in s across the step to first order, with slope
+             * σt·(1 + d'), d' = -to_light·dir: integrated exactly over [start, start + dt],
+             * so a step longer than the mean free path (dense fog) still weighs right. */
+            float d_rate = directional ? 0.0f : -dot(to_light, dir);
+            float path = t + d - (1.0f + d_rate) * u * dt;
+            float3 weight = exp(-sigma_t * path) * step_integral(sigma_t * (1.0f + d_rate), dt);
             /* cos θ = (light → p)·(p → eye) = to_light·dir */
-            at_point += incident * (visible * phase_function(frame, dot(to_light, dir)));
+            radiance += incident * weight * (visible * phase_function(frame, dot(to_light, dir)));
         }
-        radiance += at_point * exp(-sigma_t * t);
     }
-    scatter[sample] = (float4)(radiance * sigma_s * dt, 0.0f);
+    scatter[sample] = (float4)(radiance * frame->sigma_s.xyz, 0.0f);
 }

@@ -54,7 +54,10 @@ kernel void rectify(global const view_t* views, global const light_t* lights,
     if (texel >= ep->gamma_samples || slice >= ep->slices) return;
     global const light_t* light = lights + ep->light_index;
     float alpha = ep->alpha_min + ((float)slice + 0.5f) * ep->alpha_step;
-    float gamma = ((float)texel + 0.5f) * ep->gamma_step;
+    /* Texel centres, except texel 0 at γ = 0: the eye's own light ray (through the eye, the
+     * same for every slice). A ray straight away from the light (β → π) spans only
+     * γ < SIN_BETA_MIN·s, far less than half a texel, and its visibility is that ray's. */
+    float gamma = texel == 0 ? 0.0f : ((float)texel + 0.5f) * ep->gamma_step;
     float3 r = slice_direction(ep, alpha);
     float blocker_beta;
     if (light->type == LIGHT_DIRECTIONAL) {

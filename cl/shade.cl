@@ -41,8 +41,10 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                 if (cosine <= 0.0f || incident.x + incident.y + incident.z == 0.0f) continue;
                 /* Normal offset by a texel keeps a lit surface from shadowing itself. */
                 float3 lookup = p + n * shadow_texel_size(lights + l, length(p - lights[l].position.xyz));
-                float visible = shadow_visibility(lights + l, views, shadow_depth, lookup,
-                                                  SURFACE_BIAS_TEXELS, frame->pcf);
+                float visible = eye_in_lamp(lights + l, frame->far)
+                                    ? 1.0f
+                                    : shadow_visibility(lights + l, views, shadow_depth, lookup,
+                                                        SURFACE_BIAS_TEXELS, frame->pcf);
                 irradiance += incident * (cosine * visible);
             }
             surface = tri_albedo[tri].xyz * irradiance * M_1_PI_F;

@@ -81,8 +81,12 @@ kernel void traverse(global const frame_t* frame, global const view_t* views, gl
     int light_type = lights[ep->light_index].type;
 
     float cos_beta = dot(dir, ep->axis.xyz);
-    float sin_beta = length(cross(dir, ep->axis.xyz));
-    float beta = atan2(sin_beta, cos_beta);
+    /* Clamped, not tested: a ray through a point light (β = 0) or straight away from a
+     * light (β = π) has a finite integral, and the clamp gives it a γ extent of
+     * SIN_BETA_MIN·s that the row coordinates resolve. β stays below float32(π), the S of
+     * an unblocked light ray, so that the ray away from the light sees those as lit. */
+    float sin_beta = fmax(length(cross(dir, ep->axis.xyz)), SIN_BETA_MIN);
+    float beta = fmin(atan2(sin_beta, cos_beta), nextafter(M_PI_F, 0.0f));
     float begin = 0.0f, end = distance;
     if (light_type == LIGHT_SPOT && !spot_interval(lights + ep->light_index, dir, distance, &begin, &end))
         return; /* the ray never enters the cone */
@@ -90,7 +94,18 @@ kernel void traverse(global const frame_t* frame, global const view_t* views, gl
                                                         : atan2(begin * sin_beta, ep->d_el - begin * cos_beta);
     float gamma_end = light_type == LIGHT_DIRECTIONAL ? end * sin_beta
                                                       : atan2(end * sin_beta, ep->d_el - end * cos_beta);
-    if (!(sin_beta > 0.0f) || !(gamma_end > gamma_begin)) return; /* no extent in γ */
+    if (!(gamma_end > gamma_begin)) return; /* no extent in γ */
+    /* The lamp (lighting.h): a ray that passes within its radius of a point or spot light
+     * leaves out the chord inside it, [gamma_lamp0, gamma_lamp1), as exact does; this keeps
+     * a ray through the light finite. For every other ray the chord is empty. */
+    float gamma_lamp0 = gamma_end, gamma_lamp1 = gamma_end;
+    float radius = LAMP_RADIUS_REL * frame->far, miss = ep->d_el * sin_beta;
+    if (light_type != LIGHT_DIRECTIONAL && miss < radius) {
+        float closest = ep->d_el * cos_beta, half_chord = sqrt(radius * radius - miss * miss);
+        float s0 = clamp(closest - half_chord, begin, end), s1 = clamp(closest + half_chord, begin, end);
+        gamma_lamp0 = atan2(s0 * sin_beta, ep->d_el - s0 * cos_beta);
+        gamma_lamp1 = atan2(s1 * sin_beta, ep->d_el - s1 * cos_beta);
+    }
 
     /* Position between slice centres; wrap around when the slices close the circle. */
     float alpha = atan2(dot(dir, ep->w.xyz), dot(dir, ep->u.xyz));
@@ -112,7 +127,11 @@ kernel void traverse(global const frame_t* frame, global const view_t* views, gl
     }
     size_t stride = 2 * (size_t)ep->gamma_samples;
     integrand_row_t ray = integrand_row(integrand, beta, sin_beta, cos_beta);
-    float3 near0 = walk_row(ep, tree + i0 * stride, &ray, gamma_begin, gamma_end, integrand, tables, frame);
-    float3 near1 = walk_row(ep, tree + i1 * stride, &ray, gamma_begin, gamma_end, integrand, tables, frame);
+    float3 near0 = walk_row(ep, tree + i0 * stride, &ray, gamma_begin, gamma_lamp0, integrand, tables, frame);
+    float3 near1 = walk_row(ep, tree + i1 * stride, &ray, gamma_begin, gamma_lamp0, integrand, tables, frame);
+    if (gamma_lamp1 < gamma_end) {
+        near0 += walk_row(ep, tree + i0 * stride, &ray, gamma_lamp1, gamma_end, integrand, tables, frame);
+        near1 += walk_row(ep, tree + i1 * stride, &ray, gamma_lamp1, gamma_end, integrand, tables, frame);
+    }
     scatter[sample] += (float4)(mix(near0, near1, t), 0.0f);
 }

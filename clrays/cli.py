@@ -1,6 +1,8 @@
 """The `clrays` command line."""
 from __future__ import annotations
 
+import contextlib
+import signal
 import sys
 import traceback
 from pathlib import Path
@@ -15,6 +17,7 @@ Examples:
   clrays render scenes/demo.yaml -o out/demo.png
   clrays render scenes/demo.yaml -o out/demo.exr --method raymarch --set render.steps=1024
   clrays render scenes/demo.yaml -o out/demo.npy --set medium.sigma_s=0.1 --stats
+  clrays render scenes/orbit.yaml -o out/orbit_30.png --frame 30
 """
 
 
@@ -85,15 +88,20 @@ def info(device: str | None) -> None:
 @click.option("--stats", is_flag=True, help="Print per-stage device times and device memory.")
 @click.option("--device", envvar="CLRAYS_DEVICE", help="OpenCL device: 'P:D' index or name substring.")
 @click.option("--progress/--no-progress", default=None, help="Progress bar for slow methods (default: on a terminal).")
-def render(scene: Path, output: Path, method, overrides, exposure, stats, device, progress) -> None:
+@click.option("--frame", type=int, metavar="N", help="Render frame N of the scene's animation (see `clrays sequence`).")
+def render(scene: Path, output: Path, method, overrides, exposure, stats, device, progress, frame) -> None:
     """Render SCENE (a YAML file) to an image."""
     try:
         from .output import check_output_path, write_image
         from .renderer import Renderer
         from .scene_loader import load_scene
+        from .sequence import parse_frames, scene_frames
 
         check_output_path(output)
         loaded = load_scene(scene, overrides)
+        if frame is not None:
+            parse_frames(str(frame), scene_frames(loaded), "--frame")
+            loaded = loaded.animation.scene_at(loaded, frame) if loaded.animation is not None else loaded
         show_progress = sys.stderr.isatty() if progress is None else progress
         result = Renderer(device).render(loaded, method, progress=show_progress)
         if not np_isfinite(result.image):
@@ -111,10 +119,26 @@ def np_isfinite(image) -> bool:
     return bool(np.isfinite(image).all())
 
 
+def _stage_statuses(result) -> dict[str, str]:
+    """Stage label (as in the timings) → computed / reused / skipped; raster has two parts."""
+    status, shown = {}, {}
+    for stage, value in result.stage_status.items():
+        label, _, part = stage.partition(".")
+        status.setdefault(label, []).append((part, value))
+    for label, parts in status.items():
+        names = {"camera": "camera", "shadow": "shadow maps"}
+        shown[label] = ", ".join(f"{names.get(p, p)} {v}" if p else v for p, v in parts)
+    return shown
+
+
 def _print_stats(result) -> None:
     click.echo(f"method: {result.method}")
+    status = _stage_statuses(result)
     for label, ms in result.stage_ms.items():
-        click.echo(f"  {label:<10} {ms:9.2f} ms (device)")
+        click.echo(f"  {label:<10} {ms:9.2f} ms (device)  {status.get(label, '')}".rstrip())
+    for label, text in status.items():
+        if label not in result.stage_ms:
+            click.echo(f"  {label:<10} {'-':>9}              {text}")
     if result.stage_ms:
         click.echo(f"  {'total':<10} {sum(result.stage_ms.values()):9.2f} ms (device)")
     click.echo(f"  wall       {result.wall_ms:9.2f} ms")
@@ -179,6 +203,175 @@ def bench(scenes, resolutions, out, repeats, pixels, cache, quick, device) -> No
     except Exception as exc:  # noqa: BLE001 - every failure becomes one line
         _fail(exc)
 
+
+
+@contextlib.contextmanager
+def _sigterm_as_interrupt():
+    """SIGTERM raises KeyboardInterrupt, like Ctrl-C, so a half-written frame's temporary
+    file is removed on the way out and the run ends with its resume hint."""
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _stage_counts(results) -> str:
+    """Per stage over many frames: how often it was computed, reused, skipped."""
+    counts: dict[str, dict[str, int]] = {}
+    for result in results:
+        for stage, status in result.stage_status.items():
+            kind = status.split()[0]
+            counts.setdefault(stage, {}).setdefault(kind, 0)
+            counts[stage][kind] += 1
+    lines = [f"  {stage:<14} " + ", ".join(f"{kind} {n}" for kind, n in sorted(kinds.items()))
+             for stage, kinds in counts.items()]
+    labels = list(dict.fromkeys(label for result in results for label in result.stage_ms))
+    means = {label: sum(r.stage_ms.get(label, 0.0) for r in results) / len(results) for label in labels}
+    wall = sum(r.wall_ms for r in results) / len(results)
+    lines.append("  mean per frame: " + ", ".join(f"{label} {ms:.1f}" for label, ms in means.items())
+                 + f"; device total {sum(means.values()):.1f}; wall {wall:.1f} ms")
+    return "\n".join(lines)
+
+
+def _frame_line(label: str, result) -> str:
+    reused = " ".join(result.reused) or "-"
+    return f"{label}: {result.wall_ms:8.1f} ms  reused: {reused}"
+
+
+EXAMPLES_SEQUENCE = """
+\b
+Examples:
+  clrays sequence scenes/orbit.yaml -o out/orbit/frame_{:04d}.png
+  clrays sequence scenes/orbit.yaml -o out/orbit/frame_{:04d}.png --frames 0:23 --video out/orbit.gif
+  clrays sequence scenes/orbit.yaml -o out/orbit/f_{:04d}.npy --set image.width=320 --stats
+
+\b
+Frames are written atomically: re-running the same command skips the frames already
+there, so an interrupted run resumes where it stopped (--overwrite renders all again).
+"""
+
+
+@main.command(epilog=EXAMPLES_SEQUENCE)
+@click.argument("scene", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("-o", "--output", "pattern", required=True, metavar="PATTERN",
+              help="Frame files, with one {} field for the frame number: frames/frame_{:04d}.png "
+                   "(.png, .exr or .npy; the folder is created).")
+@click.option("--frames", metavar="A:B", help="Frames A to B, inclusive (also A:, :B or N). Default: the "
+                                             "animation's frames.")
+@click.option("--video", type=click.Path(dir_okay=False, path_type=Path),
+              help="Also write the frames as an animation: .gif or .webp (at the animation's fps).")
+@click.option("--method", type=click.Choice(["minmax", "raymarch", "exact"]), help="Override render.method.")
+@click.option("--set", "overrides", multiple=True, metavar="KEY.PATH=VALUE",
+              help="Override a scene field (repeatable), e.g. --set animation.fps=12.")
+@click.option("--exposure", type=float, default=0.0, show_default=True,
+              help="PNG and video: scale radiance by 2^EXPOSURE before sRGB encoding.")
+@click.option("--overwrite", is_flag=True, help="Render every frame, also those already written.")
+@click.option("--reuse/--no-reuse", default=True, show_default=True,
+              help="Keep stage results between frames; re-run a stage only when its inputs changed.")
+@click.option("--stats", is_flag=True, help="Print each frame's time and reused stages, then a summary.")
+@click.option("--device", envvar="CLRAYS_DEVICE", help="OpenCL device: 'P:D' index or name substring.")
+@click.option("--progress/--no-progress", default=None, help="Progress bar (default: on a terminal).")
+def sequence(scene, pattern, frames, video, method, overrides, exposure, overwrite, reuse, stats, device,
+             progress) -> None:
+    """Render the frames of SCENE's animation to numbered images."""
+    done = []
+    try:
+        from .renderer import Renderer
+        from .scene_loader import load_scene
+        from .sequence import check_pattern, check_video_path, parse_frames, render_sequence, scene_frames, write_video
+
+        check_pattern(pattern)
+        if video is not None:
+            check_video_path(video)
+        loaded = load_scene(scene, overrides)
+        chosen = parse_frames(frames, scene_frames(loaded))
+        show_progress = sys.stderr.isatty() if progress is None else progress
+
+        def on_frame(frame, path, result):
+            if result is not None:
+                done.append(result)
+                if stats:
+                    click.echo(_frame_line(f"frame {frame}", result))
+
+        with _sigterm_as_interrupt():
+            report = render_sequence(loaded, pattern, chosen, renderer=Renderer(device, reuse=reuse), method=method,
+                                     exposure=exposure, overwrite=overwrite, progress=show_progress,
+                                     on_frame=on_frame)
+        click.echo(report.summary())
+        if stats and done:
+            click.echo("stages over the rendered frames:\n" + _stage_counts(done))
+        if video is not None:
+            fps = loaded.animation.fps if loaded.animation is not None else 24.0
+            click.echo(f"wrote {write_video(report.paths, video, fps, exposure)}")
+    except KeyboardInterrupt:
+        click.echo(f"clrays: interrupted after {len(done)} new frames; run the same command again to resume",
+                   err=True)
+        sys.exit(130)
+    except Exception as exc:  # noqa: BLE001 - every failure becomes one line
+        _fail(exc)
+
+
+EXAMPLES_SWEEP = """
+\b
+Examples:
+  clrays sweep scenes/demo.yaml --set medium.sigma_s=0.02,0.05,0.1 --set render.slices=256,1024 -o out/sweep
+  clrays sweep scenes/demo.yaml --set render.slices=128,256,512,1024 --reference raymarch:2048 -o out/slices
+  clrays sweep scenes/demo.yaml --set 'lights.0.intensity=[100,100,100],[300,300,300]' -o out/power
+
+\b
+Writes one image per point (000.png, 001.png, ...), results.csv (the parameters, wall and
+per-stage times, reused stages and, with --reference, the error against it) and
+contact_sheet.png. Re-running the same command keeps the points already done.
+"""
+
+
+@main.command(epilog=EXAMPLES_SWEEP)
+@click.argument("scene", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--set", "settings", multiple=True, metavar="KEY.PATH=V1,V2,...",
+              help="A swept key with comma-separated values, or a fixed override with one (repeatable); the "
+                   "points are the cartesian product of the swept keys.")
+@click.option("-o", "--output", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
+              help="Folder for the images, results.csv and contact_sheet.png (created).")
+@click.option("--reference", metavar="exact|raymarch:N", help="Measure each point's error against this reference.")
+@click.option("--method", type=click.Choice(["minmax", "raymarch", "exact"]), help="Override render.method.")
+@click.option("--format", "image_format", type=click.Choice(["png", "exr", "npy"]), default="png",
+              show_default=True, help="Image format of the points.")
+@click.option("--exposure", type=float, default=0.0, show_default=True,
+              help="PNG and contact sheet: scale radiance by 2^EXPOSURE before sRGB encoding.")
+@click.option("--overwrite", is_flag=True, help="Render every point, also those done by an earlier run.")
+@click.option("--reuse/--no-reuse", default=True, show_default=True,
+              help="Keep stage results between points; re-run a stage only when its inputs changed.")
+@click.option("--device", envvar="CLRAYS_DEVICE", help="OpenCL device: 'P:D' index or name substring.")
+@click.option("--progress/--no-progress", default=None, help="Progress bar (default: on a terminal).")
+def sweep(scene, settings, out_dir, reference, method, image_format, exposure, overwrite, reuse, device,
+          progress) -> None:
+    """Render SCENE at every combination of the --set values and tabulate the results."""
+    done = []
+    try:
+        from .renderer import Renderer
+        from .sweep import axes_from, format_table, parse_reference, run_sweep
+
+        if not scene.is_file():
+            raise ClraysError(f"{scene}: no such scene file")
+        axes, _ = axes_from(list(settings))
+        parse_reference(reference)
+        show_progress = sys.stderr.isatty() if progress is None else progress
+        with _sigterm_as_interrupt():
+            report = run_sweep(scene, list(settings), out_dir, method=method, reference=reference,
+                               renderer=Renderer(device, reuse=reuse), exposure=exposure, image_format=image_format,
+                               overwrite=overwrite, progress=show_progress,
+                               on_point=lambda point, row: done.append(point))
+        click.echo(format_table(report.rows, axes), nl=False)
+        click.echo(report.summary())
+    except KeyboardInterrupt:
+        click.echo(f"clrays: interrupted after {len(done)} points; run the same command again to resume", err=True)
+        sys.exit(130)
+    except Exception as exc:  # noqa: BLE001 - every failure becomes one line
+        _fail(exc)
 
 if __name__ == "__main__":
     main()

@@ -13,7 +13,9 @@ channel (DESIGN.md §1, §4),
   beyond its plane inside the three planes through the light — or parallel to a
   directional light — and each edge), so it meets the ray in one interval found by
   clipping against 4 half-spaces; the shadowed set is the union of those intervals and
-  the lit set its complement (for a spot light: within the ray's interval inside the cone).
+  the lit set its complement (for a spot light: within the ray's interval inside the cone),
+  less the lamp: the medium-free ball of `radiometry.lamp_radius` around a point or spot
+  light, which keeps a ray through the light, and the eye at the light, finite.
 - Each lit interval is integrated by `radiometry.in_scatter_segments`: closed form for a
   directional light, adaptive composite Gauss–Legendre in the angle φ of
   s = s0 + h·tanφ for point and spot lights.
@@ -26,9 +28,10 @@ import math
 
 import numpy as np
 
+from . import radiometry
 from .camera import primary_rays, sample_offsets
-from .radiometry import (cone_interval, in_scatter_segments, light_incident, light_position, propagation_direction,
-                         rgb)
+from .radiometry import (cone_interval, in_scatter_segments, lamp_interval, light_incident, light_position,
+                         propagation_direction, rgb)
 from .scene import Light, Scene, SpotLight
 
 # Memory budget for the (rays × triangles) temporaries of one chunk.
@@ -101,14 +104,14 @@ def raycast(origins, dirs, triangles, t_max=np.inf, t_min=None) -> tuple[np.ndar
             det = _dot(pvec, ke1)  # = -d·n
             # Grazing rays (|cos| < 1e-14 against the plane) are misses: their u, v, t are noise.
             ok = np.abs(det) > 1e-14 * dir_len[r:r + rc, None] * n_len[None, k:k + tc]
-            with np.errstate(divide="ignore", invalid="ignore"):
+            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # only where not ok
                 inv = 1.0 / det
                 tvec = o - kp0
                 u = _dot(tvec, pvec) * inv
                 qvec = np.cross(tvec, ke1)
                 v = _dot(d, qvec) * inv
                 t = _dot(ke2, qvec) * inv
-            ok &= (u >= 0) & (v >= 0) & (u + v <= 1)
+                ok &= (u >= 0) & (v >= 0) & (u + v <= 1)  # u + v is inf - inf where det = 0 (masked already)
             ok &= (t > t_min[r:r + rc, None]) & (t < t_max[r:r + rc, None])
             t = np.where(ok, t, np.inf)
             j = np.argmin(t, axis=1)
@@ -272,12 +275,14 @@ def _ray_range(light: Light, origins, dirs, D) -> tuple[np.ndarray, np.ndarray]:
     return np.zeros(n), D.copy()
 
 
-def lit_intervals(origins, dirs, D, light: Light, triangles, halfspaces=None,
+def lit_intervals(origins, dirs, D, light: Light, triangles, halfspaces=None, lamp_radius: float = 0.0,
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The lit set of each ray's [0, D], as flattened disjoint intervals (ray, a, b).
 
-    lit = (cone ∩ [0, D]) \\ ⋃_triangles shadow volume, the cone being everything except for
-    a spot light. `halfspaces` may pass a precomputed `shadow_halfspaces(light, triangles)`.
+    lit = (cone ∩ [0, D]) \\ (⋃_triangles shadow volume ∪ lamp), the cone being everything
+    except for a spot light and the lamp the ball of `lamp_radius` around a point or spot
+    light, which holds no medium (`radiometry.lamp_radius`; 0: none). `halfspaces` may pass
+    a precomputed `shadow_halfspaces(light, triangles)`.
     Rays are chunked so the (rays × triangles) temporaries stay near 100 MB; intervals come
     out sorted by ray, then by a.
     """
@@ -295,6 +300,10 @@ def lit_intervals(origins, dirs, D, light: Light, triangles, halfspaces=None,
             start, end = _clip(o, dirs[sl], lo[sl], hi[sl], K, c)
         else:
             start = end = np.zeros((len(lo[sl]), 0))
+        if lamp_radius > 0:
+            ball_start, ball_end = lamp_interval(light, o, dirs[sl], lamp_radius)
+            start = np.concatenate([start, ball_start[:, None]], axis=1)
+            end = np.concatenate([end, ball_end[:, None]], axis=1)
         ray, a, b = _lit_from_clips(lo[sl], hi[sl], start, end)
         rays.append(ray + r)
         a_all.append(a)
@@ -337,7 +346,8 @@ def _radiance(scene: Scene, eye: np.ndarray, dirs: np.ndarray, prepared, quad: d
     out = surf * np.exp(-sigma_t * D[:, None])
     if np.any(sigma_s > 0):
         for light, halfspaces in prepared:
-            ray, a, b = lit_intervals(eye, dirs, D, light, tri, halfspaces=halfspaces)
+            ray, a, b = lit_intervals(eye, dirs, D, light, tri, halfspaces=halfspaces,
+                                      lamp_radius=radiometry.lamp_radius(scene))
             seg = in_scatter_segments(light, medium, eye, dirs[ray], a, b, **quad)
             for ch in range(3):
                 out[:, ch] += np.bincount(ray, weights=seg[:, ch], minlength=n)

@@ -44,13 +44,24 @@ def to_srgb8(radiance: np.ndarray, exposure: float = 0.0) -> np.ndarray:
     return np.round(srgb * 255).astype(np.uint8)
 
 
+def temporary_beside(path: Path) -> str:
+    """A new empty file beside `path` (`.NAME.XXXX.SUFFIX`) to write and then rename over
+    it; created with the permissions of any new file (umask), not mkstemp's 0600."""
+    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix.lower(),
+                                         dir=path.parent or ".")
+    os.close(handle)
+    umask = os.umask(0o022)
+    os.umask(umask)
+    os.chmod(temporary, 0o666 & ~umask)
+    return temporary
+
+
 def write_image(path: str | Path, radiance: np.ndarray, exposure: float = 0.0) -> Path:
     """Write (H, W, 3) linear radiance to `path` atomically; returns the path."""
     path = check_output_path(path)
     suffix = path.suffix.lower()
     radiance = np.ascontiguousarray(radiance, dtype=np.float32)
-    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent or ".")
-    os.close(handle)
+    temporary = temporary_beside(path)
     try:
         if suffix == ".png":
             from PIL import Image

@@ -15,6 +15,12 @@ camera ray x_s = o + s·v the cosine is cosθ = -ω_prop·v.
 
 This module knows nothing about occluders: the helpers here integrate over segments the
 caller has already found to be lit (V = 1).
+
+The lamp. Along a ray through a point light the integral diverges like ∫ds/d², and with the
+eye at the light every ray goes through it. So a point or spot light is a lamp: a ball of
+radius `lamp_radius(scene)` = LAMP_RADIUS_REL × camera.far around it holds no medium. A ray
+that passes the light at a distance h > lamp radius never meets the ball, so the ball
+changes nothing but those two cases: they become finite (about σs·I·ρ·2/radius per ray).
 """
 from __future__ import annotations
 
@@ -27,6 +33,11 @@ from .scene import DirectionalLight, Light, Medium, Phase, SpotLight
 # Gauss–Legendre rule on [-1, 1] used for every panel of the point-light quadrature.
 GL_NODES = 16
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(GL_NODES)
+
+# Lamp radius (the medium-free ball around a point or spot light) as a fraction of
+# camera.far: a length of the scene, so the ball scales with it, and small enough that only
+# rays within 1e-6·far/d_el rad of the light meet it.
+LAMP_RADIUS_REL = 1e-6
 
 # Bound on the float64 elements of one quadrature batch (segments × nodes × 3 channels),
 # so a call on many segments stays around 100 MB of temporaries.
@@ -63,6 +74,33 @@ def light_position(light: Light) -> np.ndarray | None:
     if isinstance(light, DirectionalLight):
         return None
     return np.asarray(light.position, dtype=np.float64)
+
+
+def lamp_radius(scene) -> float:
+    """Radius of every point and spot light's medium-free ball (module docstring), in the
+    scene's length unit: LAMP_RADIUS_REL × camera.far."""
+    return LAMP_RADIUS_REL * float(scene.camera.far)
+
+
+def lamp_interval(light: Light, origins: np.ndarray, dirs: np.ndarray, radius: float
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """The part (a, b) of each ray x(s) = o + s·v (v unit) inside the lamp |x - l| < radius,
+    each (N,); a ray that misses it (or a directional light) gets a = b = 0.
+
+    With s0 = (l - o)·v and h = |(l - o) - s0·v| the ray's distance from the light, the
+    chord is s0 ± sqrt(radius² - h²)."""
+    dirs = np.asarray(dirs, dtype=np.float64).reshape(-1, 3)
+    n = len(dirs)
+    position = light_position(light)
+    if position is None or radius <= 0:
+        return np.zeros(n), np.zeros(n)
+    to_light = position - np.broadcast_to(np.asarray(origins, dtype=np.float64), (n, 3))
+    s0 = np.einsum("ij,ij->i", to_light, dirs)
+    across = to_light - s0[:, None] * dirs
+    h2 = np.einsum("ij,ij->i", across, across)
+    half = np.sqrt(np.maximum(radius * radius - h2, 0.0))
+    inside = h2 < radius * radius
+    return np.where(inside, s0 - half, 0.0), np.where(inside, s0 + half, 0.0)
 
 
 def spot_axis(light: SpotLight) -> np.ndarray:
@@ -283,5 +321,6 @@ def in_scatter_unoccluded(light: Light, medium: Medium, origins: np.ndarray, dir
     return in_scatter_segments(light, medium, origins, dirs, a, b, **quad)
 
 
-__all__ = ["GL_NODES", "rgb", "phase", "light_position", "spot_axis", "in_spot_cone", "propagation_direction",
+__all__ = ["GL_NODES", "LAMP_RADIUS_REL", "rgb", "phase", "light_position", "lamp_radius", "lamp_interval",
+           "spot_axis", "in_spot_cone", "propagation_direction",
            "light_incident", "cone_interval", "in_scatter_segments", "in_scatter_unoccluded"]

@@ -104,6 +104,9 @@ def rectify(device: Device, buffers: FrameBuffers, rastered: RasterResult, light
         rastered.camera_depth, buffers.offsets, bounds_buffer)
     timer.add("rectify", event)
     beta_min, beta_max, gamma_max = device.read(bounds_buffer, 4, np.uint32)[:3].view(np.float32).astype(float)
+    # float32(π) is 9e-8 above π: a ray pointing straight away from the light (the
+    # anti-epipole on a pixel centre) would put β past the integrand's [0, π].
+    beta_min, beta_max = min(beta_min, math.pi), min(beta_max, math.pi)
     if not gamma_max > 0:
         return None
     n = int(params["gamma_samples"])

@@ -114,11 +114,12 @@ class Renderer:
 
         device = self.device
         buffers = upload(device, frame_inputs(scene))  # the scene in eye space, packed into device structs
-        keys = _Keys(buffers.inputs)
-        camera_depth, tri_id = reuse.stage("raster.camera", keys.camera,  # raster: camera depth + triangle ids
-                                           lambda: raster_camera(device, buffers, timer))
-        maps = [reuse.stage("raster.shadow", keys.shadow[i], lambda i=i: self._shadow_map(buffers, i, timer))
-                for i in range(len(scene.lights))]  # raster: each light's shadow map, anchored at the light
+        keys = _Keys(buffers.inputs)  # digests of what each stage reads
+        camera_depth, tri_id = reuse.stage(  # raster: camera depth + triangle ids
+            "raster.camera", keys.camera, lambda: raster_camera(device, buffers, timer))
+        maps = [reuse.stage(  # raster: each light's shadow map, anchored at the light
+            "raster.shadow", keys.shadow[i], lambda i=i: self._shadow_map(buffers, i, timer), per_light=True)
+            for i in range(len(scene.lights))]
         rastered = RasterResult(camera_depth, tri_id, self._shadow_atlas(buffers, maps, keys, reuse))
         scatter = self._in_scatter(method, buffers, rastered, maps, keys, reuse, timer)  # in-scattering per sample
         image = shade(device, buffers, rastered, scatter, timer)  # shade: surfaces, attenuation, + scatter
@@ -229,22 +230,24 @@ class _MinmaxReuse:
 
     def trees(self, index: int, build):
         """`build(buffers)` runs rectify and minmax. A light whose map is empty casts no
-        shadow anywhere: its texture is π everywhere and the tree walk ends at the root,
-        so a minimal texture gives the same radiance (DESIGN §7)."""
+        shadow anywhere: its texture is π everywhere, the tree walk finds one lit run at
+        any texture size, so a minimal texture gives the same radiance (up to float32
+        rounding where the run is clipped) without rectifying the full one (DESIGN §7)."""
         key, buffers = self.keys.trees(index), self.buffers
         if self.renderer._skip_unshadowed and self.renderer._map_is_empty(self.maps[index]):
             render = buffers.inputs.scene.render
             small = replace(buffers.inputs.scene, render=replace(render, slices=UNSHADOWED_SIZE,
                                                                    gamma_samples=UNSHADOWED_SIZE))
             epipolar = self.reuse.keep("unshadowed", digest("unshadowed", key),
-                                       lambda: build(replace(buffers, inputs=replace(buffers.inputs, scene=small))))
+                                       lambda: build(replace(buffers, inputs=replace(buffers.inputs, scene=small))),
+                                       per_light=True)
             self.reuse.skip("rectify", "minmax")
             return epipolar
-        return self.reuse.stage(("rectify", "minmax"), key, lambda: build(buffers))
+        return self.reuse.stage(("rectify", "minmax"), key, lambda: build(buffers), per_light=True)
 
     def tables(self, index: int, epipolar, build):
         """`build()` runs the integrand stage."""
-        return self.reuse.stage("integrand", self.keys.tables(index, epipolar), build)
+        return self.reuse.stage("integrand", self.keys.tables(index, epipolar), build, per_light=True)
 
 
 _renderers: dict[str | None, Renderer] = {}

@@ -126,32 +126,33 @@ class StageRecord:
 
 
 class Reuse:
-    """The reuse decisions of one frame: a cache (or None: compute everything) and the record."""
+    """The reuse decisions of one frame: a cache (or None: compute everything), the record,
+    and the light count (per-light stages keep that many times more entries)."""
 
-    def __init__(self, cache: StageCache | None, record: StageRecord, scale: int = 1):
-        self.cache, self.record, self.scale = cache, record, scale
+    def __init__(self, cache: StageCache | None, record: StageRecord, lights: int = 1):
+        self.cache, self.record, self.lights = cache, record, max(lights, 1)
 
-    def stage(self, stage: str | tuple[str, ...], key: bytes, compute: Callable[[], Any]) -> Any:
+    def stage(self, stage: str | tuple[str, ...], key: bytes, compute: Callable[[], Any], *,
+              per_light: bool = False) -> Any:
         """The stage's result for `key`: the kept one, or `compute()` (then kept). A tuple
         of stage labels records one outcome for stages kept together (rectify + minmax)."""
         labels = (stage,) if isinstance(stage, str) else stage
-        found, value = self.cache.get(labels[0], key) if self.cache is not None else (False, None)
-        if not found:
-            value = compute()
-            if self.cache is not None:
-                self.cache.put(labels[0], key, value, self.scale)
+        found, value = self._get_or_compute(labels[0], key, compute, per_light)
         for label in labels:
             self.record.note(label, REUSED if found else COMPUTED)
         return value
 
-    def keep(self, name: str, key: bytes, compute: Callable[[], Any]) -> Any:
+    def keep(self, name: str, key: bytes, compute: Callable[[], Any], *, per_light: bool = False) -> Any:
         """Like `stage`, for intermediate results that are no stage of their own (not recorded)."""
+        return self._get_or_compute(name, key, compute, per_light)[1]
+
+    def _get_or_compute(self, name: str, key: bytes, compute: Callable[[], Any], per_light: bool) -> tuple[bool, Any]:
         found, value = self.cache.get(name, key) if self.cache is not None else (False, None)
         if not found:
             value = compute()
             if self.cache is not None:
-                self.cache.put(name, key, value, self.scale)
-        return value
+                self.cache.put(name, key, value, self.lights if per_light else 1)
+        return found, value
 
     def skip(self, *stages: str) -> None:
         for stage in stages:
