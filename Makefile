@@ -24,7 +24,8 @@ test-slow: $(STAMP)
 
 # The run-time/error benchmark behind bench/RESULTS.md (tens of minutes on 2 cores).
 bench: $(STAMP)
-	$(BIN)/clrays bench -r 640x360 -r 1280x720 --out bench/out
+	$(BIN)/clrays bench -r 640x360 -r 1280x720 --out bench/results
+	$(BIN)/clrays bench -r 640x360 --volume-only --out bench/results-volume
 
 info: $(STAMP)
 	$(BIN)/clrays info

@@ -56,33 +56,54 @@ class BenchPoint:
     stage_ms: dict[str, float] = field(default_factory=dict)
 
 
-def sweep(scene: Scene, quick: bool = False) -> list[tuple[str, str, dict]]:
+def volume_only(scene: Scene) -> Scene:
+    """The scene with black surfaces and background: its image is the in-scattered light
+    alone (attenuated), so its error is the volumetric method's, free of the hard
+    surface-shadow edges that every shadow-map method shares."""
+    geometry = replace(scene.geometry, albedo=np.zeros_like(scene.geometry.albedo))
+    return replace(scene, geometry=geometry, background=np.zeros(3))
+
+
+def sweep(scene: Scene, quick: bool = False, volume: bool = False) -> list[tuple[str, str, dict]]:
     """(method, label, render overrides) of every point for one scene; `quick` keeps
-    a handful (two raymarch points, minmax defaults and scan) for a smoke run."""
+    a handful (two raymarch points, minmax defaults and scan) for a smoke run; `volume`
+    (volume-only error) a single shadow-map size and the main minmax settings."""
     from .scene import DirectionalLight
 
+    if volume:
+        points = [("raymarch", f"steps={steps}", {"steps": steps}) for steps in (32, 64, 128, 256, 512, 1024)]
+        points.append(("minmax", "defaults", {}))
+        points += [("minmax", f"{key}={value}", {key: value})
+                   for key, value in (("slices", 256), ("slices", 512), ("gamma_samples", 256),
+                                      ("gamma_samples", 512))]
+        return points
     if quick:
         return [("raymarch", "steps=32 shadow_map=256", {"steps": 32, "shadow_map": 256}),
                 ("raymarch", "steps=256 shadow_map=256", {"steps": 256, "shadow_map": 256}),
                 ("minmax", "shadow_map=256", {"shadow_map": 256}),
                 ("minmax", "shadow_map=256 traversal=scan", {"shadow_map": 256, "traversal": "scan"})]
+    # Large frames get a coarser grid: a 1280×720 raymarch at 2048 steps takes a minute.
+    large = scene.image.width * scene.image.height > 500_000
     points = []
-    for shadow_map in (512, 1024, 2048):
-        for steps in (16, 32, 64, 128, 256, 512, 1024, 2048):
+    for shadow_map in (1024,) if large else (1024, 2048):
+        for steps in (128, 512) if large else (32, 64, 128, 256, 512, 1024):
             points.append(("raymarch", f"steps={steps} shadow_map={shadow_map}",
                            {"steps": steps, "shadow_map": shadow_map}))
-    points.append(("minmax", "defaults", {}))
-    one_at_a_time = {
-        "slices": (128, 256, 512, 2048),
-        "gamma_samples": (128, 256, 512, 2048),
-        "shadow_map": (256, 512, 2048),
-        "traversal": ("scan",),
-    }
     defaults = dataclasses.asdict(scene.render)
+    points.append(("minmax", f"defaults (slices={defaults['slices']} gamma_samples={defaults['gamma_samples']} "
+                             f"shadow_map={defaults['shadow_map']})", {}))
+    one_at_a_time = {
+        "slices": (512,) if large else (128, 256, 512, 2048),
+        "gamma_samples": (512,) if large else (128, 256, 512, 2048),
+        "shadow_map": (512,) if large else (256, 512, 2048),
+        "traversal": () if large else ("scan",),
+    }
     for key, values in one_at_a_time.items():
         for value in values:
             if value != defaults[key]:
                 points.append(("minmax", f"{key}={value}", {key: value}))
+    if large:
+        return points
     for rank in (1, 2, 4, 8):
         points.append(("minmax", f"integrand=svd svd_rank={rank}", {"integrand": "svd", "svd_rank": rank}))
     if all(isinstance(light, DirectionalLight) for light in scene.lights):
@@ -144,14 +165,17 @@ def measure(renderer: Renderer, scene: Scene, method: str, repeats: int):
 
 def run(scene_paths=DEFAULT_SCENES, resolutions=((640, 360),), repeats: int = 5, pixels: int = 4000,
         cache: Path = Path(".cache/clrays"), device: str | None = None, progress=None, log=print,
-        quick: bool = False) -> list[BenchPoint]:
-    """The whole sweep; `progress(points_done, points_total)` is called after each point."""
+        quick: bool = False, volume: bool = False) -> list[BenchPoint]:
+    """The whole sweep; `progress(points_done, points_total)` is called after each point;
+    `volume`: surfaces black, so the error is the in-scattering's alone (`volume_only`)."""
     renderer = Renderer(device, reuse=False)  # every frame computed from scratch
     plan = []
     for path in scene_paths:
         for width, height in resolutions:
             scene = load_scene(path, [f"image.width={width}", f"image.height={height}"])
-            plan.append((path, scene, sweep(scene, quick)))
+            if volume:
+                scene = volume_only(scene)
+            plan.append((path, scene, sweep(scene, quick, volume)))
     total = sum(len(points) for _, _, points in plan)
     results, done = [], 0
     for path, scene, points in plan:

@@ -179,8 +179,10 @@ Examples:
 @click.option("--cache", type=click.Path(file_okay=False, path_type=Path), default=Path(".cache/clrays"),
               show_default=True, help="Where exact references are cached.")
 @click.option("--quick", is_flag=True, help="A handful of points per scene: a smoke run, not results.")
+@click.option("--volume-only", "volume", is_flag=True,
+              help="Black surfaces: measure the in-scattering's error alone (a smaller sweep).")
 @click.option("--device", envvar="CLRAYS_DEVICE", help="OpenCL device: 'P:D' index or name substring.")
-def bench(scenes, resolutions, out, repeats, pixels, cache, quick, device) -> None:
+def bench(scenes, resolutions, out, repeats, pixels, cache, quick, volume, device) -> None:
     """Time every method and setting against its error versus `exact`.
 
     Writes a CSV of every point, a log-log plot of error against time with the Pareto
@@ -195,8 +197,8 @@ def bench(scenes, resolutions, out, repeats, pixels, cache, quick, device) -> No
             if not Path(path).is_file():
                 raise ClraysError(f"{path}: no such scene file")
         points = bench_module.run(paths, sizes, repeats=repeats, pixels=pixels, cache=cache, device=device,
-                                  log=lambda line: click.echo(line, err=True), quick=quick)
-        bench_module.save(points, out, {"repeats": repeats, "pixels": pixels,
+                                  log=lambda line: click.echo(line, err=True), quick=quick, volume=volume)
+        bench_module.save(points, out, {"repeats": repeats, "pixels": pixels, "volume_only": volume,
                                         "resolutions": [f"{w}x{h}" for w, h in sizes], "scenes": paths})
         click.echo(bench_module.markdown_summary(points))
         click.echo(f"wrote {out}/bench.csv, bench.png, summary.md, machine.json")

@@ -364,48 +364,26 @@ def render_exact(scene: Scene, progress: bool = False, rows=None, *, panels: int
     `progress` shows a tqdm bar over ray chunks; `panels` and `tol` are the point-light
     quadrature's starting panel count and relative tolerance (tol=None: one fixed pass).
     """
-    image, camera = scene.image, scene.camera
-    row_idx = np.arange(image.height)[slice(None) if rows is None else rows]
-    row_idx = np.atleast_1d(row_idx)
-    offsets = sample_offsets(image.spp)
-    eye = np.asarray(camera.position, dtype=np.float64)
-    tri = np.asarray(scene.geometry.triangles, dtype=np.float64).reshape(-1, 3, 3)
-    prepared = [(light, shadow_halfspaces(light, tri)) for light in scene.lights]
-    n = len(row_idx) * image.width
-    # Chunks small enough for the (rays × triangles) clipping, and not so small that
-    # per-chunk overhead dominates when there are few triangles.
-    chunk = int(np.clip(_BUDGET_BYTES // (_CLIP_PAIR_BYTES * (len(tri) + 1)), 64, 16384))
-    starts = range(0, n, chunk)
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=len(offsets) * len(starts), desc="exact", unit="chunk")
-    quad = {"panels": panels, "tol": tol}
-    total = np.zeros((n, 3))
-    for k in range(len(offsets)):
-        # One sample offset at a time keeps the ray array at H·W·3 floats.
-        dirs = primary_rays(camera, image, offsets[k:k + 1])[row_idx, :, 0, :].reshape(-1, 3)
-        for s in starts:
-            total[s:s + chunk] += _radiance(scene, eye, dirs[s:s + chunk], prepared, quad)
-            if bar is not None:
-                bar.update(1)
-    if bar is not None:
-        bar.close()
-    return (total / len(offsets)).reshape(len(row_idx), image.width, 3)
+    image = scene.image
+    row_idx = np.atleast_1d(np.arange(image.height)[slice(None) if rows is None else rows])
+    ys, xs = np.repeat(row_idx, image.width), np.tile(np.arange(image.width), len(row_idx))
+    radiance = exact_pixels(scene, ys, xs, progress, panels=panels, tol=tol)
+    return radiance.reshape(len(row_idx), image.width, 3)
 
 
 def exact_pixels(scene: Scene, ys, xs, progress: bool = False, *, panels: int = 8,
                  tol: float | None = 1e-10) -> np.ndarray:
-    """Ground-truth radiance (N, 3) float64 of the pixels (ys[i], xs[i]) only: what
-    `render_exact` gives there, at a cost proportional to the number of pixels. For
-    measuring error on a fixed subset of a large image."""
+    """Ground-truth radiance (N, 3) float64 of the pixels (ys[i], xs[i]): what
+    `render_exact` gives there, at a cost proportional to the number of pixels (for
+    measuring error on a fixed subset of a large image)."""
     image, camera = scene.image, scene.camera
     ys, xs = np.asarray(ys, dtype=np.intp), np.asarray(xs, dtype=np.intp)
     offsets = sample_offsets(image.spp)
     eye = np.asarray(camera.position, dtype=np.float64)
     tri = np.asarray(scene.geometry.triangles, dtype=np.float64).reshape(-1, 3, 3)
     prepared = [(light, shadow_halfspaces(light, tri)) for light in scene.lights]
+    # Chunks small enough for the (rays × triangles) clipping, and not so small that
+    # per-chunk overhead dominates when there are few triangles.
     chunk = int(np.clip(_BUDGET_BYTES // (_CLIP_PAIR_BYTES * (len(tri) + 1)), 64, 16384))
     starts = range(0, len(ys), chunk)
     bar = None
@@ -416,6 +394,7 @@ def exact_pixels(scene: Scene, ys, xs, progress: bool = False, *, panels: int = 
     quad = {"panels": panels, "tol": tol}
     total = np.zeros((len(ys), 3))
     for k in range(len(offsets)):
+        # One sample offset at a time keeps the ray array at H·W·3 floats.
         dirs = primary_rays(camera, image, offsets[k:k + 1])[ys, xs, 0, :]
         for s in starts:
             total[s:s + chunk] += _radiance(scene, eye, dirs[s:s + chunk], prepared, quad)

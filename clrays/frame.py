@@ -15,7 +15,7 @@ import numpy as np
 from . import structs
 from .camera import camera_basis, sample_offsets
 from .device import Device
-from .scene import DirectionalLight, PointLight, Scene, SpotLight
+from .scene import DirectionalLight, Scene, SpotLight
 
 #: Spot lights wider than this use a cube map: a single perspective map of a wide
 #: cone would spend most texels near its rim.

@@ -29,6 +29,11 @@ def check_output_path(path: str | Path) -> Path:
     if suffix not in FORMATS:
         raise OutputError(f"{path}: unknown output extension {path.suffix or '(none)'!r}; "
                           f"expected one of {', '.join(FORMATS)}")
+    return check_folder(path)
+
+
+def check_folder(path: Path) -> Path:
+    """Fail early when the folder a file goes into is missing or not writable."""
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
         raise OutputError(f"{path}: folder {str(folder)!r} does not exist")
@@ -56,13 +61,27 @@ def temporary_beside(path: Path) -> str:
     return temporary
 
 
+def write_atomic(path: Path, write) -> None:
+    """Call `write(temporary)` on a file beside `path`, then rename it over `path`: readers
+    see the old file or the whole new one, and a failure leaves nothing behind."""
+    temporary = temporary_beside(path)
+    try:
+        write(temporary)
+        os.replace(temporary, path)
+    except OSError as exc:
+        raise OutputError(f"{path}: cannot write: {exc.strerror or exc}") from exc
+    finally:
+        if os.path.exists(temporary):
+            os.unlink(temporary)
+
+
 def write_image(path: str | Path, radiance: np.ndarray, exposure: float = 0.0) -> Path:
     """Write (H, W, 3) linear radiance to `path` atomically; returns the path."""
     path = check_output_path(path)
     suffix = path.suffix.lower()
     radiance = np.ascontiguousarray(radiance, dtype=np.float32)
-    temporary = temporary_beside(path)
-    try:
+
+    def write(temporary: str) -> None:
         if suffix == ".png":
             from PIL import Image
 
@@ -75,10 +94,6 @@ def write_image(path: str | Path, radiance: np.ndarray, exposure: float = 0.0) -
                 exr.write(temporary)
         else:
             np.save(temporary, radiance)
-        os.replace(temporary, path)
-    except OSError as exc:
-        raise OutputError(f"{path}: cannot write: {exc.strerror or exc}") from exc
-    finally:
-        if os.path.exists(temporary):
-            os.unlink(temporary)
+
+    write_atomic(path, write)
     return path

@@ -11,7 +11,6 @@ frames, so what a frame shares with the previous one is not computed again (DESI
 """
 from __future__ import annotations
 
-import os
 import string
 import time
 from dataclasses import dataclass, field
@@ -21,7 +20,7 @@ from typing import Callable
 import numpy as np
 
 from .errors import ClraysError, OutputError
-from .output import FORMATS, check_output_path, temporary_beside, to_srgb8, write_image
+from .output import FORMATS, check_folder, check_output_path, to_srgb8, write_atomic, write_image
 from .renderer import Renderer, RenderResult
 from .scene import Scene
 
@@ -184,12 +183,7 @@ def check_video_path(path: str | Path) -> Path:
                     f"frame_%04d.png -pix_fmt yuv420p {path.name})")
         raise OutputError(f"{path}: unknown animation extension {path.suffix or '(none)'!r}; "
                           f"expected one of {', '.join(VIDEO_FORMATS)}{hint}")
-    folder = path.parent if str(path.parent) else Path(".")
-    if not folder.is_dir():
-        raise OutputError(f"{path}: folder {str(folder)!r} does not exist")
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise OutputError(f"{path}: folder {str(folder)!r} is not writable")
-    return path
+    return check_folder(path)
 
 
 def write_video(paths: list[Path], out: str | Path, fps: float, exposure: float = 0.0) -> Path:
@@ -203,15 +197,8 @@ def write_video(paths: list[Path], out: str | Path, fps: float, exposure: float 
     images = [Image.fromarray(_srgb_frame(p, exposure), mode="RGB") for p in paths]
     if not images:
         raise OutputError(f"{out}: no frames")
-    temporary = temporary_beside(out)
-    try:
-        duration = max(int(round(1000.0 / fps)), 1)
-        options = {"optimize": False} if out.suffix.lower() == ".gif" else {"lossless": True}
-        images[0].save(temporary, save_all=True, append_images=images[1:], duration=duration, loop=0, **options)
-        os.replace(temporary, out)
-    except OSError as exc:
-        raise OutputError(f"{out}: cannot write: {exc.strerror or exc}") from exc
-    finally:
-        if os.path.exists(temporary):
-            os.unlink(temporary)
+    duration = max(int(round(1000.0 / fps)), 1)
+    options = {"optimize": False} if out.suffix.lower() == ".gif" else {"lossless": True}
+    write_atomic(out, lambda temporary: images[0].save(temporary, save_all=True, append_images=images[1:],
+                                                       duration=duration, loop=0, **options))
     return out

@@ -33,7 +33,7 @@ import numpy as np
 import yaml
 
 from .errors import ClraysError, OutputError
-from .output import temporary_beside, to_srgb8, write_image
+from .output import to_srgb8, write_atomic, write_image
 from .renderer import Renderer, RenderResult
 from .reuse import digest, scene_digest
 from .scene import Render, Scene
@@ -257,18 +257,6 @@ def _image_name(point: SweepPoint, count: int, fmt: str) -> str:
     return f"{point.index:0{max(3, len(str(count - 1)))}d}.{fmt}"
 
 
-def _write_atomic(path: Path, write: Callable[[str], None]) -> None:
-    temporary = temporary_beside(path)
-    try:
-        write(temporary)
-        os.replace(temporary, path)
-    except OSError as exc:
-        raise OutputError(f"{path}: cannot write: {exc.strerror or exc}") from exc
-    finally:
-        if os.path.exists(temporary):
-            os.unlink(temporary)
-
-
 def _read_rows(path: Path) -> dict[int, dict[str, str]]:
     try:
         with open(path, newline="", encoding="utf-8") as f:
@@ -293,7 +281,7 @@ def _write_rows(path: Path, rows: list[dict[str, str]], axes: Sequence[Axis]) ->
             writer.writeheader()
             writer.writerows(rows)
 
-    _write_atomic(path, write)
+    write_atomic(path, write)
 
 
 def _row(point: SweepPoint, image_name: str, result: RenderResult, digest_hex: str, error, reference) -> dict:
@@ -437,7 +425,7 @@ def write_contact_sheet(path: Path, folder: Path, rows: list[dict[str, str]], ax
         sheet.paste(thumb, (x, y))
         for k, line in enumerate(lines):
             draw.text((x, y + thumb.height + 3 + k * line_height), line, fill=(230, 230, 230), font=font)
-    _write_atomic(path, lambda temporary: sheet.save(temporary, format="PNG"))
+    write_atomic(path, lambda temporary: sheet.save(temporary, format="PNG"))
     return path
 
 

@@ -1,7 +1,6 @@
 """The command line: outputs in each format, and bad input as one line with exit code 1."""
 import os
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest

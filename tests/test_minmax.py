@@ -9,7 +9,7 @@ from clrays.device import StageTimer
 from clrays.frame import frame_inputs, upload
 from clrays.metrics import depth_edges, depth_map, image_error
 from clrays.minmax import minmax
-from clrays.primitives import box_triangles, load_mesh_triangles, sphere_triangles
+from clrays.primitives import box_triangles, load_mesh_triangles
 from clrays.raster import raster
 from clrays.rectify import rectify
 from clrays.camera import primary_rays
