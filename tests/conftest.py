@@ -26,6 +26,16 @@ def renderer(device):
     return Renderer(device)
 
 
+def run_cli(*args) -> tuple[int, str]:
+    """Run the `clrays` command line in-process: (exit code, output)."""
+    from click.testing import CliRunner
+
+    from clrays.cli import main
+
+    result = CliRunner().invoke(main, [str(a) for a in args], catch_exceptions=False)
+    return result.exit_code, result.output
+
+
 def v3(*xs) -> np.ndarray:
     return np.array(xs, dtype=np.float64)
 

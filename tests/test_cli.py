@@ -4,10 +4,9 @@ import re
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 from PIL import Image
 
-from clrays.cli import main
+from conftest import run_cli as run
 
 SCENE = """version: 1
 image: {width: 24, height: 16}
@@ -29,9 +28,6 @@ def scene_file(tmp_path):
     return path
 
 
-def run(*args):
-    result = CliRunner().invoke(main, [str(a) for a in args], catch_exceptions=False)
-    return result.exit_code, result.output
 
 
 def test_render_writes_each_format(scene_file, tmp_path):

@@ -11,13 +11,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 from PIL import Image
 
-from clrays.cli import main
 from clrays.renderer import Renderer
 from clrays.scene_loader import load_scene
 from clrays.sequence import check_pattern, parse_frames, render_sequence
+from conftest import run_cli as run
 
 SCENE = """\
 version: 1
@@ -52,9 +51,6 @@ def write_scene(folder: Path, frames: int) -> Path:
     return path
 
 
-def run(*args):
-    result = CliRunner().invoke(main, [str(a) for a in args], catch_exceptions=False)
-    return result.exit_code, result.output
 
 
 def frames_in(folder: Path) -> list[str]:

@@ -8,14 +8,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 from PIL import Image
 
-from clrays.cli import main
 from clrays.errors import ClraysError, SceneError
 from clrays.renderer import Renderer
 from clrays.sweep import (Axis, execution_order, parse_reference, parse_settings, run_sweep, split_values,
                           sweep_points, sweep_scenes)
+from conftest import run_cli as run
 
 SCENE = """\
 version: 1
@@ -39,9 +38,6 @@ def scene_file(tmp_path):
     return path
 
 
-def run(*args):
-    result = CliRunner().invoke(main, [str(a) for a in args], catch_exceptions=False)
-    return result.exit_code, result.output
 
 
 def rows_of(folder: Path) -> list[dict[str, str]]:
