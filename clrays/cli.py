@@ -46,6 +46,9 @@ def main(debug: bool) -> None:
     \b
     Examples:
       clrays render scenes/demo.yaml -o out/demo.png
+      clrays sequence scenes/orbit.yaml -o 'out/orbit/frame_{:04d}.png'
+      clrays sweep scenes/demo.yaml --set medium.sigma_s=0.02,0.05 -o out/sweep
+      clrays bench scenes/demo.yaml -r 640x360
       clrays info
     """
     _Context.debug = debug
@@ -131,16 +134,21 @@ def _stage_statuses(result) -> dict[str, str]:
     return shown
 
 
+#: Stages that run on the host (their time is wall clock, not an OpenCL event).
+HOST_STAGES = {"integrand"}
+
+
 def _print_stats(result) -> None:
     click.echo(f"method: {result.method}")
     status = _stage_statuses(result)
     for label, ms in result.stage_ms.items():
-        click.echo(f"  {label:<10} {ms:9.2f} ms (device)  {status.get(label, '')}".rstrip())
+        where = "host" if label in HOST_STAGES else "device"
+        click.echo(f"  {label:<10} {ms:9.2f} ms {f'({where})':<8}  {status.get(label, '')}".rstrip())
     for label, text in status.items():
         if label not in result.stage_ms:
             click.echo(f"  {label:<10} {'-':>9}              {text}")
     if result.stage_ms:
-        click.echo(f"  {'total':<10} {sum(result.stage_ms.values()):9.2f} ms (device)")
+        click.echo(f"  {'total':<10} {sum(result.stage_ms.values()):9.2f} ms (device + host stages)")
     click.echo(f"  wall       {result.wall_ms:9.2f} ms")
     click.echo(f"  device memory {result.device_bytes / 2**20:.1f} MiB")
 
