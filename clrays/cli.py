@@ -27,6 +27,9 @@ class _Context:
 
 def _fail(exc: BaseException) -> None:
     """One line on stderr and exit 1; the traceback only with --debug."""
+    if isinstance(exc, BrokenPipeError):  # `clrays ... | head`: the reader left, nothing to report
+        sys.stderr.close()
+        sys.exit(1)
     if _Context.debug:
         traceback.print_exception(exc)
     if isinstance(exc, ClraysError):
