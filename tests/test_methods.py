@@ -42,6 +42,7 @@ def test_raymarch_converges_to_exact(renderer, kind):
     for steps, shadow_map in [(32, 64), (256, 256), (2048, 1024)]:
         coarse = _occluder_scene(LIGHTS[kind], steps=steps, shadow_map=shadow_map)
         errors.append(image_error(renderer.render(coarse, "raymarch").image, reference, edges))
+    print(kind, " | ".join(str(e) for e in errors))
     means = [e.mean for e in errors]
     assert means[0] > means[1] > means[2], [str(e) for e in errors]
     assert errors[2].mean < 0.01 and errors[2].p99 < 0.05, str(errors[2])
