@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-import hashlib
 import json
 import math
 import platform
@@ -34,6 +33,7 @@ import numpy as np
 
 from .metrics import depth_edges_at, image_error
 from .renderer import Renderer
+from .reuse import digest, scene_digest
 from .scene import Scene
 from .scene_loader import load_scene
 
@@ -123,13 +123,8 @@ def error_pixels(width: int, height: int, count: int, seed: int = 20111) -> tupl
 
 
 def _scene_key(scene: Scene, ys: np.ndarray, xs: np.ndarray) -> str:
-    """Hash of everything `exact` reads: geometry, lights, medium, camera, image, pixels."""
-    digest = hashlib.sha256()
-    for array in (scene.geometry.triangles, scene.geometry.albedo, scene.background, ys, xs):
-        digest.update(np.ascontiguousarray(array).tobytes())
-    text = repr((scene.lights, scene.medium, scene.camera, scene.image))
-    digest.update(text.encode())
-    return digest.hexdigest()[:24]
+    """Digest of everything `exact` reads (the scene, not its render settings) and the pixels."""
+    return digest("exact", scene_digest(scene, render=False), ys, xs).hex()[:24]
 
 
 def reference(scene: Scene, ys, xs, cache: Path, progress: bool = False) -> tuple[np.ndarray, np.ndarray]:
@@ -282,14 +277,14 @@ def plot(points: list[BenchPoint], path: Path) -> None:
     plt.close(figure)
 
 
-def machine() -> dict:
+def machine(device: str | None = None) -> dict:
     """What the figures were measured on."""
     import os
 
     from .device import Device
 
     return {"cpu": platform.processor() or platform.machine(), "cores": os.cpu_count(),
-            "python": platform.python_version(), "device": Device().name}
+            "python": platform.python_version(), "device": Device(device).name}
 
 
 def peak_host_mib() -> float:
@@ -311,11 +306,11 @@ def markdown_summary(points: list[BenchPoint]) -> str:
     return "\n".join(lines)
 
 
-def save(points: list[BenchPoint], out: Path, extra: dict | None = None) -> None:
+def save(points: list[BenchPoint], out: Path, extra: dict | None = None, device: str | None = None) -> None:
     """CSV, plot, summary table and machine description into `out`."""
     out.mkdir(parents=True, exist_ok=True)
     write_csv(points, out / "bench.csv")
     plot(points, out / "bench.png")
     (out / "summary.md").write_text(markdown_summary(points) + "\n")
-    info = {"machine": machine(), "peak_host_mib": peak_host_mib(), **(extra or {})}
+    info = {"machine": machine(device), "peak_host_mib": peak_host_mib(), **(extra or {})}
     (out / "machine.json").write_text(json.dumps(info, indent=2) + "\n")

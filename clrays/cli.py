@@ -89,7 +89,7 @@ def info(device: str | None) -> None:
               help="Override render.method.")
 @click.option("--set", "overrides", multiple=True, metavar="KEY.PATH=VALUE",
               help="Override a scene field (repeatable), e.g. --set render.steps=1024.")
-@click.option("--exposure", type=float, default=0.0, show_default=True,
+@click.option("--exposure", type=click.FloatRange(-64, 64), default=0.0, show_default=True,
               help="PNG only: scale radiance by 2^EXPOSURE before sRGB encoding.")
 @click.option("--stats", is_flag=True, help="Print per-stage device times and device memory.")
 @click.option("--device", envvar="CLRAYS_DEVICE", help="OpenCL device: 'P:D' index or name substring.")
@@ -201,15 +201,22 @@ def bench(scenes, resolutions, out, repeats, pixels, cache, quick, volume, devic
     """
     try:
         from . import bench as bench_module
+        from .output import check_folder
 
         sizes = resolutions
+        for folder in (out, cache):  # fail before the sweep, not after it
+            try:
+                folder.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise ClraysError(f"{folder}: cannot create folder: {exc.strerror or exc}") from None
+            check_folder(folder / "probe")
         paths = [str(path) for path in scenes] or list(bench_module.DEFAULT_SCENES)
         for path in paths:
             if not Path(path).is_file():
                 raise ClraysError(f"{path}: no such scene file")
         points = bench_module.run(paths, sizes, repeats=repeats, pixels=pixels, cache=cache, device=device,
                                   log=lambda line: click.echo(line, err=True), quick=quick, volume=volume)
-        bench_module.save(points, out, {"repeats": repeats, "pixels": pixels, "volume_only": volume,
+        bench_module.save(points, out, device=device, extra={"repeats": repeats, "pixels": pixels, "volume_only": volume,
                                         "resolutions": [f"{w}x{h}" for w, h in sizes], "scenes": paths})
         click.echo(bench_module.markdown_summary(points))
         click.echo(f"wrote {out}/bench.csv, bench.png, summary.md, machine.json")
@@ -246,7 +253,7 @@ def _stage_counts(results) -> str:
     means = {label: sum(r.stage_ms.get(label, 0.0) for r in results) / len(results) for label in labels}
     wall = sum(r.wall_ms for r in results) / len(results)
     lines.append("  mean per frame: " + ", ".join(f"{label} {ms:.1f}" for label, ms in means.items())
-                 + f"; device total {sum(means.values()):.1f}; wall {wall:.1f} ms")
+                 + f"; stage total (device + host) {sum(means.values()):.1f}; wall {wall:.1f} ms")
     return "\n".join(lines)
 
 
@@ -280,7 +287,7 @@ there, so an interrupted run resumes where it stopped (--overwrite renders all a
 @click.option("--method", type=click.Choice(["minmax", "raymarch", "exact"]), help="Override render.method.")
 @click.option("--set", "overrides", multiple=True, metavar="KEY.PATH=VALUE",
               help="Override a scene field (repeatable), e.g. --set animation.fps=12.")
-@click.option("--exposure", type=float, default=0.0, show_default=True,
+@click.option("--exposure", type=click.FloatRange(-64, 64), default=0.0, show_default=True,
               help="PNG and video: scale radiance by 2^EXPOSURE before sRGB encoding.")
 @click.option("--overwrite", is_flag=True, help="Render every frame, also those already written.")
 @click.option("--reuse/--no-reuse", default=True, show_default=True,
@@ -353,7 +360,7 @@ contact_sheet.png. Re-running the same command keeps the points already done.
 @click.option("--method", type=click.Choice(["minmax", "raymarch", "exact"]), help="Override render.method.")
 @click.option("--format", "image_format", type=click.Choice(["png", "exr", "npy"]), default="png",
               show_default=True, help="Image format of the points.")
-@click.option("--exposure", type=float, default=0.0, show_default=True,
+@click.option("--exposure", type=click.FloatRange(-64, 64), default=0.0, show_default=True,
               help="PNG and contact sheet: scale radiance by 2^EXPOSURE before sRGB encoding.")
 @click.option("--overwrite", is_flag=True, help="Render every point, also those done by an earlier run.")
 @click.option("--reuse/--no-reuse", default=True, show_default=True,

@@ -2,7 +2,7 @@
 
 
 class ClraysError(Exception):
-    """Base class: anything the CLI reports as `clrays: <message>` with exit code 1."""
+    """Base class: anything the CLI reports as `clrays: error: <message>` with exit code 1."""
 
 
 class SceneError(ClraysError):

@@ -64,14 +64,15 @@ def temporary_beside(path: Path) -> str:
 def write_atomic(path: Path, write) -> None:
     """Call `write(temporary)` on a file beside `path`, then rename it over `path`: readers
     see the old file or the whole new one, and a failure leaves nothing behind."""
-    temporary = temporary_beside(path)
+    temporary = None
     try:
+        temporary = temporary_beside(path)
         write(temporary)
         os.replace(temporary, path)
     except OSError as exc:
         raise OutputError(f"{path}: cannot write: {exc.strerror or exc}") from exc
     finally:
-        if os.path.exists(temporary):
+        if temporary is not None and os.path.exists(temporary):
             os.unlink(temporary)
 
 

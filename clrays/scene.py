@@ -87,7 +87,7 @@ class Render:
     shadow_map: int = 1024  # shadow map side, texels (cube maps: per face)
     pcf: int = 0  # surface shadow filter radius in texels (0 = hard)
     # min-max method
-    slices: int = 1024
+    slices: int = 1024  # measured: bench/RESULTS.md, "Choosing defaults"
     gamma_samples: int = 1024
     integrand: Literal["svd", "table", "analytic"] = "table"
     svd_rank: int = 4

@@ -541,11 +541,6 @@ def _transform_parts(node: _Node | None) -> tuple[np.ndarray, np.ndarray, np.nda
     return translate, rotate, _scale(m.get("scale"))
 
 
-def _transform(node: _Node | None) -> np.ndarray | None:
-    """4x4 T @ R @ S (scale, then rotate, then translate), or None for no transform."""
-    return None if node is None else affine(*_transform_parts(node))
-
-
 def _triangles(m: dict[str, _Node]) -> np.ndarray:
     vertices = np.array([_vec3(v) for v in _list(m["vertices"], "a list of at least 3 vertices [x, y, z]", 3)])
     n = len(vertices)

@@ -108,17 +108,17 @@ def render_sequence(scene: Scene, pattern: str | Path, frames: range | None = No
     """Render `frames` (default: all of the animation) of `scene` to `pattern`.
 
     pattern: a path with one `{}` field for the frame number, e.g. `out/frame_{:04d}.png`
-    (its folder is created). Frames whose file exists are skipped unless `overwrite`.
+    (its folders are created). Frames whose file exists are skipped unless `overwrite`.
     renderer: the session to use (default: a new one with reuse). on_frame(frame, path,
     result or None when skipped) is called after each frame."""
     pattern = check_pattern(pattern)
     frames = scene_frames(scene) if frames is None else frames
     paths = [frame_path(pattern, frame) for frame in frames]
-    folder = paths[0].parent if paths else Path(".")
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(f"{pattern}: cannot create folder {str(folder)!r}: {exc.strerror or exc}") from None
+    for folder in dict.fromkeys(path.parent for path in paths):  # the frame number may be in a folder name
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise OutputError(f"{pattern}: cannot create folder {str(folder)!r}: {exc.strerror or exc}") from None
     for path in paths[:1]:
         check_output_path(path)
     renderer = renderer or Renderer()

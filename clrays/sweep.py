@@ -355,7 +355,10 @@ def run_sweep(path: str | Path, spec, out_dir: str | Path, *, overrides: Sequenc
                 rows[point.index] = _row(point, name, result, digest_hex, error,
                                          references.name if references else None)
                 report.rendered.append(point.index)
-                _write_rows(folder / RESULTS, [rows[i] for i in sorted(rows)], axes)
+                # Rows of an earlier run stay until this run reaches their point, so an
+                # interrupted resume loses nothing.
+                merged = {**{i: row for i, row in earlier.items() if i < len(points)}, **rows}
+                _write_rows(folder / RESULTS, [merged[i] for i in sorted(merged)], axes)
             if on_point:
                 on_point(point, rows[point.index])
             if bar is not None:

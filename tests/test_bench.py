@@ -1,11 +1,14 @@
 """The benchmark's bookkeeping, and a smoke run of `clrays bench` end to end."""
 import csv
+from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
 
 from clrays.bench import BenchPoint, cheapest_at, error_pixels, pareto_front, summary
 from clrays.cli import main
+
+DEMO = Path(__file__).resolve().parents[1] / "scenes" / "demo.yaml"
 
 
 def _point(method, ms, rmse, setting=""):
@@ -36,8 +39,9 @@ def test_error_pixels_are_fixed_and_distinct():
 
 
 def test_bench_command_writes_csv_plot_and_summary(tmp_path):
+    pytest.importorskip("matplotlib")  # the `bench` extra, which `make test` installs
     out = tmp_path / "out"
-    result = CliRunner().invoke(main, ["bench", "scenes/demo.yaml", "-r", "48x27", "--quick", "--repeats", "1",
+    result = CliRunner().invoke(main, ["bench", str(DEMO), "-r", "48x27", "--quick", "--repeats", "1",
                                        "--pixels", "300", "--out", str(out), "--cache", str(tmp_path / "cache")])
     assert result.exit_code == 0, result.output
     rows = list(csv.DictReader(open(out / "bench.csv")))
@@ -49,5 +53,5 @@ def test_bench_command_writes_csv_plot_and_summary(tmp_path):
 
 
 def test_bench_rejects_a_bad_resolution():
-    result = CliRunner().invoke(main, ["bench", "scenes/demo.yaml", "-r", "640by360"])
+    result = CliRunner().invoke(main, ["bench", str(DEMO), "-r", "640by360"])
     assert result.exit_code == 2 and "WIDTHxHEIGHT" in result.output
