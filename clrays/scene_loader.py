@@ -384,6 +384,18 @@ def _direction(node: _Node) -> np.ndarray:
     return v / norm
 
 
+#: Largest light power accepted: beyond it float32 radiance on the device overflows.
+MAX_POWER = 1e30
+
+
+def _power(node: _Node | None) -> np.ndarray:
+    """A light's intensity (W/sr) or irradiance: RGB ≥ 0, at most MAX_POWER."""
+    power = _rgb(node)
+    if power.max() > MAX_POWER:
+        node.fail(f"a power of at most {MAX_POWER:g} (beyond it float32 radiance overflows)")
+    return power
+
+
 def _rgb(node: _Node | None, lo: float = 0.0, hi: float | None = None, *,
          default: float | None = None) -> np.ndarray:
     """A colour: a number (broadcast to RGB) or a list of 3 numbers, each in [lo, hi]."""
@@ -447,12 +459,12 @@ _LIGHTS = {  # type -> (required keys, optional keys)
 def _light(node: _Node) -> Light:
     kind, m = _typed(node, _LIGHTS)
     if kind == "point":
-        return PointLight(position=_vec3(m["position"]), intensity=_rgb(m["intensity"]))
+        return PointLight(position=_vec3(m["position"]), intensity=_power(m["intensity"]))
     if kind == "spot":
         return SpotLight(position=_vec3(m["position"]), direction=_direction(m["direction"]),
                          cone_deg=_number(m["cone_deg"], 0.0, 90.0, lo_open=True),
-                         intensity=_rgb(m["intensity"]))
-    return DirectionalLight(direction=_direction(m["direction"]), irradiance=_rgb(m["irradiance"]))
+                         intensity=_power(m["intensity"]))
+    return DirectionalLight(direction=_direction(m["direction"]), irradiance=_power(m["irradiance"]))
 
 
 def _phase(node: _Node) -> Phase:
@@ -637,10 +649,10 @@ _CAMERA_TRACKS: dict[str, _Reader] = {
     "fov_deg": (lambda n: _number(n, 0.0, 180.0, lo_open=True, hi_open=True), "linear"),
 }
 _LIGHT_TRACKS: dict[str, dict[str, _Reader]] = {
-    "point": {"position": (_vec3, "linear"), "intensity": (_rgb, "linear")},
+    "point": {"position": (_vec3, "linear"), "intensity": (_power, "linear")},
     "spot": {"position": (_vec3, "linear"), "direction": (_direction, "direction"),
-             "cone_deg": (lambda n: _number(n, 0.0, 90.0, lo_open=True), "linear"), "intensity": (_rgb, "linear")},
-    "directional": {"direction": (_direction, "direction"), "irradiance": (_rgb, "linear")},
+             "cone_deg": (lambda n: _number(n, 0.0, 90.0, lo_open=True), "linear"), "intensity": (_power, "linear")},
+    "directional": {"direction": (_direction, "direction"), "irradiance": (_power, "linear")},
 }
 _OBJECT_TRACKS: dict[str, _Reader] = {
     "translate": (_vec3, "linear"),

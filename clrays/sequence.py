@@ -197,7 +197,8 @@ def write_video(paths: list[Path], out: str | Path, fps: float, exposure: float 
     images = [Image.fromarray(_srgb_frame(p, exposure), mode="RGB") for p in paths]
     if not images:
         raise OutputError(f"{out}: no frames")
-    duration = max(int(round(1000.0 / fps)), 1)
+    # Milliseconds per frame; GIF stores centiseconds in 16 bits, so slow rates are clamped.
+    duration = int(min(max(round(1000.0 / fps), 1), 655_350))
     options = {"optimize": False} if out.suffix.lower() == ".gif" else {"lossless": True}
     write_atomic(out, lambda temporary: images[0].save(temporary, save_all=True, append_images=images[1:],
                                                        duration=duration, loop=0, **options))

@@ -621,3 +621,10 @@ def test_corrupt_mesh_files(tmp_path, name, content, reason):
     assert "\n" not in message
     assert re.search(rf"^{re.escape(str(scene))}:\d+:\d+: objects\.0\.file: expected a readable mesh file "
                      rf".*got '{re.escape(name)}' \((?:{reason}).*{re.escape(name)}\)$", message), message
+
+
+def test_light_power_beyond_float32_range_is_a_scene_error():
+    # float32 radiance on the device overflows beyond ~3e38: refuse it at load time.
+    with pytest.raises(SceneError, match=r"lights\.0\.intensity: expected"):
+        load_text(scene_text({"lights.0.intensity": 1e39}))
+
