@@ -23,8 +23,8 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from clrays.device import Device  # noqa: E402
-from clrays.renderer import Renderer  # noqa: E402
-from clrays.scene_loader import load_scene  # noqa: E402
+from clrays.session import Renderer  # noqa: E402
+from clrays.scene.load import load_scene  # noqa: E402
 
 SIGMAS = [f"{0.01 * i:.2f}" for i in range(1, 13)]
 

@@ -5,8 +5,8 @@
     image = clrays.render(scene, method="raymarch")   # (H, W, 3) float32 linear radiance
 """
 from .errors import ClraysError, DeviceError, OutputError, SceneError
-from .renderer import Renderer, RenderResult, render
-from .scene_loader import load_scene, parse_scene
+from .session import Renderer, RenderResult, render
+from .scene.load import load_scene, parse_scene
 
 __version__ = "0.1.0"
 __all__ = ["load_scene", "parse_scene", "render", "Renderer", "RenderResult",

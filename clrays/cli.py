@@ -98,10 +98,10 @@ def info(device: str | None) -> None:
 def render(scene: Path, output: Path, method, overrides, exposure, stats, device, progress, frame) -> None:
     """Render SCENE (a YAML file) to an image."""
     try:
-        from .output import check_output_path, write_image
-        from .renderer import Renderer
-        from .scene_loader import load_scene
-        from .sequence import parse_frames, scene_frames
+        from .image_io import check_output_path, write_image
+        from .session import Renderer
+        from .scene.load import load_scene
+        from .runs.sequence import parse_frames, scene_frames
 
         check_output_path(output)
         loaded = load_scene(scene, overrides)
@@ -200,8 +200,8 @@ def bench(scenes, resolutions, out, repeats, pixels, cache, quick, volume, devic
     front, and the headline table (speedup of minmax over raymarch at equal error).
     """
     try:
-        from . import bench as bench_module
-        from .output import check_folder
+        from .runs import bench as bench_module
+        from .image_io import check_folder
 
         sizes = resolutions
         for folder in (out, cache):  # fail before the sweep, not after it
@@ -300,9 +300,9 @@ def sequence(scene, pattern, frames, video, method, overrides, exposure, overwri
     """Render the frames of SCENE's animation to numbered images."""
     done = []
     try:
-        from .renderer import Renderer
-        from .scene_loader import load_scene
-        from .sequence import check_pattern, check_video_path, parse_frames, render_sequence, scene_frames, write_video
+        from .session import Renderer
+        from .scene.load import load_scene
+        from .runs.sequence import check_pattern, check_video_path, parse_frames, render_sequence, scene_frames, write_video
 
         check_pattern(pattern)
         if video is not None:
@@ -372,8 +372,8 @@ def sweep(scene, settings, out_dir, reference, method, image_format, exposure, o
     """Render SCENE at every combination of the --set values and tabulate the results."""
     done = []
     try:
-        from .renderer import Renderer
-        from .sweep import axes_from, format_table, parse_reference, run_sweep
+        from .session import Renderer
+        from .runs.sweep import axes_from, format_table, parse_reference, run_sweep
 
         if not scene.is_file():
             raise ClraysError(f"{scene}: no such scene file")

@@ -95,6 +95,11 @@ class StageTimer:
         """Time of a stage that runs on the host (table construction)."""
         self.host_ms[label] = self.host_ms.get(label, 0.0) + milliseconds
 
+    @property
+    def host_labels(self) -> frozenset[str]:
+        """The stages timed on the host (wall clock), not by OpenCL events."""
+        return frozenset(self.host_ms)
+
     def milliseconds(self) -> dict[str, float]:
         times = {}
         for label, events in self.events.items():

@@ -6,9 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from clrays.primitives import box_triangles
+from clrays.scene.geometry import box_triangles
 
-from clrays.scene import (Camera, DirectionalLight, Geometry, Image, Medium, Phase, PointLight, Render, Scene,
+from clrays.scene.model import (Camera, DirectionalLight, Geometry, Image, Medium, Phase, PointLight, Render, Scene,
                           SpotLight)
 
 
@@ -21,7 +21,7 @@ def device():
 
 @pytest.fixture(scope="session")
 def renderer(device):
-    from clrays.renderer import Renderer
+    from clrays.session import Renderer
 
     return Renderer(device)
 
@@ -93,7 +93,7 @@ def unoccluded_point_quadrature(scene) -> tuple[np.ndarray, np.ndarray]:
     """Red channel of the in-scattered radiance of an empty scene lit by one point light,
     per pixel centre, and the mask of pixels more than 2.5° from the light (the pixel
     holding the light, ~π/h as h → 0, belongs to the stability suite)."""
-    from clrays.camera import primary_rays
+    from clrays.scene.camera import primary_rays
 
     light, medium = scene.lights[0], scene.medium
     g = medium.phase.g if medium.phase.type == "hg" else 0.0

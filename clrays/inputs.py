@@ -1,0 +1,220 @@
+"""Per-frame device inputs: the scene moved into eye space and packed into the
+structs of `cl/common.h` (views, lights, frame parameters) and triangle buffers.
+
+Eye space is world space translated so the camera sits at the origin (no rotation).
+The subtraction happens in float64 on the host, so float32 on the device keeps its
+precision however far the scene is from the world origin.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from . import structs
+from .scene.camera import camera_basis, sample_offsets
+from .device import Device
+from .scene.model import DirectionalLight, Scene, SpotLight
+
+#: Spot lights wider than this use a cube map: a single perspective map of a wide
+#: cone would spend most texels near its rim.
+SPOT_SINGLE_VIEW_MAX_DEG = 75.0
+
+#: Cube faces in the order `light_view_index` expects: +x, -x, +y, -y, +z, -z, with an up vector each.
+_CUBE_FACES = [
+    ((1, 0, 0), (0, 1, 0)), ((-1, 0, 0), (0, 1, 0)),
+    ((0, 1, 0), (0, 0, 1)), ((0, -1, 0), (0, 0, 1)),
+    ((0, 0, 1), (0, 1, 0)), ((0, 0, -1), (0, 1, 0)),
+]
+
+
+def _view(origin, forward, up, scale_x, scale_y, width, height, projection, depth_offset) -> np.ndarray:
+    forward = np.asarray(forward, float) / np.linalg.norm(forward)
+    right = np.cross(forward, up)
+    right /= np.linalg.norm(right)
+    true_up = np.cross(right, forward)
+    v = np.zeros((), dtype=structs.view_dtype)
+    v["origin"] = structs.float4(origin)
+    v["right"], v["up"], v["forward"] = structs.float4(right), structs.float4(true_up), structs.float4(forward)
+    v["scale_x"], v["scale_y"] = scale_x, scale_y
+    v["width"], v["height"] = width, height
+    v["projection"] = projection
+    v["depth_offset"] = depth_offset
+    return v
+
+
+def _any_up(forward) -> np.ndarray:
+    """An up vector not parallel to forward."""
+    forward = np.asarray(forward, float)
+    return np.array([0.0, 1.0, 0.0]) if abs(forward[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+
+
+@dataclass
+class FrameInputs:
+    """Host-side arrays for one frame, ready to upload."""
+
+    scene: Scene
+    eye_ws: np.ndarray  # camera position, world space (float64)
+    views: np.ndarray  # view_t[]: views[0] is the camera, then every shadow-map view
+    lights: np.ndarray  # light_t[]
+    params: np.ndarray  # frame_t
+    offsets: np.ndarray  # (spp, 2) float32 sample offsets
+    tri_vertices: np.ndarray  # (3T, 4) float32, eye space
+    tri_normal: np.ndarray  # (T, 4) float32, unit geometric normals
+    tri_albedo: np.ndarray  # (T, 4) float32
+    shadow_texels: int  # size of the shared shadow depth buffer
+    light_anchor_ws: np.ndarray  # (L, 3) float64: each light's shadow-map origin, world space
+
+    @property
+    def light_views(self) -> list[tuple[int, int]]:
+        """(first view, view count) of each light."""
+        return [(int(entry["first_view"]), int(entry["view_count"])) for entry in self.lights[:len(self.scene.lights)]]
+
+    @property
+    def samples(self) -> int:
+        return self.scene.image.width * self.scene.image.height * self.scene.image.spp
+
+
+def frame_inputs(scene: Scene) -> FrameInputs:
+    """Pack a scene into the device structs, in eye space."""
+    eye_ws = np.asarray(scene.camera.position, dtype=np.float64)
+    image, camera, medium = scene.image, scene.camera, scene.medium
+    tris = scene.geometry.triangles - eye_ws  # float64 translation, then float32
+    lo, hi = scene.geometry.bounds()  # world space: the directional maps must not depend on the eye
+
+    right, up, forward = camera_basis(camera)
+    tan_half = math.tan(math.radians(camera.fov_deg) / 2)
+    views = [_view(np.zeros(3), forward, up, tan_half * image.width / image.height, tan_half,
+                   image.width, image.height, structs.PROJECTION_PERSPECTIVE, 0)]
+    lights, anchors = [], []
+    n = scene.render.shadow_map
+    texels = 0
+    for light in scene.lights:
+        entry = np.zeros((), dtype=structs.light_dtype)
+        entry["first_view"] = len(views)
+        if isinstance(light, DirectionalLight):
+            entry["type"] = structs.LIGHT_DIRECTIONAL
+            entry["direction"] = structs.float4(light.direction)
+            entry["power"] = structs.float4(light.irradiance)
+            # Orthographic map fitted to the bounding sphere of the scene.
+            centre, radius = (lo + hi) / 2, max(np.linalg.norm(hi - lo) / 2, 1e-6) * 1.01
+            anchors.append(centre - light.direction * radius)
+            views.append(_view(anchors[-1] - eye_ws, light.direction, _any_up(light.direction),
+                               radius, radius, n, n, structs.PROJECTION_ORTHOGRAPHIC, texels))
+            entry["texel_angle"] = 2 * radius / n
+            texels += n * n
+        else:
+            anchors.append(np.asarray(light.position, dtype=np.float64))
+            position = light.position - eye_ws
+            entry["position"] = structs.float4(position)
+            entry["power"] = structs.float4(light.intensity)
+            if isinstance(light, SpotLight):
+                entry["type"] = structs.LIGHT_SPOT
+                entry["direction"] = structs.float4(light.direction)
+                entry["cos_cone"] = math.cos(math.radians(light.cone_deg))
+            else:
+                entry["type"] = structs.LIGHT_POINT
+            if isinstance(light, SpotLight) and light.cone_deg <= SPOT_SINGLE_VIEW_MAX_DEG:
+                scale = math.tan(math.radians(light.cone_deg))
+                views.append(_view(position, light.direction, _any_up(light.direction), scale, scale,
+                                   n, n, structs.PROJECTION_PERSPECTIVE, texels))
+                entry["texel_angle"] = 2 * scale / n
+                texels += n * n
+            else:
+                for face_forward, face_up in _CUBE_FACES:
+                    views.append(_view(position, face_forward, face_up, 1.0, 1.0, n, n,
+                                       structs.PROJECTION_PERSPECTIVE, texels))
+                    texels += n * n
+                entry["texel_angle"] = 2.0 / n
+        entry["view_count"] = len(views) - entry["first_view"]
+        lights.append(entry)
+
+    params = np.zeros((), dtype=structs.frame_dtype)
+    params["sigma_s"] = structs.float4(medium.sigma_s)
+    params["sigma_t"] = structs.float4(medium.sigma_t)
+    params["background"] = structs.float4(scene.background)
+    params["phase_g"] = medium.phase.g
+    params["phase_type"] = structs.PHASE_HG if medium.phase.type == "hg" else structs.PHASE_ISOTROPIC
+    params["far"] = camera.far
+    params["light_count"] = len(lights)
+    params["width"], params["height"], params["spp"] = image.width, image.height, image.spp
+    params["steps"] = scene.render.steps
+    params["jitter"] = int(scene.render.jitter)
+    params["pcf"] = scene.render.pcf
+
+    normals = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    length = np.linalg.norm(normals, axis=1, keepdims=True)
+    normals = np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
+    pad = lambda a: np.concatenate([a, np.zeros((len(a), 1))], axis=1).astype(np.float32)  # noqa: E731
+    return FrameInputs(
+        scene=scene, eye_ws=eye_ws,
+        views=np.array(views, dtype=structs.view_dtype),
+        lights=np.array(lights, dtype=structs.light_dtype) if lights else np.zeros(1, structs.light_dtype),
+        params=params,
+        offsets=sample_offsets(image.spp).astype(np.float32),
+        tri_vertices=pad(tris.reshape(-1, 3)),
+        tri_normal=pad(normals),
+        tri_albedo=pad(scene.geometry.albedo),
+        shadow_texels=texels,
+        light_anchor_ws=np.array(anchors, dtype=np.float64).reshape(-1, 3),
+    )
+
+
+@dataclass
+class FrameBuffers:
+    """The frame inputs on the device; stage outputs are added by the stages."""
+
+    inputs: FrameInputs
+    views: object
+    lights: object
+    params: object
+    offsets: object
+    tri_vertices: object
+    tri_normal: object
+    tri_albedo: object
+
+
+def upload(device: Device, inputs: FrameInputs) -> FrameBuffers:
+    return FrameBuffers(
+        inputs=inputs,
+        views=device.buffer(inputs.views, writable=False),
+        lights=device.buffer(inputs.lights, writable=False),
+        params=device.buffer(inputs.params.reshape(1), writable=False),
+        offsets=device.buffer(inputs.offsets, writable=False),
+        tri_vertices=device.buffer(inputs.tri_vertices, writable=False),
+        tri_normal=device.buffer(inputs.tri_normal, writable=False),
+        tri_albedo=device.buffer(inputs.tri_albedo, writable=False),
+    )
+
+
+def light_pass_inputs(inputs: FrameInputs, light_index: int) -> FrameInputs:
+    """The inputs of one light's shadow-map pass, anchored at the light.
+
+    Vertices and the light's views are translated (float64, on the host) so the map's
+    origin sits at zero: the map's depths are distances from that origin whatever the
+    eye space, so they depend only on the geometry and the light. That is what lets a
+    render session keep a static light's map while the camera moves (DESIGN §7). The
+    camera view stays in views[0]; the light's views follow from views[1], with depth
+    offsets from 0, and `shadow_texels` counts this light's texels only.
+    """
+    first, count = inputs.light_views[light_index]
+    anchor = inputs.light_anchor_ws[light_index]
+    views = inputs.views[first:first + count].copy()
+    views["origin"] = 0.0
+    views["depth_offset"] -= views["depth_offset"][0]
+    texels = int(sum(int(v["width"]) * int(v["height"]) for v in views))
+    light = inputs.lights[light_index:light_index + 1].copy()
+    light["first_view"] = 1
+    if light["type"][0] != structs.LIGHT_DIRECTIONAL:
+        light["position"] = 0.0
+    triangles = inputs.scene.geometry.triangles - anchor
+    vertices = triangles.reshape(-1, 3)
+    return replace(
+        inputs,
+        views=np.concatenate([inputs.views[:1], views]),
+        lights=light,
+        tri_vertices=np.concatenate([vertices, np.zeros((len(vertices), 1))], axis=1).astype(np.float32),
+        shadow_texels=texels,
+        light_anchor_ws=anchor.reshape(1, 3),
+    )

@@ -1,0 +1,316 @@
+"""Run time against error: every method and setting of clrays, timed and measured
+against `exact` on the same scenes (`clrays bench`).
+
+For each scene and resolution the sweep renders
+
+- `raymarch` over `steps` × `shadow_map`;
+- `minmax` at its defaults and, one parameter at a time, over `slices`,
+  `gamma_samples`, `shadow_map`, `integrand` (svd rank 1–8, table, analytic where it
+  exists) and `traversal` (tree, scan);
+
+and records, per point, the frame time (median of `repeats` renders after a warm-up,
+wall clock, host work included), the median device time per stage, the device memory,
+and the error against `exact`: relative RMSE of luminance and the 99th-percentile
+relative error, on pixels with at least 1% of the mean radiance, depth edges excluded
+(`clrays.reference.metrics`). `exact` costs pixels × triangles, so the error is measured on a
+fixed, seeded random subset of pixels (`pixels`, default 4000), the same for every
+point; references are cached on disk by a hash of the scene and the subset.
+"""
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import math
+import platform
+import resource
+import statistics
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from ..reference.metrics import depth_edges_at, image_error
+from ..session import Renderer
+from ..reuse import digest, scene_digest
+from ..scene.model import Scene
+from ..scene.load import load_scene
+
+DEFAULT_SCENES = ("scenes/demo.yaml", "scenes/bunny.yaml", "scenes/behind.yaml", "scenes/sun.yaml")
+RMSE_TARGETS = (0.01, 0.05)
+
+
+@dataclass
+class BenchPoint:
+    scene: str
+    resolution: str
+    method: str
+    setting: str  # the swept parameter and value, e.g. "steps=256 shadow_map=1024"
+    frame_ms: float  # median wall time of a frame
+    frame_ms_spread: float  # (max - min) / median over the timed repeats
+    rmse: float  # relative RMSE of luminance against exact
+    p99: float  # 99th percentile of the relative luminance error
+    mean_error: float
+    device_mib: float
+    stage_ms: dict[str, float] = field(default_factory=dict)
+
+
+def volume_only(scene: Scene) -> Scene:
+    """The scene with black surfaces and background: its image is the in-scattered light
+    alone (attenuated), so its error is the volumetric method's, free of the hard
+    surface-shadow edges that every shadow-map method shares."""
+    geometry = replace(scene.geometry, albedo=np.zeros_like(scene.geometry.albedo))
+    return replace(scene, geometry=geometry, background=np.zeros(3))
+
+
+def sweep(scene: Scene, quick: bool = False, volume: bool = False) -> list[tuple[str, str, dict]]:
+    """(method, label, render overrides) of every point for one scene; `quick` keeps
+    a handful (two raymarch points, minmax defaults and scan) for a smoke run; `volume`
+    (volume-only error) a single shadow-map size and the main minmax settings."""
+    from ..scene.model import DirectionalLight
+
+    if volume:
+        points = [("raymarch", f"steps={steps}", {"steps": steps}) for steps in (32, 64, 128, 256, 512, 1024)]
+        points.append(("minmax", "defaults", {}))
+        points += [("minmax", f"{key}={value}", {key: value})
+                   for key, value in (("slices", 256), ("slices", 512), ("gamma_samples", 256),
+                                      ("gamma_samples", 512))]
+        return points
+    if quick:
+        return [("raymarch", "steps=32 shadow_map=256", {"steps": 32, "shadow_map": 256}),
+                ("raymarch", "steps=256 shadow_map=256", {"steps": 256, "shadow_map": 256}),
+                ("minmax", "shadow_map=256", {"shadow_map": 256}),
+                ("minmax", "shadow_map=256 traversal=scan", {"shadow_map": 256, "traversal": "scan"})]
+    # Large frames get a coarser grid: a 1280×720 raymarch at 2048 steps takes a minute.
+    large = scene.image.width * scene.image.height > 500_000
+    points = []
+    for shadow_map in (1024,) if large else (1024, 2048):
+        for steps in (128, 512) if large else (32, 64, 128, 256, 512, 1024):
+            points.append(("raymarch", f"steps={steps} shadow_map={shadow_map}",
+                           {"steps": steps, "shadow_map": shadow_map}))
+    defaults = dataclasses.asdict(scene.render)
+    points.append(("minmax", f"defaults (slices={defaults['slices']} gamma_samples={defaults['gamma_samples']} "
+                             f"shadow_map={defaults['shadow_map']})", {}))
+    one_at_a_time = {
+        "slices": (512,) if large else (128, 256, 512, 2048),
+        "gamma_samples": (512,) if large else (128, 256, 512, 2048),
+        "shadow_map": (512,) if large else (256, 512, 2048),
+        "traversal": () if large else ("scan",),
+    }
+    for key, values in one_at_a_time.items():
+        for value in values:
+            if value != defaults[key]:
+                points.append(("minmax", f"{key}={value}", {key: value}))
+    if large:
+        return points
+    for rank in (1, 2, 4, 8):
+        points.append(("minmax", f"integrand=svd svd_rank={rank}", {"integrand": "svd", "svd_rank": rank}))
+    if all(isinstance(light, DirectionalLight) for light in scene.lights):
+        points.append(("minmax", "integrand=analytic", {"integrand": "analytic"}))
+    if defaults["integrand"] != "table":
+        points.append(("minmax", "integrand=table", {"integrand": "table"}))
+    return points
+
+
+def error_pixels(width: int, height: int, count: int, seed: int = 20111) -> tuple[np.ndarray, np.ndarray]:
+    """A fixed, seeded subset of pixels (all of them when count >= width·height)."""
+    if count >= width * height:
+        ys, xs = np.divmod(np.arange(width * height), width)
+        return ys, xs
+    flat = np.sort(np.random.default_rng(seed).choice(width * height, size=count, replace=False))
+    return np.divmod(flat, width)
+
+
+def _scene_key(scene: Scene, ys: np.ndarray, xs: np.ndarray) -> str:
+    """Digest of everything `exact` reads (the scene, not its render settings) and the pixels."""
+    return digest("exact", scene_digest(scene, render=False), ys, xs).hex()[:24]
+
+
+def reference(scene: Scene, ys, xs, cache: Path, progress: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """(exact radiance (N, 3), depth-edge mask (N,)) of the pixel subset, cached on disk."""
+    from ..reference.exact import exact_pixels
+
+    path = cache / f"exact-{_scene_key(scene, ys, xs)}.npz"
+    if path.exists():
+        stored = np.load(path)
+        return stored["radiance"], stored["edges"]
+    radiance = exact_pixels(scene, ys, xs, progress=progress)
+    edges = depth_edges_at(scene, ys, xs)
+    cache.mkdir(parents=True, exist_ok=True)
+    temporary = path.with_suffix(".tmp.npz")
+    np.savez(temporary, radiance=radiance, edges=edges)
+    temporary.replace(path)
+    return radiance, edges
+
+
+def measure(renderer: Renderer, scene: Scene, method: str, repeats: int):
+    """Warm-up, then `repeats` timed frames: (median ms, spread, median stage ms, last result)."""
+    renderer.render(scene, method)
+    walls, stages, result = [], [], None
+    for _ in range(repeats):
+        start = time.perf_counter()
+        result = renderer.render(scene, method)
+        walls.append((time.perf_counter() - start) * 1e3)
+        stages.append(result.stage_ms)
+    median = statistics.median(walls)
+    stage_ms = {label: statistics.median(s.get(label, 0.0) for s in stages) for label in stages[-1]}
+    return median, (max(walls) - min(walls)) / median, stage_ms, result
+
+
+def run(scene_paths=DEFAULT_SCENES, resolutions=((640, 360),), repeats: int = 5, pixels: int = 4000,
+        cache: Path = Path(".cache/clrays"), device: str | None = None, progress=None, log=print,
+        quick: bool = False, volume: bool = False) -> list[BenchPoint]:
+    """The whole sweep; `progress(points_done, points_total)` is called after each point;
+    `volume`: surfaces black, so the error is the in-scattering's alone (`volume_only`)."""
+    renderer = Renderer(device, reuse=False)  # every frame computed from scratch
+    plan = []
+    for path in scene_paths:
+        for width, height in resolutions:
+            scene = load_scene(path, [f"image.width={width}", f"image.height={height}"])
+            if volume:
+                scene = volume_only(scene)
+            plan.append((path, scene, sweep(scene, quick, volume)))
+    total = sum(len(points) for _, _, points in plan)
+    results, done = [], 0
+    for path, scene, points in plan:
+        image = scene.image
+        ys, xs = error_pixels(image.width, image.height, pixels)
+        log(f"{path} {image.width}x{image.height}: exact on {len(ys)} pixels ...")
+        truth, edges = reference(scene, ys, xs, cache)
+        for method, label, overrides in points:
+            variant = replace(scene, render=replace(scene.render, **overrides))
+            frame_ms, spread, stage_ms, result = measure(renderer, variant, method, repeats)
+            error = image_error(result.image[ys, xs][:, None], truth[:, None], edges[:, None])
+            point = BenchPoint(Path(path).stem, f"{image.width}x{image.height}", method, label, frame_ms, spread,
+                               error.rmse, error.p99, error.mean, result.device_bytes / 2**20, stage_ms)
+            results.append(point)
+            log(f"  {method:8} {label:36} {frame_ms:9.1f} ms  rmse {error.rmse:7.3%}  p99 {error.p99:7.3%}")
+            done += 1
+            if progress:
+                progress(done, total)
+    return results
+
+
+def cheapest_at(points: list[BenchPoint], method: str, target: float) -> BenchPoint | None:
+    """The fastest point of a method whose relative RMSE is at most `target`."""
+    good = [p for p in points if p.method == method and p.rmse <= target]
+    return min(good, key=lambda p: p.frame_ms) if good else None
+
+
+def pareto_front(points: list[BenchPoint]) -> list[BenchPoint]:
+    """Points no other point beats on both time and error, by increasing time."""
+    front, best = [], math.inf
+    for point in sorted(points, key=lambda p: (p.frame_ms, p.rmse)):
+        if point.rmse < best:
+            front.append(point)
+            best = point.rmse
+    return front
+
+
+def summary(points: list[BenchPoint]) -> list[dict]:
+    """Per scene and resolution: speedup of minmax over raymarch at equal error."""
+    rows = []
+    for key in dict.fromkeys((p.scene, p.resolution) for p in points):
+        group = [p for p in points if (p.scene, p.resolution) == key]
+        row = {"scene": key[0], "resolution": key[1]}
+        for target in RMSE_TARGETS:
+            fast, slow = cheapest_at(group, "minmax", target), cheapest_at(group, "raymarch", target)
+            tag = f"{target:.0%}"
+            row[f"minmax_ms@{tag}"] = fast.frame_ms if fast else None
+            row[f"minmax_setting@{tag}"] = fast.setting if fast else "not reached"
+            row[f"raymarch_ms@{tag}"] = slow.frame_ms if slow else None
+            row[f"raymarch_setting@{tag}"] = slow.setting if slow else "not reached"
+            row[f"speedup@{tag}"] = slow.frame_ms / fast.frame_ms if fast and slow else None
+        rows.append(row)
+    return rows
+
+
+def write_csv(points: list[BenchPoint], path: Path) -> None:
+    stages = sorted({label for p in points for label in p.stage_ms})
+    with open(path, "w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(["scene", "resolution", "method", "setting", "frame_ms", "frame_ms_spread", "rel_rmse",
+                         "p99_rel_error", "mean_rel_error", "device_mib"] + [f"{s}_ms" for s in stages])
+        for p in points:
+            writer.writerow([p.scene, p.resolution, p.method, p.setting, f"{p.frame_ms:.2f}", f"{p.frame_ms_spread:.3f}",
+                             f"{p.rmse:.6f}", f"{p.p99:.6f}", f"{p.mean_error:.6f}", f"{p.device_mib:.1f}"]
+                            + [f"{p.stage_ms.get(s, 0.0):.2f}" for s in stages])
+
+
+def plot(points: list[BenchPoint], path: Path) -> None:
+    """Error against time, log-log, one panel per scene and resolution, one curve per method,
+    the Pareto front of all points marked."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    groups = list(dict.fromkeys((p.scene, p.resolution) for p in points))
+    columns = min(len(groups), 2)
+    rows = math.ceil(len(groups) / columns)
+    figure, axes = plt.subplots(rows, columns, figsize=(6.5 * columns, 4.8 * rows), squeeze=False)
+    colours = {"raymarch": "tab:orange", "minmax": "tab:blue"}
+    for axis, key in zip(axes.ravel(), groups):
+        group = [p for p in points if (p.scene, p.resolution) == key]
+        for method, colour in colours.items():
+            mine = sorted((p for p in group if p.method == method), key=lambda p: p.frame_ms)
+            axis.scatter([p.frame_ms for p in mine], [max(p.rmse, 1e-5) for p in mine], s=18, color=colour,
+                         label=method, alpha=0.8)
+            front = pareto_front(mine)
+            axis.plot([p.frame_ms for p in front], [max(p.rmse, 1e-5) for p in front], color=colour, lw=1.2)
+        overall = pareto_front(group)
+        axis.scatter([p.frame_ms for p in overall], [max(p.rmse, 1e-5) for p in overall], s=70,
+                     facecolors="none", edgecolors="black", label="Pareto front (all)")
+        for target in RMSE_TARGETS:
+            axis.axhline(target, color="grey", ls=":", lw=0.8)
+        axis.set_xscale("log")
+        axis.set_yscale("log")
+        axis.set_xlabel("frame time (ms, median)")
+        axis.set_ylabel("relative RMSE vs exact")
+        axis.set_title(f"{key[0]} {key[1]}")
+        axis.legend(fontsize=8)
+    for axis in axes.ravel()[len(groups):]:
+        axis.set_visible(False)
+    figure.tight_layout()
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+
+
+def machine(device: str | None = None) -> dict:
+    """What the figures were measured on."""
+    import os
+
+    from ..device import Device
+
+    return {"cpu": platform.processor() or platform.machine(), "cores": os.cpu_count(),
+            "python": platform.python_version(), "device": Device(device).name}
+
+
+def peak_host_mib() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def markdown_summary(points: list[BenchPoint]) -> str:
+    """The headline table, as it goes into bench/RESULTS.md."""
+    lines = ["| scene | resolution | target rel. RMSE | minmax (ms, setting) | raymarch (ms, setting) | speedup |",
+             "|---|---|---|---|---|---|"]
+    for row in summary(points):
+        for target in RMSE_TARGETS:
+            tag = f"{target:.0%}"
+            fast, slow, speedup = row[f"minmax_ms@{tag}"], row[f"raymarch_ms@{tag}"], row[f"speedup@{tag}"]
+            lines.append(f"| {row['scene']} | {row['resolution']} | {tag} | "
+                         f"{'—' if fast is None else f'{fast:.0f}'} ({row[f'minmax_setting@{tag}']}) | "
+                         f"{'—' if slow is None else f'{slow:.0f}'} ({row[f'raymarch_setting@{tag}']}) | "
+                         f"{'—' if speedup is None else f'{speedup:.1f}×'} |")
+    return "\n".join(lines)
+
+
+def save(points: list[BenchPoint], out: Path, extra: dict | None = None, device: str | None = None) -> None:
+    """CSV, plot, summary table and machine description into `out`."""
+    out.mkdir(parents=True, exist_ok=True)
+    write_csv(points, out / "bench.csv")
+    plot(points, out / "bench.png")
+    (out / "summary.md").write_text(markdown_summary(points) + "\n")
+    info = {"machine": machine(device), "peak_host_mib": peak_host_mib(), **(extra or {})}
+    (out / "machine.json").write_text(json.dumps(info, indent=2) + "\n")

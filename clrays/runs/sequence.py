@@ -1,0 +1,205 @@
+"""Image sequences: every frame of a scene's animation to numbered files, resumable.
+
+    scene = load_scene("scenes/orbit.yaml")
+    report = render_sequence(scene, "out/orbit/frame_{:04d}.png")
+    write_video(report.paths, "out/orbit.gif", fps=scene.animation.fps)
+
+Frames are written atomically (`clrays.image_io.write_image`), so a file that exists is
+a finished frame: running the same sequence again skips them, and an interrupted run
+loses nothing but the frame it was on. One render session (`Renderer`) renders all
+frames, so what a frame shares with the previous one is not computed again (DESIGN §7).
+"""
+from __future__ import annotations
+
+import string
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from ..errors import ClraysError, OutputError
+from ..image_io import FORMATS, check_folder, check_output_path, to_srgb8, write_atomic, write_image
+from ..session import Renderer, RenderResult
+from ..scene.model import Scene
+
+VIDEO_FORMATS = (".gif", ".webp")
+
+
+def scene_frames(scene: Scene) -> range:
+    """The frames a scene has: its animation's range, or frame 0 alone."""
+    return scene.animation.frames if scene.animation is not None else range(0, 1)
+
+
+def parse_frames(text: str | None, available: range, option: str = "--frames") -> range:
+    """`A:B` (inclusive), `A:`, `:B` or `N` within `available`; None: all of it. `option`
+    names the command-line option in messages."""
+    if text is None:
+        return available
+    first, last = available.start, available.stop - 1
+    where = f"{option} {text}"
+    head, colon, tail = text.strip().partition(":")
+    try:
+        a = int(head) if head.strip() else first
+        b = (int(tail) if tail.strip() else last) if colon else a
+    except ValueError:
+        raise ClraysError(f"{where}: expected A:B, A:, :B or N (frame numbers), got {text!r}") from None
+    if not first <= a <= b <= last:
+        raise ClraysError(f"{where}: expected frames {first} <= A <= B <= {last} (the scene's frames), "
+                          f"got {a}:{b}")
+    return range(a, b + 1)
+
+
+def check_pattern(pattern: str | Path) -> str:
+    """A frame path pattern with exactly one replacement field for the frame number
+    (`{}`, `{:04d}`, `{0:04d}` or `{frame:04d}`) and an image extension."""
+    pattern = str(pattern)
+    example = "like frames/frame_{:04d}.png"
+    try:
+        fields = [name for _, name, _, _ in string.Formatter().parse(pattern) if name is not None]
+        if len(fields) != 1:
+            raise OutputError(f"{pattern}: expected one {{}} field for the frame number ({example}), "
+                              f"got {len(fields)} fields")
+        sample = [frame_path(pattern, n) for n in (0, 1)]
+    except (ValueError, IndexError, KeyError) as exc:
+        raise OutputError(f"{pattern}: expected a frame pattern {example} ({type(exc).__name__}: {exc})") from None
+    if sample[0] == sample[1]:
+        raise OutputError(f"{pattern}: expected a different file per frame, got {sample[0]} for frames 0 and 1")
+    if Path(pattern).suffix.lower() not in FORMATS or "{" in Path(pattern).suffix:
+        raise OutputError(f"{pattern}: unknown frame extension {Path(pattern).suffix or '(none)'!r}; "
+                          f"expected one of {', '.join(FORMATS)}")
+    return pattern
+
+
+def frame_path(pattern: str, frame: int) -> Path:
+    return Path(pattern.format(frame, frame=frame))
+
+
+@dataclass
+class SequenceReport:
+    """What a sequence run did."""
+
+    paths: list[Path]  # every frame's file, in frame order
+    rendered: list[int] = field(default_factory=list)  # frames rendered by this run
+    kept: list[int] = field(default_factory=list)  # frames whose file was already there
+    results: dict[int, RenderResult] = field(default_factory=dict)  # of the rendered frames
+    wall_s: float = 0.0
+
+    def summary(self) -> str:
+        per = f", {self.wall_s / len(self.rendered):.2f} s per frame" if self.rendered else ""
+        return (f"{len(self.rendered)} frames rendered, {len(self.kept)} already there "
+                f"(of {len(self.paths)}) in {self.wall_s:.1f} s{per}")
+
+
+def _remove_stale_temporaries(path: Path) -> None:
+    """Temporary files of a killed write of `path` (`write_image` names them .NAME.*SUFFIX)."""
+    for stale in path.parent.glob(f".{path.name}.*{path.suffix.lower()}"):
+        try:
+            stale.unlink()
+        except OSError:
+            pass
+
+
+def render_sequence(scene: Scene, pattern: str | Path, frames: range | None = None, *,
+                    renderer: Renderer | None = None, method: str | None = None, exposure: float = 0.0,
+                    overwrite: bool = False, progress: bool = False,
+                    on_frame: Callable[[int, Path, RenderResult | None], None] | None = None) -> SequenceReport:
+    """Render `frames` (default: all of the animation) of `scene` to `pattern`.
+
+    pattern: a path with one `{}` field for the frame number, e.g. `out/frame_{:04d}.png`
+    (its folders are created). Frames whose file exists are skipped unless `overwrite`.
+    renderer: the session to use (default: a new one with reuse). on_frame(frame, path,
+    result or None when skipped) is called after each frame."""
+    pattern = check_pattern(pattern)
+    frames = scene_frames(scene) if frames is None else frames
+    paths = [frame_path(pattern, frame) for frame in frames]
+    for folder in dict.fromkeys(path.parent for path in paths):  # the frame number may be in a folder name
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise OutputError(f"{pattern}: cannot create folder {str(folder)!r}: {exc.strerror or exc}") from None
+    for path in paths[:1]:
+        check_output_path(path)
+    renderer = renderer or Renderer()
+    report = SequenceReport(paths)
+    start = time.perf_counter()
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(paths), unit="frame", desc="sequence", leave=True)
+    try:
+        for frame, path in zip(frames, paths):
+            if path.exists() and not overwrite:
+                report.kept.append(frame)
+                if on_frame:
+                    on_frame(frame, path, None)
+            else:
+                _remove_stale_temporaries(path)
+                frame_scene = scene.animation.scene_at(scene, frame) if scene.animation is not None else scene
+                result = renderer.render(frame_scene, method)
+                if not np.isfinite(result.image).all():
+                    raise ClraysError(f"frame {frame}: the render produced non-finite values "
+                                      f"(a bug: please report the scene)")
+                write_image(path, result.image, exposure)
+                report.rendered.append(frame)
+                report.results[frame] = result
+                if on_frame:
+                    on_frame(frame, path, result)
+            if bar is not None:
+                bar.set_postfix_str(f"frame {frame}", refresh=False)
+                bar.update(1)
+    finally:
+        if bar is not None:
+            bar.close()
+        report.wall_s = time.perf_counter() - start
+    return report
+
+
+def _srgb_frame(path: Path, exposure: float) -> np.ndarray:
+    """A written frame as 8-bit sRGB (PNG as stored; float formats tone-mapped)."""
+    suffix = path.suffix.lower()
+    if suffix == ".png":
+        from PIL import Image
+
+        with Image.open(path) as image:
+            return np.asarray(image.convert("RGB"))
+    if suffix == ".npy":
+        return to_srgb8(np.load(path), exposure)
+    import OpenEXR
+
+    with OpenEXR.File(str(path)) as exr:
+        return to_srgb8(np.asarray(exr.channels()["RGB"].pixels), exposure)
+
+
+def check_video_path(path: str | Path) -> Path:
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in VIDEO_FORMATS:
+        hint = ""
+        if suffix in (".mp4", ".mov", ".mkv", ".webm"):
+            hint = (f" (clrays ships no video encoder; with ffmpeg: ffmpeg -framerate FPS -i "
+                    f"frame_%04d.png -pix_fmt yuv420p {path.name})")
+        raise OutputError(f"{path}: unknown animation extension {path.suffix or '(none)'!r}; "
+                          f"expected one of {', '.join(VIDEO_FORMATS)}{hint}")
+    return check_folder(path)
+
+
+def write_video(paths: list[Path], out: str | Path, fps: float, exposure: float = 0.0) -> Path:
+    """An animated GIF or WebP of the frame files (atomically, like images); loops forever."""
+    from PIL import Image
+
+    out = check_video_path(out)
+    missing = [str(p) for p in paths if not p.exists()]
+    if missing:
+        raise OutputError(f"{out}: frames missing: {', '.join(missing[:3])}{' ...' if len(missing) > 3 else ''}")
+    images = [Image.fromarray(_srgb_frame(p, exposure), mode="RGB") for p in paths]
+    if not images:
+        raise OutputError(f"{out}: no frames")
+    # Milliseconds per frame; GIF stores centiseconds in 16 bits, so slow rates are clamped.
+    duration = int(min(max(round(1000.0 / fps), 1), 655_350))
+    options = {"optimize": False} if out.suffix.lower() == ".gif" else {"lossless": True}
+    write_atomic(out, lambda temporary: images[0].save(temporary, save_all=True, append_images=images[1:],
+                                                       duration=duration, loop=0, **options))
+    return out

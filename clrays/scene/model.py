@@ -1,0 +1,134 @@
+"""The scene model: frozen, typed, validated objects built from a YAML file.
+
+Vectors are float64 numpy arrays of shape (3,); colours are RGB arrays of shape (3,)
+(a scalar in the file is broadcast to RGB). Geometry is flattened into one triangle
+list at load time so every method (raster, raymarch, exact, minmax) sees the same
+triangles.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Literal, Union
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from .animation import Animation
+
+Vec3 = np.ndarray
+RGB = np.ndarray
+
+#: The choices of the scene's enumerated fields, written once: the loader, the command
+#: line, the session and the docs read them from here.
+METHODS = ("minmax", "raymarch", "exact")
+INTEGRAND_MODES = ("table", "svd", "analytic")
+TRAVERSALS = ("tree", "scan")
+PHASE_TYPES = ("isotropic", "hg")
+
+
+@dataclass(frozen=True)
+class Image:
+    width: int
+    height: int
+    spp: int = 1
+
+
+@dataclass(frozen=True)
+class Camera:
+    position: Vec3
+    look_at: Vec3
+    up: Vec3
+    fov_deg: float = 50.0  # vertical field of view
+    far: float = 1000.0  # a ray that hits nothing runs through the medium to here
+
+
+@dataclass(frozen=True)
+class PointLight:
+    position: Vec3
+    intensity: RGB  # radiant intensity, W/sr
+    type: Literal["point"] = "point"
+
+
+@dataclass(frozen=True)
+class SpotLight:
+    position: Vec3
+    direction: Vec3  # unit, the cone's axis (direction light travels)
+    cone_deg: float  # half-angle, hard edge, in (0, 90]
+    intensity: RGB
+    type: Literal["spot"] = "spot"
+
+
+@dataclass(frozen=True)
+class DirectionalLight:
+    direction: Vec3  # unit, the direction light travels (e.g. [0, -1, 0] shines down)
+    irradiance: RGB
+    type: Literal["directional"] = "directional"
+
+
+Light = Union[PointLight, SpotLight, DirectionalLight]
+
+
+@dataclass(frozen=True)
+class Phase:
+    type: str = "isotropic"  # one of PHASE_TYPES
+    g: float = 0.0  # Henyey-Greenstein asymmetry, in (-1, 1)
+
+
+@dataclass(frozen=True)
+class Medium:
+    sigma_s: RGB  # scattering coefficient, 1/unit
+    sigma_a: RGB  # absorption coefficient, 1/unit
+    phase: Phase = field(default_factory=Phase)
+
+    @property
+    def sigma_t(self) -> RGB:
+        return self.sigma_s + self.sigma_a
+
+
+@dataclass(frozen=True)
+class Render:
+    method: str = "minmax"  # one of METHODS
+    steps: int = 256  # raymarch samples per pixel
+    jitter: bool = False  # raymarch: jitter sample positions (seeded per pixel)
+    shadow_map: int = 1024  # shadow map side, texels (cube maps: per face)
+    pcf: int = 0  # surface shadow filter radius in texels (0 = hard)
+    # min-max method
+    slices: int = 1024  # measured: bench/RESULTS.md, "Choosing defaults"
+    gamma_samples: int = 1024
+    integrand: str = "table"  # one of INTEGRAND_MODES
+    svd_rank: int = 4
+    traversal: str = "tree"  # one of TRAVERSALS
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """All objects, flattened. Triangle t has vertices triangles[t] (3, 3) and albedo albedo[t]."""
+
+    triangles: np.ndarray  # (T, 3, 3) float64, world space
+    albedo: np.ndarray  # (T, 3) float64, RGB in [0, 1]
+    object_id: np.ndarray  # (T,) int32, index into Scene.objects order
+
+    @property
+    def count(self) -> int:
+        return int(self.triangles.shape[0])
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Axis-aligned bounds (lo, hi); a unit box at the origin when there are no triangles."""
+        if self.count == 0:
+            return np.full(3, -1.0), np.full(3, 1.0)
+        pts = self.triangles.reshape(-1, 3)
+        return pts.min(axis=0), pts.max(axis=0)
+
+
+@dataclass(frozen=True)
+class Scene:
+    image: Image
+    camera: Camera
+    lights: tuple[Light, ...]
+    medium: Medium
+    background: RGB
+    geometry: Geometry
+    render: Render
+    source: Path | None = None  # the YAML file, for messages and relative paths
+    animation: Animation | None = None  # keyframes (clrays.scene.animation): `animation.scene_at(scene, frame)`

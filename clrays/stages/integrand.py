@@ -1,0 +1,577 @@
+"""The integrand stage, host side: per-frame tables that turn a lit interval of a camera
+ray into in-scattered radiance (DESIGN.md §2–§4, stage 4 `integrand`).
+
+A camera ray has view angle β; a lit interval of it is [γ0, γ1) in light angle γ (point
+and spot lights, DESIGN §2) or in perpendicular distance γ = s·sinβ (directional light,
+DESIGN §3). Its in-scattered radiance is ∫ I(β, γ) dγ with
+
+    point/spot:   I(β, γ) = σs·I·ρ(cos(β+γ))·exp(-σt·d_el·(sinβ + sinγ)/sin(β+γ)) / (d_el·sinβ)
+                  γ ∈ [0, π-β)   (γ → π-β is the ray's point at infinity)
+    directional:  I(β, γ) = σs·E·ρ(cosβ)·exp(-σt·γ/sinβ) / sinβ,   γ ∈ [0, ∞)
+
+per RGB channel. Every mode writes a segment as
+
+    L(β, γ0, γ1) = row_scale(β) · [F(β, x(β, γ1)) - F(β, x(β, γ0))]
+
+where x ∈ [0, 1] is a per-row coordinate and F(β, x) = ∫_0^x K(β, x') dx' is a prefix
+integral of a bounded, smooth integrand K; the 1/sinβ singularity sits in row_scale, in
+closed form:
+
+    point/spot:   x = clamp(γ/(π-β), 0, 1)    K = sinβ·I(β, x·(π-β))     row_scale = (π-β)/sinβ
+    directional:  x = clamp(s/s_end, 0, 1)    K = σs·E·ρ(cosβ)·e^{-σt·x·s_end}   row_scale = s_end
+                  (s = γ/sinβ, the distance along the ray)
+
+The point-light rows run to the ray's point at infinity, so β → π (whole ray in a sliver
+of γ) keeps full resolution and nothing lies "beyond infinity"; the directional rows run
+in distance, where the integrand is separable. The β nodes are uniform in t with
+β = beta_min + (beta_max - beta_min)·sin²(πt/2): dense at both ends, because F has a
+β·log β term at β → 0 (the ray beyond 2·d_el is squeezed into γ ∈ (π-2β, π-β)) and a
+backward-peaked phase curves fast at β → π. docs/integrand.md gives the reasons and the
+measured errors.
+
+Modes (`mode`):
+    table     F sampled on n_beta × n_gamma nodes, per-cell Gauss–Legendre in float64;
+              bilinear lookup.
+    svd       the seed's method: K sampled on 64 × 64 (t, x) nodes, truncated SVD
+              K ≈ Σ_i B_i(β)·Γ_i(x), B_i on the n_beta β nodes and P_i(x) = ∫_0^x Γ_i on
+              the n_gamma x nodes (Nyström extension of the singular vectors, prefix
+              integrals by the same quadrature as `table`); linear lookups.
+    analytic  closed forms: directional light (any phase), and point/spot light with
+              σt = 0 and an isotropic phase. Everything else raises ValueError.
+
+`segment_radiance` evaluates a segment exactly as the OpenCL kernel will (same clamps,
+same interpolation), in float64. `python -m clrays.stages.integrand` prints the error table of
+docs/integrand.md (needs scipy).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..scene.model import Phase
+
+MODES = ("table", "svd", "analytic")
+LIGHT_KINDS = ("point", "directional")  # "spot" is accepted and treated as "point"
+
+# The seed's SVD sampling grid, and so the largest rank it can keep.
+SVD_SAMPLES = 64
+# Singular values below this fraction of the largest are dropped (their Nyström
+# extension divides by σ_i).
+SVD_RELATIVE_CUTOFF = 1e-13
+# Gauss–Legendre nodes per table cell. Cells are ~1e-3 wide in x and K is smooth on that
+# scale (the one exception, the last cell of a point row, gets halving panels): 4 nodes
+# agree with 16 to 4e-10 of a row's total.
+QUAD_NODES = 4
+# Directional rows end at this optical depth (of the least attenuating channel) when
+# no s_max is given: the light beyond carries e^{-20} ≈ 2e-9 of the ray's radiance.
+DIRECTIONAL_OPTICAL_DEPTH = 20.0
+# sinβ is clamped to this in every 1/sinβ, so that β = 0 (a ray through a point light)
+# stays finite; only rays within 1e-9 rad of the eye–light axis see the clamp.
+SIN_BETA_MIN = 1e-9
+
+# Columns of IntegrandTables.constants, one row per RGB channel.
+C_AMPLITUDE = 0  # σs·I (point/spot, W/sr/m) or σs·E (directional, W/m²/m)
+C_SIGMA_T = 1  # σt, 1/m
+C_D_EL = 2  # eye–light distance d_el (point/spot; 0 for directional)
+C_G = 3  # Henyey–Greenstein g (0 for isotropic)
+C_S_END = 4  # directional rows: end of the row in distance s (0 otherwise)
+N_CONSTANTS = 5
+
+
+@dataclass(frozen=True)
+class IntegrandTables:
+    """What the integrand kernel needs for one frame (float64, C-contiguous; the device
+    copy is `astype(np.float32)` of each array).
+
+    mode: "table" | "svd" | "analytic"; light_kind: "point" (also spot) | "directional".
+    beta_min, beta_max: β range of the rows (radians); gamma_max: the γ range the caller
+    asked for (recorded; point rows always cover the whole ray, directional rows run to
+    constants[:, C_S_END] in distance).
+    n_beta, n_gamma: table nodes (0 for analytic); rank: SVD terms kept (0 unless svd).
+    prefix: table only, (3, n_beta, n_gamma) F(β_j, x_k).
+    basis_beta: svd only, (3, rank, n_beta) B_i(β_j).
+    prefix_gamma: svd only, (3, rank, n_gamma) P_i(x_k).
+    constants: (3, N_CONSTANTS) per-channel constants, columns C_*.
+
+    Nodes: β_j = beta_min + (beta_max - beta_min)·sin²(π/2·j/(n_beta-1)), x_k = k/(n_gamma-1).
+    """
+
+    mode: str
+    light_kind: str
+    beta_min: float
+    beta_max: float
+    gamma_max: float
+    n_beta: int
+    n_gamma: int
+    rank: int
+    prefix: np.ndarray | None
+    basis_beta: np.ndarray | None
+    prefix_gamma: np.ndarray | None
+    constants: np.ndarray
+
+    def float32(self) -> IntegrandTables:
+        """The same tables rounded to float32, as the device stores them."""
+
+        def f32(a):
+            return None if a is None else np.ascontiguousarray(a, dtype=np.float32)
+
+        return replace(self, prefix=f32(self.prefix), basis_beta=f32(self.basis_beta),
+                       prefix_gamma=f32(self.prefix_gamma), constants=f32(self.constants))
+
+
+# --------------------------------------------------------------------------- inputs
+
+
+def _rgb(name: str, value) -> np.ndarray:
+    a = np.asarray(value, dtype=np.float64)
+    try:
+        a = np.broadcast_to(a, (3,)).copy()
+    except ValueError:
+        raise ValueError(f"integrand: {name}: expected a scalar or 3 values (RGB), got shape {a.shape}") from None
+    if not np.all(np.isfinite(a)) or np.any(a < 0):
+        raise ValueError(f"integrand: {name}: expected finite values >= 0, got {a.tolist()}")
+    return a
+
+
+def _light_kind(light_kind: str) -> str:
+    if light_kind == "spot":
+        return "point"
+    if light_kind not in LIGHT_KINDS:
+        raise ValueError(f"integrand: light kind: expected one of point, spot, directional, got {light_kind!r}")
+    return light_kind
+
+
+def _phase_g(phase: Phase) -> float:
+    if phase.type == "isotropic":
+        return 0.0
+    if phase.type == "hg":
+        g = float(phase.g)
+        if not -1.0 < g < 1.0:
+            raise ValueError(f"integrand: phase.g: expected (-1, 1), got {g}")
+        return g
+    raise ValueError(f"integrand: phase: expected isotropic or hg, got {phase.type!r}")
+
+
+def hg_phase(cos_theta, g: float) -> np.ndarray:
+    """Henyey–Greenstein ρ(cosθ) = (1-g²)/(4π(1+g²-2g·cosθ)^{3/2}); g = 0 is isotropic 1/(4π)."""
+    c = np.clip(np.asarray(cos_theta, dtype=np.float64), -1.0, 1.0)
+    return (1.0 - g * g) / (4.0 * math.pi * (1.0 + g * g - 2.0 * g * c) ** 1.5)
+
+
+# --------------------------------------------------------------------------- the integrand
+
+
+def integrand_exact(light_kind, sigma_s, sigma_t, phase, power, d_el, beta, gamma) -> np.ndarray:
+    """I(β, γ) pointwise in float64, shape broadcast(beta, gamma).shape + (3,).
+
+    light_kind: "point", "spot" or "directional"; sigma_s, sigma_t: 1/m (scalar or RGB);
+    phase: clrays.scene.model.Phase; power: radiant intensity I (W/sr, point/spot) or irradiance
+    E (W/m², directional), scalar or RGB; d_el: eye–light distance (m, point/spot only);
+    beta in (0, π) radians; gamma: light angle (point/spot, radians) or perpendicular
+    distance s·sinβ (directional, m). Zero outside the ray (γ < 0, and γ ≥ π-β for a
+    point light: those γ are behind the eye).
+    """
+    kind = _light_kind(light_kind)
+    amplitude = _rgb("sigma_s", sigma_s) * _rgb("power", power)
+    sigma_t = _rgb("sigma_t", sigma_t)
+    g = _phase_g(phase)
+    beta, gamma = np.broadcast_arrays(np.asarray(beta, dtype=np.float64), np.asarray(gamma, dtype=np.float64))
+    beta, gamma = beta[..., None], gamma[..., None]
+    sin_beta = np.sin(beta)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        if kind == "point":
+            d_el = float(d_el)
+            delta = math.pi - beta
+            on_ray = (gamma >= 0) & (gamma < delta)
+            # sin(β+γ) = sin(π-β-γ): the second form keeps its relative precision as γ → π-β.
+            sin_bg = np.sin(delta - gamma)
+            ratio = np.where(on_ray, (sin_beta + np.sin(gamma)) / sin_bg, 0.0)
+            attenuation = np.exp(-sigma_t * d_el * ratio)
+            value = amplitude * hg_phase(np.cos(beta + gamma), g) * attenuation / (d_el * sin_beta)
+        else:
+            on_ray = gamma >= 0
+            s = np.where(on_ray, gamma, 0.0) / sin_beta
+            value = amplitude * hg_phase(np.cos(beta), g) * np.exp(-sigma_t * s) / sin_beta
+    return np.where(on_ray, value, 0.0)
+
+
+def _row_integrand(kind, consts, beta, x) -> np.ndarray:
+    """K(β, x) of the module docstring, shape (3, len(beta), x.shape[-1]) for 1-D beta and
+    x of shape (m,) or (len(beta), m). x must lie in [0, 1) (the nodes used are interior)."""
+    amplitude, sigma_t = consts[:, C_AMPLITUDE, None, None], consts[:, C_SIGMA_T, None, None]
+    g = float(consts[0, C_G])
+    beta = np.asarray(beta, dtype=np.float64)[:, None]
+    x = np.asarray(x, dtype=np.float64)
+    if kind == "point":
+        d_el = float(consts[0, C_D_EL])
+        # Rows are written in δ = π-β (sinβ = sinδ, β+γ = π-(1-x)δ); the floor keeps the
+        # β = π row finite, where K tends to ρ(-1)·exp(-σt·d_el·(1+x)/(1-x)).
+        delta = np.maximum(math.pi - beta, 1e-150)
+        sin_bg = np.sin((1.0 - x) * delta)
+        ratio = (np.sin(delta) + np.sin(x * delta)) / sin_bg
+        return amplitude * hg_phase(-np.cos((1.0 - x) * delta), g) * np.exp(-sigma_t * d_el * ratio) / d_el
+    s_end = consts[:, C_S_END, None, None]
+    return amplitude * hg_phase(np.cos(beta), g) * np.exp(-sigma_t * (x * s_end))
+
+
+def _prefix_rows(kind, consts, beta, n_gamma) -> np.ndarray:
+    """F(β_j, x_k) = ∫_0^{x_k} K(β_j, x) dx on x_k = k/(n_gamma-1), (3, len(beta), n_gamma):
+    Gauss–Legendre with QUAD_NODES per cell, summed in float64."""
+    nodes, weights = np.polynomial.legendre.leggauss(QUAD_NODES)
+    edges = np.linspace(0.0, 1.0, n_gamma)
+    h = edges[1] - edges[0]
+    x = (0.5 * (edges[:-1] + edges[1:]))[:, None] + 0.5 * h * nodes[None, :]
+    shared = _shared_channel(consts)
+    if shared is not None:  # grey medium: one channel's table, scaled by each amplitude
+        return consts[:, C_AMPLITUDE, None, None] * _prefix_rows(kind, shared, beta, n_gamma)
+    out = np.zeros((len(consts), len(beta), n_gamma))
+    rows_per_chunk = max(1, 400_000 // x.size)
+    for j0 in range(0, len(beta), rows_per_chunk):
+        rows = slice(j0, j0 + rows_per_chunk)
+        k = _row_integrand(kind, consts, beta[rows], x.ravel()).reshape(len(consts), -1, *x.shape)
+        cells = 0.5 * h * (k @ weights)
+        if kind == "point":
+            cells[..., -1] = _last_cell(kind, consts, beta[rows], h, nodes, weights)
+        out[:, rows, 1:] = np.cumsum(cells, axis=-1)
+    return out
+
+
+def _shared_channel(consts) -> np.ndarray | None:
+    """When every channel has the same σt (and row end), the table differs between
+    channels only by the amplitude σs·power: return one unit-amplitude channel to build
+    once (3× less work for grey fog), else None."""
+    if len(consts) == 1 or not np.array_equal(consts[:, [C_SIGMA_T, C_S_END]], consts[:1, [C_SIGMA_T, C_S_END]].repeat(len(consts), 0)):
+        return None
+    unit = consts[:1].copy()
+    unit[:, C_AMPLITUDE] = 1.0
+    return unit
+
+
+def _last_cell(kind, consts, beta, h, nodes, weights) -> np.ndarray:
+    """∫ K over the last cell [1-h, 1] on panels halving towards x = 1. For β → 0 the point
+    light's K drops from e^{-σt·d_el}·ρ to 0 in a layer ~σt·d_el·β wide at x = 1 (the far
+    half-ray), narrower than a cell; one Gauss–Legendre panel would miss it by ~1e-5."""
+    edges = 1.0 - h * 0.5 ** np.arange(41)  # the last 1e-12·h is left out: K is bounded
+    lo, hi = edges[:-1], edges[1:]
+    x = (0.5 * (lo + hi))[:, None] + (0.5 * (hi - lo))[:, None] * nodes[None, :]
+    k = _row_integrand(kind, consts, beta, x.ravel()).reshape(len(consts), len(beta), *x.shape)
+    return (k @ weights) @ (0.5 * (hi - lo))
+
+
+def _beta_nodes(beta_min, beta_max, n) -> np.ndarray:
+    t = np.linspace(0.0, 1.0, n)
+    return beta_min + (beta_max - beta_min) * np.sin(0.5 * math.pi * t) ** 2
+
+
+# --------------------------------------------------------------------------- building
+
+
+def build_integrand(mode, light_kind, sigma_s, sigma_t, phase, power, d_el, beta_min, beta_max, gamma_max,
+                    n_beta=256, n_gamma=1024, rank=4, *, s_max=None) -> IntegrandTables:
+    """Build one frame's integrand tables (float64).
+
+    mode: "table" | "svd" | "analytic". light_kind: "point" | "spot" | "directional".
+    sigma_s, sigma_t: scattering and extinction coefficients, 1/m, scalar or RGB.
+    phase: clrays.scene.model.Phase. power: I (W/sr) for point/spot, E (W/m²) for directional.
+    d_el: eye–light distance (m), > 0 for point/spot; ignored for directional.
+    beta_min, beta_max: the β range the rays need, 0 <= beta_min <= beta_max <= π.
+    gamma_max: the γ range of the rectified map (> 0); recorded, see IntegrandTables.
+    n_beta (default 256), n_gamma (default 1024): table nodes, >= 2. rank (default 4):
+    SVD terms, 1..64. s_max (keyword, directional table/svd only): the longest camera
+    ray in the medium (m); the rows end at s_end = min(s_max, 20/min σt). Required when
+    some channel has σt = 0.
+
+    Raises ValueError (one line, starting "integrand:") on bad input and when `analytic`
+    has no closed form for the light and medium.
+    """
+    if mode not in MODES:
+        raise ValueError(f"integrand: mode: expected one of {', '.join(MODES)}, got {mode!r}")
+    kind = _light_kind(light_kind)
+    sigma_s, sigma_t, power = _rgb("sigma_s", sigma_s), _rgb("sigma_t", sigma_t), _rgb("power", power)
+    g = _phase_g(phase)
+    beta_min, beta_max, gamma_max = float(beta_min), float(beta_max), float(gamma_max)
+    if not 0.0 <= beta_min <= beta_max <= math.pi:
+        raise ValueError(f"integrand: beta range: expected 0 <= beta_min <= beta_max <= pi, "
+                         f"got [{beta_min}, {beta_max}]")
+    if not (math.isfinite(gamma_max) and gamma_max > 0):
+        raise ValueError(f"integrand: gamma_max: expected a finite value > 0, got {gamma_max}")
+    d_el = float(d_el) if kind == "point" else 0.0
+    if kind == "point" and not (math.isfinite(d_el) and d_el > 0):
+        raise ValueError(f"integrand: d_el: expected a finite distance > 0 (eye at the light has no epipolar "
+                         f"coordinates; use the unshadowed closed form), got {d_el}")
+
+    consts = np.zeros((3, N_CONSTANTS))
+    consts[:, C_AMPLITUDE] = sigma_s * power
+    consts[:, C_SIGMA_T] = sigma_t
+    consts[:, C_D_EL] = d_el
+    consts[:, C_G] = g
+
+    if mode == "analytic":
+        if kind == "point":
+            if np.any(sigma_t > 0):
+                raise ValueError("integrand: analytic: a point/spot light in an attenuating medium (sigma_t > 0) "
+                                 "has no closed form; use mode table or svd")
+            if g != 0.0:
+                raise ValueError("integrand: analytic: a point/spot light with a Henyey-Greenstein phase needs the "
+                                 "incomplete elliptic integral E(phi|m), which the device lacks; use mode table "
+                                 "or svd (or an isotropic phase)")
+        return IntegrandTables(mode, kind, beta_min, beta_max, gamma_max, 0, 0, 0, None, None, None, consts)
+
+    n_beta, n_gamma, rank = int(n_beta), int(n_gamma), int(rank)
+    if n_beta < 2 or n_gamma < 2:
+        raise ValueError(f"integrand: table size: expected n_beta, n_gamma >= 2, got {n_beta} x {n_gamma}")
+    if kind == "directional":
+        sigma_ref = float(sigma_t.min())
+        limit = DIRECTIONAL_OPTICAL_DEPTH / sigma_ref if sigma_ref > 0 else math.inf
+        if s_max is not None:
+            s_max = float(s_max)
+            if not (math.isfinite(s_max) and s_max > 0):
+                raise ValueError(f"integrand: s_max: expected a finite distance > 0, got {s_max}")
+            limit = min(limit, s_max)
+        if not math.isfinite(limit):
+            raise ValueError(f"integrand: {mode} for a directional light with sigma_t = 0 in some channel needs "
+                             "s_max, the longest camera ray in the medium")
+        consts[:, C_S_END] = limit
+
+    beta = _beta_nodes(beta_min, beta_max, n_beta)
+    if mode == "table":
+        prefix = _prefix_rows(kind, consts, beta, n_gamma)
+        return IntegrandTables(mode, kind, beta_min, beta_max, gamma_max, n_beta, n_gamma, 0,
+                               np.ascontiguousarray(prefix), None, None, consts)
+
+    if not 1 <= rank <= SVD_SAMPLES:
+        raise ValueError(f"integrand: rank: expected 1..{SVD_SAMPLES}, got {rank}")
+    beta_s = _beta_nodes(beta_min, beta_max, SVD_SAMPLES)
+    x_s = (np.arange(SVD_SAMPLES) + 0.5) / SVD_SAMPLES
+    samples = _row_integrand(kind, consts, beta_s, x_s)  # (3, 64, 64)
+    # Nyström extension: B_i(β) = Σ_k K(β, x_k)·v_ik, Γ_i(x) = Σ_j K(β_j, x)·u_ji/σ_i, so
+    # P_i(x) = Σ_j u_ji/σ_i·F(β_j, x) with F the accurate prefix rows. On the sample grid
+    # this is exactly the truncated SVD; between samples it uses K itself, not a lerp.
+    k_rows = _row_integrand(kind, consts, beta, x_s)  # (3, n_beta, 64)
+    f_rows = _prefix_rows(kind, consts, beta_s, n_gamma)  # (3, 64, n_gamma)
+    basis = np.zeros((3, rank, n_beta))
+    prefix_gamma = np.zeros((3, rank, n_gamma))
+    for c in range(3):
+        u, sv, vt = np.linalg.svd(samples[c])
+        for i in range(rank):
+            if sv[i] <= SVD_RELATIVE_CUTOFF * sv[0] or sv[0] == 0.0:
+                break
+            basis[c, i] = k_rows[c] @ vt[i]
+            prefix_gamma[c, i] = (u[:, i] / sv[i]) @ f_rows[c]
+    return IntegrandTables(mode, kind, beta_min, beta_max, gamma_max, n_beta, n_gamma, rank,
+                           None, np.ascontiguousarray(basis), np.ascontiguousarray(prefix_gamma), consts)
+
+
+# --------------------------------------------------------------------------- evaluating (the kernel)
+
+
+def _sin_beta(beta):
+    return np.maximum(np.sin(beta), SIN_BETA_MIN)
+
+
+def row_coord(tables: IntegrandTables, beta, gamma) -> np.ndarray:
+    """x(β, γ) ∈ [0, 1], shape (3, ...) (per channel only through s_end)."""
+    beta, gamma = np.asarray(beta, dtype=np.float64), np.asarray(gamma, dtype=np.float64)
+    if tables.light_kind == "point":
+        delta = np.maximum(math.pi - beta, 0.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x = np.where(delta > 0, gamma / delta, np.where(gamma > 0, 1.0, 0.0))
+        return np.broadcast_to(np.clip(x, 0.0, 1.0), (3,) + x.shape)
+    s = gamma / _sin_beta(beta)
+    s_end = tables.constants[:, C_S_END].astype(np.float64).reshape((3,) + (1,) * s.ndim)
+    return np.clip(s / s_end, 0.0, 1.0)
+
+
+def row_scale(tables: IntegrandTables, beta) -> np.ndarray:
+    """row_scale(β) of the module docstring, shape (3, ...)."""
+    beta = np.asarray(beta, dtype=np.float64)
+    if tables.light_kind == "point":
+        delta = np.maximum(math.pi - beta, 0.0)
+        # (π-β)/sinβ → 1 as β → π; below SIN_BETA_MIN the limit is used.
+        scale = np.where(delta > SIN_BETA_MIN, delta / _sin_beta(beta), 1.0)
+        return np.broadcast_to(scale, (3,) + scale.shape)
+    s_end = tables.constants[:, C_S_END].astype(np.float64).reshape((3,) + (1,) * beta.ndim)
+    return np.broadcast_to(s_end, (3,) + beta.shape)
+
+
+def beta_coord(tables: IntegrandTables, beta) -> np.ndarray:
+    """Fractional β node index t·(n_beta-1), the inverse of β = beta_min + span·sin²(πt/2):
+    t = (2/π)·atan2(sqrt(β - beta_min), sqrt(beta_max - β)), precise at both ends in float32."""
+    beta = np.asarray(beta, dtype=np.float64)
+    span = tables.beta_max - tables.beta_min
+    if span <= 0:
+        return np.zeros(beta.shape)
+    lo = np.sqrt(np.clip(beta - tables.beta_min, 0.0, span))
+    hi = np.sqrt(np.clip(tables.beta_max - beta, 0.0, span))
+    return (2.0 / math.pi) * np.arctan2(lo, hi) * (tables.n_beta - 1)
+
+
+def _split(coord, n):
+    """Integer cell index in [0, n-2] and the fraction in it (the kernel's floor/clamp)."""
+    i = np.clip(np.floor(coord), 0, n - 2).astype(np.intp)
+    return i, coord - i
+
+
+def _lerp_rows(table, j, fj, x):
+    """table (3, R, N): bilinear value at row j + fj, column x·(N-1), shape (3, ...)."""
+    k, fk = _split(x * (table.shape[-1] - 1), table.shape[-1])
+    c = np.arange(3).reshape((3,) + (1,) * (x.ndim - 1))
+
+    def at(jj):
+        return (1.0 - fk) * table[c, jj, k] + fk * table[c, jj, k + 1]
+
+    return (1.0 - fj) * at(j) + fj * at(j + 1)
+
+
+def segment_radiance(tables: IntegrandTables, beta, gamma0, gamma1) -> np.ndarray:
+    """In-scattered radiance of the lit interval [γ0, γ1) of ray β: ∫ I(β, γ) dγ, shape
+    broadcast(beta, gamma0, gamma1).shape + (3,), float64 (W/sr/m² per channel).
+
+    Mirrors the OpenCL kernel step by step: row coordinates, the β node lookup, bilinear
+    (table) or separable linear (svd) prefix lookups, the closed-form row scale; analytic
+    evaluates the closed form. γ outside the ray is clamped onto it (so γ1 past the
+    point at infinity gives the whole rest of the ray); γ0 <= γ1 is expected.
+    """
+    beta, gamma0, gamma1 = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (beta, gamma0, gamma1)))
+    consts = tables.constants.astype(np.float64)
+    shape_c = (3,) + (1,) * beta.ndim
+    if tables.mode == "analytic":
+        amplitude = consts[:, C_AMPLITUDE].reshape(shape_c)
+        sin_beta = _sin_beta(beta)
+        if tables.light_kind == "point":
+            delta = np.maximum(math.pi - beta, 0.0)
+            span = np.clip(gamma1, 0.0, delta) - np.clip(gamma0, 0.0, delta)
+            d_el = consts[:, C_D_EL].reshape(shape_c)
+            out = amplitude / (4.0 * math.pi * d_el * sin_beta) * span
+        else:
+            sigma_t = consts[:, C_SIGMA_T].reshape(shape_c)
+            rho = hg_phase(np.cos(beta), float(consts[0, C_G]))
+            s0 = np.maximum(gamma0, 0.0) / sin_beta
+            ds = np.maximum(gamma1, 0.0) / sin_beta - s0
+            # σs·E·ρ·(e^{-σt·s0} - e^{-σt·s1})/σt = σs·E·ρ·e^{-σt·s0}·(-expm1(-σt·Δs))/σt,
+            # which tends to σs·E·ρ·Δs as σt → 0.
+            with np.errstate(divide="ignore", invalid="ignore"):
+                tail = np.where(sigma_t > 0, -np.expm1(-sigma_t * ds) / sigma_t, ds)
+            out = amplitude * rho * np.exp(-sigma_t * s0) * tail
+        return np.moveaxis(out, 0, -1)
+
+    j, fj = _split(beta_coord(tables, beta), tables.n_beta)
+    x0, x1 = row_coord(tables, beta, gamma0), row_coord(tables, beta, gamma1)
+    if tables.mode == "table":
+        prefix = tables.prefix.astype(np.float64)
+        diff = _lerp_rows(prefix, j, fj, x1) - _lerp_rows(prefix, j, fj, x0)
+    else:
+        basis = tables.basis_beta.astype(np.float64)
+        prefix_gamma = tables.prefix_gamma.astype(np.float64)
+        diff = np.zeros((3,) + beta.shape)
+        c = np.arange(3).reshape(shape_c)
+        k0, fk0 = _split(x0 * (tables.n_gamma - 1), tables.n_gamma)
+        k1, fk1 = _split(x1 * (tables.n_gamma - 1), tables.n_gamma)
+        for i in range(tables.rank):
+            b_i = (1.0 - fj) * basis[c, i, j] + fj * basis[c, i, j + 1]
+            p_i = prefix_gamma[:, i]
+            p1 = (1.0 - fk1) * p_i[c, k1] + fk1 * p_i[c, k1 + 1]
+            p0 = (1.0 - fk0) * p_i[c, k0] + fk0 * p_i[c, k0 + 1]
+            diff += b_i * (p1 - p0)
+    return np.moveaxis(row_scale(tables, beta) * diff, 0, -1)
+
+
+# --------------------------------------------------------------------------- error report (docs/integrand.md)
+
+# The representative setting of the report: relative errors do not depend on σs or the
+# power, and for point lights σt enters only through σt·d_el (≤ 1 here).
+REPORT_D_EL = 2.0
+REPORT_SIGMA_S = (0.1, 0.2, 0.3)
+REPORT_POWER = (10.0, 20.0, 30.0)
+REPORT_SIGMA_T = {"zero": (0.0, 0.0, 0.0), "small": (0.01, 0.02, 0.04), "medium": (0.2, 0.3, 0.5)}
+REPORT_PHASES = (Phase(), Phase("hg", 0.3), Phase("hg", -0.5))
+REPORT_BETAS = (1e-3, 3e-3, 1e-2, 3e-2, 0.1, 0.3, 0.6, 1.0, 1.4, 1.8, 2.2, 2.6, 2.9, 3.05,
+                math.pi - 3e-2, math.pi - 1e-2)
+# Point light: fractions of the whole ray [0, π-β); directional: distances s (m), s_max = 50.
+REPORT_POINT_SPANS = ((0.0, 1.0), (0.0, 0.25), (0.25, 0.5), (0.5, 0.75), (0.75, 0.95), (0.1, 0.9), (0.4, 0.41))
+REPORT_DIRECTIONAL_SPANS = ((0.0, 50.0), (0.0, 5.0), (3.0, 20.0), (30.0, 45.0), (10.0, 10.5))
+REPORT_S_MAX = 50.0
+# Segments carrying less than this fraction of their ray's radiance are left out.
+REPORT_FLOOR = 1e-6
+
+
+def _reference(light_kind, sigma_t, phase, beta, gamma0, gamma1) -> np.ndarray:
+    """∫ I dγ over [γ0, γ1] by adaptive quadrature (scipy), per channel."""
+    from scipy.integrate import quad
+
+    hints = [math.pi - beta - k * beta for k in (0.5, 1, 2, 5, 20)] if light_kind == "point" else []
+    hints = [p for p in hints if gamma0 < p < gamma1] or None
+    return np.array([quad(lambda gm: integrand_exact(light_kind, REPORT_SIGMA_S, sigma_t, phase, REPORT_POWER,
+                                                     REPORT_D_EL, beta, gm)[c],
+                          gamma0, gamma1, epsabs=0.0, epsrel=1e-11, limit=500, points=hints)[0] for c in range(3)])
+
+
+def error_report(n_beta=256, n_gamma=1024) -> list[dict]:
+    """Relative error of every mode against quadrature over the REPORT_* grid.
+
+    Returns one dict per (light, mode, phase class) with keys light, mode, phase, count
+    (segments × channels), whole_median, whole_max (whole rays), median, max (all
+    segments), max_to_ray (largest |error| / whole-ray radiance) and worst (the segment
+    with the largest relative error)."""
+    modes = (("table", {}), ("svd", {"rank": 1}), ("svd", {"rank": 4}), ("svd", {"rank": 8}), ("analytic", {}))
+    stats: dict[tuple, list] = {}
+    for light_kind in LIGHT_KINDS:
+        for sigma_name, sigma_t in REPORT_SIGMA_T.items():
+            for phase in REPORT_PHASES:
+                phase_class = "isotropic" if phase.type == "isotropic" else "HG g=0.3, -0.5"
+                built = []
+                for mode, extra in modes:
+                    label = mode + (f" rank {extra['rank']}" if "rank" in extra else "")
+                    try:
+                        built.append((label, build_integrand(mode, light_kind, REPORT_SIGMA_S, sigma_t, phase,
+                                                             REPORT_POWER, REPORT_D_EL, 0.0, math.pi, math.pi,
+                                                             n_beta, n_gamma, s_max=REPORT_S_MAX, **extra)))
+                    except ValueError:
+                        pass  # analytic has no closed form here
+                for beta in REPORT_BETAS:
+                    if light_kind == "point":
+                        spans = [(a * (math.pi - beta), b * (math.pi - beta)) for a, b in REPORT_POINT_SPANS]
+                    else:
+                        spans = [(a * math.sin(beta), b * math.sin(beta)) for a, b in REPORT_DIRECTIONAL_SPANS]
+                    refs = [_reference(light_kind, sigma_t, phase, beta, g0, g1) for g0, g1 in spans]
+                    for index, ((g0, g1), ref) in enumerate(zip(spans, refs)):
+                        keep = np.abs(ref) > REPORT_FLOOR * np.abs(refs[0])
+                        for label, tables in built:
+                            value = segment_radiance(tables, beta, g0, g1)
+                            err = np.abs(value / ref - 1.0)[keep]
+                            to_ray = (np.abs(value - ref) / np.abs(refs[0]))[keep]
+                            where = f"σt {sigma_name}, g={phase.g:g}, β={beta:.4g}, γ∈[{g0:.4g}, {g1:.4g}]"
+                            stats.setdefault((light_kind, label, phase_class), []).extend(
+                                (float(e), float(r), index == 0, where) for e, r in zip(err, to_ray))
+    rows = []
+    for (light_kind, label, phase_class), errs in stats.items():
+        values = np.array([e[0] for e in errs])
+        whole = np.array([e[0] for e in errs if e[2]])
+        rows.append({"light": light_kind, "mode": label, "phase": phase_class, "count": len(values),
+                     "whole_median": float(np.median(whole)), "whole_max": float(whole.max()),
+                     "median": float(np.median(values)), "max": float(values.max()),
+                     "max_to_ray": max(e[1] for e in errs), "worst": errs[int(values.argmax())][3]})
+    return rows
+
+
+def format_report(rows) -> str:
+    """The error table as Markdown."""
+    lines = ["| light | mode | phase | whole rays: median | max | all segments: median | max "
+             "| max error / ray | worst segment |",
+             "|---|---|---|---:|---:|---:|---:|---:|---|"]
+    for r in rows:
+        lines.append(f"| {r['light']} | {r['mode']} | {r['phase']} | {r['whole_median']:.1e} | "
+                     f"{r['whole_max']:.1e} | {r['median']:.1e} | {r['max']:.1e} | {r['max_to_ray']:.1e} | "
+                     f"{r['worst']} |")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    """`python -m clrays.stages.integrand`: print the error table of docs/integrand.md."""
+    print(format_report(error_report()))
+
+
+if __name__ == "__main__":
+    main()

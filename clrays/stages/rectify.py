@@ -1,0 +1,120 @@
+"""Stage rectify: the shadow map resampled into the epipolar texture S[α, γ].
+
+Host side of `cl/rectify.cl`: the light's epipolar frame (axis, slice basis), the
+fan of slices that crosses the screen, the β and γ ranges of the visible rays
+(reduced on the device from the camera depth), and the rectify launch that writes
+level 0 of the min-max tree.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import structs
+from ..scene.camera import camera_basis
+from ..device import Device, StageTimer
+from ..inputs import FrameBuffers
+from .raster import RasterResult
+from ..scene.model import DirectionalLight
+
+
+@dataclass
+class Epipolar:
+    """The epipolar texture of one light and what it was built from."""
+
+    params: np.ndarray  # epipolar_t
+    buffer: object  # the epipolar_t on the device
+    tree: object  # float2[slices][2·gamma_samples]: the min-max tree rows
+    beta_min: float
+    beta_max: float
+    gamma_max: float
+
+
+def slice_basis(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit u, w with (u, w, axis) orthonormal: α = atan2(v·w, v·u)."""
+    helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    u = np.cross(axis, helper)
+    u /= np.linalg.norm(u)
+    return u, np.cross(axis, u)
+
+
+def slice_fan(scene, axis: np.ndarray, u: np.ndarray, w: np.ndarray) -> tuple[float, float, bool]:
+    """(alpha_min, alpha_span, full_circle): the slice angles that rays through the
+    screen take. When the epipole (axis) or anti-epipole (-axis) is on screen the slices
+    close the circle; otherwise α is continuous over the screen and its range is the
+    circle minus the largest gap between the angles of rays along the screen border."""
+    camera, image = scene.camera, scene.image
+    right, up, forward = camera_basis(camera)
+    tan_y = math.tan(math.radians(camera.fov_deg) / 2)
+    tan_x = tan_y * image.width / image.height
+    for pole in (axis, -axis):
+        depth = pole @ forward
+        if depth > 0 and abs(pole @ right / depth) <= tan_x and abs(pole @ up / depth) <= tan_y:
+            return -math.pi, 2 * math.pi, True
+    edge = np.linspace(-1.0, 1.0, 4 * max(image.width, image.height) + 1)
+    ones = np.ones_like(edge)
+    border = np.concatenate([np.stack([edge, ones]), np.stack([edge, -ones]),
+                             np.stack([ones, edge]), np.stack([-ones, edge])], axis=1)
+    dirs = forward[:, None] + right[:, None] * (border[0] * tan_x) + up[:, None] * (border[1] * tan_y)
+    alpha = np.sort(np.arctan2(w @ dirs, u @ dirs))
+    gaps = np.diff(np.concatenate([alpha, alpha[:1] + 2 * math.pi]))
+    largest = int(np.argmax(gaps))
+    start = alpha[(largest + 1) % len(alpha)]
+    span = 2 * math.pi - gaps[largest]
+    # A margin of 1% keeps border pixels between two slices rather than past the last one.
+    margin = 0.01 * span + 1e-6
+    return float(start - margin), float(min(span + 2 * margin, 2 * math.pi)), False
+
+
+def epipolar_frame(scene, buffers: FrameBuffers, light_index: int) -> np.ndarray:
+    """epipolar_t for one light, without the ranges that need the depth map."""
+    light = scene.lights[light_index]
+    params = np.zeros((), dtype=structs.epipolar_dtype)
+    if isinstance(light, DirectionalLight):
+        axis, d_el = -light.direction, 0.0
+    else:
+        to_light = light.position - buffers.inputs.eye_ws
+        d_el = float(np.linalg.norm(to_light))
+        axis = to_light / d_el
+    u, w = slice_basis(axis)
+    alpha_min, span, full = slice_fan(scene, axis, u, w)
+    slices = scene.render.slices
+    gamma_samples = 1 << max(int(math.ceil(math.log2(scene.render.gamma_samples))), 1)
+    params["axis"], params["u"], params["w"] = structs.float4(axis), structs.float4(u), structs.float4(w)
+    params["d_el"] = d_el
+    params["alpha_min"], params["alpha_step"], params["slices"] = alpha_min, span / slices, slices
+    params["gamma_samples"], params["levels"] = gamma_samples, int(math.log2(gamma_samples))
+    params["light_index"], params["full_circle"] = light_index, int(full)
+    return params
+
+
+def rectify(device: Device, buffers: FrameBuffers, rastered: RasterResult, light_index: int,
+            timer: StageTimer) -> Epipolar | None:
+    """Build S[α, γ] for one light; None when no visible ray has any extent in γ."""
+    scene = buffers.inputs.scene
+    params = epipolar_frame(scene, buffers, light_index)
+    frame_buffer = device.buffer(params.reshape(1))
+    bounds = np.array([structs.DEPTH_EMPTY, 0, 0, 0], dtype=np.uint32)
+    bounds_buffer = device.buffer(bounds)
+    samples = buffers.inputs.samples
+    event = device.kernel("rectify", "rectify_bounds")(
+        device.queue, (samples,), None, buffers.params, buffers.views, buffers.lights, frame_buffer,
+        rastered.camera_depth, buffers.offsets, bounds_buffer)
+    timer.add("rectify", event)
+    beta_min, beta_max, gamma_max = device.read(bounds_buffer, 4, np.uint32)[:3].view(np.float32).astype(float)
+    # float32(π) is 9e-8 above π: a ray pointing straight away from the light (the
+    # anti-epipole on a pixel centre) would put β past the integrand's [0, π].
+    beta_min, beta_max = min(beta_min, math.pi), min(beta_max, math.pi)
+    if not gamma_max > 0:
+        return None
+    n = int(params["gamma_samples"])
+    params["gamma_step"] = gamma_max / n
+    frame_buffer = device.buffer(params.reshape(1), writable=False)
+    slices = int(params["slices"])
+    tree = device.buffer(nbytes=8 * slices * 2 * n)
+    event = device.kernel("rectify", "rectify")(
+        device.queue, (n, slices), None, buffers.views, buffers.lights, rastered.shadow_depth, frame_buffer, tree)
+    timer.add("rectify", event)
+    return Epipolar(params, frame_buffer, tree, float(beta_min), float(beta_max), float(gamma_max))

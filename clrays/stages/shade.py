@@ -1,0 +1,22 @@
+"""Stage shade: surface term (shadow-map test, optional PCF), attenuation to the eye,
+plus in-scattering, averaged over each pixel's samples. Host side of `cl/shade.cl`."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..device import Device, StageTimer
+from ..inputs import FrameBuffers
+from .raster import RasterResult
+
+
+def shade(device: Device, buffers: FrameBuffers, rastered: RasterResult, scatter, timer: StageTimer) -> np.ndarray:
+    """Returns linear radiance, (H, W, 3) float32."""
+    image = buffers.inputs.scene.image
+    pixels = image.width * image.height
+    out = device.buffer(nbytes=16 * pixels)
+    event = device.kernel("shade", "shade")(
+        device.queue, (pixels,), None, buffers.params, buffers.views, buffers.lights, rastered.shadow_depth,
+        rastered.camera_depth, rastered.tri_id, buffers.tri_normal, buffers.tri_albedo, buffers.offsets,
+        scatter, out)
+    timer.add("shade", event)
+    return device.read(out, (image.height, image.width, 4), np.float32)[..., :3]

@@ -1,0 +1,73 @@
+"""Stage raster against a float64 numpy ray cast of the same rays."""
+import numpy as np
+
+from clrays.scene.camera import primary_rays
+from clrays.reference.exact import raycast
+from clrays.inputs import frame_inputs, upload
+from clrays.device import StageTimer
+from clrays.scene.geometry import box_triangles, sphere_triangles
+from clrays.stages.raster import raster
+from conftest import PointLight, grid_plane, make_scene, v3
+
+
+def _scene(**kw):
+    triangles = np.concatenate([grid_plane(0.0, 8.0, 4), box_triangles([-1, 0, -1], [1, 2, 1]),
+                                sphere_triangles([2.0, 1.0, 1.5], 0.8, 16)])
+    return make_scene(triangles, [PointLight(v3(0.5, 5, 0.3), np.full(3, 30.0))], width=48, height=32, **kw)
+
+
+def _rasterized(device, scene):
+    buffers = upload(device, frame_inputs(scene))
+    result = raster(device, buffers, StageTimer())
+    samples = buffers.inputs.samples
+    depth = device.read(result.camera_depth, samples, np.uint32).view(np.float32)
+    tri = device.read(result.tri_id, samples, np.int32)
+    shadow = device.read(result.shadow_depth, buffers.inputs.shadow_texels, np.uint32).view(np.float32)
+    return buffers, depth, tri, shadow
+
+
+def test_camera_depth_matches_numpy_raycast(device):
+    scene = _scene(spp=4)
+    _, depth, tri, _ = _rasterized(device, scene)
+    dirs = primary_rays(scene.camera, scene.image).reshape(-1, 3)
+    t, index = raycast(scene.camera.position, dirs, scene.geometry.triangles)
+    assert np.array_equal(np.isinf(depth), np.isinf(t)), "coverage differs"
+    hit = np.isfinite(t)
+    assert hit.mean() > 0.5
+    # float32 ray-triangle test vs float64: relative error of a few ulps of the scene size.
+    np.testing.assert_allclose(depth[hit], t[hit], rtol=1e-5, atol=1e-5)
+    # The nearest triangle agrees except on shared edges, where either neighbour is right.
+    assert (tri[hit] >= 0).all()
+    assert (tri[hit] == index[hit]).mean() > 0.98
+
+
+def test_cube_shadow_map_matches_numpy_raycast(device):
+    scene = _scene(shadow_map=32)
+    buffers, _, _, shadow = _rasterized(device, scene)
+    light = scene.lights[0].position
+    views = buffers.inputs.views
+    for face in range(1, 7):
+        view = views[face]
+        n = int(view["width"])
+        centres = (np.arange(n) + 0.5) / n * 2 - 1
+        sx, sy = np.meshgrid(centres, -centres)
+        dirs = (view["forward"][:3] + sx[..., None] * view["right"][:3] + sy[..., None] * view["up"][:3]).reshape(-1, 3)
+        dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+        t, _ = raycast(light, dirs.astype(np.float64), scene.geometry.triangles)
+        stored = shadow[view["depth_offset"]: view["depth_offset"] + n * n]
+        assert np.array_equal(np.isinf(stored), np.isinf(t)), f"face {face} coverage differs"
+        hit = np.isfinite(t)
+        np.testing.assert_allclose(stored[hit], t[hit], rtol=1e-4)
+
+
+def test_triangle_through_the_camera_is_rasterized(device):
+    # One triangle with a vertex behind the eye: near-plane clipping must still cover
+    # the screen area in front of the camera.
+    triangles = np.array([[[-20.0, -1.0, 20.0], [20.0, -1.0, 20.0], [0.0, -1.0, -40.0]]])
+    scene = make_scene(triangles, width=16, height=12, position=(0, 0, 0), look_at=(0, -0.3, -1))
+    _, depth, _, _ = _rasterized(device, scene)
+    dirs = primary_rays(scene.camera, scene.image).reshape(-1, 3)
+    t, _ = raycast(scene.camera.position, dirs, triangles)
+    assert np.isfinite(t).sum() > 50
+    np.testing.assert_array_equal(np.isfinite(depth), np.isfinite(t))
+    np.testing.assert_allclose(depth[np.isfinite(t)], t[np.isfinite(t)], rtol=1e-5)

@@ -1,0 +1,200 @@
+"""A render session re-runs only the stages whose inputs changed, and reuse never
+changes an image: every frame here is compared bit for bit with a frame computed from
+scratch."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from clrays.session import Renderer
+from clrays.reuse import StageCache, digest, scene_digest
+from clrays.scene.model import Phase
+from clrays.scene.load import parse_scene
+
+from conftest import DirectionalLight, PointLight, SpotLight, box_triangles, grid_plane, make_scene, v3
+
+SMALL = dict(width=40, height=30, shadow_map=128, slices=64, gamma_samples=128)
+
+
+def _slats():
+    return np.concatenate([grid_plane(0.0, 6.0, 2)] + [box_triangles(v3(x, 2.5, -3), v3(x + 0.4, 2.7, 3))
+                                                        for x in (-2.0, -1.0, 0.0, 1.0)])
+
+
+ANIMATED = """\
+version: 1
+image: {width: 40, height: 30}
+camera: {position: [0, 2, 8], look_at: [0, 1, 0], far: 30}
+lights:
+  - {type: point, position: [0.3, 5, -0.5], intensity: 60}
+  - {type: spot, position: [-2, 6, 1], direction: [0.2, -1, 0], cone_deg: 35, intensity: 80}
+medium: {sigma_s: 0.06, sigma_a: 0.01, phase: {type: hg, g: 0.3}}
+objects:
+  - {type: plane, center: [0, 0, 0], normal: [0, 1, 0], size: 14, segments: 2}
+  - {type: box, min: [-2, 2.5, -3], max: [-1.6, 2.7, 3]}
+  - {type: box, min: [0, 2.5, -3], max: [0.4, 2.7, 3]}
+  - {type: sphere, center: [1.5, 0.8, 0.5], radius: 0.8, segments: 12}
+render: {shadow_map: 128, slices: 64, gamma_samples: 128, steps: 64}
+animation:
+  frames: [0, 11]
+  camera:   # moves over 0-3, then stands still
+    - {frame: 0, position: [0, 2, 8]}
+    - {frame: 3, position: [3, 2.5, 7]}
+  lights:
+    - light: 0   # power changes over 3-5; moves over 9-10
+      keys:
+        - {frame: 3, intensity: 60, position: [0.3, 5, -0.5]}
+        - {frame: 5, intensity: [90, 70, 50]}
+        - {frame: 9, position: [0.3, 5, -0.5]}
+        - {frame: 10, position: [1.0, 5.5, 0]}
+  objects:
+    - object: 3  # the sphere moves over 5-7
+      keys:
+        - {frame: 5, translate: [0, 0, 0]}
+        - {frame: 7, translate: [-0.5, 0.2, 0]}
+  medium:        # thickens over 7-9
+    - {frame: 7, sigma_s: 0.06}
+    - {frame: 9, sigma_s: [0.1, 0.08, 0.06]}
+"""
+
+#: What each frame of ANIMATED must reuse (frame 0 computes everything).
+EXPECTED_REUSE = {
+    1: {"raster.shadow"},  # camera moves, lights static
+    3: {"raster.shadow"},  # camera arrives (frame 3 != 2)
+    4: {"raster.camera", "raster.shadow", "rectify", "minmax"},  # only the power changes
+    6: {"integrand"},  # the sphere moves (both maps, the view); the β and γ ranges stay
+    8: {"raster.camera", "raster.shadow", "rectify", "minmax"},  # only the medium changes
+    11: {"raster.camera", "raster.shadow", "rectify", "minmax", "integrand", "traverse", "shade"},  # same as 10
+}
+
+
+@pytest.mark.parametrize("method", ["minmax", "raymarch"])
+def test_sequence_with_reuse_equals_without(device, method):
+    scene = parse_scene(ANIMATED)
+    session, scratch = Renderer(device), Renderer(device, reuse=False)
+    for frame in scene.animation.frames:
+        frame_scene = scene.animation.scene_at(scene, frame)
+        kept = session.render(frame_scene, method)
+        fresh = scratch.render(frame_scene, method)
+        np.testing.assert_array_equal(kept.image, fresh.image, err_msg=f"frame {frame}")
+        assert not fresh.reused
+        if method == "minmax" and frame in EXPECTED_REUSE:
+            assert set(kept.reused) == EXPECTED_REUSE[frame], (frame, kept.stage_status)
+        if method == "raymarch" and frame == 4:
+            assert set(kept.reused) == {"raster.camera", "raster.shadow"}
+
+
+def test_one_light_moving_keeps_the_others(device):
+    scene = parse_scene(ANIMATED)
+    session = Renderer(device)
+    session.render(scene.animation.scene_at(scene, 9))
+    moved = session.render(scene.animation.scene_at(scene, 10))
+    assert moved.stage_status["raster.shadow"] == "reused 1 of 2"
+    assert moved.stage_status["rectify"] == "reused 1 of 2"
+    np.testing.assert_array_equal(moved.image,
+                                  Renderer(device, reuse=False).render(scene.animation.scene_at(scene, 10)).image)
+
+
+SWEEPS = {
+    "sigma_s": [dict(sigma_s=s) for s in (0.02, 0.05, 0.1, 0.05)],
+    "slices": [dict(slices=s) for s in (32, 64, 32)],
+    "integrand": [dict(integrand="svd"), dict(integrand="table"), dict(integrand="svd", svd_rank=2)],
+    "phase": [dict(phase=Phase("hg", g)) for g in (0.0, 0.5, -0.3)],
+    "traversal": [dict(traversal="tree"), dict(traversal="scan")],
+}
+
+
+@pytest.mark.parametrize("sweep", list(SWEEPS))
+def test_sweep_with_reuse_equals_independent_renders(device, sweep):
+    sun = v3(0.3, -1, 0.2) / np.linalg.norm(v3(0.3, -1, 0.2))
+    lights = [PointLight(v3(0.3, 5, -0.5), np.full(3, 60.0)), DirectionalLight(sun, np.full(3, 1.5))]
+    session, scratch = Renderer(device), Renderer(device, reuse=False)
+    for n, settings in enumerate(SWEEPS[sweep]):
+        scene = make_scene(_slats(), lights, **{**SMALL, **settings})
+        kept, fresh = session.render(scene), scratch.render(scene)
+        np.testing.assert_array_equal(kept.image, fresh.image, err_msg=f"{sweep} point {n}")
+        if n:
+            assert {"raster.camera", "raster.shadow"} <= set(kept.reused)
+        if n and sweep in ("sigma_s", "integrand", "phase"):
+            assert {"rectify", "minmax"} <= set(kept.reused)
+
+
+def test_identical_frame_is_kept_whole(renderer):
+    scene = make_scene(_slats(), **SMALL)
+    first = renderer.render(scene)
+    again = renderer.render(scene)
+    assert set(again.reused) == set(first.stage_status) and not again.stage_ms
+    np.testing.assert_array_equal(first.image, again.image)
+    again.image[:] = -1  # results are copies: the kept image is untouched
+    np.testing.assert_array_equal(renderer.render(scene).image, first.image)
+    assert renderer.render(scene, "raymarch").stage_status["raymarch"] == "computed"  # the method is an input
+
+
+def test_exact_frames_are_kept_too(renderer):
+    scene = make_scene(box_triangles(v3(-1, 2, -1), v3(1, 2.2, 1)), width=8, height=6)
+    assert renderer.render(scene, "exact").stage_status == {"exact": "computed"}
+    assert renderer.render(scene, "exact").stage_status == {"exact": "reused"}
+
+
+def test_no_medium_runs_no_volume_stage(renderer):
+    result = renderer.render(make_scene(_slats(), sigma_s=0.0, **SMALL))
+    for stage in ("rectify", "minmax", "integrand", "traverse"):
+        assert result.stage_status[stage] == "skipped" and stage not in result.stage_ms
+
+
+@pytest.mark.parametrize("light", [
+    SpotLight(v3(0, 4, -2), v3(0, 0.3, 1) / np.hypot(0.3, 1), 30.0, np.full(3, 80.0)),  # over the slats: an empty map
+    DirectionalLight(v3(0, -1, 0), np.full(3, 2.0)),
+])
+def test_nothing_casting_a_shadow_skips_the_tree(device, light):
+    triangles = [] if isinstance(light, DirectionalLight) else _slats()
+    scene = make_scene(triangles, [light], **SMALL)
+    skipping, full = Renderer(device), Renderer(device, reuse=False)
+    full._skip_unshadowed = False
+    result = skipping.render(scene)
+    assert result.stage_status["rectify"] == "skipped" and result.stage_status["minmax"] == "skipped"
+    assert full.render(scene).stage_status["rectify"] == "computed"
+    # One lit run either way; only where float32 clips the run's end can differ.
+    np.testing.assert_allclose(result.image, full.render(scene).image, rtol=1e-5, atol=1e-7 * result.image.max())
+    assert result.image.max() > 0
+
+
+def test_a_shadowing_light_walks_its_tree(renderer):
+    result = renderer.render(make_scene(_slats(), [SpotLight(v3(0, 5, 0), v3(0, -1, 0), 30.0, np.full(3, 80.0))],
+                                        **SMALL))
+    assert result.stage_status["rectify"] == "computed"
+
+
+def test_module_render_reuses_between_calls():
+    import clrays
+
+    scene = make_scene(_slats(), **SMALL)
+    clrays.render(scene)
+    assert "raster.shadow" in clrays.render(replace(scene, medium=replace(scene.medium, sigma_a=np.full(3, 0.02))),
+                                            stats=True).reused
+    assert not clrays.render(scene, stats=True, reuse=False).reused
+
+
+def test_digest_tells_apart_what_differs():
+    a = np.zeros(4, np.float32)
+    assert digest(a) != digest(a.astype(np.float64)) and digest(a) != digest(a.reshape(2, 2))
+    assert digest(1, 2) != digest((1, 2)) and digest(0.0) != digest(-0.0) and digest(1) != digest(1.0)
+    assert digest(np.arange(3.0)) == digest(np.arange(3.0))
+    scene = make_scene(_slats())
+    assert scene_digest(scene) == scene_digest(replace(scene, source="elsewhere.yaml"))
+    assert scene_digest(scene) != scene_digest(replace(scene, render=replace(scene.render, slices=32)))
+    assert scene_digest(scene, render=False) == scene_digest(replace(scene, render=replace(scene.render, slices=32)),
+                                                             render=False)
+
+
+def test_stage_cache_keeps_the_most_recent():
+    cache = StageCache(2)
+    for key in (b"a", b"b", b"c"):
+        cache.put("s", key, key.upper())
+    assert cache.get("s", b"a") == (False, None) and cache.get("s", b"c") == (True, b"C")
+    cache.put("s", b"d", 1, scale=2)
+    assert len(cache) == 3
+    with pytest.raises(ValueError):
+        StageCache(0)
