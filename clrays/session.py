@@ -1,14 +1,19 @@
-"""One frame, stage by stage: raster → (raymarch | rectify → minmax → integrand →
-traverse) → shade. The `exact` reference runs on the host in float64 instead.
+"""A render session and the frame it runs, stage by stage (docs/design.md §4):
 
-A `Renderer` is a render session: besides the built kernels it keeps the stage
-results of recent frames (device buffers, integrand tables) and re-runs a stage only
-when what it reads changed (DESIGN §7): the shadow maps while the lights and the
-geometry are static, the camera depth while the camera and the geometry are, the
-min-max trees while those and the eye–light frame are, the integrand tables while the
-medium and the β/γ ranges are; a frame identical to a recent one is not rendered at
-all. Keys are digests of the stages' inputs (`clrays.reuse`), so reuse never changes
-an image. `RenderResult.stage_status` says what each stage did.
+    raster → rectify → minmax → integrand → traverse → shade     (method `minmax`)
+    raster → raymarch → shade                                    (method `raymarch`)
+
+`Renderer._frame` is that figure, one line per stage. The `exact` reference runs on
+the host in float64 instead (clrays.reference.exact).
+
+A `Renderer` keeps the built kernels and the stage results of recent frames (device
+buffers, integrand tables) and re-runs a stage only when what it reads changed
+(docs/design.md §7). `StageKeys` says, beside each stage, what that is: the shadow maps
+while the lights and the geometry stand still, the camera depth while the camera and
+the geometry do, the min-max trees while those and the eye–light frame do, the
+integrand tables while the medium and the β/γ ranges do; a frame identical to a recent
+one is not rendered at all. Keys are digests of the stages' inputs (clrays.reuse), so
+reuse never changes an image. `RenderResult.stage_status` says what each stage did.
 """
 from __future__ import annotations
 
@@ -18,47 +23,48 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from . import structs
 from .device import Device, StageTimer
-from .inputs import FrameBuffers, FrameInputs, frame_inputs, light_pass_inputs, upload
-from .stages.raster import RasterResult, raster_camera, raster_shadow_maps
-from .stages.raymarch import raymarch
+from .inputs import FrameBuffers, FrameInputs, frame_inputs, upload
 from .reuse import COMPUTED, REUSED, Reuse, StageCache, StageRecord, digest, scene_digest
-from .scene.model import Scene
+from .scene.model import METHODS, Scene
+from .stages.integrand import DeviceIntegrand, integrand
+from .stages.lamp import eye_in_lamp, lamp_in_scatter
+from .stages.minmax import minmax
+from .stages.raster import RasterResult, ShadowMap, map_is_empty, raster_camera, raster_shadow_map, shadow_atlas
+from .stages.raymarch import raymarch
+from .stages.rectify import Epipolar, rectify
 from .stages.shade import shade
-
-METHODS = ("raymarch", "exact", "minmax")
+from .stages.traverse import traverse
 
 #: The rectified texture of a light whose shadow map is empty (nothing casts a shadow)
 #: is π everywhere whatever its size, so it is built at this size (the minimum).
 UNSHADOWED_SIZE = 16
+
+#: Stage labels of the volume stages of each method, as timings and statuses name them.
+VOLUME_STAGES = {"minmax": ("rectify", "minmax", "integrand", "traverse"), "raymarch": ("raymarch",)}
 
 
 @dataclass
 class RenderResult:
     image: np.ndarray  # (H, W, 3) float32 linear radiance
     method: str
-    stage_ms: dict[str, float] = field(default_factory=dict)  # device time per stage
+    stage_ms: dict[str, float] = field(default_factory=dict)  # time per stage (device events, or host clock)
     wall_ms: float = 0.0
     device_bytes: int = 0  # device memory allocated for the frame
     # stage → "computed", "reused", "skipped" or "reused k of n" (per light); raster is
     # "raster.camera" and "raster.shadow"; a frame identical to a kept one is all "reused".
     stage_status: dict[str, str] = field(default_factory=dict)
+    host_stages: frozenset[str] = frozenset()  # the labels of `stage_ms` timed on the host
 
     @property
     def reused(self) -> list[str]:
         """The stages this frame took from an earlier one."""
         return [stage for stage, status in self.stage_status.items() if status == REUSED]
 
-
-@dataclass
-class _ShadowMap:
-    """One light's shadow map, in its own buffer (views anchored at the light)."""
-
-    depth: object  # uint[texels]
-    texels: int
-    triangles: int  # scene triangles: with none, the map is empty without looking
-    empty: bool | None = None  # nothing rasterized: filled in when first asked
+    @property
+    def device_ms(self) -> float:
+        """Stage time spent on the OpenCL device (host stages left out)."""
+        return sum(ms for label, ms in self.stage_ms.items() if label not in self.host_stages)
 
 
 class Renderer:
@@ -102,87 +108,101 @@ class Renderer:
         status = record.status() or {stage: REUSED for stage in stages}
         device_bytes = self._device.allocated_bytes if self._device is not None else 0
         wall_ms = (time.perf_counter() - start) * 1e3
-        return RenderResult(image.copy(), method, timer.milliseconds(), wall_ms, device_bytes, status)
+        return RenderResult(image.copy(), method, timer.milliseconds(), wall_ms, device_bytes, status,
+                            timer.host_labels)
 
     def _frame(self, scene: Scene, method: str, reuse: Reuse, timer: StageTimer, progress: bool):
-        """(image, stage labels) of one frame."""
+        """(image, stage labels) of one frame: the pipeline of the module docstring."""
         if method == "exact":
-            from .reference.exact import render_exact
-
-            reuse.record.note("exact", COMPUTED)
-            return render_exact(scene, progress=progress).astype(np.float32), ("exact",)
-
+            return self._exact(scene, reuse, timer, progress)
         device = self.device
         buffers = upload(device, frame_inputs(scene))  # the scene in eye space, packed into device structs
-        keys = _Keys(buffers.inputs)  # digests of what each stage reads
-        camera_depth, tri_id = reuse.stage(  # raster: camera depth + triangle ids
-            "raster.camera", keys.camera, lambda: raster_camera(device, buffers, timer))
-        maps = [reuse.stage(  # raster: each light's shadow map, anchored at the light
-            "raster.shadow", keys.shadow[i], lambda i=i: self._shadow_map(buffers, i, timer), per_light=True)
-            for i in range(len(scene.lights))]
-        rastered = RasterResult(camera_depth, tri_id, self._shadow_atlas(buffers, maps, keys, reuse))
-        scatter = self._in_scatter(method, buffers, rastered, maps, keys, reuse, timer)  # in-scattering per sample
+        keys = StageKeys(buffers.inputs)
+        rastered, maps = self._raster(buffers, keys, reuse, timer)  # raster: camera depth and ids, shadow maps
+        scatter = device.buffer(nbytes=16 * buffers.inputs.samples)  # in-scattered radiance per camera sample
+        device.fill(scatter, np.float32(0), 16 * buffers.inputs.samples)
+        if not np.any(scene.medium.sigma_s > 0):
+            reuse.skip(*VOLUME_STAGES[method])  # no medium: no volume stages at all
+        elif method == "raymarch":
+            reuse.record.note("raymarch", COMPUTED)
+            raymarch(device, buffers, rastered, scatter, timer)  # raymarch: the brute-force reference
+        else:
+            for index, light in enumerate(scene.lights):
+                if eye_in_lamp(scene, light):  # d_el → 0: no epipolar frame, nothing visible is shadowed
+                    lamp_in_scatter(device, buffers, rastered, light, scatter, timer)
+                    continue
+                epipolar = self._rectify(buffers, rastered, maps, keys, index, reuse, timer)  # rectify: S[α, γ]
+                if epipolar is None:  # no visible ray has any extent in γ
+                    continue
+                self._minmax(epipolar, reuse, timer)  # minmax: the 1D min-max mipmap of every row
+                tables = reuse.stage("integrand", keys.integrand(index, epipolar),  # integrand: lit run → radiance
+                                     lambda: integrand(device, scene, light, epipolar, timer), per_light=True)
+                traverse(device, buffers, rastered, epipolar, tables, scatter, timer)  # traverse: walk the trees
+            reuse.record.note("traverse", COMPUTED)
         image = shade(device, buffers, rastered, scatter, timer)  # shade: surfaces, attenuation, + scatter
         reuse.record.note("shade", COMPUTED)
         return image, tuple(reuse.record.status())
 
-    def _shadow_map(self, buffers: FrameBuffers, light_index: int, timer: StageTimer) -> _ShadowMap:
-        """Rasterize one light's views from the geometry translated to the light (float64 on
-        the host), so the depths do not depend on the eye and a static light's map is kept
-        while the camera moves."""
+    def _exact(self, scene: Scene, reuse: Reuse, timer: StageTimer, progress: bool):
+        """The float64 reference, one host stage."""
+        from .reference.exact import render_exact
+
+        start = time.perf_counter()
+        image = render_exact(scene, progress=progress).astype(np.float32)
+        timer.add_host("exact", (time.perf_counter() - start) * 1e3)
+        reuse.record.note("exact", COMPUTED)
+        return image, ("exact",)
+
+    def _raster(self, buffers: FrameBuffers, keys: StageKeys, reuse: Reuse, timer: StageTimer):
+        """The raster stage, each part kept while its inputs are: the camera's depth and
+        triangle ids, and each light's shadow map (anchored at the light, so a moving
+        camera keeps it). Returns the frame's RasterResult and the per-light maps."""
         device = self.device
-        inputs = light_pass_inputs(buffers.inputs, light_index)
-        light_buffers = replace(buffers, inputs=inputs,
-                                views=device.buffer(inputs.views, writable=False),
-                                lights=device.buffer(inputs.lights, writable=False),
-                                tri_vertices=device.buffer(inputs.tri_vertices, writable=False))
-        depth = raster_shadow_maps(device, light_buffers, timer)
-        return _ShadowMap(depth, inputs.shadow_texels, inputs.scene.geometry.count)
+        camera_depth, tri_id = reuse.stage("raster.camera", keys.camera,
+                                           lambda: raster_camera(device, buffers, timer))
+        maps = [reuse.stage("raster.shadow", keys.shadow[index],
+                            lambda index=index: raster_shadow_map(device, buffers, index, timer), per_light=True)
+                for index in range(len(buffers.inputs.scene.lights))]
+        atlas = reuse.keep("shadow_atlas", digest(tuple(keys.shadow)), lambda: shadow_atlas(device, buffers, maps))
+        return RasterResult(camera_depth, tri_id, atlas), maps
 
-    def _shadow_atlas(self, buffers: FrameBuffers, maps: list[_ShadowMap], keys: "_Keys", reuse: Reuse):
-        """Every light's map back to back, as the views' depth offsets expect."""
-        if len(maps) == 1:
-            return maps[0].depth
-        device = self.device
+    def _rectify(self, buffers: FrameBuffers, rastered: RasterResult, maps: list[ShadowMap], keys: StageKeys,
+                 index: int, reuse: Reuse, timer: StageTimer) -> Epipolar | None:
+        """The rectify stage of one light, kept while `keys.trees` is the same. A light whose
+        map is empty casts no shadow anywhere: its texture is π everywhere and the tree walk
+        finds one lit run at any texture size, so a minimal texture gives the same radiance
+        (up to float32 rounding where the run is clipped) without rectifying the full one."""
+        device, key = self.device, keys.trees(index)
+        if self._skip_unshadowed and map_is_empty(device, maps[index]):
+            render = buffers.inputs.scene.render
+            small = replace(buffers.inputs.scene, render=replace(render, slices=UNSHADOWED_SIZE,
+                                                                   gamma_samples=UNSHADOWED_SIZE))
+            small_buffers = replace(buffers, inputs=replace(buffers.inputs, scene=small))
+            reuse.skip("rectify", "minmax")
+            return reuse.keep("unshadowed", digest("unshadowed", key),
+                              lambda: self._unshadowed_trees(small_buffers, rastered, index, timer), per_light=True)
+        return reuse.stage("rectify", key, lambda: rectify(device, buffers, rastered, index, timer), per_light=True)
 
-        def build():
-            texels = max(buffers.inputs.shadow_texels, 1)
-            atlas = device.buffer(nbytes=4 * texels)
-            for (first, _), entry in zip(buffers.inputs.light_views, maps):
-                offset = 4 * int(buffers.inputs.views[first]["depth_offset"])
-                device.cl.enqueue_copy(device.queue, atlas, entry.depth, byte_count=4 * entry.texels,
-                                       dst_offset=offset)
-            return atlas
+    def _unshadowed_trees(self, buffers: FrameBuffers, rastered: RasterResult, index: int, timer: StageTimer):
+        epipolar = rectify(self.device, buffers, rastered, index, timer)
+        if epipolar is not None:
+            minmax(self.device, epipolar, timer)
+            epipolar.unshadowed = True
+        return epipolar
 
-        return reuse.keep("shadow_atlas", digest(tuple(keys.shadow)), build)
-
-    def _map_is_empty(self, entry: _ShadowMap) -> bool:
-        """Whether nothing at all was rasterized into a light's map (read back once)."""
-        if entry.empty is None:
-            entry.empty = entry.triangles == 0 or bool(
-                (self.device.read(entry.depth, entry.texels, np.uint32) == structs.DEPTH_EMPTY).all())
-        return entry.empty
-
-    def _in_scatter(self, method, buffers, rastered, maps, keys, reuse, timer):
-        device, inputs = self.device, buffers.inputs
-        if not np.any(inputs.scene.medium.sigma_s > 0):
-            # No medium: no volume stages at all, just a zero scatter buffer.
-            reuse.skip(*(("raymarch",) if method == "raymarch" else ("rectify", "minmax", "integrand", "traverse")))
-            scatter = device.buffer(nbytes=16 * inputs.samples)
-            device.fill(scatter, np.float32(0), 16 * inputs.samples)
-            return scatter
-        if method == "raymarch":
-            reuse.record.note("raymarch", COMPUTED)
-            return raymarch(device, buffers, rastered, timer)  # raymarch: the brute-force reference
-        from .stages.minmax_path import minmax_in_scatter
-
-        scatter = minmax_in_scatter(device, buffers, rastered, timer,
-                                    reuse=_MinmaxReuse(self, buffers, maps, keys, reuse))
-        reuse.record.note("traverse", COMPUTED)
-        return scatter
+    def _minmax(self, epipolar: Epipolar, reuse: Reuse, timer: StageTimer) -> None:
+        """The minmax stage: builds the tree levels in place, unless these trees were kept
+        from an earlier frame with their levels already built."""
+        if epipolar.unshadowed:
+            return  # built with the minimal texture, recorded as skipped
+        if epipolar.levels_built:
+            reuse.record.note("minmax", REUSED)
+            return
+        minmax(self.device, epipolar, timer)
+        reuse.record.note("minmax", COMPUTED)
 
 
-class _Keys:
+class StageKeys:
     """Digests of exactly what each stage of one frame reads."""
 
     def __init__(self, inputs: FrameInputs):
@@ -212,42 +232,12 @@ class _Keys:
                       inputs.views[:1], inputs.views[first:first + count], scene.camera, scene.image,
                       scene.render.slices, scene.render.gamma_samples)
 
-    def tables(self, index: int, epipolar) -> bytes:
+    def integrand(self, index: int, epipolar: Epipolar) -> bytes:
         """integrand of one light: the medium, the light, the eye–light distance, the β and
         γ ranges of the visible rays, the integrand mode and rank, the camera's far."""
         scene = self.inputs.scene
         return digest("tables", scene.medium, scene.lights[index], scene.render.integrand, scene.render.svd_rank,
-                      scene.camera.far, epipolar.params["d_el"], epipolar.beta_min, epipolar.beta_max,
-                      epipolar.gamma_max)
-
-
-class _MinmaxReuse:
-    """What `minmax_in_scatter` asks the session for, light by light: the min-max trees
-    (rectify → minmax) and the integrand tables, kept ones where the inputs match."""
-
-    def __init__(self, renderer: Renderer, buffers: FrameBuffers, maps: list[_ShadowMap], keys: _Keys, reuse: Reuse):
-        self.renderer, self.buffers, self.maps, self.keys, self.reuse = renderer, buffers, maps, keys, reuse
-
-    def trees(self, index: int, build):
-        """`build(buffers)` runs rectify and minmax. A light whose map is empty casts no
-        shadow anywhere: its texture is π everywhere, the tree walk finds one lit run at
-        any texture size, so a minimal texture gives the same radiance (up to float32
-        rounding where the run is clipped) without rectifying the full one (DESIGN §7)."""
-        key, buffers = self.keys.trees(index), self.buffers
-        if self.renderer._skip_unshadowed and self.renderer._map_is_empty(self.maps[index]):
-            render = buffers.inputs.scene.render
-            small = replace(buffers.inputs.scene, render=replace(render, slices=UNSHADOWED_SIZE,
-                                                                   gamma_samples=UNSHADOWED_SIZE))
-            epipolar = self.reuse.keep("unshadowed", digest("unshadowed", key),
-                                       lambda: build(replace(buffers, inputs=replace(buffers.inputs, scene=small))),
-                                       per_light=True)
-            self.reuse.skip("rectify", "minmax")
-            return epipolar
-        return self.reuse.stage(("rectify", "minmax"), key, lambda: build(buffers), per_light=True)
-
-    def tables(self, index: int, epipolar, build):
-        """`build()` runs the integrand stage."""
-        return self.reuse.stage("integrand", self.keys.tables(index, epipolar), build, per_light=True)
+                      scene.camera.far, epipolar.d_el, epipolar.beta_min, epipolar.beta_max, epipolar.gamma_max)
 
 
 _renderers: dict[str | None, Renderer] = {}
@@ -256,7 +246,7 @@ _renderers: dict[str | None, Renderer] = {}
 def render(scene: Scene, method: str | None = None, device: str | None = None, stats: bool = False,
            progress: bool = False, reuse: bool = True):
     """Render a scene; returns (H, W, 3) float32 linear radiance, or a RenderResult with
-    per-stage device times and stage status when `stats=True`. `method` overrides
+    per-stage times and stage status when `stats=True`. `method` overrides
     `scene.render.method`; `device` is a device spec as for `--device`. Calls share one
     session per device, so consecutive frames reuse what did not change (`reuse=False`:
     compute every stage)."""

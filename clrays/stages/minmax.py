@@ -15,3 +15,4 @@ def minmax(device: Device, epipolar: Epipolar, timer: StageTimer) -> None:
     for level in range(1, int(epipolar.params["levels"]) + 1):
         event = kernel(device.queue, (n >> level, slices), None, epipolar.buffer, np.int32(level), epipolar.tree)
         timer.add("minmax", event)
+    epipolar.levels_built = True

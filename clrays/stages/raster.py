@@ -5,13 +5,13 @@ Host side of `cl/raster.cl`. Depth is stored as the uint bits of a positive floa
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from .. import structs
 from ..device import Device, StageTimer
-from ..inputs import FrameBuffers
+from ..inputs import FrameBuffers, light_pass_inputs
 
 
 @dataclass
@@ -66,19 +66,56 @@ def raster_camera(device: Device, buffers: FrameBuffers, timer: StageTimer) -> t
     return camera_depth, tri_id
 
 
-def raster_shadow_maps(device: Device, buffers: FrameBuffers, timer: StageTimer):
-    """Every light's shadow-map views, back to back in one depth buffer."""
-    inputs = buffers.inputs
+@dataclass
+class ShadowMap:
+    """One light's shadow map, in its own buffer (views anchored at the light)."""
+
+    depth: object  # uint[texels]
+    texels: int
+    triangles: int  # scene triangles: with none, the map is empty without looking
+    empty: bool | None = None  # nothing rasterized: filled in by `map_is_empty` when first asked
+
+
+def raster_shadow_map(device: Device, buffers: FrameBuffers, light_index: int, timer: StageTimer) -> ShadowMap:
+    """Rasterize one light's views from the geometry translated to the light (float64 on
+    the host), so the depths do not depend on the eye and a render session keeps a static
+    light's map while the camera moves (docs/design.md §5, §7)."""
+    inputs = light_pass_inputs(buffers.inputs, light_index)
+    light_buffers = replace(buffers, inputs=inputs,
+                            views=device.buffer(inputs.views, writable=False),
+                            lights=device.buffer(inputs.lights, writable=False),
+                            tri_vertices=device.buffer(inputs.tri_vertices, writable=False))
     texels = max(inputs.shadow_texels, 1)
-    shadow_depth = device.buffer(nbytes=4 * texels)
-    device.fill(shadow_depth, structs.DEPTH_EMPTY, 4 * texels, timer, "raster")
+    depth = device.buffer(nbytes=4 * texels)
+    device.fill(depth, structs.DEPTH_EMPTY, 4 * texels, timer, "raster")
     centre = device.buffer(np.array([[0.5, 0.5]], dtype=np.float32), writable=False)
     for view_index in range(1, len(inputs.views)):
-        _rasterize(device, buffers, view_index, centre, 1, shadow_depth, timer)
-    return shadow_depth
+        _rasterize(device, light_buffers, view_index, centre, 1, depth, timer)
+    return ShadowMap(depth, inputs.shadow_texels, inputs.scene.geometry.count)
+
+
+def map_is_empty(device: Device, shadow_map: ShadowMap) -> bool:
+    """Whether nothing at all was rasterized into a light's map (read back once)."""
+    if shadow_map.empty is None:
+        shadow_map.empty = shadow_map.triangles == 0 or bool(
+            (device.read(shadow_map.depth, shadow_map.texels, np.uint32) == structs.DEPTH_EMPTY).all())
+    return shadow_map.empty
+
+
+def shadow_atlas(device: Device, buffers: FrameBuffers, maps: list[ShadowMap]):
+    """Every light's map back to back, at the depth offsets of the frame's views."""
+    if len(maps) == 1:
+        return maps[0].depth
+    atlas = device.buffer(nbytes=4 * max(buffers.inputs.shadow_texels, 1))
+    for (first, _), entry in zip(buffers.inputs.light_views, maps):
+        offset = 4 * int(buffers.inputs.views[first]["depth_offset"])
+        device.cl.enqueue_copy(device.queue, atlas, entry.depth, byte_count=4 * entry.texels, dst_offset=offset)
+    return atlas
 
 
 def raster(device: Device, buffers: FrameBuffers, timer: StageTimer) -> RasterResult:
-    """Rasterize the camera view (every sample of every pixel) and all shadow-map views."""
+    """The whole stage without a session's reuse: every sample of every pixel from the
+    camera, and each light's map anchored at the light, as a render session wires them."""
     camera_depth, tri_id = raster_camera(device, buffers, timer)
-    return RasterResult(camera_depth, tri_id, raster_shadow_maps(device, buffers, timer))
+    maps = [raster_shadow_map(device, buffers, index, timer) for index in range(len(buffers.inputs.scene.lights))]
+    return RasterResult(camera_depth, tri_id, shadow_atlas(device, buffers, maps))

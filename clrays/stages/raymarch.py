@@ -7,12 +7,10 @@ from ..inputs import FrameBuffers
 from .raster import RasterResult
 
 
-def raymarch(device: Device, buffers: FrameBuffers, rastered: RasterResult, timer: StageTimer):
-    """Returns the scatter buffer: one float4 (rgb radiance) per camera sample."""
+def raymarch(device: Device, buffers: FrameBuffers, rastered: RasterResult, scatter, timer: StageTimer) -> None:
+    """Write every camera sample's in-scattered radiance (float4, rgb) into `scatter`."""
     samples = buffers.inputs.samples
-    scatter = device.buffer(nbytes=16 * samples)
     event = device.kernel("raymarch", "raymarch")(
         device.queue, (samples,), None, buffers.params, buffers.views, buffers.lights,
         rastered.shadow_depth, rastered.camera_depth, buffers.offsets, scatter)
     timer.add("raymarch", event)
-    return scatter

@@ -30,6 +30,13 @@ class Epipolar:
     beta_min: float
     beta_max: float
     gamma_max: float
+    levels_built: bool = False  # the minmax stage has filled levels 1..log2(N) of `tree`
+    unshadowed: bool = False  # the minimal texture of a light that casts no shadow (clrays.session)
+
+    @property
+    def d_el(self) -> float:
+        """Eye–light distance (0 for a directional light)."""
+        return float(self.params["d_el"])
 
 
 def slice_basis(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -19,7 +19,7 @@ from clrays.inputs import frame_inputs, upload
 from clrays.stages.integrand import segment_radiance
 from clrays.reference.metrics import depth_edges, depth_map, image_error
 from clrays.stages.minmax import minmax
-from clrays.stages.minmax_path import integrand
+from clrays.stages.integrand import integrand
 from clrays.reference.radiometry import cone_interval, lamp_radius
 from clrays.stages.raster import raster
 from clrays.stages.rectify import rectify
@@ -247,11 +247,12 @@ def minmax_in_both_precisions(device, scene):
     rastered = raster(device, buffers, timer)
     epipolar = rectify(device, buffers, rastered, 0, timer)
     minmax(device, epipolar, timer)
-    tables = integrand(scene, scene.lights[0], epipolar, timer)
+    packed = integrand(device, scene, scene.lights[0], epipolar, timer)
+    tables = packed.tables
     samples = buffers.inputs.samples
     scatter = device.buffer(nbytes=16 * samples)
     device.fill(scatter, np.float32(0), 16 * samples)
-    traverse(device, buffers, rastered, epipolar, tables, scatter, timer)
+    traverse(device, buffers, rastered, epipolar, packed, scatter, timer)
     single = device.read(scatter, (samples, 4), np.float32)[:, :3]
     n, slices = int(epipolar.params["gamma_samples"]), int(epipolar.params["slices"])
     rows = device.read(epipolar.tree, (slices, 2 * n, 2), np.float32)[:, :n, 0].astype(np.float64)
