@@ -27,7 +27,7 @@ from .device import Device, StageTimer
 from .inputs import FrameBuffers, FrameInputs, frame_inputs, upload
 from .reuse import COMPUTED, REUSED, Reuse, StageCache, StageRecord, digest, scene_digest
 from .scene.model import METHODS, Scene
-from .stages.integrand import DeviceIntegrand, integrand
+from .stages.integrand import integrand
 from .stages.lamp import eye_in_lamp, lamp_in_scatter
 from .stages.minmax import minmax
 from .stages.raster import RasterResult, ShadowMap, map_is_empty, raster_camera, raster_shadow_map, shadow_atlas

@@ -23,7 +23,7 @@ def luminance(image: np.ndarray) -> np.ndarray:
 
 def depth_map(scene: Scene) -> np.ndarray:
     """Distance to the first surface through each pixel centre (inf: none), float64."""
-    from .exact import raycast
+    from .geometry import raycast
 
     dirs = primary_rays(scene.camera, scene.image, np.array([[0.5, 0.5]])).reshape(-1, 3)
     t, _ = raycast(scene.camera.position, dirs, scene.geometry.triangles, t_max=scene.camera.far)
@@ -50,7 +50,7 @@ def depth_edges(depth: np.ndarray, relative: float = 0.05) -> np.ndarray:
 def depth_edges_at(scene: Scene, ys, xs, relative: float = 0.05) -> np.ndarray:
     """`depth_edges` for the pixels (ys[i], xs[i]) only, from float64 ray casts of each
     pixel and its 4 neighbours: for error on a pixel subset of a large image."""
-    from .exact import raycast
+    from .geometry import raycast
 
     ys, xs = np.asarray(ys), np.asarray(xs)
     h, w = scene.image.height, scene.image.width

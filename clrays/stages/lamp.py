@@ -30,10 +30,10 @@ def lamp_in_scatter(device: Device, buffers: FrameBuffers, rastered: RasterResul
     Epipolar coordinates need an eye–light axis, which d_el → 0 takes away; and they are not
     needed: every point the eye sees, the light sees too, so nothing visible is shadowed.
     What is left is the unshadowed integral of each sample ray over [where it leaves the
-    lamp, its depth] (within the cone for a spot light), which `exact.lit_intervals` and
+    lamp, its depth] (within the cone for a spot light), which `reference.geometry.lit_intervals` and
     `radiometry.in_scatter_segments` give in float64 on the host. The configuration is rare
     and the cost is one quadrature per sample, like `exact` without occluders."""
-    from ..reference.exact import lit_intervals
+    from ..reference.geometry import lit_intervals
 
     start = time.perf_counter()
     scene, samples = buffers.inputs.scene, buffers.inputs.samples

@@ -21,9 +21,10 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from clrays import exact
+from clrays.reference import geometry
 from clrays.scene.camera import primary_rays
-from clrays.reference.exact import lit_intervals, raycast, render_exact
+from clrays.reference.exact import render_exact
+from clrays.reference.geometry import lit_intervals, raycast
 from clrays.reference.radiometry import cone_interval, in_scatter_segments, phase
 from clrays.scene.model import (Camera, DirectionalLight, Geometry, Image, Medium, Phase, PointLight, Render, Scene,
                           SpotLight)
@@ -316,7 +317,7 @@ def test_raycast_matches_slab(monkeypatch):
     # t_max cuts hits off; tiny chunks give the same answer as one big one
     t_cut, idx_cut = raycast(o, d, tris, t_max=2.0)
     np.testing.assert_array_equal(idx_cut >= 0, (idx >= 0) & (t < 2.0))
-    monkeypatch.setattr(exact, "_BUDGET_BYTES", exact._RAYCAST_PAIR_BYTES * 5)
+    monkeypatch.setattr(geometry, "BUDGET_BYTES", geometry._RAYCAST_PAIR_BYTES * 5)
     t_small, idx_small = raycast(o, d, tris)
     np.testing.assert_array_equal(t_small, t)
     np.testing.assert_array_equal(idx_small, idx)

@@ -2,7 +2,7 @@
 import numpy as np
 
 from clrays.scene.camera import primary_rays
-from clrays.reference.exact import raycast
+from clrays.reference.geometry import raycast
 from clrays.inputs import frame_inputs, upload
 from clrays.device import StageTimer
 from clrays.scene.geometry import box_triangles, sphere_triangles
