@@ -24,6 +24,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .device import Device, StageTimer
+from .errors import ClraysError
 from .inputs import FrameBuffers, FrameInputs, frame_inputs, upload
 from .reuse import COMPUTED, REUSED, Reuse, StageCache, StageRecord, digest, scene_digest
 from .scene.model import METHODS, Scene
@@ -116,7 +117,9 @@ class Renderer:
         if method == "exact":
             return self._exact(scene, reuse, timer, progress)
         device = self.device
-        buffers = upload(device, frame_inputs(scene))  # the scene in eye space, packed into device structs
+        inputs = frame_inputs(scene)
+        check_device_memory(device, inputs)
+        buffers = upload(device, inputs)  # the scene in eye space, packed into device structs
         keys = StageKeys(buffers.inputs)
         rastered, maps = self._raster(buffers, keys, reuse, timer)  # raster: camera depth and ids, shadow maps
         scatter = device.buffer(nbytes=16 * buffers.inputs.samples)  # in-scattered radiance per camera sample
@@ -200,6 +203,47 @@ class Renderer:
             return
         minmax(self.device, epipolar, timer)
         reuse.record.note("minmax", COMPUTED)
+
+
+def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
+    """(what, bytes) of the large device buffers one frame allocates, before allocating
+    them: the per-sample buffers, every shadow map, and each light's min-max tree."""
+    scene = inputs.scene
+    samples, pixels = inputs.samples, scene.image.width * scene.image.height
+    sizes = [("camera depth and triangle ids (64-bit)", 8 * samples), ("in-scattering", 16 * samples),
+             ("image", 16 * pixels)]
+    for index, (first, count) in enumerate(inputs.light_views):
+        views = inputs.views[first:first + count]
+        sizes.append((f"shadow map of light {index}", 4 * int((views["width"] * views["height"]).sum())))
+    if len(inputs.light_views) > 1:
+        sizes.append(("shadow maps of all lights together", 4 * inputs.shadow_texels))
+    if scene.render.method == "minmax" and np.any(scene.medium.sigma_s > 0):
+        gamma_samples = 1 << max(int(np.ceil(np.log2(scene.render.gamma_samples))), 1)
+        tree = 8 * scene.render.slices * 2 * gamma_samples
+        sizes += [(f"min-max tree of light {index}", tree) for index in range(len(scene.lights))]
+    return sizes
+
+
+def check_device_memory(device: Device, inputs: FrameInputs) -> None:
+    """Refuse, in one line naming the limit, a frame whose buffers the device cannot hold:
+    one larger than its largest allocation, or all together more than its memory."""
+    scene = inputs.scene
+    image = scene.image
+    what = (f"{image.width}×{image.height} at {image.spp} spp, {len(scene.lights)} light(s) with "
+            f"{scene.render.shadow_map}² shadow maps")
+    where = f"{scene.source}: " if scene.source else ""
+    sizes = frame_buffer_bytes(inputs)
+    name, largest = max(sizes, key=lambda item: item[1])
+    limit = int(device.device.max_mem_alloc_size)
+    if largest > limit:
+        raise ClraysError(f"{where}the frame ({what}) needs a {largest / 2**20:.0f} MiB buffer for the {name}, "
+                          f"more than the device's largest allocation of {limit / 2**20:.0f} MiB ({device.name}); "
+                          f"lower the image size, the light count or render.shadow_map")
+    total, memory = sum(size for _, size in sizes), int(device.device.global_mem_size)
+    if total > memory:
+        raise ClraysError(f"{where}the frame ({what}) needs {total / 2**30:.1f} GiB of device memory, more than "
+                          f"the device's {memory / 2**30:.1f} GiB ({device.name}); lower the image size, the "
+                          f"light count or render.shadow_map")
 
 
 class StageKeys:
