@@ -1,16 +1,44 @@
 /* shade — surface radiance at each camera sample (two-sided Lambertian, shadow-map
  * test with optional PCF), attenuated to the eye, plus the in-scattered radiance,
  * averaged over the pixel's samples.
- * Reads frame, views, lights, shadow_depth, camera_depth, tri_id, tri_normal,
- * tri_albedo, offsets, scatter; writes image (one float4 per pixel, linear rgb). */
+ * Reads frame, views, lights, shadow_depth, camera_depth, tri_id, tri_vertices,
+ * tri_normal, tri_vertex_normals, tri_albedo, offsets, scatter; writes image (one
+ * float4 per pixel, linear rgb). */
 #include "lighting.h"
 
 #define SURFACE_BIAS_TEXELS 1.5f /* depth tolerance of the surface shadow test */
 
+/* The shading normal of a smooth triangle where the sample ray meets it: its three vertex
+ * normals weighted by the barycentric coordinates of the hit (Möller–Trumbore on the ray,
+ * clamped to the triangle, as a sample by an edge may land just outside), normalised.
+ * `flat` where that is undefined: a ray in the triangle's plane, or normals that cancel. */
+inline float3 smooth_normal(global const float4* tri_vertices, global const float4* tri_vertex_normals,
+                            int tri, float3 origin, float3 dir, float3 flat)
+{
+    float3 v0 = tri_vertices[3 * tri].xyz;
+    float3 edge1 = tri_vertices[3 * tri + 1].xyz - v0, edge2 = tri_vertices[3 * tri + 2].xyz - v0;
+    float3 p = cross(dir, edge2);
+    float det = dot(edge1, p);
+    if (det == 0.0f) return flat;
+    float3 t = origin - v0;
+    float u = clamp(dot(t, p) / det, 0.0f, 1.0f);
+    float v = clamp(dot(dir, cross(t, edge1)) / det, 0.0f, 1.0f);
+    if (u + v > 1.0f) {
+        float sum = u + v;
+        u /= sum;
+        v /= sum;
+    }
+    float3 n = (1.0f - u - v) * tri_vertex_normals[3 * tri].xyz + u * tri_vertex_normals[3 * tri + 1].xyz
+               + v * tri_vertex_normals[3 * tri + 2].xyz;
+    float n_length = length(n);
+    return n_length > 0.0f ? n / n_length : flat;
+}
+
 kernel void shade(global const frame_t* frame, global const view_t* views,
                   global const light_t* lights, global const uint* shadow_depth,
                   global const uint* camera_depth, global const int* tri_id,
-                  global const float4* tri_normal, global const float4* tri_albedo,
+                  global const float4* tri_vertices, global const float4* tri_normal,
+                  global const float4* tri_vertex_normals, global const float4* tri_albedo,
                   global const float2* offsets, global const float4* scatter,
                   global float4* image)
 {
@@ -31,13 +59,21 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
             surface = frame->background.xyz;
         } else {
             float3 p = origin + distance * dir;
+            /* n, the triangle's own normal, picks the side and offsets the shadow lookup;
+             * the shading normal (n itself unless the triangle is smooth) weighs the light. */
             float3 n = tri_normal[tri].xyz;
-            if (dot(n, dir) > 0.0f) n = -n; /* two-sided: face the camera */
+            float3 shading = tri_normal[tri].w != 0.0f
+                                 ? smooth_normal(tri_vertices, tri_vertex_normals, tri, origin, dir, n)
+                                 : n;
+            if (dot(n, dir) > 0.0f) { /* two-sided: face the camera */
+                n = -n;
+                shading = -shading;
+            }
             float3 irradiance = (float3)(0.0f);
             for (int l = 0; l < frame->light_count; ++l) {
                 float3 to_light;
                 float3 incident = light_incident(lights + l, sigma_t, p, &to_light);
-                float cosine = dot(n, to_light);
+                float cosine = dot(shading, to_light);
                 if (cosine <= 0.0f || incident.x + incident.y + incident.z == 0.0f) continue;
                 /* Normal offset by a texel keeps a lit surface from shadowing itself. */
                 float3 lookup = p + n * shadow_texel_size(lights + l, length(p - lights[l].position.xyz));

@@ -61,7 +61,8 @@ class FrameInputs:
     params: np.ndarray  # frame_t
     offsets: np.ndarray  # (spp, 2) float32 sample offsets
     tri_vertices: np.ndarray  # (3T, 4) float32, eye space
-    tri_normal: np.ndarray  # (T, 4) float32, unit geometric normals
+    tri_normal: np.ndarray  # (T, 4) float32, unit geometric normals; w = 1 where the triangle is shaded smooth
+    tri_vertex_normals: np.ndarray  # (3T, 4) float32, the shading normal at each vertex; (0, 4) when none is smooth
     tri_albedo: np.ndarray  # (T, 4) float32
     shadow_texels: int  # size of the shared shadow depth buffer
     light_anchor_ws: np.ndarray  # (L, 3) float64: each light's shadow-map origin, world space
@@ -147,6 +148,11 @@ def frame_inputs(scene: Scene) -> FrameInputs:
     length = np.linalg.norm(normals, axis=1, keepdims=True)
     normals = np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
     pad = lambda a: np.concatenate([a, np.zeros((len(a), 1))], axis=1).astype(np.float32)  # noqa: E731
+    smooth = scene.geometry.smooth
+    tri_normal = pad(normals)
+    tri_normal[:, 3] = smooth  # the shade kernel's flag: interpolate the vertex normals
+    # Normals do not move with eye space's translation; a frame without smooth triangles uploads none.
+    vertex_normals = scene.geometry.normals.reshape(-1, 3) if smooth.any() else np.zeros((0, 3))
     return FrameInputs(
         scene=scene, eye_ws=eye_ws,
         views=np.array(views, dtype=structs.view_dtype),
@@ -154,7 +160,8 @@ def frame_inputs(scene: Scene) -> FrameInputs:
         params=params,
         offsets=sample_offsets(image.spp).astype(np.float32),
         tri_vertices=pad(tris.reshape(-1, 3)),
-        tri_normal=pad(normals),
+        tri_normal=tri_normal,
+        tri_vertex_normals=pad(vertex_normals),
         tri_albedo=pad(scene.geometry.albedo),
         shadow_texels=texels,
         light_anchor_ws=np.array(anchors, dtype=np.float64).reshape(-1, 3),
@@ -172,6 +179,7 @@ class FrameBuffers:
     offsets: object
     tri_vertices: object
     tri_normal: object
+    tri_vertex_normals: object
     tri_albedo: object
 
 
@@ -184,6 +192,7 @@ def upload(device: Device, inputs: FrameInputs) -> FrameBuffers:
         offsets=device.buffer(inputs.offsets, writable=False),
         tri_vertices=device.buffer(inputs.tri_vertices, writable=False),
         tri_normal=device.buffer(inputs.tri_normal, writable=False),
+        tri_vertex_normals=device.buffer(inputs.tri_vertex_normals, writable=False),
         tri_albedo=device.buffer(inputs.tri_albedo, writable=False),
     )
 

@@ -63,7 +63,8 @@ def scene_digest(scene, *, render: bool = True) -> bytes:
     animation, which only make other scenes). `render=False` leaves out the render
     settings, for references whose own settings are given separately."""
     return digest(scene.image, scene.camera, scene.lights, scene.medium, scene.background,
-                  scene.geometry.triangles, scene.geometry.albedo, scene.render if render else None)
+                  scene.geometry.triangles, scene.geometry.albedo, scene.geometry.normals, scene.geometry.smooth,
+                  scene.render if render else None)
 
 
 class StageCache:

@@ -7,8 +7,9 @@ channel (DESIGN.md §1, §4),
 
 - D is the first hit of the ray (Möller–Trumbore against every triangle), or camera.far
   for a miss, in which case L_surf is the background.
-- L_surf = albedo/π · Σ_lights Lin(x)·max(0, n·ω_l)·V(x), n the geometric normal turned
-  towards the camera, V by a shadow ray.
+- L_surf = albedo/π · Σ_lights Lin(x)·max(0, n·ω_l)·V(x), n the shading normal (the
+  geometric normal, or on a smooth mesh the interpolated vertex normals) turned towards the
+  camera with the geometric normal, V by a shadow ray.
 - The lit set of [0, D] is exact: a triangle's shadow volume is convex (the region
   beyond its plane inside the three planes through the light — or parallel to a
   directional light — and each edge), so it meets the ray in one interval found by
@@ -49,6 +50,34 @@ def estimate_seconds(scene: Scene, pixels: int | None = None) -> float:
     return pairs / PAIRS_PER_SECOND
 
 
+def _shading_normals(geometry, tri: np.ndarray, ids: np.ndarray, x: np.ndarray, face: np.ndarray) -> np.ndarray:
+    """Unit shading normals at hit points x on triangles `ids`: the face normal `face`, or on
+    a smooth triangle its vertex normals weighted by the barycentric coordinates of x
+    (clamped to the triangle, as the device does), falling back to `face` where they cancel."""
+    shading = face.copy()
+    smooth = np.flatnonzero(np.asarray(geometry.smooth)[ids])
+    if len(smooth) == 0:
+        return shading
+    corners = tri[ids[smooth]]
+    v0, e1, e2 = corners[:, 0], corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+    rel = x[smooth] - v0
+    d11, d12, d22 = dot(e1, e1), dot(e1, e2), dot(e2, e2)
+    r1, r2 = dot(rel, e1), dot(rel, e2)
+    denom = d11 * d22 - d12 * d12
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = np.clip((d22 * r1 - d12 * r2) / denom, 0.0, 1.0)
+        v = np.clip((d11 * r2 - d12 * r1) / denom, 0.0, 1.0)
+    over = u + v > 1.0
+    u[over], v[over] = u[over] / (u + v)[over], v[over] / (u + v)[over]
+    vertex_normals = np.asarray(geometry.normals, dtype=np.float64)[ids[smooth]]
+    n = (1.0 - u - v)[:, None] * vertex_normals[:, 0] + u[:, None] * vertex_normals[:, 1] \
+        + v[:, None] * vertex_normals[:, 2]
+    length = np.linalg.norm(n, axis=1)
+    good = np.isfinite(length) & (length > 0.0) & (denom > 0.0)
+    shading[smooth[good]] = n[good] / length[good, None]
+    return shading
+
+
 def _radiance(scene: Scene, eye: np.ndarray, dirs: np.ndarray, prepared, quad: dict) -> np.ndarray:
     """Radiance (N, 3) of unit rays from the eye (the model in the module docstring)."""
     n = len(dirs)
@@ -67,11 +96,14 @@ def _radiance(scene: Scene, eye: np.ndarray, dirs: np.ndarray, prepared, quad: d
         x = eye + t[hits, None] * dirs[hits]
         nrm = triangle_normals(tri[idx[hits]])
         nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
-        # Two-sided: the normal that faces the camera.
-        nrm *= np.where(dot(nrm, dirs[hits]) > 0, -1.0, 1.0)[:, None]
+        shading = _shading_normals(scene.geometry, tri, idx[hits], x, nrm)
+        # Two-sided: the face normal that faces the camera, and the shading normal with it.
+        facing = np.where(dot(nrm, dirs[hits]) > 0, -1.0, 1.0)[:, None]
+        nrm *= facing
+        shading *= facing
         irradiance = np.zeros((len(hits), 3))
         for light, _ in prepared:
-            cos_l = np.maximum(0.0, -dot(nrm, propagation_direction(light, x)))
+            cos_l = np.maximum(0.0, -dot(shading, propagation_direction(light, x)))
             lin = light_incident(light, x, sigma_t) * cos_l[:, None]
             lit = np.flatnonzero(np.any(lin > 0, axis=1))
             if len(lit):

@@ -22,7 +22,8 @@ from typing import Iterator, Literal, Mapping
 import numpy as np
 
 from .model import Geometry, Medium, Phase, Scene
-from .transforms import affine, quat_rotate, quat_to_matrix, slerp, transform_points
+from .geometry import flat_normals
+from .transforms import affine, quat_rotate, quat_to_matrix, slerp, transform_normals, transform_points
 
 #: Easing curves: the fraction of the way from one key to the next at t in [0, 1].
 EASINGS = {
@@ -90,14 +91,16 @@ def slerp_direction(a: np.ndarray, b: np.ndarray, t: float) -> np.ndarray:
 
 @dataclass(frozen=True)
 class ObjectRig:
-    """What an animated object is made of: its triangles before its transform, where they
-    sit in `Scene.geometry`, and its static transform (the values its tracks replace)."""
+    """What an animated object is made of: its triangles (and a smooth object's vertex
+    normals) before its transform, where they sit in `Scene.geometry`, and its static
+    transform (the values its tracks replace)."""
 
     local: np.ndarray  # (T, 3, 3) float64, the object's own coordinates
     rows: slice  # its triangles in Scene.geometry.triangles
     translate: np.ndarray  # (3,)
     rotate: np.ndarray  # unit quaternion [w, x, y, z]
     scale: np.ndarray  # (3,)
+    local_normals: np.ndarray | None = None  # (T, 3, 3) a smooth object's vertex normals; None: flat
 
 
 @dataclass(frozen=True)
@@ -155,13 +158,15 @@ class Animation:
     def _geometry(self, scene: Scene, frame: float) -> Geometry:
         if not self.objects:
             return scene.geometry
-        triangles = scene.geometry.triangles.copy()
+        triangles, normals = scene.geometry.triangles.copy(), scene.geometry.normals.copy()
         for rig, tracks in self.objects.values():
             parts = {"translate": rig.translate, "rotate": rig.rotate, "scale": rig.scale}
             parts.update({name: track.at(frame) for name, track in tracks.items()})
             matrix = affine(parts["translate"], quat_to_matrix(parts["rotate"]), parts["scale"])
             triangles[rig.rows] = transform_points(matrix, rig.local)
-        return replace(scene.geometry, triangles=triangles)
+            normals[rig.rows] = (flat_normals(triangles[rig.rows]) if rig.local_normals is None
+                                 else transform_normals(matrix, rig.local_normals))
+        return replace(scene.geometry, triangles=triangles, normals=normals)
 
 
 def frame_scenes(scene: Scene, frames=None) -> Iterator[tuple[int, Scene]]:

@@ -1,9 +1,11 @@
-"""Triangle tessellations of the scene's primitive objects, float64 numpy.
+"""Triangle tessellations of the scene's primitive objects and meshes, float64 numpy.
 
 Every function returns triangles of shape (T, 3, 3) in the object's local frame (the
 loader applies the object's transform afterwards). Surfaces are two-sided for the
 renderer, but closed shapes are still wound counter-clockwise seen from outside, so
 (b - a) x (c - a) is the outward normal; a plane's triangles face along its normal.
+Shading normals come per triangle vertex, (T, 3, 3): a mesh's vertex normals for smooth
+shading, or each triangle's own normal on all three of its vertices for flat shading.
 """
 from __future__ import annotations
 
@@ -39,9 +41,9 @@ def box_triangles(lo, hi) -> np.ndarray:
     return indexed_triangles(corners, faces)
 
 
-def sphere_triangles(center, radius: float, segments: int = 48) -> np.ndarray:
+def sphere_triangles(center, radius: float, segments: int) -> np.ndarray:
     """A UV sphere: `segments` slices around the y axis and segments // 2 rings from pole
-    to pole, so 2 * segments * (rings - 1) triangles (2208 for the default 48)."""
+    to pole, so 2 * segments * (rings - 1) triangles (2208 for 48 segments)."""
     if segments < 4:
         raise ValueError(f"a sphere needs at least 4 segments, got {segments}")
     rings = segments // 2
@@ -79,7 +81,7 @@ def plane_basis(normal) -> tuple[np.ndarray, np.ndarray]:
     return u, np.cross(n, u)
 
 
-def plane_triangles(center, normal, size: float, segments: int = 8) -> np.ndarray:
+def plane_triangles(center, normal, size: float, segments: int) -> np.ndarray:
     """A size x size square centred on `center`, perpendicular to the unit `normal`, as a
     segments x segments grid: 2 * segments**2 triangles facing along the normal."""
     u, v = plane_basis(normal)
@@ -93,8 +95,50 @@ def plane_triangles(center, normal, size: float, segments: int = 8) -> np.ndarra
     return np.concatenate([tri_a, tri_b])
 
 
-def load_mesh_triangles(path: Path) -> np.ndarray:
-    """Read an OBJ, PLY or STL file with trimesh, as (T, 3, 3) triangles.
+def flat_normals(triangles: np.ndarray) -> np.ndarray:
+    """Each triangle's unit normal (b - a) x (c - a) on all three of its vertices, (T, 3, 3);
+    zero for a triangle without area."""
+    triangles = np.asarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
+    normals = _unit_rows(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]))
+    return np.repeat(normals[:, None], 3, axis=1)
+
+
+def _unit_rows(v: np.ndarray) -> np.ndarray:
+    """Rows of v normalised; rows of zero length stay zero."""
+    length = np.linalg.norm(v, axis=-1, keepdims=True)
+    return np.divide(v, length, out=np.zeros_like(v), where=length > 0)
+
+
+def smooth_normals(vertices: np.ndarray, faces: np.ndarray, given: np.ndarray | None = None) -> np.ndarray:
+    """The normal at each vertex of each face, (F, 3, 3), for smooth shading.
+
+    A vertex's normal is `given[vertex]` (a file's vertex normals) where that is finite and
+    non-zero, else the mean of the normals of the faces that share the vertex, weighted
+    by their areas. Faces share a vertex by index, as the file wrote them, so a mesh that
+    repeats vertices along an edge (every STL file) keeps that edge sharp. A vertex whose
+    faces' normals cancel takes each face's own normal.
+    """
+    v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    cross = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])  # |cross| = twice the face's area
+    summed = np.zeros_like(v)
+    for corner in range(3):
+        np.add.at(summed, f[:, corner], cross)
+    normals = _unit_rows(summed)
+    if given is not None:
+        given = np.asarray(given, dtype=np.float64).reshape(-1, 3)
+        usable = np.isfinite(given).all(axis=1)
+        given = _unit_rows(np.where(usable[:, None], given, 0.0))
+        normals = np.where(np.any(given != 0.0, axis=1, keepdims=True), given, normals)
+    corners = normals[f]
+    missing = ~np.any(corners != 0.0, axis=2, keepdims=True)
+    return np.where(missing, flat_normals(v[f]), corners)
+
+
+def load_mesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """Read an OBJ, PLY or STL file with trimesh: (triangles (T, 3, 3), the smooth normal
+    at each of their vertices (T, 3, 3), from `smooth_normals` with the file's vertex
+    normals where it has them).
 
     Raises ValueError with a one-line reason for an unknown suffix, a missing, unreadable
     or corrupt file, a file without triangles, or non-finite vertices.
@@ -107,13 +151,21 @@ def load_mesh_triangles(path: Path) -> np.ndarray:
     import trimesh  # slow to import; only scenes with meshes pay for it
 
     try:
-        mesh = trimesh.load(str(path), force="mesh", process=False)
-        vertices = np.asarray(mesh.vertices, dtype=np.float64)
-        faces = np.asarray(mesh.faces, dtype=np.int64)
+        # A file of one mesh loads as that mesh, with the vertex normals it holds; one of
+        # several is concatenated (and its normals are recomputed).
+        loaded = trimesh.load(str(path), process=False)
+        if isinstance(loaded, trimesh.Scene):
+            loaded = loaded.to_mesh()
     except Exception as exc:  # trimesh raises many types for corrupt files
         detail = " ".join(str(exc).split())
         reason = f"{type(exc).__name__}: {detail}" if detail else type(exc).__name__
         raise ValueError(f"not a valid {path.suffix.lower()[1:].upper()} file ({reason})") from None
+    if not isinstance(loaded, trimesh.Trimesh):
+        raise ValueError("the file has no triangles")
+    vertices = np.asarray(loaded.vertices, dtype=np.float64)
+    faces = np.asarray(loaded.faces, dtype=np.int64)
+    # trimesh computes vertex normals on demand; only those read from the file sit in its cache.
+    given = np.asarray(loaded.vertex_normals) if "vertex_normals" in loaded._cache else None
     if faces.ndim != 2 or faces.shape[0] == 0 or faces.shape[1] != 3:
         raise ValueError("the file has no triangles")
     if faces.min() < 0 or faces.max() >= len(vertices):
@@ -121,4 +173,9 @@ def load_mesh_triangles(path: Path) -> np.ndarray:
     tris = indexed_triangles(vertices, faces)
     if not np.isfinite(tris).all():
         raise ValueError("the file has non-finite vertex coordinates")
-    return tris
+    return tris, smooth_normals(vertices, faces, given)
+
+
+def load_mesh_triangles(path: Path) -> np.ndarray:
+    """The triangles of `load_mesh`, (T, 3, 3)."""
+    return load_mesh(path)[0]

@@ -13,6 +13,8 @@ from typing import TYPE_CHECKING, Literal, Union
 
 import numpy as np
 
+from .geometry import flat_normals
+
 if TYPE_CHECKING:
     from .animation import Animation
 
@@ -25,6 +27,7 @@ METHODS = ("minmax", "raymarch", "exact")
 INTEGRAND_MODES = ("table", "svd", "analytic")
 TRAVERSALS = ("tree", "scan")
 PHASE_TYPES = ("isotropic", "hg")
+NORMALS = ("smooth", "flat")  # a mesh's shading normals: interpolated vertex normals, or each face's own
 
 
 @dataclass(frozen=True)
@@ -103,11 +106,22 @@ class Render:
 
 @dataclass(frozen=True)
 class Geometry:
-    """All objects, flattened. Triangle t has vertices triangles[t] (3, 3) and albedo albedo[t]."""
+    """All objects, flattened. Triangle t has vertices triangles[t] (3, 3), albedo albedo[t],
+    and the shading normal normals[t, i] at its vertex i; where smooth[t] the renderer
+    interpolates those across the triangle, elsewhere it shades with the face normal
+    (which flat triangles also hold at every vertex)."""
 
     triangles: np.ndarray  # (T, 3, 3) float64, world space
     albedo: np.ndarray  # (T, 3) float64, RGB in [0, 1]
     object_id: np.ndarray  # (T,) int32, index into Scene.objects order
+    normals: np.ndarray = None  # (T, 3, 3) float64, world space, unit; None: the face normals
+    smooth: np.ndarray = None  # (T,) bool; None: no triangle is smooth
+
+    def __post_init__(self):
+        if self.normals is None:
+            object.__setattr__(self, "normals", flat_normals(self.triangles))
+        if self.smooth is None:
+            object.__setattr__(self, "smooth", np.zeros(len(self.triangles), dtype=bool))
 
     @property
     def count(self) -> int:

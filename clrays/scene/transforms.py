@@ -1,4 +1,6 @@
-"""Rigid and affine transforms, quaternions and camera matrices, float64 numpy.
+"""Rotations, quaternions and affine transforms of points and normals, float64 numpy:
+what the loader (object transforms), the animation (SLERP, camera orientation) and the
+shading normals need.
 
 Conventions:
 
@@ -8,9 +10,6 @@ Conventions:
 * Angles are in radians.
 * Quaternions are arrays ``[w, x, y, z]`` (scalar first); rotation quaternions are unit.
 * Homogeneous matrices are 4x4 with the translation in the last column.
-* Camera space follows OpenGL: the camera sits at the origin looking down -z, +y up.
-* Pixel coordinates have y = 0 at the top row; pixel (i, j) covers [i, i+1) x [j, j+1),
-  so its centre is at (i + 0.5, j + 0.5), matching `clrays.scene.camera`.
 """
 from __future__ import annotations
 
@@ -108,12 +107,6 @@ def quat_normalize(q) -> np.ndarray:
     return _unit(q, "quaternion")
 
 
-def quat_from_axis_angle(axis, angle_rad: float) -> np.ndarray:
-    """Unit quaternion [cos(a/2), sin(a/2) * unit axis] for a rotation of a radians."""
-    u = _unit(axis, "rotation axis")
-    return np.concatenate([[np.cos(angle_rad / 2)], np.sin(angle_rad / 2) * u])
-
-
 def quat_rotate(q, v) -> np.ndarray:
     """Rotate the 3-vector v by q, computed literally as the vector part of q·(0, v)·q⁻¹."""
     p = np.concatenate([[0.0], np.asarray(v, dtype=np.float64)])
@@ -200,35 +193,8 @@ def transform_points(m4, pts) -> np.ndarray:
 
 
 def transform_normals(m4, normals) -> np.ndarray:
-    """Map normals of shape (..., 3) by the inverse transpose of m4's 3x3 and re-normalise."""
+    """Map normals of shape (..., 3) by the inverse transpose of m4's 3x3 and re-normalise
+    (zero normals stay zero)."""
     n = np.asarray(normals, dtype=np.float64) @ normal_matrix(m4).T
-    return n / np.linalg.norm(n, axis=-1, keepdims=True)
-
-
-def look_at(eye, target, up) -> np.ndarray:
-    """4x4 world->camera view matrix: eye goes to the origin, target onto the -z axis and
-    up into the y-z half-plane with y > 0 (OpenGL's gluLookAt). Positions in world units."""
-    eye = np.asarray(eye, dtype=np.float64)
-    forward = _unit(np.asarray(target, dtype=np.float64) - eye, "target - eye")
-    right = np.cross(forward, np.asarray(up, dtype=np.float64))
-    # |right| = |up| sin(angle); compare relative to |up| so the test is scale-free.
-    if np.linalg.norm(right) <= 1e-12 * np.linalg.norm(up):
-        raise ValueError(f"up {up} is zero or parallel to the view direction {forward}")
-    right /= np.linalg.norm(right)
-    true_up = np.cross(right, forward)
-    m = np.eye(4)
-    m[:3, :3] = np.stack([right, true_up, -forward])  # rows: the camera axes in world space
-    m[:3, 3] = -m[:3, :3] @ eye
-    return m
-
-
-def viewport(width: int, height: int) -> np.ndarray:
-    """4x4 from NDC to pixels: x in [-1, 1] -> [0, width], y in [-1, 1] -> [height, 0]
-    (y = 0 is the top row, so NDC +y is up), z in [-1, 1] -> [0, 1]. Pixel centres land
-    at half-integers; width and height are in pixels."""
-    return np.array([
-        [width / 2, 0.0, 0.0, width / 2],
-        [0.0, -height / 2, 0.0, height / 2],
-        [0.0, 0.0, 0.5, 0.5],
-        [0.0, 0.0, 0.0, 1.0],
-    ])
+    length = np.linalg.norm(n, axis=-1, keepdims=True)
+    return np.divide(n, length, out=np.zeros_like(n), where=length > 0)

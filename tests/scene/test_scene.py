@@ -432,7 +432,7 @@ BAD = [
     ({"background": [0, 0]}, r"background: expected a list of 3 numbers"),
     ({"background": "black"}, r"background: expected a number >= 0, got 'black'"),
     # render
-    ({"render": {"method": "pathtrace"}}, r"render\.method: expected one of 'raymarch', 'exact', 'minmax', got 'pathtrace'"),
+    ({"render": {"method": "pathtrace"}}, r"render\.method: expected one of 'minmax', 'raymarch', 'exact', got 'pathtrace'"),
     ({"render": {"steps": 0}}, r"render\.steps: expected an integer in \[1, 65536\], got 0"),
     ({"render": {"steps": 65537}}, r"render\.steps: expected an integer in \[1, 65536\], got 65537"),
     ({"render": {"steps": 2.5}}, r"render\.steps: expected an integer in \[1, 65536\], got 2\.5"),
@@ -442,7 +442,7 @@ BAD = [
     ({"render": {"gamma_samples": 20000}}, r"render\.gamma_samples: expected an integer in \[16, 16384\], got 20000"),
     ({"render": {"svd_rank": 0}}, r"render\.svd_rank: expected an integer in \[1, 16\], got 0"),
     ({"render": {"svd_rank": 17}}, r"render\.svd_rank: expected an integer in \[1, 16\], got 17"),
-    ({"render": {"integrand": "magic"}}, r"render\.integrand: expected one of 'svd', 'table', 'analytic', got 'magic'"),
+    ({"render": {"integrand": "magic"}}, r"render\.integrand: expected one of 'table', 'svd', 'analytic', got 'magic'"),
     ({"render": {"traversal": "bfs"}}, r"render\.traversal: expected one of 'tree', 'scan', got 'bfs'"),
     ({"render": {"jitter": "yes please"}}, r"render\.jitter: expected true or false, got 'yes please'"),
     ({"render": {"jitter": 1}}, r"render\.jitter: expected true or false, got 1"),

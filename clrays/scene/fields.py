@@ -1,0 +1,240 @@
+"""The scene format's keys, written once: the type, default, range and choices of each.
+
+`clrays.scene.load` reads its limits, defaults and choices from these tables, and
+`tools/scene_format_doc.py` writes the reference tables of docs/scene-format.md from
+them, so the loader and its documentation cannot drift apart. Defaults of keys that
+have a field in `clrays.scene.model` are that model's defaults.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from .animation import EASINGS
+from .model import INTEGRAND_MODES, METHODS, NORMALS, TRAVERSALS, Camera, Image, Render
+
+FORMAT_VERSION = 1
+MAX_IMAGE_PIXELS = 1 << 26
+#: Largest light power accepted: beyond it float32 radiance on the device overflows.
+MAX_POWER = 1e30
+QUATERNION_TOLERANCE = 1e-6  # how far from 1 a rotation quaternion's norm may be
+
+
+class _Required:
+    def __repr__(self) -> str:
+        return "REQUIRED"
+
+
+#: The default of a key that must be written.
+REQUIRED: Any = _Required()
+
+
+@dataclass(frozen=True)
+class Field:
+    """One key: its type as the docs name it, its default (REQUIRED when it must be
+    written, None when leaving it out means more than a value, which `shown_default`
+    then says), its numeric range (inclusive unless open), its choices, and words for
+    the docs: a `rule` the range column adds, and `notes`."""
+
+    key: str
+    type: str
+    default: Any = None
+    low: float | None = None
+    high: float | None = None
+    low_open: bool = False
+    high_open: bool = False
+    choices: tuple[str, ...] = ()
+    rule: str = ""
+    shown_default: str = ""
+    notes: str = ""
+
+    @property
+    def required(self) -> bool:
+        return self.default is REQUIRED
+
+
+@dataclass(frozen=True)
+class Section:
+    """The keys of one mapping of the format. `name` is the dotted path the docs' markers
+    use (`render`, `lights.spot`); a typed mapping (a light, an object, a phase) also has
+    a `type` key naming `kind`, not listed in `fields`. `rules` are constraints across
+    keys, in words for the docs."""
+
+    name: str
+    fields: tuple[Field, ...]
+    kind: str = ""
+    rules: tuple[str, ...] = ()
+
+    def __getitem__(self, key: str) -> Field:
+        return next(field for field in self.fields if field.key == key)
+
+    @property
+    def required(self) -> tuple[str, ...]:
+        return tuple(field.key for field in self.fields if field.required)
+
+    @property
+    def optional(self) -> tuple[str, ...]:
+        return tuple(field.key for field in self.fields if not field.required)
+
+
+def _typed(group: str, kinds: dict[str, tuple[Field, ...]]) -> dict[str, Section]:
+    return {kind: Section(f"{group}.{kind}", fields, kind) for kind, fields in kinds.items()}
+
+
+def kinds(sections: dict[str, Section]) -> dict[str, tuple[tuple[str, ...], tuple[str, ...]]]:
+    """type -> (required keys, optional keys) of a typed group, as the loader checks them."""
+    return {kind: (section.required, section.optional) for kind, section in sections.items()}
+
+
+TOP = Section("top", (
+    Field("version", "integer", REQUIRED, notes=f"must be `{FORMAT_VERSION}` (checked before anything else)"),
+    Field("image", "mapping", REQUIRED, notes="[image](#image)"),
+    Field("camera", "mapping", REQUIRED, notes="[camera](#camera)"),
+    Field("lights", "list of mappings", REQUIRED, notes="at least one light; [lights](#lights)"),
+    Field("medium", "mapping", shown_default="no medium: σs = σa = 0, isotropic", notes="[medium](#medium)"),
+    Field("background", "RGB", 0.0, low=0.0, notes="radiance of rays that leave the scene"),
+    Field("objects", "list of mappings", shown_default="`[]`", notes="[objects](#objects)"),
+    Field("render", "mapping", shown_default="all defaults", notes="[render](#render)"),
+    Field("animation", "mapping", shown_default="a still scene (one frame, 0)", notes="[animation](#animation)"),
+))
+
+IMAGE = Section("image", (
+    Field("width", "integer", REQUIRED, 1, 16384, notes="pixels"),
+    Field("height", "integer", REQUIRED, 1, 16384, notes="pixels"),
+    Field("spp", "integer", Image.spp, 1, 4096, notes="samples per pixel"),
+), rules=(f"`width * height` must be at most {MAX_IMAGE_PIXELS} pixels.",))
+
+CAMERA = Section("camera", (
+    Field("position", "vec3", REQUIRED, notes="scene units"),
+    Field("look_at", "vec3", REQUIRED, rule="≠ `position`", notes="scene units"),
+    Field("up", "direction", (0, 1, 0), rule="not parallel to `look_at - position` (normalised on load)"),
+    Field("fov_deg", "number", Camera.fov_deg, 0.0, 180.0, low_open=True, high_open=True,
+          notes="degrees, vertical field of view"),
+    Field("far", "number", Camera.far, 0.0, low_open=True,
+          notes="scene units; a ray that hits nothing runs through the medium this far"),
+))
+
+_POSITION = Field("position", "vec3", REQUIRED, notes="scene units")
+LIGHTS = _typed("lights", {
+    "point": (
+        _POSITION,
+        Field("intensity", "RGB", REQUIRED, 0.0, MAX_POWER, notes="radiant intensity, W/sr"),
+    ),
+    "spot": (
+        _POSITION,
+        Field("direction", "direction", REQUIRED, rule="normalised on load",
+              notes="the cone's axis, the way light travels"),
+        Field("cone_deg", "number", REQUIRED, 0.0, 90.0, low_open=True, notes="degrees, half-angle of the cone"),
+        Field("intensity", "RGB", REQUIRED, 0.0, MAX_POWER, notes="W/sr inside the cone"),
+    ),
+    "directional": (
+        Field("direction", "direction", REQUIRED, rule="normalised on load",
+              notes="the way light travels: `[0, -1, 0]` shines down"),
+        Field("irradiance", "RGB", REQUIRED, 0.0, MAX_POWER, notes="W/m² on a surface facing the light"),
+    ),
+})
+
+MEDIUM = Section("medium", (
+    Field("sigma_s", "RGB", 0.0, low=0.0, notes="scattering coefficient, 1 / scene unit"),
+    Field("sigma_a", "RGB", 0.0, low=0.0, notes="absorption coefficient, 1 / scene unit"),
+    Field("phase", "mapping", shown_default="`{type: isotropic}`", notes="phase function, below"),
+))
+
+PHASES = _typed("medium.phase", {
+    "isotropic": (),
+    "hg": (Field("g", "number", REQUIRED, -1.0, 1.0, low_open=True, high_open=True,
+                 notes="Henyey–Greenstein asymmetry: g > 0 scatters forward"),),
+})
+
+OBJECT = Section("objects", (
+    Field("albedo", "RGB", 0.8, 0.0, 1.0, rule="per channel", notes="diffuse reflectance"),
+    Field("transform", "mapping", shown_default="none",
+          notes="[transform](#transform), applied to the object's local geometry"),
+))
+
+OBJECTS = _typed("objects", {
+    "triangles": (
+        Field("vertices", "list of vec3", REQUIRED, rule="at least 3"),
+        Field("faces", "list of `[i, j, k]`", REQUIRED,
+              rule="at least 1; integer indices into `vertices`, in [0, len(vertices) - 1]"),
+    ),
+    "plane": (
+        Field("center", "vec3", REQUIRED, notes="scene units"),
+        Field("normal", "direction", REQUIRED, notes="normalised; triangles face this way"),
+        Field("size", "number", REQUIRED, 0.0, low_open=True, notes="side length, scene units"),
+        Field("segments", "integer", 8, 1, 1024, notes="cells per side: 2 · segments² triangles"),
+    ),
+    "box": (
+        Field("min", "vec3", REQUIRED),
+        Field("max", "vec3", REQUIRED, rule="greater than `min` on every axis"),
+    ),
+    "sphere": (
+        Field("center", "vec3", REQUIRED, notes="scene units"),
+        Field("radius", "number", REQUIRED, 0.0, low_open=True, notes="scene units"),
+        Field("segments", "integer", 48, 4, 1024, notes="slices around the y axis"),
+    ),
+    "mesh": (
+        Field("file", "string", REQUIRED, rule="`.obj`, `.ply` or `.stl`",
+              notes="relative paths start at the YAML file's folder (the working directory for "
+                    "`parse_scene` without a source)"),
+        Field("normals", "string", "smooth", choices=NORMALS,
+              notes="shading: `smooth` interpolates vertex normals across each triangle, `flat` uses each "
+                    "triangle's own normal ([below](#shading-normals))"),
+    ),
+})
+
+TRANSFORM = Section("objects.transform", (
+    Field("translate", "vec3", (0, 0, 0), notes="scene units"),
+    Field("rotate", "mapping", shown_default="no rotation", notes="exactly one of the forms below"),
+    Field("scale", "number or vec3", 1.0, 0.0, low_open=True, rule="every component",
+          notes="a number scales uniformly"),
+))
+
+ROTATE = Section("objects.transform.rotate", (
+    Field("axis", "direction", notes="axis–angle form, with `angle_deg`"),
+    Field("angle_deg", "number", notes="axis–angle form: degrees about `axis`"),
+    Field("euler_deg", "3 numbers", notes="Euler form: degrees about the axes of `order`"),
+    Field("order", "string", "xyz", rule="3 letters over `xyz`, no two adjacent letters equal",
+          notes="Euler form: intrinsic, R = R_{order[0]}(a0) · R_{order[1]}(a1) · R_{order[2]}(a2)"),
+    Field("quaternion", "`[w, x, y, z]`", rule=f"unit: ‖q‖ within {QUATERNION_TOLERANCE:g} of 1",
+          notes="quaternion form"),
+), rules=("Exactly one form: `axis` with `angle_deg`, `euler_deg` (with `order` or not), or `quaternion`.",))
+
+RENDER = Section("render", (
+    Field("method", "string", Render.method, choices=METHODS, notes="volumetric integrator (README: Methods)"),
+    Field("steps", "integer", Render.steps, 1, 65536, notes="raymarch samples per pixel ray"),
+    Field("jitter", "boolean", Render.jitter, notes="raymarch: jitter sample positions (seeded per pixel)"),
+    Field("shadow_map", "integer", Render.shadow_map, 16, 8192,
+          notes="shadow map side in texels (cube maps: per face)"),
+    Field("pcf", "integer", Render.pcf, 0, 16, notes="surface shadow filter radius in texels (0 = hard)"),
+    Field("slices", "integer", Render.slices, 16, 16384, notes="min-max: epipolar slices"),
+    Field("gamma_samples", "integer", Render.gamma_samples, 16, 16384,
+          notes="min-max: samples along each slice (rounded up to a power of two)"),
+    Field("integrand", "string", Render.integrand, choices=INTEGRAND_MODES,
+          notes="min-max: how the scattering integrand is evaluated ([docs/integrand.md](integrand.md)); "
+                "`analytic` exists for directional lights only (a point light's closed form needs σt = 0)"),
+    Field("svd_rank", "integer", Render.svd_rank, 1, 16,
+          notes="min-max, `integrand: svd`: rank of the factorisation"),
+    Field("traversal", "string", Render.traversal, choices=TRAVERSALS,
+          notes="min-max: min-max tree traversal or a linear scan"),
+))
+
+ANIMATION = Section("animation", (
+    Field("frames", "`[first, last]`", REQUIRED, 0, 100_000, rule="integers, first ≤ last",
+          notes="the frames the sequence renders, both inclusive"),
+    Field("fps", "number", 24.0, 0.0, 1000.0, low_open=True,
+          notes="frames per second: the animation's speed in `--video` output"),
+    Field("easing", "string", "linear", choices=tuple(EASINGS),
+          notes="every key's easing unless the key sets its own"),
+    Field("camera", "list of keys", notes="keys of `position`, `look_at`, `up`, `orientation`, `fov_deg`"),
+    Field("lights", "list of `{light: i, keys: [...]}`",
+          notes="`i` indexes `lights`; keys of that light's own fields (below)"),
+    Field("objects", "list of `{object: i, keys: [...]}`",
+          notes="`i` indexes `objects`; keys of `translate`, `rotate`, `scale`"),
+    Field("medium", "list of keys", notes="keys of `sigma_s`, `sigma_a`, `g`"),
+))
+
+#: Every section, by the name the docs' markers use, in the order of the format.
+SECTIONS: dict[str, Section] = {section.name: section for section in (
+    TOP, IMAGE, CAMERA, *LIGHTS.values(), MEDIUM, *PHASES.values(), OBJECT, *OBJECTS.values(), TRANSFORM,
+    ROTATE, RENDER, ANIMATION)}
