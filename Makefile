@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-slow bench info clean
+.PHONY: demo test test-device test-slow bench info clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -16,8 +16,17 @@ demo: $(STAMP)
 	mkdir -p out
 	$(BIN)/clrays render scenes/demo.yaml -o out/demo.png
 
+# The suite runs on PoCL's CPU device whatever CLRAYS_DEVICE says (tests/conftest.py pins
+# it), as CI does. `make test-device DEVICE=nvidia` runs it on another device instead:
+# DEVICE is a `--device` spec, `P:D` or a name substring (see `make info`); the golden
+# images are PoCL renders, so tests/golden skips on any other device. Rewrite the golden
+# images (after a change meant to move them): .venv/bin/python -m pytest tests/golden --regen-golden
 test: $(STAMP)
 	$(BIN)/python -m pytest
+
+test-device: $(STAMP)
+	@test -n "$(DEVICE)" || { echo "usage: make test-device DEVICE=<spec, e.g. nvidia or 1:0>"; exit 2; }
+	CLRAYS_TEST_DEVICE='$(DEVICE)' $(BIN)/python -m pytest
 
 test-slow: $(STAMP)
 	$(BIN)/python -m pytest -m slow

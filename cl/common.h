@@ -1,20 +1,27 @@
 /* common.h — the one C definition of every struct shared by host and device.
  * clrays/structs.py mirrors each struct as a numpy dtype (same fields, same order);
- * tests/test_layout.py checks sizes and offsets against the device. */
+ * tests/layout/test_layout.py checks sizes and offsets against the device.
+ *
+ * The enumerations and constants shared with Python are defined in clrays/structs.py
+ * only and reach every build as -D options (clrays.device.build_options):
+ *   PROJECTION_PERSPECTIVE, PROJECTION_ORTHOGRAPHIC       view_t.projection
+ *   LIGHT_POINT, LIGHT_SPOT, LIGHT_DIRECTIONAL            light_t.type, integrand_t.light_type
+ *   PHASE_ISOTROPIC, PHASE_HG                             frame_t.phase_type
+ *   INTEGRAND_TABLE, INTEGRAND_SVD, INTEGRAND_ANALYTIC    integrand_t.mode
+ *   TRAVERSAL_TREE, TRAVERSAL_SCAN                        traverse.cl's TRAVERSAL
+ *   DEPTH_EMPTY      as_uint(+INFINITY): nothing rasterized here (uint)
+ *   LAMP_RADIUS_REL  radius of a point or spot light's medium-free ball, × far (float)
+ *   SIN_BETA_MIN     the clamp of sinβ in every 1/sinβ (float) */
 #ifndef CLRAYS_COMMON_H
 #define CLRAYS_COMMON_H
 
-#define PROJECTION_PERSPECTIVE 0
-#define PROJECTION_ORTHOGRAPHIC 1
-
-#define LIGHT_POINT 0
-#define LIGHT_SPOT 1
-#define LIGHT_DIRECTIONAL 2
-
-#define PHASE_ISOTROPIC 0
-#define PHASE_HG 1
-
-#define DEPTH_EMPTY 0x7f800000u /* as_uint(+INFINITY): nothing rasterized here */
+#if !defined(PROJECTION_PERSPECTIVE) || !defined(PROJECTION_ORTHOGRAPHIC) || !defined(LIGHT_POINT) \
+    || !defined(LIGHT_SPOT) || !defined(LIGHT_DIRECTIONAL) || !defined(PHASE_ISOTROPIC) || !defined(PHASE_HG) \
+    || !defined(INTEGRAND_TABLE) || !defined(INTEGRAND_SVD) || !defined(INTEGRAND_ANALYTIC) \
+    || !defined(TRAVERSAL_TREE) || !defined(TRAVERSAL_SCAN) || !defined(DEPTH_EMPTY) \
+    || !defined(LAMP_RADIUS_REL) || !defined(SIN_BETA_MIN)
+#error "the constants of clrays/structs.py are missing: build with clrays.device.build_options()"
+#endif
 
 /* A pinhole or orthographic view: the camera, a spot light's map, a cube face,
  * a directional light's map. All positions are in eye space: world space
@@ -75,7 +82,7 @@ typedef struct {
     int _pad1;
 } frame_t;
 
-/* The epipolar frame of one light for one frame (DESIGN §2, §3).
+/* The epipolar frame of one light for one frame (docs/design.md §2, §3).
  *
  *            light l (or ω towards a directional light)
  *              *
@@ -106,7 +113,7 @@ typedef struct {
     int _pad2;
 } epipolar_t;
 
-/* The integrand tables of one light for one frame (DESIGN §4, clrays/integrand.py):
+/* The integrand tables of one light for one frame (docs/design.md §4, clrays/stages/integrand.py):
  * what turns a lit interval [γ0, γ1) of ray β into radiance. */
 typedef struct {
     float4 amplitude; /* σs·I (point, spot) or σs·E (directional), rgb */
@@ -125,9 +132,5 @@ typedef struct {
     int _pad1;
     int _pad2;
 } integrand_t;
-
-#define INTEGRAND_TABLE 0
-#define INTEGRAND_SVD 1
-#define INTEGRAND_ANALYTIC 2
 
 #endif

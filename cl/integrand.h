@@ -1,5 +1,5 @@
 /* integrand.h — radiance of a lit interval [γ0, γ1) of camera ray β, from the tables
- * clrays/integrand.py builds per frame; a line-by-line port of its segment_radiance
+ * clrays/stages/integrand.py builds per frame; a line-by-line port of its segment_radiance
  * (docs/integrand.md has the derivation and the measured errors). Every mode is
  *
  *     L = row_scale(β) · [F(β, x(β, γ1)) - F(β, x(β, γ0))]
@@ -17,7 +17,8 @@
 #define CLRAYS_INTEGRAND_H
 #include "lighting.h"
 
-#define SIN_BETA_MIN 1e-9f
+/* SIN_BETA_MIN, the clamp of sinβ in every 1/sinβ, comes from clrays/structs.py (-D): the
+ * host's tables use the same one. */
 
 /* Cell index in [0, n-2] and the fraction within it. */
 inline int grid_split(float coordinate, int n, float* fraction)

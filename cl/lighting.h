@@ -1,6 +1,6 @@
 /* lighting.h — device functions shared by the stages: view rays and projections,
  * incident light, phase function, shadow-map visibility. Radiometry as in
- * DESIGN §1: Lin = I·exp(-σt·d)/d² (point, spot inside its cone), Lin = E (directional). */
+ * docs/design.md §1: Lin = I·exp(-σt·d)/d² (point, spot inside its cone), Lin = E (directional). */
 #ifndef CLRAYS_LIGHTING_H
 #define CLRAYS_LIGHTING_H
 #include "common.h"
@@ -9,11 +9,10 @@
 
 /* A point or spot light is a lamp: a ball of radius LAMP_RADIUS_REL·far around it holds no
  * medium, which keeps a ray through the light and the eye at the light finite
- * (clrays/radiometry.py, LAMP_RADIUS_REL, says why; the two values must agree). */
-#define LAMP_RADIUS_REL 1e-6f
+ * (clrays/reference/radiometry.py says why; the value comes from clrays/structs.py). */
 
 /* The eye (eye space's origin) is inside a point or spot light's lamp, d_el → 0: then every
- * point the eye sees, the light sees too, and nothing visible is shadowed (DESIGN §6). A
+ * point the eye sees, the light sees too, and nothing visible is shadowed (docs/design.md §6). A
  * shadow-map test there would only add its texel-wide errors along every silhouette. */
 inline int eye_in_lamp(global const light_t* light, float far)
 {
@@ -73,7 +72,7 @@ inline float phase_function(global const frame_t* frame, float cos_theta)
     return INV_FOUR_PI * (1.0f - g * g) / (denom * sqrt(denom));
 }
 
-/* Incident radiance-carrying quantity at p (DESIGN §1) and the unit direction from p
+/* Incident radiance-carrying quantity at p (docs/design.md §1) and the unit direction from p
  * towards the light. */
 inline float3 light_incident(global const light_t* light, float3 sigma_t, float3 p, float3* to_light)
 {

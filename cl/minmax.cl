@@ -1,13 +1,8 @@
 /* minmax — one level of the 1D min-max mipmap of every rectified row, by parallel
  * reduction: node i of level k is (min, max) of nodes 2i and 2i + 1 of level k - 1.
- * Reads and writes tree (layout in rectify.cl); one launch per level. */
+ * Reads epipolar; reads and writes tree (layout in minmax.h); one launch per level. */
 #include "common.h"
-
-/* Offset of level k inside a row of 2N nodes: N + N/2 + ... (k terms). */
-inline int level_offset(int gamma_samples, int level)
-{
-    return 2 * gamma_samples - (2 * gamma_samples >> level);
-}
+#include "minmax.h"
 
 kernel void minmax_reduce(global const epipolar_t* epipolar, int level, global float2* tree)
 {

@@ -8,17 +8,12 @@
  * one whose max ≤ β wholly shadowed, else descend; after a node, move to the next
  * one and climb while its index is even. TRAVERSAL_SCAN reads every texel. */
 #include "integrand.h"
+#include "minmax.h"
 
-#define TRAVERSAL_TREE 0
-#define TRAVERSAL_SCAN 1
+/* TRAVERSAL_TREE and TRAVERSAL_SCAN come from clrays/structs.py (-D). */
 #ifndef TRAVERSAL
 #define TRAVERSAL TRAVERSAL_TREE
 #endif
-
-inline int level_offset(int gamma_samples, int level)
-{
-    return 2 * gamma_samples - (2 * gamma_samples >> level);
-}
 
 /* Radiance of the lit part of [gamma_begin, gamma_end) of ray beta along one row.
  * Adjacent lit nodes merge into one run, so the integrand is evaluated once per run. */

@@ -1,8 +1,9 @@
 """The OpenCL device: which one, its context and queue, and building the stage kernels.
 
 Device choice: `--device` or `CLRAYS_DEVICE` (an index like `0:1` for platform 0,
-device 1, or a case-insensitive substring of the platform or device name such as
-`pocl` or `nvidia`); by default the first GPU, else the first CPU device.
+device 1, or a case-insensitive substring of the platform's name or vendor or the
+device's name, such as `pocl` or `nvidia`); by default the first GPU, else the first
+CPU device.
 """
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import structs
 from .errors import DeviceError
 
 
@@ -30,6 +32,14 @@ def kernel_dir() -> Path:
     if (source_tree / "common.h").is_file():
         return source_tree
     raise DeviceError("OpenCL kernel sources not found (expected clrays/cl or cl/ beside the package)")
+
+
+def build_options(defines: dict[str, object] | None = None) -> list[str]:
+    """Compiler options of every kernel build: `-I` on the kernel folder (headers, and
+    pyopencl's cache sees their edits), the constants shared with Python as `-D`
+    (`clrays.structs.kernel_defines`), then the stage's own `defines`."""
+    shared = [f"-D{name}={literal}" for name, literal in structs.kernel_defines().items()]
+    return [f"-I{kernel_dir()}"] + shared + [f"-D{k}={v}" for k, v in sorted((defines or {}).items())]
 
 
 def _import_cl():
@@ -76,9 +86,11 @@ def select_device(spec: str | None = None):
         raise DeviceError(f"device {spec}: no such platform:device (see `clrays info`)")
     needle = spec.lower()
     for entry in devices:
-        if needle in entry[2].name.lower() or needle in entry[3].name.lower():
+        # PoCL's platform is "Portable Computing Language": `pocl` is in its vendor only.
+        names = (entry[2].name, entry[2].vendor, entry[3].name)
+        if any(needle in name.lower() for name in names):
             return entry[3]
-    raise DeviceError(f"device {spec!r}: no platform or device name contains it (see `clrays info`)")
+    raise DeviceError(f"device {spec!r}: no platform name or vendor, or device name, contains it (see `clrays info`)")
 
 
 @dataclass
@@ -131,13 +143,12 @@ class Device:
         return f"{self.device.platform.name.strip()} / {self.device.name.strip()}"
 
     def program(self, stage: str, defines: dict[str, object] | None = None):
-        """Build (once) `cl/<stage>.cl` with `-I` on the kernel folder and `-D` defines."""
+        """Build (once) `cl/<stage>.cl` with `build_options(defines)`."""
         defines = defines or {}
         key = (stage, tuple(sorted(defines.items())))
         if key not in self._programs:
-            folder = kernel_dir()
-            path = folder / f"{stage}.cl"
-            options = [f"-I{folder}"] + [f"-D{k}={v}" for k, v in sorted(defines.items())]
+            path = kernel_dir() / f"{stage}.cl"
+            options = build_options(defines)
             try:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore", self.cl.CompilerWarning)

@@ -1,21 +1,64 @@
-"""numpy dtypes mirroring the structs of `cl/common.h`: same fields, same order.
+"""The facts host and device share: the enumerations and constants of the kernels,
+and numpy dtypes mirroring the structs of `cl/common.h` (same fields, same order).
 
-tests/test_layout.py asks the device for sizeof/offsetof of every field and
-compares them with these dtypes.
+The constants are defined here and nowhere else: every kernel build gets each one as a
+`-D NAME=literal` option (`kernel_defines`, passed by `clrays.device.Device.program`),
+and cl/common.h refuses to compile without them. tests/layout/test_layout.py asks the
+device for every constant's value and for sizeof/offsetof of every struct field, and
+compares them with this module.
 """
 import numpy as np
 
-PROJECTION_PERSPECTIVE = 0
+PROJECTION_PERSPECTIVE = 0  # view_t.projection
 PROJECTION_ORTHOGRAPHIC = 1
 
-LIGHT_POINT = 0
+LIGHT_POINT = 0  # light_t.type, integrand_t.light_type
 LIGHT_SPOT = 1
 LIGHT_DIRECTIONAL = 2
 
-PHASE_ISOTROPIC = 0
+PHASE_ISOTROPIC = 0  # frame_t.phase_type
 PHASE_HG = 1
 
-DEPTH_EMPTY = np.uint32(0x7F800000)  # as_uint(+inf)
+INTEGRAND_TABLE = 0  # integrand_t.mode
+INTEGRAND_SVD = 1
+INTEGRAND_ANALYTIC = 2
+
+TRAVERSAL_TREE = 0  # cl/traverse.cl's TRAVERSAL option
+TRAVERSAL_SCAN = 1
+
+DEPTH_EMPTY = np.uint32(0x7F800000)  # as_uint(+inf): a depth buffer's texel where nothing was rasterized
+
+# A point or spot light is a lamp: a ball of radius LAMP_RADIUS_REL × camera.far around it
+# holds no medium (clrays.reference.radiometry says why and what it changes).
+LAMP_RADIUS_REL = 1e-6
+
+# sinβ is clamped to this in every 1/sinβ, so that β = 0 (a ray through a point light)
+# stays finite; only rays within 1e-9 rad of the eye–light axis see the clamp.
+SIN_BETA_MIN = 1e-9
+
+#: Every constant above by its C name: the `-D` options of every kernel build.
+KERNEL_CONSTANTS = {
+    name: value for name, value in dict(globals()).items()
+    if name.startswith(("PROJECTION_", "LIGHT_", "PHASE_", "INTEGRAND_", "TRAVERSAL_"))
+    or name in ("DEPTH_EMPTY", "LAMP_RADIUS_REL", "SIN_BETA_MIN")
+}
+
+
+def c_literal(value) -> str:
+    """`value` as a C literal: an int, a `u`-suffixed hex uint, or a float as the exact
+    decimal of its float32 value with an `f` suffix, so that the kernels get the bits of
+    `np.float32(value)` and no expression with it is promoted to double."""
+    if isinstance(value, np.uint32):
+        return f"{int(value):#x}u"
+    if isinstance(value, float):
+        return repr(float(np.float32(value))) + "f"
+    return str(int(value))
+
+
+def kernel_defines() -> dict[str, str]:
+    """NAME → C literal of every shared constant, for `-D NAME=literal`."""
+    return {name: c_literal(value) for name, value in KERNEL_CONSTANTS.items()}
+
 
 _f4 = (np.float32, 4)
 
@@ -50,10 +93,6 @@ epipolar_dtype = np.dtype([
     ("gamma_step", np.float32), ("gamma_samples", np.int32), ("levels", np.int32), ("light_index", np.int32),
     ("full_circle", np.int32), ("_pad0", np.int32), ("_pad1", np.int32), ("_pad2", np.int32),
 ])
-
-INTEGRAND_TABLE = 0
-INTEGRAND_SVD = 1
-INTEGRAND_ANALYTIC = 2
 
 integrand_dtype = np.dtype([
     ("amplitude", _f4), ("sigma_t", _f4), ("s_end", _f4),

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 import pytest
@@ -12,11 +13,28 @@ from clrays.scene.model import (Camera, DirectionalLight, Geometry, Image, Mediu
                           SpotLight)
 
 
+#: The test session's OpenCL device: `CLRAYS_TEST_DEVICE` (a `--device` spec, as `make
+#: test-device DEVICE=nvidia` sets it), else PoCL's CPU device whatever CLRAYS_DEVICE says,
+#: so that `make test` runs where CI does. Set as CLRAYS_DEVICE for the whole process, so
+#: the tests that make their own `Renderer()` or run the command line use it too.
+TEST_DEVICE = os.environ.get("CLRAYS_TEST_DEVICE") or "Portable Computing Language"
+os.environ["CLRAYS_DEVICE"] = TEST_DEVICE
+
+
+def pytest_addoption(parser):
+    parser.addoption("--regen-golden", action="store_true",
+                     help="rewrite tests/golden/data/*.npy from this run instead of comparing with them")
+
+
+def pytest_report_header(config):
+    return f"clrays test device: {TEST_DEVICE!r} (CLRAYS_TEST_DEVICE)"
+
+
 @pytest.fixture(scope="session")
 def device():
     from clrays.device import Device
 
-    return Device()
+    return Device(TEST_DEVICE)
 
 
 @pytest.fixture(scope="session")
@@ -26,13 +44,14 @@ def renderer(device):
     return Renderer(device)
 
 
-def run_cli(*args) -> tuple[int, str]:
-    """Run the `clrays` command line in-process: (exit code, output)."""
+def run_cli(*args, env: dict[str, str] | None = None) -> tuple[int, str]:
+    """Run the `clrays` command line in-process, with `env` added to the environment:
+    (exit code, stdout and stderr as a terminal shows them)."""
     from click.testing import CliRunner
 
     from clrays.cli import main
 
-    result = CliRunner().invoke(main, [str(a) for a in args], catch_exceptions=False)
+    result = CliRunner().invoke(main, [str(a) for a in args], env=env, catch_exceptions=False)
     return result.exit_code, result.output
 
 

@@ -29,15 +29,11 @@ import math
 import numpy as np
 
 from ..scene.model import DirectionalLight, Light, Medium, Phase, SpotLight
+from ..structs import LAMP_RADIUS_REL
 
 # Gauss–Legendre rule on [-1, 1] used for every panel of the point-light quadrature.
 GL_NODES = 16
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(GL_NODES)
-
-# Lamp radius (the medium-free ball around a point or spot light) as a fraction of
-# camera.far: a length of the scene, so the ball scales with it, and small enough that only
-# rays within 1e-6·far/d_el rad of the light meet it.
-LAMP_RADIUS_REL = 1e-6
 
 # Bound on the float64 elements of one quadrature batch (segments × nodes × 3 channels),
 # so a call on many segments stays around 100 MB of temporaries.

@@ -55,6 +55,7 @@ from .. import structs
 from ..device import Device, StageTimer
 from ..errors import ClraysError
 from ..scene.model import INTEGRAND_MODES, DirectionalLight, Phase
+from ..structs import SIN_BETA_MIN
 
 MODES = INTEGRAND_MODES
 LIGHT_KINDS = ("point", "directional")  # "spot" is accepted and treated as "point"
@@ -71,9 +72,6 @@ QUAD_NODES = 4
 # Directional rows end at this optical depth (of the least attenuating channel) when
 # no s_max is given: the light beyond carries e^{-20} ≈ 2e-9 of the ray's radiance.
 DIRECTIONAL_OPTICAL_DEPTH = 20.0
-# sinβ is clamped to this in every 1/sinβ, so that β = 0 (a ray through a point light)
-# stays finite; only rays within 1e-9 rad of the eye–light axis see the clamp.
-SIN_BETA_MIN = 1e-9
 
 # Columns of IntegrandTables.constants, one row per RGB channel.
 C_AMPLITUDE = 0  # σs·I (point/spot, W/sr/m) or σs·E (directional, W/m²/m)

@@ -271,18 +271,6 @@ def test_eye_at_the_light_is_the_lamp_closed_form(renderer):
         np.testing.assert_allclose(image, expected, rtol=1e-5, err_msg=method)
 
 
-def test_lamp_radius_is_the_same_on_host_and_device():
-    """cl/lighting.h repeats radiometry.LAMP_RADIUS_REL (kernels take no per-frame value for it)."""
-    import re
-
-    from clrays.device import kernel_dir
-    from clrays.reference.radiometry import LAMP_RADIUS_REL
-
-    header = (kernel_dir() / "lighting.h").read_text()
-    device_value = float(re.search(r"#define LAMP_RADIUS_REL ([0-9.e+-]+)f", header).group(1))
-    assert device_value == LAMP_RADIUS_REL
-
-
 # --------------------------------------------------------------------------- invariances
 
 def _moved(scene, offset):

@@ -1,0 +1,163 @@
+"""Stage rectify against numpy: level 0 of the min-max tree, S[α, γ], equals the β of the
+blocker that a plain numpy walk finds along the same light rays through the same
+shadow-map texels (cl/rectify.cl; docs/design.md §2, §3)."""
+import math
+
+import numpy as np
+import pytest
+
+from clrays import structs
+from clrays.device import StageTimer
+from clrays.inputs import frame_inputs, upload
+from clrays.scene.geometry import box_triangles
+from clrays.stages.raster import RasterResult, raster_camera, raster_shadow_map, shadow_atlas
+from clrays.stages.rectify import rectify
+from conftest import DirectionalLight, PointLight, SpotLight, grid_plane, make_scene, v3
+
+PI_F = float(np.float32(math.pi))  # S of an unblocked light ray, as the kernel writes it
+
+# Where a light ray passes within this many texels of a texel's edge (or this fraction of a
+# cube-face edge), float32 on the device and float64 here may pick either neighbour.
+TEXEL_SLACK = 1e-3
+# S from the same texel: float32 angles (α, γ, atan2) against float64, in radians.
+BETA_TOLERANCE = 1e-6
+
+LIGHTS = {
+    "point": PointLight(v3(0.4, 4.5, -0.6), np.full(3, 40.0)),  # cube map, the epipole on screen
+    "spot": SpotLight(v3(0.3, 5.0, -0.5), v3(0.1, -1.0, 0.1) / np.linalg.norm([0.1, -1.0, 0.1]), 35.0,
+                      np.full(3, 60.0)),  # one perspective view
+    "directional": DirectionalLight(v3(0.35, -1.0, -0.25) / np.linalg.norm([0.35, -1.0, -0.25]),
+                                    np.full(3, 1.5)),  # one orthographic view
+}
+
+
+def _scene(light):
+    triangles = np.concatenate([grid_plane(0.0, 8.0, 4), box_triangles([-1.0, 1.2, -1.0], [1.0, 1.6, 0.8]),
+                                box_triangles([1.5, 0.0, -2.0], [2.3, 2.5, -1.2])])
+    return make_scene(triangles, [light], width=48, height=32, position=(0, 2.5, 8), look_at=(0, 2.0, 0),
+                      shadow_map=128, slices=48, gamma_samples=128)
+
+
+def _rectified(device, scene):
+    """Raster and rectify the first light, wired as a render session does; returns the frame
+    inputs, the epipolar params, the shadow depths and level 0 of the tree (slices × N)."""
+    buffers = upload(device, frame_inputs(scene))
+    timer = StageTimer()
+    camera_depth, tri_id = raster_camera(device, buffers, timer)
+    maps = [raster_shadow_map(device, buffers, 0, timer)]
+    rastered = RasterResult(camera_depth, tri_id, shadow_atlas(device, buffers, maps))
+    epipolar = rectify(device, buffers, rastered, 0, timer)
+    params = epipolar.params
+    n, slices = int(params["gamma_samples"]), int(params["slices"])
+    tree = device.read(epipolar.tree, (slices, 2 * n, 2), np.float32)
+    shadow = device.read(rastered.shadow_depth, buffers.inputs.shadow_texels, np.uint32).view(np.float32)
+    return buffers.inputs, params, shadow, tree[:, :n]
+
+
+def _vector(field) -> np.ndarray:
+    return np.asarray(field, dtype=np.float64)[:3]
+
+
+def _stored_depth(view, shadow, texel_x, texel_y, clamp):
+    """The blocker depth at continuous texel coordinates, as `shadow_texel` reads it
+    ((int) truncates towards zero, then clamps to the map); +inf off the map unless `clamp`."""
+    width, height = int(view["width"]), int(view["height"])
+    tx, ty = np.trunc(texel_x).astype(np.int64), np.trunc(texel_y).astype(np.int64)
+    inside = (texel_x >= 0) & (texel_y >= 0) & (texel_x < width) & (texel_y < height)
+    tx, ty = np.clip(tx, 0, width - 1), np.clip(ty, 0, height - 1)
+    stored = shadow[int(view["depth_offset"]) + ty * width + tx].astype(np.float64)
+    return stored if clamp else np.where(inside, stored, np.inf)
+
+
+def _project(view, points):
+    """Continuous texel coordinates and whether the point is in front (`view_project`)."""
+    q = points - _vector(view["origin"])
+    x, y, z = q @ _vector(view["right"]), q @ _vector(view["up"]), q @ _vector(view["forward"])
+    if int(view["projection"]) == structs.PROJECTION_PERSPECTIVE:
+        in_front = z > 0
+        z = np.where(in_front, z, 1.0)
+        sx, sy = x / (z * float(view["scale_x"])), y / (z * float(view["scale_y"]))
+    else:
+        in_front = np.ones(len(points), bool)
+        sx, sy = x / float(view["scale_x"]), y / float(view["scale_y"])
+    width, height = int(view["width"]), int(view["height"])
+    return (sx + 1) * 0.5 * width, (1 - sy) * 0.5 * height, in_front
+
+
+def _cube_faces(light, w):
+    """The face `light_view_index` picks for direction w, and the runner-up major axis's
+    face where the two are within TEXEL_SLACK (an edge of the cube)."""
+    first = int(light["first_view"])
+    if int(light["view_count"]) == 1:
+        return [np.full(len(w), first)]
+    magnitude = np.abs(w)
+    order = np.argsort(-magnitude, axis=1, kind="stable")
+    faces = []
+    for rank in (0, 1):
+        axis = order[:, rank]
+        component = w[np.arange(len(w)), axis]
+        faces.append(first + 2 * axis + (component < 0))
+    near_edge = (magnitude[np.arange(len(w)), order[:, 0]] - magnitude[np.arange(len(w)), order[:, 1]]
+                 < TEXEL_SLACK * magnitude.max(axis=1))
+    return [faces[0], np.where(near_edge, faces[1], faces[0])]
+
+
+def numpy_rectify(inputs, params, shadow) -> np.ndarray:
+    """Every S[α, γ] the kernel may write: (candidates, slices, N), the first candidate the
+    texel the light ray meets, the others its neighbours across an edge within TEXEL_SLACK."""
+    light = inputs.lights[int(params["light_index"])]
+    views = inputs.views
+    n, slices = int(params["gamma_samples"]), int(params["slices"])
+    alpha = float(params["alpha_min"]) + (np.arange(slices) + 0.5) * float(params["alpha_step"])
+    gamma = (np.arange(n) + 0.5) * float(params["gamma_step"])
+    gamma[0] = 0.0  # texel 0 is the eye's own light ray
+    alpha, gamma = np.meshgrid(alpha, gamma, indexing="ij")
+    alpha, gamma = alpha.ravel(), gamma.ravel()
+    r = np.cos(alpha)[:, None] * _vector(params["u"]) + np.sin(alpha)[:, None] * _vector(params["w"])
+    axis, d_el = _vector(params["axis"]), float(params["d_el"])
+    offsets = [(0.0, 0.0)] + [(dx, dy) for dx in (-TEXEL_SLACK, 0.0, TEXEL_SLACK)
+                              for dy in (-TEXEL_SLACK, 0.0, TEXEL_SLACK) if dx or dy]
+    candidates = []
+    if int(light["type"]) == structs.LIGHT_DIRECTIONAL:
+        # Light ray γ·r + t·ω; the orthographic map stores depth along -ω from its origin.
+        view = views[int(light["first_view"])]
+        texel_x, texel_y, _ = _project(view, gamma[:, None] * r)
+        to_blocker = -float(_vector(view["origin"]) @ _vector(view["forward"]))
+        for dx, dy in offsets:
+            stored = _stored_depth(view, shadow, texel_x + dx, texel_y + dy, clamp=False)
+            candidates.append(np.where(np.isinf(stored), PI_F, np.arctan2(gamma, to_blocker - stored)))
+    else:
+        # Light ray from l at angle γ to l → e, in slice α; the blocker at its stored distance.
+        direction = -axis * np.cos(gamma)[:, None] + r * np.sin(gamma)[:, None]
+        probe = _vector(light["position"]) + direction
+        for face in _cube_faces(light, direction):
+            for dx, dy in offsets:
+                stored = np.full(len(gamma), np.inf)
+                for index in np.unique(face):
+                    view, mine = views[index], face == index
+                    texel_x, texel_y, in_front = _project(view, probe[mine])
+                    depth = _stored_depth(view, shadow, texel_x + dx, texel_y + dy, clamp=True)
+                    stored[mine] = np.where(in_front, depth, np.inf)
+                with np.errstate(invalid="ignore"):
+                    beta = np.arctan2(stored * np.sin(gamma), d_el - stored * np.cos(gamma))
+                candidates.append(np.where(np.isinf(stored), PI_F, beta))
+    return np.array(candidates).reshape(-1, slices, n)
+
+
+@pytest.mark.parametrize("kind", LIGHTS)
+def test_rectify_matches_numpy_walk_of_the_shadow_map(device, kind):
+    inputs, params, shadow, level0 = _rectified(device, _scene(LIGHTS[kind]))
+    assert (level0[..., 0] == level0[..., 1]).all(), "level 0 holds (S, S)"
+    rectified = level0[..., 0].astype(np.float64)
+    blocked = rectified < PI_F
+    assert 0.05 < blocked.mean() < 0.95, "the scene should mix blocked and unblocked light rays"
+    assert (rectified[~blocked] == PI_F).all()
+    assert (rectified >= 0).all()
+
+    candidates = numpy_rectify(inputs, params, shadow)
+    error = np.abs(candidates - rectified).min(axis=0)
+    same_texel = np.abs(candidates[0] - rectified) <= BETA_TOLERANCE
+    print(f"{kind}: max |ΔS| {error.max():.2e} rad; {1 - same_texel.mean():.2%} of texels from a neighbour")
+    worst = np.unravel_index(np.argmax(error), error.shape)
+    assert error.max() <= BETA_TOLERANCE, f"slice, texel {worst}: device {rectified[worst]}"
+    assert same_texel.mean() > 0.99, "only light rays on a texel's edge may read its neighbour"
