@@ -1,4 +1,10 @@
-"""The `clrays` command line."""
+"""The `clrays` command line.
+
+One group, `Clrays`, runs every command and turns what escapes it into one line and
+exit code 1 (the traceback only with `--debug`); each command's `--help` lists its
+options in sections, and the options that several commands share are declared once
+below (`device_option`, `method_option`, ...).
+"""
 from __future__ import annotations
 
 import contextlib
@@ -6,44 +12,176 @@ import signal
 import sys
 import traceback
 from pathlib import Path
+from typing import Callable
 
 import click
+from click.core import ParameterSource
 
-from .errors import ClraysError
+from .device import list_devices, select_device
+from .errors import ClraysError, DeviceError
+from .image_io import check_finite, check_output_path, make_folder, write_image
+from .runs import bench as bench_run
+from .runs.references import parse_reference
+from .runs.sequence import (check_pattern, check_video_path, parse_frames, render_sequence, scene_frames,
+                            write_video)
+from .runs.sweep import axes_from, format_table, run_sweep
+from .scene.load import load_scene
+from .scene.model import METHODS
+from .session import Renderer
 
-EXAMPLES_RENDER = """
-\b
-Examples:
-  clrays render scenes/demo.yaml -o out/demo.png
-  clrays render scenes/demo.yaml -o out/demo.exr --method raymarch --set render.steps=1024
-  clrays render scenes/demo.yaml -o out/demo.npy --set medium.sigma_s=0.1 --stats
-  clrays render scenes/orbit.yaml -o out/orbit_30.png --frame 30
-"""
-
-
-class _Context:
-    debug = False
-
-
-def _fail(exc: BaseException) -> None:
-    """One line on stderr and exit 1; the traceback only with --debug."""
-    if isinstance(exc, BrokenPipeError):  # `clrays ... | head`: the reader left, nothing to report
-        sys.stderr.close()
-        sys.exit(1)
-    if _Context.debug:
-        traceback.print_exception(exc)
-    if isinstance(exc, ClraysError):
-        click.echo(f"clrays: error: {exc}", err=True)
-    else:
-        click.echo(f"clrays: internal error: {type(exc).__name__}: {exc} (run with --debug for the traceback)",
-                   err=True)
-    sys.exit(1)
+#: Option sections of a command's --help, in this order (then any other, then "Other").
+SCENE, SWEEP, BENCH, OUTPUT, RUN, DEVICE, OTHER = "Scene", "Sweep", "Bench", "Output", "Run", "Device", "Other"
+SECTIONS = (SCENE, SWEEP, BENCH, OUTPUT, RUN, DEVICE)
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
-@click.option("--debug", is_flag=True, help="Show tracebacks for errors.")
+def _set_debug(context: click.Context, parameter, value: bool) -> None:
+    """--debug, given to the group or to a command: kept in `ctx.obj`, which they share."""
+    settings = context.ensure_object(dict)
+    settings["debug"] = settings.get("debug", False) or value
+
+
+class Option(click.Option):
+    """An option with the section (`group`) its command's --help lists it under."""
+
+    def __init__(self, *declarations, group: str = OTHER, **settings):
+        super().__init__(*declarations, **settings)
+        self.group = group
+
+
+def option(*declarations, group: str, **settings):
+    return click.option(*declarations, cls=Option, group=group, **settings)
+
+
+class Command(click.Command):
+    """A command of `clrays`: it takes --debug too, lists its options in sections, and
+    belongs to a `section` of `clrays --help`."""
+
+    def __init__(self, *arguments, section: str = "Commands", **settings):
+        super().__init__(*arguments, **settings)
+        self.section = section
+        self.params.append(Option(["--debug"], group=OTHER, is_flag=True, expose_value=False, callback=_set_debug,
+                                  help="Show the traceback of an error."))
+
+    def format_options(self, context: click.Context, formatter: click.HelpFormatter) -> None:
+        sections: dict[str, list[tuple[str, str]]] = {}
+        for parameter in self.get_params(context):
+            record = parameter.get_help_record(context) if isinstance(parameter, click.Option) else None
+            if record is not None:
+                sections.setdefault(getattr(parameter, "group", OTHER), []).append(record)
+        order = [*SECTIONS, *sorted(set(sections) - {*SECTIONS, OTHER}), OTHER]
+        _write_sections(formatter, {name: sections[name] for name in order if name in sections})
+
+
+def _write_sections(formatter: click.HelpFormatter, sections: dict[str, list[tuple[str, str]]]) -> None:
+    """Help sections of (term, text) rows, the texts of every section in one column."""
+    width = min(max(len(term) for rows in sections.values() for term, _ in rows), 30)
+    for name, rows in sections.items():
+        with formatter.section(name):
+            formatter.write_dl([(term.ljust(width), text) for term, text in rows])
+
+
+class Clrays(click.Group):
+    """The `clrays` group: its commands listed by section, in the order they are defined,
+    and every failure of a command reported as one line."""
+
+    command_class = Command
+
+    def list_commands(self, context: click.Context) -> list[str]:
+        return list(self.commands)
+
+    def format_commands(self, context: click.Context, formatter: click.HelpFormatter) -> None:
+        commands = [(name, self.commands[name]) for name in self.list_commands(context)
+                    if not self.commands[name].hidden]
+        limit = formatter.width - 6 - max(len(name) for name, _ in commands)
+        sections: dict[str, list[tuple[str, str]]] = {}
+        for name, command in commands:
+            sections.setdefault(getattr(command, "section", "Commands"), []).append(
+                (name, command.get_short_help_str(limit)))
+        _write_sections(formatter, sections)
+
+    def invoke(self, context: click.Context):
+        try:
+            return super().invoke(context)
+        except (click.exceptions.Exit, click.exceptions.Abort, click.ClickException, BrokenPipeError):
+            raise  # click reports these itself; a reader that left (`clrays ... | head`) ends quietly
+        except Exception as exc:  # noqa: BLE001 - every failure becomes one line
+            if isinstance(context.obj, dict) and context.obj.get("debug"):
+                traceback.print_exception(exc)
+            if isinstance(exc, ClraysError):
+                click.echo(f"clrays: error: {exc}", err=True)
+            else:
+                click.echo(f"clrays: internal error: {type(exc).__name__}: {exc} "
+                           f"(run with --debug for the traceback)", err=True)
+            context.exit(1)
+
+
+# --------------------------------------------------------------------------- shared options
+
+
+def device_option():
+    return option("--device", envvar="CLRAYS_DEVICE", show_envvar=True, metavar="P:D|NAME", group=DEVICE,
+                  help="OpenCL device: 'P:D' or a name substring (see `clrays info`). Default: the first GPU, "
+                       "else the first CPU device.")
+
+
+def method_option():
+    return option("--method", type=click.Choice(METHODS), metavar="METHOD", group=SCENE,
+                  help=f"Override render.method: {', '.join(METHODS)}.")
+
+
+def overrides_option(text: str, metavar: str = "KEY.PATH=VALUE", group: str = SCENE):
+    return option("--set", "overrides", multiple=True, metavar=metavar, group=group, help=text)
+
+
+def exposure_option(applies_to: str):
+    return option("--exposure", type=click.FloatRange(-64, 64), default=0.0, show_default=True, metavar="EV",
+                  group=OUTPUT, help=f"{applies_to}: scale radiance by 2^EV before sRGB encoding.")
+
+
+def overwrite_option(text: str):
+    return option("--overwrite", is_flag=True, group=OUTPUT, help=text)
+
+
+def reuse_option(between: str):
+    return option("--reuse/--no-reuse", default=True, show_default=True, group=RUN,
+                  help=f"Keep stage results between {between}; re-run a stage only when its inputs changed.")
+
+
+def _progress_default(context: click.Context, parameter, value: bool | None) -> bool:
+    """Neither --progress nor --no-progress: a bar when stderr is a terminal."""
+    return sys.stderr.isatty() if value is None else value
+
+
+def progress_option(text: str = "Progress bar (default: on a terminal)."):
+    return option("--progress/--no-progress", default=None, callback=_progress_default, group=RUN, help=text)
+
+
+@contextlib.contextmanager
+def _resumable(context: click.Context, done: Callable[[], str]):
+    """A run that resumes: Ctrl-C or SIGTERM (raised as KeyboardInterrupt, so a half-written
+    file's temporary is removed on the way out) ends it with what was `done` and how to
+    resume, exit code 130."""
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    except KeyboardInterrupt:
+        click.echo(f"clrays: interrupted after {done()}; run the same command again to resume", err=True)
+        context.exit(130)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+# --------------------------------------------------------------------------- the commands
+
+
+@click.group(cls=Clrays, context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
+@click.option("--debug", is_flag=True, expose_value=False, callback=_set_debug,
+              help="Show the traceback of an error (also accepted after the command).")
 @click.version_option(package_name="clrays")
-def main(debug: bool) -> None:
+def main() -> None:
     """Render volumetric shadows (light shafts in fog) with OpenCL.
 
     \b
@@ -54,98 +192,56 @@ def main(debug: bool) -> None:
       clrays bench scenes/demo.yaml -r 640x360
       clrays info
     """
-    _Context.debug = debug
 
 
-@main.command()
-@click.option("--device", envvar="CLRAYS_DEVICE", help="Only show this device spec's choice.")
-def info(device: str | None) -> None:
-    """List OpenCL platforms and devices, and the one clrays would use.
-
-    \b
-    Example:
-      clrays info
-    """
-    try:
-        from .device import list_devices, select_device
-
-        chosen = select_device(device)
-        for p, d, platform, dev in list_devices():
-            mark = "*" if dev == chosen else " "
-            memory = dev.global_mem_size / 2**30
-            doubles = "fp64" if dev.double_fp_config else "no fp64"
-            click.echo(f"{mark} {p}:{d}  {platform.name.strip()} / {dev.name.strip()}  "
-                       f"({dev.version.strip()}, {dev.max_compute_units} CUs, {memory:.1f} GiB, {doubles})")
-        click.echo("* = default device (choose with --device or CLRAYS_DEVICE: 'P:D' or a name substring)")
-    except Exception as exc:  # noqa: BLE001 - every failure becomes one line
-        _fail(exc)
-
-
-@main.command(epilog=EXAMPLES_RENDER)
+@main.command(section="Render", epilog="""
+\b
+Examples:
+  clrays render scenes/demo.yaml -o out/demo.png
+  clrays render scenes/demo.yaml -o out/demo.exr --method raymarch --set render.steps=1024
+  clrays render scenes/demo.yaml -o out/demo.npy --set medium.sigma_s=0.1 --stats
+  clrays render scenes/orbit.yaml -o out/orbit_30.png --frame 30
+""")
 @click.argument("scene", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("-o", "--output", required=True, type=click.Path(path_type=Path),
-              help="Output image: .png (8-bit sRGB), .exr (float RGB) or .npy (float32 linear H×W×3).")
-@click.option("--method", type=click.Choice(["minmax", "raymarch", "exact"]),
-              help="Override render.method.")
-@click.option("--set", "overrides", multiple=True, metavar="KEY.PATH=VALUE",
-              help="Override a scene field (repeatable), e.g. --set render.steps=1024.")
-@click.option("--exposure", type=click.FloatRange(-64, 64), default=0.0, show_default=True,
-              help="PNG only: scale radiance by 2^EXPOSURE before sRGB encoding.")
-@click.option("--stats", is_flag=True, help="Print per-stage device times and device memory.")
-@click.option("--device", envvar="CLRAYS_DEVICE", help="OpenCL device: 'P:D' index or name substring.")
-@click.option("--progress/--no-progress", default=None, help="Progress bar for slow methods (default: on a terminal).")
-@click.option("--frame", type=int, metavar="N", help="Render frame N of the scene's animation (see `clrays sequence`).")
-def render(scene: Path, output: Path, method, overrides, exposure, stats, device, progress, frame) -> None:
+@method_option()
+@overrides_option("Override a scene field (repeatable), e.g. --set render.steps=1024.")
+@option("--frame", type=int, metavar="N", group=SCENE,
+        help="Render frame N of the scene's animation (see `clrays sequence`).")
+@option("-o", "--output", required=True, type=click.Path(path_type=Path), group=OUTPUT,
+        help="Output image: .png (8-bit sRGB), .exr (float RGB) or .npy (float32 linear H×W×3).")
+@exposure_option("PNG only")
+@option("--stats", is_flag=True, group=RUN, help="Print per-stage device times and device memory.")
+@progress_option("Progress bar for slow methods (default: on a terminal).")
+@device_option()
+def render(scene: Path, method, overrides, frame, output: Path, exposure, stats, progress, device) -> None:
     """Render SCENE (a YAML file) to an image."""
-    try:
-        from .image_io import check_output_path, write_image
-        from .session import Renderer
-        from .scene.load import load_scene
-        from .runs.sequence import parse_frames, scene_frames
-
-        check_output_path(output)
-        loaded = load_scene(scene, overrides)
-        if frame is not None:
-            parse_frames(str(frame), scene_frames(loaded), "--frame")
-            loaded = loaded.animation.scene_at(loaded, frame) if loaded.animation is not None else loaded
-        show_progress = sys.stderr.isatty() if progress is None else progress
-        result = Renderer(device).render(loaded, method, progress=show_progress)
-        if not np_isfinite(result.image):
-            raise ClraysError(f"{scene}: the render produced non-finite values (a bug: please report the scene)")
-        write_image(output, result.image, exposure)
-        if stats:
-            _print_stats(result)
-    except Exception as exc:  # noqa: BLE001 - every failure becomes one line
-        _fail(exc)
-
-
-def np_isfinite(image) -> bool:
-    import numpy as np
-
-    return bool(np.isfinite(image).all())
+    check_output_path(output)
+    loaded = load_scene(scene, overrides)
+    if frame is not None:
+        parse_frames(str(frame), scene_frames(loaded), "--frame")
+        loaded = loaded.animation.scene_at(loaded, frame) if loaded.animation is not None else loaded
+    result = Renderer(device).render(loaded, method, progress=progress)
+    write_image(output, check_finite(result.image, str(scene)), exposure)
+    if stats:
+        _print_stats(result)
 
 
 def _stage_statuses(result) -> dict[str, str]:
     """Stage label (as in the timings) → computed / reused / skipped; raster has two parts."""
-    status, shown = {}, {}
+    names = {"camera": "camera", "shadow": "shadow maps"}
+    parts: dict[str, list[tuple[str, str]]] = {}
     for stage, value in result.stage_status.items():
         label, _, part = stage.partition(".")
-        status.setdefault(label, []).append((part, value))
-    for label, parts in status.items():
-        names = {"camera": "camera", "shadow": "shadow maps"}
-        shown[label] = ", ".join(f"{names.get(p, p)} {v}" if p else v for p, v in parts)
-    return shown
-
-
-#: Stages that run on the host (their time is wall clock, not an OpenCL event).
-HOST_STAGES = {"integrand"}
+        parts.setdefault(label, []).append((part, value))
+    return {label: ", ".join(f"{names.get(part, part)} {value}" if part else value for part, value in values)
+            for label, values in parts.items()}
 
 
 def _print_stats(result) -> None:
     click.echo(f"method: {result.method}")
     status = _stage_statuses(result)
     for label, ms in result.stage_ms.items():
-        where = "host" if label in HOST_STAGES else "device"
+        where = "host" if label in result.host_stages else "device"
         click.echo(f"  {label:<10} {ms:9.2f} ms {f'({where})':<8}  {status.get(label, '')}".rstrip())
     for label, text in status.items():
         if label not in result.stage_ms:
@@ -154,89 +250,6 @@ def _print_stats(result) -> None:
         click.echo(f"  {'total':<10} {sum(result.stage_ms.values()):9.2f} ms (device + host stages)")
     click.echo(f"  wall       {result.wall_ms:9.2f} ms")
     click.echo(f"  device memory {result.device_bytes / 2**20:.1f} MiB")
-
-
-def _resolutions(context, parameter, texts) -> list[tuple[int, int]]:
-    """Click callback: WIDTHxHEIGHT strings → (width, height) pairs, usage error otherwise."""
-    sizes = []
-    for text in texts:
-        try:
-            width, height = (int(part) for part in text.lower().split("x"))
-            if width < 1 or height < 1:
-                raise ValueError
-        except ValueError:
-            raise click.BadParameter(f"expected WIDTHxHEIGHT like 640x360, got {text!r}") from None
-        sizes.append((width, height))
-    return sizes
-
-
-@main.command(epilog="""
-\b
-Examples:
-  clrays bench                                  # every bench scene at 640x360
-  clrays bench scenes/demo.yaml -r 1280x720 -r 640x360 --out bench/out
-  clrays bench --repeats 3 --pixels 500         # a quicker, noisier run
-  clrays bench scenes/demo.yaml -r 64x36 --quick  # smoke run: does it all work?
-""")
-@click.argument("scenes", nargs=-1, type=click.Path(dir_okay=False, path_type=Path))
-@click.option("-r", "--resolution", "resolutions", multiple=True, default=["640x360"], show_default=True,
-              callback=_resolutions, help="WIDTHxHEIGHT to render at (repeatable).")
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("bench/out"),
-              show_default=True, help="Folder for bench.csv, bench.png, summary.md, machine.json.")
-@click.option("--repeats", type=click.IntRange(1, 100), default=5, show_default=True,
-              help="Timed frames per point (after one warm-up); the median is reported.")
-@click.option("--pixels", type=click.IntRange(16), default=4000, show_default=True,
-              help="Pixels (fixed random subset) on which the error against exact is measured.")
-@click.option("--cache", type=click.Path(file_okay=False, path_type=Path), default=Path(".cache/clrays"),
-              show_default=True, help="Where exact references are cached.")
-@click.option("--quick", is_flag=True, help="A handful of points per scene: a smoke run, not results.")
-@click.option("--volume-only", "volume", is_flag=True,
-              help="Black surfaces: measure the in-scattering's error alone (a smaller sweep).")
-@click.option("--device", envvar="CLRAYS_DEVICE", help="OpenCL device: 'P:D' index or name substring.")
-def bench(scenes, resolutions, out, repeats, pixels, cache, quick, volume, device) -> None:
-    """Time every method and setting against its error versus `exact`.
-
-    Writes a CSV of every point, a log-log plot of error against time with the Pareto
-    front, and the headline table (speedup of minmax over raymarch at equal error).
-    """
-    try:
-        from .runs import bench as bench_module
-        from .image_io import check_folder
-
-        sizes = resolutions
-        for folder in (out, cache):  # fail before the sweep, not after it
-            try:
-                folder.mkdir(parents=True, exist_ok=True)
-            except OSError as exc:
-                raise ClraysError(f"{folder}: cannot create folder: {exc.strerror or exc}") from None
-            check_folder(folder / "probe")
-        paths = [str(path) for path in scenes] or list(bench_module.DEFAULT_SCENES)
-        for path in paths:
-            if not Path(path).is_file():
-                raise ClraysError(f"{path}: no such scene file")
-        points = bench_module.run(paths, sizes, repeats=repeats, pixels=pixels, cache=cache, device=device,
-                                  log=lambda line: click.echo(line, err=True), quick=quick, volume=volume)
-        bench_module.save(points, out, device=device, extra={"repeats": repeats, "pixels": pixels, "volume_only": volume,
-                                        "resolutions": [f"{w}x{h}" for w, h in sizes], "scenes": paths})
-        click.echo(bench_module.markdown_summary(points))
-        click.echo(f"wrote {out}/bench.csv, bench.png, summary.md, machine.json")
-    except Exception as exc:  # noqa: BLE001 - every failure becomes one line
-        _fail(exc)
-
-
-
-@contextlib.contextmanager
-def _sigterm_as_interrupt():
-    """SIGTERM raises KeyboardInterrupt, like Ctrl-C, so a half-written frame's temporary
-    file is removed on the way out and the run ends with its resume hint."""
-    def interrupt(signum, frame):
-        raise KeyboardInterrupt
-
-    previous = signal.signal(signal.SIGTERM, interrupt)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
 
 
 def _stage_counts(results) -> str:
@@ -262,7 +275,7 @@ def _frame_line(label: str, result) -> str:
     return f"{label}: {result.wall_ms:8.1f} ms  reused: {reused}"
 
 
-EXAMPLES_SEQUENCE = """
+@main.command(section="Render", epilog="""
 \b
 Examples:
   clrays sequence scenes/orbit.yaml -o out/orbit/frame_{:04d}.png
@@ -272,44 +285,34 @@ Examples:
 \b
 Frames are written atomically: re-running the same command skips the frames already
 there, so an interrupted run resumes where it stopped (--overwrite renders all again).
-"""
-
-
-@main.command(epilog=EXAMPLES_SEQUENCE)
+""")
 @click.argument("scene", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("-o", "--output", "pattern", required=True, metavar="PATTERN",
-              help="Frame files, with one {} field for the frame number: frames/frame_{:04d}.png "
-                   "(.png, .exr or .npy; the folder is created).")
-@click.option("--frames", metavar="A:B", help="Frames A to B, inclusive (also A:, :B or N). Default: the "
-                                             "animation's frames.")
-@click.option("--video", type=click.Path(dir_okay=False, path_type=Path),
-              help="Also write the frames as an animation: .gif or .webp (at the animation's fps).")
-@click.option("--method", type=click.Choice(["minmax", "raymarch", "exact"]), help="Override render.method.")
-@click.option("--set", "overrides", multiple=True, metavar="KEY.PATH=VALUE",
-              help="Override a scene field (repeatable), e.g. --set animation.fps=12.")
-@click.option("--exposure", type=click.FloatRange(-64, 64), default=0.0, show_default=True,
-              help="PNG and video: scale radiance by 2^EXPOSURE before sRGB encoding.")
-@click.option("--overwrite", is_flag=True, help="Render every frame, also those already written.")
-@click.option("--reuse/--no-reuse", default=True, show_default=True,
-              help="Keep stage results between frames; re-run a stage only when its inputs changed.")
-@click.option("--stats", is_flag=True, help="Print each frame's time and reused stages, then a summary.")
-@click.option("--device", envvar="CLRAYS_DEVICE", help="OpenCL device: 'P:D' index or name substring.")
-@click.option("--progress/--no-progress", default=None, help="Progress bar (default: on a terminal).")
-def sequence(scene, pattern, frames, video, method, overrides, exposure, overwrite, reuse, stats, device,
-             progress) -> None:
+@option("--frames", metavar="A:B", group=SCENE,
+        help="Frames A to B, inclusive (also A:, :B or N). Default: the animation's frames.")
+@method_option()
+@overrides_option("Override a scene field (repeatable), e.g. --set animation.fps=12.")
+@option("-o", "--output", "pattern", required=True, metavar="PATTERN", group=OUTPUT,
+        help="Frame files, with one {} field for the frame number: frames/frame_{:04d}.png "
+             "(.png, .exr or .npy; the folder is created).")
+@option("--video", type=click.Path(dir_okay=False, path_type=Path), group=OUTPUT,
+        help="Also write the frames as an animation: .gif or .webp (at the animation's fps).")
+@exposure_option("PNG and video")
+@overwrite_option("Render every frame, also those already written.")
+@reuse_option("frames")
+@option("--stats", is_flag=True, group=RUN, help="Print each frame's time and reused stages, then a summary.")
+@progress_option()
+@device_option()
+@click.pass_context
+def sequence(context, scene, frames, method, overrides, pattern, video, exposure, overwrite, reuse, stats, progress,
+             device) -> None:
     """Render the frames of SCENE's animation to numbered images."""
     done = []
-    try:
-        from .session import Renderer
-        from .scene.load import load_scene
-        from .runs.sequence import check_pattern, check_video_path, parse_frames, render_sequence, scene_frames, write_video
-
+    with _resumable(context, lambda: f"{len(done)} new frames"):
         check_pattern(pattern)
         if video is not None:
             check_video_path(video)
         loaded = load_scene(scene, overrides)
         chosen = parse_frames(frames, scene_frames(loaded))
-        show_progress = sys.stderr.isatty() if progress is None else progress
 
         def on_frame(frame, path, result):
             if result is not None:
@@ -317,25 +320,18 @@ def sequence(scene, pattern, frames, video, method, overrides, exposure, overwri
                 if stats:
                     click.echo(_frame_line(f"frame {frame}", result))
 
-        with _sigterm_as_interrupt():
-            report = render_sequence(loaded, pattern, chosen, renderer=Renderer(device, reuse=reuse), method=method,
-                                     exposure=exposure, overwrite=overwrite, progress=show_progress,
-                                     on_frame=on_frame)
+        report = render_sequence(loaded, pattern, chosen, renderer=Renderer(device, reuse=reuse), method=method,
+                                 exposure=exposure, overwrite=overwrite, progress=progress, on_frame=on_frame)
         click.echo(report.summary())
         if stats and done:
             click.echo("stages over the rendered frames:\n" + _stage_counts(done))
         if video is not None:
             fps = loaded.animation.fps if loaded.animation is not None else 24.0
             click.echo(f"wrote {write_video(report.paths, video, fps, exposure)}")
-    except KeyboardInterrupt:
-        click.echo(f"clrays: interrupted after {len(done)} new frames; run the same command again to resume",
-                   err=True)
-        sys.exit(130)
-    except Exception as exc:  # noqa: BLE001 - every failure becomes one line
-        _fail(exc)
 
 
-EXAMPLES_SWEEP = """
+@main.command(section="Study", short_help="Render SCENE at each combination of --set values, tabulated.",
+              epilog="""
 \b
 Examples:
   clrays sweep scenes/demo.yaml --set medium.sigma_s=0.02,0.05,0.1 --set render.slices=256,1024 -o out/sweep
@@ -344,54 +340,131 @@ Examples:
 
 \b
 Writes one image per point (000.png, 001.png, ...), results.csv (the parameters, wall and
-per-stage times, reused stages and, with --reference, the error against it) and
+per-stage times, reused stages and, with --reference, the error against it in percent) and
 contact_sheet.png. Re-running the same command keeps the points already done.
-"""
-
-
-@main.command(epilog=EXAMPLES_SWEEP)
+""")
 @click.argument("scene", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("--set", "settings", multiple=True, metavar="KEY.PATH=V1,V2,...",
-              help="A swept key with comma-separated values, or a fixed override with one (repeatable); the "
-                   "points are the cartesian product of the swept keys.")
-@click.option("-o", "--output", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
-              help="Folder for the images, results.csv and contact_sheet.png (created).")
-@click.option("--reference", metavar="exact|raymarch:N", help="Measure each point's error against this reference.")
-@click.option("--method", type=click.Choice(["minmax", "raymarch", "exact"]), help="Override render.method.")
-@click.option("--format", "image_format", type=click.Choice(["png", "exr", "npy"]), default="png",
-              show_default=True, help="Image format of the points.")
-@click.option("--exposure", type=click.FloatRange(-64, 64), default=0.0, show_default=True,
-              help="PNG and contact sheet: scale radiance by 2^EXPOSURE before sRGB encoding.")
-@click.option("--overwrite", is_flag=True, help="Render every point, also those done by an earlier run.")
-@click.option("--reuse/--no-reuse", default=True, show_default=True,
-              help="Keep stage results between points; re-run a stage only when its inputs changed.")
-@click.option("--device", envvar="CLRAYS_DEVICE", help="OpenCL device: 'P:D' index or name substring.")
-@click.option("--progress/--no-progress", default=None, help="Progress bar (default: on a terminal).")
-def sweep(scene, settings, out_dir, reference, method, image_format, exposure, overwrite, reuse, device,
-          progress) -> None:
+@overrides_option("A swept key with comma-separated values, or a fixed override with one (repeatable); the "
+                  "points are the cartesian product of the swept keys.", metavar="KEY.PATH=V1,V2,...", group=SWEEP)
+@option("--reference", metavar="exact|raymarch:N", group=SWEEP,
+        help="Measure each point's error against this reference (kept in OUTPUT/.references).")
+@method_option()
+@option("-o", "--output", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path), group=OUTPUT,
+        help="Folder for the images, results.csv and contact_sheet.png (created).")
+@option("--format", "image_format", type=click.Choice(["png", "exr", "npy"]), default="png", show_default=True,
+        group=OUTPUT, help="Image format of the points.")
+@exposure_option("PNG and contact sheet")
+@overwrite_option("Render every point, also those done by an earlier run.")
+@reuse_option("points")
+@progress_option()
+@device_option()
+@click.pass_context
+def sweep(context, scene, overrides, reference, method, out_dir, image_format, exposure, overwrite, reuse, progress,
+          device) -> None:
     """Render SCENE at every combination of the --set values and tabulate the results."""
     done = []
-    try:
-        from .session import Renderer
-        from .runs.sweep import axes_from, format_table, parse_reference, run_sweep
-
+    with _resumable(context, lambda: f"{len(done)} points"):
         if not scene.is_file():
             raise ClraysError(f"{scene}: no such scene file")
-        axes, _ = axes_from(list(settings))
+        axes, _ = axes_from(list(overrides))
         parse_reference(reference)
-        show_progress = sys.stderr.isatty() if progress is None else progress
-        with _sigterm_as_interrupt():
-            report = run_sweep(scene, list(settings), out_dir, method=method, reference=reference,
-                               renderer=Renderer(device, reuse=reuse), exposure=exposure, image_format=image_format,
-                               overwrite=overwrite, progress=show_progress,
-                               on_point=lambda point, row: done.append(point))
+        report = run_sweep(scene, list(overrides), out_dir, method=method, reference=reference,
+                           renderer=Renderer(device, reuse=reuse), exposure=exposure, image_format=image_format,
+                           overwrite=overwrite, progress=progress, on_point=lambda point, row: done.append(point))
         click.echo(format_table(report.rows, axes), nl=False)
         click.echo(report.summary())
-    except KeyboardInterrupt:
-        click.echo(f"clrays: interrupted after {len(done)} points; run the same command again to resume", err=True)
-        sys.exit(130)
-    except Exception as exc:  # noqa: BLE001 - every failure becomes one line
-        _fail(exc)
+
+
+def _resolutions(context, parameter, texts) -> list[tuple[int, int]]:
+    """Click callback: WIDTHxHEIGHT strings → (width, height) pairs, usage error otherwise."""
+    sizes = []
+    for text in texts:
+        try:
+            width, height = (int(part) for part in text.lower().split("x"))
+            if width < 1 or height < 1:
+                raise ValueError
+        except ValueError:
+            raise click.BadParameter(f"expected WIDTHxHEIGHT like 640x360, got {text!r}") from None
+        sizes.append((width, height))
+    return sizes
+
+
+@main.command(section="Study", epilog="""
+\b
+Examples:
+  clrays bench                                  # every bench scene at 640x360
+  clrays bench scenes/demo.yaml -r 1280x720 -r 640x360 --out bench/out
+  clrays bench --repeats 3 --pixels 500         # a quicker, noisier run
+  clrays bench scenes/demo.yaml -r 64x36 --quick  # smoke run: does it all work?
+""")
+@click.argument("scenes", nargs=-1, type=click.Path(dir_okay=False, path_type=Path))
+@option("-r", "--resolution", "resolutions", multiple=True, default=["640x360"], show_default=True, metavar="WxH",
+        callback=_resolutions, group=BENCH, help="WIDTHxHEIGHT to render at (repeatable).")
+@option("--repeats", type=click.IntRange(1, 100), default=5, show_default=True, group=BENCH,
+        help="Timed frames per point (after one warm-up); the median is reported.")
+@option("--pixels", type=click.IntRange(16), default=4000, show_default=True, group=BENCH,
+        help="Pixels (fixed random subset) on which the error against exact is measured.")
+@option("--quick", is_flag=True, group=BENCH, help="A handful of points per scene: a smoke run, not results.")
+@option("--volume-only", "volume", is_flag=True, group=BENCH,
+        help="Black surfaces: measure the in-scattering's error alone (a smaller sweep).")
+@option("-o", "--out", type=click.Path(file_okay=False, path_type=Path), default=Path("bench/out"),
+        show_default=True, group=OUTPUT, help="Folder for bench.csv, bench.png, summary.md, machine.json.")
+@option("--cache", type=click.Path(file_okay=False, path_type=Path), default=Path(".cache/clrays"),
+        show_default=True, group=OUTPUT, help="Where exact references are cached.")
+@progress_option("Progress bar while an exact reference is computed (default: on a terminal).")
+@device_option()
+def bench(scenes, resolutions, repeats, pixels, quick, volume, out, cache, progress, device) -> None:
+    """Time every method and setting against its error versus `exact`.
+
+    Writes a CSV of every point, a log-log plot of error against time with the Pareto
+    front, and the headline table (speedup of minmax over raymarch at equal error).
+    """
+    for folder in (out, cache):  # fail before the sweep, not after it
+        make_folder(folder)
+    paths = [str(path) for path in scenes] or list(bench_run.DEFAULT_SCENES)
+    for path in paths:
+        if not Path(path).is_file():
+            raise ClraysError(f"{path}: no such scene file")
+    points = bench_run.run(paths, resolutions, repeats=repeats, pixels=pixels, cache=cache, device=device,
+                           progress=progress, log=lambda line: click.echo(line, err=True), quick=quick, volume=volume)
+    bench_run.save(points, out, device=device, extra={
+        "repeats": repeats, "pixels": pixels, "volume_only": volume,
+        "resolutions": [f"{width}x{height}" for width, height in resolutions], "scenes": paths})
+    click.echo(bench_run.markdown_summary(points))
+    click.echo(f"wrote {out}/bench.csv, bench.png, summary.md, machine.json")
+
+
+@main.command(section="Tools", epilog="""
+\b
+Examples:
+  clrays info
+  CLRAYS_DEVICE=pocl clrays info      # which device that spec picks
+""")
+@device_option()
+@click.pass_context
+def info(context, device: str | None) -> None:
+    """List OpenCL platforms and devices, and the one clrays would use."""
+    devices = list_devices()
+    try:
+        chosen = select_device(device)
+    except DeviceError:
+        if device is None or not devices:
+            raise
+        chosen = None  # list them anyway: they are what the spec should name
+    for p, d, platform, dev in devices:
+        mark = "*" if dev == chosen else " "
+        memory = dev.global_mem_size / 2**30
+        doubles = "fp64" if dev.double_fp_config else "no fp64"
+        click.echo(f"{mark} {p}:{d}  {platform.name.strip()} / {dev.name.strip()}  "
+                   f"({dev.version.strip()}, {dev.max_compute_units} CUs, {memory:.1f} GiB, {doubles})")
+    if chosen is not None:
+        click.echo("* = default device (choose with --device or CLRAYS_DEVICE: 'P:D' or a name substring)")
+    else:
+        source = ("CLRAYS_DEVICE" if context.get_parameter_source("device") is ParameterSource.ENVIRONMENT
+                  else "--device")
+        click.echo(f"{source}={device!r} matches none of these devices: name one as 'P:D' or by a substring "
+                   f"of its name")
+
 
 if __name__ == "__main__":
     main()

@@ -1,11 +1,12 @@
-"""Writing images. The extension of the path decides the format:
+"""Writing images (and reading them back as sRGB). The extension of the path decides the format:
 
 - `.png`: 8-bit sRGB, radiance × 2^exposure clamped to [0, 1] (opens anywhere);
 - `.exr`: float32 linear RGB (OpenEXR, ZIP compression);
 - `.npy`: float32 H×W×3 linear radiance, nothing applied.
 
 Writes are atomic: a temporary file beside the target, then a rename, so an
-interrupted or failed write never leaves a half-written image.
+interrupted or failed write never leaves a half-written image. The folder checks
+(`check_folder`, `make_folder`) run before rendering, so a bad path fails at once.
 """
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import OutputError
+from .errors import ClraysError, OutputError
 
 FORMATS = (".png", ".exr", ".npy")
 
@@ -40,6 +41,26 @@ def check_folder(path: Path) -> Path:
     if not os.access(folder, os.W_OK | os.X_OK):
         raise OutputError(f"{path}: folder {str(folder)!r} is not writable")
     return path
+
+
+def make_folder(folder: str | Path, name: str = "folder") -> Path:
+    """Create `folder` and its parents, and fail early (before any rendering) when that is
+    impossible or nothing can be written into it; `name` says what it is in messages."""
+    folder = Path(folder)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"{folder}: cannot create {name}: {exc.strerror or exc}") from None
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise OutputError(f"{folder}: {name} is not writable")
+    return folder
+
+
+def check_finite(image: np.ndarray, subject: str) -> np.ndarray:
+    """Refuse to write a render holding NaN or infinity: no scene should produce one."""
+    if not np.isfinite(image).all():
+        raise ClraysError(f"{subject}: the render produced non-finite values (a bug: please report the scene)")
+    return image
 
 
 def to_srgb8(radiance: np.ndarray, exposure: float = 0.0) -> np.ndarray:
@@ -98,3 +119,21 @@ def write_image(path: str | Path, radiance: np.ndarray, exposure: float = 0.0) -
 
     write_atomic(path, write)
     return path
+
+
+def read_srgb8(path: str | Path, exposure: float = 0.0) -> np.ndarray:
+    """A written image as 8-bit sRGB (H, W, 3): a PNG as stored, a float format encoded
+    with `to_srgb8` at `exposure` (what the PNG would have held)."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix == ".png":
+        from PIL import Image
+
+        with Image.open(path) as image:
+            return np.asarray(image.convert("RGB"))
+    if suffix == ".npy":
+        return to_srgb8(np.load(path), exposure)
+    import OpenEXR
+
+    with OpenEXR.File(str(path)) as exr:
+        return to_srgb8(np.asarray(exr.channels()["RGB"].pixels), exposure)

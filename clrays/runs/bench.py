@@ -14,7 +14,7 @@ and the error against `exact`: relative RMSE of luminance and the 99th-percentil
 relative error, on pixels with at least 1% of the mean radiance, depth edges excluded
 (`clrays.reference.metrics`). `exact` costs pixels × triangles, so the error is measured on a
 fixed, seeded random subset of pixels (`pixels`, default 4000), the same for every
-point; references are cached on disk by a hash of the scene and the subset.
+point; the references are kept on disk (`clrays.runs.references`).
 """
 from __future__ import annotations
 
@@ -31,11 +31,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..reference.metrics import depth_edges_at, image_error
+from ..image_io import make_folder
 from ..session import Renderer
-from ..reuse import digest, scene_digest
 from ..scene.model import Scene
 from ..scene.load import load_scene
+from .references import EXACT, ReferenceCache
 
 DEFAULT_SCENES = ("scenes/demo.yaml", "scenes/bunny.yaml", "scenes/behind.yaml", "scenes/sun.yaml")
 RMSE_TARGETS = (0.01, 0.05)
@@ -122,28 +122,6 @@ def error_pixels(width: int, height: int, count: int, seed: int = 20111) -> tupl
     return np.divmod(flat, width)
 
 
-def _scene_key(scene: Scene, ys: np.ndarray, xs: np.ndarray) -> str:
-    """Digest of everything `exact` reads (the scene, not its render settings) and the pixels."""
-    return digest("exact", scene_digest(scene, render=False), ys, xs).hex()[:24]
-
-
-def reference(scene: Scene, ys, xs, cache: Path, progress: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """(exact radiance (N, 3), depth-edge mask (N,)) of the pixel subset, cached on disk."""
-    from ..reference.exact import exact_pixels
-
-    path = cache / f"exact-{_scene_key(scene, ys, xs)}.npz"
-    if path.exists():
-        stored = np.load(path)
-        return stored["radiance"], stored["edges"]
-    radiance = exact_pixels(scene, ys, xs, progress=progress)
-    edges = depth_edges_at(scene, ys, xs)
-    cache.mkdir(parents=True, exist_ok=True)
-    temporary = path.with_suffix(".tmp.npz")
-    np.savez(temporary, radiance=radiance, edges=edges)
-    temporary.replace(path)
-    return radiance, edges
-
-
 def measure(renderer: Renderer, scene: Scene, method: str, repeats: int):
     """Warm-up, then `repeats` timed frames: (median ms, spread, median stage ms, last result)."""
     renderer.render(scene, method)
@@ -159,11 +137,13 @@ def measure(renderer: Renderer, scene: Scene, method: str, repeats: int):
 
 
 def run(scene_paths=DEFAULT_SCENES, resolutions=((640, 360),), repeats: int = 5, pixels: int = 4000,
-        cache: Path = Path(".cache/clrays"), device: str | None = None, progress=None, log=print,
+        cache: Path = Path(".cache/clrays"), device: str | None = None, progress: bool = False, log=print,
         quick: bool = False, volume: bool = False) -> list[BenchPoint]:
-    """The whole sweep; `progress(points_done, points_total)` is called after each point;
-    `volume`: surfaces black, so the error is the in-scattering's alone (`volume_only`)."""
+    """The whole sweep; `cache`: the folder of the exact references; `progress`: a bar while
+    one is computed; `log(line)` after each point; `volume`: surfaces black, so the error
+    is the in-scattering's alone (`volume_only`)."""
     renderer = Renderer(device, reuse=False)  # every frame computed from scratch
+    references = ReferenceCache(cache, renderer, progress)
     plan = []
     for path in scene_paths:
         for width, height in resolutions:
@@ -171,24 +151,20 @@ def run(scene_paths=DEFAULT_SCENES, resolutions=((640, 360),), repeats: int = 5,
             if volume:
                 scene = volume_only(scene)
             plan.append((path, scene, sweep(scene, quick, volume)))
-    total = sum(len(points) for _, _, points in plan)
-    results, done = [], 0
+    results = []
     for path, scene, points in plan:
         image = scene.image
-        ys, xs = error_pixels(image.width, image.height, pixels)
-        log(f"{path} {image.width}x{image.height}: exact on {len(ys)} pixels ...")
-        truth, edges = reference(scene, ys, xs, cache)
+        subset = error_pixels(image.width, image.height, pixels)
+        log(f"{path} {image.width}x{image.height}: exact on {len(subset[0])} pixels ...")
+        references.radiance(scene, EXACT, subset)
         for method, label, overrides in points:
             variant = replace(scene, render=replace(scene.render, **overrides))
             frame_ms, spread, stage_ms, result = measure(renderer, variant, method, repeats)
-            error = image_error(result.image[ys, xs][:, None], truth[:, None], edges[:, None])
+            error = references.error(scene, EXACT, result.image, subset)
             point = BenchPoint(Path(path).stem, f"{image.width}x{image.height}", method, label, frame_ms, spread,
                                error.rmse, error.p99, error.mean, result.device_bytes / 2**20, stage_ms)
             results.append(point)
             log(f"  {method:8} {label:36} {frame_ms:9.1f} ms  rmse {error.rmse:7.3%}  p99 {error.p99:7.3%}")
-            done += 1
-            if progress:
-                progress(done, total)
     return results
 
 
@@ -307,8 +283,8 @@ def markdown_summary(points: list[BenchPoint]) -> str:
 
 
 def save(points: list[BenchPoint], out: Path, extra: dict | None = None, device: str | None = None) -> None:
-    """CSV, plot, summary table and machine description into `out`."""
-    out.mkdir(parents=True, exist_ok=True)
+    """CSV, plot, summary table and machine description into `out` (created)."""
+    make_folder(out)
     write_csv(points, out / "bench.csv")
     plot(points, out / "bench.png")
     (out / "summary.md").write_text(markdown_summary(points) + "\n")

@@ -7,7 +7,8 @@
 Frames are written atomically (`clrays.image_io.write_image`), so a file that exists is
 a finished frame: running the same sequence again skips them, and an interrupted run
 loses nothing but the frame it was on. One render session (`Renderer`) renders all
-frames, so what a frame shares with the previous one is not computed again (DESIGN §7).
+frames, so what a frame shares with the previous one is not computed again
+(docs/design.md §7).
 """
 from __future__ import annotations
 
@@ -17,12 +18,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-import numpy as np
-
 from ..errors import ClraysError, OutputError
-from ..image_io import FORMATS, check_folder, check_output_path, to_srgb8, write_atomic, write_image
+from ..image_io import (FORMATS, check_finite, check_folder, check_output_path, make_folder, read_srgb8,
+                        write_atomic, write_image)
 from ..session import Renderer, RenderResult
 from ..scene.model import Scene
+from .progress import Progress
 
 VIDEO_FORMATS = (".gif", ".webp")
 
@@ -115,62 +116,32 @@ def render_sequence(scene: Scene, pattern: str | Path, frames: range | None = No
     frames = scene_frames(scene) if frames is None else frames
     paths = [frame_path(pattern, frame) for frame in frames]
     for folder in dict.fromkeys(path.parent for path in paths):  # the frame number may be in a folder name
-        try:
-            folder.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise OutputError(f"{pattern}: cannot create folder {str(folder)!r}: {exc.strerror or exc}") from None
+        make_folder(folder)
     for path in paths[:1]:
         check_output_path(path)
     renderer = renderer or Renderer()
     report = SequenceReport(paths)
     start = time.perf_counter()
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=len(paths), unit="frame", desc="sequence", leave=True)
     try:
-        for frame, path in zip(frames, paths):
-            if path.exists() and not overwrite:
-                report.kept.append(frame)
-                if on_frame:
-                    on_frame(frame, path, None)
-            else:
-                _remove_stale_temporaries(path)
-                frame_scene = scene.animation.scene_at(scene, frame) if scene.animation is not None else scene
-                result = renderer.render(frame_scene, method)
-                if not np.isfinite(result.image).all():
-                    raise ClraysError(f"frame {frame}: the render produced non-finite values "
-                                      f"(a bug: please report the scene)")
-                write_image(path, result.image, exposure)
-                report.rendered.append(frame)
-                report.results[frame] = result
-                if on_frame:
-                    on_frame(frame, path, result)
-            if bar is not None:
-                bar.set_postfix_str(f"frame {frame}", refresh=False)
-                bar.update(1)
+        with Progress(progress, len(paths), "frame", "sequence") as bar:
+            for frame, path in zip(frames, paths):
+                if path.exists() and not overwrite:
+                    report.kept.append(frame)
+                    if on_frame:
+                        on_frame(frame, path, None)
+                else:
+                    _remove_stale_temporaries(path)
+                    frame_scene = scene.animation.scene_at(scene, frame) if scene.animation is not None else scene
+                    result = renderer.render(frame_scene, method)
+                    write_image(path, check_finite(result.image, f"frame {frame}"), exposure)
+                    report.rendered.append(frame)
+                    report.results[frame] = result
+                    if on_frame:
+                        on_frame(frame, path, result)
+                bar.advance(f"frame {frame}")
     finally:
-        if bar is not None:
-            bar.close()
         report.wall_s = time.perf_counter() - start
     return report
-
-
-def _srgb_frame(path: Path, exposure: float) -> np.ndarray:
-    """A written frame as 8-bit sRGB (PNG as stored; float formats tone-mapped)."""
-    suffix = path.suffix.lower()
-    if suffix == ".png":
-        from PIL import Image
-
-        with Image.open(path) as image:
-            return np.asarray(image.convert("RGB"))
-    if suffix == ".npy":
-        return to_srgb8(np.load(path), exposure)
-    import OpenEXR
-
-    with OpenEXR.File(str(path)) as exr:
-        return to_srgb8(np.asarray(exr.channels()["RGB"].pixels), exposure)
 
 
 def check_video_path(path: str | Path) -> Path:
@@ -194,7 +165,7 @@ def write_video(paths: list[Path], out: str | Path, fps: float, exposure: float 
     missing = [str(p) for p in paths if not p.exists()]
     if missing:
         raise OutputError(f"{out}: frames missing: {', '.join(missing[:3])}{' ...' if len(missing) > 3 else ''}")
-    images = [Image.fromarray(_srgb_frame(p, exposure), mode="RGB") for p in paths]
+    images = [Image.fromarray(read_srgb8(p, exposure), mode="RGB") for p in paths]
     if not images:
         raise OutputError(f"{out}: no frames")
     # Milliseconds per frame; GIF stores centiseconds in 16 bits, so slow rates are clamped.

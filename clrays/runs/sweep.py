@@ -13,9 +13,9 @@ From Python, a scripted study is a loop over scenes and one render session:
         print(point.label, f"{result.wall_ms:.0f} ms", result.reused)
 
 or `run_sweep(...)` for everything `clrays sweep` writes. The session keeps the stage
-results that a point shares with earlier ones (DESIGN §7); the points run in an order
-that changes early-stage parameters (camera, geometry, lights) least often, while
-results keep the order of the product as given.
+results that a point shares with recent ones (docs/design.md §7); `run_sweep` renders
+the points that share them one after another (`execution_order`), while the results
+keep the order of the product as given.
 """
 from __future__ import annotations
 
@@ -23,27 +23,33 @@ import csv
 import io
 import itertools
 import math
-import os
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable, Iterator, Mapping, Sequence
+from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
-import numpy as np
 import yaml
 
 from ..errors import ClraysError, OutputError
-from ..image_io import to_srgb8, write_atomic, write_image
-from ..session import Renderer, RenderResult
+from ..image_io import check_finite, make_folder, read_srgb8, write_atomic, write_image
+from ..inputs import frame_inputs
+from ..session import Renderer, RenderResult, StageKeys
 from ..reuse import digest, scene_digest
-from ..scene.model import Render, Scene
-from ..scene.load import MAX_STEPS, load_scene
+from ..scene.model import Scene
+from ..scene.load import load_scene
+from .progress import Progress
+from .references import ReferenceCache, parse_reference
 
 RESULTS = "results.csv"
 CONTACT_SHEET = "contact_sheet.png"
+#: The sweep folder's cache of reference images (`clrays.runs.references`).
+REFERENCES = ".references"
 IMAGE_FORMATS = ("png", "exr", "npy")
 #: Stage columns of results.csv, in pipeline order (other labels follow, sorted).
 STAGES = ("raster", "rectify", "minmax", "integrand", "traverse", "raymarch", "shade")
+#: The error columns of results.csv, in percent (as the contact sheet shows them): mean
+#: and 99th percentile of the relative luminance error, relative RMSE (`ImageError`).
+ERROR_COLUMNS = ("error_mean_pct", "error_p99_pct", "error_rmse_pct")
 
 
 @dataclass(frozen=True)
@@ -126,28 +132,22 @@ def sweep_points(axes: Sequence[Axis]) -> list[SweepPoint]:
             for i, combo in enumerate(itertools.product(*(a.values for a in axes)))]
 
 
-def stage_rank(key: str) -> int:
-    """How early in the pipeline a key is read: 0 raster (camera, geometry, light
-    placement, shadow-map size), 1 rectify (texture size), 2 integrand (medium, light
-    power, integrand mode), 3 later (shading, method options)."""
-    parts = key.split(".")
-    if parts[0] in ("image", "camera", "objects", "version"):
-        return 0
-    if parts[0] == "lights":
-        return 2 if parts[-1] in ("intensity", "irradiance") else 0
-    if parts[0] == "render":
-        field_name = parts[1] if len(parts) > 1 else ""
-        return {"shadow_map": 0, "slices": 1, "gamma_samples": 1, "integrand": 2, "svd_rank": 2}.get(field_name, 3)
-    if parts[0] == "medium":
-        return 2
-    return 3
+def execution_order(points: Sequence[SweepPoint], scenes: Iterable[Scene]) -> list[SweepPoint]:
+    """`points` (`scenes`: theirs, in the same order) reordered so that those sharing
+    shadow maps, then the camera raster, then the min-max trees run one after another,
+    while the session still keeps them; ties keep the order of the product.
 
-
-def execution_order(points: Sequence[SweepPoint], axes: Sequence[Axis]) -> list[SweepPoint]:
-    """The points reordered so the axes read by early stages change least often."""
-    order = sorted(range(len(axes)), key=lambda i: stage_rank(axes[i].key))  # stable: ties keep their order
-    position = [{v: j for j, v in enumerate(a.values)} for a in axes]
-    return sorted(points, key=lambda p: tuple(position[i][p.settings[i][1]] for i in order))
+    Sharing is decided by the session's own keys (`clrays.session.StageKeys`), not by
+    which keys were swept. The integrand's key also holds the β and γ ranges that rectify
+    finds on the device, so it is not known before a point renders and plays no part."""
+    first_seen: dict[bytes, int] = {}
+    rank = {}
+    for point, scene in zip(points, scenes):
+        keys = StageKeys(frame_inputs(scene))
+        trees = digest(*(keys.trees(index) for index in range(len(scene.lights))))
+        rank[point.index] = tuple(first_seen.setdefault(key, len(first_seen))
+                                  for key in (digest(*keys.shadow), keys.camera, trees))
+    return sorted(points, key=lambda point: rank[point.index])
 
 
 def check_values(path: str | Path, axes: Sequence[Axis], fixed: Sequence[str] = ()) -> None:
@@ -167,74 +167,6 @@ def sweep_scenes(path: str | Path, spec, overrides: Sequence[str] = ()) -> Itera
     check_values(path, axes, list(overrides) + fixed)
     for point in sweep_points(axes):
         yield point, load_scene(path, list(overrides) + fixed + point.overrides)
-
-
-# --------------------------------------------------------------------------- references
-
-
-def parse_reference(text: str | None) -> tuple[str, int] | None:
-    """`exact` or `raymarch:N` (N steps per ray) → (method, steps)."""
-    if text is None:
-        return None
-    method, _, steps = text.strip().partition(":")
-    if method == "exact" and not steps:
-        return "exact", 0
-    if method == "raymarch" and steps.strip().isdigit() and 1 <= int(steps) <= MAX_STEPS:
-        return "raymarch", int(steps)
-    raise ClraysError(f"--reference {text}: expected exact or raymarch:N (N steps per ray, 1 to {MAX_STEPS}), "
-                      f"got {text!r}")
-
-
-def reference_scene(scene: Scene, reference: tuple[str, int]) -> Scene:
-    """The scene as the reference renders it: only the render settings it reads are kept,
-    so points that differ in nothing else share one reference image."""
-    method, steps = reference
-    if method == "exact":
-        return replace(scene, render=Render(method="exact"), source=None, animation=None)
-    r = scene.render
-    return replace(scene, render=Render(method="raymarch", steps=steps, jitter=r.jitter, shadow_map=r.shadow_map,
-                                        pcf=r.pcf), source=None, animation=None)
-
-
-class References:
-    """Reference images and depth-edge masks, kept in memory and (images) in the sweep
-    folder, so a resumed sweep does not render them again."""
-
-    def __init__(self, reference: tuple[str, int], renderer: Renderer, folder: Path | None):
-        self.reference, self.renderer, self.folder = reference, renderer, folder
-        self._images: dict[bytes, np.ndarray] = {}
-        self._edges: dict[bytes, np.ndarray] = {}
-
-    @property
-    def name(self) -> str:
-        method, steps = self.reference
-        return method if method == "exact" else f"raymarch:{steps}"
-
-    def image(self, scene: Scene) -> np.ndarray:
-        ref_scene = reference_scene(scene, self.reference)
-        key = scene_digest(ref_scene)
-        if key not in self._images:
-            path = self.folder / f".reference_{key.hex()[:16]}.npy" if self.folder else None
-            if path is not None and path.exists():
-                self._images[key] = np.load(path)
-            else:
-                self._images[key] = self.renderer.render(ref_scene, reuse=False).image
-                if path is not None:
-                    write_image(path, self._images[key])
-        return self._images[key]
-
-    def edges(self, scene: Scene) -> np.ndarray:
-        from ..reference.metrics import depth_edges, depth_map
-
-        key = digest(scene.camera, scene.image, scene.geometry.triangles)
-        if key not in self._edges:
-            self._edges[key] = depth_edges(depth_map(scene))
-        return self._edges[key]
-
-    def error(self, scene: Scene, image: np.ndarray):
-        from ..reference.metrics import image_error
-
-        return image_error(image, self.image(scene), self.edges(scene))
 
 
 # --------------------------------------------------------------------------- the sweep
@@ -272,7 +204,7 @@ def _write_rows(path: Path, rows: list[dict[str, str]], axes: Sequence[Axis]) ->
     columns = (["index", "image"] + [a.key for a in axes] + ["method", "wall_ms", "device_ms"]
                + [f"{s}_ms" for s in stages + extra] + ["reused", "computed"])
     if any(r.get("reference") for r in rows):
-        columns += ["reference", "error_mean", "error_p99", "error_rmse", "error_pixels"]
+        columns += ["reference", *ERROR_COLUMNS, "error_pixels"]
     columns.append("scene_digest")
 
     def write(temporary: str) -> None:
@@ -286,14 +218,15 @@ def _write_rows(path: Path, rows: list[dict[str, str]], axes: Sequence[Axis]) ->
 
 def _row(point: SweepPoint, image_name: str, result: RenderResult, digest_hex: str, error, reference) -> dict:
     row = {"index": str(point.index), "image": image_name, **dict(point.settings), "method": result.method,
-           "wall_ms": f"{result.wall_ms:.2f}", "device_ms": f"{sum(result.stage_ms.values()):.2f}",
+           "wall_ms": f"{result.wall_ms:.2f}", "device_ms": f"{result.device_ms:.2f}",
            "reused": " ".join(s for s, v in result.stage_status.items() if v == "reused"),
            "computed": " ".join(s for s, v in result.stage_status.items() if v == "computed"),
            "scene_digest": digest_hex}
     row.update({f"{stage}_ms": f"{ms:.2f}" for stage, ms in result.stage_ms.items()})
     if error is not None:
-        row.update({"reference": reference, "error_mean": f"{error.mean:.6g}", "error_p99": f"{error.p99:.6g}",
-                    "error_rmse": f"{error.rmse:.6g}", "error_pixels": str(error.pixels)})
+        row.update({"reference": reference, "error_pixels": str(error.pixels),
+                    **{column: f"{100 * value:.6g}" for column, value in
+                       zip(ERROR_COLUMNS, (error.mean, error.p99, error.rmse))}})
     return row
 
 
@@ -304,73 +237,62 @@ def run_sweep(path: str | Path, spec, out_dir: str | Path, *, overrides: Sequenc
               on_point: Callable[[SweepPoint, dict], None] | None = None) -> SweepReport:
     """Render every point of the sweep into `out_dir` (created): one image per point,
     results.csv and contact_sheet.png. `spec` as for `sweep_scenes`; `reference`:
-    "exact" or "raymarch:N" adds error columns (`clrays.reference.metrics.image_error`, depth edges
-    excluded). Points whose image and results row exist from an earlier run of the same
-    scene and settings are kept unless `overwrite`. on_point(point, row) after each."""
+    "exact" or "raymarch:N" adds error columns in percent
+    (`clrays.reference.metrics.image_error`, depth edges excluded; the reference images
+    are kept in `out_dir`/.references). Points whose image and results row exist from an
+    earlier run of the same scene and settings are kept unless `overwrite`.
+    on_point(point, row) after each."""
     if image_format not in IMAGE_FORMATS:
         raise ClraysError(f"image format: expected one of {', '.join(IMAGE_FORMATS)}, got {image_format!r}")
     axes, fixed = axes_from(spec)
-    ref = parse_reference(reference)
+    against = parse_reference(reference)
     fixed = list(overrides) + fixed
     check_values(path, axes, fixed)
-    folder = Path(out_dir)
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(f"{folder}: cannot create the sweep folder: {exc.strerror or exc}") from None
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise OutputError(f"{folder}: folder is not writable")
+    folder = make_folder(out_dir, "the sweep folder")
+
+    def point_scene(point: SweepPoint) -> Scene:
+        scene = load_scene(path, fixed + point.overrides)
+        return scene if method is None else replace(scene, render=replace(scene.render, method=method))
 
     renderer = renderer or Renderer()
-    references = References(ref, renderer, folder) if ref else None
+    references = ReferenceCache(folder / REFERENCES, renderer, progress) if against else None
     points = sweep_points(axes)
     earlier = {} if overwrite else _read_rows(folder / RESULTS)
     rows: dict[int, dict[str, str]] = {}
     report = SweepReport(folder, [])
     start = time.perf_counter()
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=len(points), unit="point", desc="sweep")
     try:
-        for point in execution_order(points, axes):
-            scene = load_scene(path, fixed + point.overrides)
-            if method is not None:
-                scene = replace(scene, render=replace(scene.render, method=method))
-            digest_hex = digest(scene_digest(scene), exposure).hex()  # what the point's image depends on
-            name = _image_name(point, len(points), image_format)
-            old = earlier.get(point.index)
-            if (old is not None and old.get("scene_digest") == digest_hex and (folder / name).exists()
-                    and old.get("image") == name and (references is None or old.get("reference") == references.name)):
-                rows[point.index] = old
-                report.kept.append(point.index)
-            else:
-                result = renderer.render(scene)
-                if not np.isfinite(result.image).all():
-                    raise ClraysError(f"{point.label}: the render produced non-finite values "
-                                      f"(a bug: please report the scene)")
-                write_image(folder / name, result.image, exposure)
-                error = references.error(scene, result.image) if references else None
-                rows[point.index] = _row(point, name, result, digest_hex, error,
-                                         references.name if references else None)
-                report.rendered.append(point.index)
-                # Rows of an earlier run stay until this run reaches their point, so an
-                # interrupted resume loses nothing.
-                merged = {**{i: row for i, row in earlier.items() if i < len(points)}, **rows}
-                _write_rows(folder / RESULTS, [merged[i] for i in sorted(merged)], axes)
-            if on_point:
-                on_point(point, rows[point.index])
-            if bar is not None:
-                bar.set_postfix_str(point.label[:60], refresh=False)
-                bar.update(1)
+        with Progress(progress, len(points), "point", "sweep") as bar:
+            for point in execution_order(points, map(point_scene, points)):
+                scene = point_scene(point)
+                digest_hex = digest(scene_digest(scene), exposure).hex()  # what the point's image depends on
+                name = _image_name(point, len(points), image_format)
+                old = earlier.get(point.index)
+                if (old is not None and old.get("scene_digest") == digest_hex and old.get("image") == name
+                        and (folder / name).exists()
+                        and (against is None or (old.get("reference") == against.name
+                                                 and old.get(ERROR_COLUMNS[0])))):
+                    rows[point.index] = old
+                    report.kept.append(point.index)
+                else:
+                    result = renderer.render(scene)
+                    write_image(folder / name, check_finite(result.image, point.label), exposure)
+                    error = references.error(scene, against, result.image) if references else None
+                    rows[point.index] = _row(point, name, result, digest_hex, error,
+                                             against.name if against else None)
+                    report.rendered.append(point.index)
+                    # Rows of an earlier run stay until this run reaches their point, so an
+                    # interrupted resume loses nothing.
+                    merged = {**{i: row for i, row in earlier.items() if i < len(points)}, **rows}
+                    _write_rows(folder / RESULTS, [merged[i] for i in sorted(merged)], axes)
+                if on_point:
+                    on_point(point, rows[point.index])
+                bar.advance(point.label[:60])
         report.rows = [rows[i] for i in sorted(rows)]
         _write_rows(folder / RESULTS, report.rows, axes)
         if contact_sheet:
             write_contact_sheet(folder / CONTACT_SHEET, folder, report.rows, axes, exposure)
     finally:
-        if bar is not None:
-            bar.close()
         report.wall_s = time.perf_counter() - start
     return report
 
@@ -381,16 +303,7 @@ def run_sweep(path: str | Path, spec, out_dir: str | Path, *, overrides: Sequenc
 def _thumbnail(path: Path, exposure: float, width: int):
     from PIL import Image
 
-    suffix = path.suffix.lower()
-    if suffix == ".png":
-        image = Image.open(path).convert("RGB")
-    elif suffix == ".npy":
-        image = Image.fromarray(to_srgb8(np.load(path), exposure), mode="RGB")
-    else:
-        import OpenEXR
-
-        with OpenEXR.File(str(path)) as exr:
-            image = Image.fromarray(to_srgb8(np.asarray(exr.channels()["RGB"].pixels), exposure), mode="RGB")
+    image = Image.fromarray(read_srgb8(path, exposure), mode="RGB")
     if image.width > width:
         image = image.resize((width, max(1, round(image.height * width / image.width))), Image.Resampling.LANCZOS)
     return image
@@ -398,8 +311,8 @@ def _thumbnail(path: Path, exposure: float, width: int):
 
 def _label_lines(row: dict[str, str], axes: Sequence[Axis]) -> list[str]:
     lines = [f"{a.key}={row.get(a.key, '')}" for a in axes] + [f"#{row['index']}  {float(row['wall_ms']):.0f} ms"]
-    if row.get("error_mean"):
-        lines.append(f"error {float(row['error_mean']):.2%}, p99 {float(row['error_p99']):.1%}")
+    if row.get("error_mean_pct"):
+        lines.append(f"error {float(row['error_mean_pct']):.2f}%, p99 {float(row['error_p99_pct']):.1f}%")
     return lines
 
 
@@ -434,8 +347,8 @@ def write_contact_sheet(path: Path, folder: Path, rows: list[dict[str, str]], ax
 
 def format_table(rows: list[dict[str, str]], axes: Sequence[Axis]) -> str:
     """results.csv as an aligned text table (for the terminal)."""
-    columns = [a.key for a in axes] + ["wall_ms", "reused"] + (["error_mean"] if any(r.get("error_mean") for r in rows)
-                                                              else [])
+    error = ["error_mean_pct"] if any(r.get("error_mean_pct") for r in rows) else []
+    columns = [a.key for a in axes] + ["wall_ms", "reused"] + error
     buffer = io.StringIO()
     widths = [max(len(c), *(len(r.get(c, "")) for r in rows)) for c in columns]
     buffer.write("  ".join(c.ljust(w) for c, w in zip(columns, widths)).rstrip() + "\n")

@@ -1,7 +1,9 @@
 """The benchmark's bookkeeping, and a smoke run of `clrays bench` end to end."""
 import csv
+from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -55,3 +57,27 @@ def test_bench_command_writes_csv_plot_and_summary(tmp_path):
 def test_bench_rejects_a_bad_resolution():
     result = CliRunner().invoke(main, ["bench", str(DEMO), "-r", "640by360"])
     assert result.exit_code == 2 and "WIDTHxHEIGHT" in result.output
+
+
+def test_reference_cache_keeps_exact_on_pixels_on_disk(tmp_path, monkeypatch, device):
+    from clrays.scene.load import load_scene
+    from clrays.session import Renderer
+    from clrays.runs.references import EXACT, ReferenceCache
+
+    scene = load_scene(DEMO, ["image.width=16", "image.height=9"])
+    pixels = error_pixels(16, 9, 20)
+    cache = ReferenceCache(tmp_path, Renderer(device))
+    on_pixels = cache.radiance(scene, EXACT, pixels)
+    whole = cache.radiance(scene, EXACT)
+    assert on_pixels.shape == (20, 3) and whole.shape == (9, 16, 3)
+    np.testing.assert_allclose(on_pixels, whole[pixels], rtol=1e-6)  # float64 on the pixels, float32 frame
+    assert cache.edges(scene, pixels).shape == (20,) and cache.edges(scene).shape == (9, 16)
+
+    def recomputed(*args, **kwargs):
+        raise AssertionError("the cached reference was computed again")
+
+    monkeypatch.setattr("clrays.reference.exact.exact_pixels", recomputed)
+    fresh = ReferenceCache(tmp_path, Renderer(device))
+    coarser = replace(scene, render=replace(scene.render, slices=64))  # exact reads no render setting
+    np.testing.assert_array_equal(fresh.radiance(coarser, EXACT, pixels), on_pixels)
+    assert fresh.error(scene, EXACT, whole, pixels).rmse < 1e-6

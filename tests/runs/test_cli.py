@@ -122,3 +122,92 @@ def test_missing_scene_file(tmp_path):
 
 def test_usage_error_exits_2(scene_file):
     assert run("render", scene_file)[0] == 2  # missing -o
+
+
+@pytest.mark.parametrize("place", ["group", "command"])
+def test_debug_shows_the_traceback_before_the_line(scene_file, tmp_path, place):
+    scene_file.write_text(SCENE.replace("fov_deg: 50", "fov_deg: 190"))
+    command = ["render", scene_file, "-o", tmp_path / "a.png"]
+    code, out = run(*(["--debug", *command] if place == "group" else [*command, "--debug"]))
+    assert code == 1 and "Traceback" in out and "SceneError" in out
+    assert out.strip().splitlines()[-1].startswith("clrays: error: ")
+
+
+def test_an_unexpected_failure_is_an_internal_error(scene_file, tmp_path, monkeypatch):
+    def fail(*args, **kwargs):
+        raise RuntimeError("boom")
+
+    monkeypatch.setattr("clrays.cli.load_scene", fail)
+    code, out = run("render", scene_file, "-o", tmp_path / "a.png")
+    assert code == 1
+    assert out.strip() == "clrays: internal error: RuntimeError: boom (run with --debug for the traceback)"
+
+
+def test_a_reader_that_left_ends_the_run_quietly(scene_file, tmp_path, monkeypatch):
+    def reader_left(*args, **kwargs):
+        raise BrokenPipeError(32, "Broken pipe")
+
+    monkeypatch.setattr("clrays.cli.load_scene", reader_left)
+    code, out = run("render", scene_file, "-o", tmp_path / "a.png")
+    assert code == 1 and "error" not in out
+
+
+def test_info_lists_every_device_when_clrays_device_matches_none():
+    from clrays.device import list_devices
+
+    code, out = run("info", env={"CLRAYS_DEVICE": "no-such-device"})
+    assert code == 0, out
+    lines = out.strip().splitlines()
+    assert len(lines) == len(list_devices()) + 1 and "*" not in out
+    assert lines[-1].startswith("CLRAYS_DEVICE='no-such-device' matches none of these devices")
+    code, out = run("info", "--device", "97:3")
+    assert code == 0 and out.strip().splitlines()[-1].startswith("--device='97:3' matches none")
+
+
+def test_stats_marks_the_host_stages(scene_file, tmp_path):
+    code, out = run("render", scene_file, "-o", tmp_path / "a.npy", "--method", "minmax", "--stats")
+    assert code == 0, out
+    assert re.search(r"^ +integrand +[\d.]+ ms \(host\)", out, re.M), out
+    assert re.search(r"^ +traverse +[\d.]+ ms \(device\)", out, re.M), out
+
+
+def test_help_groups_options_and_commands():
+    code, out = run("render", "--help")
+    assert code == 0
+    sections = [line for line in out.splitlines() if re.fullmatch(r"[A-Z]\w+:", line)]
+    assert sections == ["Scene:", "Output:", "Run:", "Device:", "Other:"], sections
+    assert "clrays render scenes/demo.yaml -o out/demo.png" in out
+    code, out = run("--help")
+    assert [line for line in out.splitlines() if line in ("Render:", "Study:", "Tools:")] == \
+        ["Render:", "Study:", "Tools:"]
+
+
+def test_method_choices_are_the_scene_models(scene_file, tmp_path):
+    from clrays.scene.model import METHODS
+
+    code, out = run("render", scene_file, "-o", tmp_path / "a.png", "--method", "fastest")
+    assert code == 2 and all(method in out for method in METHODS)
+
+
+def test_every_format_reads_back_as_the_png_it_would_have_been(tmp_path):
+    from clrays.image_io import read_srgb8, write_image
+
+    radiance = np.random.default_rng(7).uniform(0, 0.7, (5, 6, 3)).astype(np.float32)
+    for name in ("a.png", "a.npy", "a.exr"):
+        write_image(tmp_path / name, radiance, exposure=0.5)
+    png = read_srgb8(tmp_path / "a.png")
+    assert png.shape == (5, 6, 3) and png.dtype == np.uint8
+    np.testing.assert_array_equal(read_srgb8(tmp_path / "a.npy", 0.5), png)
+    np.testing.assert_array_equal(read_srgb8(tmp_path / "a.exr", 0.5), png)
+
+
+def test_non_finite_render_and_unmakeable_folder_are_errors(tmp_path):
+    from clrays.errors import ClraysError, OutputError
+    from clrays.image_io import check_finite, make_folder
+
+    with pytest.raises(ClraysError, match=r"^frame 3: the render produced non-finite values"):
+        check_finite(np.array([[[0.0, np.nan, 1.0]]]), "frame 3")
+    (tmp_path / "file").write_text("not a folder")
+    with pytest.raises(OutputError, match=r"file/sub: cannot create the sweep folder: "):
+        make_folder(tmp_path / "file" / "sub", "the sweep folder")
+    assert make_folder(tmp_path / "a" / "b").is_dir()

@@ -1,0 +1,126 @@
+"""Reference images to measure error against, computed once and kept on disk: `exact`
+(the float64 renderer) or `raymarch:N` (N steps per ray), of whole frames (`clrays sweep
+--reference`) or of a fixed subset of pixels (`clrays bench`: exact costs pixels ×
+triangles, so it is measured where it is needed only).
+
+An entry's key is the reference, the digest of the scene as the reference renders it
+(`clrays.reuse.scene_digest` of `reference_scene`) and the pixels: points of a study that
+differ only in settings the reference does not read share one image. The depth-edge
+masks that `clrays.reference.metrics.image_error` leaves out are kept the same way.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+from typing import Callable, NamedTuple
+
+import numpy as np
+
+from ..errors import ClraysError
+from ..image_io import make_folder, write_atomic
+from ..reference.metrics import ImageError, depth_edges, depth_edges_at, depth_map, image_error
+from ..reuse import StageCache, digest, scene_digest
+from ..scene.load import MAX_STEPS
+from ..scene.model import Render, Scene
+from ..session import Renderer
+
+#: (ys, xs): the rows and columns of the pixels a reference is computed on.
+Pixels = tuple[np.ndarray, np.ndarray]
+
+
+class Reference(NamedTuple):
+    """What the error is measured against: `exact`, or `raymarch` at `steps` per ray."""
+
+    method: str
+    steps: int = 0
+
+    @property
+    def name(self) -> str:
+        """As `--reference` spells it."""
+        return self.method if self.method == "exact" else f"{self.method}:{self.steps}"
+
+
+EXACT = Reference("exact")
+
+
+def parse_reference(text: str | None) -> Reference | None:
+    """`exact` or `raymarch:N` (N steps per ray, 1 to MAX_STEPS); None: no reference."""
+    if text is None:
+        return None
+    method, _, steps = text.strip().partition(":")
+    if method == "exact" and not steps:
+        return EXACT
+    if method == "raymarch" and steps.strip().isdigit() and 1 <= int(steps) <= MAX_STEPS:
+        return Reference("raymarch", int(steps))
+    raise ClraysError(f"--reference {text}: expected exact or raymarch:N (N steps per ray, 1 to {MAX_STEPS}), "
+                      f"got {text!r}")
+
+
+def reference_scene(scene: Scene, reference: Reference) -> Scene:
+    """The scene as the reference renders it: only the render settings it reads are kept
+    (none for exact), so scenes that differ in nothing else share one reference."""
+    if reference.method == "exact":
+        return replace(scene, render=Render(method="exact"), source=None, animation=None)
+    render = scene.render
+    return replace(scene, render=Render(method="raymarch", steps=reference.steps, jitter=render.jitter,
+                                        shadow_map=render.shadow_map, pcf=render.pcf), source=None, animation=None)
+
+
+class ReferenceCache:
+    """Reference radiance and depth-edge masks, as `.npy` files in `folder` (created on
+    the first write) and the last few in memory; entries are never stale, because the
+    key holds everything they are computed from.
+
+    renderer: renders whole-frame references (default: a new session); they are
+    rendered with `reuse=False`, so they neither use nor evict what the renderer keeps
+    for the study's own frames. progress: a progress bar while a reference renders."""
+
+    def __init__(self, folder: str | Path, renderer: Renderer | None = None, progress: bool = False,
+                 memory_entries: int = 4):
+        self.folder = Path(folder)
+        self.renderer = renderer or Renderer()
+        self.progress = progress
+        self._memory = StageCache(memory_entries)  # least recently used first out, per kind
+
+    def radiance(self, scene: Scene, reference: Reference, pixels: Pixels | None = None) -> np.ndarray:
+        """The reference's linear radiance of `scene`: (H, W, 3), or (N, 3) on `pixels`."""
+        as_rendered = reference_scene(scene, reference)
+        key = digest(reference, scene_digest(as_rendered), pixels)
+        return self._cached(reference.name.replace(":", ""), key,
+                            lambda: self._render(as_rendered, reference, pixels))
+
+    def edges(self, scene: Scene, pixels: Pixels | None = None) -> np.ndarray:
+        """Pixels at depth discontinuities: (H, W), or (N,) on `pixels`."""
+        key = digest("edges", scene.camera, scene.image, scene.geometry.triangles, pixels)
+        if pixels is None:
+            return self._cached("edges", key, lambda: depth_edges(depth_map(scene)))
+        return self._cached("edges", key, lambda: depth_edges_at(scene, *pixels))
+
+    def error(self, scene: Scene, reference: Reference, image: np.ndarray, pixels: Pixels | None = None) -> ImageError:
+        """`image_error` of a whole rendered frame (H, W, 3) against the reference, depth
+        edges left out; on `pixels` only, when given."""
+        if pixels is not None:
+            image = image[pixels]
+        return image_error(image, self.radiance(scene, reference, pixels), self.edges(scene, pixels))
+
+    def _render(self, scene: Scene, reference: Reference, pixels: Pixels | None) -> np.ndarray:
+        if pixels is not None and reference.method == "exact":
+            from ..reference.exact import exact_pixels
+
+            return exact_pixels(scene, *pixels, progress=self.progress)
+        image = self.renderer.render(scene, reuse=False, progress=self.progress).image
+        return image if pixels is None else image[pixels]
+
+    def _cached(self, kind: str, key: bytes, compute: Callable[[], np.ndarray]) -> np.ndarray:
+        found, array = self._memory.get(kind, key)
+        if found:
+            return array
+        path = self.folder / f"{kind}-{key.hex()[:24]}.npy"
+        if path.exists():
+            array = np.load(path)
+        else:
+            array = compute()
+            make_folder(self.folder, "the reference folder")
+            write_atomic(path, lambda temporary: np.save(temporary, array))
+        self._memory.put(kind, key, array)
+        return array
