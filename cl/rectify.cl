@@ -1,5 +1,5 @@
 /* rectify — the shadow map resampled into epipolar coordinates: for each slice α and
- * light angle γ, the view angle β of the light ray's blocker, S[α, γ] (DESIGN §2, §3).
+ * light angle γ, the view angle β of the light ray's blocker, S[α, γ] (docs/design.md §2, §3).
  * Reads views, lights, shadow_depth, epipolar; writes level 0 of the min-max tree
  * (float2 (S, S) per texel). rectify_bounds reads camera_depth and reduces the
  * β and γ ranges the visible rays need.
@@ -15,7 +15,7 @@ inline float3 slice_direction(global const epipolar_t* ep, float alpha)
     return ep->u.xyz * cos(alpha) + ep->w.xyz * sin(alpha);
 }
 
-/* β and γ of the point at distance s along unit eye ray dir (DESIGN §2, §3). */
+/* β and γ of the point at distance s along unit eye ray dir (docs/design.md §2, §3). */
 inline float2 epipolar_beta_gamma(global const epipolar_t* ep, int light_type, float3 dir, float s)
 {
     float cos_beta = dot(dir, ep->axis.xyz);

@@ -1,6 +1,6 @@
 /* traverse — in-scattered radiance per camera sample: walk the min-max tree of the
  * two slices nearest the sample's α over [0, γ_D), integrate the lit runs with the
- * integrand tables, blend the two slices (DESIGN §4 "traverse").
+ * integrand tables, blend the two slices (docs/design.md §4 "traverse").
  * Reads frame, views, lights, epipolar, tree, integrand, tables, camera_depth,
  * offsets; adds into scatter (float4 per camera sample).
  *

@@ -203,7 +203,7 @@ def light_pass_inputs(inputs: FrameInputs, light_index: int) -> FrameInputs:
     Vertices and the light's views are translated (float64, on the host) so the map's
     origin sits at zero: the map's depths are distances from that origin whatever the
     eye space, so they depend only on the geometry and the light. That is what lets a
-    render session keep a static light's map while the camera moves (DESIGN §7). The
+    render session keep a static light's map while the camera moves (docs/design.md §7). The
     camera view stays in views[0]; the light's views follow from views[1], with depth
     offsets from 0, and `shadow_texels` counts this light's texels only.
     """

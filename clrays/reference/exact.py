@@ -1,7 +1,7 @@
 """`exact`: the ground-truth renderer (numpy, float64, no shadow map).
 
 For each camera sample ray x(s) = e + s·v (v unit) it computes, per light and per RGB
-channel (DESIGN.md §1, §4),
+channel (docs/design.md §1, §4),
 
     L = L_surf·e^{-σt·D} + Σ_lights Σ_{lit [a, b]} ∫_a^b e^{-σt·s}·σs·ρ(cosθ)·Lin(x_s) ds
 

@@ -1,6 +1,6 @@
 """Radiometry shared by the reference renderers (numpy, float64, vectorised).
 
-Every method in clrays computes the same single-scattering model (DESIGN.md §1), per
+Every method in clrays computes the same single-scattering model (docs/design.md §1), per
 RGB channel, with σt = σs + σa:
 
     L = L_surf·e^{-σt·D} + ∫_0^D e^{-σt·s} · σs · ρ(cosθ) · V(x_s) · Lin(x_s) ds

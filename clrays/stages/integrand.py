@@ -1,9 +1,9 @@
 """The integrand stage, host side: per-frame tables that turn a lit interval of a camera
-ray into in-scattered radiance (DESIGN.md §2–§4, stage 4 `integrand`).
+ray into in-scattered radiance (docs/design.md §2–§4, stage 4 `integrand`).
 
 A camera ray has view angle β; a lit interval of it is [γ0, γ1) in light angle γ (point
-and spot lights, DESIGN §2) or in perpendicular distance γ = s·sinβ (directional light,
-DESIGN §3). Its in-scattered radiance is ∫ I(β, γ) dγ with
+and spot lights, docs/design.md §2) or in perpendicular distance γ = s·sinβ (directional light,
+docs/design.md §3). Its in-scattered radiance is ∫ I(β, γ) dγ with
 
     point/spot:   I(β, γ) = σs·I·ρ(cos(β+γ))·exp(-σt·d_el·(sinβ + sinγ)/sin(β+γ)) / (d_el·sinβ)
                   γ ∈ [0, π-β)   (γ → π-β is the ray's point at infinity)
@@ -32,7 +32,7 @@ measured errors.
 Modes (`mode`):
     table     F sampled on n_beta × n_gamma nodes, per-cell Gauss–Legendre in float64;
               bilinear lookup.
-    svd       the seed's method: K sampled on 64 × 64 (t, x) nodes, truncated SVD
+    svd       the paper's method: K sampled on 64 × 64 (t, x) nodes, truncated SVD
               K ≈ Σ_i B_i(β)·Γ_i(x), B_i on the n_beta β nodes and P_i(x) = ∫_0^x Γ_i on
               the n_gamma x nodes (Nyström extension of the singular vectors, prefix
               integrals by the same quadrature as `table`); linear lookups.
@@ -60,7 +60,7 @@ from ..structs import SIN_BETA_MIN
 MODES = INTEGRAND_MODES
 LIGHT_KINDS = ("point", "directional")  # "spot" is accepted and treated as "point"
 
-# The seed's SVD sampling grid, and so the largest rank it can keep.
+# The paper's SVD sampling grid, and so the largest rank it can keep.
 SVD_SAMPLES = 64
 # Singular values below this fraction of the largest are dropped (their Nyström
 # extension divides by σ_i).

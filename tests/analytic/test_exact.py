@@ -2,7 +2,7 @@
 
 The references here share nothing with clrays.reference.exact / clrays.reference.radiometry except the pixel
 rays (`camera.primary_rays`, the one definition of pixel rays): they integrate the
-model of DESIGN.md §1 in the ray parameter s with scipy's adaptive `quad`, evaluate the
+model of docs/design.md §1 in the ray parameter s with scipy's adaptive `quad`, evaluate the
 light, phase function and visibility with their own code, and find the discontinuities
 of the integrand (cone crossings, shadow boundaries) by sign changes on a dense grid
 refined by bisection, then pass them to `quad` as breakpoints.
@@ -88,7 +88,7 @@ def ref_phase(c, ph: Phase):
 
 
 def ref_integrand(scene, light, v, ch):
-    """s ↦ e^{-σt s}·σs·ρ(cosθ)·Lin(x_s) for channel ch, written from DESIGN.md §1 (V = 1)."""
+    """s ↦ e^{-σt s}·σs·ρ(cosθ)·Lin(x_s) for channel ch, written from docs/design.md §1 (V = 1)."""
     m = scene.medium
     ss, st = m.sigma_s[ch], m.sigma_s[ch] + m.sigma_a[ch]
     e = scene.camera.position

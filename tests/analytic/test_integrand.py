@@ -1,7 +1,7 @@
 """The integrand stage's host side (clrays/integrand.py) against independent quadrature.
 
 The reference everywhere is scipy.integrate.quad of I(β, γ) written out here from
-DESIGN.md §2–§3 (not the module's own integrand_exact), and once the radiometric
+docs/design.md §2–§3 (not the module's own integrand_exact), and once the radiometric
 integral over distance s along a concrete 3-D ray, which pins down the change of
 variables and the sign of the phase angle.
 """
@@ -41,7 +41,7 @@ def hg(c, g):
 
 
 def design_integrand(gamma, kind, sigma_t, g, beta, channel):
-    """I(β, γ) of DESIGN §2 (point) and §3 (directional), one channel, scalars."""
+    """I(β, γ) of docs/design.md §2 (point) and §3 (directional), one channel, scalars."""
     ss, st, power = SIGMA_S[channel], sigma_t[channel], POWER[channel]
     if kind == "point":
         if not 0 <= gamma < PI - beta:
@@ -141,7 +141,7 @@ def test_point_light_change_of_variables_and_phase_sign():
             return math.exp(-sigma_t * s) * sigma_s * hg(cos_theta, g) * intensity * math.exp(-sigma_t * d) / d**2
 
         want = quad(along_s, s0, s1, epsabs=0, epsrel=1e-12, limit=200)[0]
-        # DESIGN §2: γ of the point at distance s on ray β.
+        # docs/design.md §2: γ of the point at distance s on ray β.
         gamma0, gamma1 = (math.atan2(s * math.sin(beta), d_el - s * math.cos(beta)) for s in (s0, s1))
         # ... and the s ↔ γ relations of the triangle, at the far end.
         x1 = eye + s1 * view
@@ -217,7 +217,7 @@ SVD_RANK_4_MEASURED = {
 
 @pytest.mark.parametrize("sigma_name,phase_name", CASES)
 def test_svd_point_light_rank_4(sigma_name, phase_name):
-    """The seed's rank-4 SVD. Its error is an absolute one (the SVD minimises L2 over the
+    """The paper's rank-4 SVD. Its error is an absolute one (the SVD minimises L2 over the
     (β, x) samples), so a sub-interval is judged against its whole ray: relative to the
     sub-interval alone it reaches 0.28 in the attenuated far tails (docs/integrand.md)."""
     rel, to_ray, whole = errors(tables("svd", "point", sigma_name, phase_name), "point", sigma_name, phase_name)

@@ -1,4 +1,4 @@
-"""Numerical stability: the configurations where volumetric renderers break (DESIGN §6),
+"""Numerical stability: the configurations where volumetric renderers break (docs/design.md §6),
 for every light type and every method (minmax, raymarch, exact).
 
 Each test renders small images and asserts that every pixel is finite and non-negative,
@@ -232,7 +232,7 @@ def _eye_at_light_scenes(kind, offset):
 @pytest.mark.parametrize("offset", [0.0, 1e-6], ids=["at_light", "1e-6_from_light"])
 @pytest.mark.parametrize("kind", ["point", "spot"])
 def test_eye_at_the_light_is_unshadowed(renderer, kind, offset):
-    """d_el → 0 (DESIGN §6): everything the eye sees, the light sees, so the render equals
+    """d_el → 0 (docs/design.md §6): everything the eye sees, the light sees, so the render equals
     the same method's render without the blocks wherever the blocks are not in view; the
     1/s² divergence at s = 0 is cut by the lamp (radiometry.py), so every method is finite,
     and minmax (its unshadowed fallback) matches exact."""
@@ -380,7 +380,7 @@ def test_an_occluder_that_grows_the_bounds_never_adds_light(renderer):
 @pytest.mark.parametrize("kind", ["point", "spot", "directional"])
 def test_no_scattering_is_the_surface_image_without_volume_stages(renderer, kind, sigma_a):
     """σs = 0: the image is the surfaces attenuated by e^{-σa·D}, exactly what exact gives,
-    and no volume stage runs (DESIGN §7)."""
+    and no volume stage runs (docs/design.md §7)."""
     scene = stress_scene(lights_at(LIGHT_POSITION)[kind], sigma_s=0.0, sigma_a=sigma_a)
     reference = renderer.render(scene, "exact").image
     for method in ("minmax", "raymarch"):

@@ -1,5 +1,5 @@
 """The min-max method: its stages against numpy, the tree walk against the texel scan,
-and the whole method against raymarch and exact in the configurations of DESIGN §6."""
+and the whole method against raymarch and exact in the configurations of docs/design.md §6."""
 from pathlib import Path
 
 import numpy as np
