@@ -94,7 +94,8 @@ typedef struct {
  *          axis a
  *
  * The rectified texture S[α, γ] holds, per light ray, the β of its blocker: a
- * point (β, γ) is lit iff β < S (S = π: unblocked; S = 0: carries no light). */
+ * point (β, γ) is lit iff β < S (S = π: unblocked; rectify writes π outside a spot
+ * light's cone too, since traverse clips each ray to the cone itself). */
 typedef struct {
     float4 axis;       /* a = (l - e)/|l - e|, or ω = -direction for directional lights */
     float4 u;          /* slice frame, u ⟂ axis */

@@ -1,5 +1,5 @@
 """What a render session keeps between frames: stage results keyed by a digest of
-exactly the inputs each stage reads (docs/design.md §7 "skip what a scene doesn't need").
+exactly the inputs each stage reads (docs/design.md §7 "Doing only the work a frame needs").
 
 A key is a BLAKE2b digest of numbers, strings, numpy arrays (dtype, shape and bytes)
 and dataclasses (field by field), so two frames share a stage result only when every
