@@ -10,7 +10,6 @@
  *   INTEGRAND_TABLE, INTEGRAND_SVD, INTEGRAND_ANALYTIC    integrand_t.mode
  *   TRAVERSAL_TREE, TRAVERSAL_SCAN                        traverse.cl's TRAVERSAL
  *   DEPTH_EMPTY      as_uint(+INFINITY): nothing rasterized here (uint)
- *   LAMP_RADIUS_REL  radius of a point or spot light's medium-free ball, × far (float)
  *   SIN_BETA_MIN     the clamp of sinβ in every 1/sinβ (float) */
 #ifndef CLRAYS_COMMON_H
 #define CLRAYS_COMMON_H
@@ -19,7 +18,7 @@
     || !defined(LIGHT_SPOT) || !defined(LIGHT_DIRECTIONAL) || !defined(PHASE_ISOTROPIC) || !defined(PHASE_HG) \
     || !defined(INTEGRAND_TABLE) || !defined(INTEGRAND_SVD) || !defined(INTEGRAND_ANALYTIC) \
     || !defined(TRAVERSAL_TREE) || !defined(TRAVERSAL_SCAN) || !defined(DEPTH_EMPTY) \
-    || !defined(LAMP_RADIUS_REL) || !defined(SIN_BETA_MIN)
+    || !defined(SIN_BETA_MIN)
 #error "the constants of clrays/structs.py are missing: build with clrays.device.build_options()"
 #endif
 
@@ -70,7 +69,7 @@ typedef struct {
     float4 background; /* radiance of rays that hit nothing, rgb */
     float phase_g;     /* Henyey-Greenstein asymmetry */
     int phase_type;    /* PHASE_* */
-    float far;         /* rays that hit nothing end here */
+    float far;         /* rays that hit nothing end here (camera.far, clamped: radiometry.effective_far) */
     int light_count;
     int width;
     int height;
@@ -78,8 +77,8 @@ typedef struct {
     int steps;         /* raymarch samples per ray */
     int jitter;        /* raymarch: jitter sample positions */
     int pcf;           /* surface shadow filter radius, texels */
+    float lamp_radius; /* radius of a point or spot light's medium-free ball (lighting.h) */
     int _pad0;
-    int _pad1;
 } frame_t;
 
 /* The epipolar frame of one light for one frame (docs/design.md §2, §3).

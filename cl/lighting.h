@@ -7,16 +7,17 @@
 
 #define INV_FOUR_PI 0.0795774715459476679f
 
-/* A point or spot light is a lamp: a ball of radius LAMP_RADIUS_REL·far around it holds no
+/* A point or spot light is a lamp: a ball of radius frame_t.lamp_radius around it holds no
  * medium, which keeps a ray through the light and the eye at the light finite
- * (clrays/reference/radiometry.py says why; the value comes from clrays/structs.py). */
+ * (docs/design.md §6; the radius follows the scene's size, never camera.far, and is
+ * clrays/reference/radiometry.py lamp_radius, so the host reference uses the same value). */
 
 /* The eye (eye space's origin) is inside a point or spot light's lamp, d_el → 0: then every
  * point the eye sees, the light sees too, and nothing visible is shadowed (docs/design.md §6). A
  * shadow-map test there would only add its texel-wide errors along every silhouette. */
-inline int eye_in_lamp(global const light_t* light, float far)
+inline int eye_in_lamp(global const light_t* light, float lamp_radius)
 {
-    return light->type != LIGHT_DIRECTIONAL && length(light->position.xyz) < LAMP_RADIUS_REL * far;
+    return light->type != LIGHT_DIRECTIONAL && length(light->position.xyz) < lamp_radius;
 }
 
 /* Screen coordinates of sample (x + ox, y + oy) in [-1, 1], y up. */

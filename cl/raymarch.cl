@@ -45,12 +45,12 @@ kernel void raymarch(global const frame_t* frame, global const view_t* views,
         if (light->type == LIGHT_SPOT && !spot_interval(light, dir, distance, &begin, &end)) continue;
         float dt = (end - begin) / (float)frame->steps;
         int directional = light->type == LIGHT_DIRECTIONAL;
-        int unshadowed = eye_in_lamp(light, frame->far);
+        int unshadowed = eye_in_lamp(light, frame->lamp_radius);
         for (int i = 0; i < frame->steps; ++i) {
             float t = begin + ((float)i + u) * dt;
             float3 p = origin + t * dir;
             float d = directional ? 0.0f : length(p - light->position.xyz);
-            if (!directional && d < LAMP_RADIUS_REL * frame->far) continue; /* no medium in the lamp */
+            if (!directional && d < frame->lamp_radius) continue; /* no medium in the lamp */
             float3 to_light;
             /* Unattenuated here: both exponentials are integrated over the step below. */
             float3 incident = light_incident(light, (float3)(0.0f), p, &to_light);

@@ -77,7 +77,7 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                 if (cosine <= 0.0f || incident.x + incident.y + incident.z == 0.0f) continue;
                 /* Normal offset by a texel keeps a lit surface from shadowing itself. */
                 float3 lookup = p + n * shadow_texel_size(lights + l, length(p - lights[l].position.xyz));
-                float visible = eye_in_lamp(lights + l, frame->far)
+                float visible = eye_in_lamp(lights + l, frame->lamp_radius)
                                     ? 1.0f
                                     : shadow_visibility(lights + l, views, shadow_depth, lookup,
                                                         SURFACE_BIAS_TEXELS, frame->pcf);

@@ -94,7 +94,7 @@ kernel void traverse(global const frame_t* frame, global const view_t* views, gl
      * leaves out the chord inside it, [gamma_lamp0, gamma_lamp1), as exact does; this keeps
      * a ray through the light finite. For every other ray the chord is empty. */
     float gamma_lamp0 = gamma_end, gamma_lamp1 = gamma_end;
-    float radius = LAMP_RADIUS_REL * frame->far, miss = ep->d_el * sin_beta;
+    float radius = frame->lamp_radius, miss = ep->d_el * sin_beta;
     if (light_type != LIGHT_DIRECTIONAL && miss < radius) {
         float closest = ep->d_el * cos_beta, half_chord = sqrt(radius * radius - miss * miss);
         float s0 = clamp(closest - half_chord, begin, end), s1 = clamp(closest + half_chord, begin, end);

@@ -15,6 +15,7 @@ import numpy as np
 from . import structs
 from .scene.camera import camera_basis, sample_offsets
 from .device import Device
+from .reference.radiometry import effective_far, lamp_radius
 from .scene.model import DirectionalLight, Scene, SpotLight
 
 #: Spot lights wider than this use a cube map: a single perspective map of a wide
@@ -137,7 +138,8 @@ def frame_inputs(scene: Scene) -> FrameInputs:
     params["background"] = structs.float4(scene.background)
     params["phase_g"] = medium.phase.g
     params["phase_type"] = structs.PHASE_HG if medium.phase.type == "hg" else structs.PHASE_ISOTROPIC
-    params["far"] = camera.far
+    params["far"] = effective_far(scene)  # camera.far, clamped where it changes nothing
+    params["lamp_radius"] = lamp_radius(scene)  # from the scene's size, not far (docs/design.md §6)
     params["light_count"] = len(lights)
     params["width"], params["height"], params["spp"] = image.width, image.height, image.spp
     params["steps"] = scene.render.steps

@@ -26,6 +26,7 @@ import numpy as np
 from .device import Device, StageTimer
 from .errors import ClraysError
 from .inputs import FrameBuffers, FrameInputs, frame_inputs, upload
+from .reference.radiometry import effective_far
 from .reuse import COMPUTED, REUSED, Reuse, StageCache, StageRecord, digest, scene_digest
 from .scene.model import METHODS, Scene
 from .stages.integrand import integrand
@@ -281,7 +282,7 @@ class StageKeys:
         γ ranges of the visible rays, the integrand mode and rank, the camera's far."""
         scene = self.inputs.scene
         return digest("tables", scene.medium, scene.lights[index], scene.render.integrand, scene.render.svd_rank,
-                      scene.camera.far, epipolar.d_el, epipolar.beta_min, epipolar.beta_max, epipolar.gamma_max)
+                      effective_far(scene), epipolar.d_el, epipolar.beta_min, epipolar.beta_max, epipolar.gamma_max)
 
 
 _renderers: dict[str | None, Renderer] = {}

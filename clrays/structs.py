@@ -28,9 +28,17 @@ TRAVERSAL_SCAN = 1
 
 DEPTH_EMPTY = np.uint32(0x7F800000)  # as_uint(+inf): a depth buffer's texel where nothing was rasterized
 
-# A point or spot light is a lamp: a ball of radius LAMP_RADIUS_REL × camera.far around it
-# holds no medium (clrays.reference.radiometry says why and what it changes).
+# A point or spot light is a lamp: a ball of radius LAMP_RADIUS_REL × the scene's size around
+# it holds no medium (clrays.reference.radiometry says why and what it changes); the radius
+# reaches the device per frame, in frame_t.lamp_radius.
 LAMP_RADIUS_REL = 1e-6
+
+# Rays that hit nothing end at camera.far, but no further than this optical depth of the
+# least attenuating channel (e^-40 ≈ 4e-18: nothing a float32 radiance keeps) nor than
+# FAR_DEVICE_MAX scene units, where squared distances still fit a float32
+# (clrays.reference.radiometry.effective_far).
+FAR_OPTICAL_DEPTH = 40.0
+FAR_DEVICE_MAX = 1e18
 
 # sinβ is clamped to this in every 1/sinβ, so that β = 0 (a ray through a point light)
 # stays finite; only rays within 1e-9 rad of the eye–light axis see the clamp.
@@ -40,7 +48,7 @@ SIN_BETA_MIN = 1e-9
 KERNEL_CONSTANTS = {
     name: value for name, value in dict(globals()).items()
     if name.startswith(("PROJECTION_", "LIGHT_", "PHASE_", "INTEGRAND_", "TRAVERSAL_"))
-    or name in ("DEPTH_EMPTY", "LAMP_RADIUS_REL", "SIN_BETA_MIN")
+    or name in ("DEPTH_EMPTY", "SIN_BETA_MIN")
 }
 
 
@@ -84,7 +92,7 @@ frame_dtype = np.dtype([
     ("far", np.float32), ("light_count", np.int32),
     ("width", np.int32), ("height", np.int32), ("spp", np.int32), ("steps", np.int32),
     ("jitter", np.int32), ("pcf", np.int32),
-    ("_pad0", np.int32), ("_pad1", np.int32),
+    ("lamp_radius", np.float32), ("_pad0", np.int32),
 ])
 
 epipolar_dtype = np.dtype([

@@ -6,7 +6,7 @@ channel (docs/design.md §1, §4),
     L = L_surf·e^{-σt·D} + Σ_lights Σ_{lit [a, b]} ∫_a^b e^{-σt·s}·σs·ρ(cosθ)·Lin(x_s) ds
 
 - D is the first hit of the ray (Möller–Trumbore against every triangle), or camera.far
-  for a miss, in which case L_surf is the background.
+  (clamped: `radiometry.effective_far`) for a miss, in which case L_surf is the background.
 - L_surf = albedo/π · Σ_lights Lin(x)·max(0, n·ω_l)·V(x), n the shading normal (the
   geometric normal, or on a smooth mesh the interpolated vertex normals) turned towards the
   camera with the geometric normal, V by a shadow ray.
@@ -85,7 +85,7 @@ def _radiance(scene: Scene, eye: np.ndarray, dirs: np.ndarray, prepared, quad: d
     medium = scene.medium
     sigma_s = rgb(medium.sigma_s)
     sigma_t = sigma_s + rgb(medium.sigma_a)
-    far = float(scene.camera.far)
+    far = radiometry.effective_far(scene)
     t, idx = raycast(eye, dirs, tri, t_max=far)
     hit = idx >= 0
     D = np.where(hit, t, far)

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..scene.camera import primary_rays
+from .radiometry import effective_far
 from ..scene.model import Scene
 
 _LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
@@ -26,7 +27,7 @@ def depth_map(scene: Scene) -> np.ndarray:
     from .geometry import raycast
 
     dirs = primary_rays(scene.camera, scene.image, np.array([[0.5, 0.5]])).reshape(-1, 3)
-    t, _ = raycast(scene.camera.position, dirs, scene.geometry.triangles, t_max=scene.camera.far)
+    t, _ = raycast(scene.camera.position, dirs, scene.geometry.triangles, t_max=effective_far(scene))
     return t.reshape(scene.image.height, scene.image.width)
 
 
@@ -59,7 +60,7 @@ def depth_edges_at(scene: Scene, ys, xs, relative: float = 0.05) -> np.ndarray:
     cy = np.stack([np.clip(ys + dy, 0, h - 1) for dy, _ in neighbours])
     cx = np.stack([np.clip(xs + dx, 0, w - 1) for _, dx in neighbours])
     t, _ = raycast(scene.camera.position, dirs[cy.ravel(), cx.ravel()], scene.geometry.triangles,
-                   t_max=scene.camera.far)
+                   t_max=effective_far(scene))
     depth = np.where(np.isfinite(t), t, -1.0).reshape(len(neighbours), -1)
     centre, around = depth[0], depth[1:]
     jump = ((centre < 0) != (around < 0)) | (np.abs(around - centre) > relative * np.maximum(np.abs(around),

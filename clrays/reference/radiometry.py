@@ -18,9 +18,19 @@ caller has already found to be lit (V = 1).
 
 The lamp. Along a ray through a point light the integral diverges like ∫ds/d², and with the
 eye at the light every ray goes through it. So a point or spot light is a lamp: a ball of
-radius `lamp_radius(scene)` = LAMP_RADIUS_REL × camera.far around it holds no medium. A ray
+radius `lamp_radius(scene)` = LAMP_RADIUS_REL × the scene's size around it holds no medium. A ray
 that passes the light at a distance h > lamp radius never meets the ball, so the ball
 changes nothing but those two cases: they become finite (about σs·I·ρ·2/radius per ray).
+The scene's size is the diagonal of the bounds of its triangles, the camera and the lights'
+positions (`scene_size`), never camera.far: far bounds only the rays that hit nothing, so
+a closed room renders the same whatever its far (docs/design.md §6).
+
+Far. camera.far only ends the rays that hit nothing. Past the optical depth
+FAR_OPTICAL_DEPTH of the least attenuating channel the medium adds nothing a float32 can
+hold, so every method ends rays at `effective_far(scene)`: far, but no further than that
+depth past twice the distance of the farthest vertex or light from the eye, and never past
+FAR_DEVICE_MAX (which keeps squares of distances finite in float32). A far of 1e300 thus
+renders like a far of a few hundred scene units instead of overflowing.
 """
 from __future__ import annotations
 
@@ -29,7 +39,7 @@ import math
 import numpy as np
 
 from ..scene.model import DirectionalLight, Light, Medium, Phase, SpotLight
-from ..structs import LAMP_RADIUS_REL
+from ..structs import FAR_DEVICE_MAX, FAR_OPTICAL_DEPTH, LAMP_RADIUS_REL
 
 # Gauss–Legendre rule on [-1, 1] used for every panel of the point-light quadrature.
 GL_NODES = 16
@@ -72,10 +82,37 @@ def light_position(light: Light) -> np.ndarray | None:
     return np.asarray(light.position, dtype=np.float64)
 
 
+def scene_size(scene) -> float:
+    """The diagonal of the bounds of the scene's triangles, the camera position and every
+    point or spot light's position, in scene units (0 only for a scene with no triangles
+    whose camera sits at its only light)."""
+    points = [scene.geometry.triangles.reshape(-1, 3), np.reshape(scene.camera.position, (1, 3))]
+    points += [np.reshape(light.position, (1, 3)) for light in scene.lights if not isinstance(light, DirectionalLight)]
+    points = np.concatenate(points).astype(np.float64)
+    return float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
+
+
+def effective_far(scene) -> float:
+    """Where every method ends the rays that hit nothing (module docstring, Far): camera.far,
+    clamped where going further changes no float32 radiance."""
+    eye = np.asarray(scene.camera.position, dtype=np.float64)
+    points = [scene.geometry.triangles.reshape(-1, 3), eye.reshape(1, 3)]
+    points += [np.reshape(light.position, (1, 3)) for light in scene.lights if not isinstance(light, DirectionalLight)]
+    reach = float(np.sqrt(((np.concatenate(points) - eye) ** 2).sum(axis=1).max()))
+    sigma_t = np.asarray(scene.medium.sigma_t, dtype=np.float64)
+    optical = FAR_OPTICAL_DEPTH / float(sigma_t[sigma_t > 0].min()) if (sigma_t > 0).any() else 0.0
+    # A light of any power sits within `reach`, so what lies a further `optical` away is
+    # e^-FAR_OPTICAL_DEPTH of the light the ray gathers nearer (the light's path and the
+    # ray's together are at least as long). The margin of 2 keeps far surfaces from float32
+    # rounding against the clamped far.
+    return min(float(scene.camera.far), 2.0 * reach + optical, FAR_DEVICE_MAX)
+
+
 def lamp_radius(scene) -> float:
     """Radius of every point and spot light's medium-free ball (module docstring), in the
-    scene's length unit: LAMP_RADIUS_REL × camera.far."""
-    return LAMP_RADIUS_REL * float(scene.camera.far)
+    scene's length unit: LAMP_RADIUS_REL × `scene_size`, or × the effective far for a
+    scene of size 0."""
+    return LAMP_RADIUS_REL * (scene_size(scene) or effective_far(scene))
 
 
 def lamp_interval(light: Light, origins: np.ndarray, dirs: np.ndarray, radius: float
@@ -317,6 +354,6 @@ def in_scatter_unoccluded(light: Light, medium: Medium, origins: np.ndarray, dir
     return in_scatter_segments(light, medium, origins, dirs, a, b, **quad)
 
 
-__all__ = ["GL_NODES", "LAMP_RADIUS_REL", "rgb", "phase", "light_position", "lamp_radius", "lamp_interval",
+__all__ = ["GL_NODES", "LAMP_RADIUS_REL", "rgb", "phase", "light_position", "scene_size", "effective_far", "lamp_radius", "lamp_interval",
            "spot_axis", "in_spot_cone", "propagation_direction",
            "light_incident", "cone_interval", "in_scatter_segments", "in_scatter_unoccluded"]

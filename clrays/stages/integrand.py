@@ -54,6 +54,7 @@ import numpy as np
 from .. import structs
 from ..device import Device, StageTimer
 from ..errors import ClraysError
+from ..reference.radiometry import effective_far
 from ..scene.model import INTEGRAND_MODES, DirectionalLight, Phase
 from ..structs import SIN_BETA_MIN
 
@@ -512,7 +513,7 @@ def integrand(device: Device, scene, light, epipolar, timer: StageTimer) -> Devi
             medium.phase, light.irradiance if directional else light.intensity, epipolar.d_el,
             epipolar.beta_min, epipolar.beta_max, epipolar.gamma_max, rank=render.svd_rank,
             n_beta=INTEGRAND_ROWS, n_gamma=INTEGRAND_COLUMNS,
-            s_max=scene.camera.far if directional and render.integrand != "analytic" else None)
+            s_max=effective_far(scene) if directional and render.integrand != "analytic" else None)
     except ValueError as exc:  # e.g. `analytic` where no closed form exists
         where = f"{scene.source}: " if scene.source else ""
         raise ClraysError(f"{where}render.integrand: {str(exc).removeprefix('integrand: ')}") from exc

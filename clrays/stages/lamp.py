@@ -9,7 +9,7 @@ import numpy as np
 
 from ..device import Device, StageTimer
 from ..inputs import FrameBuffers
-from ..reference.radiometry import in_scatter_segments, lamp_radius
+from ..reference.radiometry import effective_far, in_scatter_segments, lamp_radius
 from ..scene.camera import primary_rays
 from ..scene.model import DirectionalLight
 from .raster import RasterResult
@@ -39,7 +39,7 @@ def lamp_in_scatter(device: Device, buffers: FrameBuffers, rastered: RasterResul
     scene, samples = buffers.inputs.scene, buffers.inputs.samples
     eye = np.asarray(scene.camera.position, dtype=np.float64)
     depth = device.read(rastered.camera_depth, samples, np.uint32).view(np.float32)
-    distance = np.minimum(depth.astype(np.float64), scene.camera.far)
+    distance = np.minimum(depth.astype(np.float64), effective_far(scene))
     dirs = primary_rays(scene.camera, scene.image).reshape(-1, 3)  # sample order: pixel·spp + sample
     ray, a, b = lit_intervals(eye, dirs, distance, light, np.zeros((0, 3, 3)), lamp_radius=lamp_radius(scene))
     segments = in_scatter_segments(light, scene.medium, eye, dirs[ray], a, b)
