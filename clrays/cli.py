@@ -8,6 +8,7 @@ below (`device_option`, `method_option`, ...).
 from __future__ import annotations
 
 import contextlib
+import math
 import signal
 import sys
 import traceback
@@ -18,13 +19,15 @@ import click
 from click.core import ParameterSource
 
 from .device import list_devices, select_device
-from .errors import ClraysError, DeviceError
+from .errors import ClraysError, DeviceError, OutputError
 from .image_io import check_finite, check_output_path, make_folder, write_image
+from .reference.exact import estimate_seconds
 from .runs import bench as bench_run
 from .runs.references import parse_reference
 from .runs.sequence import (check_pattern, check_video_path, parse_frames, render_sequence, scene_frames,
                             write_video)
 from .runs.sweep import axes_from, format_table, run_sweep
+from .scene.fields import unread_render_keys
 from .scene.load import load_scene
 from .scene.model import METHODS
 from .session import Renderer
@@ -32,6 +35,11 @@ from .session import Renderer
 #: Option sections of a command's --help, in this order (then any other, then "Other").
 SCENE, SWEEP, BENCH, OUTPUT, RUN, DEVICE, OTHER = "Scene", "Sweep", "Bench", "Output", "Run", "Device", "Other"
 SECTIONS = (SCENE, SWEEP, BENCH, OUTPUT, RUN, DEVICE)
+
+#: Outputs that --exposure changes: 8-bit images; .exr and .npy keep linear radiance.
+EXPOSED_FORMATS = (".png", ".gif", ".webp")
+#: `exact` runs estimated to take at least this long are announced up front.
+EXACT_ESTIMATE_MIN_S = 5.0
 
 
 def _set_debug(context: click.Context, parameter, value: bool) -> None:
@@ -133,9 +141,62 @@ def overrides_option(text: str, metavar: str = "KEY.PATH=VALUE", group: str = SC
     return option("--set", "overrides", multiple=True, metavar=metavar, group=group, help=text)
 
 
+def _finite_exposure(context: click.Context, parameter, value: float) -> float:
+    """--exposure in [-64, 64]; NaN slips through a FloatRange (every comparison is false)."""
+    if not (math.isfinite(value) and -64 <= value <= 64):
+        click.echo(f"clrays: error: --exposure: expected a finite number of stops in [-64, 64], got {value}",
+                   err=True)
+        context.exit(2)
+    return value
+
+
 def exposure_option(applies_to: str):
-    return option("--exposure", type=click.FloatRange(-64, 64), default=0.0, show_default=True, metavar="EV",
+    return option("--exposure", type=float, default=0.0, show_default=True, metavar="EV", callback=_finite_exposure,
                   group=OUTPUT, help=f"{applies_to}: scale radiance by 2^EV before sRGB encoding.")
+
+
+def check_exposure_applies(exposure: float, outputs: list[str]) -> None:
+    """Refuse an --exposure that would change none of the outputs: .exr and .npy keep
+    linear radiance as rendered."""
+    if exposure != 0.0 and not any(Path(str(out)).suffix.lower() in EXPOSED_FORMATS for out in outputs):
+        raise OutputError(f"--exposure {exposure:g}: applies only to PNG, GIF and WebP output; "
+                          f"{', '.join(str(out) for out in outputs)} keeps linear radiance (drop --exposure)")
+
+
+def verbose_option():
+    return option("--verbose", "-v", is_flag=True, group=RUN,
+                  help="Say which scene keys the chosen method does not read.")
+
+
+def _notice_unread_keys(scene, method: str | None) -> None:
+    """One line on stderr for each render key set away from its default that `method`
+    ignores (the field table's `read_by`), e.g. render.steps with minmax."""
+    method = method or scene.render.method
+    for text in unread_render_keys(scene.render, method):
+        click.echo(f"clrays: notice: {text}; method {method} ignores it", err=True)
+
+
+def _estimate_exact(scene, method: str | None, progress) -> object:
+    """`exact` runs on the host and can take minutes: say how long up front, and when no
+    bar is shown (stderr not a terminal) report progress as lines. Returns the progress
+    argument for the render."""
+    if (method or scene.render.method) != "exact":
+        return progress
+    seconds = estimate_seconds(scene)
+    if seconds >= EXACT_ESTIMATE_MIN_S:
+        image = scene.image
+        click.echo(f"clrays: exact on {image.width}×{image.height} at {image.spp} spp, "
+                   f"{scene.geometry.count} triangles, {len(scene.lights)} light(s): about "
+                   f"{_duration(seconds)} on the host (estimate)", err=True)
+    return progress or (lambda line: click.echo(f"clrays: {line}", err=True))
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
 
 
 def overwrite_option(text: str):
@@ -154,6 +215,23 @@ def _progress_default(context: click.Context, parameter, value: bool | None) -> 
 
 def progress_option(text: str = "Progress bar (default: on a terminal)."):
     return option("--progress/--no-progress", default=None, callback=_progress_default, group=RUN, help=text)
+
+
+@contextlib.contextmanager
+def _interruptible(context: click.Context, what: str):
+    """A run that does not resume: Ctrl-C or SIGTERM (raised as KeyboardInterrupt, so the
+    atomic write's temporary is removed on the way out) ends it with one line, exit 130."""
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    except KeyboardInterrupt:
+        click.echo(f"clrays: interrupted; {what}", err=True)
+        context.exit(130)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 @contextlib.contextmanager
@@ -211,17 +289,25 @@ Examples:
         help="Output image: .png (8-bit sRGB), .exr (float RGB) or .npy (float32 linear H×W×3).")
 @exposure_option("PNG only")
 @option("--stats", is_flag=True, group=RUN, help="Print per-stage device times and device memory.")
+@verbose_option()
 @progress_option("Progress bar for slow methods (default: on a terminal).")
 @device_option()
-def render(scene: Path, method, overrides, frame, output: Path, exposure, stats, progress, device) -> None:
+@click.pass_context
+def render(context, scene: Path, method, overrides, frame, output: Path, exposure, stats, verbose, progress,
+           device) -> None:
     """Render SCENE (a YAML file) to an image."""
     check_output_path(output)
+    check_exposure_applies(exposure, [output])
     loaded = load_scene(scene, overrides)
     if frame is not None:
         parse_frames(str(frame), scene_frames(loaded), "--frame")
         loaded = loaded.animation.scene_at(loaded, frame) if loaded.animation is not None else loaded
-    result = Renderer(device).render(loaded, method, progress=progress)
-    write_image(output, check_finite(result.image, str(scene)), exposure)
+    if stats or verbose:
+        _notice_unread_keys(loaded, method)
+    with _interruptible(context, f"{output} was not written"):
+        progress = _estimate_exact(loaded, method, progress)
+        result = Renderer(device).render(loaded, method, progress=progress)
+        write_image(output, check_finite(result.image, str(scene)), exposure)
     if stats:
         _print_stats(result)
 
@@ -300,19 +386,23 @@ there, so an interrupted run resumes where it stopped (--overwrite renders all a
 @overwrite_option("Render every frame, also those already written.")
 @reuse_option("frames")
 @option("--stats", is_flag=True, group=RUN, help="Print each frame's time and reused stages, then a summary.")
+@verbose_option()
 @progress_option()
 @device_option()
 @click.pass_context
-def sequence(context, scene, frames, method, overrides, pattern, video, exposure, overwrite, reuse, stats, progress,
-             device) -> None:
+def sequence(context, scene, frames, method, overrides, pattern, video, exposure, overwrite, reuse, stats, verbose,
+             progress, device) -> None:
     """Render the frames of SCENE's animation to numbered images."""
     done = []
     with _resumable(context, lambda: f"{len(done)} new frames"):
         check_pattern(pattern)
         if video is not None:
             check_video_path(video)
+        check_exposure_applies(exposure, [pattern] + ([video] if video is not None else []))
         loaded = load_scene(scene, overrides)
         chosen = parse_frames(frames, scene_frames(loaded))
+        if stats or verbose:
+            _notice_unread_keys(loaded, method)
 
         def on_frame(frame, path, result):
             if result is not None:

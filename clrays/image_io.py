@@ -5,12 +5,16 @@
 - `.npy`: float32 H×W×3 linear radiance, nothing applied.
 
 Writes are atomic: a temporary file beside the target, then a rename, so an
-interrupted or failed write never leaves a half-written image. The folder checks
+interrupted or failed write never leaves a half-written image. A temporary's name holds
+the host and process id of its writer, so a later write in the folder removes those of a
+process that is gone (SIGKILL leaves no chance to clean up). The folder checks
 (`check_folder`, `make_folder`) run before rendering, so a bad path fails at once.
 """
 from __future__ import annotations
 
 import os
+import re
+import socket
 import tempfile
 from pathlib import Path
 
@@ -24,6 +28,7 @@ FORMATS = (".png", ".exr", ".npy")
 def check_output_path(path: str | Path) -> Path:
     """Fail early (before rendering) on an unknown extension or an unwritable folder."""
     path = Path(path)
+    check_name_length(path)
     if path.is_dir():
         raise OutputError(f"{path}: is a folder, not a file")
     suffix = path.suffix.lower()
@@ -33,8 +38,27 @@ def check_output_path(path: str | Path) -> Path:
     return check_folder(path)
 
 
+def check_name_length(path: Path) -> Path:
+    """Refuse a file name or path longer than the file system takes (NAME_MAX, PATH_MAX),
+    before anything is rendered."""
+    folder = path.parent if str(path.parent) else Path(".")
+    limits = {"PC_NAME_MAX": 255, "PC_PATH_MAX": 4096}
+    for name in limits:
+        try:
+            limits[name] = os.pathconf(folder if folder.is_dir() else ".", name)
+        except (OSError, ValueError):
+            pass
+    if len(os.fsencode(path.name)) > limits["PC_NAME_MAX"]:
+        raise OutputError(f"{str(path)[:60]}...: file name too long: {len(os.fsencode(path.name))} bytes, "
+                          f"the file system takes at most {limits['PC_NAME_MAX']}")
+    if len(os.fsencode(str(path.absolute()))) >= limits["PC_PATH_MAX"]:
+        raise OutputError(f"{str(path)[:60]}...: path too long: at most {limits['PC_PATH_MAX'] - 1} bytes")
+    return path
+
+
 def check_folder(path: Path) -> Path:
     """Fail early when the folder a file goes into is missing or not writable."""
+    check_name_length(path)
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
         raise OutputError(f"{path}: folder {str(folder)!r} does not exist")
@@ -70,11 +94,52 @@ def to_srgb8(radiance: np.ndarray, exposure: float = 0.0) -> np.ndarray:
     return np.round(srgb * 255).astype(np.uint8)
 
 
+#: A temporary's name: `.NAME.clrays-HOST-PID-XXXX.SUFFIX`, so that a later run can tell
+#: whether the process that wrote it is still alive (`remove_stale_temporaries`).
+_TEMPORARY = re.compile(r"^\..+\.clrays-(?P<host>[A-Za-z0-9_-]*)-(?P<pid>\d+)-[A-Za-z0-9_]+\.[a-z]+$")
+
+
+def _host() -> str:
+    return re.sub(r"[^A-Za-z0-9_-]", "_", socket.gethostname())[:64]
+
+
+def _process_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # e.g. another user's process: alive
+        return True
+    return True
+
+
+def remove_stale_temporaries(folder: str | Path) -> list[Path]:
+    """Remove the temporaries in `folder` left by a write whose process is gone (killed with
+    SIGKILL, or a machine that crashed); returns them. A temporary of a live process, or
+    of another host (a shared folder), is left alone."""
+    removed = []
+    try:
+        entries = list(os.scandir(folder or "."))
+    except OSError:
+        return removed
+    for entry in entries:
+        match = _TEMPORARY.match(entry.name)
+        if match is None or match["host"] != _host() or _process_alive(int(match["pid"])):
+            continue
+        try:
+            os.unlink(entry.path)
+            removed.append(Path(entry.path))
+        except OSError:
+            pass
+    return removed
+
+
 def temporary_beside(path: Path) -> str:
-    """A new empty file beside `path` (`.NAME.XXXX.SUFFIX`) to write and then rename over
-    it; created with the permissions of any new file (umask), not mkstemp's 0600."""
-    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix.lower(),
-                                         dir=path.parent or ".")
+    """A new empty file beside `path` (`.NAME.clrays-HOST-PID-XXXX.SUFFIX`) to write and then
+    rename over it; created with the permissions of any new file (umask), not mkstemp's 0600."""
+    # The name is cut so that the temporary's stays within NAME_MAX whatever the target's.
+    handle, temporary = tempfile.mkstemp(prefix=f".{path.name[:80]}.clrays-{_host()}-{os.getpid()}-",
+                                         suffix=path.suffix.lower(), dir=path.parent or ".")
     os.close(handle)
     umask = os.umask(0o022)
     os.umask(umask)
@@ -87,6 +152,7 @@ def write_atomic(path: Path, write) -> None:
     see the old file or the whole new one, and a failure leaves nothing behind."""
     temporary = None
     try:
+        remove_stale_temporaries(path.parent)
         temporary = temporary_beside(path)
         write(temporary)
         os.replace(temporary, path)

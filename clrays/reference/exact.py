@@ -26,6 +26,7 @@ Cost is O(pixels × triangles); rays go in chunks so memory stays around 100 MB.
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 
@@ -40,6 +41,8 @@ from ..scene.model import Scene
 #: Ray–triangle pairs per second that `exact` clips and integrates on the 2-core CI-class
 #: machine (measured on demo, bunny and sun at 64×36: 1.7–2.3 million), for estimates.
 PAIRS_PER_SECOND = 2.0e6
+# Progress without a bar (stderr not a terminal): a line per this many percent.
+PROGRESS_LINE_PERCENT = 10
 
 
 def estimate_seconds(scene: Scene, pixels: int | None = None) -> float:
@@ -129,7 +132,7 @@ def render_exact(scene: Scene, progress: bool = False, rows=None, *, panels: int
     Each pixel is the mean over its `image.spp` sample rays (`camera.primary_rays`, one
     definition of pixel rays for every method) of the radiance described in the module
     docstring. `rows` selects image rows (a slice or indices) for tests on big images;
-    `progress` shows a tqdm bar over ray chunks; `panels` and `tol` are the point-light
+    `progress` shows a tqdm bar over ray chunks (or, a function, lines of text); `panels` and `tol` are the point-light
     quadrature's starting panel count and relative tolerance (tol=None: one fixed pass).
     """
     image = scene.image
@@ -139,11 +142,33 @@ def render_exact(scene: Scene, progress: bool = False, rows=None, *, panels: int
     return radiance.reshape(len(row_idx), image.width, 3)
 
 
-def exact_pixels(scene: Scene, ys, xs, progress: bool = False, *, panels: int = 8,
+class _ProgressLines:
+    """Progress as text lines, for a log or a pipe where a bar would not show: one line per
+    PROGRESS_LINE_PERCENT of the work, with the time spent and the time left."""
+
+    def __init__(self, log, total: int):
+        self.log, self.total, self.done, self.shown = log, max(total, 1), 0, 0
+        self.start = time.perf_counter()
+
+    def update(self, count: int) -> None:
+        self.done += count
+        percent = 100 * self.done // self.total
+        if percent >= self.shown + PROGRESS_LINE_PERCENT or (self.done == self.total and percent > self.shown):
+            self.shown = percent
+            spent = time.perf_counter() - self.start
+            left = spent * (self.total - self.done) / self.done
+            self.log(f"exact: {percent}% ({spent:.0f} s, about {left:.0f} s left)")
+
+    def close(self) -> None:
+        pass
+
+
+def exact_pixels(scene: Scene, ys, xs, progress=False, *, panels: int = 8,
                  tol: float | None = 1e-10) -> np.ndarray:
     """Ground-truth radiance (N, 3) float64 of the pixels (ys[i], xs[i]): what
     `render_exact` gives there, at a cost proportional to the number of pixels (for
-    measuring error on a fixed subset of a large image)."""
+    measuring error on a fixed subset of a large image). `progress`: True for a tqdm bar,
+    or a function that takes a line of text, called every PROGRESS_LINE_PERCENT."""
     image, camera = scene.image, scene.camera
     ys, xs = np.asarray(ys, dtype=np.intp), np.asarray(xs, dtype=np.intp)
     offsets = sample_offsets(image.spp)
@@ -155,7 +180,9 @@ def exact_pixels(scene: Scene, ys, xs, progress: bool = False, *, panels: int = 
     chunk = int(np.clip(BUDGET_BYTES // (CLIP_PAIR_BYTES * (len(tri) + 1)), 64, 16384))
     starts = range(0, len(ys), chunk)
     bar = None
-    if progress:
+    if callable(progress):
+        bar = _ProgressLines(progress, len(offsets) * len(starts))
+    elif progress:
         from tqdm import tqdm
 
         bar = tqdm(total=len(offsets) * len(starts), desc="exact", unit="chunk")

@@ -5,13 +5,16 @@
     write_video(report.paths, "out/orbit.gif", fps=scene.animation.fps)
 
 Frames are written atomically (`clrays.image_io.write_image`), so a file that exists is
-a finished frame: running the same sequence again skips them, and an interrupted run
-loses nothing but the frame it was on. One render session (`Renderer`) renders all
+a finished frame, and a manifest beside the frames (MANIFEST) holds the digest of the
+scene each was rendered from: running the same sequence again skips the frames whose
+scene is unchanged and renders again those of a changed one (another `--set`, an edited
+file), and an interrupted run loses nothing but the frame it was on. One render session (`Renderer`) renders all
 frames, so what a frame shares with the previous one is not computed again
 (docs/design.md §7).
 """
 from __future__ import annotations
 
+import json
 import string
 import time
 from dataclasses import dataclass, field
@@ -21,6 +24,7 @@ from typing import Callable
 from ..errors import ClraysError, OutputError
 from ..image_io import (FORMATS, check_finite, check_folder, check_output_path, make_folder, read_srgb8,
                         write_atomic, write_image)
+from ..reuse import digest, scene_digest
 from ..session import Renderer, RenderResult
 from ..scene.model import Scene
 from .progress import Progress
@@ -83,23 +87,53 @@ class SequenceReport:
 
     paths: list[Path]  # every frame's file, in frame order
     rendered: list[int] = field(default_factory=list)  # frames rendered by this run
-    kept: list[int] = field(default_factory=list)  # frames whose file was already there
+    kept: list[int] = field(default_factory=list)  # frames whose file was already there, of the same scene
+    stale: list[int] = field(default_factory=list)  # rendered again: their file was of another scene
     results: dict[int, RenderResult] = field(default_factory=dict)  # of the rendered frames
     wall_s: float = 0.0
 
     def summary(self) -> str:
         per = f", {self.wall_s / len(self.rendered):.2f} s per frame" if self.rendered else ""
-        return (f"{len(self.rendered)} frames rendered, {len(self.kept)} already there "
+        stale = f" ({len(self.stale)} of them replacing frames of a changed scene)" if self.stale else ""
+        return (f"{len(self.rendered)} frames rendered{stale}, {len(self.kept)} already there "
                 f"(of {len(self.paths)}) in {self.wall_s:.1f} s{per}")
 
 
-def _remove_stale_temporaries(path: Path) -> None:
-    """Temporary files of a killed write of `path` (`write_image` names them .NAME.*SUFFIX)."""
-    for stale in path.parent.glob(f".{path.name}.*{path.suffix.lower()}"):
+#: Beside the frames, in each folder that holds some: frame file name → the digest of what
+#: its image depends on (`frame_digest`), so that a resumed run can tell a finished frame
+#: from a stale one.
+MANIFEST = ".clrays-frames.json"
+
+
+def frame_digest(frame_scene: Scene, method: str | None, exposure: float, suffix: str) -> str:
+    """Everything a frame file depends on: the frame's scene (`reuse.scene_digest`), the
+    method, the format, and the exposure where the format applies it."""
+    method = method or frame_scene.render.method
+    return digest("frame file", scene_digest(frame_scene), method, suffix,
+                  exposure if suffix == ".png" else 0.0).hex()
+
+
+class FrameManifest:
+    """The digests of the frames of one folder (MANIFEST), rewritten atomically before each
+    frame file is written: a frame file without an entry, or with another digest, is stale."""
+
+    def __init__(self, folder: Path):
+        self.path = folder / MANIFEST
+        self.entries: dict[str, str] = {}
         try:
-            stale.unlink()
-        except OSError:
-            pass
+            entries = json.loads(self.path.read_text())
+            if isinstance(entries, dict):
+                self.entries = {str(k): str(v) for k, v in entries.items()}
+        except (OSError, ValueError):
+            pass  # none yet, or unreadable: every frame file there counts as stale
+
+    def matches(self, path: Path, frame_digest_hex: str) -> bool:
+        return path.exists() and self.entries.get(path.name) == frame_digest_hex
+
+    def record(self, path: Path, frame_digest_hex: str) -> None:
+        self.entries[path.name] = frame_digest_hex
+        text = json.dumps(self.entries, indent=0, sort_keys=True)
+        write_atomic(self.path, lambda temporary: Path(temporary).write_text(text))
 
 
 def render_sequence(scene: Scene, pattern: str | Path, frames: range | None = None, *,
@@ -121,19 +155,30 @@ def render_sequence(scene: Scene, pattern: str | Path, frames: range | None = No
         check_output_path(path)
     renderer = renderer or Renderer()
     report = SequenceReport(paths)
+    manifests: dict[Path, FrameManifest] = {}
     start = time.perf_counter()
     try:
         with Progress(progress, len(paths), "frame", "sequence") as bar:
             for frame, path in zip(frames, paths):
-                if path.exists() and not overwrite:
+                frame_scene = scene.animation.scene_at(scene, frame) if scene.animation is not None else scene
+                manifest = manifests.setdefault(path.parent, FrameManifest(path.parent))
+                key = frame_digest(frame_scene, method, exposure, path.suffix.lower())
+                if manifest.matches(path, key) and not overwrite:
                     report.kept.append(frame)
                     if on_frame:
                         on_frame(frame, path, None)
                 else:
-                    _remove_stale_temporaries(path)
-                    frame_scene = scene.animation.scene_at(scene, frame) if scene.animation is not None else scene
                     result = renderer.render(frame_scene, method)
-                    write_image(path, check_finite(result.image, f"frame {frame}"), exposure)
+                    image = check_finite(result.image, f"frame {frame}")
+                    if path.exists() and manifest.entries.get(path.name) != key:
+                        # A stale frame goes before its new digest is recorded, and the digest
+                        # before the new file: a kill anywhere between leaves no file that a
+                        # later run could take for finished.
+                        path.unlink()
+                        if not overwrite:
+                            report.stale.append(frame)
+                    manifest.record(path, key)
+                    write_image(path, image, exposure)
                     report.rendered.append(frame)
                     report.results[frame] = result
                     if on_frame:
@@ -168,6 +213,11 @@ def write_video(paths: list[Path], out: str | Path, fps: float, exposure: float 
     images = [Image.fromarray(read_srgb8(p, exposure), mode="RGB") for p in paths]
     if not images:
         raise OutputError(f"{out}: no frames")
+    sizes = {image.size for image in images}
+    if len(sizes) > 1:  # a GIF of mixed sizes plays garbage: refuse rather than pad
+        odd, size = next((p, image.size) for p, image in zip(paths, images) if image.size != images[0].size)
+        raise OutputError(f"{out}: frames of different sizes ({paths[0]}: {images[0].size[0]}×{images[0].size[1]}, "
+                          f"{odd}: {size[0]}×{size[1]}); render them again with --overwrite")
     # Milliseconds per frame; GIF stores centiseconds in 16 bits, so slow rates are clamped.
     duration = int(min(max(round(1000.0 / fps), 1), 655_350))
     options = {"optimize": False} if out.suffix.lower() == ".gif" else {"lossless": True}

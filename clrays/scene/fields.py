@@ -47,6 +47,7 @@ class Field:
     rule: str = ""
     shown_default: str = ""
     notes: str = ""
+    read_by: tuple[str, ...] = ()  # render keys: the methods that read it (empty: every method)
 
     @property
     def required(self) -> bool:
@@ -200,24 +201,41 @@ ROTATE = Section("objects.transform.rotate", (
           notes="quaternion form"),
 ), rules=("Exactly one form: `axis` with `angle_deg`, `euler_deg` (with `order` or not), or `quaternion`.",))
 
+_RASTER_METHODS = ("minmax", "raymarch")  # the methods with shadow maps; exact has none
+
 RENDER = Section("render", (
     Field("method", "string", Render.method, choices=METHODS, notes="volumetric integrator (README: Methods)"),
-    Field("steps", "integer", Render.steps, 1, 65536, notes="raymarch samples per pixel ray"),
-    Field("jitter", "boolean", Render.jitter, notes="raymarch: jitter sample positions (seeded per pixel)"),
+    Field("steps", "integer", Render.steps, 1, 65536, notes="raymarch samples per pixel ray", read_by=("raymarch",)),
+    Field("jitter", "boolean", Render.jitter, notes="raymarch: jitter sample positions (seeded per pixel)",
+          read_by=("raymarch",)),
     Field("shadow_map", "integer", Render.shadow_map, 16, 8192,
-          notes="shadow map side in texels (cube maps: per face)"),
-    Field("pcf", "integer", Render.pcf, 0, 16, notes="surface shadow filter radius in texels (0 = hard)"),
-    Field("slices", "integer", Render.slices, 16, 16384, notes="min-max: epipolar slices"),
+          notes="shadow map side in texels (cube maps: per face)", read_by=_RASTER_METHODS),
+    Field("pcf", "integer", Render.pcf, 0, 16, notes="surface shadow filter radius in texels (0 = hard)",
+          read_by=_RASTER_METHODS),
+    Field("slices", "integer", Render.slices, 16, 16384, notes="min-max: epipolar slices", read_by=("minmax",)),
     Field("gamma_samples", "integer", Render.gamma_samples, 16, 16384,
-          notes="min-max: samples along each slice (rounded up to a power of two)"),
+          notes="min-max: samples along each slice (rounded up to a power of two)", read_by=("minmax",)),
     Field("integrand", "string", Render.integrand, choices=INTEGRAND_MODES,
           notes="min-max: how the scattering integrand is evaluated ([docs/integrand.md](integrand.md)); "
-                "`analytic` exists for directional lights only (a point light's closed form needs σt = 0)"),
+                "`analytic` exists for directional lights only (a point light's closed form needs σt = 0)",
+          read_by=("minmax",)),
     Field("svd_rank", "integer", Render.svd_rank, 1, 16,
-          notes="min-max, `integrand: svd`: rank of the factorisation"),
+          notes="min-max, `integrand: svd`: rank of the factorisation", read_by=("minmax",)),
     Field("traversal", "string", Render.traversal, choices=TRAVERSALS,
-          notes="min-max: min-max tree traversal or a linear scan"),
+          notes="min-max: min-max tree traversal or a linear scan", read_by=("minmax",)),
 ))
+
+
+def unread_render_keys(render: Render, method: str) -> list[str]:
+    """The `render` keys set away from their default that `method` does not read (the
+    `read_by` of RENDER's fields), as `render.KEY = VALUE (read by ...)`."""
+    unread = []
+    for field in RENDER.fields:
+        value = getattr(render, field.key)
+        if field.read_by and method not in field.read_by and value != field.default:
+            unread.append(f"render.{field.key} = {value} (read by {' and '.join(field.read_by)} only)")
+    return unread
+
 
 ANIMATION = Section("animation", (
     Field("frames", "`[first, last]`", REQUIRED, 0, 100_000, rule="integers, first ≤ last",
