@@ -458,9 +458,18 @@ def sweep(context, scene, overrides, reference, method, out_dir, image_format, e
             raise ClraysError(f"{scene}: no such scene file")
         axes, _ = axes_from(list(overrides))
         parse_reference(reference)
+        def on_point(point, row):
+            done.append(point)
+            if not progress:  # no bar (stderr is not a terminal): a line per point, with its host work
+                host = ", ".join(f"{label} {float(row[column]):.0f} ms" for column, label in
+                                 (("reference_ms", "reference"), ("edges_ms", "depth edges"), ("warmup_ms", "warm-up"))
+                                 if float(row.get(column) or 0) > 0)
+                click.echo(f"clrays: point {point.index}: {point.label}: {float(row['wall_ms']):.0f} ms"
+                           + (f" (+ {host})" if host else ""), err=True)
+
         report = run_sweep(scene, list(overrides), out_dir, method=method, reference=reference,
                            renderer=Renderer(device, reuse=reuse), exposure=exposure, image_format=image_format,
-                           overwrite=overwrite, progress=progress, on_point=lambda point, row: done.append(point))
+                           overwrite=overwrite, progress=progress, on_point=on_point)
         click.echo(format_table(report.rows, axes), nl=False)
         click.echo(report.summary())
 

@@ -10,6 +10,7 @@ masks that `clrays.reference.metrics.image_error` leaves out are kept the same w
 """
 from __future__ import annotations
 
+import time
 from dataclasses import replace
 from pathlib import Path
 from typing import Callable, NamedTuple
@@ -81,6 +82,9 @@ class ReferenceCache:
         self.renderer = renderer or Renderer()
         self.progress = progress
         self._memory = StageCache(memory_entries)  # least recently used first out, per kind
+        #: Host time of what the last `error` computed: reference_ms, edges_ms (absent: cached).
+        self.last_ms: dict[str, float] = {}
+        self._computed = False
 
     def radiance(self, scene: Scene, reference: Reference, pixels: Pixels | None = None) -> np.ndarray:
         """The reference's linear radiance of `scene`: (H, W, 3), or (N, 3) on `pixels`."""
@@ -101,7 +105,17 @@ class ReferenceCache:
         edges left out; on `pixels` only, when given."""
         if pixels is not None:
             image = image[pixels]
-        return image_error(image, self.radiance(scene, reference, pixels), self.edges(scene, pixels))
+        self.last_ms = {}
+        return image_error(image, self._timed("reference_ms", lambda: self.radiance(scene, reference, pixels)),
+                           self._timed("edges_ms", lambda: self.edges(scene, pixels)))
+
+    def _timed(self, label: str, get: Callable[[], np.ndarray]) -> np.ndarray:
+        """`get()`, its time kept in `last_ms[label]` when it computed or loaded the entry."""
+        start, self._computed = time.perf_counter(), False
+        array = get()
+        if self._computed:
+            self.last_ms[label] = (time.perf_counter() - start) * 1e3
+        return array
 
     def _render(self, scene: Scene, reference: Reference, pixels: Pixels | None) -> np.ndarray:
         if pixels is not None and reference.method == "exact":
@@ -115,6 +129,7 @@ class ReferenceCache:
         found, array = self._memory.get(kind, key)
         if found:
             return array
+        self._computed = True
         path = self.folder / f"{kind}-{key.hex()[:24]}.npy"
         if path.exists():
             array = np.load(path)

@@ -50,6 +50,9 @@ STAGES = ("raster", "rectify", "minmax", "integrand", "traverse", "raymarch", "s
 #: The error columns of results.csv, in percent (as the contact sheet shows them): mean
 #: and 99th percentile of the relative luminance error, relative RMSE (`ImageError`).
 ERROR_COLUMNS = ("error_mean_pct", "error_p99_pct", "error_rmse_pct")
+#: Host time a point spent on the reference image and on the depth-edge map that the error
+#: leaves out (`ReferenceCache.last_ms`): empty where an earlier point had computed them.
+REFERENCE_COLUMNS = ("reference_ms", "edges_ms")
 
 
 @dataclass(frozen=True)
@@ -200,11 +203,11 @@ def _read_rows(path: Path) -> dict[int, dict[str, str]]:
 def _write_rows(path: Path, rows: list[dict[str, str]], axes: Sequence[Axis]) -> None:
     stages = [s for s in STAGES if any(f"{s}_ms" in r for r in rows)]
     extra = sorted({k[:-3] for r in rows for k in r if k.endswith("_ms") and k[:-3] not in STAGES
-                    and k not in ("wall_ms", "device_ms")})
+                    and k not in ("wall_ms", "device_ms", "warmup_ms", *REFERENCE_COLUMNS)})
     columns = (["index", "image"] + [a.key for a in axes] + ["method", "wall_ms", "device_ms"]
-               + [f"{s}_ms" for s in stages + extra] + ["reused", "computed"])
+               + [f"{s}_ms" for s in stages + extra] + ["reused", "computed", "warmup_ms"])
     if any(r.get("reference") for r in rows):
-        columns += ["reference", *ERROR_COLUMNS, "error_pixels"]
+        columns += ["reference", *ERROR_COLUMNS, "error_pixels", *REFERENCE_COLUMNS]
     columns.append("scene_digest")
 
     def write(temporary: str) -> None:
@@ -216,18 +219,40 @@ def _write_rows(path: Path, rows: list[dict[str, str]], axes: Sequence[Axis]) ->
     write_atomic(path, write)
 
 
-def _row(point: SweepPoint, image_name: str, result: RenderResult, digest_hex: str, error, reference) -> dict:
+def _row(point: SweepPoint, image_name: str, result: RenderResult, digest_hex: str, error, reference,
+         warmup_ms: float = 0.0, reference_ms: dict[str, float] | None = None) -> dict:
+    """A results.csv row. `warmup_ms`: the untimed render before this point's (`_warm_up`);
+    `reference_ms`: the host time of the reference and its depth-edge map, where this
+    point computed them (REFERENCE_COLUMNS)."""
     row = {"index": str(point.index), "image": image_name, **dict(point.settings), "method": result.method,
            "wall_ms": f"{result.wall_ms:.2f}", "device_ms": f"{result.device_ms:.2f}",
+           "warmup_ms": f"{warmup_ms:.2f}",
            "reused": " ".join(s for s, v in result.stage_status.items() if v == "reused"),
            "computed": " ".join(s for s, v in result.stage_status.items() if v == "computed"),
            "scene_digest": digest_hex}
     row.update({f"{stage}_ms": f"{ms:.2f}" for stage, ms in result.stage_ms.items()})
+    row.update({column: f"{reference_ms[column]:.2f}" for column in REFERENCE_COLUMNS if column in (reference_ms or {})})
     if error is not None:
         row.update({"reference": reference, "error_pixels": str(error.pixels),
                     **{column: f"{100 * value:.6g}" for column, value in
                        zip(ERROR_COLUMNS, (error.mean, error.p99, error.rmse))}})
     return row
+
+
+def _warm_up(renderer: Renderer, scene: Scene, warmed: set) -> float:
+    """Render `scene` once, untimed and keeping nothing, if no earlier point ran its kernels
+    (method, traversal, integrand, light types): opening the device, building the programs
+    and the device's first launches are the session's cost, not a point's, and would
+    otherwise make the first point look several times slower than the rest. Returns the
+    milliseconds spent (0 when nothing was new), reported as warmup_ms."""
+    render = scene.render
+    kind = (render.method, render.traversal, render.integrand, tuple(type(light).__name__ for light in scene.lights))
+    if render.method == "exact" or kind in warmed:
+        return 0.0
+    warmed.add(kind)
+    start = time.perf_counter()
+    renderer.render(scene, reuse=False)
+    return (time.perf_counter() - start) * 1e3
 
 
 def run_sweep(path: str | Path, spec, out_dir: str | Path, *, overrides: Sequence[str] = (),
@@ -258,6 +283,7 @@ def run_sweep(path: str | Path, spec, out_dir: str | Path, *, overrides: Sequenc
     references = ReferenceCache(folder / REFERENCES, renderer, progress) if against else None
     points = sweep_points(axes)
     earlier = {} if overwrite else _read_rows(folder / RESULTS)
+    warmed: set = set()
     rows: dict[int, dict[str, str]] = {}
     report = SweepReport(folder, [])
     start = time.perf_counter()
@@ -275,11 +301,13 @@ def run_sweep(path: str | Path, spec, out_dir: str | Path, *, overrides: Sequenc
                     rows[point.index] = old
                     report.kept.append(point.index)
                 else:
+                    warmup_ms = _warm_up(renderer, scene, warmed)
                     result = renderer.render(scene)
                     write_image(folder / name, check_finite(result.image, point.label), exposure)
                     error = references.error(scene, against, result.image) if references else None
                     rows[point.index] = _row(point, name, result, digest_hex, error,
-                                             against.name if against else None)
+                                             against.name if against else None, warmup_ms,
+                                             references.last_ms if references else {})
                     report.rendered.append(point.index)
                     # Rows of an earlier run stay until this run reaches their point, so an
                     # interrupted resume loses nothing.

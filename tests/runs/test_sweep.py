@@ -63,7 +63,8 @@ def test_sweep_writes_images_results_and_contact_sheet(scene_file, tmp_path):
         assert 0 <= float(r["error_mean_pct"]) < 20 and float(r["error_mean_pct"]) <= float(r["error_p99_pct"])
         # device_ms: the stages timed by OpenCL events, not the integrand tables built on the host.
         device_stages = [float(value) for column, value in r.items() if column.endswith("_ms") and value
-                         and column not in ("wall_ms", "device_ms", "integrand_ms")]
+                         and column not in ("wall_ms", "device_ms", "integrand_ms", "warmup_ms",
+                                            "reference_ms", "edges_ms")]
         assert float(r["device_ms"]) == pytest.approx(sum(device_stages), abs=0.05)
     assert any(float(r["integrand_ms"] or 0) > 0 for r in rows)
     # Only the medium and the texture size change: the rasters are computed once.
@@ -71,7 +72,16 @@ def test_sweep_writes_images_results_and_contact_sheet(scene_file, tmp_path):
     assert sum("rectify" in r["computed"].split() for r in rows) == 2
     sheet = Image.open(out / "contact_sheet.png")
     assert sheet.width >= 2 * 40 and sheet.height >= 3 * 24  # 3 rows (σs) of 2 columns (slices)
-    assert "6 points rendered, 0 kept" in text and "medium.sigma_s" in text.splitlines()[0]
+    assert "6 points rendered, 0 kept" in text
+    # Without a bar, a line per point on stderr; the table on stdout.
+    lines = text.splitlines()
+    assert sorted(line.split(":")[1] for line in lines[:6]) == [f" point {i}" for i in range(6)]
+    assert lines[6].startswith("medium.sigma_s")
+    # Warm-up (kernel builds, first launches) and the host's reference and depth-edge map
+    # are timed on their own, not in point 0's wall_ms.
+    assert float(rows[0]["warmup_ms"]) > 0 and all(float(r["warmup_ms"]) == 0 for r in rows[1:])
+    assert float(rows[0]["edges_ms"]) > 0 and not any(r["edges_ms"] for r in rows[1:])
+    assert all(float(r["reference_ms"]) > 0 for r in rows[::2])  # the reference ignores slices
 
 
 def test_resume_keeps_finished_points_and_redoes_changed_ones(scene_file, tmp_path):
