@@ -247,3 +247,26 @@ def test_a_gif_never_mixes_frame_sizes(tmp_path):
 
     with pytest.raises(OutputError, match=r"frames of different sizes .* render them again with --overwrite"):
         write_video([tmp_path / "out" / f"f_{i}.png" for i in range(3)], tmp_path / "b.gif", 12)
+
+
+# --------------------------------------------------------------------------- the README
+
+
+def test_each_readme_python_snippet_defines_what_it_uses():
+    # A newcomer pastes one block at a time: each must import or assign every name it reads.
+    import ast
+    import builtins
+
+    text = (Path(__file__).parents[2] / "README.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", text, re.S)
+    assert len(blocks) >= 2
+    for block in blocks:
+        tree = ast.parse(block)
+        bound = set(dir(builtins))
+        for node in ast.walk(tree):
+            if isinstance(node, (ast.Import, ast.ImportFrom)):
+                bound |= {(alias.asname or alias.name).split(".")[0] for alias in node.names}
+            elif isinstance(node, ast.Name) and isinstance(node.ctx, ast.Store):
+                bound.add(node.id)
+        used = {node.id for node in ast.walk(tree) if isinstance(node, ast.Name) and isinstance(node.ctx, ast.Load)}
+        assert used <= bound, f"README snippet uses {sorted(used - bound)} without defining them:\n{block}"
