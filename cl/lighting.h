@@ -9,7 +9,7 @@
 
 /* A point or spot light is a lamp: a ball of radius frame_t.lamp_radius around it holds no
  * medium, which keeps a ray through the light and the eye at the light finite
- * (docs/design.md §6; the radius follows the scene's size, never camera.far, and is
+ * (docs/design.md §1, the lamp; the radius follows the scene's size, never camera.far, and is
  * clrays/reference/radiometry.py lamp_radius, so the host reference uses the same value). */
 
 /* The eye (eye space's origin) is inside a point or spot light's lamp, d_el → 0: then every

@@ -23,7 +23,7 @@ that passes the light at a distance h > lamp radius never meets the ball, so the
 changes nothing but those two cases: they become finite (about σs·I·ρ·2/radius per ray).
 The scene's size is the diagonal of the bounds of its triangles, the camera and the lights'
 positions (`scene_size`), never camera.far: far bounds only the rays that hit nothing, so
-a closed room renders the same whatever its far (docs/design.md §6).
+a closed room renders the same whatever its far (docs/design.md §1, the lamp).
 
 Far. camera.far only ends the rays that hit nothing. Past the optical depth
 FAR_OPTICAL_DEPTH of the least attenuating channel the medium adds nothing a float32 can
