@@ -218,38 +218,30 @@ def progress_option(text: str = "Progress bar (default: on a terminal)."):
 
 
 @contextlib.contextmanager
+def _stopped_by_signal(context: click.Context, message: Callable[[], str]):
+    """Ctrl-C or SIGTERM (`kill`), raised as KeyboardInterrupt so that a half-written file's
+    temporary is removed on the way out, ends the run with one line, exit code 130."""
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    except KeyboardInterrupt:
+        click.echo(f"clrays: interrupted{message()}", err=True)
+        context.exit(130)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def _interruptible(context: click.Context, what: str):
-    """A run that does not resume: Ctrl-C or SIGTERM (raised as KeyboardInterrupt, so the
-    atomic write's temporary is removed on the way out) ends it with one line, exit 130."""
-    def interrupt(signum, frame):
-        raise KeyboardInterrupt
-
-    previous = signal.signal(signal.SIGTERM, interrupt)
-    try:
-        yield
-    except KeyboardInterrupt:
-        click.echo(f"clrays: interrupted; {what}", err=True)
-        context.exit(130)
-    finally:
-        signal.signal(signal.SIGTERM, previous)
+    """A run that does not resume (`render`): the line says what was not written."""
+    return _stopped_by_signal(context, lambda: f"; {what}")
 
 
-@contextlib.contextmanager
 def _resumable(context: click.Context, done: Callable[[], str]):
-    """A run that resumes: Ctrl-C or SIGTERM (raised as KeyboardInterrupt, so a half-written
-    file's temporary is removed on the way out) ends it with what was `done` and how to
-    resume, exit code 130."""
-    def interrupt(signum, frame):
-        raise KeyboardInterrupt
-
-    previous = signal.signal(signal.SIGTERM, interrupt)
-    try:
-        yield
-    except KeyboardInterrupt:
-        click.echo(f"clrays: interrupted after {done()}; run the same command again to resume", err=True)
-        context.exit(130)
-    finally:
-        signal.signal(signal.SIGTERM, previous)
+    """A run that resumes: the line says what was `done` and how to resume."""
+    return _stopped_by_signal(context, lambda: f" after {done()}; run the same command again to resume")
 
 
 # --------------------------------------------------------------------------- the commands

@@ -113,11 +113,22 @@ def _process_alive(pid: int) -> bool:
     return True
 
 
-def remove_stale_temporaries(folder: str | Path) -> list[Path]:
+#: Folders this process has already cleaned: a writer that died before it started left its
+#: temporaries there, so once is enough, and a sequence of many frames does not list its
+#: folder again for each one.
+_cleaned_folders: set[str] = set()
+
+
+def remove_stale_temporaries(folder: str | Path, again: bool = False) -> list[Path]:
     """Remove the temporaries in `folder` left by a write whose process is gone (killed with
     SIGKILL, or a machine that crashed); returns them. A temporary of a live process, or
-    of another host (a shared folder), is left alone."""
+    of another host (a shared folder), is left alone. Once per folder and process unless
+    `again`."""
     removed = []
+    key = os.path.abspath(folder or ".")
+    if key in _cleaned_folders and not again:
+        return removed
+    _cleaned_folders.add(key)
     try:
         entries = list(os.scandir(folder or "."))
     except OSError:
