@@ -24,8 +24,10 @@ import numpy as np
 from . import geometry as primitives
 from ..errors import SceneError
 from .animation import Animation, Key, ObjectRig, Track
+from .files import FileRefused, read_regular_file
 from .fields import (ANIMATION, CAMERA, FORMAT_VERSION, IMAGE, LIGHTS, MAX_IMAGE_PIXELS, MEDIUM, OBJECT, OBJECTS,
                      PHASES, QUATERNION_TOLERANCE, RENDER, ROTATE, TOP, TRANSFORM, Field, kinds)
+from .limits import MAX_LIGHTS, MAX_OBJECTS, MAX_SCENE_BYTES
 from .model import Camera, DirectionalLight, Geometry, Image, Light, Medium, Phase, PointLight, Render, Scene, SpotLight
 from .transforms import (affine, matrix_to_quat, quat_to_matrix, rotation_axis_angle, rotation_euler,
                          transform_normals, transform_points)
@@ -115,6 +117,14 @@ def _light(node: Node) -> Light:
                          cone_deg=_read(keys["cone_deg"], m["cone_deg"]),
                          intensity=_power(keys["intensity"], m["intensity"]))
     return DirectionalLight(direction=direction(m["direction"]), irradiance=_power(keys["irradiance"], m["irradiance"]))
+
+
+def _lights(node: Node) -> list[Node]:
+    items = sequence(node, "a list of at least 1 light", 1)
+    if len(items) > MAX_LIGHTS:  # checked before reading any: each light costs memory on its own
+        node.fail(f"at most {MAX_LIGHTS} lights (each keeps its own shadow map and min-max tree)",
+                  f"{len(items)} lights")
+    return items
 
 
 def _phase(node: Node) -> Phase:
@@ -292,7 +302,10 @@ def _geometry(node: Node | None, base_dir: Path, rigs: list | None = None) -> Ge
     tris, albedo, ids = [np.zeros((0, 3, 3))], [np.zeros((0, 3))], [np.zeros(0, np.int32)]
     normals, smooth = [np.zeros((0, 3, 3))], [np.zeros(0, bool)]
     start = 0
-    for i, item in enumerate(sequence(node, "a list of objects") if node is not None else []):
+    items = sequence(node, "a list of objects") if node is not None else []
+    if len(items) > MAX_OBJECTS:
+        node.fail(f"at most {MAX_OBJECTS} objects (join many small ones into one mesh file)", f"{len(items)} objects")
+    for i, item in enumerate(items):
         obj = _object(item, base_dir)
         count = len(obj.triangles)
         if rigs is not None:
@@ -464,7 +477,7 @@ def _parse(text: str, filename: str, source: Path | str | None, overrides: Seque
     scene = Scene(  # sections are read (and fail) in the order the format lists them
         image=_image(m["image"]),
         camera=_camera(m["camera"]),
-        lights=tuple(_light(n) for n in sequence(m["lights"], "a list of at least 1 light", 1)),
+        lights=tuple(_light(n) for n in _lights(m["lights"])),
         medium=_medium(m.get("medium")),
         background=_read(TOP["background"], m.get("background")),
         geometry=_geometry(m.get("objects"), base_dir, rigs if "animation" in m else None),
@@ -479,9 +492,11 @@ def _parse(text: str, filename: str, source: Path | str | None, overrides: Seque
 def load_scene(path: Path | str, overrides: Sequence[str] = ()) -> Scene:
     """Read, override (`key.path=value` strings, as from `--set`) and validate a scene file."""
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        data = read_regular_file(path, MAX_SCENE_BYTES, "put large geometry in a mesh file "
+                                                        "(objects: - {type: mesh, file: ...})")
+        text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise SceneError(f"{path}: cannot read scene file: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
-    except OSError as exc:
-        raise SceneError(f"{path}: cannot read scene file: {exc.strerror or exc}") from None
+    except FileRefused as exc:
+        raise SceneError(f"{path}: cannot read scene file: {exc}") from None
     return _parse(text, str(path), path, overrides)
