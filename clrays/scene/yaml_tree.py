@@ -312,7 +312,7 @@ def compose(text: str, path: str, where: Callable[[yaml.Mark], str | Place], fal
 
 def apply_override(root: Node, text: str) -> None:
     """Splice one `key.path=value` override into the tree (creating missing mappings)."""
-    where = f"--set {text}"
+    where = f"--set {text if len(text) <= 80 else text[:77] + '...'}"  # a message shows a value, not all of it
     key, sep, value_text = text.partition("=")
     key = key.strip()
     parts = key.split(".")
