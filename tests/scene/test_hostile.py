@@ -124,6 +124,8 @@ CASES = [
      r"put large geometry in a mesh file"),
     ("201 lights", lambda d: (write(d, lights(201)), []),
      rf"scene\.yaml:5:3: lights: expected at most {MAX_LIGHTS} lights .*, got 201 lights$"),
+    ("shadow maps past the views' int offsets", lambda d: (write(d, lights(6)), ["--set", "render.shadow_map=8192"]),
+     r"scene\.yaml: the shadow maps of lights 0 to 5 at render\.shadow_map 8192 need more than 2147483647 texels"),
     ("too many objects", lambda d: (write(d, objects(MAX_OBJECTS + 1)), []),
      rf"scene\.yaml:7:3: objects: expected at most {MAX_OBJECTS} objects .*, got {MAX_OBJECTS + 1} objects$"),
     ("mesh file that is a FIFO", lambda d: (os.mkfifo(d / "m.obj") or write(
