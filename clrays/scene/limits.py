@@ -5,9 +5,9 @@ the value it has, with the measurements behind it.
 """
 from __future__ import annotations
 
-#: A scene file's size. Reading YAML costs about 1 s and 100 MB per MiB (measured on a
-#: scene of inline triangles), so a 4 MiB scene loads in seconds; geometry that needs more
-#: belongs in a mesh file, which is read as arrays.
+#: A scene file's size. Reading YAML costs 1 to 3 s and about 60 MB per MiB (measured on
+#: a scene of inline triangles, docs/limits.md), so a 4 MiB scene loads in seconds;
+#: geometry that needs more belongs in a mesh file, which is read as arrays.
 MAX_SCENE_BYTES = 4 << 20
 #: A mesh file's size: about 5 million triangles as binary PLY or STL.
 MAX_MESH_BYTES = 256 << 20
@@ -25,8 +25,8 @@ MAX_ALIAS_NODES = 100_000
 MAX_NUMBER_DIGITS = 100
 
 #: Lights in one scene. Each light keeps its own shadow map, epipolar texture and min-max
-#: tree: about 68 MB of memory at the default render settings, so 16 lights take about
-#: 1.1 GB (docs/limits.md).
+#: tree: about 62 MB of memory at the default render settings, so 16 lights take about
+#: 1.2 GB (docs/limits.md).
 MAX_LIGHTS = 16
 #: Objects in one scene: each is read and transformed on its own in Python; meshes carry
 #: any number of triangles in one object.

@@ -272,8 +272,7 @@ class _Object:
     albedo, and what an animation of it needs (its own triangles and normals, its transform)."""
 
     triangles: np.ndarray  # (T, 3, 3) world space
-    normals: np.ndarray  # (T, 3, 3) world space, unit
-    smooth: bool  # normals interpolate across each triangle (else each is the face normal)
+    normals: np.ndarray | None  # (T, 3, 3) world space, unit, for a smooth object (else each is the face normal)
     albedo: np.ndarray  # (3,)
     local: np.ndarray  # (T, 3, 3) before the transform
     local_normals: np.ndarray | None  # (T, 3, 3) before the transform, for a smooth object
@@ -292,15 +291,13 @@ def _object(node: Node, base_dir: Path) -> _Object:
         triangles = transform_points(matrix, local)
         if local_normals is not None:
             normals = transform_normals(matrix, local_normals)
-    smooth = normals is not None
-    return _Object(triangles, normals if smooth else primitives.flat_normals(triangles), smooth, albedo, local,
-                   local_normals, parts)
+    return _Object(triangles, normals, albedo, local, local_normals, parts)
 
 
 def _geometry(node: Node | None, base_dir: Path, rigs: list | None = None) -> Geometry:
     """All objects flattened; `rigs`, when given, receives each object's ObjectRig."""
     tris, albedo, ids = [np.zeros((0, 3, 3))], [np.zeros((0, 3))], [np.zeros(0, np.int32)]
-    normals, smooth = [np.zeros((0, 3, 3))], [np.zeros(0, bool)]
+    smooth_normals: list[tuple[slice, np.ndarray]] = []
     start = 0
     items = sequence(node, "a list of objects") if node is not None else []
     if len(items) > MAX_OBJECTS:
@@ -312,17 +309,19 @@ def _geometry(node: Node | None, base_dir: Path, rigs: list | None = None) -> Ge
             translate, rotate, scale = obj.parts
             rigs.append(ObjectRig(obj.local, slice(start, start + count), translate, matrix_to_quat(rotate), scale,
                                   obj.local_normals))
+        if obj.normals is not None:
+            smooth_normals.append((slice(start, start + count), obj.normals))
         start += count
         tris.append(obj.triangles)
         albedo.append(np.broadcast_to(obj.albedo, (count, 3)))
         ids.append(np.full(count, i, dtype=np.int32))
-        normals.append(obj.normals)
-        smooth.append(np.full(count, obj.smooth))
-    return Geometry(triangles=np.ascontiguousarray(np.concatenate(tris), dtype=np.float64),
-                    albedo=np.ascontiguousarray(np.concatenate(albedo), dtype=np.float64),
-                    object_id=np.concatenate(ids).astype(np.int32),
-                    normals=np.ascontiguousarray(np.concatenate(normals), dtype=np.float64),
-                    smooth=np.concatenate(smooth))
+    triangles = np.ascontiguousarray(np.concatenate(tris), dtype=np.float64)
+    normals = primitives.flat_normals(triangles)  # once for all objects: per object, it dominated loading
+    smooth = np.zeros(len(triangles), bool)
+    for rows, object_normals in smooth_normals:
+        normals[rows], smooth[rows] = object_normals, True
+    return Geometry(triangles=triangles, albedo=np.ascontiguousarray(np.concatenate(albedo), dtype=np.float64),
+                    object_id=np.concatenate(ids).astype(np.int32), normals=normals, smooth=smooth)
 
 
 # --------------------------------------------------------------------------- animation
