@@ -432,14 +432,24 @@ def _animation(node: Node, scene: Scene, rigs: list[ObjectRig]) -> Animation:
 
 def _check_camera_path(node: Node, animation: Animation, scene: Scene) -> None:
     """Every frame's camera must be valid, like a static one (look_at off the position,
-    up off the view direction)."""
-    for frame in animation.frames:
-        camera = animation._camera(scene, frame)
-        view = camera.look_at - camera.position
-        if not np.any(view):
-            node.fail("look_at away from position at every frame", f"look_at = position at frame {frame}")
-        if np.linalg.norm(np.cross(view / np.linalg.norm(view), camera.up)) < PARALLEL_TOLERANCE:
-            node.fail("up not parallel to look_at - position at every frame", f"parallel at frame {frame}")
+    up off the view direction). All frames at once: one at a time, the 100 001 frames the
+    format allows took 19 s to check."""
+    frames = np.arange(animation.first, animation.last + 1, dtype=np.float64)
+    camera, tracks = scene.camera, animation.camera
+
+    def path(name: str) -> np.ndarray:
+        return tracks[name].at_frames(frames) if name in tracks else np.broadcast_to(getattr(camera, name),
+                                                                                      (len(frames), 3))
+
+    view = path("look_at") - path("position")
+    length = np.linalg.norm(view, axis=1)
+    if not np.all(length > 0):
+        frame = animation.first + int(np.argmin(length > 0))
+        node.fail("look_at away from position at every frame", f"look_at = position at frame {frame}")
+    sin_angle = np.linalg.norm(np.cross(view / length[:, None], path("up")), axis=1)
+    if np.any(sin_angle < PARALLEL_TOLERANCE):
+        frame = animation.first + int(np.argmax(sin_angle < PARALLEL_TOLERANCE))
+        node.fail("up not parallel to look_at - position at every frame", f"parallel at frame {frame}")
 
 
 # --------------------------------------------------------------------------- entry points
