@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from .animation import EASINGS
-from .limits import MAX_LIGHTS, MAX_MESH_BYTES, MAX_OBJECTS, MAX_SCENE_BYTES
+from .limits import MAX_LIGHTS, MAX_MESH_BYTES, MAX_OBJECTS, MAX_SCENE_BYTES, MAX_TRIANGLES
 from .model import INTEGRAND_MODES, METHODS, NORMALS, TRAVERSALS, Camera, Image, Render
 
 FORMAT_VERSION = 1
@@ -97,9 +97,10 @@ TOP = Section("top", (
     Field("objects", "list of mappings", shown_default="`[]`", notes=f"at most {MAX_OBJECTS}; [objects](#objects)"),
     Field("render", "mapping", shown_default="all defaults", notes="[render](#render)"),
     Field("animation", "mapping", shown_default="a still scene (one frame, 0)", notes="[animation](#animation)"),
-), rules=(f"The file is a regular file of at most {MAX_SCENE_BYTES >> 20} MiB, with at most {MAX_LIGHTS} lights "
-          f"and {MAX_OBJECTS} objects: each light keeps its own shadow maps and min-max tree, and large "
-          f"geometry belongs in a mesh file ([docs/limits.md](limits.md)).",))
+), rules=(f"The file is a regular file of at most {MAX_SCENE_BYTES >> 20} MiB, with at most {MAX_LIGHTS} lights, "
+          f"{MAX_OBJECTS} objects and {MAX_TRIANGLES} triangles in all (spheres and planes counted before they "
+          f"are tessellated): each light keeps its own shadow maps and min-max tree, and large geometry "
+          f"belongs in a mesh file ([docs/limits.md](limits.md)).",))
 
 IMAGE = Section("image", (
     Field("width", "integer", REQUIRED, 1, 16384, notes="pixels"),

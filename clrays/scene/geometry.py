@@ -60,18 +60,19 @@ def sphere_triangles(center, radius: float, segments: int) -> np.ndarray:
     pts = np.concatenate([ring_pts, north, south]) * radius + np.asarray(center, dtype=np.float64)
     n_idx, s_idx = len(ring_pts), len(ring_pts) + 1
 
-    def vid(ring, j):
-        return ring * segments + j % segments
-
-    faces = []
-    for j in range(segments):
-        faces.append((n_idx, vid(0, j), vid(0, j + 1)))
-        faces.append((s_idx, vid(rings - 2, j + 1), vid(rings - 2, j)))
-        for r in range(rings - 2):
-            a, b = vid(r, j), vid(r, j + 1)
-            c, d = vid(r + 1, j + 1), vid(r + 1, j)
-            faces.append((a, d, c))
-            faces.append((a, c, b))
+    # Per slice j, in this order: the north cap's triangle, the south cap's, then two per
+    # band between rings r and r + 1 (built as arrays: a 1024-segment sphere has a million).
+    j = np.arange(segments)[:, None]
+    j_next = (j + 1) % segments
+    r = np.arange(rings - 2)[None, :]
+    a, b = r * segments + j, r * segments + j_next
+    c, d = (r + 1) * segments + j_next, (r + 1) * segments + j
+    bands = np.stack([np.stack([a, d, c], axis=-1), np.stack([a, c, b], axis=-1)], axis=2)
+    bands = bands.reshape(segments, 2 * (rings - 2), 3)
+    last = (rings - 2) * segments
+    north = np.concatenate([np.full_like(j, n_idx), j, j_next], axis=1)[:, None]
+    south = np.concatenate([np.full_like(j, s_idx), last + j_next, last + j], axis=1)[:, None]
+    faces = np.concatenate([north, south, bands], axis=1).reshape(-1, 3)
     return indexed_triangles(pts, faces)
 
 

@@ -9,8 +9,10 @@ from __future__ import annotations
 #: a scene of inline triangles, docs/limits.md), so a 4 MiB scene loads in seconds;
 #: geometry that needs more belongs in a mesh file, which is read as arrays.
 MAX_SCENE_BYTES = 4 << 20
-#: A mesh file's size: about 5 million triangles as binary PLY or STL.
-MAX_MESH_BYTES = 256 << 20
+#: A mesh file's size: room for `MAX_TRIANGLES` in any of the three formats (binary STL,
+#: the largest, takes 50 bytes a triangle: 100 MiB), so trimesh never reads much more
+#: than the loader can keep.
+MAX_MESH_BYTES = 128 << 20
 
 #: How deep mappings and lists may nest, in the file or behind aliases. A scene needs
 #: about 6 levels; the cap, checked on the parser's events before anything is composed,
@@ -28,6 +30,12 @@ MAX_NUMBER_DIGITS = 100
 #: tree: about 62 MB of memory at the default render settings, so 16 lights take about
 #: 1.2 GB (docs/limits.md).
 MAX_LIGHTS = 16
+#: Triangles in one scene, counted as each object is built (a sphere's or a plane's
+#: before it is tessellated): a 60-byte sphere with `segments: 1024` is a million of them,
+#: so without a cap a small file could ask for terabytes. Loading costs about 110 bytes
+#: per triangle (measured: 4 spheres of a million triangles peak at 570 MB), so 2 Mi
+#: triangles stay near 250 MB; the renderer's own copies come on top.
+MAX_TRIANGLES = 1 << 21
 #: Objects in one scene: each is read and transformed on its own in Python; meshes carry
 #: any number of triangles in one object.
 MAX_OBJECTS = 4096

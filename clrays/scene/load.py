@@ -27,7 +27,7 @@ from .animation import Animation, Key, ObjectRig, Track
 from .files import FileRefused, read_regular_file
 from .fields import (ANIMATION, CAMERA, FORMAT_VERSION, IMAGE, LIGHTS, MAX_IMAGE_PIXELS, MEDIUM, OBJECT, OBJECTS,
                      PHASES, QUATERNION_TOLERANCE, RENDER, ROTATE, TOP, TRANSFORM, Field, kinds)
-from .limits import MAX_LIGHTS, MAX_OBJECTS, MAX_SCENE_BYTES
+from .limits import MAX_LIGHTS, MAX_OBJECTS, MAX_SCENE_BYTES, MAX_TRIANGLES
 from .model import Camera, DirectionalLight, Geometry, Image, Light, Medium, Phase, PointLight, Render, Scene, SpotLight
 from .transforms import (affine, matrix_to_quat, quat_to_matrix, rotation_axis_angle, rotation_euler,
                          transform_normals, transform_points)
@@ -294,6 +294,26 @@ def _object(node: Node, base_dir: Path) -> _Object:
     return _Object(triangles, normals, albedo, local, local_normals, parts)
 
 
+def _tessellated_count(node: Node) -> int:
+    """The triangles a sphere or plane will have, from its keys, before it is built (0 for
+    other objects, or when the keys are invalid: building then fails with their message)."""
+    m = node.value if isinstance(node.value, dict) else {}
+    kind = m["type"].value if "type" in m else None
+    if kind not in ("sphere", "plane"):
+        return 0
+    try:
+        segments = _read(OBJECTS[kind]["segments"], m.get("segments"))
+    except SceneError:
+        return 0
+    return 2 * segments * (segments // 2 - 1) if kind == "sphere" else 2 * segments * segments
+
+
+def _check_triangle_count(node: Node, index: int, count: int) -> None:
+    if count > MAX_TRIANGLES:
+        node.fail(f"at most {MAX_TRIANGLES} triangles in the whole scene (lower the segments of spheres and "
+                  f"planes, or simplify meshes)", f"{count} with objects 0 to {index}")
+
+
 def _geometry(node: Node | None, base_dir: Path, rigs: list | None = None) -> Geometry:
     """All objects flattened; `rigs`, when given, receives each object's ObjectRig."""
     tris, albedo, ids = [np.zeros((0, 3, 3))], [np.zeros((0, 3))], [np.zeros(0, np.int32)]
@@ -303,6 +323,7 @@ def _geometry(node: Node | None, base_dir: Path, rigs: list | None = None) -> Ge
     if len(items) > MAX_OBJECTS:
         node.fail(f"at most {MAX_OBJECTS} objects (join many small ones into one mesh file)", f"{len(items)} objects")
     for i, item in enumerate(items):
+        _check_triangle_count(item, i, start + _tessellated_count(item))  # before tessellating: it may be huge
         obj = _object(item, base_dir)
         count = len(obj.triangles)
         if rigs is not None:
@@ -312,6 +333,7 @@ def _geometry(node: Node | None, base_dir: Path, rigs: list | None = None) -> Ge
         if obj.normals is not None:
             smooth_normals.append((slice(start, start + count), obj.normals))
         start += count
+        _check_triangle_count(item, i, start)  # a mesh's count is known once it is read
         tris.append(obj.triangles)
         albedo.append(np.broadcast_to(obj.albedo, (count, 3)))
         ids.append(np.full(count, i, dtype=np.int32))
