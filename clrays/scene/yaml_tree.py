@@ -318,7 +318,9 @@ def apply_override(root: Node, text: str) -> None:
     key = key.strip()
     parts = key.split(".")
     if not sep or not key or any(not p.strip() for p in parts):
-        raise SceneError(f"{where}: expected key.path=value, got {text!r}")
+        raise SceneError(f"{where}: expected key.path=value, got {show(text)}")
+    if len(parts) > MAX_NESTING:
+        raise SceneError(f"{where}: expected a key path of at most {MAX_NESTING} keys, got {len(parts)}")
     parts = [p.strip() for p in parts]
     value = compose(value_text, key, lambda _mark: where, where)
     if value is None:  # `key=` sets null, which the schema then rejects or accepts
