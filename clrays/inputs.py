@@ -15,12 +15,16 @@ import numpy as np
 from . import structs
 from .scene.camera import camera_basis, sample_offsets
 from .device import Device
+from .errors import ClraysError
 from .reference.radiometry import effective_far, lamp_radius
 from .scene.model import DirectionalLight, Scene, SpotLight
 
 #: Spot lights wider than this use a cube map: a single perspective map of a wide
 #: cone would spend most texels near its rim.
 SPOT_SINGLE_VIEW_MAX_DEG = 75.0
+
+#: All lights' shadow maps share one depth buffer, indexed by an int offset per view.
+MAX_SHADOW_TEXELS = 2**31 - 1
 
 #: Cube faces in the order `light_view_index` expects: +x, -x, +y, -y, +z, -z, with an up vector each.
 _CUBE_FACES = [
@@ -92,7 +96,12 @@ def frame_inputs(scene: Scene) -> FrameInputs:
     lights, anchors = [], []
     n = scene.render.shadow_map
     texels = 0
-    for light in scene.lights:
+    for index, light in enumerate(scene.lights):
+        if texels + 6 * n * n > MAX_SHADOW_TEXELS:  # a light takes at most a cube: 6 views
+            where = f"{scene.source}: " if scene.source else ""
+            raise ClraysError(f"{where}the shadow maps of lights 0 to {index} at render.shadow_map {n} need more than "
+                              f"{MAX_SHADOW_TEXELS} texels, the most a view's int depth_offset (cl/common.h) "
+                              f"addresses; lower render.shadow_map or the light count")
         entry = np.zeros((), dtype=structs.light_dtype)
         entry["first_view"] = len(views)
         if isinstance(light, DirectionalLight):

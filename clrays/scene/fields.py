@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from .animation import EASINGS
+from .limits import MAX_LIGHTS, MAX_MESH_BYTES, MAX_OBJECTS, MAX_SCENE_BYTES, MAX_TRIANGLES
 from .model import INTEGRAND_MODES, METHODS, NORMALS, TRAVERSALS, Camera, Image, Render
 
 FORMAT_VERSION = 1
@@ -91,13 +92,16 @@ TOP = Section("top", (
     Field("version", "integer", REQUIRED, notes=f"must be `{FORMAT_VERSION}` (checked before anything else)"),
     Field("image", "mapping", REQUIRED, notes="[image](#image)"),
     Field("camera", "mapping", REQUIRED, notes="[camera](#camera)"),
-    Field("lights", "list of mappings", REQUIRED, notes="at least one light; [lights](#lights)"),
+    Field("lights", "list of mappings", REQUIRED, notes=f"1 to {MAX_LIGHTS} lights; [lights](#lights)"),
     Field("medium", "mapping", shown_default="no medium: σs = σa = 0, isotropic", notes="[medium](#medium)"),
     Field("background", "RGB", 0.0, low=0.0, notes="radiance of rays that leave the scene"),
-    Field("objects", "list of mappings", shown_default="`[]`", notes="[objects](#objects)"),
+    Field("objects", "list of mappings", shown_default="`[]`", notes=f"at most {MAX_OBJECTS}; [objects](#objects)"),
     Field("render", "mapping", shown_default="all defaults", notes="[render](#render)"),
     Field("animation", "mapping", shown_default="a still scene (one frame, 0)", notes="[animation](#animation)"),
-))
+), rules=(f"The file is a regular file of at most {MAX_SCENE_BYTES >> 20} MiB, with at most {MAX_LIGHTS} lights, "
+          f"{MAX_OBJECTS} objects and {MAX_TRIANGLES} triangles in all (spheres and planes counted before they "
+          f"are tessellated): each light keeps its own shadow maps and min-max tree, and large geometry "
+          f"belongs in a mesh file ([docs/limits.md](limits.md)).",))
 
 IMAGE = Section("image", (
     Field("width", "integer", REQUIRED, 1, 16384, notes="pixels"),
@@ -175,7 +179,8 @@ OBJECTS = _typed("objects", {
         Field("segments", "integer", 48, 4, 1024, notes="slices around the y axis"),
     ),
     "mesh": (
-        Field("file", "string", REQUIRED, rule="`.obj`, `.ply` or `.stl`",
+        Field("file", "string", REQUIRED, rule=f"`.obj`, `.ply` or `.stl`, a regular file of at most "
+                                               f"{MAX_MESH_BYTES >> 20} MiB",
               notes="relative paths start at the YAML file's folder (the working directory for "
                     "`parse_scene` without a source)"),
         Field("normals", "string", "smooth", choices=NORMALS,

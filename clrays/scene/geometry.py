@@ -9,9 +9,13 @@ shading, or each triangle's own normal on all three of its vertices for flat sha
 """
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import numpy as np
+
+from .files import FileRefused, read_regular_file
+from .limits import MAX_MESH_BYTES
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl")
 
@@ -56,18 +60,19 @@ def sphere_triangles(center, radius: float, segments: int) -> np.ndarray:
     pts = np.concatenate([ring_pts, north, south]) * radius + np.asarray(center, dtype=np.float64)
     n_idx, s_idx = len(ring_pts), len(ring_pts) + 1
 
-    def vid(ring, j):
-        return ring * segments + j % segments
-
-    faces = []
-    for j in range(segments):
-        faces.append((n_idx, vid(0, j), vid(0, j + 1)))
-        faces.append((s_idx, vid(rings - 2, j + 1), vid(rings - 2, j)))
-        for r in range(rings - 2):
-            a, b = vid(r, j), vid(r, j + 1)
-            c, d = vid(r + 1, j + 1), vid(r + 1, j)
-            faces.append((a, d, c))
-            faces.append((a, c, b))
+    # Per slice j, in this order: the north cap's triangle, the south cap's, then two per
+    # band between rings r and r + 1 (built as arrays: a 1024-segment sphere has a million).
+    j = np.arange(segments)[:, None]
+    j_next = (j + 1) % segments
+    r = np.arange(rings - 2)[None, :]
+    a, b = r * segments + j, r * segments + j_next
+    c, d = (r + 1) * segments + j_next, (r + 1) * segments + j
+    bands = np.stack([np.stack([a, d, c], axis=-1), np.stack([a, c, b], axis=-1)], axis=2)
+    bands = bands.reshape(segments, 2 * (rings - 2), 3)
+    last = (rings - 2) * segments
+    north = np.concatenate([np.full_like(j, n_idx), j, j_next], axis=1)[:, None]
+    south = np.concatenate([np.full_like(j, s_idx), last + j_next, last + j], axis=1)[:, None]
+    faces = np.concatenate([north, south, bands], axis=1).reshape(-1, 3)
     return indexed_triangles(pts, faces)
 
 
@@ -141,19 +146,27 @@ def load_mesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
     normals where it has them).
 
     Raises ValueError with a one-line reason for an unknown suffix, a missing, unreadable
-    or corrupt file, a file without triangles, or non-finite vertices.
+    or corrupt file, something other than a regular file, a file over `MAX_MESH_BYTES`,
+    a file without triangles, or non-finite vertices.
     """
     path = Path(path)
-    if path.suffix.lower() not in MESH_SUFFIXES:
+    suffix = path.suffix.lower()
+    if suffix not in MESH_SUFFIXES:
         raise ValueError(f"unsupported mesh format {path.suffix or '(no suffix)'!r}")
-    if not path.is_file():
-        raise ValueError("no such file" if not path.exists() else "not a regular file")
+    if not path.exists():
+        raise ValueError("no such file")
+    try:
+        data = read_regular_file(path, MAX_MESH_BYTES)
+    except FileRefused as exc:
+        raise ValueError(str(exc)) from None
+    if suffix == ".obj":
+        data = _obj_as_utf8(data)
     import trimesh  # slow to import; only scenes with meshes pay for it
 
     try:
         # A file of one mesh loads as that mesh, with the vertex normals it holds; one of
         # several is concatenated (and its normals are recomputed).
-        loaded = trimesh.load(str(path), process=False)
+        loaded = trimesh.load(io.BytesIO(data), file_type=suffix[1:], process=False)
         if isinstance(loaded, trimesh.Scene):
             loaded = loaded.to_mesh()
     except Exception as exc:  # trimesh raises many types for corrupt files
@@ -174,6 +187,17 @@ def load_mesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
     if not np.isfinite(tris).all():
         raise ValueError("the file has non-finite vertex coordinates")
     return tris, smooth_normals(vertices, faces, given)
+
+
+def _obj_as_utf8(data: bytes) -> bytes:
+    """An OBJ's bytes as UTF-8. Its numbers and keywords are ASCII; a comment or a name in
+    another encoding (Latin-1, from older exporters) is read as Latin-1, which decodes any
+    byte, rather than left to trimesh's guess, which needs a package we do not depend on."""
+    try:
+        data.decode("utf-8")
+        return data
+    except UnicodeDecodeError:
+        return data.decode("latin-1").encode("utf-8")
 
 
 def load_mesh_triangles(path: Path) -> np.ndarray:

@@ -248,3 +248,36 @@ def test_the_documented_example_loads():
     assert s.animation.frames == range(0, 48) and set(s.animation.camera) == {"position", "fov_deg"}
     last = s.animation.scene_at(s, 47)
     assert last.medium.phase.g == pytest.approx(0.2) and last.camera.fov_deg == 40
+
+
+@pytest.mark.parametrize("kind", ["linear", "direction"])
+def test_track_at_frames_equals_at(kind):
+    """The vectorised track (the loader's check of every frame's camera) gives the values
+    of `Track.at`, frame by frame, for every easing, before, between and after the keys."""
+    rng = np.random.default_rng(7)
+    frames = [-3.0, 0.0, 2.5, 7.0, 8.0, 15.0]
+    values = rng.normal(size=(len(frames), 3))
+    if kind == "direction":
+        values /= np.linalg.norm(values, axis=1, keepdims=True)
+    easings = list(EASINGS) + ["linear"]
+    track = Track(kind, tuple(Key(f, v, easings[i % len(easings)]) for i, (f, v) in enumerate(zip(frames, values))))
+    queries = np.linspace(-6, 18, 97)
+    expected = np.array([track.at(f) for f in queries])
+    np.testing.assert_allclose(track.at_frames(queries), expected, rtol=0, atol=1e-12)
+    scalar = Track("linear", tuple(Key(f, float(v[0]), "ease_in_out") for f, v in zip(frames, values)))
+    np.testing.assert_allclose(scalar.at_frames(queries), [scalar.at(f) for f in queries], rtol=0, atol=1e-12)
+
+
+def test_every_frame_of_a_long_camera_path_is_checked_quickly():
+    """The format allows 100 001 frames; each one's camera is checked, all at once."""
+    import time
+
+    text = ("version: 1\nimage: {width: 8, height: 8}\ncamera: {position: [0, 2, 20], look_at: [0, 0, 0]}\n"
+            "lights: [{type: point, position: [0, 8, 0], intensity: 1}]\n"
+            "animation: {frames: [0, 100000], camera: [{frame: 0, position: [0, 0, 5]}, "
+            "{frame: 100000, position: [0, 0, -5]}]}\n")
+    start = time.perf_counter()
+    with pytest.raises(SceneError, match=r"expected look_at away from position at every frame, "
+                                         r"got look_at = position at frame 50000$"):
+        parse_scene(text)
+    assert time.perf_counter() - start < 2.0

@@ -1,0 +1,41 @@
+"""How much a scene file may ask for, written once. Each limit keeps one hostile or
+mistaken input (an alias bomb, /dev/zero, a 50 MB scene) from taking a shared render node
+down, and each is named in the error that enforces it. docs/limits.md says why each has
+the value it has, with the measurements behind it.
+"""
+from __future__ import annotations
+
+#: A scene file's size. Reading YAML costs 1 to 3 s and about 60 MB per MiB (measured on
+#: a scene of inline triangles, docs/limits.md), so a 4 MiB scene loads in seconds;
+#: geometry that needs more belongs in a mesh file, which is read as arrays.
+MAX_SCENE_BYTES = 4 << 20
+#: A mesh file's size: room for `MAX_TRIANGLES` in any of the three formats (binary STL,
+#: the largest, takes 50 bytes a triangle: 100 MiB), so trimesh never reads much more
+#: than the loader can keep.
+MAX_MESH_BYTES = 128 << 20
+
+#: How deep mappings and lists may nest, in the file or behind aliases. A scene needs
+#: about 6 levels; the cap, checked on the parser's events before anything is composed,
+#: keeps composing and converting (which recurse) far from the stack's limits.
+MAX_NESTING = 64
+#: How many values aliases (`*name`, `<<: *name`) may copy in all. A few anchored colours
+#: or lights copy tens; the cap stops an alias bomb (each level repeating the one before)
+#: long before it fills memory.
+MAX_ALIAS_NODES = 100_000
+#: The most digits (and letters, for 0x and 0b) a number may be written with. Python
+#: refuses to turn an integer of more than 4300 digits into text; no scene value needs 20.
+MAX_NUMBER_DIGITS = 100
+
+#: Lights in one scene. Each light keeps its own shadow map, epipolar texture and min-max
+#: tree: about 62 MB of memory at the default render settings, so 16 lights take about
+#: 1.2 GB (docs/limits.md).
+MAX_LIGHTS = 16
+#: Triangles in one scene, counted as each object is built (a sphere's or a plane's
+#: before it is tessellated): a 60-byte sphere with `segments: 1024` is a million of them,
+#: so without a cap a small file could ask for terabytes. Loading costs about 110 bytes
+#: per triangle (measured: 4 spheres of a million triangles peak at 570 MB), so 2 Mi
+#: triangles stay near 250 MB; the renderer's own copies come on top.
+MAX_TRIANGLES = 1 << 21
+#: Objects in one scene: each is read and transformed on its own in Python; meshes carry
+#: any number of triangles in one object.
+MAX_OBJECTS = 4096
