@@ -25,6 +25,7 @@ from __future__ import annotations
 import os
 import threading
 import uuid
+import weakref
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, Callable, Iterator, Sequence
@@ -60,6 +61,7 @@ class DaskExecutor:
         self.scheduler, self.workers, self.device = scheduler, workers, device
         self.client = None
         self._cluster = None
+        self._runs = weakref.WeakSet()  # `run` generators still open, closed before the client
 
     def __enter__(self) -> DaskExecutor:
         distributed = _import_distributed()
@@ -71,12 +73,14 @@ class DaskExecutor:
         else:
             env = {"CLRAYS_DEVICE": self.device} if self.device else {}
             self._cluster = distributed.LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                                     dashboard_address=None, env=env)
+                                                     dashboard_address=":0", env=env)
             self.client = distributed.Client(self._cluster)
         self.client.wait_for_workers(1, timeout=CONNECT_TIMEOUT_S)
         return self
 
     def __exit__(self, *exc_info) -> None:
+        for run in list(self._runs):  # a run left by an exception cancels its tasks while the client is up
+            run.close()
         if self.client is not None:
             self.client.close()
         if self._cluster is not None:
@@ -92,6 +96,11 @@ class DaskExecutor:
 
         items go to the workers in contiguous runs, in order (see the module's docstring);
         `shared` is sent to each worker once. Leaving the loop early cancels what is left."""
+        run = self._run(function, items, shared)
+        self._runs.add(run)
+        return run
+
+    def _run(self, function: Callable, items: Sequence, shared: dict[str, Any]) -> Iterator[tuple[Any, Any]]:
         distributed = _import_distributed()
         items = list(items)
         if not items:
