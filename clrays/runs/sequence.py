@@ -195,7 +195,7 @@ def write_video(paths: list[Path], out: str | Path, fps: float, exposure: float 
         from .video import video_encoder_options, write_mp4
 
         options = encoder_options or video_encoder_options(out, None, ())
-        return write_mp4([read_srgb8(p, exposure) for p in paths], out, fps, options)
+        return write_mp4((read_srgb8(p, exposure) for p in paths), out, fps, options)
     images = [Image.fromarray(read_srgb8(p, exposure), mode="RGB") for p in paths]
     # Milliseconds per frame; GIF stores centiseconds in 16 bits, so slow rates are clamped.
     duration = int(min(max(round(1000.0 / fps), 1), 655_350))

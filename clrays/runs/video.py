@@ -7,8 +7,12 @@ KEY=VALUE` (any ffmpeg output option) override the defaults below.
 """
 from __future__ import annotations
 
+import itertools
+import subprocess
+import tempfile
+from fractions import Fraction
 from pathlib import Path
-from typing import Sequence
+from typing import Iterable, Sequence
 
 import numpy as np
 
@@ -48,31 +52,39 @@ def even_size(frame: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(frame)
 
 
-def write_mp4(frames: Sequence[np.ndarray], out: Path, fps: float, options: dict[str, str]) -> Path:
-    """Encode 8-bit sRGB frames (H, W, 3) to H.264 MP4 at `out`, atomically."""
+def write_mp4(frames: Iterable[np.ndarray], out: Path, fps: float, options: dict[str, str]) -> Path:
+    """Encode 8-bit sRGB frames (H, W, 3, all one size) to H.264 MP4 at `out`, atomically;
+    the frames are streamed to ffmpeg one at a time."""
     try:
         import imageio_ffmpeg
     except ImportError:
         raise OutputError(f"{out}: MP4 needs imageio-ffmpeg: pip install 'clrays[video]'") from None
-    frames = [even_size(frame) for frame in frames]
-    height, width = frames[0].shape[:2]
-    options = dict(options)
-    pix_fmt = options.pop("pix_fmt", DEFAULT_OPTIONS["pix_fmt"])
-    output_params = [argument for key, value in options.items() for argument in (f"-{key}", value)]
+    frames = iter(frames)
+    first = even_size(next(frames))
+    height, width = first.shape[:2]
+    options = {**DEFAULT_OPTIONS, **options}
+    output = [argument for key, value in options.items() for argument in (f"-{key}", value)]
 
     def encode(temporary: str) -> None:
-        writer = imageio_ffmpeg.write_frames(temporary, (width, height), fps=fps, codec="libx264",
-                                             pix_fmt_out=pix_fmt, quality=None, macro_block_size=1,
-                                             output_params=output_params, ffmpeg_log_level="error")
-        try:
-            writer.send(None)  # starts ffmpeg
-            for frame in frames:
-                writer.send(frame)
-            writer.close()
-        except (OSError, RuntimeError) as exc:  # ffmpeg's own complaint (a bad option): its last line
-            writer.close()
-            lines = [line for line in str(exc).splitlines() if line.strip()]
-            raise OutputError(f"{out}: ffmpeg failed: {lines[-1] if lines else type(exc).__name__}") from None
+        command = [imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-loglevel", "error", "-f", "rawvideo",
+                   "-pix_fmt", "rgb24", "-s", f"{width}x{height}", "-r", str(Fraction(fps).limit_denominator()),
+                   "-i", "-", "-an", "-c:v", "libx264", *output, temporary]
+        with tempfile.TemporaryFile() as log:  # a file, not a pipe, so a chatty ffmpeg cannot block
+            encoder = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=log)
+            try:
+                for frame in itertools.chain([first], (even_size(frame) for frame in frames)):
+                    encoder.stdin.write(frame.tobytes())
+            except BrokenPipeError:
+                pass  # ffmpeg stopped early; its log says why
+            finally:
+                encoder.stdin.close()
+                code = encoder.wait()
+            if code != 0:
+                log.seek(0)
+                lines = [line for line in log.read().decode(errors="replace").splitlines() if line.strip()]
+                # x264 names a bad option on the first line; ffmpeg's own summary comes last.
+                reason = lines[0] if lines else f"exit code {code}"
+                raise OutputError(f"{out}: ffmpeg failed: {reason.strip()}")
 
     write_atomic(out, encode)
     return out
