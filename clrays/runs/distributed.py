@@ -106,7 +106,8 @@ class DaskExecutor:
         if not items:
             return
         workers = sorted(self.client.scheduler_info()["workers"])
-        shared_futures = {name: self.client.scatter(value, broadcast=True, hash=False)
+        # In a list, so that a tuple or dict travels as one value rather than one per element.
+        shared_futures = {name: self.client.scatter([value], broadcast=True, hash=False)[0]
                           for name, value in shared.items()}
         run_id = uuid.uuid4().hex[:8]
         per_worker = -(-len(items) // len(workers))

@@ -63,8 +63,11 @@ def _rows(folder: Path) -> list[dict[str, str]]:
 def test_sweep_on_two_workers_gives_the_same_rows_and_images(tmp_path, executor):
     scene = write_scene(tmp_path, 2)
     spec = ["medium.sigma_s=0.03,0.08", "render.slices=32,64,128"]
-    here = run_sweep(scene, spec, tmp_path / "here", overrides=SMALL, renderer=Renderer(), contact_sheet=False)
-    there = run_sweep(scene, spec, tmp_path / "there", overrides=SMALL, executor=executor, contact_sheet=False)
+    # With a reference, so the workers also compute the error columns (and cache the references).
+    options = dict(overrides=SMALL, contact_sheet=False, reference="raymarch:64")
+    here = run_sweep(scene, spec, tmp_path / "here", renderer=Renderer(), **options)
+    there = run_sweep(scene, spec, tmp_path / "there", executor=executor, **options)
+    assert all(row["error_mean_pct"] for row in there.rows)
     assert sorted(there.rendered) == list(range(6)) and len(here.rows) == 6
     assert _rows(tmp_path / "there") == _rows(tmp_path / "here")
     assert _file_bytes(tmp_path / "there", "*.png") == _file_bytes(tmp_path / "here", "*.png")
@@ -142,3 +145,14 @@ def test_a_plain_render_and_sequence_never_import_dask_or_the_video_encoder(tmp_
                           env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
     assert done.returncode == 0, done.stderr
     assert "loaded: []" in done.stdout, done.stdout
+
+
+def test_an_unreachable_scheduler_is_one_line(tmp_path, monkeypatch):
+    import clrays.runs.distributed as engine
+    from conftest import run_cli
+
+    monkeypatch.setattr(engine, "CONNECT_TIMEOUT_S", 2)
+    code, out = run_cli("sweep", write_scene(tmp_path, 2), "--set", "render.slices=32,64",
+                        "--scheduler", "tcp://127.0.0.1:1", "-o", tmp_path / "sweep")
+    assert code == 1 and len(out.strip().splitlines()) == 1, out
+    assert "--scheduler tcp://127.0.0.1:1: cannot connect: Timed out" in out
