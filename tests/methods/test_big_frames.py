@@ -44,7 +44,7 @@ def test_a_frame_over_global_memory_names_the_total_and_the_limit():
     assert max(size for _, size in needs) < 512 * 2**20 < 768 * 2**20 < sum(size for _, size in needs)
     small = SimpleNamespace(name="a small device", device=SimpleNamespace(max_mem_alloc_size=512 * 2**20,
                                                                           global_mem_size=768 * 2**20))
-    with pytest.raises(ClraysError, match=r"the frame \(3840×2160 at 4 spp.*\) needs 0\.9 GiB of device memory, "
+    with pytest.raises(ClraysError, match=r"the frame \(3840×2160 at 4 spp.*\) needs 1\.2 GiB of device memory, "
                                           r"more than the device's 0\.8 GiB \(a small device\)"):
         check_device_memory(small, frame_inputs(scene))
 
@@ -61,4 +61,4 @@ def test_4k_renders_within_its_predicted_memory(method):
     print(f"4K {method}: {time.perf_counter() - start:.1f} s, device memory {result.device_bytes / 2**20:.0f} MiB")
     assert result.image.shape == (2160, 3840, 3) and np.isfinite(result.image).all() and result.image.max() > 0
     predicted = sum(size for _, size in frame_buffer_bytes(frame_inputs(scene)))
-    assert result.device_bytes <= min(1.25 * predicted, renderer.device.device.global_mem_size)
+    assert result.device_bytes <= min(1.05 * predicted, renderer.device.device.global_mem_size)
