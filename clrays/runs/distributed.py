@@ -188,6 +188,6 @@ def render_point_task(item, *, folder: str, exposure: float, against, reuse: boo
 
 def pin_to_core(core: int) -> None:
     """Pin this process (every thread, and those it starts later) to one CPU core: for the
-    benchmark of bench/distributed.py."""
+    benchmark of bench/dask_workers.py."""
     for thread in os.listdir("/proc/self/task"):
         os.sched_setaffinity(int(thread), {core})

@@ -1,8 +1,8 @@
 """Sequences on dask workers: the wall time of a 24-frame 640×360 orbit on 1 and on 2
 local workers, each worker pinned to its own core (bench/RESULTS.md, "Dask workers").
 
-    .venv/bin/python bench/distributed.py                  # scenes/orbit.yaml, frames 0:23, 3 repeats
-    .venv/bin/python bench/distributed.py --repeats 5
+    .venv/bin/python bench/dask_workers.py                  # scenes/orbit.yaml, frames 0:23, 3 repeats
+    .venv/bin/python bench/dask_workers.py --repeats 5
 
 Each worker process is pinned to one core (every thread, `pin_to_core`) and PoCL runs one
 thread (POCL_MAX_PTHREAD_COUNT=1), so a worker is one core's worth of device. Both
