@@ -26,6 +26,7 @@ from .runs import bench as bench_run
 from .runs.references import parse_reference
 from .runs.sequence import (check_pattern, check_video_path, parse_frames, render_sequence, scene_frames,
                             write_video)
+from .runs.video import DEFAULT_CRF, video_encoder_options
 from .runs.sweep import axes_from, format_table, run_sweep
 from .scene.fields import unread_render_keys
 from .scene.load import load_scene
@@ -217,6 +218,26 @@ def progress_option(text: str = "Progress bar (default: on a terminal)."):
     return option("--progress/--no-progress", default=None, callback=_progress_default, group=RUN, help=text)
 
 
+def cluster_options(command):
+    """--scheduler / --workers: run the frames or points on dask.distributed workers
+    (clrays.runs.distributed); without them the run stays in this process and dask is
+    not imported."""
+    command = option("--workers", type=click.IntRange(1, 256), metavar="N", group=RUN,
+                     help="Render on a local dask cluster of N worker processes, one OpenCL session each.")(command)
+    return option("--scheduler", metavar="ADDRESS", group=RUN,
+                  help="Render on the workers of a running dask scheduler (tcp://host:8786); each worker uses "
+                       "the device its own CLRAYS_DEVICE names. Output paths must be shared with them.")(command)
+
+
+def _executor(scheduler: str | None, workers: int | None, device: str | None):
+    """The dask executor that --scheduler / --workers ask for (a context manager), else none."""
+    if scheduler is None and workers is None:
+        return contextlib.nullcontext(None)
+    from .runs.distributed import DaskExecutor  # imports dask only when asked for
+
+    return DaskExecutor(scheduler, workers, device)
+
+
 @contextlib.contextmanager
 def _stopped_by_signal(context: click.Context, message: Callable[[], str]):
     """Ctrl-C or SIGTERM (`kill`), raised as KeyboardInterrupt so that a half-written file's
@@ -359,6 +380,8 @@ Examples:
   clrays sequence scenes/orbit.yaml -o out/orbit/frame_{:04d}.png
   clrays sequence scenes/orbit.yaml -o out/orbit/frame_{:04d}.png --frames 0:23 --video out/orbit.gif
   clrays sequence scenes/orbit.yaml -o out/orbit/f_{:04d}.npy --set image.width=320 --stats
+  clrays sequence scenes/orbit.yaml -o out/orbit/frame_{:04d}.png --video out/orbit.mp4 --crf 23
+  clrays sequence scenes/orbit.yaml -o out/orbit/frame_{:04d}.png --workers 2
 
 \b
 Frames are written atomically: re-running the same command skips the frames already
@@ -373,23 +396,29 @@ there, so an interrupted run resumes where it stopped (--overwrite renders all a
         help="Frame files, with one {} field for the frame number: frames/frame_{:04d}.png "
              "(.png, .exr or .npy; the folder is created).")
 @option("--video", type=click.Path(dir_okay=False, path_type=Path), group=OUTPUT,
-        help="Also write the frames as an animation: .gif or .webp (at the animation's fps).")
+        help="Also write the frames as a video: .mp4 (H.264), .gif or .webp (at the animation's fps).")
+@option("--crf", type=click.IntRange(0, 51), default=None, metavar="N", group=OUTPUT,
+        help=f"MP4 quality: H.264 constant rate factor, lower is better (default {DEFAULT_CRF}).")
+@option("--video-option", "video_options", multiple=True, metavar="KEY=VALUE", group=OUTPUT,
+        help="MP4: an ffmpeg output option (repeatable), e.g. --video-option preset=slow or pix_fmt=yuv444p.")
 @exposure_option("PNG and video")
 @overwrite_option("Render every frame, also those already written.")
 @reuse_option("frames")
 @option("--stats", is_flag=True, group=RUN, help="Print each frame's time and reused stages, then a summary.")
 @verbose_option()
 @progress_option()
+@cluster_options
 @device_option()
 @click.pass_context
-def sequence(context, scene, frames, method, overrides, pattern, video, exposure, overwrite, reuse, stats, verbose,
-             progress, device) -> None:
+def sequence(context, scene, frames, method, overrides, pattern, video, crf, video_options, exposure, overwrite, reuse,
+             stats, verbose, progress, scheduler, workers, device) -> None:
     """Render the frames of SCENE's animation to numbered images."""
     done = []
     with _resumable(context, lambda: f"{len(done)} new frames"):
         check_pattern(pattern)
         if video is not None:
             check_video_path(video)
+            encoder_options = video_encoder_options(video, crf, video_options)
         check_exposure_applies(exposure, [pattern] + ([video] if video is not None else []))
         loaded = load_scene(scene, overrides)
         chosen = parse_frames(frames, scene_frames(loaded))
@@ -402,14 +431,16 @@ def sequence(context, scene, frames, method, overrides, pattern, video, exposure
                 if stats:
                     click.echo(_frame_line(f"frame {frame}", result))
 
-        report = render_sequence(loaded, pattern, chosen, renderer=Renderer(device, reuse=reuse), method=method,
-                                 exposure=exposure, overwrite=overwrite, progress=progress, on_frame=on_frame)
+        with _executor(scheduler, workers, device) as executor:
+            report = render_sequence(loaded, pattern, chosen, renderer=Renderer(device, reuse=reuse), method=method,
+                                     exposure=exposure, overwrite=overwrite, progress=progress, on_frame=on_frame,
+                                     executor=executor)
         click.echo(report.summary())
         if stats and done:
             click.echo("stages over the rendered frames:\n" + _stage_counts(done))
         if video is not None:
             fps = loaded.animation.fps if loaded.animation is not None else 24.0
-            click.echo(f"wrote {write_video(report.paths, video, fps, exposure)}")
+            click.echo(f"wrote {write_video(report.paths, video, fps, exposure, encoder_options)}")
 
 
 @main.command(section="Study", short_help="Render SCENE at each combination of --set values, tabulated.",
@@ -419,6 +450,7 @@ Examples:
   clrays sweep scenes/demo.yaml --set medium.sigma_s=0.02,0.05,0.1 --set render.slices=256,1024 -o out/sweep
   clrays sweep scenes/demo.yaml --set render.slices=128,256,512,1024 --reference raymarch:2048 -o out/slices
   clrays sweep scenes/demo.yaml --set 'lights.0.intensity=[100,100,100],[300,300,300]' -o out/power
+  clrays sweep scenes/demo.yaml --set render.slices=128,256,512 --scheduler tcp://head:8786 -o /shared/sweep
 
 \b
 Writes one image per point (000.png, 001.png, ...), results.csv (the parameters, wall and
@@ -439,10 +471,11 @@ contact_sheet.png. Re-running the same command keeps the points already done.
 @overwrite_option("Render every point, also those done by an earlier run.")
 @reuse_option("points")
 @progress_option()
+@cluster_options
 @device_option()
 @click.pass_context
 def sweep(context, scene, overrides, reference, method, out_dir, image_format, exposure, overwrite, reuse, progress,
-          device) -> None:
+          scheduler, workers, device) -> None:
     """Render SCENE at every combination of the --set values and tabulate the results."""
     done = []
     with _resumable(context, lambda: f"{len(done)} points"):
@@ -459,9 +492,10 @@ def sweep(context, scene, overrides, reference, method, out_dir, image_format, e
                 click.echo(f"clrays: point {point.index}: {point.label}: {float(row['wall_ms']):.0f} ms"
                            + (f" (+ {host})" if host else ""), err=True)
 
-        report = run_sweep(scene, list(overrides), out_dir, method=method, reference=reference,
-                           renderer=Renderer(device, reuse=reuse), exposure=exposure, image_format=image_format,
-                           overwrite=overwrite, progress=progress, on_point=on_point)
+        with _executor(scheduler, workers, device) as executor:
+            report = run_sweep(scene, list(overrides), out_dir, method=method, reference=reference,
+                               renderer=Renderer(device, reuse=reuse), exposure=exposure, image_format=image_format,
+                               overwrite=overwrite, progress=progress, on_point=on_point, executor=executor)
         click.echo(format_table(report.rows, axes), nl=False)
         click.echo(report.summary())
 

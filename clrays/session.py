@@ -211,8 +211,10 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
     them: the per-sample buffers, every shadow map, and each light's min-max tree."""
     scene = inputs.scene
     samples, pixels = inputs.samples, scene.image.width * scene.image.height
-    sizes = [("camera depth and triangle ids (64-bit)", 8 * samples), ("in-scattering", 16 * samples),
-             ("image", 16 * pixels)]
+    # The one-pass raster (devices with 64-bit atomics) also keeps a packed depth–triangle
+    # key per sample while it runs; counted always, so the check errs on the safe side.
+    sizes = [("camera depth and triangle ids (64-bit)", 8 * samples), ("packed raster keys (64-bit)", 8 * samples),
+             ("in-scattering", 16 * samples), ("image", 16 * pixels)]
     for index, (first, count) in enumerate(inputs.light_views):
         views = inputs.views[first:first + count]
         sizes.append((f"shadow map of light {index}", 4 * int((views["width"] * views["height"]).sum())))

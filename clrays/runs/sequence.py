@@ -29,7 +29,7 @@ from ..session import Renderer, RenderResult
 from ..scene.model import Scene
 from .progress import Progress
 
-VIDEO_FORMATS = (".gif", ".webp")
+VIDEO_FORMATS = (".mp4", ".gif", ".webp")
 
 
 def scene_frames(scene: Scene) -> range:
@@ -139,13 +139,17 @@ class FrameManifest:
 def render_sequence(scene: Scene, pattern: str | Path, frames: range | None = None, *,
                     renderer: Renderer | None = None, method: str | None = None, exposure: float = 0.0,
                     overwrite: bool = False, progress: bool = False,
-                    on_frame: Callable[[int, Path, RenderResult | None], None] | None = None) -> SequenceReport:
+                    on_frame: Callable[[int, Path, RenderResult | None], None] | None = None,
+                    executor=None) -> SequenceReport:
     """Render `frames` (default: all of the animation) of `scene` to `pattern`.
 
     pattern: a path with one `{}` field for the frame number, e.g. `out/frame_{:04d}.png`
     (its folders are created). Frames whose file exists are skipped unless `overwrite`.
     renderer: the session to use (default: a new one with reuse). on_frame(frame, path,
-    result or None when skipped) is called after each frame."""
+    result or None when skipped) is called after each frame. executor: a
+    `clrays.runs.distributed.DaskExecutor` to render the frames on its workers instead
+    (each with its own session; `renderer` then only gives the reuse setting), in any
+    order; the result's image is then empty, the frame being in its file."""
     pattern = check_pattern(pattern)
     frames = scene_frames(scene) if frames is None else frames
     paths = [frame_path(pattern, frame) for frame in frames]
@@ -157,8 +161,17 @@ def render_sequence(scene: Scene, pattern: str | Path, frames: range | None = No
     report = SequenceReport(paths)
     manifests: dict[Path, FrameManifest] = {}
     start = time.perf_counter()
+
+    def render_here(work):
+        for frame, path in work:
+            frame_scene = scene.animation.scene_at(scene, frame) if scene.animation is not None else scene
+            result = renderer.render(frame_scene, method)
+            write_image(path, check_finite(result.image, f"frame {frame}"), exposure)
+            yield (frame, path), result
+
     try:
         with Progress(progress, len(paths), "frame", "sequence") as bar:
+            work = []
             for frame, path in zip(frames, paths):
                 frame_scene = scene.animation.scene_at(scene, frame) if scene.animation is not None else scene
                 manifest = manifests.setdefault(path.parent, FrameManifest(path.parent))
@@ -167,25 +180,37 @@ def render_sequence(scene: Scene, pattern: str | Path, frames: range | None = No
                     report.kept.append(frame)
                     if on_frame:
                         on_frame(frame, path, None)
+                    bar.advance(f"frame {frame}")
+                    continue
+                if path.exists() and manifest.entries.get(path.name) != key:
+                    # A stale frame goes before its new digest is recorded, and the digest
+                    # before the new file is written (here or by a worker): a kill anywhere
+                    # between leaves no file that a later run could take for finished.
+                    path.unlink()
+                    if not overwrite:
+                        report.stale.append(frame)
+                manifest.record(path, key)
+                work.append((frame, path))
+            if executor is None:
+                outcomes = render_here(work)
+            else:
+                from .distributed import render_frame_task
+
+                outcomes = executor.run(render_frame_task, work, dict(scene=scene, method=method, exposure=exposure,
+                                                                      reuse=renderer.reuse, overwrite=overwrite))
+            for (frame, path), result in outcomes:
+                if result is None:  # written by a worker that died before reporting it
+                    report.kept.append(frame)
                 else:
-                    result = renderer.render(frame_scene, method)
-                    image = check_finite(result.image, f"frame {frame}")
-                    if path.exists() and manifest.entries.get(path.name) != key:
-                        # A stale frame goes before its new digest is recorded, and the digest
-                        # before the new file: a kill anywhere between leaves no file that a
-                        # later run could take for finished.
-                        path.unlink()
-                        if not overwrite:
-                            report.stale.append(frame)
-                    manifest.record(path, key)
-                    write_image(path, image, exposure)
                     report.rendered.append(frame)
                     report.results[frame] = result
-                    if on_frame:
-                        on_frame(frame, path, result)
-                bar.advance(f"frame {frame}")
+                if on_frame:
+                    on_frame(frame, path, result)
+                bar.advance(f"frame {frame}" + (f", {executor.busy_label()}" if executor and progress else ""))
     finally:
         report.wall_s = time.perf_counter() - start
+        report.rendered.sort()
+        report.kept.sort()
     return report
 
 
@@ -193,26 +218,30 @@ def check_video_path(path: str | Path) -> Path:
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in VIDEO_FORMATS:
-        hint = ""
-        if suffix in (".mp4", ".mov", ".mkv", ".webm"):
-            hint = (f" (clrays ships no video encoder; with ffmpeg: ffmpeg -framerate FPS -i "
-                    f"frame_%04d.png -pix_fmt yuv420p {path.name})")
-        raise OutputError(f"{path}: unknown animation extension {path.suffix or '(none)'!r}; "
-                          f"expected one of {', '.join(VIDEO_FORMATS)}{hint}")
+        raise OutputError(f"{path}: unknown video extension {path.suffix or '(none)'!r}; "
+                          f"expected one of {', '.join(VIDEO_FORMATS)}")
     return check_folder(path)
 
 
-def write_video(paths: list[Path], out: str | Path, fps: float, exposure: float = 0.0) -> Path:
-    """An animated GIF or WebP of the frame files (atomically, like images); loops forever."""
+def write_video(paths: list[Path], out: str | Path, fps: float, exposure: float = 0.0,
+                encoder_options: dict[str, str] | None = None) -> Path:
+    """An H.264 MP4 (`clrays.runs.video`; encoder_options: its ffmpeg options, default
+    `video_encoder_options`), or an animated GIF or WebP that loops forever, of the frame
+    files; written atomically, like images."""
     from PIL import Image
 
     out = check_video_path(out)
     missing = [str(p) for p in paths if not p.exists()]
     if missing:
         raise OutputError(f"{out}: frames missing: {', '.join(missing[:3])}{' ...' if len(missing) > 3 else ''}")
-    images = [Image.fromarray(read_srgb8(p, exposure), mode="RGB") for p in paths]
-    if not images:
+    if not paths:
         raise OutputError(f"{out}: no frames")
+    if out.suffix.lower() == ".mp4":
+        from .video import video_encoder_options, write_mp4
+
+        options = encoder_options or video_encoder_options(out, None, ())
+        return write_mp4((read_srgb8(p, exposure) for p in paths), out, fps, options)
+    images = [Image.fromarray(read_srgb8(p, exposure), mode="RGB") for p in paths]
     sizes = {image.size for image in images}
     if len(sizes) > 1:  # a GIF of mixed sizes plays garbage: refuse rather than pad
         odd, size = next((p, image.size) for p, image in zip(paths, images) if image.size != images[0].size)

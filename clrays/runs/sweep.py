@@ -255,18 +255,33 @@ def _warm_up(renderer: Renderer, scene: Scene, warmed: set) -> float:
     return (time.perf_counter() - start) * 1e3
 
 
+def render_point(renderer: Renderer, references: ReferenceCache | None, against, point: SweepPoint, scene: Scene,
+                 folder: Path, name: str, digest_hex: str, exposure: float, warmed: set) -> dict[str, str]:
+    """Render one point (after a warm-up if its kernels are new to this session, `_warm_up`),
+    write its image (atomically) and return its results.csv row; in this process or on a
+    dask worker (`clrays.runs.distributed`), each with its own `warmed` set."""
+    warmup_ms = _warm_up(renderer, scene, warmed)
+    result = renderer.render(scene)
+    write_image(folder / name, check_finite(result.image, point.label), exposure)
+    error = references.error(scene, against, result.image) if references else None
+    return _row(point, name, result, digest_hex, error, against.name if against else None, warmup_ms,
+                references.last_ms if references else {})
+
+
 def run_sweep(path: str | Path, spec, out_dir: str | Path, *, overrides: Sequence[str] = (),
               method: str | None = None, reference: str | None = None, renderer: Renderer | None = None,
               exposure: float = 0.0, image_format: str = "png", contact_sheet: bool = True,
               overwrite: bool = False, progress: bool = False,
-              on_point: Callable[[SweepPoint, dict], None] | None = None) -> SweepReport:
+              on_point: Callable[[SweepPoint, dict], None] | None = None, executor=None) -> SweepReport:
     """Render every point of the sweep into `out_dir` (created): one image per point,
     results.csv and contact_sheet.png. `spec` as for `sweep_scenes`; `reference`:
     "exact" or "raymarch:N" adds error columns in percent
     (`clrays.reference.metrics.image_error`, depth edges excluded; the reference images
     are kept in `out_dir`/.references). Points whose image and results row exist from an
     earlier run of the same scene and settings are kept unless `overwrite`.
-    on_point(point, row) after each."""
+    on_point(point, row) after each. executor: a `clrays.runs.distributed.DaskExecutor`
+    to render the points on its workers (`renderer` then only gives the reuse setting);
+    results.csv is still written here, by the client alone."""
     if image_format not in IMAGE_FORMATS:
         raise ClraysError(f"image format: expected one of {', '.join(IMAGE_FORMATS)}, got {image_format!r}")
     axes, fixed = axes_from(spec)
@@ -289,6 +304,7 @@ def run_sweep(path: str | Path, spec, out_dir: str | Path, *, overrides: Sequenc
     start = time.perf_counter()
     try:
         with Progress(progress, len(points), "point", "sweep") as bar:
+            work = []  # (point, image name, scene digest) to render, in execution order
             for point in execution_order(points, map(point_scene, points)):
                 scene = point_scene(point)
                 digest_hex = digest(scene_digest(scene), exposure).hex()  # what the point's image depends on
@@ -300,22 +316,32 @@ def run_sweep(path: str | Path, spec, out_dir: str | Path, *, overrides: Sequenc
                                                  and old.get(ERROR_COLUMNS[0])))):
                     rows[point.index] = old
                     report.kept.append(point.index)
+                    if on_point:
+                        on_point(point, old)
+                    bar.advance(point.label[:60])
                 else:
-                    warmup_ms = _warm_up(renderer, scene, warmed)
-                    result = renderer.render(scene)
-                    write_image(folder / name, check_finite(result.image, point.label), exposure)
-                    error = references.error(scene, against, result.image) if references else None
-                    rows[point.index] = _row(point, name, result, digest_hex, error,
-                                             against.name if against else None, warmup_ms,
-                                             references.last_ms if references else {})
-                    report.rendered.append(point.index)
-                    # Rows of an earlier run stay until this run reaches their point, so an
-                    # interrupted resume loses nothing.
-                    merged = {**{i: row for i, row in earlier.items() if i < len(points)}, **rows}
-                    _write_rows(folder / RESULTS, [merged[i] for i in sorted(merged)], axes)
+                    work.append((point, name, digest_hex))
+            if executor is None:
+                # The scene is loaded again here rather than kept in `work`: a sweep of
+                # hundreds of mesh scenes would otherwise hold them all in memory.
+                outcomes = ((item, render_point(renderer, references, against, item[0], point_scene(item[0]), folder,
+                                                *item[1:], exposure, warmed)) for item in work)
+            else:
+                from .distributed import render_point_task
+
+                outcomes = executor.run(render_point_task, [(point, point_scene(point), *rest) for point, *rest in work],
+                                        dict(folder=str(folder), exposure=exposure, against=against,
+                                             reuse=renderer.reuse))
+            for (point, *_), row in outcomes:
+                rows[point.index] = row
+                report.rendered.append(point.index)
+                # Rows of an earlier run stay until this run reaches their point, so an
+                # interrupted resume loses nothing.
+                merged = {**{i: row for i, row in earlier.items() if i < len(points)}, **rows}
+                _write_rows(folder / RESULTS, [merged[i] for i in sorted(merged)], axes)
                 if on_point:
                     on_point(point, rows[point.index])
-                bar.advance(point.label[:60])
+                bar.advance(point.label[:60] + (f", {executor.busy_label()}" if executor and progress else ""))
         report.rows = [rows[i] for i in sorted(rows)]
         _write_rows(folder / RESULTS, report.rows, axes)
         if contact_sheet:

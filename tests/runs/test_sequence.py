@@ -111,8 +111,10 @@ def test_a_scene_without_animation_is_one_frame(tmp_path):
     (["-o", "OUT/f_{x}.png"], r"expected a frame pattern like frames/frame_\{:04d\}\.png"),
     (["-o", "OUT/f_{:04d}.jpg"], r"unknown frame extension '\.jpg'"),
     (["-o", "OUT/blocker/sub/f_{}.png"], r"cannot create folder"),
-    (["--video", "OUT/a.mp4"], r"a\.mp4: unknown animation extension '\.mp4'; expected one of \.gif, \.webp "
-                               r"\(clrays ships no video encoder; with ffmpeg"),
+    (["--video", "OUT/a.mov"], r"a\.mov: unknown video extension '\.mov'; expected one of \.mp4, \.gif, \.webp$"),
+    (["--video", "OUT/a.gif", "--crf", "20"], r"a\.gif: --crf and --video-option apply to \.mp4 only"),
+    (["--video", "OUT/a.mp4", "--video-option", "preset"], r"--video-option preset: expected KEY=VALUE"),
+    (["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], r"give either --scheduler ADDRESS or --workers N"),
     (["--set", "animation.frames=[2,1]"], r"--set animation.frames=\[2,1\]: animation\.frames\.1: expected"),
 ])
 def test_bad_input_is_one_line(tmp_path, args, message):

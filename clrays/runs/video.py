@@ -1,0 +1,93 @@
+"""MP4 (H.264) from a sequence's frames, through imageio-ffmpeg's own ffmpeg binary, so
+no system ffmpeg is needed (`pip install 'clrays[video]'`).
+
+Players want yuv420p, whose chroma is subsampled 2×2, so the frames are padded to even
+width and height (the last row or column repeated). `--crf` and `--video-option
+KEY=VALUE` (any ffmpeg output option) override the defaults below.
+"""
+from __future__ import annotations
+
+import itertools
+import subprocess
+import tempfile
+from fractions import Fraction
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from ..errors import OutputError
+from ..image_io import write_atomic
+
+#: H.264 constant rate factor: 18 is visually near-lossless for renders, at a few MB a minute.
+DEFAULT_CRF = 18
+#: ffmpeg output options before --crf and --video-option: what players and browsers expect
+#: (4:2:0 chroma; the index at the front, so playback starts before the download ends).
+DEFAULT_OPTIONS = {"pix_fmt": "yuv420p", "preset": "medium", "movflags": "+faststart"}
+
+
+def video_encoder_options(path: Path, crf: int | None, options: Sequence[str]) -> dict[str, str]:
+    """The ffmpeg output options (name → value) for `path`: the defaults, `crf`, then
+    `options` ("KEY=VALUE"). Empty for GIF and WebP, which take neither."""
+    if path.suffix.lower() != ".mp4":
+        if crf is not None or options:
+            raise OutputError(f"{path}: --crf and --video-option apply to .mp4 only, got "
+                              f"{'--crf' if crf is not None else '--video-option'} for {path.suffix or '(none)'}")
+        return {}
+    chosen = {**DEFAULT_OPTIONS, "crf": str(DEFAULT_CRF if crf is None else crf)}
+    for text in options:
+        key, sep, value = text.partition("=")
+        key = key.strip().lstrip("-")
+        if not sep or not key or not value.strip():
+            raise OutputError(f"--video-option {text}: expected KEY=VALUE like preset=slow, got {text!r}")
+        chosen[key] = value.strip()
+    return chosen
+
+
+def even_size(frame: np.ndarray) -> np.ndarray:
+    """(H, W, 3) uint8 padded to even H and W by repeating the last row / column."""
+    pad_h, pad_w = frame.shape[0] % 2, frame.shape[1] % 2
+    if pad_h or pad_w:
+        frame = np.pad(frame, ((0, pad_h), (0, pad_w), (0, 0)), mode="edge")
+    return np.ascontiguousarray(frame)
+
+
+def write_mp4(frames: Iterable[np.ndarray], out: Path, fps: float, options: dict[str, str]) -> Path:
+    """Encode 8-bit sRGB frames (H, W, 3, all one size) to H.264 MP4 at `out`, atomically;
+    the frames are streamed to ffmpeg one at a time."""
+    try:
+        import imageio_ffmpeg
+    except ImportError:
+        raise OutputError(f"{out}: MP4 needs imageio-ffmpeg: pip install 'clrays[video]'") from None
+    frames = iter(frames)
+    first = even_size(next(frames))
+    height, width = first.shape[:2]
+    options = {**DEFAULT_OPTIONS, **options}
+    output = [argument for key, value in options.items() for argument in (f"-{key}", value)]
+
+    def encode(temporary: str) -> None:
+        command = [imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-loglevel", "error", "-f", "rawvideo",
+                   "-pix_fmt", "rgb24", "-s", f"{width}x{height}", "-r", str(Fraction(fps).limit_denominator()),
+                   "-i", "-", "-an", "-c:v", "libx264", *output, temporary]
+        with tempfile.TemporaryFile() as log:  # a file, not a pipe, so a chatty ffmpeg cannot block
+            encoder = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=log)
+            try:
+                for index, frame in enumerate(itertools.chain([first], (even_size(frame) for frame in frames))):
+                    if frame.shape != first.shape:  # a video of mixed sizes plays garbage
+                        raise OutputError(f"{out}: frame {index} is {frame.shape[1]}×{frame.shape[0]}, the first "
+                                          f"{width}×{height}; render the frames again with --overwrite")
+                    encoder.stdin.write(frame.tobytes())
+            except BrokenPipeError:
+                pass  # ffmpeg stopped early; its log says why
+            finally:
+                encoder.stdin.close()
+                code = encoder.wait()
+            if code != 0:
+                log.seek(0)
+                lines = [line for line in log.read().decode(errors="replace").splitlines() if line.strip()]
+                # x264 names a bad option on the first line; ffmpeg's own summary comes last.
+                reason = lines[0] if lines else f"exit code {code}"
+                raise OutputError(f"{out}: ffmpeg failed: {reason.strip()}")
+
+    write_atomic(out, encode)
+    return out

@@ -1,0 +1,158 @@
+"""Sequences and sweeps on a 2-worker dask LocalCluster (real processes, each with its own
+PoCL session): the same bytes as in-process, a worker killed mid-run, resume; and a plain
+run that never imports dask or imageio-ffmpeg."""
+from __future__ import annotations
+
+import csv
+import os
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from clrays.runs.sequence import render_sequence
+from clrays.runs.sweep import run_sweep
+from clrays.scene.load import load_scene
+from clrays.session import Renderer
+from test_sequence import write_scene
+
+distributed = pytest.importorskip("distributed")
+from clrays.runs.distributed import DaskExecutor  # noqa: E402
+
+FRAMES = 12
+SMALL = ["image.width=32", "image.height=24"]
+
+
+@pytest.fixture(scope="module")
+def executor():
+    # Spawned workers inherit CLRAYS_DEVICE, which conftest pins to the test device.
+    with DaskExecutor(workers=2) as running:
+        running.client.wait_for_workers(2, timeout=120)
+        yield running
+
+
+def _file_bytes(folder: Path, pattern: str = "f_*") -> dict[str, bytes]:
+    return {path.name: path.read_bytes() for path in sorted(folder.glob(pattern))}
+
+
+def test_sequence_on_two_workers_is_byte_identical(tmp_path, executor):
+    # Only the camera moves (no object keys), so a session reuses the shadow map.
+    scene = load_scene(write_scene(tmp_path, FRAMES), SMALL + ["animation.objects=[]"])
+    here, there = tmp_path / "here", tmp_path / "there"
+    render_sequence(scene, here / "f_{:03d}.npy", renderer=Renderer())
+    report = render_sequence(scene, there / "f_{:03d}.npy", executor=executor)
+    assert report.rendered == list(range(FRAMES)) and not report.kept
+    assert _file_bytes(there) == _file_bytes(here) and len(_file_bytes(here)) == FRAMES
+    # Each worker rendered its run of frames on one session: beyond its first frame, the
+    # shadow map (the light stands still) was reused.
+    reused = sum(result.stage_status.get("raster.shadow") == "reused" for result in report.results.values())
+    assert reused >= FRAMES - 2 - 2  # work stealing may move a frame or two to the other worker
+
+
+def _rows(folder: Path) -> list[dict[str, str]]:
+    """results.csv without what depends on timing or on which session rendered a point
+    (`reused` / `computed`: a worker's first point computes what in-process was reused)."""
+    with open(folder / "results.csv", newline="") as f:
+        return [{key: value for key, value in row.items() if not key.endswith("_ms") and key not in ("reused", "computed")}
+                for row in csv.DictReader(f)]
+
+
+def test_sweep_on_two_workers_gives_the_same_rows_and_images(tmp_path, executor):
+    scene = write_scene(tmp_path, 2)
+    spec = ["medium.sigma_s=0.03,0.08", "render.slices=32,64,128"]
+    # With a reference, so the workers also compute the error columns (and cache the references).
+    options = dict(overrides=SMALL, contact_sheet=False, reference="raymarch:64")
+    here = run_sweep(scene, spec, tmp_path / "here", renderer=Renderer(), **options)
+    there = run_sweep(scene, spec, tmp_path / "there", executor=executor, **options)
+    assert all(row["error_mean_pct"] for row in there.rows)
+    assert sorted(there.rendered) == list(range(6)) and len(here.rows) == 6
+    assert _rows(tmp_path / "there") == _rows(tmp_path / "here")
+    assert _file_bytes(tmp_path / "there", "*.png") == _file_bytes(tmp_path / "here", "*.png")
+
+
+def test_a_worker_killed_midway_loses_only_its_frame_and_resume_renders_nothing_twice(tmp_path, executor):
+    scene = load_scene(write_scene(tmp_path, 24), ["image.width=64", "image.height=48"])
+    pattern = tmp_path / "run" / "f_{:03d}.npy"
+    client = executor.client
+    before = set(client.scheduler_info()["workers"])
+    killed_at = []
+
+    def kill_one_worker(frame, path, result):
+        if not killed_at:
+            victim = sorted(client.scheduler_info()["workers"])[0]
+            # Exit a moment after replying, so that the call returns; the worker's frames are in flight.
+            client.run(lambda: threading.Timer(0.1, os._exit, (1,)).start(), workers=[victim])
+            killed_at.append(time.monotonic())
+
+    report = render_sequence(scene, pattern, on_frame=kill_one_worker, executor=executor)
+    assert sorted(report.rendered + report.kept) == list(range(24))
+    assert set(client.scheduler_info()["workers"]) != before  # the victim did die (its nanny restarts it)
+    reference = tmp_path / "here"
+    render_sequence(scene, reference / "f_{:03d}.npy", renderer=Renderer())
+    assert _file_bytes(tmp_path / "run") == _file_bytes(reference)
+
+    again = render_sequence(scene, pattern, executor=executor)
+    assert again.rendered == [] and again.kept == list(range(24))
+    client.wait_for_workers(2, timeout=120)
+
+
+def test_an_interrupted_run_resumes_with_the_missing_frames_only(tmp_path, executor):
+    scene = load_scene(write_scene(tmp_path, FRAMES), SMALL)
+    pattern = tmp_path / "f_{:03d}.png"
+
+    def stop_after_four(frame, path, result):
+        if result is not None and len([p for p in tmp_path.glob("f_*.png")]) >= 4:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        render_sequence(scene, pattern, on_frame=stop_after_four, executor=executor)
+    time.sleep(1.0)  # a frame in flight on a worker may still land; it then counts as done
+    present = {int(p.stem[2:]) for p in tmp_path.glob("f_*.png")}
+    assert 4 <= len(present) < FRAMES
+    resumed = render_sequence(scene, pattern, executor=executor)
+    assert set(resumed.rendered).isdisjoint(present) and set(resumed.kept) == present
+    assert sorted(resumed.rendered + resumed.kept) == list(range(FRAMES))
+
+
+def test_cli_sweep_on_local_workers(tmp_path):
+    from conftest import run_cli
+
+    scene = write_scene(tmp_path, 2)
+    code, out = run_cli("sweep", scene, "--set", "render.slices=32,64", *[a for s in SMALL for a in ("--set", s)],
+                        "--workers", "2", "-o", tmp_path / "sweep")
+    assert code == 0, out
+    assert "2 points rendered" in out and (tmp_path / "sweep" / "contact_sheet.png").exists()
+
+
+def test_a_plain_render_and_sequence_never_import_dask_or_the_video_encoder(tmp_path):
+    scene = write_scene(tmp_path, 3)
+    script = (
+        "import sys\n"
+        "from clrays.cli import main\n"
+        f"for args in (['render', {str(scene)!r}, '-o', {str(tmp_path / 'a.png')!r}, '--set', 'image.width=16'],\n"
+        f"             ['sequence', {str(scene)!r}, '-o', {str(tmp_path / 'f_{}.png')!r}, '--video',\n"
+        f"              {str(tmp_path / 'a.gif')!r}, '--set', 'image.width=16']):\n"
+        "    try:\n"
+        "        main(args)\n"
+        "    except SystemExit as exit:\n"
+        "        assert not exit.code, exit.code\n"
+        "loaded = sorted(m for m in sys.modules if m.split('.')[0] in ('dask', 'distributed', 'imageio_ffmpeg'))\n"
+        "print('loaded:', loaded)\n")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300,
+                          env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+    assert done.returncode == 0, done.stderr
+    assert "loaded: []" in done.stdout, done.stdout
+
+
+def test_an_unreachable_scheduler_is_one_line(tmp_path, monkeypatch):
+    import clrays.runs.distributed as engine
+    from conftest import run_cli
+
+    monkeypatch.setattr(engine, "CONNECT_TIMEOUT_S", 2)
+    code, out = run_cli("sweep", write_scene(tmp_path, 2), "--set", "render.slices=32,64",
+                        "--scheduler", "tcp://127.0.0.1:1", "-o", tmp_path / "sweep")
+    assert code == 1 and len(out.strip().splitlines()) == 1, out
+    assert "--scheduler tcp://127.0.0.1:1: cannot connect: Timed out" in out
