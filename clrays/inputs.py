@@ -15,6 +15,7 @@ import numpy as np
 from . import structs
 from .scene.camera import camera_basis, sample_offsets
 from .device import Device
+from .scene.costs import with_derived_sizes
 from .scene.model import DirectionalLight, Scene, SpotLight
 
 #: Spot lights wider than this use a cube map: a single perspective map of a wide
@@ -78,7 +79,9 @@ class FrameInputs:
 
 
 def frame_inputs(scene: Scene) -> FrameInputs:
-    """Pack a scene into the device structs, in eye space."""
+    """Pack a scene into the device structs, in eye space; sizes the scene leaves unset
+    are derived from its image first (`inputs.scene` holds them)."""
+    scene = with_derived_sizes(scene)
     eye_ws = np.asarray(scene.camera.position, dtype=np.float64)
     image, camera, medium = scene.image, scene.camera, scene.medium
     tris = scene.geometry.triangles - eye_ws  # float64 translation, then float32

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from .animation import EASINGS
+from .costs import MAX_GAMMA_SAMPLES, MAX_SHADOW_MAP, MAX_SLICES, MIN_GAMMA_SAMPLES, MIN_SHADOW_MAP, MIN_SLICES
 from .model import INTEGRAND_MODES, METHODS, NORMALS, TRAVERSALS, Camera, Image, Render
 
 FORMAT_VERSION = 1
@@ -205,10 +206,15 @@ RENDER = Section("render", (
     Field("steps", "integer", Render.steps, 1, 65536, notes="raymarch samples per pixel ray"),
     Field("jitter", "boolean", Render.jitter, notes="raymarch: jitter sample positions (seeded per pixel)"),
     Field("shadow_map", "integer", Render.shadow_map, 16, 8192,
+          shown_default=f"from the image: 4 × its diagonal, as a power of two in [{MIN_SHADOW_MAP}, {MAX_SHADOW_MAP}]",
           notes="shadow map side in texels (cube maps: per face)"),
     Field("pcf", "integer", Render.pcf, 0, 16, notes="surface shadow filter radius in texels (0 = hard)"),
-    Field("slices", "integer", Render.slices, 16, 16384, notes="min-max: epipolar slices"),
+    Field("slices", "integer", Render.slices, 16, 16384,
+          shown_default=f"from the image: its perimeter, as a power of two in [{MIN_SLICES}, {MAX_SLICES}]",
+          notes="min-max: epipolar slices"),
     Field("gamma_samples", "integer", Render.gamma_samples, 16, 16384,
+          shown_default=f"from the image: its diagonal or `shadow_map`, the smaller, as a power of two in "
+                        f"[{MIN_GAMMA_SAMPLES}, {MAX_GAMMA_SAMPLES}]",
           notes="min-max: samples along each slice (rounded up to a power of two)"),
     Field("integrand", "string", Render.integrand, choices=INTEGRAND_MODES,
           notes="min-max: how the scattering integrand is evaluated ([docs/integrand.md](integrand.md)); "

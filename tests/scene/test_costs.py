@@ -1,0 +1,48 @@
+"""Sizes that follow the image (clrays.scene.costs): derived when unset, kept when set."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import pytest
+
+from clrays.scene.costs import with_derived_sizes
+from clrays.scene.fields import RENDER
+from clrays.scene.model import Image, Render
+from tests.conftest import grid_plane, make_scene
+
+
+def _sizes(width, height, **render):
+    scene = make_scene(width=width, height=height)
+    scene = replace(scene, image=Image(width, height, 1), render=Render(**render))
+    resolved = with_derived_sizes(scene).render
+    return resolved.shadow_map, resolved.slices, resolved.gamma_samples
+
+
+def test_thumbnail_gets_small_sizes():
+    # 16×9: perimeter 50 → 64 slices, diagonal 18.4 → 32 texels, 4 × diagonal → 128 texel map.
+    assert _sizes(16, 9) == (128, 64, 32)
+
+
+@pytest.mark.parametrize("width, height", [(640, 360), (1280, 720), (1920, 1080)])
+def test_bench_sizes_keep_the_measured_defaults(width, height):
+    assert _sizes(width, height) == (1024, 1024, 1024)
+
+
+def test_texels_per_slice_follow_a_small_shadow_map():
+    assert _sizes(640, 360, shadow_map=128) == (128, 1024, 128)
+
+
+def test_sizes_the_scene_sets_are_kept():
+    assert _sizes(16, 9, shadow_map=512, slices=300, gamma_samples=1000) == (512, 300, 1000)
+
+
+def test_field_table_documents_the_derived_defaults():
+    for key in ("shadow_map", "slices", "gamma_samples"):
+        assert RENDER[key].default is None and RENDER[key].shown_default.startswith("from the image")
+
+
+def test_thumbnail_render_rectifies_a_small_texture(renderer):
+    scene = make_scene(grid_plane(), width=16, height=9)  # a floor: the light's map is not empty
+    result = renderer.render(scene, reuse=False)
+    assert (result.render.shadow_map, result.render.slices, result.render.gamma_samples) == (128, 64, 32)
+    assert result.textures == ((64, 32),)
