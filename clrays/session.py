@@ -29,7 +29,7 @@ from .inputs import FrameBuffers, FrameInputs, frame_inputs, upload
 from .reuse import COMPUTED, REUSED, Reuse, StageCache, StageRecord, digest, scene_digest
 from .scene.costs import with_derived_sizes
 from .scene.model import METHODS, Render, Scene
-from .stages.integrand import integrand
+from .stages.integrand import integrand, integrand_table_size
 from .stages.lamp import eye_in_lamp, lamp_in_scatter
 from .stages.minmax import minmax
 from .stages.raster import RasterResult, ShadowMap, map_is_empty, raster_camera, raster_shadow_map, shadow_atlas
@@ -286,10 +286,11 @@ class StageKeys:
 
     def integrand(self, index: int, epipolar: Epipolar) -> bytes:
         """integrand of one light: the medium, the light, the eye–light distance, the β and
-        γ ranges of the visible rays, the integrand mode and rank, the camera's far."""
+        γ ranges of the visible rays, the integrand mode and rank, the camera's far, the
+        table size (it follows the image)."""
         scene = self.inputs.scene
         return digest("tables", scene.medium, scene.lights[index], scene.render.integrand, scene.render.svd_rank,
-                      scene.camera.far, epipolar.d_el, epipolar.beta_min, epipolar.beta_max, epipolar.gamma_max)
+                      scene.camera.far, integrand_table_size(scene.image.width, scene.image.height), epipolar.d_el, epipolar.beta_min, epipolar.beta_max, epipolar.gamma_max)
 
 
 _renderers: dict[str | None, Renderer] = {}

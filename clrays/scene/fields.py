@@ -210,10 +210,11 @@ RENDER = Section("render", (
           notes="shadow map side in texels (cube maps: per face)"),
     Field("pcf", "integer", Render.pcf, 0, 16, notes="surface shadow filter radius in texels (0 = hard)"),
     Field("slices", "integer", Render.slices, 16, 16384,
-          shown_default=f"from the image: its perimeter, as a power of two in [{MIN_SLICES}, {MAX_SLICES}]",
+          shown_default=f"from the image: 4 × its perimeter or `shadow_map`, the smaller, as a power of two in "
+                        f"[{MIN_SLICES}, {MAX_SLICES}]",
           notes="min-max: epipolar slices"),
     Field("gamma_samples", "integer", Render.gamma_samples, 16, 16384,
-          shown_default=f"from the image: its diagonal or `shadow_map`, the smaller, as a power of two in "
+          shown_default=f"from the image: 8 × its diagonal or `shadow_map`, the smaller, as a power of two in "
                         f"[{MIN_GAMMA_SAMPLES}, {MAX_GAMMA_SAMPLES}]",
           notes="min-max: samples along each slice (rounded up to a power of two)"),
     Field("integrand", "string", Render.integrand, choices=INTEGRAND_MODES,

@@ -19,17 +19,21 @@ def _sizes(width, height, **render):
 
 
 def test_thumbnail_gets_small_sizes():
-    # 16×9: perimeter 50 → 64 slices, diagonal 18.4 → 32 texels, 4 × diagonal → 128 texel map.
-    assert _sizes(16, 9) == (128, 64, 32)
+    # 16×9: 4 × diagonal 18.4 → a 128 texel map, which bounds the slices (4 × perimeter 50 →
+    # 256) and the γ texels (8 × diagonal → 256).
+    assert _sizes(16, 9) == (128, 128, 128)
+    # A map the scene sets does not make a thumbnail rectify 1024²: the image bounds it.
+    assert _sizes(16, 9, shadow_map=1024) == (1024, 256, 256)
 
 
-@pytest.mark.parametrize("width, height", [(640, 360), (1280, 720), (1920, 1080)])
+@pytest.mark.parametrize("width, height", [(640, 360), (1280, 720), (1920, 1080), (128, 72)])
 def test_bench_sizes_keep_the_measured_defaults(width, height):
     assert _sizes(width, height) == (1024, 1024, 1024)
 
 
 def test_texels_per_slice_follow_a_small_shadow_map():
-    assert _sizes(640, 360, shadow_map=128) == (128, 1024, 128)
+    assert _sizes(640, 360, shadow_map=128) == (128, 128, 128)
+    assert _sizes(64, 48, shadow_map=1024) == (1024, 1024, 1024)
 
 
 def test_sizes_the_scene_sets_are_kept():
@@ -44,5 +48,5 @@ def test_field_table_documents_the_derived_defaults():
 def test_thumbnail_render_rectifies_a_small_texture(renderer):
     scene = make_scene(grid_plane(), width=16, height=9)  # a floor: the light's map is not empty
     result = renderer.render(scene, reuse=False)
-    assert (result.render.shadow_map, result.render.slices, result.render.gamma_samples) == (128, 64, 32)
-    assert result.textures == ((64, 32),)
+    assert (result.render.shadow_map, result.render.slices, result.render.gamma_samples) == (128, 128, 128)
+    assert result.textures == ((128, 128),)
