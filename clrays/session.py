@@ -82,6 +82,7 @@ class Renderer:
         self.reuse = reuse
         self.cache = StageCache(cache_entries)
         self._skip_unshadowed = True  # tests switch it off to compare against the full path
+        self._cull_faces = True  # the same: raster every cube face, also those the frame cannot read
 
     @property
     def device(self) -> Device:
@@ -124,6 +125,8 @@ class Renderer:
             return self._exact(scene, reuse, timer, progress)
         device = self.device
         inputs = frame_inputs(scene)
+        if not self._cull_faces:
+            inputs = replace(inputs, view_needed=np.ones_like(inputs.view_needed))
         check_device_memory(device, inputs)
         buffers = upload(device, inputs)  # the scene in eye space, packed into device structs
         keys = StageKeys(buffers.inputs)
@@ -263,13 +266,14 @@ class StageKeys:
         self.geometry = digest(scene.geometry.triangles)
         # raster.camera: the eye-space triangles (geometry and eye), the camera view, the sample offsets.
         self.camera = digest("camera", self.geometry, inputs.eye_ws, inputs.views[:1], inputs.offsets)
-        # raster.shadow: the geometry and the light's views relative to its anchor.
+        # raster.shadow: the geometry, the light's views relative to its anchor and which of
+        # them the frame reads (cube faces outside the camera's view are left empty).
         self.shadow = []
         for index, (first, count) in enumerate(inputs.light_views):
             views = inputs.views[first:first + count].copy()
             views["origin"], views["depth_offset"] = 0.0, 0
             self.shadow.append(digest("shadow", self.geometry, inputs.light_anchor_ws[index], views,
-                                      inputs.lights[index]["type"]))
+                                      inputs.lights[index]["type"], inputs.view_needed[first:first + count]))
 
     def trees(self, index: int) -> bytes:
         """rectify + minmax of one light: the camera depth, the light's map, the epipolar

@@ -90,7 +90,8 @@ def raster_shadow_map(device: Device, buffers: FrameBuffers, light_index: int, t
     device.fill(depth, structs.DEPTH_EMPTY, 4 * texels, timer, "raster")
     centre = device.buffer(np.array([[0.5, 0.5]], dtype=np.float32), writable=False)
     for view_index in range(1, len(inputs.views)):
-        _rasterize(device, light_buffers, view_index, centre, 1, depth, timer)
+        if inputs.view_needed[view_index]:  # a cube face the frame cannot read stays empty
+            _rasterize(device, light_buffers, view_index, centre, 1, depth, timer)
     return ShadowMap(depth, inputs.shadow_texels, inputs.scene.geometry.count)
 
 
