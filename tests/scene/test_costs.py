@@ -46,7 +46,8 @@ def test_field_table_documents_the_derived_defaults():
 
 
 def test_thumbnail_render_rectifies_a_small_texture(renderer):
-    scene = make_scene(grid_plane(), width=16, height=9)  # a floor: the light's map is not empty
+    # A floor: the light's map is not empty. None: the sizes follow the image.
+    scene = make_scene(grid_plane(), width=16, height=9, shadow_map=None, slices=None, gamma_samples=None)
     result = renderer.render(scene, reuse=False)
     assert (result.render.shadow_map, result.render.slices, result.render.gamma_samples) == (128, 128, 128)
     assert result.textures == ((128, 128),)

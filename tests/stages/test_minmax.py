@@ -138,7 +138,8 @@ def test_thumbnail_tables_stay_far_below_the_visibility_error(renderer):
     # map's visibility error at that size is percents.
     assert integrand_table_size(16, 9) == (32, 128) and integrand_table_size(*FULL_TABLES) == (128, 512)
     light = PointLight(v3(0.3, 2.2, 0.5), np.full(3, 20.0))
-    scene = make_scene(lights=[light], width=16, height=9, far=12.0, sigma_s=0.08, sigma_a=0.02)
+    scene = make_scene(lights=[light], width=16, height=9, far=12.0, sigma_s=0.08, sigma_a=0.02, shadow_map=None,
+                       slices=None, gamma_samples=None)
     image = renderer.render(scene, "minmax").image[..., 0]
     expected, keep = unoccluded_point_quadrature(scene)
     relative = np.abs(image - expected)[keep] / expected[keep]
