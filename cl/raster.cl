@@ -181,3 +181,11 @@ kernel void raster_split(global const ulong* nearest, int samples, global uint* 
     tri_id[i] = depth[i] == DEPTH_EMPTY ? -1 : (int)(uint)key;
 }
 #endif
+
+/* Whether any texel of a depth buffer holds a depth (map_is_empty): a flag set on the
+ * device, so the host reads 4 bytes instead of the whole map. */
+kernel void raster_any(global const uint* depth, int texels, global uint* any)
+{
+    int i = get_global_id(0);
+    if (i < texels && depth[i] != DEPTH_EMPTY) *any = 1u;
+}

@@ -100,10 +100,16 @@ def raster_shadow_map(device: Device, buffers: FrameBuffers, light_index: int, t
 
 
 def map_is_empty(device: Device, shadow_map: ShadowMap) -> bool:
-    """Whether nothing at all was rasterized into a light's map (read back once)."""
+    """Whether nothing at all was rasterized into a light's map (asked once, on the device:
+    the host reads a flag, not the map)."""
     if shadow_map.empty is None:
-        shadow_map.empty = shadow_map.triangles == 0 or bool(
-            (device.read(shadow_map.depth, shadow_map.texels, np.uint32) == structs.DEPTH_EMPTY).all())
+        if shadow_map.triangles == 0 or shadow_map.texels == 0:
+            shadow_map.empty = True
+        else:
+            flag = device.buffer(np.zeros(1, np.uint32))
+            device.kernel("raster", "raster_any")(device.queue, (shadow_map.texels,), None, shadow_map.depth,
+                                                  np.int32(shadow_map.texels), flag)
+            shadow_map.empty = not device.read(flag, 1, np.uint32)[0]
     return shadow_map.empty
 
 

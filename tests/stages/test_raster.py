@@ -88,3 +88,14 @@ def test_big_triangles_in_rows_give_the_same_maps(device, monkeypatch):
     _, depth_one_pass, tri_one_pass, shadow_one_pass = _rasterized(Device(TEST_DEVICE), scene)
     assert np.array_equal(depth, depth_one_pass) and np.array_equal(tri, tri_one_pass)
     assert np.array_equal(shadow, shadow_one_pass)
+
+
+def test_map_is_empty_asks_the_device(device):
+    from clrays.stages.raster import map_is_empty, raster_shadow_map
+    from conftest import SpotLight
+
+    for direction, empty in ((v3(0, 1, 0), True), (v3(0, -1, 0), False)):  # a narrow spot away from / onto the floor
+        scene = make_scene(grid_plane(), [SpotLight(v3(0, 3, 0), direction, 20.0, np.full(3, 30.0))],
+                           width=16, height=12, shadow_map=64)
+        buffers = upload(device, frame_inputs(scene))
+        assert map_is_empty(device, raster_shadow_map(device, buffers, 0, StageTimer())) is empty
