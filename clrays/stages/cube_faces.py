@@ -49,35 +49,42 @@ def view_pyramid(scene, light_position, margin_rad: float) -> np.ndarray | None:
 
 
 def _edges(vertices: np.ndarray) -> np.ndarray:
-    """Edge directions of a pyramid: apex (vertex 0) to each base corner, and the base
-    rectangle's sides (corners ordered (-,-), (-,+), (+,-), (+,+))."""
-    apex, base = vertices[0], vertices[1:]
-    sides = [base[1] - base[0], base[2] - base[0], base[3] - base[1], base[3] - base[2]]
-    return np.array([corner - apex for corner in base] + sides)
+    """(..., 8, 3) edge directions of pyramids (..., 5, 3): apex (vertex 0) to each base
+    corner, and the base rectangle's sides (corners ordered (-,-), (-,+), (+,-), (+,+))."""
+    apex, base = vertices[..., :1, :], vertices[..., 1:, :]
+    sides = base[..., [1, 2, 3, 3], :] - base[..., [0, 0, 1, 2], :]
+    return np.concatenate([base - apex, sides], axis=-2)
 
 
-def _face_cone(axis: int, sign: float, reach: float) -> np.ndarray:
-    """(5, 3) vertices of a face's cone from the origin, out to `reach` along its axis:
-    every point of the cone within distance `reach` of the light lies inside."""
-    others = [k for k in range(3) if k != axis]
-    vertices = [np.zeros(3)]
-    for a in (-1, 1):
-        for b in (-1, 1):
-            v = np.zeros(3)
-            v[axis], v[others[0]], v[others[1]] = sign * reach, a * reach, b * reach
-            vertices.append(v)
-    return np.array(vertices)
+def _face_cones(reach: float) -> np.ndarray:
+    """(6, 5, 3) vertices of the faces' cones from the origin, out to `reach` along each
+    axis: every point of a cone within distance `reach` of the light lies inside its body."""
+    cones = np.zeros((6, 5, 3))
+    for face, (axis, sign) in enumerate(_FACE_AXES):
+        others = [k for k in range(3) if k != axis]
+        for corner, (a, b) in enumerate(((-1, -1), (-1, 1), (1, -1), (1, 1)), start=1):
+            cones[face, corner, axis], cones[face, corner, others[0]], cones[face, corner, others[1]] = (
+                sign * reach, a * reach, b * reach)
+    return cones
 
 
-def _separated(a: np.ndarray, b: np.ndarray) -> bool:
-    edges = np.concatenate([_edges(a), _edges(b)])
-    i, j = np.triu_indices(len(edges), 1)
-    axes = np.cross(edges[i], edges[j])
-    lengths = np.linalg.norm(axes, axis=1)
-    axes = axes[lengths > 1e-12 * lengths.max()] / lengths[lengths > 1e-12 * lengths.max(), None]
-    pa, pb = a @ axes.T, b @ axes.T
-    margin = _SEPARATION_MARGIN * max(np.abs(a).max(), np.abs(b).max())
-    return bool(np.any((pa.max(axis=0) < pb.min(axis=0) - margin) | (pb.max(axis=0) < pa.min(axis=0) - margin)))
+#: Every pair of the 16 edge directions of two pyramids (computed once: host work per frame).
+_EDGE_PAIRS = np.triu_indices(16, 1)
+
+
+def _separated(pyramid: np.ndarray, cones: np.ndarray) -> np.ndarray:
+    """(6,) bool: whether an axis separates the pyramid from each cone by the margin."""
+    edges = np.concatenate([np.broadcast_to(_edges(pyramid), (len(cones), 8, 3)), _edges(cones)], axis=1)
+    i, j = _EDGE_PAIRS
+    axes = np.cross(edges[:, i], edges[:, j])  # (6, 120, 3)
+    lengths = np.linalg.norm(axes, axis=-1, keepdims=True)
+    usable = lengths > 1e-12 * lengths.max()
+    axes = np.where(usable, axes / np.where(usable, lengths, 1.0), 0.0)  # degenerate axes separate nothing
+    pa = np.einsum("vk,fak->fav", pyramid, axes)  # (6, 120, 5)
+    pb = np.einsum("fvk,fak->fav", cones, axes)
+    margin = _SEPARATION_MARGIN * max(np.abs(pyramid).max(), np.abs(cones).max())
+    apart = (pa.max(-1) < pb.min(-1) - margin) | (pb.max(-1) < pa.min(-1) - margin)
+    return apart.any(axis=1)
 
 
 def sampled_cube_faces(scene, light_position, slices: int) -> tuple[bool, ...]:
@@ -88,4 +95,4 @@ def sampled_cube_faces(scene, light_position, slices: int) -> tuple[bool, ...]:
     if pyramid is None:
         return (True,) * 6
     reach = float(np.linalg.norm(pyramid, axis=1).max()) * 1.01
-    return tuple(not _separated(pyramid, _face_cone(axis, sign, reach)) for axis, sign in _FACE_AXES)
+    return tuple(bool(not apart) for apart in _separated(pyramid, _face_cones(reach)))
