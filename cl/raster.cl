@@ -6,7 +6,8 @@
  *
  * One work-item per triangle: it clips the triangle to the view's near side,
  * projects the polygon, and per pixel row ray-tests the samples in the row's span of
- * the polygon. The ray test (not interpolation) makes depth exact along the sample
+ * the polygon; triangles taller than RASTER_BIG_ROWS go to a second pass with one
+ * work-item per row (`*_rows`). The ray test (not interpolation) makes depth exact along the sample
  * ray, and two-sided. Depth buffer layout per view: [height][width][samples]. */
 #include "lighting.h"
 
@@ -97,10 +98,8 @@ inline int row_span(const float2 corner[4], int count, int y, int width, int* x0
     return *x0 <= *x1;
 }
 
-/* Visit every sample of every pixel a triangle may cover; BODY sees idx, t and tri. */
-#define FOR_EACH_COVERED_SAMPLE(BODY)                                                       \
-    int tri = get_global_id(0);                                                             \
-    if (tri >= tri_count) return;                                                           \
+/* The triangle `tri` clipped and projected into the view; its rows are [y0, y1]. */
+#define PROJECT_TRIANGLE                                                                    \
     global const view_t* view = views + view_index;                                         \
     float3 v0 = tri_vertices[3 * tri].xyz, v1 = tri_vertices[3 * tri + 1].xyz,              \
            v2 = tri_vertices[3 * tri + 2].xyz;                                              \
@@ -110,48 +109,68 @@ inline int row_span(const float2 corner[4], int count, int y, int width, int* x0
     float top = INFINITY, bottom = -INFINITY;                                               \
     for (int k = 0; k < count; ++k) { top = fmin(top, corner[k].y); bottom = fmax(bottom, corner[k].y); } \
     int y0 = max((int)floor(fmax(top, -1.0f)) - 1, 0);                                      \
-    int y1 = min((int)ceil(fmin(bottom, (float)view->height)), view->height - 1);           \
-    for (int y = y0; y <= y1; ++y) {                                                        \
+    int y1 = min((int)ceil(fmin(bottom, (float)view->height)), view->height - 1);
+
+/* Every sample of row y that the triangle may cover; BODY sees idx, t and tri. */
+#define COVERED_SAMPLES_OF_ROW(y, BODY)                                                     \
+    {                                                                                       \
         int x0, x1;                                                                         \
-        if (!row_span(corner, count, y, view->width, &x0, &x1)) continue;                   \
-        for (int x = x0; x <= x1; ++x)                                                      \
-            for (int s = 0; s < sample_count; ++s) {                                        \
-                float3 origin, dir;                                                         \
-                view_ray(view, view_screen(view, x, y, offsets[s]), &origin, &dir);         \
-                float t = intersect_triangle(origin, dir, v0, v1, v2);                      \
-                if (t == INFINITY) continue;                                                \
-                int idx = view->depth_offset + (y * view->width + x) * sample_count + s;    \
-                BODY                                                                        \
-            }                                                                               \
+        if (row_span(corner, count, y, view->width, &x0, &x1))                              \
+            for (int x = x0; x <= x1; ++x)                                                  \
+                for (int s = 0; s < sample_count; ++s) {                                    \
+                    float3 origin, dir;                                                     \
+                    view_ray(view, view_screen(view, x, y, offsets[s]), &origin, &dir);     \
+                    float t = intersect_triangle(origin, dir, v0, v1, v2);                  \
+                    if (t == INFINITY) continue;                                            \
+                    int idx = view->depth_offset + (y * view->width + x) * sample_count + s; \
+                    BODY                                                                    \
+                }                                                                           \
     }
 
-kernel void raster_depth(global const float4* tri_vertices, int tri_count,
-                         global const view_t* views, int view_index,
-                         global const float2* offsets, int sample_count,
-                         global uint* depth)
-{
-    FOR_EACH_COVERED_SAMPLE(atomic_min(depth + idx, as_uint(t));)
-}
+/* Pass 1, one work-item per triangle: it visits every covered sample of its rows, unless
+ * it spans more than RASTER_BIG_ROWS rows; then it lists itself in `big` (while there is
+ * room) for pass 2, so a floor plane does not keep one work-item busy for the whole view.
+ * The samples and the atomic updates are the same either way, so is the depth map. */
+#define FOR_EACH_COVERED_SAMPLE(BODY)                                                       \
+    int tri = get_global_id(0);                                                             \
+    if (tri >= tri_count) return;                                                           \
+    PROJECT_TRIANGLE                                                                        \
+    if (y1 - y0 + 1 > RASTER_BIG_ROWS) {                                                    \
+        uint slot = atomic_inc(big_count);                                                  \
+        if (slot < RASTER_BIG_TRIANGLES) { big[slot] = tri; return; }                       \
+    }                                                                                       \
+    for (int y = y0; y <= y1; ++y) COVERED_SAMPLES_OF_ROW(y, BODY)
 
-kernel void raster_resolve(global const float4* tri_vertices, int tri_count,
-                           global const view_t* views, int view_index,
-                           global const float2* offsets, int sample_count,
-                           global const uint* depth, global int* tri_id)
-{
-    FOR_EACH_COVERED_SAMPLE(if (as_uint(t) == depth[idx]) atomic_max(tri_id + idx, tri);)
-}
+/* Pass 2, one work-item per (listed big triangle, view row). */
+#define FOR_EACH_COVERED_SAMPLE_OF_BIG_ROW(BODY)                                            \
+    int slot = get_global_id(0), y = get_global_id(1);                                      \
+    if (slot >= (int)min(*big_count, (uint)RASTER_BIG_TRIANGLES)) return;                   \
+    int tri = big[slot];                                                                    \
+    PROJECT_TRIANGLE                                                                        \
+    if (y < y0 || y > y1) return;                                                           \
+    COVERED_SAMPLES_OF_ROW(y, BODY)
+
+#define RASTER_ARGS global const float4* tri_vertices, int tri_count, global const view_t* views, \
+                    int view_index, global const float2* offsets, int sample_count,           \
+                    global uint* big_count, global int* big
+
+/* Each pass-1 kernel `name` has a pass-2 twin `name_rows`. */
+#define RASTER_KERNELS(name, TARGET, BODY)                                                  \
+    kernel void name(RASTER_ARGS, TARGET) { FOR_EACH_COVERED_SAMPLE(BODY) }                \
+    kernel void name##_rows(RASTER_ARGS, TARGET) { FOR_EACH_COVERED_SAMPLE_OF_BIG_ROW(BODY) }
+
+RASTER_KERNELS(raster_depth, global uint* depth, atomic_min(depth + idx, as_uint(t));)
+
+#define RESOLVE_TARGET global const uint* depth, global int* tri_id
+RASTER_KERNELS(raster_resolve, RESOLVE_TARGET,
+               if (as_uint(t) == depth[idx]) atomic_max(tri_id + idx, tri);)
 
 #ifdef RASTER_ATOMIC64
 #pragma OPENCL EXTENSION cl_khr_int64_extended_atomics : enable
 /* One pass for depth and triangle: the key (as_uint(t) << 32 | tri) orders by depth
  * first (positive floats order like their bits), ties to the lowest index. */
-kernel void raster_nearest(global const float4* tri_vertices, int tri_count,
-                           global const view_t* views, int view_index,
-                           global const float2* offsets, int sample_count,
-                           global ulong* nearest)
-{
-    FOR_EACH_COVERED_SAMPLE(atom_min(nearest + idx, ((ulong)as_uint(t) << 32) | (ulong)tri);)
-}
+RASTER_KERNELS(raster_nearest, global ulong* nearest,
+               atom_min(nearest + idx, ((ulong)as_uint(t) << 32) | (ulong)tri);)
 
 kernel void raster_split(global const ulong* nearest, int samples, global uint* depth, global int* tri_id)
 {
@@ -162,3 +181,11 @@ kernel void raster_split(global const ulong* nearest, int samples, global uint* 
     tri_id[i] = depth[i] == DEPTH_EMPTY ? -1 : (int)(uint)key;
 }
 #endif
+
+/* Whether any texel of a depth buffer holds a depth (map_is_empty): a flag set on the
+ * device, so the host reads 4 bytes instead of the whole map. */
+kernel void raster_any(global const uint* depth, int texels, global uint* any)
+{
+    int i = get_global_id(0);
+    if (i < texels && depth[i] != DEPTH_EMPTY) *any = 1u;
+}

@@ -348,6 +348,11 @@ def _print_stats(result) -> None:
     if result.stage_ms:
         click.echo(f"  {'total':<10} {sum(result.stage_ms.values()):9.2f} ms (device + host stages)")
     click.echo(f"  wall       {result.wall_ms:9.2f} ms")
+    if result.render is not None:
+        render = result.render
+        textures = ", ".join(f"{slices}×{texels}" for slices, texels in result.textures) or "none"
+        click.echo(f"  sizes      shadow map {render.shadow_map}², {render.slices} slices × {render.gamma_samples} γ "
+                   f"texels; rectified (slices×texels per light): {textures}")
     click.echo(f"  device memory {result.device_bytes / 2**20:.1f} MiB")
 
 

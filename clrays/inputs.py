@@ -17,6 +17,8 @@ from .scene.camera import camera_basis, sample_offsets
 from .device import Device
 from .errors import ClraysError
 from .reference.radiometry import effective_far, lamp_radius
+from .scene.costs import with_derived_sizes
+from .stages.cube_faces import sampled_cube_faces
 from .scene.model import DirectionalLight, Scene, SpotLight
 
 #: Spot lights wider than this use a cube map: a single perspective map of a wide
@@ -71,6 +73,9 @@ class FrameInputs:
     tri_albedo: np.ndarray  # (T, 4) float32
     shadow_texels: int  # size of the shared shadow depth buffer
     light_anchor_ws: np.ndarray  # (L, 3) float64: each light's shadow-map origin, world space
+    # (V,) bool per view: whether the frame can read it; raster skips the others (the cube
+    # faces that the camera's view misses, clrays.stages.cube_faces)
+    view_needed: np.ndarray = None
 
     @property
     def light_views(self) -> list[tuple[int, int]]:
@@ -83,7 +88,9 @@ class FrameInputs:
 
 
 def frame_inputs(scene: Scene) -> FrameInputs:
-    """Pack a scene into the device structs, in eye space."""
+    """Pack a scene into the device structs, in eye space; sizes the scene leaves unset
+    are derived from its image first (`inputs.scene` holds them)."""
+    scene = with_derived_sizes(scene)
     eye_ws = np.asarray(scene.camera.position, dtype=np.float64)
     image, camera, medium = scene.image, scene.camera, scene.medium
     tris = scene.geometry.triangles - eye_ws  # float64 translation, then float32
@@ -94,6 +101,7 @@ def frame_inputs(scene: Scene) -> FrameInputs:
     views = [_view(np.zeros(3), forward, up, tan_half * image.width / image.height, tan_half,
                    image.width, image.height, structs.PROJECTION_PERSPECTIVE, 0)]
     lights, anchors = [], []
+    needed = [True]  # the camera view, then one flag per shadow-map view
     n = scene.render.shadow_map
     texels = 0
     for index, light in enumerate(scene.lights):
@@ -111,6 +119,7 @@ def frame_inputs(scene: Scene) -> FrameInputs:
             # Orthographic map fitted to the bounding sphere of the scene.
             centre, radius = (lo + hi) / 2, max(np.linalg.norm(hi - lo) / 2, 1e-6) * 1.01
             anchors.append(centre - light.direction * radius)
+            needed.append(True)
             views.append(_view(anchors[-1] - eye_ws, light.direction, _any_up(light.direction),
                                radius, radius, n, n, structs.PROJECTION_ORTHOGRAPHIC, texels))
             entry["texel_angle"] = 2 * radius / n
@@ -128,11 +137,13 @@ def frame_inputs(scene: Scene) -> FrameInputs:
                 entry["type"] = structs.LIGHT_POINT
             if isinstance(light, SpotLight) and light.cone_deg <= SPOT_SINGLE_VIEW_MAX_DEG:
                 scale = math.tan(math.radians(light.cone_deg))
+                needed.append(True)
                 views.append(_view(position, light.direction, _any_up(light.direction), scale, scale,
                                    n, n, structs.PROJECTION_PERSPECTIVE, texels))
                 entry["texel_angle"] = 2 * scale / n
                 texels += n * n
             else:
+                needed += sampled_cube_faces(scene, light.position, scene.render.slices)
                 for face_forward, face_up in _CUBE_FACES:
                     views.append(_view(position, face_forward, face_up, 1.0, 1.0, n, n,
                                        structs.PROJECTION_PERSPECTIVE, texels))
@@ -176,6 +187,7 @@ def frame_inputs(scene: Scene) -> FrameInputs:
         tri_albedo=pad(scene.geometry.albedo),
         shadow_texels=texels,
         light_anchor_ws=np.array(anchors, dtype=np.float64).reshape(-1, 3),
+        view_needed=np.array(needed, dtype=bool),
     )
 
 
@@ -233,6 +245,7 @@ def light_pass_inputs(inputs: FrameInputs, light_index: int) -> FrameInputs:
     return replace(
         inputs,
         views=np.concatenate([inputs.views[:1], views]),
+        view_needed=np.concatenate([[True], inputs.view_needed[first:first + count]]),
         lights=light,
         tri_vertices=np.concatenate([vertices, np.zeros((len(vertices), 1))], axis=1).astype(np.float32),
         shadow_texels=texels,

@@ -28,8 +28,9 @@ from .errors import ClraysError
 from .inputs import FrameBuffers, FrameInputs, frame_inputs, upload
 from .reference.radiometry import effective_far
 from .reuse import COMPUTED, REUSED, Reuse, StageCache, StageRecord, digest, scene_digest
-from .scene.model import METHODS, Scene
-from .stages.integrand import integrand
+from .scene.costs import with_derived_sizes
+from .scene.model import METHODS, Render, Scene
+from .stages.integrand import integrand, integrand_table_size
 from .stages.lamp import eye_in_lamp, lamp_in_scatter
 from .stages.minmax import minmax
 from .stages.raster import RasterResult, ShadowMap, map_is_empty, raster_camera, raster_shadow_map, shadow_atlas
@@ -57,6 +58,9 @@ class RenderResult:
     # "raster.camera" and "raster.shadow"; a frame identical to a kept one is all "reused".
     stage_status: dict[str, str] = field(default_factory=dict)
     host_stages: frozenset[str] = frozenset()  # the labels of `stage_ms` timed on the host
+    render: Render | None = None  # the scene's render settings with the sizes derived from the image filled in
+    # (slices, γ texels) of each epipolar texture the frame used, per light that has one
+    textures: tuple[tuple[int, int], ...] = ()
 
     @property
     def reused(self) -> list[str]:
@@ -79,6 +83,7 @@ class Renderer:
         self.reuse = reuse
         self.cache = StageCache(cache_entries)
         self._skip_unshadowed = True  # tests switch it off to compare against the full path
+        self._cull_faces = True  # the same: raster every cube face, also those the frame cannot read
 
     @property
     def device(self) -> Device:
@@ -97,7 +102,8 @@ class Renderer:
         method = method or scene.render.method
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r}; expected one of {', '.join(METHODS)}")
-        scene = replace(scene, render=replace(scene.render, method=method))
+        # Sizes the scene leaves unset follow its image; resolved before any stage key is taken.
+        scene = with_derived_sizes(replace(scene, render=replace(scene.render, method=method)))
         start = time.perf_counter()
         record, timer = StageRecord(), StageTimer()
         use_cache = self.reuse if reuse is None else reuse
@@ -105,24 +111,28 @@ class Renderer:
         if self._device is not None:
             self._device.allocated_bytes = 0
         # A frame identical to a kept one: its image, and every stage counts as reused.
-        image, stages = reuse.keep("frame", digest("frame", scene_digest(scene)),
-                                   lambda: self._frame(scene, method, reuse, timer, progress))
+        image, stages, textures = reuse.keep("frame", digest("frame", scene_digest(scene)),
+                                             lambda: self._frame(scene, method, reuse, timer, progress))
         status = record.status() or {stage: REUSED for stage in stages}
         device_bytes = self._device.allocated_bytes if self._device is not None else 0
         wall_ms = (time.perf_counter() - start) * 1e3
         return RenderResult(image.copy(), method, timer.milliseconds(), wall_ms, device_bytes, status,
-                            timer.host_labels)
+                            timer.host_labels, scene.render, textures)
 
     def _frame(self, scene: Scene, method: str, reuse: Reuse, timer: StageTimer, progress: bool):
-        """(image, stage labels) of one frame: the pipeline of the module docstring."""
+        """(image, stage labels, epipolar texture sizes) of one frame: the pipeline of the
+        module docstring."""
         if method == "exact":
             return self._exact(scene, reuse, timer, progress)
         device = self.device
         inputs = frame_inputs(scene)
+        if not self._cull_faces:
+            inputs = replace(inputs, view_needed=np.ones_like(inputs.view_needed))
         check_device_memory(device, inputs)
         buffers = upload(device, inputs)  # the scene in eye space, packed into device structs
         keys = StageKeys(buffers.inputs)
         rastered, maps = self._raster(buffers, keys, reuse, timer)  # raster: camera depth and ids, shadow maps
+        textures = []
         scatter = device.buffer(nbytes=16 * buffers.inputs.samples)  # in-scattered radiance per camera sample
         device.fill(scatter, np.float32(0), 16 * buffers.inputs.samples)
         if not np.any(scene.medium.sigma_s > 0):
@@ -138,6 +148,7 @@ class Renderer:
                 epipolar = self._rectify(buffers, rastered, maps, keys, index, reuse, timer)  # rectify: S[α, γ]
                 if epipolar is None:  # no visible ray has any extent in γ
                     continue
+                textures.append((int(epipolar.params["slices"]), int(epipolar.params["gamma_samples"])))
                 self._minmax(epipolar, reuse, timer)  # minmax: the 1D min-max mipmap of every row
                 tables = reuse.stage("integrand", keys.integrand(index, epipolar),  # integrand: lit run → radiance
                                      lambda: integrand(device, scene, light, epipolar, timer), per_light=True)
@@ -145,7 +156,7 @@ class Renderer:
             reuse.record.note("traverse", COMPUTED)
         image = shade(device, buffers, rastered, scatter, timer)  # shade: surfaces, attenuation, + scatter
         reuse.record.note("shade", COMPUTED)
-        return image, tuple(reuse.record.status())
+        return image, tuple(reuse.record.status()), tuple(textures)
 
     def _exact(self, scene: Scene, reuse: Reuse, timer: StageTimer, progress: bool):
         """The float64 reference, one host stage."""
@@ -155,7 +166,7 @@ class Renderer:
         image = render_exact(scene, progress=progress).astype(np.float32)
         timer.add_host("exact", (time.perf_counter() - start) * 1e3)
         reuse.record.note("exact", COMPUTED)
-        return image, ("exact",)
+        return image, ("exact",), ()
 
     def _raster(self, buffers: FrameBuffers, keys: StageKeys, reuse: Reuse, timer: StageTimer):
         """The raster stage, each part kept while its inputs are: the camera's depth and
@@ -258,13 +269,14 @@ class StageKeys:
         self.geometry = digest(scene.geometry.triangles)
         # raster.camera: the eye-space triangles (geometry and eye), the camera view, the sample offsets.
         self.camera = digest("camera", self.geometry, inputs.eye_ws, inputs.views[:1], inputs.offsets)
-        # raster.shadow: the geometry and the light's views relative to its anchor.
+        # raster.shadow: the geometry, the light's views relative to its anchor and which of
+        # them the frame reads (cube faces outside the camera's view are left empty).
         self.shadow = []
         for index, (first, count) in enumerate(inputs.light_views):
             views = inputs.views[first:first + count].copy()
             views["origin"], views["depth_offset"] = 0.0, 0
             self.shadow.append(digest("shadow", self.geometry, inputs.light_anchor_ws[index], views,
-                                      inputs.lights[index]["type"]))
+                                      inputs.lights[index]["type"], inputs.view_needed[first:first + count]))
 
     def trees(self, index: int) -> bytes:
         """rectify + minmax of one light: the camera depth, the light's map, the epipolar
@@ -281,10 +293,12 @@ class StageKeys:
 
     def integrand(self, index: int, epipolar: Epipolar) -> bytes:
         """integrand of one light: the medium, the light, the eye–light distance, the β and
-        γ ranges of the visible rays, the integrand mode and rank, the camera's far."""
+        γ ranges of the visible rays, the integrand mode and rank, the camera's far, the
+        table size (it follows the image)."""
         scene = self.inputs.scene
         return digest("tables", scene.medium, scene.lights[index], scene.render.integrand, scene.render.svd_rank,
-                      effective_far(scene), epipolar.d_el, epipolar.beta_min, epipolar.beta_max, epipolar.gamma_max)
+                      effective_far(scene), integrand_table_size(scene.image.width, scene.image.height),
+                      epipolar.d_el, epipolar.beta_min, epipolar.beta_max, epipolar.gamma_max)
 
 
 _renderers: dict[str | None, Renderer] = {}

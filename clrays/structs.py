@@ -44,10 +44,16 @@ FAR_DEVICE_MAX = 1e18
 # stays finite; only rays within 1e-9 rad of the eye–light axis see the clamp.
 SIN_BETA_MIN = 1e-9
 
+# raster: a triangle spanning more than RASTER_BIG_ROWS rows of a view (a floor plane)
+# is drawn by one work-item per row in a second pass instead of looping over its rows
+# alone; up to RASTER_BIG_TRIANGLES of them per launch, the rest draw their own rows.
+RASTER_BIG_ROWS = 32
+RASTER_BIG_TRIANGLES = 64
+
 #: Every constant above by its C name: the `-D` options of every kernel build.
 KERNEL_CONSTANTS = {
     name: value for name, value in dict(globals()).items()
-    if name.startswith(("PROJECTION_", "LIGHT_", "PHASE_", "INTEGRAND_", "TRAVERSAL_"))
+    if name.startswith(("PROJECTION_", "LIGHT_", "PHASE_", "INTEGRAND_", "TRAVERSAL_", "RASTER_"))
     or name in ("DEPTH_EMPTY", "SIN_BETA_MIN")
 }
 

@@ -33,6 +33,7 @@ import numpy as np
 
 from ..image_io import make_folder
 from ..session import Renderer
+from ..scene.costs import with_derived_sizes
 from ..scene.model import Scene
 from ..scene.load import load_scene
 from .references import EXACT, ReferenceCache
@@ -89,7 +90,7 @@ def sweep(scene: Scene, quick: bool = False, volume: bool = False) -> list[tuple
         for steps in (128, 512) if large else (32, 64, 128, 256, 512, 1024):
             points.append(("raymarch", f"steps={steps} shadow_map={shadow_map}",
                            {"steps": steps, "shadow_map": shadow_map}))
-    defaults = dataclasses.asdict(scene.render)
+    defaults = dataclasses.asdict(with_derived_sizes(scene).render)
     points.append(("minmax", f"defaults (slices={defaults['slices']} gamma_samples={defaults['gamma_samples']} "
                              f"shadow_map={defaults['shadow_map']})", {}))
     one_at_a_time = {

@@ -12,6 +12,7 @@ from typing import Any
 
 from .animation import EASINGS
 from .limits import MAX_LIGHTS, MAX_MESH_BYTES, MAX_OBJECTS, MAX_SCENE_BYTES, MAX_TRIANGLES
+from .costs import MAX_GAMMA_SAMPLES, MAX_SHADOW_MAP, MAX_SLICES, MIN_GAMMA_SAMPLES, MIN_SHADOW_MAP, MIN_SLICES
 from .model import INTEGRAND_MODES, METHODS, NORMALS, TRAVERSALS, Camera, Image, Render
 
 FORMAT_VERSION = 1
@@ -214,11 +215,17 @@ RENDER = Section("render", (
     Field("jitter", "boolean", Render.jitter, notes="raymarch: jitter sample positions (seeded per pixel)",
           read_by=("raymarch",)),
     Field("shadow_map", "integer", Render.shadow_map, 16, 8192,
+          shown_default=f"from the image: 4 × its diagonal, as a power of two in [{MIN_SHADOW_MAP}, {MAX_SHADOW_MAP}]",
           notes="shadow map side in texels (cube maps: per face)", read_by=_RASTER_METHODS),
     Field("pcf", "integer", Render.pcf, 0, 16, notes="surface shadow filter radius in texels (0 = hard)",
           read_by=_RASTER_METHODS),
-    Field("slices", "integer", Render.slices, 16, 16384, notes="min-max: epipolar slices", read_by=("minmax",)),
+    Field("slices", "integer", Render.slices, 16, 16384,
+          shown_default=f"from the image: 4 × its perimeter or `shadow_map`, the smaller, as a power of two in "
+                        f"[{MIN_SLICES}, {MAX_SLICES}]",
+          notes="min-max: epipolar slices", read_by=("minmax",)),
     Field("gamma_samples", "integer", Render.gamma_samples, 16, 16384,
+          shown_default=f"from the image: 8 × its diagonal or `shadow_map`, the smaller, as a power of two in "
+                        f"[{MIN_GAMMA_SAMPLES}, {MAX_GAMMA_SAMPLES}]",
           notes="min-max: samples along each slice (rounded up to a power of two)", read_by=("minmax",)),
     Field("integrand", "string", Render.integrand, choices=INTEGRAND_MODES,
           notes="min-max: how the scattering integrand is evaluated ([docs/integrand.md](integrand.md)); "

@@ -147,7 +147,9 @@ def _render(node: Node | None) -> Render:
     if node is None:
         return Render()
     m = mapping(node, optional=RENDER.optional)
-    return Render(**{field.key: _read(field, m.get(field.key)) for field in RENDER.fields})
+    # A size left out stays None: the renderer derives it from the image (clrays.scene.costs).
+    return Render(**{field.key: None if field.default is None and field.key not in m else _read(field, m.get(field.key))
+                     for field in RENDER.fields})
 
 
 # --------------------------------------------------------------------------- objects

@@ -94,11 +94,12 @@ class Render:
     method: str = "minmax"  # one of METHODS
     steps: int = 256  # raymarch samples per pixel
     jitter: bool = False  # raymarch: jitter sample positions (seeded per pixel)
-    shadow_map: int = 1024  # shadow map side, texels (cube maps: per face)
+    # Sizes left None are derived from the image when a frame is rendered (clrays.scene.costs).
+    shadow_map: int | None = None  # shadow map side, texels (cube maps: per face)
     pcf: int = 0  # surface shadow filter radius in texels (0 = hard)
     # min-max method
-    slices: int = 1024  # measured: bench/RESULTS.md, "Choosing defaults"
-    gamma_samples: int = 1024
+    slices: int | None = None  # epipolar slices
+    gamma_samples: int | None = None  # γ texels per slice
     integrand: str = "table"  # one of INTEGRAND_MODES
     svd_rank: int = 4
     traversal: str = "tree"  # one of TRAVERSALS

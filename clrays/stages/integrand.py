@@ -488,6 +488,24 @@ def segment_radiance(tables: IntegrandTables, beta, gamma0, gamma1) -> np.ndarra
 #: visibility error, and the tables build 4× faster than at 256 × 1024.
 INTEGRAND_ROWS = 128
 INTEGRAND_COLUMNS = 512
+#: Smallest table. Its error (5e-4 at 32 × 128, tests/stages/test_minmax.py) stays far
+#: below the visibility error of the small shadow map such an image gets.
+MIN_INTEGRAND_ROWS = 16
+MIN_INTEGRAND_COLUMNS = 64
+
+
+def integrand_table_size(width: int, height: int) -> tuple[int, int]:
+    """(β rows, x columns) of the tables for a width × height image: rows follow the
+    image diagonal (the visible β range spans at most that many pixels), columns four
+    times it, as powers of two clamped to [16, 128] × [64, 512], so 640×360 and larger
+    keep 128 × 512 and a 16×9 thumbnail builds 32 × 128 (docs/design.md §7)."""
+    diagonal = math.hypot(width, height)
+
+    def clamped(value, low, high):
+        return min(max(1 << math.ceil(math.log2(max(value, 1.0))), low), high)
+
+    return (clamped(diagonal, MIN_INTEGRAND_ROWS, INTEGRAND_ROWS),
+            clamped(4 * diagonal, MIN_INTEGRAND_COLUMNS, INTEGRAND_COLUMNS))
 
 _MODE_IDS = {"table": structs.INTEGRAND_TABLE, "svd": structs.INTEGRAND_SVD, "analytic": structs.INTEGRAND_ANALYTIC}
 
@@ -507,12 +525,13 @@ def integrand(device: Device, scene, light, epipolar, timer: StageTimer) -> Devi
     start = time.perf_counter()
     render, medium = scene.render, scene.medium
     directional = isinstance(light, DirectionalLight)
+    n_beta, n_gamma = integrand_table_size(scene.image.width, scene.image.height)
     try:
         tables = build_integrand(
             render.integrand, "directional" if directional else "point", medium.sigma_s, medium.sigma_t,
             medium.phase, light.irradiance if directional else light.intensity, epipolar.d_el,
             epipolar.beta_min, epipolar.beta_max, epipolar.gamma_max, rank=render.svd_rank,
-            n_beta=INTEGRAND_ROWS, n_gamma=INTEGRAND_COLUMNS,
+            n_beta=n_beta, n_gamma=n_gamma,
             s_max=effective_far(scene) if directional and render.integrand != "analytic" else None)
     except ValueError as exc:  # e.g. `analytic` where no closed form exists
         where = f"{scene.source}: " if scene.source else ""

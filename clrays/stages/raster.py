@@ -21,15 +21,27 @@ class RasterResult:
     shadow_depth: object  # uint[shadow_texels]: every light's views, back to back
 
 
-def _rasterize(device: Device, buffers: FrameBuffers, view_index: int, offsets, sample_count: int,
-               depth, timer: StageTimer) -> None:
-    kernel = device.kernel("raster", "raster_depth")
+def _launch(device: Device, buffers: FrameBuffers, name: str, defines: dict | None, view_index: int, offsets,
+            sample_count: int, target: tuple, timer: StageTimer) -> None:
+    """The two passes of one raster kernel over every triangle for one view: `name`, one
+    work-item per triangle, lists the triangles taller than RASTER_BIG_ROWS; `name_rows`
+    draws those with one work-item per (triangle, view row) (docs/design.md §4.1)."""
     count = buffers.inputs.tri_vertices.shape[0] // 3
     if count == 0:
         return
-    event = kernel(device.queue, (count,), None, buffers.tri_vertices, np.int32(count),
-                                 buffers.views, np.int32(view_index), offsets, np.int32(sample_count), depth)
-    timer.add("raster", event)
+    big_count = device.buffer(np.zeros(1, np.uint32))
+    big = device.buffer(nbytes=4 * structs.RASTER_BIG_TRIANGLES)
+    args = (buffers.tri_vertices, np.int32(count), buffers.views, np.int32(view_index), offsets,
+            np.int32(sample_count), big_count, big) + target
+    timer.add("raster", device.kernel("raster", name, defines)(device.queue, (count,), None, *args))
+    height = int(buffers.inputs.views[view_index]["height"])
+    timer.add("raster", device.kernel("raster", f"{name}_rows", defines)(
+        device.queue, (structs.RASTER_BIG_TRIANGLES, height), None, *args))
+
+
+def _rasterize(device: Device, buffers: FrameBuffers, view_index: int, offsets, sample_count: int,
+               depth, timer: StageTimer) -> None:
+    _launch(device, buffers, "raster_depth", None, view_index, offsets, sample_count, (depth,), timer)
 
 
 def _atomic64(device: Device) -> bool:
@@ -42,27 +54,19 @@ def raster_camera(device: Device, buffers: FrameBuffers, timer: StageTimer) -> t
     samples, spp = inputs.samples, inputs.scene.image.spp
     camera_depth = device.buffer(nbytes=4 * samples)
     tri_id = device.buffer(nbytes=4 * samples)
-    count = inputs.tri_vertices.shape[0] // 3
     if _atomic64(device):
         # One pass: depth and triangle packed into a 64-bit key, then split.
         defines = {"RASTER_ATOMIC64": 1}
         nearest = device.buffer(nbytes=8 * samples)
         device.fill(nearest, np.uint64((int(structs.DEPTH_EMPTY) << 32) | 0xFFFFFFFF), 8 * samples, timer, "raster")
-        if count:
-            timer.add("raster", device.kernel("raster", "raster_nearest", defines)(
-                device.queue, (count,), None, buffers.tri_vertices, np.int32(count), buffers.views, np.int32(0),
-                buffers.offsets, np.int32(spp), nearest))
+        _launch(device, buffers, "raster_nearest", defines, 0, buffers.offsets, spp, (nearest,), timer)
         timer.add("raster", device.kernel("raster", "raster_split", defines)(
             device.queue, (samples,), None, nearest, np.int32(samples), camera_depth, tri_id))
         return camera_depth, tri_id
     device.fill(camera_depth, structs.DEPTH_EMPTY, 4 * samples, timer, "raster")
     device.fill(tri_id, np.int32(-1), 4 * samples, timer, "raster")
     _rasterize(device, buffers, 0, buffers.offsets, spp, camera_depth, timer)
-    if count:
-        event = device.kernel("raster", "raster_resolve")(
-            device.queue, (count,), None, buffers.tri_vertices, np.int32(count), buffers.views, np.int32(0),
-            buffers.offsets, np.int32(spp), camera_depth, tri_id)
-        timer.add("raster", event)
+    _launch(device, buffers, "raster_resolve", None, 0, buffers.offsets, spp, (camera_depth, tri_id), timer)
     return camera_depth, tri_id
 
 
@@ -90,15 +94,22 @@ def raster_shadow_map(device: Device, buffers: FrameBuffers, light_index: int, t
     device.fill(depth, structs.DEPTH_EMPTY, 4 * texels, timer, "raster")
     centre = device.buffer(np.array([[0.5, 0.5]], dtype=np.float32), writable=False)
     for view_index in range(1, len(inputs.views)):
-        _rasterize(device, light_buffers, view_index, centre, 1, depth, timer)
+        if inputs.view_needed[view_index]:  # a cube face the frame cannot read stays empty
+            _rasterize(device, light_buffers, view_index, centre, 1, depth, timer)
     return ShadowMap(depth, inputs.shadow_texels, inputs.scene.geometry.count)
 
 
 def map_is_empty(device: Device, shadow_map: ShadowMap) -> bool:
-    """Whether nothing at all was rasterized into a light's map (read back once)."""
+    """Whether nothing at all was rasterized into a light's map (asked once, on the device:
+    the host reads a flag, not the map)."""
     if shadow_map.empty is None:
-        shadow_map.empty = shadow_map.triangles == 0 or bool(
-            (device.read(shadow_map.depth, shadow_map.texels, np.uint32) == structs.DEPTH_EMPTY).all())
+        if shadow_map.triangles == 0 or shadow_map.texels == 0:
+            shadow_map.empty = True
+        else:
+            flag = device.buffer(np.zeros(1, np.uint32))
+            device.kernel("raster", "raster_any")(device.queue, (shadow_map.texels,), None, shadow_map.depth,
+                                                  np.int32(shadow_map.texels), flag)
+            shadow_map.empty = not device.read(flag, 1, np.uint32)[0]
     return shadow_map.empty
 
 

@@ -54,7 +54,8 @@ GOLDEN = {
              "minmax"),
     "directional": (lambda: _made(DirectionalLight(_unit(0.35, -1.0, -0.25), np.full(3, 1.5))), "minmax"),
     "demo": (lambda: clrays.load_scene(SCENES_DIR / "demo.yaml",
-                                       overrides=["image.width=64", "image.height=36", "render.shadow_map=512"]),
+                                       overrides=["image.width=64", "image.height=36", "render.shadow_map=512",
+                                                  "render.slices=1024", "render.gamma_samples=1024"]),
              "minmax"),
 }
 

@@ -8,6 +8,7 @@ import pytest
 from clrays.device import StageTimer
 from clrays.inputs import frame_inputs, upload
 from clrays.reference.metrics import depth_edges, depth_map, image_error
+from clrays.stages.integrand import integrand_table_size
 from clrays.stages.minmax import minmax
 from clrays.scene.geometry import box_triangles, load_mesh_triangles
 from clrays.stages.raster import raster
@@ -127,13 +128,32 @@ def test_tree_walk_equals_texel_scan(renderer, case):
     np.testing.assert_allclose(tree, scan, rtol=1e-5, atol=1e-7 * scan.max())
 
 
+#: The smallest image whose integrand tables are full size (128 × 512; smaller images
+#: get smaller tables, clrays.stages.integrand.integrand_table_size).
+FULL_TABLES = (56, 40)
+
+
+def test_thumbnail_tables_stay_far_below_the_visibility_error(renderer):
+    # 16×9: 32 × 128 tables. Measured max 5e-4 (24×16, 2e-5 with full tables); a 128² shadow
+    # map's visibility error at that size is percents.
+    assert integrand_table_size(16, 9) == (32, 128) and integrand_table_size(*FULL_TABLES) == (128, 512)
+    light = PointLight(v3(0.3, 2.2, 0.5), np.full(3, 20.0))
+    scene = make_scene(lights=[light], width=16, height=9, far=12.0, sigma_s=0.08, sigma_a=0.02, shadow_map=None,
+                       slices=None, gamma_samples=None)
+    image = renderer.render(scene, "minmax").image[..., 0]
+    expected, keep = unoccluded_point_quadrature(scene)
+    relative = np.abs(image - expected)[keep] / expected[keep]
+    print(f"thumbnail table: median {np.median(relative):.2e}, max {relative.max():.2e}")
+    assert relative.max() < 1e-3
+
+
 @pytest.mark.parametrize("mode", ["table", "svd"])
 @pytest.mark.parametrize("phase", [Phase(), Phase("hg", 0.3)], ids=["isotropic", "hg"])
 def test_integrand_modes_match_quadrature_for_a_point_light(renderer, mode, phase):
     # Unoccluded, so the only error left is the integrand's (and float32).
     light = PointLight(v3(0.3, 2.2, 0.5), np.full(3, 20.0))
-    scene = make_scene(lights=[light], width=24, height=16, far=12.0, sigma_s=0.08, sigma_a=0.02, phase=phase,
-                       integrand=mode)
+    scene = make_scene(lights=[light], width=FULL_TABLES[0], height=FULL_TABLES[1], far=12.0, sigma_s=0.08,
+                       sigma_a=0.02, phase=phase, integrand=mode)
     image = renderer.render(scene, "minmax").image[..., 0]
     expected, keep = unoccluded_point_quadrature(scene)
     relative = np.abs(image - expected)[keep] / expected[keep]
@@ -145,8 +165,8 @@ def test_integrand_modes_match_quadrature_for_a_point_light(renderer, mode, phas
 @pytest.mark.parametrize("mode", ["analytic", "table", "svd"])
 def test_integrand_modes_match_closed_form_for_a_directional_light(renderer, mode):
     sun = DirectionalLight(_unit(0.3, -1.0, -0.4), np.full(3, 2.0))
-    scene = make_scene(lights=[sun], width=24, height=16, far=12.0, sigma_s=0.08, sigma_a=0.02,
-                       phase=Phase("hg", 0.3), integrand=mode)
+    scene = make_scene(lights=[sun], width=FULL_TABLES[0], height=FULL_TABLES[1], far=12.0, sigma_s=0.08,
+                       sigma_a=0.02, phase=Phase("hg", 0.3), integrand=mode)
     image = renderer.render(scene, "minmax").image[..., 0]
     dirs = primary_rays(scene.camera, scene.image)[:, :, 0]
     cos_theta = dirs @ -sun.direction  # light travels along `direction`, the eye is at -dirs

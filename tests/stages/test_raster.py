@@ -71,3 +71,31 @@ def test_triangle_through_the_camera_is_rasterized(device):
     assert np.isfinite(t).sum() > 50
     np.testing.assert_array_equal(np.isfinite(depth), np.isfinite(t))
     np.testing.assert_allclose(depth[np.isfinite(t)], t[np.isfinite(t)], rtol=1e-5)
+
+
+def test_big_triangles_in_rows_give_the_same_maps(device, monkeypatch):
+    # A floor of two triangles spans every row of the camera view and of the shadow faces
+    # below the light: pass 2 draws it one row per work-item. A device built with a row
+    # limit no triangle reaches draws every triangle in pass 1, as before; the depth maps,
+    # triangle ids and shadow maps must be the same bits.
+    from clrays import structs
+    from clrays.device import Device
+    from conftest import TEST_DEVICE
+
+    scene = _scene(spp=2, shadow_map=256)
+    _, depth, tri, shadow = _rasterized(device, scene)
+    monkeypatch.setitem(structs.KERNEL_CONSTANTS, "RASTER_BIG_ROWS", 1 << 30)
+    _, depth_one_pass, tri_one_pass, shadow_one_pass = _rasterized(Device(TEST_DEVICE), scene)
+    assert np.array_equal(depth, depth_one_pass) and np.array_equal(tri, tri_one_pass)
+    assert np.array_equal(shadow, shadow_one_pass)
+
+
+def test_map_is_empty_asks_the_device(device):
+    from clrays.stages.raster import map_is_empty, raster_shadow_map
+    from conftest import SpotLight
+
+    for direction, empty in ((v3(0, 1, 0), True), (v3(0, -1, 0), False)):  # a narrow spot away from / onto the floor
+        scene = make_scene(grid_plane(), [SpotLight(v3(0, 3, 0), direction, 20.0, np.full(3, 30.0))],
+                           width=16, height=12, shadow_map=64)
+        buffers = upload(device, frame_inputs(scene))
+        assert map_is_empty(device, raster_shadow_map(device, buffers, 0, StageTimer())) is empty

@@ -1,0 +1,55 @@
+"""Per-stage time of frames rendered from scratch (no reuse), median over a few frames
+after a warm-up one, for the bench scenes at one image size; prints a markdown table
+(bench/RESULTS.md, "Costs that follow the image").
+
+    .venv/bin/python bench/stage_times.py --size 16x9
+    .venv/bin/python bench/stage_times.py --size 1280x720 --frames 3 demo behind
+
+Frame time here is stage time: the device time of every stage plus the host-timed
+integrand stage, as `clrays render --stats` totals it; start-up and kernel builds are
+left out (the warm-up frame builds the kernels).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from clrays.scene.load import load_scene  # noqa: E402
+from clrays.session import Renderer  # noqa: E402
+
+SCENES = ("demo", "bunny", "behind", "sun")
+STAGES = ("raster", "rectify", "minmax", "integrand", "traverse", "shade")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("scenes", nargs="*", default=SCENES, help="scene names in scenes/ (default: the bench four)")
+    parser.add_argument("--size", default="16x9", help="WxH (default 16x9)")
+    parser.add_argument("--frames", type=int, default=7, help="timed frames per scene after the warm-up (default 7)")
+    args = parser.parse_args()
+    width, height = (int(v) for v in args.size.split("x"))
+    print(f"{width}×{height}, median of {args.frames} frames, ms; load average {os.getloadavg()[0]:.1f} at start\n")
+    print("| scene | " + " | ".join(STAGES) + " | total (min–max) | sizes |")
+    print("|---|" + "---|" * (len(STAGES) + 2))
+    for name in args.scenes:
+        scene = load_scene(REPO / "scenes" / f"{name}.yaml", overrides=[f"image.width={width}", f"image.height={height}"])
+        renderer = Renderer(reuse=False)
+        renderer.render(scene)
+        runs = [renderer.render(scene) for _ in range(args.frames)]
+        totals = [sum(run.stage_ms.values()) for run in runs]
+        cells = [f"{statistics.median(run.stage_ms.get(stage, 0.0) for run in runs):.1f}" for stage in STAGES]
+        render = getattr(runs[0], "render", None)  # None: a checkout from before the sizes followed the image
+        sizes = (f"map {render.shadow_map}², texture {' '.join(f'{s}×{t}' for s, t in runs[0].textures) or '—'}"
+                 if render else "map 1024², texture 1024×1024")
+        print(f"| {name} | " + " | ".join(cells) + f" | {statistics.median(totals):.1f} ({min(totals):.1f}–{max(totals):.1f})"
+              f" | {sizes} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,73 @@
+"""Sizes that follow the image: the shadow map side, the slice count and the γ texels per
+slice that a scene leaves unset are derived from the image (docs/design.md §7,
+"Sizes that follow the image").
+
+A shadow-map texel seen from the camera should not be larger than a pixel, so the map
+side follows the image diagonal, with a margin of 4 for surfaces seen at a slant. The
+epipolar texture resamples that map, so it needs no more slices or γ texels than the map
+has texels along a side; and no more than the image can show: each pixel point-samples
+the shafts, so a slice count of 4 × the perimeter (8(W + H)) and 8 × the diagonal of γ
+texels. Why the factors are that large: on the spot-light slats of tests/stages at 64×48,
+slices = perimeter (256) gives a p99 error of 6.5 % against `exact` and γ texels =
+diagonal (128) 11.7 %, where 1024 × 1024 gives 2.4 %. Every size is rounded up to a power
+of two (sizes change in steps, not with every pixel) and clamped: below by what a shadow
+or a slice still resolves, above by the measured defaults of bench/RESULTS.md ("Choosing
+defaults"), so 64×48 and larger with a 1024 map render exactly as before.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+from .model import Scene
+
+#: Upper clamps: the measured defaults (bench/RESULTS.md, "Choosing defaults").
+MAX_SHADOW_MAP = 1024
+MAX_SLICES = 1024
+MAX_GAMMA_SAMPLES = 1024
+#: Lower clamps: the smallest sizes the scene format accepts for slices and γ samples,
+#: and a shadow map that still resolves an object's shadow on a thumbnail.
+MIN_SHADOW_MAP = 64
+MIN_SLICES = 16
+MIN_GAMMA_SAMPLES = 16
+#: Shadow-map texels per pixel of the image diagonal.
+SHADOW_TEXELS_PER_PIXEL = 4
+#: Slices per pixel of the image perimeter, γ texels per pixel of its diagonal (measured, above).
+SLICES_PER_BORDER_PIXEL = 4
+GAMMA_TEXELS_PER_PIXEL = 8
+
+
+def _power_of_two_at_least(value: float) -> int:
+    return 1 << max(math.ceil(math.log2(max(value, 1.0))), 0)
+
+
+def _clamped(value: float, low: int, high: int) -> int:
+    return min(max(_power_of_two_at_least(value), low), high)
+
+
+def derived_shadow_map(width: int, height: int) -> int:
+    """Shadow map side (texels, per cube face) for a width × height image."""
+    return _clamped(SHADOW_TEXELS_PER_PIXEL * math.hypot(width, height), MIN_SHADOW_MAP, MAX_SHADOW_MAP)
+
+
+def derived_slices(width: int, height: int, shadow_map: int) -> int:
+    """Epipolar slices: 4 × the image perimeter or the shadow map side, the smaller."""
+    return _clamped(min(SLICES_PER_BORDER_PIXEL * 2 * (width + height), shadow_map), MIN_SLICES, MAX_SLICES)
+
+
+def derived_gamma_samples(width: int, height: int, shadow_map: int) -> int:
+    """γ texels per slice: 8 × the image diagonal or the shadow map side, the smaller."""
+    return _clamped(min(GAMMA_TEXELS_PER_PIXEL * math.hypot(width, height), shadow_map),
+                    MIN_GAMMA_SAMPLES, MAX_GAMMA_SAMPLES)
+
+
+def with_derived_sizes(scene: Scene) -> Scene:
+    """The scene with every unset (None) size of `scene.render` filled in from its image;
+    sizes the scene sets are kept as written."""
+    render, image = scene.render, scene.image
+    if None not in (render.shadow_map, render.slices, render.gamma_samples):
+        return scene
+    shadow_map = render.shadow_map or derived_shadow_map(image.width, image.height)
+    slices = render.slices or derived_slices(image.width, image.height, shadow_map)
+    gamma_samples = render.gamma_samples or derived_gamma_samples(image.width, image.height, shadow_map)
+    return replace(scene, render=replace(render, shadow_map=shadow_map, slices=slices, gamma_samples=gamma_samples))
