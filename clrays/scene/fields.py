@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from .animation import EASINGS
-from .model import INTEGRAND_MODES, METHODS, NORMALS, TRAVERSALS, Camera, Image, Render
+from .model import INTEGRAND_MODES, METHODS, NORMALS, SURFACE_SHADOWS, TRAVERSALS, Camera, Image, Render
 
 FORMAT_VERSION = 1
 MAX_IMAGE_PIXELS = 1 << 26
@@ -206,7 +206,12 @@ RENDER = Section("render", (
     Field("jitter", "boolean", Render.jitter, notes="raymarch: jitter sample positions (seeded per pixel)"),
     Field("shadow_map", "integer", Render.shadow_map, 16, 8192,
           notes="shadow map side in texels (cube maps: per face)"),
-    Field("pcf", "integer", Render.pcf, 0, 16, notes="surface shadow filter radius in texels (0 = hard)"),
+    Field("surface_shadows", "string", Render.surface_shadows, choices=SURFACE_SHADOWS,
+          notes="hard shadows on surfaces: `exact` casts a shadow ray (through a BVH) wherever the shadow map "
+                "cannot decide and matches the `exact` reference; `map` is the shadow-map test alone; `pcf` "
+                "filters it over `pcf` texels. Setting only `pcf` > 0 implies `pcf`"),
+    Field("pcf", "integer", Render.pcf, 0, 16,
+          notes="`surface_shadows: pcf`: filter radius in texels (0 = hard)"),
     Field("slices", "integer", Render.slices, 16, 16384, notes="min-max: epipolar slices"),
     Field("gamma_samples", "integer", Render.gamma_samples, 16, 16384,
           notes="min-max: samples along each slice (rounded up to a power of two)"),

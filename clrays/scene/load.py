@@ -137,7 +137,14 @@ def _render(node: Node | None) -> Render:
     if node is None:
         return Render()
     m = mapping(node, optional=RENDER.optional)
-    return Render(**{field.key: _read(field, m.get(field.key)) for field in RENDER.fields})
+    values = {field.key: _read(field, m.get(field.key)) for field in RENDER.fields}
+    if values["pcf"] > 0:
+        if "surface_shadows" not in m:
+            values["surface_shadows"] = "pcf"  # the key before surface_shadows existed: pcf alone filters
+        elif values["surface_shadows"] != "pcf":
+            m["pcf"].fail(f"0 with surface_shadows: {values['surface_shadows']} (a filter radius needs "
+                          f"surface_shadows: pcf)", str(values["pcf"]))
+    return Render(**values)
 
 
 # --------------------------------------------------------------------------- objects
