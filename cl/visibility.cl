@@ -1,6 +1,6 @@
 /* visibility — exact hard shadows on surfaces: per camera sample and light, 1 when the
  * segment to the light is clear, else 0. The shadow map decides where its neighbourhood
- * is unanimous; the other samples cast a shadow ray through the BVH (docs/design.md §8).
+ * is unanimous; the other samples cast a shadow ray through the BVH (docs/design.md §4, visibility).
  * visibility_bound reads tri_vertices, views; writes bound (a lower bound of the depth of
  * every triangle that touches each texel, atomic min).
  * visibility reads frame, views, lights, shadow_depth, bound, camera_depth, tri_id,

@@ -2,7 +2,7 @@
 a linear BVH (Morton codes of the triangle centroids sorted, then Karras's radix-tree
 construction, "Maximizing parallelism in the construction of BVHs, octrees and k-d
 trees", HPG 2012), its boxes refit bottom-up. Every step is a numpy pass over all nodes,
-so a million triangles build in seconds (docs/design.md §8).
+so a million triangles build in seconds (docs/design.md §4, visibility).
 
 The device walks it in `cl/bvh.h` (shadow rays of the visibility stage). Layout, for
 n ≥ 1 triangles, n - 1 internal nodes (node 0 is the root; one triangle: no node):

@@ -1,5 +1,5 @@
 """Stage visibility: exact hard shadows on surfaces (`render.surface_shadows: exact`).
-Host side of `cl/visibility.cl` and `cl/bvh.h` (docs/design.md §8).
+Host side of `cl/visibility.cl` and `cl/bvh.h` (docs/design.md §4, visibility).
 
 Per camera sample and light, the shadow map answers where its neighbourhood is
 unanimous: lit where a conservative bound map (every triangle that touches a texel,

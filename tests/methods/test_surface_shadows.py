@@ -1,4 +1,4 @@
-"""Hard shadows on surfaces (`render.surface_shadows`, docs/design.md §8): the BVH against
+"""Hard shadows on surfaces (`render.surface_shadows`, docs/design.md §4, visibility): the BVH against
 brute force, and `exact` surface shadows against the `exact` reference in the cases that
 break shadow maps (docs/stability.md, "Surface shadows"): a wire thinner than a texel, light
 grazing a surface, a closed mesh, a light touching a surface, a scene far from the origin.
