@@ -12,9 +12,9 @@
 #define SURFACE_BIAS_TEXELS 1.5f /* depth tolerance of the map test, as in shade.cl */
 /* Shadow rays leave the surface by this much × (|p| + distance to the light): a few
  * hundred float32 ulps of the sample's coordinates. */
-#define SHADOW_RAY_OFFSET_REL 2e-5f
+#define SHADOW_RAY_OFFSET_REL 2e-6f
 /* Bounds are shrunk by this relative margin against float32 rounding of the bound itself. */
-#define BOUND_MARGIN_REL 1e-4f
+#define BOUND_MARGIN_REL 1e-5f
 /* Each triangle's texel rectangle is split over this many work-items by rows. */
 #define BOUND_ROW_SPLIT 16
 
@@ -164,13 +164,36 @@ kernel void visibility_bound(global const float4* tri_vertices, int count, globa
     }
 }
 
+/* How far the sample's own triangle (plane through p with unit normal n, largest distance
+ * `reach` of a vertex from the view's origin) may have written its bound below the depth of
+ * p in p's texel: the plane's depth over the texel's cone (perspective: within 2ρ of p's
+ * direction, ρ the widest texel's half-angle; orthographic: across the texel), plus the
+ * bound's rounding margin. */
+inline float own_surface_slack(global const light_t* light, global const view_t* view, float3 p, float3 n,
+                               float depth, float reach)
+{
+    float margin = 2.0f * BOUND_MARGIN_REL * (depth + reach);
+    if (view->projection != PROJECTION_PERSPECTIVE) {
+        float n_forward = fabs(dot(n, view->forward.xyz));
+        if (n_forward < 1e-6f) return INFINITY;
+        return light->texel_angle * (fabs(dot(n, view->right.xyz)) + fabs(dot(n, view->up.xyz))) / n_forward + margin;
+    }
+    float3 middle = view_direction(view, 0.5f * (float)view->width, 0.5f * (float)view->height);
+    float rho = acos(fmin(dot(middle, view_direction(view, 0.5f * (float)view->width + 1.0f,
+                                                      0.5f * (float)view->height + 1.0f)), 1.0f));
+    float cos_phi = fabs(dot(n, normalize(p - view->origin.xyz)));
+    float nearest = depth * cos_phi / cos(fmax(acos(fmin(cos_phi, 1.0f)) - 2.0f * rho, 0.0f));
+    return depth - nearest + margin;
+}
+
 /* How the map decides one sample: 1 lit, 0 shadowed, -1 undecided (cast a ray).
  * Lit: the bound map says no triangle in the texel of `start` comes nearer the light than
- * the sample's own depth (less the map's bias, which covers the sample's own surface).
+ * the sample's own depth, less what its own surface may have written there (at most the
+ * map's bias).
  * Shadowed: every centre of the 3×3 texels around `lookup` holds a blocker nearer than
  * the bias. */
 inline int map_decision(global const light_t* light, global const view_t* views, global const uint* shadow_depth,
-                        global const uint* bound, float3 start, float3 lookup)
+                        global const uint* bound, float3 start, float3 lookup, float3 n, float reach)
 {
     global const view_t* view = views + light_view_index(light, start);
     float2 texel;
@@ -178,7 +201,8 @@ inline int map_decision(global const light_t* light, global const view_t* views,
     if (!view_project(view, start, &texel, &depth)) return -1;
     if (texel.x < 0.0f || texel.y < 0.0f || texel.x >= (float)view->width || texel.y >= (float)view->height)
         return 1; /* outside the map: no occluder (a map covers every occluder) */
-    float tolerance = SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth);
+    float tolerance = fmin(SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth),
+                           own_surface_slack(light, view, start, n, depth, reach));
     int tx = (int)texel.x, ty = (int)texel.y;
     if (depth <= as_float(bound[view->depth_offset + ty * view->width + tx]) + tolerance) return 1;
     view = views + light_view_index(light, lookup);
@@ -222,7 +246,10 @@ kernel void visibility(global const frame_t* frame, global const view_t* views, 
         float3 side = dot(n, to_light) >= 0.0f ? n : -n;
         float3 start = p + side * (SHADOW_RAY_OFFSET_REL * (length(p) + to_light_distance));
         float3 lookup = p + n * shadow_texel_size(light, length(p - light->position.xyz));
-        int decided = map_decision(light, views, shadow_depth, bound, start, lookup);
+        float reach = 0.0f; /* of the sample's triangle from the light's view origin */
+        global const view_t* view = views + light_view_index(light, start);
+        for (int k = 0; k < 3; ++k) reach = fmax(reach, length(tri_vertices[3 * tri + k].xyz - view->origin.xyz));
+        int decided = map_decision(light, views, shadow_depth, bound, start, lookup, n, reach);
         if (decided >= 0) {
             out[l] = (float)decided;
             continue;
