@@ -89,12 +89,15 @@ kernel void visibility_bound(global const float4* tri_vertices, int count, globa
     }
     int perspective = view->projection == PROJECTION_PERSPECTIVE;
     /* The part of the triangle inside the view's frustum (near plane and four sides,
-     * Sutherland–Hodgman, planes a little outside the view), then its texel rectangle. */
+     * Sutherland–Hodgman, planes a little outside the view), then its texel rectangle.
+     * A triangle wholly in front of a perspective view's origin (or any, orthographic)
+     * skips the clipping: its vertices' rectangle, clamped to the view, is enough. */
     float3 polygon[8], clipped[8];
     int corners = 3;
     for (int k = 0; k < 3; ++k) polygon[k] = in_view[k];
     float grow = 1.0f + 4.0f / (float)min(view->width, view->height);
-    for (int plane = 0; plane < 5 && corners > 0; ++plane) {
+    int in_front = !perspective || fmin(in_view[0].z, fmin(in_view[1].z, in_view[2].z)) > 1e-5f * extent;
+    for (int plane = in_front ? 5 : 0; plane < 5 && corners > 0; ++plane) {
         int kept = 0;
         for (int k = 0; k < corners; ++k) {
             float3 a = polygon[k], b = polygon[(k + 1) % corners];
@@ -117,6 +120,7 @@ kernel void visibility_bound(global const float4* tri_vertices, int count, globa
     int x0 = max((int)floor(fmax(lo.x, -2.0f)) - 1, 0), y0 = max((int)floor(fmax(lo.y, -2.0f)) - 1, 0);
     int x1 = min((int)floor(fmin(hi.x, (float)view->width + 2.0f)) + 1, view->width - 1);
     int y1 = min((int)floor(fmin(hi.y, (float)view->height + 2.0f)) + 1, view->height - 1);
+    if (x0 > x1 || y0 + (int)get_global_id(1) > y1) return; /* outside the view, or no row for this item */
     float3 normal = cross(vertex[1] - vertex[0], vertex[2] - vertex[0]);
     float normal_length = length(normal);
     float3 n = normal_length > 0.0f ? normal / normal_length : (float3)(0.0f);
