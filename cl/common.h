@@ -9,6 +9,7 @@
  *   PHASE_ISOTROPIC, PHASE_HG                             frame_t.phase_type
  *   INTEGRAND_TABLE, INTEGRAND_SVD, INTEGRAND_ANALYTIC    integrand_t.mode
  *   TRAVERSAL_TREE, TRAVERSAL_SCAN                        traverse.cl's TRAVERSAL
+ *   SURFACE_SHADOWS_EXACT, _MAP, _PCF                     frame_t.surface_shadows
  *   DEPTH_EMPTY      as_uint(+INFINITY): nothing rasterized here (uint)
  *   SIN_BETA_MIN     the clamp of sinβ in every 1/sinβ (float) */
 #ifndef CLRAYS_COMMON_H
@@ -18,6 +19,7 @@
     || !defined(LIGHT_SPOT) || !defined(LIGHT_DIRECTIONAL) || !defined(PHASE_ISOTROPIC) || !defined(PHASE_HG) \
     || !defined(INTEGRAND_TABLE) || !defined(INTEGRAND_SVD) || !defined(INTEGRAND_ANALYTIC) \
     || !defined(TRAVERSAL_TREE) || !defined(TRAVERSAL_SCAN) || !defined(DEPTH_EMPTY) \
+    || !defined(SURFACE_SHADOWS_EXACT) || !defined(SURFACE_SHADOWS_MAP) || !defined(SURFACE_SHADOWS_PCF) \
     || !defined(SIN_BETA_MIN)
 #error "the constants of clrays/structs.py are missing: build with clrays.device.build_options()"
 #endif
@@ -78,7 +80,7 @@ typedef struct {
     int jitter;        /* raymarch: jitter sample positions */
     int pcf;           /* surface shadow filter radius, texels */
     float lamp_radius; /* radius of a point or spot light's medium-free ball (lighting.h) */
-    int _pad0;
+    int surface_shadows; /* SURFACE_SHADOWS_* */
 } frame_t;
 
 /* The epipolar frame of one light for one frame (docs/design.md §2, §3).

@@ -2,7 +2,8 @@
  * test with optional PCF), attenuated to the eye, plus the in-scattered radiance,
  * averaged over the pixel's samples.
  * Reads frame, views, lights, shadow_depth, camera_depth, tri_id, tri_vertices,
- * tri_normal, tri_vertex_normals, tri_albedo, offsets, scatter; writes image (one
+ * tri_normal, tri_vertex_normals, tri_albedo, offsets, scatter, visible (the visibility
+ * stage's answer per sample and light, with surface_shadows exact); writes image (one
  * float4 per pixel, linear rgb). */
 #include "lighting.h"
 
@@ -40,7 +41,7 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                   global const float4* tri_vertices, global const float4* tri_normal,
                   global const float4* tri_vertex_normals, global const float4* tri_albedo,
                   global const float2* offsets, global const float4* scatter,
-                  global float4* image)
+                  global const float* visible_exact, global float4* image)
 {
     int pixel = get_global_id(0);
     if (pixel >= frame->width * frame->height) return;
@@ -77,10 +78,14 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                 if (cosine <= 0.0f || incident.x + incident.y + incident.z == 0.0f) continue;
                 /* Normal offset by a texel keeps a lit surface from shadowing itself. */
                 float3 lookup = p + n * shadow_texel_size(lights + l, length(p - lights[l].position.xyz));
-                float visible = eye_in_lamp(lights + l, frame->lamp_radius)
-                                    ? 1.0f
-                                    : shadow_visibility(lights + l, views, shadow_depth, lookup,
-                                                        SURFACE_BIAS_TEXELS, frame->pcf);
+                float visible;
+                if (eye_in_lamp(lights + l, frame->lamp_radius))
+                    visible = 1.0f;
+                else if (frame->surface_shadows == SURFACE_SHADOWS_EXACT)
+                    visible = visible_exact[sample * frame->light_count + l];
+                else
+                    visible = shadow_visibility(lights + l, views, shadow_depth, lookup, SURFACE_BIAS_TEXELS,
+                                                frame->pcf);
                 irradiance += incident * (cosine * visible);
             }
             surface = tri_albedo[tri].xyz * irradiance * M_1_PI_F;

@@ -1,7 +1,9 @@
 """A render session and the frame it runs, stage by stage (docs/design.md §4):
 
-    raster → rectify → minmax → integrand → traverse → shade     (method `minmax`)
-    raster → raymarch → shade                                    (method `raymarch`)
+    raster → rectify → minmax → integrand → traverse → visibility → shade  (method `minmax`)
+    raster → raymarch → visibility → shade                                 (method `raymarch`)
+
+(`visibility` runs with `render.surface_shadows: exact`, the default.)
 
 `Renderer._frame` is that figure, one line per stage. The `exact` reference runs on
 the host in float64 instead (clrays.reference.exact).
@@ -38,6 +40,7 @@ from .stages.raymarch import raymarch
 from .stages.rectify import Epipolar, rectify
 from .stages.shade import shade
 from .stages.traverse import traverse
+from .stages.visibility import bound_atlas, upload_bvh, visibility, visibility_bound
 
 #: The rectified texture of a light whose shadow map is empty (nothing casts a shadow)
 #: is π everywhere whatever its size, so it is built at this size (the minimum).
@@ -154,9 +157,27 @@ class Renderer:
                                      lambda: integrand(device, scene, light, epipolar, timer), per_light=True)
                 traverse(device, buffers, rastered, epipolar, tables, scatter, timer)  # traverse: walk the trees
             reuse.record.note("traverse", COMPUTED)
-        image = shade(device, buffers, rastered, scatter, timer)  # shade: surfaces, attenuation, + scatter
+        visible = self._visibility(buffers, rastered, keys, reuse, timer)  # visibility: exact surface shadows
+        image = shade(device, buffers, rastered, scatter, timer, visible)  # shade: surfaces, attenuation, + scatter
         reuse.record.note("shade", COMPUTED)
         return image, tuple(reuse.record.status()), tuple(textures)
+
+    def _visibility(self, buffers: FrameBuffers, rastered: RasterResult, keys: StageKeys, reuse: Reuse,
+                    timer: StageTimer):
+        """The visibility stage: each light's bound map kept while its shadow map is, the BVH
+        while the eye-space triangles are; None unless `render.surface_shadows` is exact."""
+        scene = buffers.inputs.scene
+        if scene.render.surface_shadows != "exact" or not scene.lights:
+            return None
+        device = self.device
+        bounds = [reuse.keep("visibility.bound", digest("bound", keys.shadow[index]),
+                             lambda index=index: visibility_bound(device, buffers, index, timer), per_light=True)
+                  for index in range(len(scene.lights))]
+        atlas = reuse.keep("bound_atlas", digest("bound", tuple(keys.shadow)),
+                           lambda: bound_atlas(device, buffers, bounds))
+        bvh = reuse.keep("bvh", digest("bvh", keys.camera), lambda: upload_bvh(device, buffers.inputs, timer))
+        reuse.record.note("visibility", COMPUTED)
+        return visibility(device, buffers, rastered, atlas, bvh, timer)
 
     def _exact(self, scene: Scene, reuse: Reuse, timer: StageTimer, progress: bool):
         """The float64 reference, one host stage."""

@@ -23,6 +23,10 @@ INTEGRAND_TABLE = 0  # integrand_t.mode
 INTEGRAND_SVD = 1
 INTEGRAND_ANALYTIC = 2
 
+SURFACE_SHADOWS_EXACT = 0  # frame_t.surface_shadows
+SURFACE_SHADOWS_MAP = 1
+SURFACE_SHADOWS_PCF = 2
+
 TRAVERSAL_TREE = 0  # cl/traverse.cl's TRAVERSAL option
 TRAVERSAL_SCAN = 1
 
@@ -53,7 +57,7 @@ RASTER_BIG_TRIANGLES = 64
 #: Every constant above by its C name: the `-D` options of every kernel build.
 KERNEL_CONSTANTS = {
     name: value for name, value in dict(globals()).items()
-    if name.startswith(("PROJECTION_", "LIGHT_", "PHASE_", "INTEGRAND_", "TRAVERSAL_", "RASTER_"))
+    if name.startswith(("PROJECTION_", "LIGHT_", "PHASE_", "INTEGRAND_", "TRAVERSAL_", "RASTER_", "SURFACE_SHADOWS_"))
     or name in ("DEPTH_EMPTY", "SIN_BETA_MIN")
 }
 
@@ -98,7 +102,7 @@ frame_dtype = np.dtype([
     ("far", np.float32), ("light_count", np.int32),
     ("width", np.int32), ("height", np.int32), ("spp", np.int32), ("steps", np.int32),
     ("jitter", np.int32), ("pcf", np.int32),
-    ("lamp_radius", np.float32), ("_pad0", np.int32),
+    ("lamp_radius", np.float32), ("surface_shadows", np.int32),
 ])
 
 epipolar_dtype = np.dtype([

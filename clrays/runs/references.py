@@ -64,7 +64,8 @@ def reference_scene(scene: Scene, reference: Reference) -> Scene:
         return replace(scene, render=Render(method="exact"), source=None, animation=None)
     render = scene.render
     return replace(scene, render=Render(method="raymarch", steps=reference.steps, jitter=render.jitter,
-                                        shadow_map=render.shadow_map, pcf=render.pcf), source=None, animation=None)
+                                        shadow_map=render.shadow_map, surface_shadows=render.surface_shadows,
+                                        pcf=render.pcf), source=None, animation=None)
 
 
 class ReferenceCache:

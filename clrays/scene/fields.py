@@ -13,7 +13,7 @@ from typing import Any
 from .animation import EASINGS
 from .limits import MAX_LIGHTS, MAX_MESH_BYTES, MAX_OBJECTS, MAX_SCENE_BYTES, MAX_TRIANGLES
 from .costs import MAX_GAMMA_SAMPLES, MAX_SHADOW_MAP, MAX_SLICES, MIN_GAMMA_SAMPLES, MIN_SHADOW_MAP, MIN_SLICES
-from .model import INTEGRAND_MODES, METHODS, NORMALS, TRAVERSALS, Camera, Image, Render
+from .model import INTEGRAND_MODES, METHODS, NORMALS, SURFACE_SHADOWS, TRAVERSALS, Camera, Image, Render
 
 FORMAT_VERSION = 1
 MAX_IMAGE_PIXELS = 1 << 26
@@ -217,8 +217,12 @@ RENDER = Section("render", (
     Field("shadow_map", "integer", Render.shadow_map, 16, 8192,
           shown_default=f"from the image: 4 × its diagonal, as a power of two in [{MIN_SHADOW_MAP}, {MAX_SHADOW_MAP}]",
           notes="shadow map side in texels (cube maps: per face)", read_by=_RASTER_METHODS),
-    Field("pcf", "integer", Render.pcf, 0, 16, notes="surface shadow filter radius in texels (0 = hard)",
-          read_by=_RASTER_METHODS),
+    Field("surface_shadows", "string", Render.surface_shadows, choices=SURFACE_SHADOWS,
+          notes="hard shadows on surfaces: `exact` casts a shadow ray (through a BVH) wherever the shadow map "
+                "cannot decide and matches the `exact` reference; `map` is the shadow-map test alone; `pcf` "
+                "filters it over `pcf` texels. Setting only `pcf` > 0 implies `pcf`", read_by=_RASTER_METHODS),
+    Field("pcf", "integer", Render.pcf, 0, 16,
+          notes="`surface_shadows: pcf`: filter radius in texels (0 = hard)", read_by=_RASTER_METHODS),
     Field("slices", "integer", Render.slices, 16, 16384,
           shown_default=f"from the image: 4 × its perimeter or `shadow_map`, the smaller, as a power of two in "
                         f"[{MIN_SLICES}, {MAX_SLICES}]",

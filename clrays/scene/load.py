@@ -148,8 +148,15 @@ def _render(node: Node | None) -> Render:
         return Render()
     m = mapping(node, optional=RENDER.optional)
     # A size left out stays None: the renderer derives it from the image (clrays.scene.costs).
-    return Render(**{field.key: None if field.default is None and field.key not in m else _read(field, m.get(field.key))
-                     for field in RENDER.fields})
+    values = {field.key: None if field.default is None and field.key not in m else _read(field, m.get(field.key))
+              for field in RENDER.fields}
+    if values["pcf"] > 0:
+        if "surface_shadows" not in m:
+            values["surface_shadows"] = "pcf"  # the key before surface_shadows existed: pcf alone filters
+        elif values["surface_shadows"] != "pcf":
+            m["pcf"].fail(f"0 with surface_shadows: {values['surface_shadows']} (a filter radius needs "
+                          f"surface_shadows: pcf)", str(values["pcf"]))
+    return Render(**values)
 
 
 # --------------------------------------------------------------------------- objects

@@ -26,6 +26,8 @@ RGB = np.ndarray
 METHODS = ("minmax", "raymarch", "exact")
 INTEGRAND_MODES = ("table", "svd", "analytic")
 TRAVERSALS = ("tree", "scan")
+# Hard surface shadows: shadow rays where the map cannot decide, the map alone, or the map filtered.
+SURFACE_SHADOWS = ("exact", "map", "pcf")
 PHASE_TYPES = ("isotropic", "hg")
 NORMALS = ("smooth", "flat")  # a mesh's shading normals: interpolated vertex normals, or each face's own
 
@@ -96,7 +98,8 @@ class Render:
     jitter: bool = False  # raymarch: jitter sample positions (seeded per pixel)
     # Sizes left None are derived from the image when a frame is rendered (clrays.scene.costs).
     shadow_map: int | None = None  # shadow map side, texels (cube maps: per face)
-    pcf: int = 0  # surface shadow filter radius in texels (0 = hard)
+    surface_shadows: str = "exact"  # one of SURFACE_SHADOWS
+    pcf: int = 0  # surface_shadows `pcf`: filter radius in texels
     # min-max method
     slices: int | None = None  # epipolar slices
     gamma_samples: int | None = None  # γ texels per slice

@@ -111,7 +111,8 @@ def test_full_scene_values():
     assert (s.medium.phase.type, s.medium.phase.g) == ("hg", 0.3)
     np.testing.assert_array_equal(s.background, [0.25, 0.25, 0.25])
 
-    assert s.render == Render(method="minmax", steps=128, jitter=True, shadow_map=512, pcf=2,
+    # pcf alone (the key before surface_shadows) implies surface_shadows: pcf
+    assert s.render == Render(method="minmax", steps=128, jitter=True, shadow_map=512, surface_shadows="pcf", pcf=2,
                               slices=256, gamma_samples=64, integrand="svd", svd_rank=8,
                               traversal="scan")
     assert s.source == ANCHOR
@@ -447,6 +448,10 @@ BAD = [
     ({"render": {"jitter": "yes please"}}, r"render\.jitter: expected true or false, got 'yes please'"),
     ({"render": {"jitter": 1}}, r"render\.jitter: expected true or false, got 1"),
     ({"render": {"pcf": -1}}, r"render\.pcf: expected an integer in \[0, 16\], got -1"),
+    ({"render": {"surface_shadows": "soft"}},
+     r"render\.surface_shadows: expected one of 'exact', 'map', 'pcf', got 'soft'"),
+    ({"render": {"surface_shadows": "map", "pcf": 2}},
+     r"render\.pcf: expected 0 with surface_shadows: map \(a filter radius needs surface_shadows: pcf\), got 2"),
     ({"render": {"sptes": 3}}, r"render\.sptes: unknown key \(did you mean 'steps'\?\)"),
 ]
 

@@ -196,9 +196,10 @@ def test_lights_add_up(renderer, method):
 
 
 def test_pcf_softens_surface_shadow_edges(renderer):
-    scene = _case_scene("point_behind_camera", pcf=0, shadow_map=128)
+    scene = _case_scene("point_behind_camera", surface_shadows="map", shadow_map=128)
     hard = renderer.render(scene, "minmax").image
-    soft = renderer.render(_case_scene("point_behind_camera", pcf=2, shadow_map=128), "minmax").image
+    soft = renderer.render(_case_scene("point_behind_camera", surface_shadows="pcf", pcf=2, shadow_map=128),
+                           "minmax").image
     changed = np.abs(soft - hard).max(axis=-1) > 1e-3 * hard.max()
     # Filtering only touches pixels near shadow edges, and makes them partially lit.
     assert 0 < changed.mean() < 0.2

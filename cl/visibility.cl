@@ -1,0 +1,266 @@
+/* visibility — exact hard shadows on surfaces: per camera sample and light, 1 when the
+ * segment to the light is clear, else 0. The shadow map decides where its neighbourhood
+ * is unanimous; the other samples cast a shadow ray through the BVH (docs/design.md §4, visibility).
+ * visibility_bound reads tri_vertices, views; writes bound (a lower bound of the depth of
+ * every triangle that touches each texel, atomic min).
+ * visibility reads frame, views, lights, shadow_depth, bound, camera_depth, tri_id,
+ * tri_vertices, tri_normal, offsets, node_bounds, node_children; writes visible
+ * (float per sample and light, [sample][light]). */
+#include "lighting.h"
+#include "bvh.h"
+
+#define SURFACE_BIAS_TEXELS 1.5f /* depth tolerance of the map test, as in shade.cl */
+/* Shadow rays leave the surface by this much × (|p| + distance to the light): a few
+ * hundred float32 ulps of the sample's coordinates. */
+#define SHADOW_RAY_OFFSET_REL 2e-6f
+/* Bounds are shrunk by this relative margin against float32 rounding of the bound itself. */
+#define BOUND_MARGIN_REL 1e-5f
+/* Each triangle's texel rectangle is split over this many work-items by rows. */
+#define BOUND_ROW_SPLIT 16
+
+/* Closest point of triangle abc to p (Ericson, Real-Time Collision Detection §5.1.5). */
+inline float3 closest_on_triangle(float3 p, float3 a, float3 b, float3 c)
+{
+    float3 ab = b - a, ac = c - a, ap = p - a;
+    float d1 = dot(ab, ap), d2 = dot(ac, ap);
+    if (d1 <= 0.0f && d2 <= 0.0f) return a;
+    float3 bp = p - b;
+    float d3 = dot(ab, bp), d4 = dot(ac, bp);
+    if (d3 >= 0.0f && d4 <= d3) return b;
+    float vc = d1 * d4 - d3 * d2;
+    if (vc <= 0.0f && d1 >= 0.0f && d3 <= 0.0f) return a + ab * (d1 / (d1 - d3));
+    float3 cp = p - c;
+    float d5 = dot(ab, cp), d6 = dot(ac, cp);
+    if (d6 >= 0.0f && d5 <= d6) return c;
+    float vb = d5 * d2 - d1 * d6;
+    if (vb <= 0.0f && d2 >= 0.0f && d6 <= 0.0f) return a + ac * (d2 / (d2 - d6));
+    float va = d3 * d6 - d5 * d4;
+    if (va <= 0.0f && (d4 - d3) >= 0.0f && (d5 - d6) >= 0.0f)
+        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+    float denom = 1.0f / (va + vb + vc);
+    return a + ab * (vb * denom) + ac * (vc * denom);
+}
+
+/* Unit direction of the view ray through pixel coordinates (px, py) of a perspective view. */
+inline float3 view_direction(global const view_t* view, float px, float py)
+{
+    float sx = 2.0f * px / (float)view->width - 1.0f, sy = 1.0f - 2.0f * py / (float)view->height;
+    return normalize(view->forward.xyz + view->right.xyz * (sx * view->scale_x) + view->up.xyz * (sy * view->scale_y));
+}
+
+/* Signed side of q (view coordinates: right, up, forward) against one of the five planes
+ * of a view's frustum, ≥ 0 inside: 0 the near plane (perspective: z ≥ 1e-5·extent), 1–4
+ * the sides, widened by the factor `grow` so that rounding never clips a texel's edge. */
+inline float frustum_side(global const view_t* view, int plane, float3 q, float grow, float extent)
+{
+    int perspective = view->projection == PROJECTION_PERSPECTIVE;
+    float reach_x = grow * view->scale_x * (perspective ? q.z : 1.0f);
+    float reach_y = grow * view->scale_y * (perspective ? q.z : 1.0f);
+    switch (plane) {
+    case 0: return perspective ? q.z - 1e-5f * extent : 1.0f;
+    case 1: return reach_x - q.x;
+    case 2: return reach_x + q.x;
+    case 3: return reach_y - q.y;
+    default: return reach_y + q.y;
+    }
+}
+
+/* The conservative bound map: every texel a triangle may touch (its projected rectangle
+ * of its part inside the frustum, grown by a texel) gets a depth no
+ * larger than the triangle's nearest point inside that texel's footprint:
+ *   perspective: max(distance to the closest point of the triangle, distance to its plane
+ *     along the texel's cone, bounded by the cone's half-angle ρ: h / cos(max(φ - ρ, 0)));
+ *   orthographic: max(nearest vertex, the plane's depth at the texel's nearest corner).
+ * A triangle thinner than a texel, which the centre-sampled map may miss, is still here. */
+kernel void visibility_bound(global const float4* tri_vertices, int count, global const view_t* views,
+                             int first_view, int view_count, global uint* bound)
+{
+    int item = get_global_id(0);
+    if (item >= count * view_count) return;
+    int tri = item / view_count;
+    global const view_t* view = views + first_view + item % view_count;
+    float3 vertex[3], in_view[3];
+    float extent = 0.0f;
+    for (int k = 0; k < 3; ++k) {
+        vertex[k] = tri_vertices[3 * tri + k].xyz - view->origin.xyz;
+        in_view[k] = (float3)(dot(vertex[k], view->right.xyz), dot(vertex[k], view->up.xyz),
+                              dot(vertex[k], view->forward.xyz));
+        extent = fmax(extent, fmax(fabs(in_view[k].x), fmax(fabs(in_view[k].y), fabs(in_view[k].z))));
+    }
+    int perspective = view->projection == PROJECTION_PERSPECTIVE;
+    /* The part of the triangle inside the view's frustum (near plane and four sides,
+     * Sutherland–Hodgman, planes a little outside the view), then its texel rectangle.
+     * A triangle wholly in front of a perspective view's origin (or any, orthographic)
+     * skips the clipping: its vertices' rectangle, clamped to the view, is enough. */
+    float3 polygon[8], clipped[8];
+    int corners = 3;
+    for (int k = 0; k < 3; ++k) polygon[k] = in_view[k];
+    float grow = 1.0f + 4.0f / (float)min(view->width, view->height);
+    int in_front = !perspective || fmin(in_view[0].z, fmin(in_view[1].z, in_view[2].z)) > 1e-5f * extent;
+    for (int plane = in_front ? 5 : 0; plane < 5 && corners > 0; ++plane) {
+        int kept = 0;
+        for (int k = 0; k < corners; ++k) {
+            float3 a = polygon[k], b = polygon[(k + 1) % corners];
+            float fa = frustum_side(view, plane, a, grow, extent), fb = frustum_side(view, plane, b, grow, extent);
+            if (fa >= 0.0f) clipped[kept++] = a;
+            if ((fa >= 0.0f) != (fb >= 0.0f)) clipped[kept++] = a + (b - a) * (fa / (fa - fb));
+        }
+        corners = kept;
+        for (int k = 0; k < corners; ++k) polygon[k] = clipped[k];
+    }
+    if (corners == 0) return;
+    float2 lo = (float2)(INFINITY), hi = (float2)(-INFINITY);
+    for (int k = 0; k < corners; ++k) {
+        float z = perspective ? polygon[k].z : 1.0f;
+        float2 s = (float2)(polygon[k].x / (z * view->scale_x), polygon[k].y / (z * view->scale_y));
+        float2 texel = (float2)((s.x + 1.0f) * 0.5f * (float)view->width, (1.0f - s.y) * 0.5f * (float)view->height);
+        lo = fmin(lo, texel);
+        hi = fmax(hi, texel);
+    }
+    int x0 = max((int)floor(fmax(lo.x, -2.0f)) - 1, 0), y0 = max((int)floor(fmax(lo.y, -2.0f)) - 1, 0);
+    int x1 = min((int)floor(fmin(hi.x, (float)view->width + 2.0f)) + 1, view->width - 1);
+    int y1 = min((int)floor(fmin(hi.y, (float)view->height + 2.0f)) + 1, view->height - 1);
+    if (x0 > x1 || y0 + (int)get_global_id(1) > y1) return; /* outside the view, or no row for this item */
+    float3 normal = cross(vertex[1] - vertex[0], vertex[2] - vertex[0]);
+    float normal_length = length(normal);
+    float3 n = normal_length > 0.0f ? normal / normal_length : (float3)(0.0f);
+    float plane = dot(n, vertex[0]); /* signed distance of the plane from the view origin */
+    if (plane < 0.0f) {
+        n = -n;
+        plane = -plane;
+    }
+    float nearest; /* the triangle's nearest depth anywhere */
+    if (perspective) {
+        nearest = length(closest_on_triangle((float3)(0.0f), vertex[0], vertex[1], vertex[2]));
+    } else {
+        nearest = fmin(in_view[0].z, fmin(in_view[1].z, in_view[2].z));
+    }
+    float n_forward = dot(n, view->forward.xyz);
+    /* A texel's cone is widest at the view's centre: ρ there bounds every texel's. */
+    float3 middle = view_direction(view, 0.5f * (float)view->width, 0.5f * (float)view->height);
+    float cos_rho = dot(middle, view_direction(view, 0.5f * (float)view->width + 1.0f,
+                                                 0.5f * (float)view->height + 1.0f));
+    float sin_rho = sqrt(fmax(1.0f - cos_rho * cos_rho, 0.0f));
+    for (int ty = y0 + get_global_id(1); ty <= y1; ty += BOUND_ROW_SPLIT) {
+        for (int tx = x0; tx <= x1; ++tx) {
+            float depth = nearest;
+            if (perspective && normal_length > 0.0f) {
+                float cos_phi = dot(n, view_direction(view, tx + 0.5f, ty + 0.5f));
+                float sin_phi = sqrt(fmax(1.0f - cos_phi * cos_phi, 0.0f));
+                /* cos(φ - ρ) ≥ the largest n·u over the texel's cone; φ ≤ ρ: the foot may be inside */
+                float cos_gap = cos_phi >= cos_rho ? 1.0f : cos_phi * cos_rho + sin_phi * sin_rho;
+                if (cos_gap <= 0.0f) continue; /* no ray of this texel meets the plane */
+                depth = fmax(depth, plane / cos_gap);
+            } else if (!perspective && fabs(n_forward) > 1e-6f) {
+                float corner_min = INFINITY;
+                for (int corner = 0; corner < 4; ++corner) {
+                    float sx = 2.0f * (float)(tx + (corner & 1)) / (float)view->width - 1.0f;
+                    float sy = 1.0f - 2.0f * (float)(ty + (corner >> 1)) / (float)view->height;
+                    float3 at = view->right.xyz * (sx * view->scale_x) + view->up.xyz * (sy * view->scale_y);
+                    corner_min = fmin(corner_min, (plane - dot(n, at)) / n_forward);
+                }
+                depth = fmax(depth, corner_min);
+            }
+            depth = fmax(depth - BOUND_MARGIN_REL * fabs(depth) - BOUND_MARGIN_REL * extent, 0.0f);
+            global uint* texel = bound + view->depth_offset + ty * view->width + tx;
+            if (as_uint(depth) < *texel) atomic_min(texel, as_uint(depth)); /* the read spares most atomics */
+        }
+    }
+}
+
+/* How far the sample's own triangle (plane through p with unit normal n, largest distance
+ * `reach` of a vertex from the view's origin) may have written its bound below the depth of
+ * p in p's texel: the plane's depth over the texel's cone (perspective: within 2ρ of p's
+ * direction, ρ the widest texel's half-angle; orthographic: across the texel), plus the
+ * bound's rounding margin. */
+inline float own_surface_slack(global const light_t* light, global const view_t* view, float3 p, float3 n,
+                               float depth, float reach)
+{
+    float margin = 2.0f * BOUND_MARGIN_REL * (depth + reach);
+    if (view->projection != PROJECTION_PERSPECTIVE) {
+        float n_forward = fabs(dot(n, view->forward.xyz));
+        if (n_forward < 1e-6f) return INFINITY;
+        return light->texel_angle * (fabs(dot(n, view->right.xyz)) + fabs(dot(n, view->up.xyz))) / n_forward + margin;
+    }
+    float3 middle = view_direction(view, 0.5f * (float)view->width, 0.5f * (float)view->height);
+    float rho = acos(fmin(dot(middle, view_direction(view, 0.5f * (float)view->width + 1.0f,
+                                                      0.5f * (float)view->height + 1.0f)), 1.0f));
+    float cos_phi = fabs(dot(n, normalize(p - view->origin.xyz)));
+    float nearest = depth * cos_phi / cos(fmax(acos(fmin(cos_phi, 1.0f)) - 2.0f * rho, 0.0f));
+    return depth - nearest + margin;
+}
+
+/* How the map decides one sample: 1 lit, 0 shadowed, -1 undecided (cast a ray).
+ * Lit: the bound map says no triangle in the texel of `start` comes nearer the light than
+ * the sample's own depth, less what its own surface may have written there (at most the
+ * map's bias).
+ * Shadowed: every centre of the 3×3 texels around `lookup` holds a blocker nearer than
+ * the bias. */
+inline int map_decision(global const light_t* light, global const view_t* views, global const uint* shadow_depth,
+                        global const uint* bound, float3 start, float3 lookup, float3 n, float reach)
+{
+    global const view_t* view = views + light_view_index(light, start);
+    float2 texel;
+    float depth;
+    if (!view_project(view, start, &texel, &depth)) return -1;
+    if (texel.x < 0.0f || texel.y < 0.0f || texel.x >= (float)view->width || texel.y >= (float)view->height)
+        return 1; /* outside the map: no occluder (a map covers every occluder) */
+    float tolerance = fmin(SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth),
+                           own_surface_slack(light, view, start, n, depth, reach));
+    int tx = (int)texel.x, ty = (int)texel.y;
+    if (depth <= as_float(bound[view->depth_offset + ty * view->width + tx]) + tolerance) return 1;
+    view = views + light_view_index(light, lookup);
+    if (!view_project(view, lookup, &texel, &depth)) return -1;
+    tolerance = SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth);
+    tx = (int)texel.x;
+    ty = (int)texel.y;
+    for (int j = -1; j <= 1; ++j)
+        for (int i = -1; i <= 1; ++i)
+            if (depth <= shadow_texel(view, shadow_depth, tx + i, ty + j) + tolerance) return -1;
+    return 0;
+}
+
+kernel void visibility(global const frame_t* frame, global const view_t* views, global const light_t* lights,
+                       global const uint* shadow_depth, global const uint* bound, global const uint* camera_depth,
+                       global const int* tri_id, global const float4* tri_vertices, global const float4* tri_normal,
+                       global const float2* offsets, global const float4* node_bounds,
+                       global const int2* node_children, int root, global float* visible)
+{
+    int sample = get_global_id(0);
+    if (sample >= frame->width * frame->height * frame->spp) return;
+    int pixel = sample / frame->spp;
+    int x = pixel % frame->width, y = pixel / frame->width;
+    global float* out = visible + sample * frame->light_count;
+    for (int l = 0; l < frame->light_count; ++l) out[l] = 1.0f;
+    float distance = as_float(camera_depth[sample]);
+    int tri = tri_id[sample];
+    if (tri < 0 || distance > frame->far) return;
+    float3 origin, dir;
+    view_ray(views, view_screen(views, x, y, offsets[sample % frame->spp]), &origin, &dir);
+    float3 p = origin + distance * dir;
+    float3 n = tri_normal[tri].xyz;
+    if (dot(n, dir) > 0.0f) n = -n; /* two-sided: face the camera, as shade does */
+    for (int l = 0; l < frame->light_count; ++l) {
+        global const light_t* light = lights + l;
+        float3 to_light;
+        float3 incident = light_incident(light, frame->sigma_t.xyz, p, &to_light);
+        if (incident.x + incident.y + incident.z == 0.0f || eye_in_lamp(light, frame->lamp_radius)) continue;
+        float to_light_distance = light->type == LIGHT_DIRECTIONAL ? 0.0f : length(light->position.xyz - p);
+        /* The ray leaves on the light's side of the surface, as the exact reference's does. */
+        float3 side = dot(n, to_light) >= 0.0f ? n : -n;
+        float3 start = p + side * (SHADOW_RAY_OFFSET_REL * (length(p) + to_light_distance));
+        float3 lookup = p + n * shadow_texel_size(light, length(p - light->position.xyz));
+        float reach = 0.0f; /* of the sample's triangle from the light's view origin */
+        global const view_t* view = views + light_view_index(light, start);
+        for (int k = 0; k < 3; ++k) reach = fmax(reach, length(tri_vertices[3 * tri + k].xyz - view->origin.xyz));
+        int decided = map_decision(light, views, shadow_depth, bound, start, lookup, n, reach);
+        if (decided >= 0) {
+            out[l] = (float)decided;
+            continue;
+        }
+        float3 ray = light->type == LIGHT_DIRECTIONAL ? to_light : light->position.xyz - start;
+        float t_max = light->type == LIGHT_DIRECTIONAL ? INFINITY : 1.0f;
+        out[l] = bvh_occluded(node_bounds, node_children, root, tri_vertices, start, ray, 0.0f, t_max, tri)
+                     ? 0.0f : 1.0f;
+    }
+}

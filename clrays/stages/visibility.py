@@ -1,0 +1,90 @@
+"""Stage visibility: exact hard shadows on surfaces (`render.surface_shadows: exact`).
+Host side of `cl/visibility.cl` and `cl/bvh.h` (docs/design.md §4, visibility).
+
+Per camera sample and light, the shadow map answers where its neighbourhood is
+unanimous: lit where a conservative bound map (every triangle that touches a texel,
+however thin, at a depth no larger than its own there) has nothing nearer the light than
+the sample, shadowed where every texel centre around it holds a blocker. The rest, the
+samples on shadow edges, ask the BVH whether the segment to the light is blocked, so a
+shadow edge lands where the `exact` reference puts it.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import structs
+from ..bvh import Bvh, build_bvh
+from ..device import Device, StageTimer
+from ..inputs import FrameBuffers, FrameInputs, light_pass_inputs
+from .raster import RasterResult
+
+#: Work-items per triangle and view of `visibility_bound`, each taking every this-many-th
+#: row of the triangle's texel rectangle (cl/visibility.cl's BOUND_ROW_SPLIT).
+BOUND_ROW_SPLIT = 16
+
+
+@dataclass
+class DeviceBvh:
+    """A BVH over the frame's eye-space triangles, on the device."""
+
+    node_bounds: object
+    node_children: object
+    root: int
+    build_ms: float  # host build time
+
+
+def upload_bvh(device: Device, inputs: FrameInputs, timer: StageTimer) -> DeviceBvh:
+    """Build (on the host, timed as `bvh`) and upload the BVH of the eye-space triangles the
+    device intersects, so its boxes hold exactly the float32 vertices the rays meet."""
+    start = time.perf_counter()
+    bvh: Bvh = build_bvh(inputs.tri_vertices[:, :3].reshape(-1, 3, 3))
+    milliseconds = (time.perf_counter() - start) * 1e3
+    timer.add_host("bvh", milliseconds)
+    return DeviceBvh(device.buffer(bvh.node_bounds, writable=False),
+                     device.buffer(bvh.node_children, writable=False), bvh.root, milliseconds)
+
+
+def visibility_bound(device: Device, buffers: FrameBuffers, light_index: int, timer: StageTimer):
+    """One light's bound map (uint[its texels], as_uint(depth)), in the light-anchored
+    space of its shadow map (clrays.inputs.light_pass_inputs), so the depths match."""
+    inputs = light_pass_inputs(buffers.inputs, light_index)
+    texels = max(inputs.shadow_texels, 1)
+    bound = device.buffer(nbytes=4 * texels)
+    device.fill(bound, structs.DEPTH_EMPTY, 4 * texels, timer, "visibility")
+    count = inputs.tri_vertices.shape[0] // 3
+    view_count = len(inputs.views) - 1
+    if count:
+        event = device.kernel("visibility", "visibility_bound")(
+            device.queue, (count * view_count, BOUND_ROW_SPLIT), None,
+            device.buffer(inputs.tri_vertices, writable=False), np.int32(count),
+            device.buffer(inputs.views, writable=False), np.int32(1), np.int32(view_count), bound)
+        timer.add("visibility", event)
+    return bound, inputs.shadow_texels
+
+
+def bound_atlas(device: Device, buffers: FrameBuffers, bounds: list):
+    """Every light's bound map back to back, at the depth offsets of the frame's views."""
+    if len(bounds) == 1:
+        return bounds[0][0]
+    atlas = device.buffer(nbytes=4 * max(buffers.inputs.shadow_texels, 1))
+    for (first, _), (bound, texels) in zip(buffers.inputs.light_views, bounds):
+        offset = 4 * int(buffers.inputs.views[first]["depth_offset"])
+        device.cl.enqueue_copy(device.queue, atlas, bound, byte_count=4 * texels, dst_offset=offset)
+    return atlas
+
+
+def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, bound, bvh: DeviceBvh,
+               timer: StageTimer):
+    """float[samples × lights]: 1 where the sample sees the light, 0 where it does not."""
+    inputs = buffers.inputs
+    lights = max(len(inputs.scene.lights), 1)
+    visible = device.buffer(nbytes=4 * inputs.samples * lights)
+    event = device.kernel("visibility", "visibility")(
+        device.queue, (inputs.samples,), None, buffers.params, buffers.views, buffers.lights,
+        rastered.shadow_depth, bound, rastered.camera_depth, rastered.tri_id, buffers.tri_vertices,
+        buffers.tri_normal, buffers.offsets, bvh.node_bounds, bvh.node_children, np.int32(bvh.root), visible)
+    timer.add("visibility", event)
+    return visible
