@@ -21,6 +21,7 @@ import math
 
 import numpy as np
 
+from ..reference.radiometry import effective_far
 from ..scene.camera import camera_basis
 
 #: The six faces' axes, in view order: (axis index, sign).
@@ -31,7 +32,7 @@ _SEPARATION_MARGIN = 1e-6
 
 def view_pyramid(scene, light_position, margin_rad: float) -> np.ndarray | None:
     """(5, 3) vertices, relative to the light, of the camera's view pyramid out to depth
-    `far`, each side turned out by `margin_rad`; None when the widened view reaches 90°
+    the effective `far`, each side turned out by `margin_rad`; None when the widened view reaches 90°
     off the view direction (then it is not a pyramid and nothing is culled)."""
     camera, image = scene.camera, scene.image
     right, up, forward = camera_basis(camera)
@@ -42,8 +43,10 @@ def view_pyramid(scene, light_position, margin_rad: float) -> np.ndarray | None:
         return None
     tan_x, tan_y = math.tan(half_x), math.tan(half_y)
     eye = np.asarray(camera.position, float) - np.asarray(light_position, float)
-    # 10 % past far: a γ texel's centre may lie half a texel beyond a ray's far end.
-    corners = [eye + 1.1 * camera.far * (forward + sx * tan_x * right + sy * tan_y * up)
+    # 10 % past far (where the rays that hit nothing end: radiometry.effective_far): a γ
+    # texel's centre may lie half a texel beyond a ray's far end.
+    far = effective_far(scene)
+    corners = [eye + 1.1 * far * (forward + sx * tan_x * right + sy * tan_y * up)
                for sx in (-1, 1) for sy in (-1, 1)]
     return np.array([eye] + corners)
 
