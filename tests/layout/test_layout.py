@@ -86,3 +86,15 @@ def test_modules_that_name_a_constant_use_this_value():
     assert integrand.SIN_BETA_MIN == structs.SIN_BETA_MIN
     assert TRAVERSALS.index("tree") == structs.TRAVERSAL_TREE
     assert TRAVERSALS.index("scan") == structs.TRAVERSAL_SCAN
+
+
+def test_the_wheel_lists_every_package():
+    """pyproject.toml names the packages a wheel ships one by one: a new subpackage left out
+    would import in the source tree and be missing after `pip install`."""
+    import tomllib
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    listed = set(tomllib.loads((root / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    found = {".".join(init.parent.relative_to(root).parts) for init in (root / "clrays").rglob("__init__.py")}
+    assert found - listed == set()
