@@ -293,7 +293,7 @@ Examples:
   clrays render scenes/demo.yaml -o out/demo.npy --set medium.sigma_s=0.1 --stats
   clrays render scenes/orbit.yaml -o out/orbit_30.png --frame 30
 """)
-@click.argument("scene", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("scene", type=click.Path(path_type=Path))
 @method_option()
 @overrides_option("Override a scene field (repeatable), e.g. --set render.steps=1024.")
 @option("--frame", type=int, metavar="N", group=SCENE,
@@ -392,7 +392,7 @@ Examples:
 Frames are written atomically: re-running the same command skips the frames already
 there, so an interrupted run resumes where it stopped (--overwrite renders all again).
 """)
-@click.argument("scene", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("scene", type=click.Path(path_type=Path))
 @option("--frames", metavar="A:B", group=SCENE,
         help="Frames A to B, inclusive (also A:, :B or N). Default: the animation's frames.")
 @method_option()
@@ -462,7 +462,7 @@ Writes one image per point (000.png, 001.png, ...), results.csv (the parameters,
 per-stage times, reused stages and, with --reference, the error against it in percent) and
 contact_sheet.png. Re-running the same command keeps the points already done.
 """)
-@click.argument("scene", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("scene", type=click.Path(path_type=Path))
 @overrides_option("A swept key with comma-separated values, or a fixed override with one (repeatable); the "
                   "points are the cartesian product of the swept keys.", metavar="KEY.PATH=V1,V2,...", group=SWEEP)
 @option("--reference", metavar="exact|raymarch:N", group=SWEEP,
@@ -484,8 +484,7 @@ def sweep(context, scene, overrides, reference, method, out_dir, image_format, e
     """Render SCENE at every combination of the --set values and tabulate the results."""
     done = []
     with _resumable(context, lambda: f"{len(done)} points"):
-        if not scene.is_file():
-            raise ClraysError(f"{scene}: no such scene file")
+        _check_scene_file(scene)
         axes, _ = axes_from(list(overrides))
         parse_reference(reference)
         def on_point(point, row):
@@ -503,6 +502,14 @@ def sweep(context, scene, overrides, reference, method, out_dir, image_format, e
                                overwrite=overwrite, progress=progress, on_point=on_point, executor=executor)
         click.echo(format_table(report.rows, axes), nl=False)
         click.echo(report.summary())
+
+
+def _check_scene_file(path: Path) -> None:
+    """Before a long run: SCENE exists and is a file (the loader checks the rest, in one line)."""
+    if not path.exists():
+        raise ClraysError(f"{path}: no such scene file")
+    if not path.is_file():
+        raise ClraysError(f"{path}: not a scene file ({'a directory' if path.is_dir() else 'not a regular file'})")
 
 
 def _resolutions(context, parameter, texts) -> list[tuple[int, int]]:
@@ -527,7 +534,7 @@ Examples:
   clrays bench --repeats 3 --pixels 500         # a quicker, noisier run
   clrays bench scenes/demo.yaml -r 64x36 --quick  # smoke run: does it all work?
 """)
-@click.argument("scenes", nargs=-1, type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("scenes", nargs=-1, type=click.Path(path_type=Path))
 @option("-r", "--resolution", "resolutions", multiple=True, default=["640x360"], show_default=True, metavar="WxH",
         callback=_resolutions, group=BENCH, help="WIDTHxHEIGHT to render at (repeatable).")
 @option("--repeats", type=click.IntRange(1, 100), default=5, show_default=True, group=BENCH,
@@ -553,8 +560,7 @@ def bench(scenes, resolutions, repeats, pixels, quick, volume, out, cache, progr
         make_folder(folder)
     paths = [str(path) for path in scenes] or list(bench_run.DEFAULT_SCENES)
     for path in paths:
-        if not Path(path).is_file():
-            raise ClraysError(f"{path}: no such scene file")
+        _check_scene_file(Path(path))
     points = bench_run.run(paths, resolutions, repeats=repeats, pixels=pixels, cache=cache, device=device,
                            progress=progress, log=lambda line: click.echo(line, err=True), quick=quick, volume=volume)
     bench_run.save(points, out, device=device, extra={

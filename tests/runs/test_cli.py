@@ -120,6 +120,16 @@ def test_missing_scene_file(tmp_path):
     assert code == 1 and "nope.yaml" in out
 
 
+@pytest.mark.parametrize("command", [["render"], ["sequence"], ["sweep"], ["bench"]])
+def test_a_folder_as_the_scene_is_one_line(tmp_path, command):
+    out = tmp_path / ("o.png" if command == ["render"] else "o")
+    extra = {"render": ["-o", out], "sequence": ["-o", tmp_path / "f_{:02d}.png"], "sweep": ["-o", out],
+             "bench": ["--out", out, "--cache", tmp_path / "cache"]}[command[0]]
+    code, output = run(*command, tmp_path, *extra)
+    assert code == 1
+    assert output.strip().count("\n") == 0 and "a directory" in output, output
+
+
 def test_usage_error_exits_2(scene_file):
     assert run("render", scene_file)[0] == 2  # missing -o
 
