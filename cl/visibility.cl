@@ -141,8 +141,13 @@ kernel void visibility_bound(global const float4* tri_vertices, int count, globa
     float cos_rho = dot(middle, view_direction(view, 0.5f * (float)view->width + 1.0f,
                                                  0.5f * (float)view->height + 1.0f));
     float sin_rho = sqrt(fmax(1.0f - cos_rho * cos_rho, 0.0f));
+    /* No texel gets less than this from the triangle (the margin below is monotonic in the
+     * depth): a texel already at or under it is skipped before its cone maths, which
+     * leaves the atomic-min result unchanged. */
+    uint floor_bits = as_uint(fmax(nearest - BOUND_MARGIN_REL * fabs(nearest) - BOUND_MARGIN_REL * extent, 0.0f));
     for (int ty = y0 + get_global_id(1); ty <= y1; ty += BOUND_ROW_SPLIT) {
         for (int tx = x0; tx <= x1; ++tx) {
+            if (bound[view->depth_offset + ty * view->width + tx] <= floor_bits) continue;
             float depth = nearest;
             if (perspective && normal_length > 0.0f) {
                 float cos_phi = dot(n, view_direction(view, tx + 0.5f, ty + 0.5f));
