@@ -4,6 +4,10 @@ after a warm-up one, for the bench scenes at one image size; prints a markdown t
 
     .venv/bin/python bench/stage_times.py --size 16x9
     .venv/bin/python bench/stage_times.py --size 1280x720 --frames 3 demo behind
+    .venv/bin/python bench/stage_times.py --size 16x9 --error     # and the error against exact
+
+With `--error`, the last frame is compared with `exact` at the same size
+(`metrics.image_error`, depth edges excluded: relative luminance mean / p99 / RMSE, in %).
 
 Frame time here is stage time: the device time of every stage plus the host-timed
 integrand stage, as `clrays render --stats` totals it; start-up and kernel builds are
@@ -32,11 +36,13 @@ def main() -> None:
     parser.add_argument("scenes", nargs="*", default=SCENES, help="scene names in scenes/ (default: the bench four)")
     parser.add_argument("--size", default="16x9", help="WxH (default 16x9)")
     parser.add_argument("--frames", type=int, default=7, help="timed frames per scene after the warm-up (default 7)")
+    parser.add_argument("--error", action="store_true", help="also the error against exact at this size")
     args = parser.parse_args()
     width, height = (int(v) for v in args.size.split("x"))
     print(f"{width}×{height}, median of {args.frames} frames, ms; load average {os.getloadavg()[0]:.1f} at start\n")
-    print("| scene | " + " | ".join(STAGES) + " | total (min–max) | sizes |")
-    print("|---|" + "---|" * (len(STAGES) + 2))
+    error_header = " | error vs exact: mean / p99 / RMSE %" if args.error else ""
+    print("| scene | " + " | ".join(STAGES) + " | total (min–max) | sizes" + error_header + " |")
+    print("|---|" + "---|" * (len(STAGES) + 2 + args.error))
     for name in args.scenes:
         scene = load_scene(REPO / "scenes" / f"{name}.yaml", overrides=[f"image.width={width}", f"image.height={height}"])
         renderer = Renderer(reuse=False)
@@ -47,8 +53,18 @@ def main() -> None:
         render = getattr(runs[0], "render", None)  # None: a checkout from before the sizes followed the image
         sizes = (f"map {render.shadow_map}², texture {' '.join(f'{s}×{t}' for s, t in runs[0].textures) or '—'}"
                  if render else "map 1024², texture 1024×1024")
+        error = ""
+        if args.error:
+            from clrays.reference import metrics
+            from clrays.reference.exact import render_exact
+
+            reference, edges = render_exact(scene), metrics.depth_edges(metrics.depth_map(scene))
+            bright = metrics.luminance(reference) >= 0.01 * metrics.luminance(reference).mean()  # image_error's floor
+            kept = "" if (bright & ~edges).any() else " (every lit pixel is on a depth edge: none excluded)"
+            e = metrics.image_error(runs[-1].image, reference, edges if not kept else None)
+            error = f" | {100 * e.mean:.2f} / {100 * e.p99:.2f} / {100 * e.rmse:.2f}{kept}"
         print(f"| {name} | " + " | ".join(cells) + f" | {statistics.median(totals):.1f} ({min(totals):.1f}–{max(totals):.1f})"
-              f" | {sizes} |", flush=True)
+              f" | {sizes}{error} |", flush=True)
 
 
 if __name__ == "__main__":
