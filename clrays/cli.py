@@ -353,6 +353,10 @@ def _print_stats(result) -> None:
         textures = ", ".join(f"{slices}×{texels}" for slices, texels in result.textures) or "none"
         click.echo(f"  sizes      shadow map {render.shadow_map}², {render.slices} slices × {render.gamma_samples} γ "
                    f"texels; rectified (slices×texels per light): {textures}")
+    if result.samples is not None:
+        counts = result.samples
+        click.echo(f"  samples    {counts.computed} line samples computed; camera samples: {counts.interpolated} "
+                   f"interpolated, {counts.fixed_up} fixed up (walked their own rays)")
     click.echo(f"  device memory {result.device_bytes / 2**20:.1f} MiB")
 
 

@@ -1,6 +1,9 @@
 """A render session and the frame it runs, stage by stage (docs/design.md §4):
 
     raster → rectify → minmax → integrand → traverse → visibility → shade  (method `minmax`)
+
+(`traverse` samples along epipolar lines with `render.sampling: epipolar`, the default,
+and walks every camera sample's rows with `pixel`.)
     raster → raymarch → visibility → shade                                 (method `raymarch`)
 
 (`visibility` runs with `render.surface_shadows: exact`, the default.)
@@ -38,6 +41,7 @@ from .stages.minmax import minmax
 from .stages.raster import RasterResult, ShadowMap, map_is_empty, raster_camera, raster_shadow_map, shadow_atlas
 from .stages.raymarch import raymarch
 from .stages.rectify import Epipolar, rectify
+from .stages.sampling import SampleCounts, epipolar_sampling
 from .stages.shade import shade
 from .stages.traverse import traverse
 from .stages.visibility import bound_atlas, upload_bvh, visibility, visibility_bound
@@ -64,6 +68,7 @@ class RenderResult:
     render: Render | None = None  # the scene's render settings with the sizes derived from the image filled in
     # (slices, γ texels) of each epipolar texture the frame used, per light that has one
     textures: tuple[tuple[int, int], ...] = ()
+    samples: SampleCounts | None = None  # what epipolar sampling computed, interpolated and fixed up
 
     @property
     def reused(self) -> list[str]:
@@ -114,17 +119,17 @@ class Renderer:
         if self._device is not None:
             self._device.allocated_bytes = 0
         # A frame identical to a kept one: its image, and every stage counts as reused.
-        image, stages, textures = reuse.keep("frame", digest("frame", scene_digest(scene)),
-                                             lambda: self._frame(scene, method, reuse, timer, progress))
+        image, stages, textures, samples = reuse.keep("frame", digest("frame", scene_digest(scene)),
+                                                      lambda: self._frame(scene, method, reuse, timer, progress))
         status = record.status() or {stage: REUSED for stage in stages}
         device_bytes = self._device.allocated_bytes if self._device is not None else 0
         wall_ms = (time.perf_counter() - start) * 1e3
         return RenderResult(image.copy(), method, timer.milliseconds(), wall_ms, device_bytes, status,
-                            timer.host_labels, scene.render, textures)
+                            timer.host_labels, scene.render, textures, samples)
 
     def _frame(self, scene: Scene, method: str, reuse: Reuse, timer: StageTimer, progress: bool):
-        """(image, stage labels, epipolar texture sizes) of one frame: the pipeline of the
-        module docstring."""
+        """(image, stage labels, epipolar texture sizes, sample counts) of one frame: the
+        pipeline of the module docstring."""
         if method == "exact":
             return self._exact(scene, reuse, timer, progress)
         device = self.device
@@ -135,7 +140,7 @@ class Renderer:
         buffers = upload(device, inputs)  # the scene in eye space, packed into device structs
         keys = StageKeys(buffers.inputs)
         rastered, maps = self._raster(buffers, keys, reuse, timer)  # raster: camera depth and ids, shadow maps
-        textures = []
+        textures, samples = [], None
         scatter = device.buffer(nbytes=16 * buffers.inputs.samples)  # in-scattered radiance per camera sample
         device.fill(scatter, np.float32(0), 16 * buffers.inputs.samples)
         if not np.any(scene.medium.sigma_s > 0):
@@ -155,12 +160,16 @@ class Renderer:
                 self._minmax(epipolar, reuse, timer)  # minmax: the 1D min-max mipmap of every row
                 tables = reuse.stage("integrand", keys.integrand(index, epipolar),  # integrand: lit run → radiance
                                      lambda: integrand(device, scene, light, epipolar, timer), per_light=True)
-                traverse(device, buffers, rastered, epipolar, tables, scatter, timer)  # traverse: walk the trees
+                if scene.render.sampling == "epipolar" and not epipolar.unshadowed:  # traverse: walk the trees
+                    counts = epipolar_sampling(device, buffers, rastered, epipolar, tables, scatter, timer)
+                    samples = counts if samples is None else samples + counts
+                else:  # per camera sample; and a light that casts no shadow, whose 16 slices are too few to sample
+                    traverse(device, buffers, rastered, epipolar, tables, scatter, timer)
             reuse.record.note("traverse", COMPUTED)
         visible = self._visibility(buffers, rastered, keys, reuse, timer)  # visibility: exact surface shadows
         image = shade(device, buffers, rastered, scatter, timer, visible)  # shade: surfaces, attenuation, + scatter
         reuse.record.note("shade", COMPUTED)
-        return image, tuple(reuse.record.status()), tuple(textures)
+        return image, tuple(reuse.record.status()), tuple(textures), samples
 
     def _visibility(self, buffers: FrameBuffers, rastered: RasterResult, keys: StageKeys, reuse: Reuse,
                     timer: StageTimer):
@@ -187,7 +196,7 @@ class Renderer:
         image = render_exact(scene, progress=progress).astype(np.float32)
         timer.add_host("exact", (time.perf_counter() - start) * 1e3)
         reuse.record.note("exact", COMPUTED)
-        return image, ("exact",), ()
+        return image, ("exact",), (), None
 
     def _raster(self, buffers: FrameBuffers, keys: StageKeys, reuse: Reuse, timer: StageTimer):
         """The raster stage, each part kept while its inputs are: the camera's depth and

@@ -30,6 +30,11 @@ MAX_GAMMA_SAMPLES = 1024
 MIN_SHADOW_MAP = 64
 MIN_SLICES = 16
 MIN_GAMMA_SAMPLES = 16
+#: Epipolar sampling: samples along each slice's line. The longest line on the screen is
+#: about its diagonal, so a sample per pixel of the diagonal puts them no further apart
+#: than a pixel on any line; short lines (near the epipole, across a corner) get them closer.
+MIN_LINE_SAMPLES = 16
+MAX_LINE_SAMPLES = 4096
 #: Shadow-map texels per pixel of the image diagonal.
 SHADOW_TEXELS_PER_PIXEL = 4
 #: Slices per pixel of the image perimeter, γ texels per pixel of its diagonal (measured, above).
@@ -61,13 +66,20 @@ def derived_gamma_samples(width: int, height: int, shadow_map: int) -> int:
                     MIN_GAMMA_SAMPLES, MAX_GAMMA_SAMPLES)
 
 
+def derived_line_samples(width: int, height: int) -> int:
+    """Samples along each slice's line: the image diagonal in pixels."""
+    return min(max(math.ceil(math.hypot(width, height)), MIN_LINE_SAMPLES), MAX_LINE_SAMPLES)
+
+
 def with_derived_sizes(scene: Scene) -> Scene:
     """The scene with every unset (None) size of `scene.render` filled in from its image;
     sizes the scene sets are kept as written."""
     render, image = scene.render, scene.image
-    if None not in (render.shadow_map, render.slices, render.gamma_samples):
+    if None not in (render.shadow_map, render.slices, render.gamma_samples, render.line_samples):
         return scene
     shadow_map = render.shadow_map or derived_shadow_map(image.width, image.height)
     slices = render.slices or derived_slices(image.width, image.height, shadow_map)
     gamma_samples = render.gamma_samples or derived_gamma_samples(image.width, image.height, shadow_map)
-    return replace(scene, render=replace(render, shadow_map=shadow_map, slices=slices, gamma_samples=gamma_samples))
+    line_samples = render.line_samples or derived_line_samples(image.width, image.height)
+    return replace(scene, render=replace(render, shadow_map=shadow_map, slices=slices, gamma_samples=gamma_samples,
+                                         line_samples=line_samples))

@@ -12,8 +12,9 @@ from typing import Any
 
 from .animation import EASINGS
 from .limits import MAX_LIGHTS, MAX_MESH_BYTES, MAX_OBJECTS, MAX_SCENE_BYTES, MAX_TRIANGLES
-from .costs import MAX_GAMMA_SAMPLES, MAX_SHADOW_MAP, MAX_SLICES, MIN_GAMMA_SAMPLES, MIN_SHADOW_MAP, MIN_SLICES
-from .model import INTEGRAND_MODES, METHODS, NORMALS, SURFACE_SHADOWS, TRAVERSALS, Camera, Image, Render
+from .costs import (MAX_GAMMA_SAMPLES, MAX_LINE_SAMPLES, MAX_SHADOW_MAP, MAX_SLICES, MIN_GAMMA_SAMPLES,
+                    MIN_LINE_SAMPLES, MIN_SHADOW_MAP, MIN_SLICES)
+from .model import INTEGRAND_MODES, METHODS, NORMALS, SAMPLINGS, SURFACE_SHADOWS, TRAVERSALS, Camera, Image, Render
 
 FORMAT_VERSION = 1
 MAX_IMAGE_PIXELS = 1 << 26
@@ -239,6 +240,21 @@ RENDER = Section("render", (
           notes="min-max, `integrand: svd`: rank of the factorisation", read_by=("minmax",)),
     Field("traversal", "string", Render.traversal, choices=TRAVERSALS,
           notes="min-max: min-max tree traversal or a linear scan", read_by=("minmax",)),
+    Field("sampling", "string", Render.sampling, choices=SAMPLINGS,
+          notes="min-max: `epipolar` computes in-scattering at samples along each slice's line on the screen and "
+                "interpolates it to the pixels, walking a pixel's own rays only where no sample lies at its "
+                "distance; `pixel` walks the two nearest slices' rows for every pixel sample "
+                "([docs/design.md](design.md) §4.5)", read_by=("minmax",)),
+    Field("line_samples", "integer", Render.line_samples, 2, 16384,
+          shown_default=f"from the image: its diagonal in pixels, in [{MIN_LINE_SAMPLES}, {MAX_LINE_SAMPLES}]",
+          notes="`sampling: epipolar`: samples along each slice's line", read_by=("minmax",)),
+    Field("initial_step", "integer", Render.initial_step, 1, 1024,
+          notes="`sampling: epipolar`: every `initial_step`-th line sample is computed, and those beside a break; "
+                "the others are interpolated along the line", read_by=("minmax",)),
+    Field("refine_threshold", "number", Render.refine_threshold, 0.0, 1.0,
+          notes="`sampling: epipolar`: neighbouring line samples whose camera distance or unshadowed "
+                "in-scattering differ by more than this fraction are a break, computed both; a pixel whose "
+                "distance differs this much from its line samples' walks its own rays", read_by=("minmax",)),
 ))
 
 

@@ -26,6 +26,8 @@ RGB = np.ndarray
 METHODS = ("minmax", "raymarch", "exact")
 INTEGRAND_MODES = ("table", "svd", "analytic")
 TRAVERSALS = ("tree", "scan")
+# min-max: in-scattering at samples along epipolar lines, interpolated; or walked for every camera sample.
+SAMPLINGS = ("epipolar", "pixel")
 # Hard surface shadows: shadow rays where the map cannot decide, the map alone, or the map filtered.
 SURFACE_SHADOWS = ("exact", "map", "pcf")
 PHASE_TYPES = ("isotropic", "hg")
@@ -106,6 +108,10 @@ class Render:
     integrand: str = "table"  # one of INTEGRAND_MODES
     svd_rank: int = 4
     traversal: str = "tree"  # one of TRAVERSALS
+    sampling: str = "epipolar"  # one of SAMPLINGS
+    line_samples: int | None = None  # epipolar: samples along each slice's line
+    initial_step: int = 8  # epipolar: every initial_step-th line sample walks its row
+    refine_threshold: float = 0.02  # epipolar: relative change in distance or unshadowed radiance that is a break
 
 
 @dataclass(frozen=True)

@@ -47,6 +47,19 @@ def slice_basis(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return u, np.cross(axis, u)
 
 
+def poles_on_screen(scene, axis: np.ndarray) -> tuple[bool, bool]:
+    """Whether the epipole (the direction `axis`) and the anti-epipole (`-axis`) are on screen."""
+    camera, image = scene.camera, scene.image
+    right, up, forward = camera_basis(camera)
+    tan_y = math.tan(math.radians(camera.fov_deg) / 2)
+    tan_x = tan_y * image.width / image.height
+    on_screen = []
+    for pole in (axis, -axis):
+        depth = pole @ forward
+        on_screen.append(bool(depth > 0 and abs(pole @ right / depth) <= tan_x and abs(pole @ up / depth) <= tan_y))
+    return on_screen[0], on_screen[1]
+
+
 def slice_fan(scene, axis: np.ndarray, u: np.ndarray, w: np.ndarray) -> tuple[float, float, bool]:
     """(alpha_min, alpha_span, full_circle): the slice angles that rays through the
     screen take. When the epipole (axis) or anti-epipole (-axis) is on screen the slices
@@ -56,10 +69,8 @@ def slice_fan(scene, axis: np.ndarray, u: np.ndarray, w: np.ndarray) -> tuple[fl
     right, up, forward = camera_basis(camera)
     tan_y = math.tan(math.radians(camera.fov_deg) / 2)
     tan_x = tan_y * image.width / image.height
-    for pole in (axis, -axis):
-        depth = pole @ forward
-        if depth > 0 and abs(pole @ right / depth) <= tan_x and abs(pole @ up / depth) <= tan_y:
-            return -math.pi, 2 * math.pi, True
+    if any(poles_on_screen(scene, axis)):
+        return -math.pi, 2 * math.pi, True
     edge = np.linspace(-1.0, 1.0, 4 * max(image.width, image.height) + 1)
     ones = np.ones_like(edge)
     border = np.concatenate([np.stack([edge, ones]), np.stack([edge, -ones]),

@@ -1,0 +1,264 @@
+/* sampling — epipolar sampling, `render.sampling: epipolar` (docs/design.md §4.5
+ * "Epipolar sampling"). In-scattered light varies slowly along a slice's line on the
+ * screen and fast across lines, so it is computed at samples on each slice's line and
+ * interpolated to the camera samples:
+ *
+ *   line_samples  per line sample: the camera distance where it lands, and what its
+ *                 ray would gather unshadowed (the "line value")
+ *   line_scatter  per line sample: walk its own row where it is needed (every
+ *                 `step`-th sample, the ends, both sides of a break in either of
+ *                 those); the others are left for line_fill
+ *   line_fill     per line sample not computed: interpolate between the computed
+ *                 samples either side (no break lies between them)
+ *   gather        per camera sample: interpolate each of its two slices at its β when
+ *                 the samples there match its distance and unshadowed weight, else walk that
+ *                 row for the camera sample itself (the fix-up); blend the two slices as
+ *                 traverse does
+ *
+ * Line sample j of slice i lies in the half-plane of the slice's centre at the
+ * pseudo-angle q = lo_i + (hi_i - lo_i)·j/(n - 1) (pseudo_beta, a monotonic stand-in for
+ * β), [lo_i, hi_i] being the range of the screen beside that slice (clrays/stages/
+ * sampling.py line_ranges): along a line from the epipole β is monotonic, so it orders
+ * the samples.
+ * A line sample walks one row (it lies on its slice); a camera sample would walk two. */
+#include "walk.h"
+
+/* The counters of clrays.stages.sampling.SampleCounts: line samples that walked their
+ * row, camera samples that walked at least one row themselves (the fix-ups). Both are
+ * rare next to the camera samples, so plain global atomics do. */
+#define COUNT_COMPUTED 0
+#define COUNT_FIXED_UP 1
+
+/* The camera ray through the centre of sample `sample` of the frame, and its distance. */
+inline float3 camera_ray(global const frame_t* frame, global const view_t* views, global const float2* offsets,
+                         int sample)
+{
+    int pixel = sample / frame->spp;
+    float3 origin, dir;
+    view_ray(views, view_screen(views, pixel % frame->width, pixel / frame->width, offsets[sample % frame->spp]),
+             &origin, &dir);
+    return dir;
+}
+
+/* atan2 within 3 ulp (a minimax polynomial after reducing to [0, tan π/8]): PoCL's
+ * atan2 costs as much as the rest of a camera sample's interpolation. Used for what
+ * only places a value (a camera sample's slice weight, the unshadowed weight), never
+ * for what the tree walk compares. */
+inline float atan2_approx(float y, float x)
+{
+    float ax = fabs(x), ay = fabs(y);
+    float big = fmax(ax, ay), small = fmin(ax, ay);
+    float t = big > 0.0f ? small / big : 0.0f;
+    int reduced = t > 0.41421356f;
+    float r = reduced ? (t - 1.0f) / (t + 1.0f) : t;
+    float z = r * r;
+    float a = (((8.05374449538e-2f * z - 1.38776856032e-1f) * z + 1.99777106478e-1f) * z - 3.33329491539e-1f) * z * r
+              + r;
+    a = reduced ? a + M_PI_4_F : a;
+    a = ay > ax ? M_PI_2_F - a : a;
+    a = x < 0.0f ? M_PI_F - a : a;
+    return copysign(a, y);
+}
+
+/* Line samples are spaced evenly in q = tan(β/2) for β ≤ π/2 and 2 - cot(β/2) above: q
+ * rises with β at between 1/2 and 1 times its rate, and needs no arc tangent from cos β
+ * and sin β, nor any trigonometry back (clrays/stages/sampling.py pseudo_beta). */
+inline float pseudo_beta(float cos_beta, float sin_beta)
+{
+    return cos_beta >= 0.0f ? sin_beta / (1.0f + cos_beta) : 2.0f - sin_beta / (1.0f - cos_beta);
+}
+
+/* q of line sample j of slice i; 0 when the slice does not cross the screen. */
+inline int line_q(global const float2* ranges, int i, int j, int n, float* q)
+{
+    float2 range = ranges[i];
+    if (!(range.x <= range.y)) return 0;
+    *q = mix(range.x, range.y, (float)j / (float)(n - 1));
+    return 1;
+}
+
+/* The direction at pseudo-angle q in the half-plane of slice i's centre (sides[i]). */
+inline float3 line_direction(global const epipolar_t* ep, global const float4* sides, int i, float q)
+{
+    float k = q <= 1.0f ? q : 2.0f - q; /* tan(β/2), or cot(β/2) */
+    float across = 2.0f * k / (1.0f + k * k), along = (1.0f - k * k) / (1.0f + k * k);
+    along = q <= 1.0f ? along : -along;
+    return normalize(along * ep->axis.xyz + across * sides[i].xyz);
+}
+
+/* The camera distance where a direction lands: the depth of the pixel it points into
+ * (its first camera sample), clamped to the screen and to far. */
+inline float landing_distance(global const frame_t* frame, global const view_t* views,
+                              global const uint* camera_depth, float3 dir)
+{
+    float2 texel;
+    float unused;
+    if (!view_project(views, views->origin.xyz + dir, &texel, &unused)) return frame->far;
+    int x = clamp((int)floor(texel.x), 0, frame->width - 1), y = clamp((int)floor(texel.y), 0, frame->height - 1);
+    return fmin(as_float(camera_depth[(y * frame->width + x) * frame->spp]), frame->far);
+}
+
+/* What the ray along dir up to distance would gather if nothing cast a shadow, without
+ * the medium's attenuation and phase: σs·I/(d_el·sin β) times the γ it sweeps for a point
+ * or spot light (only the part inside a spot light's cone), the length for a directional
+ * light, up to the constant σs·I. It breaks where the in-scattering itself breaks: at a
+ * spot light's cone, and near the epipole, where 1/sin β grows faster than samples along
+ * a line can follow. */
+inline float unshadowed_weight(global const epipolar_t* ep, global const light_t* light, float3 dir,
+                               float distance)
+{
+    float begin = 0.0f, end = distance;
+    if (light->type == LIGHT_SPOT && !spot_interval(light, dir, distance, &begin, &end)) return 0.0f;
+    if (light->type == LIGHT_DIRECTIONAL) return end - begin;
+    float cos_beta = dot(dir, ep->axis.xyz);
+    float sin_beta = fmax(length(cross(dir, ep->axis.xyz)), SIN_BETA_MIN);
+    float gamma_begin = begin > 0.0f ? atan2_approx(begin * sin_beta, ep->d_el - begin * cos_beta) : 0.0f;
+    float gamma_end = atan2_approx(end * sin_beta, ep->d_el - end * cos_beta);
+    return (gamma_end - gamma_begin) / (ep->d_el * sin_beta);
+}
+
+/* Per line sample: (distance, unshadowed weight): where it lands, and what it would
+ * gather unshadowed. Distance -1 where the slice has no camera sample beside it. */
+kernel void line_samples(global const frame_t* frame, global const view_t* views, global const light_t* lights,
+                         global const epipolar_t* ep, global const uint* camera_depth, global const float2* ranges,
+                         global const float4* sides, int n, global float2* line)
+{
+    int j = get_global_id(0), i = get_global_id(1);
+    if (j >= n || i >= ep->slices) return;
+    float q;
+    if (!line_q(ranges, i, j, n, &q)) {
+        line[i * n + j] = (float2)(-1.0f, 0.0f);
+        return;
+    }
+    float3 dir = line_direction(ep, sides, i, q);
+    float distance = landing_distance(frame, views, camera_depth, dir);
+    line[i * n + j] = (float2)(distance, unshadowed_weight(ep, lights + ep->light_index, dir, distance));
+}
+
+/* Two neighbouring line samples are not interpolated across when their distances, or
+ * their unshadowed weights, differ by more than `threshold` relatively. */
+inline int line_break(float2 a, float2 b, float threshold)
+{
+    return fabs(a.x - b.x) > threshold * fmin(a.x, b.x) || fabs(a.y - b.y) > threshold * fmax(a.y, b.y);
+}
+
+/* A line value (interpolated or not) stands for a camera sample's own when both are
+ * within `threshold` of it, relatively. */
+inline int line_matches(float2 value, float2 own, float threshold)
+{
+    return fabs(value.x - own.x) <= threshold * own.x
+           && fabs(value.y - own.y) <= threshold * fmax(fabs(value.y), fabs(own.y));
+}
+
+inline int line_sample_needed(global const float2* line, int j, int n, int step, float threshold)
+{
+    if (j % step == 0 || j == n - 1) return 1;
+    float2 here = line[j];
+    return line_break(line[j - 1], here, threshold) || line_break(here, line[j + 1], threshold);
+}
+
+/* Per line sample: its radiance (w = 1) where it is needed, else w = 0 for line_fill. */
+kernel void line_scatter(global const frame_t* frame, global const view_t* views, global const light_t* lights,
+                         global const epipolar_t* ep, global const float2* tree,
+                         global const integrand_t* integrand, global const float* tables,
+                         global const float2* ranges, global const float4* sides, global const float2* line, int n,
+                         int step, float threshold,
+                         global float4* radiance, global uint* counts)
+{
+    int j = get_global_id(0), i = get_global_id(1);
+    if (j >= n || i >= ep->slices) return;
+    global const float2* samples = line + i * n;
+    float4 result = (float4)(0.0f);
+    if (samples[j].x < 0.0f) {
+        result.w = 1.0f; /* the slice does not cross the screen: nothing reads it */
+    } else if (line_sample_needed(samples, j, n, step, threshold)) {
+        float q;
+        line_q(ranges, i, j, n, &q);
+        float3 dir = line_direction(ep, sides, i, q);
+        ray_span_t span;
+        if (ray_span(ep, lights + ep->light_index, frame, integrand, dir, samples[j].x, &span)) {
+            result.xyz = row_radiance(ep, slice_row(ep, tree, i), &span, integrand, tables, frame);
+            atomic_inc(counts + COUNT_COMPUTED);
+        }
+        result.w = 1.0f;
+    }
+    radiance[i * n + j] = result;
+}
+
+/* Per line sample not computed: linear in j between the computed samples either side. */
+kernel void line_fill(global const epipolar_t* ep, int n, global float4* radiance)
+{
+    int j = get_global_id(0), i = get_global_id(1);
+    if (j >= n || i >= ep->slices) return;
+    global float4* samples = radiance + i * n;
+    if (samples[j].w != 0.0f) return;
+    int left = j - 1, right = j + 1;
+    while (samples[left].w == 0.0f) --left;   /* j % step == 0 and j = n - 1 are computed: */
+    while (samples[right].w == 0.0f) ++right; /* both loops end within step samples */
+    float t = (float)(j - left) / (float)(right - left);
+    samples[j] = (float4)(mix(samples[left].xyz, samples[right].xyz, t), 0.0f);
+}
+
+/* The radiance of slice i at a camera sample (direction dir, own line value `own`): the
+ * line samples either side of its β when they match it (1 in *interpolated), else the
+ * nearer of them that does, else the camera sample's own walk along row i. `own.y` < 0:
+ * its unshadowed weight is not computed yet, since between two line samples without a
+ * break it is only needed for a spot light, whose cone's silhouette runs along the
+ * slices (it contains the light), between two lines. */
+inline float3 slice_radiance(global const epipolar_t* ep, global const float2* tree, global const light_t* light,
+                             global const integrand_t* integrand, global const float* tables,
+                             global const frame_t* frame, global const float2* ranges,
+                             global const float2* line, global const float4* radiance, int n, float threshold,
+                             int i, float q, float3 dir, float2* own, int* interpolated)
+{
+    float lo = ranges[i].x, hi = ranges[i].y;
+    float f = hi > lo ? clamp((q - lo) / (hi - lo), 0.0f, 1.0f) * (float)(n - 1) : 0.0f;
+    int j = min((int)f, n - 2);
+    float s = f - (float)j;
+    global const float2* samples = line + i * n;
+    global const float4* values = radiance + i * n;
+    float2 a = samples[j], b = samples[j + 1];
+    *interpolated = 1;
+    if (a.x >= 0.0f && !line_break(a, b, threshold)) {
+        float2 between = mix(a, b, s);
+        if (own->y < 0.0f) between.y = own->y;
+        if (line_matches(between, *own, threshold)) return mix(values[j].xyz, values[j + 1].xyz, s);
+    }
+    /* A break lies between the two: the nearer one on the camera sample's side of it,
+     * within a quarter of the threshold, since a single sample stands for the camera
+     * sample without following the gradient between them. */
+    if (own->y < 0.0f) own->y = unshadowed_weight(ep, light, dir, own->x);
+    int a_matches = a.x >= 0.0f && line_matches(a, *own, 0.25f * threshold);
+    int b_matches = b.x >= 0.0f && line_matches(b, *own, 0.25f * threshold);
+    if (a_matches && (!b_matches || s < 0.5f)) return values[j].xyz;
+    if (b_matches) return values[j + 1].xyz;
+    *interpolated = 0;
+    ray_span_t span;
+    if (!ray_span(ep, light, frame, integrand, dir, own->x, &span)) return (float3)(0.0f);
+    return row_radiance(ep, slice_row(ep, tree, i), &span, integrand, tables, frame);
+}
+
+kernel void gather(global const frame_t* frame, global const view_t* views, global const light_t* lights,
+                   global const epipolar_t* ep, global const float2* tree, global const integrand_t* integrand,
+                   global const float* tables, global const uint* camera_depth, global const float2* offsets,
+                   global const float2* ranges, global const float2* line, global const float4* radiance, int n,
+                   float threshold, global float4* scatter, global uint* counts)
+{
+    int sample = get_global_id(0);
+    if (sample < frame->width * frame->height * frame->spp) {
+        float3 dir = camera_ray(frame, views, offsets, sample);
+        float distance = fmin(as_float(camera_depth[sample]), frame->far);
+        float q = pseudo_beta(dot(dir, ep->axis.xyz), length(cross(dir, ep->axis.xyz)));
+        global const light_t* light = lights + ep->light_index;
+        float2 own = (float2)(distance, light->type == LIGHT_SPOT ? unshadowed_weight(ep, light, dir, distance) : -1.0f);
+        int i0, i1, from0, from1;
+        float t;
+        slices_around(ep, atan2_approx(dot(dir, ep->w.xyz), dot(dir, ep->u.xyz)), &i0, &i1, &t);
+        float3 near0 = slice_radiance(ep, tree, light, integrand, tables, frame, ranges, line, radiance, n, threshold,
+                                      i0, q, dir, &own, &from0);
+        float3 near1 = slice_radiance(ep, tree, light, integrand, tables, frame, ranges, line, radiance, n, threshold,
+                                      i1, q, dir, &own, &from1);
+        scatter[sample] += (float4)(mix(near0, near1, t), 0.0f);
+        if (!(from0 && from1)) atomic_inc(counts + COUNT_FIXED_UP);
+    }
+}

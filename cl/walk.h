@@ -1,0 +1,173 @@
+/* walk.h — one camera ray in a light's epipolar frame (docs/design.md §4.5 "traverse"):
+ * its β and its extent in γ, the two slices nearest it, and the walk along one row of
+ * the min-max tree that integrates its lit runs. traverse.cl walks two rows per camera
+ * sample with it; sampling.cl walks one row per epipolar sample, and two for the pixels
+ * no sample represents. */
+#ifndef CLRAYS_WALK_H
+#define CLRAYS_WALK_H
+
+#include "integrand.h"
+#include "minmax.h"
+
+/* TRAVERSAL_TREE and TRAVERSAL_SCAN come from clrays/structs.py (-D). */
+#ifndef TRAVERSAL
+#define TRAVERSAL TRAVERSAL_TREE
+#endif
+
+/* A camera ray's part of the light's frame: its integrand row (β), its extent
+ * [gamma_begin, gamma_end) and the chord inside the lamp [gamma_lamp0, gamma_lamp1),
+ * which the walks leave out. */
+typedef struct {
+    integrand_row_t ray;
+    float gamma_begin;
+    float gamma_end;
+    float gamma_lamp0;
+    float gamma_lamp1;
+} ray_span_t;
+
+/* β of a unit direction, with sin β and cos β. Clamped, not tested: a ray through a
+ * point light (β = 0) or straight away from a light (β = π) has a finite integral, and
+ * the clamp gives it a γ extent of SIN_BETA_MIN·s that the row coordinates resolve. β
+ * stays below float32(π), the S of an unblocked light ray, so that the ray away from the
+ * light sees those as lit. */
+inline float ray_beta(global const epipolar_t* ep, float3 dir, float* sin_beta, float* cos_beta)
+{
+    *cos_beta = dot(dir, ep->axis.xyz);
+    *sin_beta = fmax(length(cross(dir, ep->axis.xyz)), SIN_BETA_MIN);
+    return fmin(atan2(*sin_beta, *cos_beta), nextafter(M_PI_F, 0.0f));
+}
+
+/* The γ extent of the ray along dir up to distance; 0 when it has none (it misses a
+ * spot light's cone, or has no extent in γ). */
+inline int ray_span(global const epipolar_t* ep, global const light_t* light, global const frame_t* frame,
+                    global const integrand_t* integrand, float3 dir, float distance, ray_span_t* span)
+{
+    float sin_beta, cos_beta;
+    float beta = ray_beta(ep, dir, &sin_beta, &cos_beta);
+    float begin = 0.0f, end = distance;
+    if (light->type == LIGHT_SPOT && !spot_interval(light, dir, distance, &begin, &end))
+        return 0; /* the ray never enters the cone */
+    int directional = light->type == LIGHT_DIRECTIONAL;
+    span->gamma_begin = directional ? begin * sin_beta : atan2(begin * sin_beta, ep->d_el - begin * cos_beta);
+    span->gamma_end = directional ? end * sin_beta : atan2(end * sin_beta, ep->d_el - end * cos_beta);
+    if (!(span->gamma_end > span->gamma_begin)) return 0;
+    /* The lamp (lighting.h): a ray that passes within its radius of a point or spot light
+     * leaves out the chord inside it, as exact does; this keeps a ray through the light
+     * finite. For every other ray the chord is empty. */
+    span->gamma_lamp0 = span->gamma_lamp1 = span->gamma_end;
+    float radius = frame->lamp_radius, miss = ep->d_el * sin_beta;
+    if (!directional && miss < radius) {
+        float closest = ep->d_el * cos_beta, half_chord = sqrt(radius * radius - miss * miss);
+        float s0 = clamp(closest - half_chord, begin, end), s1 = clamp(closest + half_chord, begin, end);
+        span->gamma_lamp0 = atan2(s0 * sin_beta, ep->d_el - s0 * cos_beta);
+        span->gamma_lamp1 = atan2(s1 * sin_beta, ep->d_el - s1 * cos_beta);
+    }
+    span->ray = integrand_row(integrand, beta, sin_beta, cos_beta);
+    return 1;
+}
+
+/* The two slices whose centres bracket the angle α, and the weight t of the second. The
+ * slices wrap around when they close the circle, and clamp at the ends of a partial fan. */
+inline void slices_around(global const epipolar_t* ep, float alpha, int* i0, int* i1, float* t)
+{
+    float offset = alpha - ep->alpha_min;
+    offset -= 2.0f * M_PI_F * floor(offset / (2.0f * M_PI_F));
+    /* A partial fan: angles in the gap before alpha_min count as negative offsets. */
+    if (!ep->full_circle && offset > M_PI_F + 0.5f * ep->alpha_step * (float)ep->slices)
+        offset -= 2.0f * M_PI_F;
+    float f = offset / ep->alpha_step - 0.5f;
+    *i0 = (int)floor(f);
+    *t = f - (float)*i0;
+    *i1 = *i0 + 1;
+    if (ep->full_circle) {
+        *i0 = (*i0 + ep->slices) % ep->slices;
+        *i1 = *i1 % ep->slices;
+    } else {
+        *i0 = clamp(*i0, 0, ep->slices - 1);
+        *i1 = clamp(*i1, 0, ep->slices - 1);
+    }
+}
+
+/* The two slices nearest dir, and the weight t of the second. */
+inline void nearest_slices(global const epipolar_t* ep, float3 dir, int* i0, int* i1, float* t)
+{
+    slices_around(ep, atan2(dot(dir, ep->w.xyz), dot(dir, ep->u.xyz)), i0, i1, t);
+}
+
+/* The first row of slice i in the tree buffer. */
+inline global const float2* slice_row(global const epipolar_t* ep, global const float2* tree, int i)
+{
+    return tree + (size_t)i * 2 * (size_t)ep->gamma_samples;
+}
+
+/* Radiance of the lit part of [gamma_begin, gamma_end) of ray beta along one row.
+ * Adjacent lit nodes merge into one run, so the integrand is evaluated once per run.
+ *
+ * TRAVERSAL_TREE walks the tree without a stack: a node whose min > β is wholly lit,
+ * one whose max ≤ β wholly shadowed, else descend; after a node, move to the next
+ * one and climb while its index is even. TRAVERSAL_SCAN reads every texel. */
+inline float3 walk_row(global const epipolar_t* ep, global const float2* row, const integrand_row_t* ray,
+                       float gamma_begin, float gamma_end, global const integrand_t* in,
+                       global const float* tables, global const frame_t* frame)
+{
+    float beta = ray->beta;
+    int n = ep->gamma_samples;
+    int end = min(n, (int)ceil(gamma_end / ep->gamma_step));
+    float3 radiance = (float3)(0.0f);
+    int run_start = -1, run_end = 0;
+    int position = clamp((int)floor(gamma_begin / ep->gamma_step), 0, n);
+    while (position < end) {
+        int size;
+        int lit;
+#if TRAVERSAL == TRAVERSAL_TREE
+        /* The largest node starting at position: climb while the index is even. */
+        int level = position == 0 ? ep->levels : min(ep->levels, 31 - clz(position & -position));
+        for (;;) {
+            float2 node = row[level_offset(n, level) + (position >> level)];
+            if (node.x > beta) { lit = 1; break; }
+            if (node.y <= beta) { lit = 0; break; }
+            --level; /* mixed: descend to the left child */
+        }
+        size = 1 << level;
+#else
+        lit = row[position].x > beta;
+        size = 1;
+#endif
+        if (lit) {
+            if (run_start < 0) run_start = position;
+            run_end = position + size;
+        } else if (run_start >= 0) {
+            radiance += segment_radiance(in, tables, frame, ray, fmax(run_start * ep->gamma_step, gamma_begin),
+                                         fmin(run_end * ep->gamma_step, gamma_end));
+            run_start = -1;
+        }
+        position += size;
+    }
+    if (run_start >= 0)
+        radiance += segment_radiance(in, tables, frame, ray, fmax(run_start * ep->gamma_step, gamma_begin),
+                                     fmin(run_end * ep->gamma_step, gamma_end));
+    return radiance;
+}
+
+/* The radiance of a ray's lit runs along one row, the lamp's chord left out. */
+inline float3 row_radiance(global const epipolar_t* ep, global const float2* row, const ray_span_t* span,
+                           global const integrand_t* in, global const float* tables, global const frame_t* frame)
+{
+    float3 radiance = walk_row(ep, row, &span->ray, span->gamma_begin, span->gamma_lamp0, in, tables, frame);
+    if (span->gamma_lamp1 < span->gamma_end)
+        radiance += walk_row(ep, row, &span->ray, span->gamma_lamp1, span->gamma_end, in, tables, frame);
+    return radiance;
+}
+
+/* The radiance the ray would gather if nothing cast a shadow: what epipolar sampling
+ * refines on, since it breaks where the ray's extent or the light's cone does. */
+inline float3 unshadowed_radiance(const ray_span_t* span, global const integrand_t* in, global const float* tables,
+                                  global const frame_t* frame)
+{
+    float3 radiance = segment_radiance(in, tables, frame, &span->ray, span->gamma_begin, span->gamma_lamp0);
+    if (span->gamma_lamp1 < span->gamma_end)
+        radiance += segment_radiance(in, tables, frame, &span->ray, span->gamma_lamp1, span->gamma_end);
+    return radiance;
+}
+
+#endif

@@ -1,0 +1,144 @@
+"""Stage sampling: epipolar sampling, minmax's default path (`render.sampling: epipolar`,
+docs/design.md §4.5 "Epipolar sampling"). Host side of `cl/sampling.cl`.
+
+Instead of every camera sample walking the rows of its two nearest slices (stage
+traverse), samples placed along each slice's line on the screen walk their own row,
+every `render.initial_step`-th one and those beside a break; the rest are interpolated
+along the line, and each camera sample interpolates its two slices at its β, walking a
+row itself only where no line sample lies at its distance (the fix-up).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..device import Device, StageTimer
+from ..inputs import FrameBuffers
+from ..scene.model import TRAVERSALS
+from ..scene.camera import camera_basis
+from .integrand import DeviceIntegrand
+from .raster import RasterResult
+from .rectify import Epipolar, poles_on_screen
+
+@dataclass
+class SampleCounts:
+    """What epipolar sampling did in one frame, summed over its lights: line samples that
+    walked their row, camera samples interpolated on both of their slices, and camera
+    samples that walked at least one row themselves."""
+
+    computed: int = 0
+    interpolated: int = 0
+    fixed_up: int = 0
+
+    def __add__(self, other: SampleCounts) -> SampleCounts:
+        return SampleCounts(self.computed + other.computed, self.interpolated + other.interpolated,
+                            self.fixed_up + other.fixed_up)
+
+
+def line_ranges(scene, params: np.ndarray) -> np.ndarray:
+    """(slices, 2) float32: the range [lo, hi] of q (`pseudo_beta`) on the screen beside
+    each slice, that is
+    between the centre lines of its two neighbours (the camera samples that read the
+    slice); lo > hi where the slice does not cross the screen.
+
+    β on the screen has its only extremes at the epipole (0) and the anti-epipole (π), and
+    is monotonic along each slice's line, so over a wedge it is extreme where the wedge's
+    lines cross the screen border, at a screen corner inside the wedge, or at a pole on
+    screen. Found here from the lines and not from the pixels, since near an epipole just
+    off screen slices are narrower than a pixel, and a slice no pixel centre falls into
+    is still read by the pixels beside it."""
+    camera, image = scene.camera, scene.image
+    right, up, forward = camera_basis(camera)
+    tan_y = np.tan(np.radians(camera.fov_deg) / 2)
+    tan_x = tan_y * image.width / image.height
+    axis, u, w = (params[name][:3].astype(float) for name in ("axis", "u", "w"))
+    slices, step = int(params["slices"]), float(params["alpha_step"])
+    centres = float(params["alpha_min"]) + (np.arange(slices) + 0.5) * step
+
+    def screen_direction(sx, sy):
+        return forward + np.multiply.outer(sx * tan_x, right) + np.multiply.outer(sy * tan_y, up)
+
+    def beta_of(directions):
+        directions = directions / np.linalg.norm(directions, axis=-1, keepdims=True)
+        return np.arccos(np.clip(directions @ axis, -1.0, 1.0))
+
+    betas = []  # (slices, k) candidates, NaN where absent
+    for alpha in (centres - step, centres, centres + step):
+        normal = np.outer(np.cos(alpha), w) - np.outer(np.sin(alpha), u)  # the slice's plane
+        side = np.outer(np.cos(alpha), u) + np.outer(np.sin(alpha), w)  # its half
+        a, b, c = normal @ forward, tan_x * (normal @ right), tan_y * (normal @ up)  # a + b·sx + c·sy = 0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            edges = [(np.full(slices, edge), -(a + b * edge) / c) for edge in (-1.0, 1.0)]
+            edges += [(-(a + c * edge) / b, np.full(slices, edge)) for edge in (-1.0, 1.0)]
+        for sx, sy in edges:
+            inside = (np.abs(sx) <= 1.0 + 1e-6) & (np.abs(sy) <= 1.0 + 1e-6)
+            directions = screen_direction(np.where(inside, sx, 0.0), np.where(inside, sy, 0.0))
+            on_half = np.einsum("ij,ij->i", directions, side) > 0
+            betas.append(np.where(inside & on_half, beta_of(directions), np.nan))
+    corners = np.array([(-1, -1), (-1, 1), (1, -1), (1, 1)], dtype=float)
+    corner_dirs = screen_direction(corners[:, 0], corners[:, 1])
+    corner_alpha = np.arctan2(corner_dirs @ w, corner_dirs @ u)
+    for corner_beta, alpha in zip(beta_of(corner_dirs), corner_alpha):
+        near = np.abs((alpha - centres + np.pi) % (2 * np.pi) - np.pi) < step
+        betas.append(np.where(near, corner_beta, np.nan))
+    betas = np.stack(betas, axis=1)
+    lo = np.min(np.where(np.isnan(betas), np.inf, betas), axis=1)
+    hi = np.max(np.where(np.isnan(betas), -np.inf, betas), axis=1)
+    epipole, anti_epipole = poles_on_screen(scene, axis)
+    if epipole:  # every slice's line starts there
+        lo[:] = 0.0
+    if anti_epipole:  # or ends there
+        hi[:] = np.pi
+    with np.errstate(invalid="ignore"):
+        return np.stack([pseudo_beta(lo), pseudo_beta(hi)], axis=1).astype(np.float32)
+
+
+def pseudo_beta(beta: np.ndarray) -> np.ndarray:
+    """q(β), the monotonic stand-in for β that line samples are spaced evenly in:
+    tan(β/2) up to π/2, 2 - cot(β/2) above (cl/sampling.cl pseudo_beta)."""
+    half = np.asarray(beta, dtype=float) / 2
+    with np.errstate(divide="ignore"):
+        return np.where(half <= np.pi / 4, np.tan(half), 2.0 - 1.0 / np.tan(half))
+
+
+def slice_sides(params: np.ndarray) -> np.ndarray:
+    """(slices, 4) float32: u·cos α + w·sin α at each slice's centre, the direction its
+    half-plane opens towards."""
+    u, w = params["u"][:3].astype(float), params["w"][:3].astype(float)
+    alpha = float(params["alpha_min"]) + (np.arange(int(params["slices"])) + 0.5) * float(params["alpha_step"])
+    sides = np.zeros((len(alpha), 4), dtype=np.float32)
+    sides[:, :3] = np.outer(np.cos(alpha), u) + np.outer(np.sin(alpha), w)
+    return sides
+
+
+def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterResult, epipolar: Epipolar,
+                      integrand: DeviceIntegrand, scatter, timer: StageTimer) -> SampleCounts:
+    """Add one light's in-scattered radiance into `scatter` (float4 per camera sample)."""
+    inputs = buffers.inputs
+    render = inputs.scene.render
+    slices, n = int(epipolar.params["slices"]), render.line_samples
+    step, threshold = np.int32(render.initial_step), np.float32(render.refine_threshold)
+    ranges_buffer = device.buffer(line_ranges(inputs.scene, epipolar.params), writable=False)
+    sides = device.buffer(slice_sides(epipolar.params), writable=False)
+    line = device.buffer(nbytes=8 * slices * n)  # (distance, lit extent) per line sample
+    radiance = device.buffer(nbytes=16 * slices * n)
+    counts = device.buffer(np.zeros(2, dtype=np.uint32))
+    samples, n32 = inputs.samples, np.int32(n)
+    traversal = {"TRAVERSAL": TRAVERSALS.index(render.traversal)}
+
+    def run(name, global_size, local_size, *args):
+        event = device.kernel("sampling", name, traversal)(device.queue, global_size, local_size, *args)
+        timer.add("traverse", event)  # the traverse stage, sampled
+
+    run("line_samples", (n, slices), None, buffers.params, buffers.views, buffers.lights, epipolar.buffer,
+        rastered.camera_depth, ranges_buffer, sides, n32, line)
+    run("line_scatter", (n, slices), None, buffers.params, buffers.views, buffers.lights,
+        epipolar.buffer, epipolar.tree, integrand.params, integrand.data, ranges_buffer, sides, line, n32, step,
+        threshold, radiance, counts)
+    run("line_fill", (n, slices), None, epipolar.buffer, n32, radiance)
+    run("gather", (samples,), None, buffers.params, buffers.views, buffers.lights, epipolar.buffer,
+        epipolar.tree, integrand.params, integrand.data, rastered.camera_depth, buffers.offsets, ranges_buffer, line,
+        radiance, n32, threshold, scatter, counts)
+    computed, fixed_up = (int(count) for count in device.read(counts, 2, np.uint32))
+    return SampleCounts(computed, samples - fixed_up, fixed_up)
