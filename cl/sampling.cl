@@ -6,8 +6,8 @@
  *   line_samples  per line sample: the camera distance where it lands, and what its
  *                 ray would gather unshadowed (the "line value")
  *   line_scatter  per line sample: walk its own row where it is needed (every
- *                 `step`-th sample, the ends, both sides of a break in either of
- *                 those); the others are left for line_fill
+ *                 `step`-th sample, the ends, both sides of a break: an edge, a spot
+ *                 light's cone, the epipole); the others are left for line_fill
  *   line_fill     per line sample not computed: interpolate between the computed
  *                 samples either side (no break lies between them)
  *   gather        per camera sample: interpolate each of its two slices at its β when
@@ -135,11 +135,17 @@ kernel void line_samples(global const frame_t* frame, global const view_t* views
     line[i * n + j] = (float2)(distance, unshadowed_weight(ep, lights + ep->light_index, dir, distance));
 }
 
-/* Two neighbouring line samples are not interpolated across when their distances, or
- * their unshadowed weights, differ by more than `threshold` relatively. */
-inline int line_break(float2 a, float2 b, float threshold)
+/* Two neighbouring line samples are not interpolated across when their distances differ
+ * by more than `threshold` relatively (an edge), or their unshadowed weights (a spot
+ * light's cone, or the epipole, where 1/sin β grows faster than samples follow). */
+inline int distance_breaks(float2 a, float2 b, float threshold)
 {
-    return fabs(a.x - b.x) > threshold * fmin(a.x, b.x) || fabs(a.y - b.y) > threshold * fmax(a.y, b.y);
+    return fabs(a.x - b.x) > threshold * fmin(a.x, b.x);
+}
+
+inline int weight_breaks(float2 a, float2 b, float threshold)
+{
+    return fabs(a.y - b.y) > threshold * fmax(fabs(a.y), fabs(b.y));
 }
 
 /* A line value (interpolated or not) stands for a camera sample's own when both are
@@ -150,11 +156,20 @@ inline int line_matches(float2 value, float2 own, float threshold)
            && fabs(value.y - own.y) <= threshold * fmax(fabs(value.y), fabs(own.y));
 }
 
+/* Every `step`-th sample, the ends, both sides of a break, and where the unshadowed
+ * weight strays from the straight line between the samples `step` apart around it by
+ * more than 1/64 of the threshold: near the epipole 1/sin β curves, and line_fill
+ * would draw that straight line through the radiance. */
 inline int line_sample_needed(global const float2* line, int j, int n, int step, float threshold)
 {
     if (j % step == 0 || j == n - 1) return 1;
-    float2 here = line[j];
-    return line_break(line[j - 1], here, threshold) || line_break(here, line[j + 1], threshold);
+    float2 before = line[j - 1], here = line[j], after = line[j + 1];
+    if (distance_breaks(before, here, threshold) || weight_breaks(before, here, threshold)
+        || distance_breaks(here, after, threshold) || weight_breaks(here, after, threshold))
+        return 1;
+    int left = j - j % step, right = min(left + step, n - 1);
+    float straight = mix(line[left].y, line[right].y, (float)(j - left) / (float)(right - left));
+    return fabs(straight - here.y) > threshold / 64.0f * fabs(here.y);
 }
 
 /* Per line sample: its radiance (w = 1) where it is needed, else w = 0 for line_fill. */
@@ -202,9 +217,10 @@ kernel void line_fill(global const epipolar_t* ep, int n, global float4* radianc
 /* The radiance of slice i at a camera sample (direction dir, own line value `own`): the
  * line samples either side of its β when they match it (1 in *interpolated), else the
  * nearer of them that does, else the camera sample's own walk along row i. `own.y` < 0:
- * its unshadowed weight is not computed yet, since between two line samples without a
- * break it is only needed for a spot light, whose cone's silhouette runs along the
- * slices (it contains the light), between two lines. */
+ * its unshadowed weight is not computed yet. Interpolation needs it for a spot light
+ * only: the weight of other lights is smooth between two lines, but a spot light's
+ * cone has its silhouette along the slices (the cone contains the light), so it can
+ * pass between a camera sample and its lines. */
 inline float3 slice_radiance(global const epipolar_t* ep, global const float2* tree, global const light_t* light,
                              global const integrand_t* integrand, global const float* tables,
                              global const frame_t* frame, global const float2* ranges,
@@ -219,19 +235,21 @@ inline float3 slice_radiance(global const epipolar_t* ep, global const float2* t
     global const float4* values = radiance + i * n;
     float2 a = samples[j], b = samples[j + 1];
     *interpolated = 1;
-    if (a.x >= 0.0f && !line_break(a, b, threshold)) {
+    if (a.x < 0.0f) { /* the slice does not cross the screen */
+    } else if (!weight_breaks(a, b, threshold)) {
         float2 between = mix(a, b, s);
         if (own->y < 0.0f) between.y = own->y;
         if (line_matches(between, *own, threshold)) return mix(values[j].xyz, values[j + 1].xyz, s);
+        /* An edge lies between the two: the nearer one on the camera sample's side of
+         * it, within a quarter of the threshold, since a single sample stands for the
+         * camera sample without following the gradient between them. */
+        if (own->y < 0.0f) own->y = unshadowed_weight(ep, light, dir, own->x);
+        int a_matches = line_matches(a, *own, 0.25f * threshold), b_matches = line_matches(b, *own, 0.25f * threshold);
+        if (a_matches && (!b_matches || s < 0.5f)) return values[j].xyz;
+        if (b_matches) return values[j + 1].xyz;
     }
-    /* A break lies between the two: the nearer one on the camera sample's side of it,
-     * within a quarter of the threshold, since a single sample stands for the camera
-     * sample without following the gradient between them. */
-    if (own->y < 0.0f) own->y = unshadowed_weight(ep, light, dir, own->x);
-    int a_matches = a.x >= 0.0f && line_matches(a, *own, 0.25f * threshold);
-    int b_matches = b.x >= 0.0f && line_matches(b, *own, 0.25f * threshold);
-    if (a_matches && (!b_matches || s < 0.5f)) return values[j].xyz;
-    if (b_matches) return values[j + 1].xyz;
+    /* Else, and where the light's own radiance jumps between the two (its cone, the
+     * epipole), the camera sample walks the row itself. */
     *interpolated = 0;
     ray_span_t span;
     if (!ray_span(ep, light, frame, integrand, dir, own->x, &span)) return (float3)(0.0f);

@@ -1,0 +1,128 @@
+"""Epipolar sampling (`render.sampling: epipolar`, minmax's default) against the walk of
+every camera sample (`pixel`), which it interpolates (docs/design.md §4.5). Surfaces are
+black (albedo 0), so the images hold the in-scattering alone, the only part sampling
+changes. Tolerances are about twice the errors measured when they were written."""
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from clrays.reference.metrics import depth_edges, depth_map, image_error
+from clrays.scene.geometry import box_triangles, sphere_triangles
+from conftest import DirectionalLight, PointLight, SpotLight, grid_plane, make_scene, v3
+
+
+def _sampled(scene, sampling):
+    return replace(scene, render=replace(scene.render, sampling=sampling))
+
+
+def _both(renderer, scene):
+    """(epipolar result, pixel result) of one scene."""
+    return (renderer.render(_sampled(scene, "epipolar"), "minmax", reuse=False),
+            renderer.render(_sampled(scene, "pixel"), "minmax", reuse=False))
+
+
+def _error(renderer, scene):
+    epipolar, pixel = _both(renderer, scene)
+    assert np.all(np.isfinite(epipolar.image))
+    return image_error(epipolar.image, pixel.image, depth_edges(depth_map(scene))), epipolar
+
+
+def _shafts(light, extra=(), **kwargs):
+    """Fog over a floor, under a slatted board that cuts the light into shafts, plus `extra`."""
+    slats = [box_triangles([-3.0 + 0.8 * k, 3.0, -2.0], [-2.6 + 0.8 * k, 3.1, 2.0]) for k in range(8)]
+    triangles = np.concatenate([grid_plane(0.0, 8.0, 4), *slats, *extra])
+    settings = dict(width=96, height=64, far=25.0, sigma_s=0.08, sigma_a=0.02, albedo=0.0)
+    return make_scene(triangles, [light], **{**settings, **kwargs})
+
+
+POINT = PointLight(v3(0.3, 5.0, -0.5), np.full(3, 60.0))
+
+
+@pytest.mark.parametrize("occluder", ["pole", "sphere"])
+def test_interpolation_matches_the_walk_across_depth_breaks(renderer, occluder):
+    """A thin pole in front of the shafts, a sphere against a far wall: pixels whose
+    distance the line samples beside them do not share are walked, not smeared."""
+    if occluder == "pole":
+        extra = [box_triangles([0.4, 0.0, 2.0], [0.47, 4.0, 2.07])]  # thinner than two pixels
+    else:
+        extra = [sphere_triangles(v3(-0.5, 1.2, -1.0), 0.9, 24), box_triangles([-8, 0, -4.2], [8, 8, -4.0])]
+    error, epipolar = _error(renderer, _shafts(POINT, extra))
+    assert epipolar.samples.fixed_up > 0  # the breaks were found
+    assert error.rmse < 0.01 and error.p99 < 0.03, error
+
+
+CAMERA = dict(position=(0.0, 2.0, 8.0), look_at=(0.0, 1.5, 0.0), fov_deg=50.0)
+EPIPOLES = {  # where the light projects, for the camera above
+    "in view": v3(0.3, 3.5, 0.0),
+    "off screen": v3(9.0, 4.0, 2.0),
+    "at a corner": v3(-3.2, 3.6, 1.0),
+    "behind the camera": v3(1.0, 4.0, 11.0),
+}
+
+
+@pytest.mark.parametrize("where", EPIPOLES)
+def test_epipole_anywhere(renderer, where):
+    scene = _shafts(PointLight(EPIPOLES[where], np.full(3, 60.0)), **CAMERA)
+    error, _ = _error(renderer, scene)
+    assert error.rmse < 0.01 and error.p99 < 0.03, error
+
+
+@pytest.mark.parametrize("direction", ["along the view", "against the view", "across the view"])
+def test_directional_light_parallel_to_the_view(renderer, direction):
+    """A sun straight behind the camera (anti-epipole at the centre), straight ahead
+    (epipole at the centre), and parallel to the image plane (parallel lines)."""
+    forward = v3(0.0, -0.5, -8.0) / np.linalg.norm([0.0, -0.5, -8.0])
+    light_direction = {"along the view": forward, "against the view": -forward,
+                       "across the view": v3(1.0, 0.0, 0.0)}[direction]
+    board = [box_triangles([-3.0 + 0.8 * k, -1.0, -2.0], [-2.6 + 0.8 * k, 4.0, -1.9]) for k in range(8)]
+    scene = make_scene(np.concatenate([grid_plane(0.0, 8.0, 4), *board]),
+                       [DirectionalLight(light_direction, np.full(3, 1.5))], width=96, height=64, far=25.0,
+                       sigma_s=0.08, sigma_a=0.02, albedo=0.0, **CAMERA)
+    error, _ = _error(renderer, scene)
+    assert error.rmse < 0.01 and error.p99 < 0.03, error
+
+
+def test_no_seams_between_slices(renderer):
+    """Unshadowed fog under a spot light: the in-scattering is smooth, so the epipolar
+    image follows the walked one everywhere, and its steps from pixel to pixel are no
+    larger (a seam between two slices' lines would be a step of its own)."""
+    spot = SpotLight(v3(0.0, 5.0, 0.0), v3(0.0, -1.0, 0.0), 35.0, np.full(3, 80.0))
+    scene = make_scene(grid_plane(0.0, 8.0, 4), [spot], width=96, height=64, far=25.0, sigma_s=0.08,
+                       sigma_a=0.02, albedo=0.0, **CAMERA)
+    epipolar, pixel = _both(renderer, scene)
+    lum_e, lum_p = epipolar.image.sum(-1), pixel.image.sum(-1)
+    inside = lum_p > 0.05 * lum_p.max()
+    assert np.max(np.abs(lum_e - lum_p)[inside] / lum_p[inside]) < 0.05
+    for axis in (0, 1):
+        steps_e, steps_p = np.abs(np.diff(lum_e, axis=axis)), np.abs(np.diff(lum_p, axis=axis))
+        assert steps_e.max() <= 1.05 * steps_p.max() + 1e-6
+
+
+def test_orbit_adds_no_flicker(renderer):
+    """60 frames of a camera orbiting the shafts: the change from frame to frame with
+    epipolar sampling is that of the walk (sampling moves with the lines, so a flicker of
+    its own would show as a larger change)."""
+    scene = _shafts(POINT, width=64, height=40)
+    changes = {"epipolar": [], "pixel": []}
+    previous = {}
+    for frame in range(60):
+        angle = 2 * np.pi * frame / 60
+        camera = replace(scene.camera, position=v3(8 * np.sin(angle), 2.5, 8 * np.cos(angle)))
+        for sampling in changes:
+            image = renderer.render(_sampled(replace(scene, camera=camera), sampling), "minmax", reuse=False).image
+            if sampling in previous:
+                changes[sampling].append(np.mean(np.abs(image - previous[sampling])))
+            previous[sampling] = image
+    epipolar, pixel = np.array(changes["epipolar"]), np.array(changes["pixel"])
+    assert np.max(np.abs(epipolar - pixel) / pixel) < 0.05
+    assert epipolar.mean() <= 1.02 * pixel.mean()
+
+
+def test_stats_count_what_sampling_did(renderer):
+    scene = _shafts(POINT)
+    epipolar, pixel = _both(renderer, scene)
+    counts = epipolar.samples
+    assert counts.interpolated + counts.fixed_up == 96 * 64
+    assert 0 < counts.computed < counts.interpolated
+    assert pixel.samples is None
