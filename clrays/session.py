@@ -249,8 +249,9 @@ class Renderer:
 
 def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
     """(what, bytes) of the large device buffers one frame allocates, before allocating
-    them: the per-sample buffers, every shadow map, and each light's min-max tree."""
-    scene = inputs.scene
+    them: the per-sample buffers, every shadow map, each light's min-max tree and the
+    epipolar line samples."""
+    scene = with_derived_sizes(inputs.scene)
     samples, pixels = inputs.samples, scene.image.width * scene.image.height
     # The one-pass raster (devices with 64-bit atomics) also keeps a packed depth–triangle
     # key per sample while it runs; counted always, so the check errs on the safe side.
@@ -265,6 +266,8 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
         gamma_samples = 1 << max(int(np.ceil(np.log2(scene.render.gamma_samples))), 1)
         tree = 8 * scene.render.slices * 2 * gamma_samples
         sizes += [(f"min-max tree of light {index}", tree) for index in range(len(scene.lights))]
+        if scene.render.sampling == "epipolar":  # per line sample: (distance, weight), radiance twice, one light at a time
+            sizes.append(("epipolar line samples", 40 * scene.render.slices * scene.render.line_samples))
     return sizes
 
 

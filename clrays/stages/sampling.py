@@ -136,6 +136,10 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
     run("line_scatter", (n, slices), None, buffers.params, buffers.views, buffers.lights,
         epipolar.buffer, epipolar.tree, integrand.params, integrand.data, ranges_buffer, sides, line, n32, step,
         threshold, radiance, counts)
+    refined = device.buffer(nbytes=16 * slices * n)
+    run("line_refine", (n, slices), None, buffers.params, buffers.lights, epipolar.buffer, epipolar.tree,
+        integrand.params, integrand.data, ranges_buffer, sides, line, n32, threshold, radiance, refined, counts)
+    radiance = refined
     run("line_fill", (n, slices), None, epipolar.buffer, n32, radiance)
     run("gather", (samples,), None, buffers.params, buffers.views, buffers.lights, epipolar.buffer,
         epipolar.tree, integrand.params, integrand.data, rastered.camera_depth, buffers.offsets, ranges_buffer, line,
