@@ -23,7 +23,9 @@
  * β), [lo_i, hi_i] being the range of the screen beside that slice (clrays/stages/
  * sampling.py line_ranges): along a line from the epipole β is monotonic, so it orders
  * the samples.
- * A line sample walks one row (it lies on its slice); a camera sample would walk two. */
+ * A line sample walks one row (it lies on its slice); a camera sample would walk two.
+ * Radiance is kept times sin β for point and spot lights (radiance_scale): what remains
+ * varies slowly even next to the light, where the brightest pixels are. */
 #include "walk.h"
 
 /* The counters of clrays.stages.sampling.SampleCounts: line samples that walked their
@@ -81,11 +83,13 @@ inline int line_q(global const float2* ranges, int i, int j, int n, float* q)
 }
 
 /* The direction at pseudo-angle q in the half-plane of slice i's centre (sides[i]). */
-inline float3 line_direction(global const epipolar_t* ep, global const float4* sides, int i, float q)
+inline float3 line_direction(global const epipolar_t* ep, global const float4* sides, int i, float q,
+                             float* sin_beta)
 {
     float k = q <= 1.0f ? q : 2.0f - q; /* tan(β/2), or cot(β/2) */
     float across = 2.0f * k / (1.0f + k * k), along = (1.0f - k * k) / (1.0f + k * k);
     along = q <= 1.0f ? along : -along;
+    *sin_beta = across;
     return normalize(along * ep->axis.xyz + across * sides[i].xyz);
 }
 
@@ -102,11 +106,11 @@ inline float landing_distance(global const frame_t* frame, global const view_t* 
 }
 
 /* What the ray along dir up to distance would gather if nothing cast a shadow, without
- * the medium's attenuation and phase: σs·I/(d_el·sin β) times the γ it sweeps for a point
- * or spot light (only the part inside a spot light's cone), the length for a directional
- * light, up to the constant σs·I. It breaks where the in-scattering itself breaks: at a
- * spot light's cone, and near the epipole, where 1/sin β grows faster than samples along
- * a line can follow. */
+ * the medium's attenuation and phase, and without the factor 1/sin β of a point or spot
+ * light (which `radiance_scale` takes out of the radiance exactly): the γ it sweeps,
+ * divided by d_el, for a point or spot light (only the part inside a spot light's cone),
+ * the lit length for a directional light. It breaks where the in-scattering breaks: at
+ * the ray's end (an edge) and at a spot light's cone. */
 inline float unshadowed_weight(global const epipolar_t* ep, global const light_t* light, float3 dir,
                                float distance)
 {
@@ -117,7 +121,15 @@ inline float unshadowed_weight(global const epipolar_t* ep, global const light_t
     float sin_beta = fmax(length(cross(dir, ep->axis.xyz)), SIN_BETA_MIN);
     float gamma_begin = begin > 0.0f ? atan2_approx(begin * sin_beta, ep->d_el - begin * cos_beta) : 0.0f;
     float gamma_end = atan2_approx(end * sin_beta, ep->d_el - end * cos_beta);
-    return (gamma_end - gamma_begin) / (ep->d_el * sin_beta);
+    return (gamma_end - gamma_begin) / ep->d_el;
+}
+
+/* The factor radiance is stored and interpolated under: sin β for a point or spot light,
+ * whose in-scattering grows as 1/sin β near the epipole, faster than a straight line
+ * between samples follows; 1 for a directional light. */
+inline float radiance_scale(global const light_t* light, float sin_beta)
+{
+    return light->type == LIGHT_DIRECTIONAL ? 1.0f : fmax(sin_beta, SIN_BETA_MIN);
 }
 
 /* Per line sample: (distance, unshadowed weight): where it lands, and what it would
@@ -133,7 +145,8 @@ kernel void line_samples(global const frame_t* frame, global const view_t* views
         line[i * n + j] = (float2)(-1.0f, 0.0f);
         return;
     }
-    float3 dir = line_direction(ep, sides, i, q);
+    float sin_beta;
+    float3 dir = line_direction(ep, sides, i, q, &sin_beta);
     float distance = landing_distance(frame, views, camera_depth, dir);
     line[i * n + j] = (float2)(distance, unshadowed_weight(ep, lights + ep->light_index, dir, distance));
 }
@@ -159,37 +172,31 @@ inline int line_matches(float2 value, float2 own, float threshold)
            && fabs(value.y - own.y) <= threshold * fmax(fabs(value.y), fabs(own.y));
 }
 
-/* Every `step`-th sample, the ends, both sides of a break, and where the unshadowed
- * weight strays from the straight line between the samples `step` apart around it by
- * more than 1/64 of the threshold: near the epipole 1/sin β curves, and line_fill
- * would draw that straight line through the radiance. */
+/* Every `step`-th sample, the ends, and both sides of a break. */
 inline int line_sample_needed(global const float2* line, int j, int n, int step, float threshold)
 {
     if (j % step == 0 || j == n - 1) return 1;
     float2 before = line[j - 1], here = line[j], after = line[j + 1];
-    if (distance_breaks(before, here, threshold) || weight_breaks(before, here, threshold)
-        || distance_breaks(here, after, threshold) || weight_breaks(here, after, threshold))
-        return 1;
-    int left = j - j % step, right = min(left + step, n - 1);
-    float straight = mix(line[left].y, line[right].y, (float)(j - left) / (float)(right - left));
-    return fabs(straight - here.y) > threshold / 64.0f * fabs(here.y);
+    return distance_breaks(before, here, threshold) || weight_breaks(before, here, threshold)
+           || distance_breaks(here, after, threshold) || weight_breaks(here, after, threshold);
 }
 
-/* The radiance of line sample j of slice i: its own walk along row i (0 where its ray
- * has no extent). */
+/* The radiance of line sample j of slice i, times radiance_scale: its own walk along
+ * row i (0 where its ray has no extent). */
 inline float3 line_sample_radiance(global const frame_t* frame, global const light_t* lights,
                                    global const epipolar_t* ep, global const float2* tree,
                                    global const integrand_t* integrand, global const float* tables,
                                    global const float2* ranges, global const float4* sides, float distance,
                                    int i, int j, int n, global uint* counts)
 {
-    float q;
+    float q, sin_beta;
     line_q(ranges, i, j, n, &q);
-    float3 dir = line_direction(ep, sides, i, q);
+    float3 dir = line_direction(ep, sides, i, q, &sin_beta);
     ray_span_t span;
-    if (!ray_span(ep, lights + ep->light_index, frame, integrand, dir, distance, &span)) return (float3)(0.0f);
+    global const light_t* light = lights + ep->light_index;
+    if (!ray_span(ep, light, frame, integrand, dir, distance, &span)) return (float3)(0.0f);
     atomic_inc(counts + COUNT_COMPUTED);
-    return row_radiance(ep, slice_row(ep, tree, i), &span, integrand, tables, frame);
+    return radiance_scale(light, sin_beta) * row_radiance(ep, slice_row(ep, tree, i), &span, integrand, tables, frame);
 }
 
 inline float luminance(float3 c) { return dot(c, (float3)(0.2126f, 0.7152f, 0.0722f)); }
@@ -203,7 +210,7 @@ inline int radiance_breaks(float3 a, float3 b, float threshold)
     return fabs(la - lb) > threshold * fmax(la, lb);
 }
 
-/* Per line sample: its radiance (w = 1) where it is needed, else w = 0. */
+/* Per line sample: its radiance times radiance_scale (w = 1) where it is needed, else w = 0. */
 kernel void line_scatter(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                          global const epipolar_t* ep, global const float2* tree,
                          global const integrand_t* integrand, global const float* tables,
@@ -293,7 +300,7 @@ inline float3 slice_radiance(global const epipolar_t* ep, global const float2* t
         if (own->y < 0.0f) between.y = own->y;
         float4 va = values[j], vb = values[j + 1];
         if (line_matches(between, *own, threshold) && !radiance_breaks(va.xyz, vb.xyz, threshold))
-            return mix(va.xyz, vb.xyz, s);
+            return mix(va.xyz, vb.xyz, s) / radiance_scale(light, length(cross(dir, ep->axis.xyz)));
     }
     /* Else (an edge lies between the two, or the camera sample is off both lines' surfaces,
      * or a shadow's edge crosses the line between them) and where the light's own
