@@ -2,12 +2,14 @@
  * two slices nearest the sample's α over [0, γ_D), integrate the lit runs with the
  * integrand tables, blend the two slices (docs/design.md §4 "traverse").
  * Reads frame, views, lights, epipolar, tree, integrand, tables, camera_depth,
- * offsets; adds into scatter (float4 per camera sample).
+ * offsets, and for a textured light textured, texture_basis, texture_prefix
+ * (docs/light-textures.md); adds into scatter (float4 per camera sample).
  *
  * TRAVERSAL_TREE walks the tree without a stack: a node whose min > β is wholly lit,
  * one whose max ≤ β wholly shadowed, else descend; after a node, move to the next
  * one and climb while its index is even. TRAVERSAL_SCAN reads every texel. */
 #include "integrand.h"
+#include "light_texture.h"
 #include "minmax.h"
 
 /* TRAVERSAL_TREE and TRAVERSAL_SCAN come from clrays/structs.py (-D). */
@@ -15,11 +17,26 @@
 #define TRAVERSAL TRAVERSAL_TREE
 #endif
 
+/* A lit run's radiance: the integrand tables' segment, times the light's texture along
+ * this row when it has one (light_texture.h). */
+inline float3 run_radiance(global const integrand_t* in, global const float* tables, global const frame_t* frame,
+                           const integrand_row_t* ray, global const textured_integrand_t* textured,
+                           global const float* texture_basis, global const float* row_prefix, float gamma_step,
+                           float gamma0, float gamma1)
+{
+    float3 untextured = segment_radiance(in, tables, frame, ray, gamma0, gamma1);
+    if (!textured->textured || !(gamma1 > gamma0)) return untextured;
+    return textured_run_radiance(textured, texture_basis, row_prefix, gamma_step, ray, untextured, gamma0, gamma1);
+}
+
 /* Radiance of the lit part of [gamma_begin, gamma_end) of ray beta along one row.
- * Adjacent lit nodes merge into one run, so the integrand is evaluated once per run. */
+ * Adjacent lit nodes merge into one run, so the integrand is evaluated once per run.
+ * row_prefix: this row's texture prefix sums (unread for an untextured light). */
 inline float3 walk_row(global const epipolar_t* ep, global const float2* row, const integrand_row_t* ray,
                        float gamma_begin, float gamma_end, global const integrand_t* in,
-                       global const float* tables, global const frame_t* frame)
+                       global const float* tables, global const frame_t* frame,
+                       global const textured_integrand_t* textured, global const float* texture_basis,
+                       global const float* row_prefix)
 {
     float beta = ray->beta;
     int n = ep->gamma_samples;
@@ -48,22 +65,25 @@ inline float3 walk_row(global const epipolar_t* ep, global const float2* row, co
             if (run_start < 0) run_start = position;
             run_end = position + size;
         } else if (run_start >= 0) {
-            radiance += segment_radiance(in, tables, frame, ray, fmax(run_start * ep->gamma_step, gamma_begin),
-                                         fmin(run_end * ep->gamma_step, gamma_end));
+            radiance += run_radiance(in, tables, frame, ray, textured, texture_basis, row_prefix, ep->gamma_step,
+                                     fmax(run_start * ep->gamma_step, gamma_begin),
+                                     fmin(run_end * ep->gamma_step, gamma_end));
             run_start = -1;
         }
         position += size;
     }
     if (run_start >= 0)
-        radiance += segment_radiance(in, tables, frame, ray, fmax(run_start * ep->gamma_step, gamma_begin),
-                                     fmin(run_end * ep->gamma_step, gamma_end));
+        radiance += run_radiance(in, tables, frame, ray, textured, texture_basis, row_prefix, ep->gamma_step,
+                                 fmax(run_start * ep->gamma_step, gamma_begin), fmin(run_end * ep->gamma_step, gamma_end));
     return radiance;
 }
 
 kernel void traverse(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                      global const epipolar_t* epipolar, global const float2* tree,
                      global const integrand_t* integrand, global const float* tables,
-                     global const uint* camera_depth, global const float2* offsets, global float4* scatter)
+                     global const uint* camera_depth, global const float2* offsets,
+                     global const textured_integrand_t* textured, global const float* texture_basis,
+                     global const float* texture_prefix, global float4* scatter)
 {
     int sample = get_global_id(0);
     if (sample >= frame->width * frame->height * frame->spp) return;
@@ -122,11 +142,19 @@ kernel void traverse(global const frame_t* frame, global const view_t* views, gl
     }
     size_t stride = 2 * (size_t)ep->gamma_samples;
     integrand_row_t ray = integrand_row(integrand, beta, sin_beta, cos_beta);
-    float3 near0 = walk_row(ep, tree + i0 * stride, &ray, gamma_begin, gamma_lamp0, integrand, tables, frame);
-    float3 near1 = walk_row(ep, tree + i1 * stride, &ray, gamma_begin, gamma_lamp0, integrand, tables, frame);
+    /* A textured light's prefix sums, one block per slice (light_texture.cl). */
+    size_t prefix_stride = textured->textured ? (size_t)3 * (textured->rank + 1) * (ep->gamma_samples + 1) : 0;
+    global const float* prefix0 = texture_prefix + i0 * prefix_stride;
+    global const float* prefix1 = texture_prefix + i1 * prefix_stride;
+    float3 near0 = walk_row(ep, tree + i0 * stride, &ray, gamma_begin, gamma_lamp0, integrand, tables, frame,
+                            textured, texture_basis, prefix0);
+    float3 near1 = walk_row(ep, tree + i1 * stride, &ray, gamma_begin, gamma_lamp0, integrand, tables, frame,
+                            textured, texture_basis, prefix1);
     if (gamma_lamp1 < gamma_end) {
-        near0 += walk_row(ep, tree + i0 * stride, &ray, gamma_lamp1, gamma_end, integrand, tables, frame);
-        near1 += walk_row(ep, tree + i1 * stride, &ray, gamma_lamp1, gamma_end, integrand, tables, frame);
+        near0 += walk_row(ep, tree + i0 * stride, &ray, gamma_lamp1, gamma_end, integrand, tables, frame,
+                          textured, texture_basis, prefix0);
+        near1 += walk_row(ep, tree + i1 * stride, &ray, gamma_lamp1, gamma_end, integrand, tables, frame,
+                          textured, texture_basis, prefix1);
     }
     scatter[sample] += (float4)(mix(near0, near1, t), 0.0f);
 }

@@ -34,6 +34,8 @@ from .scene.costs import with_derived_sizes
 from .scene.model import METHODS, Render, Scene
 from .stages.integrand import integrand, integrand_table_size
 from .stages.lamp import eye_in_lamp, lamp_in_scatter
+from .stages.light_texture import light_texture, untextured_tables
+from .reference.light_texture import textured
 from .stages.minmax import minmax
 from .stages.raster import RasterResult, ShadowMap, map_is_empty, raster_camera, raster_shadow_map, shadow_atlas
 from .stages.raymarch import raymarch
@@ -155,7 +157,10 @@ class Renderer:
                 self._minmax(epipolar, reuse, timer)  # minmax: the 1D min-max mipmap of every row
                 tables = reuse.stage("integrand", keys.integrand(index, epipolar),  # integrand: lit run → radiance
                                      lambda: integrand(device, scene, light, epipolar, timer), per_light=True)
-                traverse(device, buffers, rastered, epipolar, tables, scatter, timer)  # traverse: walk the trees
+                texture = reuse.stage("light_texture", keys.light_texture(index, epipolar),  # texture: T·Γ_i prefix sums
+                                      lambda: light_texture(device, buffers, index, epipolar, tables, timer),
+                                      per_light=True) if textured(light) else untextured_tables(device)
+                traverse(device, buffers, rastered, epipolar, tables, scatter, timer, texture)  # traverse: walk the trees
             reuse.record.note("traverse", COMPUTED)
         visible = self._visibility(buffers, rastered, keys, reuse, timer)  # visibility: exact surface shadows
         image = shade(device, buffers, rastered, scatter, timer, visible)  # shade: surfaces, attenuation, + scatter
@@ -209,7 +214,9 @@ class Renderer:
         finds one lit run at any texture size, so a minimal texture gives the same radiance
         (up to float32 rounding where the run is clipped) without rectifying the full one."""
         device, key = self.device, keys.trees(index)
-        if self._skip_unshadowed and map_is_empty(device, maps[index]):
+        # A textured light keeps its full texture size: the texture is rectified on its rows.
+        if self._skip_unshadowed and not textured(buffers.inputs.scene.lights[index]) \
+                and map_is_empty(device, maps[index]):
             render = buffers.inputs.scene.render
             small = replace(buffers.inputs.scene, render=replace(render, slices=UNSHADOWED_SIZE,
                                                                    gamma_samples=UNSHADOWED_SIZE))
@@ -311,6 +318,12 @@ class StageKeys:
         return digest("trees", index, self.camera, self.shadow[index], geometry_of_light, inputs.eye_ws,
                       inputs.views[:1], inputs.views[first:first + count], scene.camera, scene.image,
                       scene.render.slices, scene.render.gamma_samples)
+
+    def light_texture(self, index: int, epipolar: Epipolar) -> bytes:
+        """light_texture of one light: the trees' key (the epipolar frame and texture size,
+        the light with its texture), the integrand's (the medium, the β range) and the rank."""
+        return digest("light_texture", self.trees(index), self.integrand(index, epipolar), self.inputs.eye_ws,
+                      self.inputs.scene.render.svd_rank)
 
     def integrand(self, index: int, epipolar: Epipolar) -> bytes:
         """integrand of one light: the medium, the light, the eye–light distance, the β and
