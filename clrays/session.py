@@ -34,7 +34,7 @@ from .scene.costs import with_derived_sizes
 from .scene.model import METHODS, Render, Scene
 from .stages.integrand import integrand, integrand_table_size
 from .stages.lamp import eye_in_lamp, lamp_in_scatter
-from .stages.light_texture import light_texture, untextured_tables
+from .stages.light_texture import light_texture
 from .reference.light_texture import textured
 from .stages.minmax import minmax
 from .stages.raster import RasterResult, ShadowMap, map_is_empty, raster_camera, raster_shadow_map, shadow_atlas
@@ -159,7 +159,7 @@ class Renderer:
                                      lambda: integrand(device, scene, light, epipolar, timer), per_light=True)
                 texture = reuse.stage("light_texture", keys.light_texture(index, epipolar),  # texture: T·Γ_i prefix sums
                                       lambda: light_texture(device, buffers, index, epipolar, tables, timer),
-                                      per_light=True) if textured(light) else untextured_tables(device)
+                                      per_light=True) if textured(light) else None
                 traverse(device, buffers, rastered, epipolar, tables, scatter, timer, texture)  # traverse: walk the trees
             reuse.record.note("traverse", COMPUTED)
         visible = self._visibility(buffers, rastered, keys, reuse, timer)  # visibility: exact surface shadows

@@ -6,15 +6,17 @@ from ..device import Device, StageTimer
 from ..inputs import FrameBuffers
 from ..scene.model import TRAVERSALS
 from .integrand import DeviceIntegrand
-from .light_texture import TextureTables
+from .light_texture import TextureTables, untextured_tables
 from .raster import RasterResult
 from .rectify import Epipolar
 
 
 def traverse(device: Device, buffers: FrameBuffers, rastered: RasterResult, epipolar: Epipolar,
-             integrand: DeviceIntegrand, scatter, timer: StageTimer, texture: TextureTables) -> None:
+             integrand: DeviceIntegrand, scatter, timer: StageTimer,
+             texture: TextureTables | None = None) -> None:
     """Add one light's in-scattered radiance into `scatter` (float4 per camera sample);
-    `texture`: the light's texture tables (`light_texture.untextured_tables` for none)."""
+    `texture`: the light's texture tables (stage light_texture; None: an untextured light)."""
+    texture = texture if texture is not None else untextured_tables(device)
     traversal = TRAVERSALS.index(buffers.inputs.scene.render.traversal)  # TRAVERSAL 0: tree, 1: scan
     kernel = device.kernel("traverse", "traverse", {"TRAVERSAL": traversal})
     event = kernel(device.queue, (buffers.inputs.samples,), None, buffers.params, buffers.views, buffers.lights,
