@@ -263,6 +263,13 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
         gamma_samples = 1 << max(int(np.ceil(np.log2(scene.render.gamma_samples))), 1)
         tree = 8 * scene.render.slices * 2 * gamma_samples
         sizes += [(f"min-max tree of light {index}", tree) for index in range(len(scene.lights))]
+        # A textured light's rectified texture and prefix sums (clrays.stages.light_texture).
+        sizes += [(f"texture prefix sums of light {index}",
+                   4 * scene.render.slices * 3 * (scene.render.svd_rank + 1) * (gamma_samples + 1)
+                   + 16 * scene.render.slices * gamma_samples)
+                  for index, light in enumerate(scene.lights) if textured(light)]
+    if inputs.texels is not None and any(textured(light) for light in scene.lights):
+        sizes.append(("light textures", 16 * len(inputs.texels)))
     return sizes
 
 

@@ -150,7 +150,7 @@ LIGHTS = _typed("lights", {
                     "origin; its colour multiplies `irradiance` per light ray "
                     "([docs/light-textures.md](light-textures.md))"),
         Field("texture_size", "`[w, h]`", DirectionalLight.texture_size, 0.0, low_open=True,
-              rule="with `texture` only; both > 0", notes="scene units covered by one copy of the texture"),
+              rule="with `texture` only", notes="scene units covered by one copy of the texture"),
         Field("texture_wrap", "string", DirectionalLight.texture_wrap, choices=TEXTURE_WRAPS,
               rule="with `texture` only",
               notes="beyond one copy: `repeat` tiles it, `clamp` repeats its edge texels"),
