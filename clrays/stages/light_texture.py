@@ -111,49 +111,22 @@ def gamma_basis(light_kind, medium, power, d_el, beta_min, beta_max, gamma_step,
     at_rows, at_cells = k(beta_rows, gamma_samples), k(beta_samples, cells)
     basis_beta = np.zeros((3, rank, n_beta))
     gamma = np.zeros((3, rank, n))
-    for c in range(3):
+    # A grey medium (one σt) makes the channels proportional: K_c = a_c·K with a_c = σs_c·power_c.
+    # One factorisation then serves all three, its B scaled by a_c / a_0 (one SVD, not three).
+    amplitude = np.asarray(medium.sigma_s, dtype=np.float64) * np.broadcast_to(np.asarray(power, float), (3,))
+    grey = np.all(medium.sigma_t == medium.sigma_t[0]) and amplitude[0] > 0
+    for c in range(1 if grey else 3):
         u, sigma, vt = np.linalg.svd(samples[c], full_matrices=False)
         keep = min(rank, int(np.sum(sigma > SVD_RELATIVE_CUTOFF * max(sigma[0], 1e-300))))
         for i in range(keep):
             basis_beta[c, i] = at_rows[c] @ vt[i]
             gamma[c, i] = u[:, i] @ at_cells[c] / sigma[i]
+    if grey:
+        basis_beta[1:] = basis_beta[0] * (amplitude[1:] / amplitude[0])[:, None, None]
+        gamma[1:] = gamma[0]
     prefix = np.zeros((3, rank, n + 1))
     prefix[..., 1:] = gamma_step * np.cumsum(gamma, axis=-1)
     return GammaBasis(basis_beta, gamma, prefix, float(beta_min), float(beta_max), rank)
-
-
-def textured_run(basis: GammaBasis, texture_rows: np.ndarray, gamma_step: float, beta, gamma0, gamma1,
-                 untextured) -> np.ndarray:
-    """What cl/light_texture.h `textured_run_radiance` gives for one run of one row, in
-    float64: texture_rows (n, 3) the rectified texture of the row, untextured (3,) the
-    integrand stage's segment. For tests and docs/light-textures.md's error table."""
-    n = texture_rows.shape[0]
-    rows = basis.basis_beta.shape[-1]
-    t = np.sqrt(np.clip(beta - basis.beta_min, 0, None))
-    s = np.sqrt(np.clip(basis.beta_max - beta, 0, None))
-    coord = (2 / math.pi) * math.atan2(t, s) * (rows - 1) if basis.beta_max > basis.beta_min else 0.0
-    j = int(np.clip(math.floor(coord), 0, rows - 2))
-    fj = coord - j
-    q0 = np.zeros((n + 1, 3))
-    q0[1:] = gamma_step * np.cumsum(texture_rows, axis=0)
-
-    def at(prefix, g):
-        cell = g / gamma_step
-        kk = int(np.clip(math.floor(cell), 0, n - 1))
-        f = np.clip(cell - kk, 0, 1)
-        return (1 - f) * prefix[kk] + f * prefix[kk + 1]
-
-    mean = (at(q0, gamma1) - at(q0, gamma0)) / (gamma1 - gamma0)
-    out = mean * np.asarray(untextured, dtype=np.float64)
-    for c in range(3):
-        for i in range(basis.rank):
-            q = np.zeros(n + 1)
-            q[1:] = gamma_step * np.cumsum(texture_rows[:, c] * basis.gamma[c, i])
-            b = (1 - fj) * basis.basis_beta[c, i, j] + fj * basis.basis_beta[c, i, j + 1]
-            out[c] += b * ((at(q, gamma1) - at(q, gamma0)) - mean[c] * (at(basis.prefix[c, i], gamma1)
-                                                                        - at(basis.prefix[c, i], gamma0))) \
-                / max(math.sin(beta), structs.SIN_BETA_MIN)
-    return out
 
 
 # --------------------------------------------------------------------------- the stage
