@@ -16,13 +16,32 @@ inline int texture_wrap(int i, int n, int wrap)
 }
 
 /* The texture's factor on the light that reaches p (eye space): 1 for an untextured light,
- * 0 behind a spot light. Texel centres at i + ½, bilinear between them. */
+ * 0 behind a spot light. Texel centres at i + ½, bilinear between them (within a cube
+ * face, clamped at its edges). */
 inline float3 light_texture(global const light_texture_t* texture, global const float4* texels,
                             global const light_t* light, float3 p)
 {
     if (!texture->textured) return (float3)(1.0f);
     float sx, sy;
-    if (light->type == LIGHT_DIRECTIONAL) {
+    int w = texture->width, h = texture->height;
+    global const float4* t = texels + texture->first_texel;
+    if (light->type == LIGHT_POINT) {
+        /* A cube: the face of the major axis (as light_view_index), seen from the light along
+         * F with up U and right F × U (+x, -x, +y, -y, +z, -z as the cube shadow map's faces);
+         * six faces of w × w stacked in rows. */
+        float3 d = p - light->position.xyz, a = fabs(d);
+        int axis = (a.x >= a.y && a.x >= a.z) ? 0 : (a.y >= a.z ? 1 : 2);
+        float major = axis == 0 ? d.x : (axis == 1 ? d.y : d.z);
+        int face = 2 * axis + (major < 0.0f ? 1 : 0);
+        float3 forward = (float3)(axis == 0, axis == 1, axis == 2) * (major < 0.0f ? -1.0f : 1.0f);
+        float3 up = axis == 1 ? (float3)(0.0f, 0.0f, 1.0f) : (float3)(0.0f, 1.0f, 0.0f);
+        float along = dot(d, forward);
+        if (!(along > 0.0f)) return (float3)(0.0f);
+        sx = dot(d, cross(forward, up)) / along;
+        sy = dot(d, up) / along;
+        h = w;
+        t += face * w * w;
+    } else if (light->type == LIGHT_DIRECTIONAL) {
         float3 q = p - texture->origin.xyz;
         sx = 2.0f * dot(q, texture->right.xyz) * texture->scale_x;
         sy = 2.0f * dot(q, texture->up.xyz) * texture->scale_y;
@@ -34,15 +53,13 @@ inline float3 light_texture(global const light_texture_t* texture, global const 
         sy = dot(w, texture->up.xyz) * texture->scale_y / along;
     }
     /* Clamped so that the int conversion below stays defined far outside the image. */
-    float fx = clamp((sx + 1.0f) * 0.5f * (float)texture->width - 0.5f, -1e9f, 1e9f);
-    float fy = clamp((1.0f - sy) * 0.5f * (float)texture->height - 0.5f, -1e9f, 1e9f);
+    float fx = clamp((sx + 1.0f) * 0.5f * (float)w - 0.5f, -1e9f, 1e9f);
+    float fy = clamp((1.0f - sy) * 0.5f * (float)h - 0.5f, -1e9f, 1e9f);
     float x0 = floor(fx), y0 = floor(fy);
     float tx = fx - x0, ty = fy - y0;
-    int w = texture->width, h = texture->height;
     int ix = (int)x0, iy = (int)y0;
     int xa = texture_wrap(ix, w, texture->wrap), xb = texture_wrap(ix + 1, w, texture->wrap);
     int ya = texture_wrap(iy, h, texture->wrap), yb = texture_wrap(iy + 1, h, texture->wrap);
-    global const float4* t = texels + texture->first_texel;
     float3 top = mix(t[ya * w + xa].xyz, t[ya * w + xb].xyz, tx);
     float3 bottom = mix(t[yb * w + xa].xyz, t[yb * w + xb].xyz, tx);
     return mix(top, bottom, ty);

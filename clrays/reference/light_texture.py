@@ -12,6 +12,8 @@ texture means"):
                  world origin: (x·right, x·up); one copy of the image covers
                  texture_size, centred on the origin; `repeat` tiles it, `clamp` extends
                  its edge texels.
+    point:       a cube: the face of w = x - l's major axis, seen from the light along
+                 its axis F with up U (CUBE_FACES): (w·(F × U), w·U)/(w·F).
 
 Both give screen coordinates (sx, sy) in [-1, 1] over the image, then texel coordinates
 x_t = (sx + 1)/2·W, y_t = (1 - sy)/2·H (row 0 on top) like a view's (cl/lighting.h), and a
@@ -20,8 +22,9 @@ bilinear lookup between texel centres i + ½. `cl/light_texture.h` is the same o
 `textured_in_scatter` integrates lit segments with the texture: the bilinear lookup has
 kinks where a texel coordinate crosses a texel centre, so each segment is cut there (the
 light ray through a point of a camera ray moves monotonically across the image: a straight
-line in the image for a spot light, a straight line in the plane for a directional one) and
-every piece is integrated by Gauss–Legendre, where the integrand is smooth.
+line in the image for a spot light or a cube face, a straight line in the plane for a
+directional one; a cube texture is cut where the ray changes face first) and every piece
+is integrated by Gauss–Legendre, where the integrand is smooth.
 """
 from __future__ import annotations
 
@@ -58,46 +61,79 @@ def texture_frame(direction) -> tuple[np.ndarray, np.ndarray]:
     return right, np.cross(right, d)
 
 
-def _screen_linear(light: Light):
-    """(A, B) with screen coordinates sx, sy of a point x = (A_x·x + c)/(den) — returned as
-    the numerator rows and the denominator row of the projective map x -> (sx, sy), each a
-    (4,) vector acting on [x, 1]."""
+#: A point light's cube texture faces, in the order of its six images: the direction each
+#: looks along and its up, as the cube shadow map's faces (clrays/inputs.py); right = F × U.
+CUBE_FACES = np.array([
+    [[1, 0, 0], [0, 1, 0]], [[-1, 0, 0], [0, 1, 0]],
+    [[0, 1, 0], [0, 0, 1]], [[0, -1, 0], [0, 0, 1]],
+    [[0, 0, 1], [0, 1, 0]], [[0, 0, -1], [0, 1, 0]],
+], dtype=np.float64)
+
+
+def _rows(light: Light, face: int = 0) -> np.ndarray:
+    """(3, 4): the projective map x -> (sx, sy) of the light's texture as rows acting on
+    [x, 1]: sx = row_0·[x, 1] / row_2·[x, 1], sy = row_1·[x, 1] / row_2·[x, 1] (for a point
+    light, of cube face `face`)."""
+    if isinstance(light, DirectionalLight):
+        right, up = texture_frame(light.direction)
+        w, h = light.texture_size
+        return np.array([np.append(2.0 * right / w, 0.0), np.append(2.0 * up / h, 0.0), [0.0, 0.0, 0.0, 1.0]])
+    l = np.asarray(light.position, dtype=np.float64)
     if isinstance(light, SpotLight):
         right, up = texture_frame(light.direction)
         axis = np.asarray(light.direction, dtype=np.float64) / np.linalg.norm(light.direction)
-        inv_tan = 1.0 / math.tan(math.radians(light.cone_deg))
-        l = np.asarray(light.position, dtype=np.float64)
-        row = lambda v, s: np.append(v * s, -(v @ l) * s)  # noqa: E731  (v·(x - l))·s
-        return row(right, inv_tan), row(up, inv_tan), row(axis, 1.0)
-    right, up = texture_frame(light.direction)
-    w, h = light.texture_size
-    return np.append(2.0 * right / w, 0.0), np.append(2.0 * up / h, 0.0), np.array([0.0, 0.0, 0.0, 1.0])
+        scale = 1.0 / math.tan(math.radians(light.cone_deg))
+    else:
+        axis, up = CUBE_FACES[face]
+        right, scale = np.cross(axis, up), 1.0
+    return np.array([np.append(v * k, -(v @ l) * k) for v, k in ((right, scale), (up, scale), (axis, 1.0))])
 
 
-def texel_coordinates(light: Light, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(fx, fy, valid): continuous texel coordinates less ½ (so texel centres sit on
-    integers) of the light ray through each point, and whether that ray leaves the light
-    (a spot light's rays behind it have no texel)."""
+def cube_face(light: Light, points) -> np.ndarray:
+    """The cube face (0..5: +x, -x, +y, -y, +z, -z) of the light ray through each point: its
+    major axis, ties to x, then y (as cl/lighting.h light_view_index)."""
+    w = np.asarray(points, dtype=np.float64).reshape(-1, 3) - light.position
+    a = np.abs(w)
+    axis = np.where((a[:, 0] >= a[:, 1]) & (a[:, 0] >= a[:, 2]), 0, np.where(a[:, 1] >= a[:, 2], 1, 2))
+    return 2 * axis + (w[np.arange(len(w)), axis] < 0)
+
+
+def _face_size(light: Light) -> tuple[int, int]:
+    """(width, height) of one image of the texture: the whole texture, or one cube face."""
+    texture = light.texture
+    return (texture.width, texture.width) if _is_cube(light) else (texture.width, texture.height)
+
+
+def _is_cube(light: Light) -> bool:
+    return not isinstance(light, (SpotLight, DirectionalLight))
+
+
+def texel_coordinates(light: Light, points) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(fx, fy, valid, face): continuous texel coordinates less ½ (so texel centres sit on
+    integers) within the image (or cube face `face`) of the light ray through each point,
+    and whether that ray has a texel (a spot light's rays behind it have none)."""
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     ph = np.concatenate([p, np.ones((len(p), 1))], axis=1)
-    row_x, row_y, row_d = _screen_linear(light)
-    den = ph @ row_d
-    valid = den > 0
+    face = cube_face(light, p) if _is_cube(light) else np.zeros(len(p), dtype=np.int64)
+    rows = np.stack([_rows(light, f) for f in range(6 if _is_cube(light) else 1)])[face]  # (N, 3, 4)
+    value = np.einsum("nrk,nk->nr", rows, ph)
+    valid = value[:, 2] > 0
     with np.errstate(divide="ignore", invalid="ignore"):
-        sx = np.where(valid, (ph @ row_x) / den, 0.0)
-        sy = np.where(valid, (ph @ row_y) / den, 0.0)
-    texture = light.texture
-    return (sx + 1.0) * 0.5 * texture.width - 0.5, (1.0 - sy) * 0.5 * texture.height - 0.5, valid
+        sx = np.where(valid, value[:, 0] / value[:, 2], 0.0)
+        sy = np.where(valid, value[:, 1] / value[:, 2], 0.0)
+    width, height = _face_size(light)
+    return (sx + 1.0) * 0.5 * width - 0.5, (1.0 - sy) * 0.5 * height - 0.5, valid, face
 
 
 def _wrap(index: np.ndarray, n: int, repeat: bool) -> np.ndarray:
     return np.mod(index, n) if repeat else np.clip(index, 0, n - 1)
 
 
-def bilinear(light: Light, fx, fy) -> np.ndarray:
-    """Texels (N, 3) at texel coordinates (fx, fy) (texel centres on integers)."""
+def bilinear(light: Light, fx, fy, face=None) -> np.ndarray:
+    """Texels (N, 3) at texel coordinates (fx, fy) (texel centres on integers) of the image,
+    or of cube face `face` (clamped at the face's edges; faces stacked in the texels' rows)."""
     texels = np.asarray(light.texture.texels, dtype=np.float64)
-    height, width = texels.shape[:2]
+    width, height = _face_size(light)
     repeat = isinstance(light, DirectionalLight) and light.texture_wrap == "repeat"
     fx = np.clip(fx, -1e9, 1e9)
     fy = np.clip(fy, -1e9, 1e9)
@@ -106,6 +142,8 @@ def bilinear(light: Light, fx, fy) -> np.ndarray:
     x0, y0 = x0.astype(np.int64), y0.astype(np.int64)
     xa, xb = _wrap(x0, width, repeat), _wrap(x0 + 1, width, repeat)
     ya, yb = _wrap(y0, height, repeat), _wrap(y0 + 1, height, repeat)
+    if face is not None and _is_cube(light):
+        ya, yb = ya + face * height, yb + face * height
     top = (1 - tx) * texels[ya, xa] + tx * texels[ya, xb]
     bottom = (1 - tx) * texels[yb, xa] + tx * texels[yb, xb]
     return (1 - ty) * top + ty * bottom
@@ -116,8 +154,8 @@ def light_texture(light: Light, points) -> np.ndarray:
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     if not textured(light):
         return np.ones((len(p), 3))
-    fx, fy, valid = texel_coordinates(light, p)
-    return np.where(valid[:, None], bilinear(light, fx, fy), 0.0)
+    fx, fy, valid, face = texel_coordinates(light, p)
+    return np.where(valid[:, None], bilinear(light, fx, fy, face), 0.0)
 
 
 # --------------------------------------------------------------------------- exact in-scattering
@@ -136,24 +174,53 @@ def _crossings(f0: np.ndarray, f1: np.ndarray, s_of, limit: int = 1 << 16):
 
 def _pieces(light: Light, origins, dirs, a, b):
     """Cut each segment [a, b] of x(s) = o + s·v where a texel coordinate crosses a texel
-    centre: (segment index, piece start, piece end), pieces sorted within each segment."""
+    centre (and, for a cube texture, where the ray changes face first): (segment index,
+    piece start, piece end), pieces sorted within each segment."""
     m = len(a)
-    row_x, row_y, row_d = _screen_linear(light)
+    if not _is_cube(light):
+        return _texel_pieces(origins, dirs, a, b, np.arange(m), np.broadcast_to(_rows(light), (m, 3, 4)),
+                             _face_size(light))
+    # Face changes: where two components of w(s) = (o - l) + s·v are equal in size.
+    q, cuts_segment, cuts_s = origins - light.position, [np.arange(m), np.arange(m)], [a, b]
+    for i, j in ((0, 1), (0, 2), (1, 2)):
+        for sign in (1.0, -1.0):
+            with np.errstate(divide="ignore", invalid="ignore"):
+                s = -(q[:, i] - sign * q[:, j]) / (dirs[:, i] - sign * dirs[:, j])
+            keep = np.isfinite(s) & (s > a) & (s < b)
+            cuts_segment.append(np.flatnonzero(keep))
+            cuts_s.append(s[keep])
+    segment, lo, hi = _sorted_pieces(np.concatenate(cuts_segment), np.concatenate(cuts_s))
+    middle = origins[segment] + (0.5 * (lo + hi))[:, None] * dirs[segment]
+    faces = cube_face(light, middle)
+    rows = np.stack([_rows(light, f) for f in range(6)])[faces]
+    return _texel_pieces(origins[segment], dirs[segment], lo, hi, segment, rows, _face_size(light))
+
+
+def _sorted_pieces(segment, s):
+    order = np.lexsort((s, segment))
+    segment, s = segment[order], s[order]
+    same = segment[1:] == segment[:-1]
+    return segment[:-1][same], s[:-1][same], s[1:][same]
+
+
+def _texel_pieces(origins, dirs, a, b, owner, rows, size):
+    """Cut segments [a, b] (each within one projective map `rows` (M, 3, 4)) at texel-centre
+    crossings; (owner of each piece, start, end)."""
+    m = len(a)
     oh = np.concatenate([origins, np.ones((m, 1))], axis=1)
     vh = np.concatenate([dirs, np.zeros((m, 1))], axis=1)
-    texture = light.texture
+    d0, d1 = np.einsum("mk,mk->m", rows[:, 2], oh), np.einsum("mk,mk->m", rows[:, 2], vh)
     cuts_segment, cuts_s = [np.arange(m), np.arange(m)], [a, b]
-    for row, size, sign in ((row_x, texture.width, 1.0), (row_y, texture.height, -1.0)):
-        # Texel coordinate f(s) = (sign·N(s)/D(s) + 1)·size/2 - ½, N and D linear in s.
-        n0, n1 = oh @ row, vh @ row
-        d0, d1 = oh @ row_d, vh @ row_d
+    for axis, n_texels, sign in ((0, size[0], 1.0), (1, size[1], -1.0)):
+        # Texel coordinate f(s) = (sign·N(s)/D(s) + 1)·n/2 - ½, N and D linear in s.
+        n0, n1 = np.einsum("mk,mk->m", rows[:, axis], oh), np.einsum("mk,mk->m", rows[:, axis], vh)
 
         def f(s):
             with np.errstate(divide="ignore", invalid="ignore"):
-                return (sign * (n0 + s * n1) / (d0 + s * d1) + 1.0) * 0.5 * size - 0.5
+                return (sign * (n0 + s * n1) / (d0 + s * d1) + 1.0) * 0.5 * n_texels - 0.5
 
         def s_of(segment, k):
-            c = sign * (2.0 * (k + 0.5) / size - 1.0)  # N(s)/D(s) = c
+            c = sign * (2.0 * (k + 0.5) / n_texels - 1.0)  # N(s)/D(s) = c
             with np.errstate(divide="ignore", invalid="ignore"):
                 return (c * d0[segment] - n0[segment]) / (n1[segment] - c * d1[segment])
 
@@ -163,11 +230,8 @@ def _pieces(light: Light, origins, dirs, a, b):
         keep = np.isfinite(s) & (s > a[segment]) & (s < b[segment])
         cuts_segment.append(segment[keep])
         cuts_s.append(s[keep])
-    segment, s = np.concatenate(cuts_segment), np.concatenate(cuts_s)
-    order = np.lexsort((s, segment))
-    segment, s = segment[order], s[order]
-    same = segment[1:] == segment[:-1]
-    return segment[:-1][same], s[:-1][same], s[1:][same]
+    piece, lo, hi = _sorted_pieces(np.concatenate(cuts_segment), np.concatenate(cuts_s))
+    return owner[piece], lo, hi
 
 
 def textured_in_scatter(light: Light, medium: Medium, origins, dirs, a, b) -> np.ndarray:

@@ -130,6 +130,11 @@ LIGHTS = _typed("lights", {
     "point": (
         _POSITION,
         Field("intensity", "RGB", REQUIRED, 0.0, MAX_POWER, notes="radiant intensity, W/sr"),
+        Field("texture", "string or list of 6 strings", shown_default="none (white)",
+              rule="six square images of one size, `[+x, -x, +y, -y, +z, -z]`, or one cross of 4 × 3 square "
+                   "cells; files as for a spot's `texture`",
+              notes="a cube texture around the light; its colour multiplies `intensity` per light ray "
+                    "([docs/light-textures.md](light-textures.md#point-lights-a-cube))"),
     ),
     "spot": (
         _POSITION,

@@ -30,7 +30,7 @@ from .fields import (ANIMATION, CAMERA, FORMAT_VERSION, IMAGE, LIGHTS, MAX_IMAGE
 from .limits import MAX_LIGHTS, MAX_OBJECTS, MAX_SCENE_BYTES, MAX_TRIANGLES
 from .model import (Camera, DirectionalLight, Geometry, Image, Light, LightTexture, Medium, Phase, PointLight, Render,
                     Scene, SpotLight)
-from .textures import TextureError, read_texture
+from .textures import TextureError, cube_from_cross, cube_from_faces, read_texture
 from .transforms import (affine, matrix_to_quat, quat_to_matrix, rotation_axis_angle, rotation_euler,
                          transform_normals, transform_points)
 from .yaml_tree import (Node, apply_override, boolean, choice, compose, direction, integer, mapping, mark_where,
@@ -123,6 +123,26 @@ def _texture(node: Node | None, base_dir: Path) -> LightTexture | None:
         node.fail("a texture image (.png, .exr or .npy) with finite texels >= 0", f"{show(node)}: {exc} ({path})")
 
 
+def _cube_texture(node: Node | None, base_dir: Path) -> LightTexture | None:
+    """A point light's cube texture: six files (a list) or one cross layout (a string)."""
+    if node is None:
+        return None
+    if isinstance(node.value, list):
+        if len(node.value) != 6:
+            node.fail("six texture files [+x, -x, +y, -y, +z, -z] or one cross image", f"{len(node.value)} files")
+        faces = [_texture(item, base_dir) for item in node.value]
+        try:
+            texels = cube_from_faces([face.texels for face in faces])
+        except TextureError as exc:
+            node.fail("six square texture images of one size", f"{show(node)}: {exc}")
+        return LightTexture(texels, ", ".join(face.file for face in faces))
+    cross = _texture(node, base_dir)
+    try:
+        return LightTexture(cube_from_cross(cross.texels), cross.file)
+    except TextureError as exc:
+        node.fail("a cross of 4 × 3 square cells, or a list of six files", f"{show(node)}: {exc}")
+
+
 def _texture_only(m: dict[str, Node], *keys: str) -> None:
     """Keys that only mean something with a texture."""
     if "texture" not in m:
@@ -136,7 +156,8 @@ def _light(node: Node, base_dir: Path = Path(".")) -> Light:
     kind, m = typed(node, kinds(LIGHTS))
     keys = LIGHTS[kind]
     if kind == "point":
-        return PointLight(position=vec3(m["position"]), intensity=_power(keys["intensity"], m["intensity"]))
+        return PointLight(position=vec3(m["position"]), intensity=_power(keys["intensity"], m["intensity"]),
+                          texture=_cube_texture(m.get("texture"), base_dir))
     if kind == "spot":
         return SpotLight(position=vec3(m["position"]), direction=direction(m["direction"]),
                          cone_deg=_read(keys["cone_deg"], m["cone_deg"]),

@@ -72,6 +72,7 @@ class PointLight:
     position: Vec3
     intensity: RGB  # radiant intensity, W/sr
     type: Literal["point"] = "point"
+    texture: LightTexture | None = None  # a cube: six square faces stacked in rows, +x, -x, +y, -y, +z, -z
 
 
 @dataclass(frozen=True)

@@ -12,6 +12,9 @@ linear RGB texels (docs/scene-format.md, lights; docs/light-textures.md).
 
 Row 0 is the top of the image. Any problem raises TextureError with one line that does
 not name the file (the caller does).
+
+A point light's cube texture (`cube_from_faces`, `cube_from_cross`) is six square faces
+stacked in rows, +x, -x, +y, -y, +z, -z (docs/light-textures.md, "Point lights: a cube").
 """
 from __future__ import annotations
 
@@ -136,3 +139,26 @@ def _exr(path: Path) -> np.ndarray:
     except Exception as exc:  # OpenEXR raises bare exceptions for broken files
         raise TextureError(f"not a readable EXR image ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") \
             from None
+
+
+#: The cross layout's cells (column, row) of the faces +x, -x, +y, -y, +z, -z: a camera at the
+#: light turning right sees +x, +z, -x, -z along the middle row; +y above +z, -y below it.
+CROSS_CELLS = ((0, 1), (2, 1), (1, 0), (1, 2), (1, 1), (3, 1))
+
+
+def cube_from_faces(faces: list[np.ndarray]) -> np.ndarray:
+    """Six face images (+x, -x, +y, -y, +z, -z) as one cube texture (6·s, s, 3)."""
+    sizes = {face.shape[:2] for face in faces}
+    if len(sizes) != 1 or any(h != w for h, w in sizes):
+        raise TextureError("faces of sizes " + ", ".join(f"{w}×{h}" for h, w in (f.shape[:2] for f in faces))
+                           + ", not six square images of one size")
+    return np.ascontiguousarray(np.concatenate(faces, axis=0))
+
+
+def cube_from_cross(cross: np.ndarray) -> np.ndarray:
+    """A cross of 4 × 3 square cells (CROSS_CELLS) as one cube texture (6·s, s, 3)."""
+    height, width = cross.shape[:2]
+    if width * 3 != height * 4 or width % 4:
+        raise TextureError(f"a {width}×{height} image, not a cross of 4 × 3 square cells (width:height = 4:3)")
+    s = width // 4
+    return cube_from_faces([cross[row * s:(row + 1) * s, col * s:(col + 1) * s] for col, row in CROSS_CELLS])

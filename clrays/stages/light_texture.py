@@ -47,11 +47,14 @@ def pack_light_textures(scene, eye_ws: np.ndarray) -> tuple[np.ndarray, np.ndarr
         if not textured(light):
             continue
         entry = entries[index]
-        right, up = texture_frame(light.direction)
+        right, up = texture_frame(light.direction) if hasattr(light, "direction") else (np.zeros(3), np.zeros(3))
         entry["right"], entry["up"] = structs.float4(right), structs.float4(up)
         entry["origin"] = structs.float4(-np.asarray(eye_ws, dtype=np.float64))  # the world origin
         if isinstance(light, SpotLight):
             entry["scale_x"] = entry["scale_y"] = 1.0 / math.tan(math.radians(light.cone_deg))
+            entry["wrap"] = structs.TEXTURE_WRAP_CLAMP
+        elif not isinstance(light, DirectionalLight):  # a point light's cube: its faces fix the frame
+            entry["scale_x"] = entry["scale_y"] = 1.0
             entry["wrap"] = structs.TEXTURE_WRAP_CLAMP
         else:
             entry["scale_x"], entry["scale_y"] = 1.0 / light.texture_size[0], 1.0 / light.texture_size[1]

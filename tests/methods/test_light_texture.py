@@ -27,6 +27,7 @@ objects:
 render: {shadow_map: 512, slices: 512, gamma_samples: 512}
 """
 LIGHTS = {
+    "point": "{type: point, position: [0.3, 3.5, 0.2], intensity: 30}",
     "spot": "{type: spot, position: [0.3, 5, 0.2], direction: [0, -1, 0.1], cone_deg: 30, intensity: 60}",
     "directional": "{type: directional, direction: [-0.4, -1, -0.2], irradiance: 2}",
 }
@@ -49,8 +50,9 @@ def test_a_white_texture_changes_nothing(kind, method):
     untextured light's image within 0.1 %, surfaces and haze, in every method."""
     scene = parse_scene(SMALL.replace("LIGHT", LIGHTS[kind]), ROOT / "scenes" / "x.yaml")
     plain = clrays.render(scene, method=method, reuse=False)
-    white = clrays.render(_with_texture(scene, np.ones((37, 53, 3)), **({"texture_size": (3.7, 2.9)}
-                                                                           if kind == "directional" else {})),
+    texels = np.ones((6 * 19, 19, 3)) if kind == "point" else np.ones((37, 53, 3))  # a point light's: a cube
+    white = clrays.render(_with_texture(scene, texels, **({"texture_size": (3.7, 2.9)}
+                                                           if kind == "directional" else {})),
                           method=method, reuse=False)
     lit = plain.mean(axis=2) > 0.01 * plain.mean()
     relative = np.abs(white - plain).max(axis=2)[lit] / plain.mean(axis=2)[lit]
@@ -64,7 +66,7 @@ def test_a_texture_scales_the_light_like_its_colour(kind):
     scene = parse_scene(SMALL.replace("LIGHT", LIGHTS[kind]), ROOT / "scenes" / "x.yaml")
     plain = clrays.render(scene, reuse=False)
     colour = np.array([0.25, 0.5, 2.0])
-    tinted = clrays.render(_with_texture(scene, np.ones((8, 8, 3)) * colour), reuse=False)
+    tinted = clrays.render(_with_texture(scene, np.ones((48 if kind == "point" else 8, 8, 3)) * colour), reuse=False)
     np.testing.assert_allclose(tinted, plain * colour, rtol=1e-3, atol=1e-6 * plain.max())
 
 
@@ -93,6 +95,24 @@ def test_stained_glass_minmax_is_within_1_percent_of_exact():
     error, _, _ = _minmax_against_exact("stained_glass.yaml", (160, 90), [
         "render.shadow_map=1024", "render.slices=2048", "render.gamma_samples=1024"])
     assert error.rmse < 0.01, f"stained glass: {error}"
+
+
+def test_a_cube_texture_in_minmax_and_raymarch_follows_exact(tmp_path):
+    """A point light with a cube texture of a different checker in each face: the face
+    seams, the per-face frames and the lookups agree between the device and exact
+    (measured at 64×36: minmax 0.47 %, raymarch 0.58 % relative RMSE)."""
+    rng = np.random.default_rng(3)
+    y, x = np.mgrid[0:16, 0:16]
+    checker = ((x // 4 + y // 4) % 2)[..., None]
+    faces = np.concatenate([0.3 + rng.uniform(0, 1, 3) * checker for _ in range(6)])
+    scene = _with_texture(parse_scene(SMALL.replace("LIGHT", LIGHTS["point"]).replace("512", "1024")
+                                      .replace("width: 48, height: 27", "width: 64, height: 36"),
+                                      ROOT / "scenes" / "x.yaml"), faces)
+    exact = clrays.render(scene, method="exact")
+    for method in ("minmax", "raymarch"):
+        error = _error(scene, clrays.render(dataclasses.replace(scene, render=dataclasses.replace(
+            scene.render, steps=2048)), method=method, reuse=False), exact)
+        assert error.rmse < 0.01 and error.mean < 0.005, f"{method}: {error}"
 
 
 def test_raymarch_follows_exact_with_a_texture():

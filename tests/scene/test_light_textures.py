@@ -111,7 +111,35 @@ def test_texture_size_must_be_positive(tmp_path):
         load_scene(scene_with(tmp_path, SUN.replace("[2, 3]", "[2, 0]")))
 
 
-def test_a_point_light_takes_no_texture(tmp_path):
-    scene = scene_with(tmp_path, "{type: point, position: [0, 4, 0], intensity: 5, texture: t.npy}")
-    with pytest.raises(SceneError, match=r"lights\.0\.texture: unknown key"):
-        load_scene(scene)
+POINT = "{type: point, position: [0, 4, 0], intensity: 5, texture: TEX}"
+
+
+def test_a_point_light_takes_six_faces_or_a_cross(tmp_path):
+    faces = [np.full((4, 4), float(f)) for f in range(6)]
+    for f, face in enumerate(faces):
+        np.save(tmp_path / f"f{f}.npy", face)
+    six = load_scene(scene_with(tmp_path, POINT, "[" + ", ".join(f"f{f}.npy" for f in range(6)) + "]"))
+    cube = six.lights[0].texture.texels
+    assert cube.shape == (24, 4, 3)
+    np.testing.assert_array_equal(cube[::4, 0, 0], np.arange(6))
+    cross = np.full((12, 16), -1.0)
+    for f, (col, row) in enumerate(((0, 1), (2, 1), (1, 0), (1, 2), (1, 1), (3, 1))):
+        cross[4 * row:4 * row + 4, 4 * col:4 * col + 4] = f
+    np.save(tmp_path / "cross.npy", np.maximum(cross, 0))
+    np.testing.assert_array_equal(load_scene(scene_with(tmp_path, POINT, "cross.npy")).lights[0].texture.texels,
+                                  cube)
+
+
+@pytest.mark.parametrize("texture, shapes, pattern", [
+    ("[a.npy, a.npy]", {"a.npy": (4, 4)}, r"expected six texture files .*, got 2 files"),
+    ("[a.npy, a.npy, a.npy, a.npy, a.npy, b.npy]", {"a.npy": (4, 4), "b.npy": (5, 5)},
+     r"expected six square texture images of one size, got .*faces of sizes 4×4, 4×4, 4×4, 4×4, 4×4, 5×5"),
+    ("a.npy", {"a.npy": (12, 12)}, r"expected a cross of 4 × 3 square cells.*a 12×12 image"),
+    ("[a.npy, a.npy, a.npy, a.npy, a.npy, b.npy]", {"a.npy": (4, 4), "b.npy": (4,)},
+     r"lights\.0\.texture\.5: expected a texture image .*an array of shape \(4,\)"),
+])
+def test_a_bad_cube_texture_is_one_line(tmp_path, texture, shapes, pattern):
+    for name, shape in shapes.items():
+        np.save(tmp_path / name, np.ones(shape))
+    with pytest.raises(SceneError, match=pattern):
+        load_scene(scene_with(tmp_path, POINT, texture))

@@ -16,12 +16,14 @@ from clrays.stages.integrand import integrand, integrand_exact
 from clrays.stages.light_texture import gamma_basis, light_texture
 from clrays.stages.raster import raster
 from clrays.stages.rectify import rectify
-from conftest import DirectionalLight, SpotLight, grid_plane, make_scene, v3
+from conftest import DirectionalLight, PointLight, SpotLight, grid_plane, make_scene, v3
 
 TEXELS = np.random.default_rng(14).uniform(0.0, 2.0, (24, 40, 3)).astype(np.float32)
 LIGHTS = {
     "spot": SpotLight(v3(0.3, 5.0, -0.5), v3(0.1, -1.0, 0.1) / np.linalg.norm([0.1, -1.0, 0.1]), 35.0,
                       np.full(3, 60.0), texture=LightTexture(TEXELS, "random")),
+    "point": PointLight(v3(0.3, 4.0, -0.5), np.full(3, 60.0),
+                        texture=LightTexture(np.concatenate([TEXELS[:24, :24] * (1 + f) for f in range(6)]), "cube")),
     "directional": DirectionalLight(v3(0.35, -1.0, -0.25) / np.linalg.norm([0.35, -1.0, -0.25]), np.full(3, 1.5),
                                     texture=LightTexture(TEXELS, "random"), texture_size=(1.3, 0.7)),
 }
