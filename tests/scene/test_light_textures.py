@@ -143,3 +143,15 @@ def test_a_bad_cube_texture_is_one_line(tmp_path, texture, shapes, pattern):
         np.save(tmp_path / name, np.ones(shape))
     with pytest.raises(SceneError, match=pattern):
         load_scene(scene_with(tmp_path, POINT, texture))
+
+
+def test_the_example_textures_are_what_make_gobo_draws():
+    """scenes/textures/*.png are tools/make_gobo.py's output (it writes them; --check compares)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    result = subprocess.run([sys.executable, str(root / "tools" / "make_gobo.py"), "--check"], capture_output=True,
+                            text=True)
+    assert result.returncode == 0, result.stderr
