@@ -3,7 +3,8 @@
     raster → rectify → minmax → integrand → traverse → visibility → shade  (method `minmax`)
     raster → raymarch → visibility → shade                                 (method `raymarch`)
 
-(`visibility` runs with `render.surface_shadows: exact`, the default.)
+(`visibility` runs with `render.surface_shadows: exact`, the default; a textured light adds
+`light_texture` between integrand and traverse, docs/light-textures.md.)
 
 `Renderer._frame` is that figure, one line per stage. The `exact` reference runs on
 the host in float64 instead (clrays.reference.exact).
