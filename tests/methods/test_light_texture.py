@@ -122,3 +122,18 @@ def test_raymarch_follows_exact_with_a_texture():
                                                        "render.shadow_map=1024", "render.steps=2048"])
     error = _error(scene, clrays.render(scene, method="raymarch"), clrays.render(scene, method="exact"))
     assert error.rmse < 0.01, f"raymarch: {error}"
+
+
+def test_the_texture_stage_is_kept_while_its_inputs_stand_still(renderer):
+    """A frame that changes only the surfaces' albedo keeps the light_texture stage
+    (StageKeys.light_texture: the trees, the integrand, the eye, the rank), and its image is
+    the one rendered from scratch, bit for bit."""
+    scene = parse_scene(SMALL.replace("LIGHT", LIGHTS["spot"]), ROOT / "scenes" / "x.yaml")
+    scene = _with_texture(scene, np.random.default_rng(5).uniform(0, 1, (9, 7, 3)))
+    renderer.render(scene, "minmax")
+    geometry = dataclasses.replace(scene.geometry, albedo=scene.geometry.albedo * 0.5)
+    changed = dataclasses.replace(scene, geometry=geometry)
+    kept = renderer.render(changed, "minmax")
+    assert kept.stage_status["light_texture"] == "reused", kept.stage_status
+    fresh = renderer.render(changed, "minmax", reuse=False)
+    np.testing.assert_array_equal(kept.image, fresh.image)
