@@ -115,6 +115,17 @@ def test_a_cube_texture_in_minmax_and_raymarch_follows_exact(tmp_path):
         assert error.rmse < 0.01 and error.mean < 0.005, f"{method}: {error}"
 
 
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="a texture finer than the slice spacing: at 1024 slices (the derived size "
+                   "from 640×360 up) stained_glass.yaml is 1.15 % relative RMSE against exact at 160×90 (0.28 % "
+                   "untextured); the two-slice blend misses its 2 cm lead lines at the far wall, and nothing "
+                   "raises render.slices for a texture (docs/light-textures.md)")
+def test_stained_glass_at_1024_slices_misses_1_percent():
+    error, _, _ = _minmax_against_exact("stained_glass.yaml", (160, 90), [
+        "render.shadow_map=1024", "render.slices=1024", "render.gamma_samples=1024"])
+    assert error.rmse < 0.01, f"stained glass at 1024 slices: {error}"
+
+
 def test_raymarch_follows_exact_with_a_texture():
     """The per-sample lookup of raymarch against exact's cut-at-texel integral, on the
     gobo."""
