@@ -2,9 +2,10 @@
  * `steps` uniform (optionally jittered) samples per light from the eye to the surface
  * (for a spot light, over the part of the ray inside its cone), with a shadow-map
  * lookup per sample.
- * Reads frame, views, lights, shadow_depth, camera_depth, offsets; writes scatter
+ * Reads frame, views, lights, shadow_depth, camera_depth, offsets, light_textures,
+ * texels (a light's texture multiplies it per sample, docs/light-textures.md); writes scatter
  * (one float4 per camera sample, rgb radiance). */
-#include "lighting.h"
+#include "light_texture.h"
 
 /* A per-ray number in [0, 1): jitter that is repeatable from run to run. */
 inline float hash_unit(uint a)
@@ -24,6 +25,7 @@ inline float3 step_integral(float3 k, float dt)
 kernel void raymarch(global const frame_t* frame, global const view_t* views,
                      global const light_t* lights, global const uint* shadow_depth,
                      global const uint* camera_depth, global const float2* offsets,
+                     global const light_texture_t* light_textures, global const float4* texels,
                      global float4* scatter)
 {
     int sample = get_global_id(0);
@@ -53,7 +55,8 @@ kernel void raymarch(global const frame_t* frame, global const view_t* views,
             if (!directional && d < frame->lamp_radius) continue; /* no medium in the lamp */
             float3 to_light;
             /* Unattenuated here: both exponentials are integrated over the step below. */
-            float3 incident = light_incident(light, (float3)(0.0f), p, &to_light);
+            float3 incident = light_incident(light, (float3)(0.0f), p, &to_light)
+                              * light_texture(light_textures + l, texels, light, p);
             if (incident.x + incident.y + incident.z == 0.0f) continue;
             /* No depth bias: a sample in the medium is on no surface, so it cannot shadow
              * itself, and a bias would light a texel-thick layer behind every occluder. */

@@ -186,8 +186,9 @@ inline int line_sample_needed(global const float2* line, int j, int n, int step,
 inline float3 line_sample_radiance(global const frame_t* frame, global const light_t* lights,
                                    global const epipolar_t* ep, global const float2* tree,
                                    global const integrand_t* integrand, global const float* tables,
-                                   global const float2* ranges, global const float4* sides, float distance,
-                                   int i, int j, int n, global uint* counts)
+                                   const row_texture_t* texture, global const float2* ranges,
+                                   global const float4* sides, float distance, int i, int j, int n,
+                                   global uint* counts)
 {
     float q, sin_beta;
     line_q(ranges, i, j, n, &q);
@@ -196,7 +197,7 @@ inline float3 line_sample_radiance(global const frame_t* frame, global const lig
     global const light_t* light = lights + ep->light_index;
     if (!ray_span(ep, light, frame, integrand, dir, distance, &span)) return (float3)(0.0f);
     atomic_inc(counts + COUNT_COMPUTED);
-    return radiance_scale(light, sin_beta) * row_radiance(ep, slice_row(ep, tree, i), &span, integrand, tables, frame);
+    return radiance_scale(light, sin_beta) * row_radiance(ep, tree, i, &span, integrand, tables, frame, texture);
 }
 
 inline float luminance(float3 c) { return dot(c, (float3)(0.2126f, 0.7152f, 0.0722f)); }
@@ -214,9 +215,12 @@ inline int radiance_breaks(float3 a, float3 b, float threshold)
 kernel void line_scatter(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                          global const epipolar_t* ep, global const float2* tree,
                          global const integrand_t* integrand, global const float* tables,
-                         global const float2* ranges, global const float4* sides, global const float2* line, int n,
-                         int step, float threshold, global float4* radiance, global uint* counts)
+                         global const textured_integrand_t* textured, global const float* texture_basis,
+                         global const float* texture_prefix, global const float2* ranges,
+                         global const float4* sides, global const float2* line, int n, int step, float threshold,
+                         global float4* radiance, global uint* counts)
 {
+    row_texture_t texture = {textured, texture_basis, texture_prefix};
     int j = get_global_id(0), i = get_global_id(1);
     if (j >= n || i >= ep->slices) return;
     global const float2* samples = line + i * n;
@@ -224,8 +228,8 @@ kernel void line_scatter(global const frame_t* frame, global const view_t* views
     if (samples[j].x < 0.0f) {
         result.w = 1.0f; /* the slice does not cross the screen: nothing reads it */
     } else if (line_sample_needed(samples, j, n, step, threshold)) {
-        result.xyz = line_sample_radiance(frame, lights, ep, tree, integrand, tables, ranges, sides, samples[j].x,
-                                          i, j, n, counts);
+        result.xyz = line_sample_radiance(frame, lights, ep, tree, integrand, tables, &texture, ranges, sides,
+                                          samples[j].x, i, j, n, counts);
         result.w = 1.0f;
     }
     radiance[i * n + j] = result;
@@ -239,9 +243,12 @@ kernel void line_scatter(global const frame_t* frame, global const view_t* views
  * so that every decision sees line_scatter's samples only. */
 kernel void line_refine(global const frame_t* frame, global const light_t* lights, global const epipolar_t* ep,
                         global const float2* tree, global const integrand_t* integrand, global const float* tables,
-                        global const float2* ranges, global const float4* sides, global const float2* line, int n,
-                        float threshold, global const float4* radiance, global float4* refined, global uint* counts)
+                        global const textured_integrand_t* textured, global const float* texture_basis,
+                        global const float* texture_prefix, global const float2* ranges,
+                        global const float4* sides, global const float2* line, int n, float threshold,
+                        global const float4* radiance, global float4* refined, global uint* counts)
 {
+    row_texture_t texture = {textured, texture_basis, texture_prefix};
     int j = get_global_id(0), i = get_global_id(1);
     if (j >= n || i >= ep->slices) return;
     global const float4* samples = radiance + i * n;
@@ -250,8 +257,8 @@ kernel void line_refine(global const frame_t* frame, global const light_t* light
         int left = j - 1, right = j + 1;
         while (samples[left].w == 0.0f) --left;   /* j % step == 0 and j = n - 1 are computed: */
         while (samples[right].w == 0.0f) ++right; /* both loops end within step samples */
-        if (radiance_breaks(samples[left].xyz, samples[right].xyz, 4.0f * threshold)) {
-            result.xyz = line_sample_radiance(frame, lights, ep, tree, integrand, tables, ranges, sides,
+        if (radiance_breaks(samples[left].xyz, samples[right].xyz, textured->textured ? threshold : 4.0f * threshold)) {
+            result.xyz = line_sample_radiance(frame, lights, ep, tree, integrand, tables, &texture, ranges, sides,
                                               line[i * n + j].x, i, j, n, counts);
             result.w = 1.0f;
         }
@@ -282,7 +289,7 @@ kernel void line_fill(global const epipolar_t* ep, int n, global float4* radianc
  * pass between a camera sample and its lines. */
 inline float3 slice_radiance(global const epipolar_t* ep, global const float2* tree, global const light_t* light,
                              global const integrand_t* integrand, global const float* tables,
-                             global const frame_t* frame, global const float2* ranges,
+                             const row_texture_t* texture, global const frame_t* frame, global const float2* ranges,
                              global const float2* line, global const float4* radiance, int n, float threshold,
                              int i, float q, float3 dir, float2* own, int* interpolated)
 {
@@ -311,15 +318,18 @@ inline float3 slice_radiance(global const epipolar_t* ep, global const float2* t
     *interpolated = 0;
     ray_span_t span;
     if (!ray_span(ep, light, frame, integrand, dir, own->x, &span)) return (float3)(0.0f);
-    return row_radiance(ep, slice_row(ep, tree, i), &span, integrand, tables, frame);
+    return row_radiance(ep, tree, i, &span, integrand, tables, frame, texture);
 }
 
 kernel void gather(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                    global const epipolar_t* ep, global const float2* tree, global const integrand_t* integrand,
                    global const float* tables, global const uint* camera_depth, global const float2* offsets,
-                   global const float2* ranges, global const float2* line, global const float4* radiance, int n,
-                   float threshold, global float4* scatter, global uint* counts)
+                   global const textured_integrand_t* textured, global const float* texture_basis,
+                   global const float* texture_prefix, global const float2* ranges, global const float2* line,
+                   global const float4* radiance, int n, float threshold, global float4* scatter,
+                   global uint* counts)
 {
+    row_texture_t texture = {textured, texture_basis, texture_prefix};
     int sample = get_global_id(0);
     if (sample < frame->width * frame->height * frame->spp) {
         float3 dir = camera_ray(frame, views, offsets, sample);
@@ -330,10 +340,10 @@ kernel void gather(global const frame_t* frame, global const view_t* views, glob
         int i0, i1, from0, from1;
         float t;
         slices_around(ep, atan2_approx(dot(dir, ep->w.xyz), dot(dir, ep->u.xyz)), &i0, &i1, &t);
-        float3 near0 = slice_radiance(ep, tree, light, integrand, tables, frame, ranges, line, radiance, n, threshold,
-                                      i0, q, dir, &own, &from0);
-        float3 near1 = slice_radiance(ep, tree, light, integrand, tables, frame, ranges, line, radiance, n, threshold,
-                                      i1, q, dir, &own, &from1);
+        float3 near0 = slice_radiance(ep, tree, light, integrand, tables, &texture, frame, ranges, line, radiance, n,
+                                      threshold, i0, q, dir, &own, &from0);
+        float3 near1 = slice_radiance(ep, tree, light, integrand, tables, &texture, frame, ranges, line, radiance, n,
+                                      threshold, i1, q, dir, &own, &from1);
         scatter[sample] += (float4)(mix(near0, near1, t), 0.0f);
         if (!(from0 && from1)) atomic_inc(counts + COUNT_FIXED_UP);
     }

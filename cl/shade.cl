@@ -3,9 +3,10 @@
  * averaged over the pixel's samples.
  * Reads frame, views, lights, shadow_depth, camera_depth, tri_id, tri_vertices,
  * tri_normal, tri_vertex_normals, tri_albedo, offsets, scatter, visible (the visibility
- * stage's answer per sample and light, with surface_shadows exact); writes image (one
+ * stage's answer per sample and light, with surface_shadows exact), light_textures and
+ * texels (a light's texture, docs/light-textures.md); writes image (one
  * float4 per pixel, linear rgb). */
-#include "lighting.h"
+#include "light_texture.h"
 
 #define SURFACE_BIAS_TEXELS 1.5f /* depth tolerance of the surface shadow test */
 
@@ -41,7 +42,8 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                   global const float4* tri_vertices, global const float4* tri_normal,
                   global const float4* tri_vertex_normals, global const float4* tri_albedo,
                   global const float2* offsets, global const float4* scatter,
-                  global const float* visible_exact, global float4* image)
+                  global const float* visible_exact, global const light_texture_t* light_textures,
+                  global const float4* texels, global float4* image)
 {
     int pixel = get_global_id(0);
     if (pixel >= frame->width * frame->height) return;
@@ -73,7 +75,8 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
             float3 irradiance = (float3)(0.0f);
             for (int l = 0; l < frame->light_count; ++l) {
                 float3 to_light;
-                float3 incident = light_incident(lights + l, sigma_t, p, &to_light);
+                float3 incident = light_incident(lights + l, sigma_t, p, &to_light)
+                                  * light_texture(light_textures + l, texels, lights + l, p);
                 float cosine = dot(shading, to_light);
                 if (cosine <= 0.0f || incident.x + incident.y + incident.z == 0.0f) continue;
                 /* Normal offset by a texel keeps a lit surface from shadowing itself. */

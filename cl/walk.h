@@ -7,12 +7,34 @@
 #define CLRAYS_WALK_H
 
 #include "integrand.h"
+#include "light_texture.h"
 #include "minmax.h"
 
 /* TRAVERSAL_TREE and TRAVERSAL_SCAN come from clrays/structs.py (-D). */
 #ifndef TRAVERSAL
 #define TRAVERSAL TRAVERSAL_TREE
 #endif
+
+/* A light's texture along the rows (light_texture.h, docs/light-textures.md): its
+ * parameters (`textured->textured` is 0 for an untextured light), the γ basis, and the
+ * prefix sums, one block per slice. */
+typedef struct {
+    global const textured_integrand_t* textured;
+    global const float* basis;
+    global const float* prefix;
+} row_texture_t;
+
+/* A lit run's radiance: the integrand tables' segment, times the light's texture along
+ * this row when it has one. */
+inline float3 run_radiance(global const integrand_t* in, global const float* tables, global const frame_t* frame,
+                           const integrand_row_t* ray, const row_texture_t* texture, global const float* row_prefix,
+                           float gamma_step, float gamma0, float gamma1)
+{
+    float3 untextured = segment_radiance(in, tables, frame, ray, gamma0, gamma1);
+    if (!texture->textured->textured || !(gamma1 > gamma0)) return untextured;
+    return textured_run_radiance(texture->textured, texture->basis, row_prefix, gamma_step, ray, untextured, gamma0,
+                                 gamma1);
+}
 
 /* A camera ray's part of the light's frame: its integrand row (β), its extent
  * [gamma_begin, gamma_end) and the chord inside the lamp [gamma_lamp0, gamma_lamp1),
@@ -94,12 +116,6 @@ inline void nearest_slices(global const epipolar_t* ep, float3 dir, int* i0, int
     slices_around(ep, atan2(dot(dir, ep->w.xyz), dot(dir, ep->u.xyz)), i0, i1, t);
 }
 
-/* The first row of slice i in the tree buffer. */
-inline global const float2* slice_row(global const epipolar_t* ep, global const float2* tree, int i)
-{
-    return tree + (size_t)i * 2 * (size_t)ep->gamma_samples;
-}
-
 /* Radiance of the lit part of [gamma_begin, gamma_end) of ray beta along one row.
  * Adjacent lit nodes merge into one run, so the integrand is evaluated once per run.
  *
@@ -108,7 +124,8 @@ inline global const float2* slice_row(global const epipolar_t* ep, global const 
  * one and climb while its index is even. TRAVERSAL_SCAN reads every texel. */
 inline float3 walk_row(global const epipolar_t* ep, global const float2* row, const integrand_row_t* ray,
                        float gamma_begin, float gamma_end, global const integrand_t* in,
-                       global const float* tables, global const frame_t* frame)
+                       global const float* tables, global const frame_t* frame, const row_texture_t* texture,
+                       global const float* row_prefix)
 {
     float beta = ray->beta;
     int n = ep->gamma_samples;
@@ -137,25 +154,33 @@ inline float3 walk_row(global const epipolar_t* ep, global const float2* row, co
             if (run_start < 0) run_start = position;
             run_end = position + size;
         } else if (run_start >= 0) {
-            radiance += segment_radiance(in, tables, frame, ray, fmax(run_start * ep->gamma_step, gamma_begin),
-                                         fmin(run_end * ep->gamma_step, gamma_end));
+            radiance += run_radiance(in, tables, frame, ray, texture, row_prefix, ep->gamma_step,
+                                     fmax(run_start * ep->gamma_step, gamma_begin),
+                                     fmin(run_end * ep->gamma_step, gamma_end));
             run_start = -1;
         }
         position += size;
     }
     if (run_start >= 0)
-        radiance += segment_radiance(in, tables, frame, ray, fmax(run_start * ep->gamma_step, gamma_begin),
-                                     fmin(run_end * ep->gamma_step, gamma_end));
+        radiance += run_radiance(in, tables, frame, ray, texture, row_prefix, ep->gamma_step,
+                                 fmax(run_start * ep->gamma_step, gamma_begin), fmin(run_end * ep->gamma_step, gamma_end));
     return radiance;
 }
 
-/* The radiance of a ray's lit runs along one row, the lamp's chord left out. */
-inline float3 row_radiance(global const epipolar_t* ep, global const float2* row, const ray_span_t* span,
-                           global const integrand_t* in, global const float* tables, global const frame_t* frame)
+/* The radiance of a ray's lit runs along slice i's row, the lamp's chord left out. */
+inline float3 row_radiance(global const epipolar_t* ep, global const float2* tree, int i, const ray_span_t* span,
+                           global const integrand_t* in, global const float* tables, global const frame_t* frame,
+                           const row_texture_t* texture)
 {
-    float3 radiance = walk_row(ep, row, &span->ray, span->gamma_begin, span->gamma_lamp0, in, tables, frame);
+    global const float2* row = tree + (size_t)i * 2 * (size_t)ep->gamma_samples;
+    size_t prefix_stride = texture->textured->textured
+                               ? (size_t)3 * (texture->textured->rank + 1) * (ep->gamma_samples + 1) : 0;
+    global const float* row_prefix = texture->prefix + i * prefix_stride;
+    float3 radiance = walk_row(ep, row, &span->ray, span->gamma_begin, span->gamma_lamp0, in, tables, frame, texture,
+                               row_prefix);
     if (span->gamma_lamp1 < span->gamma_end)
-        radiance += walk_row(ep, row, &span->ray, span->gamma_lamp1, span->gamma_end, in, tables, frame);
+        radiance += walk_row(ep, row, &span->ray, span->gamma_lamp1, span->gamma_end, in, tables, frame, texture,
+                             row_prefix);
     return radiance;
 }
 

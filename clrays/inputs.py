@@ -19,6 +19,7 @@ from .errors import ClraysError
 from .reference.radiometry import effective_far, lamp_radius
 from .scene.costs import with_derived_sizes
 from .stages.cube_faces import sampled_cube_faces
+from .stages.light_texture import pack_light_textures
 from .scene.model import DirectionalLight, Scene, SpotLight
 
 #: Spot lights wider than this use a cube map: a single perspective map of a wide
@@ -76,6 +77,8 @@ class FrameInputs:
     # (V,) bool per view: whether the frame can read it; raster skips the others (the cube
     # faces that the camera's view misses, clrays.stages.cube_faces)
     view_needed: np.ndarray = None
+    light_textures: np.ndarray = None  # light_texture_t[] per light (clrays.stages.light_texture)
+    texels: np.ndarray = None  # (N, 4) float32: every light's texture texels
 
     @property
     def light_views(self) -> list[tuple[int, int]]:
@@ -190,6 +193,7 @@ def frame_inputs(scene: Scene) -> FrameInputs:
         shadow_texels=texels,
         light_anchor_ws=np.array(anchors, dtype=np.float64).reshape(-1, 3),
         view_needed=np.array(needed, dtype=bool),
+        **dict(zip(("light_textures", "texels"), pack_light_textures(scene, eye_ws))),
     )
 
 
@@ -206,6 +210,8 @@ class FrameBuffers:
     tri_normal: object
     tri_vertex_normals: object
     tri_albedo: object
+    light_textures: object = None
+    texels: object = None
 
 
 def upload(device: Device, inputs: FrameInputs) -> FrameBuffers:
@@ -219,6 +225,8 @@ def upload(device: Device, inputs: FrameInputs) -> FrameBuffers:
         tri_normal=device.buffer(inputs.tri_normal, writable=False),
         tri_vertex_normals=device.buffer(inputs.tri_vertex_normals, writable=False),
         tri_albedo=device.buffer(inputs.tri_albedo, writable=False),
+        light_textures=device.buffer(inputs.light_textures, writable=False),
+        texels=device.buffer(inputs.texels, writable=False),
     )
 
 

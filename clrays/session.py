@@ -6,7 +6,8 @@
 and walks every camera sample's rows with `pixel`.)
     raster → raymarch → visibility → shade                                 (method `raymarch`)
 
-(`visibility` runs with `render.surface_shadows: exact`, the default.)
+(`visibility` runs with `render.surface_shadows: exact`, the default; a textured light adds
+`light_texture` between integrand and traverse, docs/light-textures.md.)
 
 `Renderer._frame` is that figure, one line per stage. The `exact` reference runs on
 the host in float64 instead (clrays.reference.exact).
@@ -37,6 +38,8 @@ from .scene.costs import with_derived_sizes
 from .scene.model import METHODS, Render, Scene
 from .stages.integrand import integrand, integrand_table_size
 from .stages.lamp import eye_in_lamp, lamp_in_scatter
+from .stages.light_texture import light_texture
+from .reference.light_texture import textured
 from .stages.minmax import minmax
 from .stages.raster import RasterResult, ShadowMap, map_is_empty, raster_camera, raster_shadow_map, shadow_atlas
 from .stages.raymarch import raymarch
@@ -160,11 +163,14 @@ class Renderer:
                 self._minmax(epipolar, reuse, timer)  # minmax: the 1D min-max mipmap of every row
                 tables = reuse.stage("integrand", keys.integrand(index, epipolar),  # integrand: lit run → radiance
                                      lambda: integrand(device, scene, light, epipolar, timer), per_light=True)
+                texture = reuse.stage("light_texture", keys.light_texture(index, epipolar),  # texture: T·Γ_i prefix sums
+                                      lambda: light_texture(device, buffers, index, epipolar, tables, timer),
+                                      per_light=True) if textured(light) else None
                 if scene.render.sampling == "epipolar" and not epipolar.unshadowed:  # traverse: walk the trees
-                    counts = epipolar_sampling(device, buffers, rastered, epipolar, tables, scatter, timer)
+                    counts = epipolar_sampling(device, buffers, rastered, epipolar, tables, scatter, timer, texture)
                     samples = counts if samples is None else samples + counts
                 else:  # per camera sample; and a light that casts no shadow, whose 16 slices are too few to sample
-                    traverse(device, buffers, rastered, epipolar, tables, scatter, timer)
+                    traverse(device, buffers, rastered, epipolar, tables, scatter, timer, texture)
             reuse.record.note("traverse", COMPUTED)
         visible = self._visibility(buffers, rastered, keys, reuse, timer)  # visibility: exact surface shadows
         image = shade(device, buffers, rastered, scatter, timer, visible)  # shade: surfaces, attenuation, + scatter
@@ -218,7 +224,9 @@ class Renderer:
         finds one lit run at any texture size, so a minimal texture gives the same radiance
         (up to float32 rounding where the run is clipped) without rectifying the full one."""
         device, key = self.device, keys.trees(index)
-        if self._skip_unshadowed and map_is_empty(device, maps[index]):
+        # A textured light keeps its full texture size: the texture is rectified on its rows.
+        if self._skip_unshadowed and not textured(buffers.inputs.scene.lights[index]) \
+                and map_is_empty(device, maps[index]):
             render = buffers.inputs.scene.render
             small = replace(buffers.inputs.scene, render=replace(render, slices=UNSHADOWED_SIZE,
                                                                    gamma_samples=UNSHADOWED_SIZE))
@@ -268,6 +276,13 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
         sizes += [(f"min-max tree of light {index}", tree) for index in range(len(scene.lights))]
         if scene.render.sampling == "epipolar":  # per line sample: (distance, weight), radiance twice, one light at a time
             sizes.append(("epipolar line samples", 40 * scene.render.slices * scene.render.line_samples))
+        # A textured light's rectified texture and prefix sums (clrays.stages.light_texture).
+        sizes += [(f"texture prefix sums of light {index}",
+                   4 * scene.render.slices * 3 * (scene.render.svd_rank + 1) * (gamma_samples + 1)
+                   + 16 * scene.render.slices * gamma_samples)
+                  for index, light in enumerate(scene.lights) if textured(light)]
+    if inputs.texels is not None and any(textured(light) for light in scene.lights):
+        sizes.append(("light textures", 16 * len(inputs.texels)))
     return sizes
 
 
@@ -323,6 +338,12 @@ class StageKeys:
         return digest("trees", index, self.camera, self.shadow[index], geometry_of_light, inputs.eye_ws,
                       inputs.views[:1], inputs.views[first:first + count], scene.camera, scene.image,
                       scene.render.slices, scene.render.gamma_samples)
+
+    def light_texture(self, index: int, epipolar: Epipolar) -> bytes:
+        """light_texture of one light: the trees' key (the epipolar frame and texture size,
+        the light with its texture), the integrand's (the medium, the β range) and the rank."""
+        return digest("light_texture", self.trees(index), self.integrand(index, epipolar), self.inputs.eye_ws,
+                      self.inputs.scene.render.svd_rank)
 
     def integrand(self, index: int, epipolar: Epipolar) -> bytes:
         """integrand of one light: the medium, the light, the eye–light distance, the β and

@@ -30,6 +30,9 @@ SURFACE_SHADOWS_PCF = 2
 TRAVERSAL_TREE = 0  # cl/traverse.cl's TRAVERSAL option
 TRAVERSAL_SCAN = 1
 
+TEXTURE_WRAP_REPEAT = 0  # light_texture_t.wrap
+TEXTURE_WRAP_CLAMP = 1
+
 DEPTH_EMPTY = np.uint32(0x7F800000)  # as_uint(+inf): a depth buffer's texel where nothing was rasterized
 
 # A point or spot light is a lamp: a ball of radius LAMP_RADIUS_REL × the scene's size around
@@ -57,7 +60,8 @@ RASTER_BIG_TRIANGLES = 64
 #: Every constant above by its C name: the `-D` options of every kernel build.
 KERNEL_CONSTANTS = {
     name: value for name, value in dict(globals()).items()
-    if name.startswith(("PROJECTION_", "LIGHT_", "PHASE_", "INTEGRAND_", "TRAVERSAL_", "RASTER_", "SURFACE_SHADOWS_"))
+    if name.startswith(("PROJECTION_", "LIGHT_", "PHASE_", "INTEGRAND_", "TRAVERSAL_", "RASTER_", "SURFACE_SHADOWS_",
+                         "TEXTURE_WRAP_"))
     or name in ("DEPTH_EMPTY", "SIN_BETA_MIN")
 }
 
@@ -119,9 +123,22 @@ integrand_dtype = np.dtype([
     ("light_type", np.int32), ("_pad0", np.int32), ("_pad1", np.int32), ("_pad2", np.int32),
 ])
 
+light_texture_dtype = np.dtype([
+    ("right", _f4), ("up", _f4), ("origin", _f4),
+    ("scale_x", np.float32), ("scale_y", np.float32),
+    ("first_texel", np.int32), ("width", np.int32), ("height", np.int32), ("wrap", np.int32),
+    ("textured", np.int32), ("_pad0", np.int32),
+])
+
+textured_integrand_dtype = np.dtype([
+    ("beta_min", np.float32), ("beta_max", np.float32), ("n_beta", np.int32), ("rank", np.int32),
+    ("gamma_samples", np.int32), ("slices", np.int32), ("textured", np.int32), ("_pad0", np.int32),
+])
+
 #: C struct name → dtype, for the layout test.
 STRUCTS = {"view_t": view_dtype, "light_t": light_dtype, "frame_t": frame_dtype,
-           "epipolar_t": epipolar_dtype, "integrand_t": integrand_dtype}
+           "epipolar_t": epipolar_dtype, "integrand_t": integrand_dtype,
+           "light_texture_t": light_texture_dtype, "textured_integrand_t": textured_integrand_dtype}
 
 
 def float4(v, w: float = 0.0) -> np.ndarray:

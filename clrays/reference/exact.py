@@ -19,7 +19,10 @@ channel (docs/design.md §1, §4),
   light, which keeps a ray through the light, and the eye at the light, finite.
 - Each lit interval is integrated by `radiometry.in_scatter_segments`: closed form for a
   directional light, adaptive composite Gauss–Legendre in the angle φ of
-  s = s0 + h·tanφ for point and spot lights.
+  s = s0 + h·tanφ for point and spot lights. A textured light's (docs/light-textures.md)
+  is cut where its texture's bilinear lookup has kinks and each piece integrated by
+  Gauss–Legendre (`light_texture.textured_in_scatter`); its texture also multiplies Lin
+  on surfaces.
 
 Cost is O(pixels × triangles); rays go in chunks so memory stays around 100 MB.
 """
@@ -34,6 +37,7 @@ from . import radiometry
 from ..scene.camera import primary_rays, sample_offsets
 from .geometry import (BUDGET_BYTES, CLIP_PAIR_BYTES, dot, lit_intervals, occluded, raycast, shadow_halfspaces,
                        triangle_normals)
+from .light_texture import light_texture, textured, textured_in_scatter
 from .radiometry import in_scatter_segments, light_incident, propagation_direction, rgb
 from ..scene.model import Scene
 
@@ -107,7 +111,7 @@ def _radiance(scene: Scene, eye: np.ndarray, dirs: np.ndarray, prepared, quad: d
         irradiance = np.zeros((len(hits), 3))
         for light, _ in prepared:
             cos_l = np.maximum(0.0, -dot(shading, propagation_direction(light, x)))
-            lin = light_incident(light, x, sigma_t) * cos_l[:, None]
+            lin = light_incident(light, x, sigma_t) * cos_l[:, None] * light_texture(light, x)
             lit = np.flatnonzero(np.any(lin > 0, axis=1))
             if len(lit):
                 blocked = occluded(x[lit], light, tri, normals=nrm[lit])
@@ -119,7 +123,10 @@ def _radiance(scene: Scene, eye: np.ndarray, dirs: np.ndarray, prepared, quad: d
         for light, halfspaces in prepared:
             ray, a, b = lit_intervals(eye, dirs, D, light, tri, halfspaces=halfspaces,
                                       lamp_radius=radiometry.lamp_radius(scene))
-            seg = in_scatter_segments(light, medium, eye, dirs[ray], a, b, **quad)
+            if textured(light):  # cut at the texture's texel centres (clrays.reference.light_texture)
+                seg = textured_in_scatter(light, medium, eye, dirs[ray], a, b)
+            else:
+                seg = in_scatter_segments(light, medium, eye, dirs[ray], a, b, **quad)
             for ch in range(3):
                 out[:, ch] += np.bincount(ray, weights=seg[:, ch], minlength=n)
     return out

@@ -14,7 +14,9 @@ from .animation import EASINGS
 from .limits import MAX_LIGHTS, MAX_MESH_BYTES, MAX_OBJECTS, MAX_SCENE_BYTES, MAX_TRIANGLES
 from .costs import (MAX_GAMMA_SAMPLES, MAX_LINE_SAMPLES, MAX_SHADOW_MAP, MAX_SLICES, MIN_GAMMA_SAMPLES,
                     MIN_LINE_SAMPLES, MIN_SHADOW_MAP, MIN_SLICES)
-from .model import INTEGRAND_MODES, METHODS, NORMALS, SAMPLINGS, SURFACE_SHADOWS, TRAVERSALS, Camera, Image, Render
+from .model import (INTEGRAND_MODES, METHODS, NORMALS, SAMPLINGS, SURFACE_SHADOWS, TEXTURE_WRAPS, TRAVERSALS, Camera,
+                    DirectionalLight, Image, Render)
+from .textures import MAX_TEXTURE_SIDE
 
 FORMAT_VERSION = 1
 MAX_IMAGE_PIXELS = 1 << 26
@@ -122,10 +124,18 @@ CAMERA = Section("camera", (
 ))
 
 _POSITION = Field("position", "vec3", REQUIRED, notes="scene units")
+_TEXTURE_FILE = (f"`.png` (sRGB, decoded to linear), `.exr` or `.npy` (linear, shape (H, W) or (H, W, 3)); "
+                 f"sides of at most {MAX_TEXTURE_SIDE} texels, texels finite and >= 0; relative paths start at "
+                 f"the YAML file's folder")
 LIGHTS = _typed("lights", {
     "point": (
         _POSITION,
         Field("intensity", "RGB", REQUIRED, 0.0, MAX_POWER, notes="radiant intensity, W/sr"),
+        Field("texture", "string or list of 6 strings", shown_default="none (white)",
+              rule="six square images of one size, `[+x, -x, +y, -y, +z, -z]`, or one cross of 4 × 3 square "
+                   "cells; files as for a spot's `texture`",
+              notes="a cube texture around the light; its colour multiplies `intensity` per light ray "
+                    "([docs/light-textures.md](light-textures.md#point-lights-a-cube))"),
     ),
     "spot": (
         _POSITION,
@@ -133,11 +143,23 @@ LIGHTS = _typed("lights", {
               notes="the cone's axis, the way light travels"),
         Field("cone_deg", "number", REQUIRED, 0.0, 90.0, low_open=True, notes="degrees, half-angle of the cone"),
         Field("intensity", "RGB", REQUIRED, 0.0, MAX_POWER, notes="W/sr inside the cone"),
+        Field("texture", "string", shown_default="none (white)", rule=_TEXTURE_FILE,
+              notes="a gobo: the image fills the square around the cone, its colour multiplies `intensity` per "
+                    "light ray ([docs/light-textures.md](light-textures.md))"),
     ),
     "directional": (
         Field("direction", "direction", REQUIRED, rule="normalised on load",
               notes="the way light travels: `[0, -1, 0]` shines down"),
         Field("irradiance", "RGB", REQUIRED, 0.0, MAX_POWER, notes="W/m² on a surface facing the light"),
+        Field("texture", "string", shown_default="none (white)", rule=_TEXTURE_FILE,
+              notes="a cloud shadow or window pattern, projected along `direction` and centred on the world "
+                    "origin; its colour multiplies `irradiance` per light ray "
+                    "([docs/light-textures.md](light-textures.md))"),
+        Field("texture_size", "`[w, h]`", DirectionalLight.texture_size, 0.0, low_open=True,
+              rule="with `texture` only", notes="scene units covered by one copy of the texture"),
+        Field("texture_wrap", "string", DirectionalLight.texture_wrap, choices=TEXTURE_WRAPS,
+              rule="with `texture` only",
+              notes="beyond one copy: `repeat` tiles it, `clamp` repeats its edge texels"),
     ),
 })
 

@@ -28,7 +28,9 @@ from .files import FileRefused, read_regular_file
 from .fields import (ANIMATION, CAMERA, FORMAT_VERSION, IMAGE, LIGHTS, MAX_IMAGE_PIXELS, MEDIUM, OBJECT, OBJECTS,
                      PHASES, QUATERNION_TOLERANCE, RENDER, ROTATE, TOP, TRANSFORM, Field, kinds)
 from .limits import MAX_LIGHTS, MAX_OBJECTS, MAX_SCENE_BYTES, MAX_TRIANGLES
-from .model import Camera, DirectionalLight, Geometry, Image, Light, Medium, Phase, PointLight, Render, Scene, SpotLight
+from .model import (Camera, DirectionalLight, Geometry, Image, Light, LightTexture, Medium, Phase, PointLight, Render,
+                    Scene, SpotLight)
+from .textures import TextureError, cube_from_cross, cube_from_faces, read_texture
 from .transforms import (affine, matrix_to_quat, quat_to_matrix, rotation_axis_angle, rotation_euler,
                          transform_normals, transform_points)
 from .yaml_tree import (Node, apply_override, boolean, choice, compose, direction, integer, mapping, mark_where,
@@ -107,16 +109,67 @@ def _camera(node: Node) -> Camera:
                   fov_deg=_read(CAMERA["fov_deg"], m.get("fov_deg")), far=_read(CAMERA["far"], m.get("far")))
 
 
-def _light(node: Node) -> Light:
+def _texture(node: Node | None, base_dir: Path) -> LightTexture | None:
+    """A light's texture file read into linear texels (clrays.scene.textures), or None."""
+    if node is None:
+        return None
+    if not isinstance(node.value, str) or not node.value.strip():
+        node.fail("a texture file path (.png, .exr or .npy)")
+    path = Path(node.value)
+    path = path if path.is_absolute() else base_dir / path
+    try:
+        return LightTexture(read_texture(path), node.value)
+    except TextureError as exc:
+        node.fail("a texture image (.png, .exr or .npy) with finite texels >= 0", f"{show(node)}: {exc} ({path})")
+
+
+def _cube_texture(node: Node | None, base_dir: Path) -> LightTexture | None:
+    """A point light's cube texture: six files (a list) or one cross layout (a string)."""
+    if node is None:
+        return None
+    if isinstance(node.value, list):
+        if len(node.value) != 6:
+            node.fail("six texture files [+x, -x, +y, -y, +z, -z] or one cross image", f"{len(node.value)} files")
+        faces = [_texture(item, base_dir) for item in node.value]
+        try:
+            texels = cube_from_faces([face.texels for face in faces])
+        except TextureError as exc:
+            node.fail("six square texture images of one size", f"{show(node)}: {exc}")
+        return LightTexture(texels, ", ".join(face.file for face in faces))
+    cross = _texture(node, base_dir)
+    try:
+        return LightTexture(cube_from_cross(cross.texels), cross.file)
+    except TextureError as exc:
+        node.fail("a cross of 4 × 3 square cells, or a list of six files", f"{show(node)}: {exc}")
+
+
+def _texture_only(m: dict[str, Node], *keys: str) -> None:
+    """Keys that only mean something with a texture."""
+    if "texture" not in m:
+        for key in keys:
+            if key in m:
+                m[key].fail("no " + key + " without a texture (add `texture: FILE`, or remove the key)",
+                            show(m[key]))
+
+
+def _light(node: Node, base_dir: Path = Path(".")) -> Light:
     kind, m = typed(node, kinds(LIGHTS))
     keys = LIGHTS[kind]
     if kind == "point":
-        return PointLight(position=vec3(m["position"]), intensity=_power(keys["intensity"], m["intensity"]))
+        return PointLight(position=vec3(m["position"]), intensity=_power(keys["intensity"], m["intensity"]),
+                          texture=_cube_texture(m.get("texture"), base_dir))
     if kind == "spot":
         return SpotLight(position=vec3(m["position"]), direction=direction(m["direction"]),
                          cone_deg=_read(keys["cone_deg"], m["cone_deg"]),
-                         intensity=_power(keys["intensity"], m["intensity"]))
-    return DirectionalLight(direction=direction(m["direction"]), irradiance=_power(keys["irradiance"], m["irradiance"]))
+                         intensity=_power(keys["intensity"], m["intensity"]),
+                         texture=_texture(m.get("texture"), base_dir))
+    _texture_only(m, "texture_size", "texture_wrap")
+    size_field = keys["texture_size"]
+    size = tuple(numbers(m["texture_size"], 2, "a list of 2 numbers > 0 [width, height]", size_field.low,
+                         lo_open=size_field.low_open)) if "texture_size" in m else size_field.default
+    return DirectionalLight(direction=direction(m["direction"]), irradiance=_power(keys["irradiance"], m["irradiance"]),
+                            texture=_texture(m.get("texture"), base_dir), texture_size=tuple(float(v) for v in size),
+                            texture_wrap=_read(keys["texture_wrap"], m.get("texture_wrap")))
 
 
 def _lights(node: Node) -> list[Node]:
@@ -517,7 +570,7 @@ def _parse(text: str, filename: str, source: Path | str | None, overrides: Seque
     scene = Scene(  # sections are read (and fail) in the order the format lists them
         image=_image(m["image"]),
         camera=_camera(m["camera"]),
-        lights=tuple(_light(n) for n in _lights(m["lights"])),
+        lights=tuple(_light(n, base_dir) for n in _lights(m["lights"])),
         medium=_medium(m.get("medium")),
         background=_read(TOP["background"], m.get("background")),
         geometry=_geometry(m.get("objects"), base_dir, rigs if "animation" in m else None),

@@ -30,6 +30,7 @@ TRAVERSALS = ("tree", "scan")
 SAMPLINGS = ("epipolar", "pixel")
 # Hard surface shadows: shadow rays where the map cannot decide, the map alone, or the map filtered.
 SURFACE_SHADOWS = ("exact", "map", "pcf")
+TEXTURE_WRAPS = ("repeat", "clamp")  # a directional light's texture beyond its first tile
 PHASE_TYPES = ("isotropic", "hg")
 NORMALS = ("smooth", "flat")  # a mesh's shading normals: interpolated vertex normals, or each face's own
 
@@ -50,11 +51,30 @@ class Camera:
     far: float = 1000.0  # a ray that hits nothing runs through the medium to here
 
 
+@dataclass(frozen=True, eq=False)
+class LightTexture:
+    """A light's texture (docs/light-textures.md): linear RGB texels that multiply the
+    light's power per light ray. Row 0 is the image's top. Compared by identity (the
+    scene digest reads the texels)."""
+
+    texels: np.ndarray  # (H, W, 3) float32, finite, >= 0
+    file: str  # as written in the scene, for messages
+
+    @property
+    def width(self) -> int:
+        return int(self.texels.shape[1])
+
+    @property
+    def height(self) -> int:
+        return int(self.texels.shape[0])
+
+
 @dataclass(frozen=True)
 class PointLight:
     position: Vec3
     intensity: RGB  # radiant intensity, W/sr
     type: Literal["point"] = "point"
+    texture: LightTexture | None = None  # a cube: six square faces stacked in rows, +x, -x, +y, -y, +z, -z
 
 
 @dataclass(frozen=True)
@@ -64,6 +84,7 @@ class SpotLight:
     cone_deg: float  # half-angle, hard edge, in (0, 90]
     intensity: RGB
     type: Literal["spot"] = "spot"
+    texture: LightTexture | None = None  # projected over the cone, filling the square around it
 
 
 @dataclass(frozen=True)
@@ -71,6 +92,9 @@ class DirectionalLight:
     direction: Vec3  # unit, the direction light travels (e.g. [0, -1, 0] shines down)
     irradiance: RGB
     type: Literal["directional"] = "directional"
+    texture: LightTexture | None = None  # projected along `direction`, centred on the world origin
+    texture_size: tuple[float, float] = (1.0, 1.0)  # one tile's width and height, scene units
+    texture_wrap: str = "repeat"  # one of TEXTURE_WRAPS
 
 
 Light = Union[PointLight, SpotLight, DirectionalLight]

@@ -9,6 +9,7 @@ import numpy as np
 
 from ..device import Device, StageTimer
 from ..inputs import FrameBuffers
+from ..reference.light_texture import textured, textured_in_scatter
 from ..reference.radiometry import effective_far, in_scatter_segments, lamp_radius
 from ..scene.camera import primary_rays
 from ..scene.model import DirectionalLight
@@ -42,7 +43,10 @@ def lamp_in_scatter(device: Device, buffers: FrameBuffers, rastered: RasterResul
     distance = np.minimum(depth.astype(np.float64), effective_far(scene))
     dirs = primary_rays(scene.camera, scene.image).reshape(-1, 3)  # sample order: pixel·spp + sample
     ray, a, b = lit_intervals(eye, dirs, distance, light, np.zeros((0, 3, 3)), lamp_radius=lamp_radius(scene))
-    segments = in_scatter_segments(light, scene.medium, eye, dirs[ray], a, b)
+    if textured(light):  # docs/light-textures.md: exact's integral, cut at texel centres
+        segments = textured_in_scatter(light, scene.medium, eye, dirs[ray], a, b)
+    else:
+        segments = in_scatter_segments(light, scene.medium, eye, dirs[ray], a, b)
     radiance = device.read(scatter, (samples, 4), np.float32)
     for channel in range(3):
         radiance[:, channel] += np.bincount(ray, weights=segments[:, channel], minlength=samples)

@@ -12,5 +12,5 @@ def raymarch(device: Device, buffers: FrameBuffers, rastered: RasterResult, scat
     samples = buffers.inputs.samples
     event = device.kernel("raymarch", "raymarch")(
         device.queue, (samples,), None, buffers.params, buffers.views, buffers.lights,
-        rastered.shadow_depth, rastered.camera_depth, buffers.offsets, scatter)
+        rastered.shadow_depth, rastered.camera_depth, buffers.offsets, buffers.light_textures, buffers.texels, scatter)
     timer.add("raymarch", event)

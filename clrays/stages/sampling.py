@@ -18,6 +18,7 @@ from ..inputs import FrameBuffers
 from ..scene.model import TRAVERSALS
 from ..scene.camera import camera_basis
 from .integrand import DeviceIntegrand
+from .light_texture import TextureTables, untextured_tables
 from .raster import RasterResult
 from .rectify import Epipolar, poles_on_screen
 
@@ -113,8 +114,11 @@ def slice_sides(params: np.ndarray) -> np.ndarray:
 
 
 def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterResult, epipolar: Epipolar,
-                      integrand: DeviceIntegrand, scatter, timer: StageTimer) -> SampleCounts:
-    """Add one light's in-scattered radiance into `scatter` (float4 per camera sample)."""
+                      integrand: DeviceIntegrand, scatter, timer: StageTimer,
+                      texture: TextureTables | None = None) -> SampleCounts:
+    """Add one light's in-scattered radiance into `scatter` (float4 per camera sample);
+    `texture`: the light's texture tables (stage light_texture; None: an untextured light)."""
+    texture = texture if texture is not None else untextured_tables(device)
     inputs = buffers.inputs
     render = inputs.scene.render
     slices, n = int(epipolar.params["slices"]), render.line_samples
@@ -134,15 +138,16 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
     run("line_samples", (n, slices), None, buffers.params, buffers.views, buffers.lights, epipolar.buffer,
         rastered.camera_depth, ranges_buffer, sides, n32, line)
     run("line_scatter", (n, slices), None, buffers.params, buffers.views, buffers.lights,
-        epipolar.buffer, epipolar.tree, integrand.params, integrand.data, ranges_buffer, sides, line, n32, step,
-        threshold, radiance, counts)
+        epipolar.buffer, epipolar.tree, integrand.params, integrand.data, texture.params, texture.basis,
+        texture.prefix, ranges_buffer, sides, line, n32, step, threshold, radiance, counts)
     refined = device.buffer(nbytes=16 * slices * n)
     run("line_refine", (n, slices), None, buffers.params, buffers.lights, epipolar.buffer, epipolar.tree,
-        integrand.params, integrand.data, ranges_buffer, sides, line, n32, threshold, radiance, refined, counts)
+        integrand.params, integrand.data, texture.params, texture.basis, texture.prefix, ranges_buffer, sides, line,
+        n32, threshold, radiance, refined, counts)
     radiance = refined
     run("line_fill", (n, slices), None, epipolar.buffer, n32, radiance)
     run("gather", (samples,), None, buffers.params, buffers.views, buffers.lights, epipolar.buffer,
-        epipolar.tree, integrand.params, integrand.data, rastered.camera_depth, buffers.offsets, ranges_buffer, line,
-        radiance, n32, threshold, scatter, counts)
+        epipolar.tree, integrand.params, integrand.data, rastered.camera_depth, buffers.offsets, texture.params,
+        texture.basis, texture.prefix, ranges_buffer, line, radiance, n32, threshold, scatter, counts)
     computed, fixed_up = (int(count) for count in device.read(counts, 2, np.uint32))
     return SampleCounts(computed, samples - fixed_up, fixed_up)

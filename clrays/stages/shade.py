@@ -21,6 +21,6 @@ def shade(device: Device, buffers: FrameBuffers, rastered: RasterResult, scatter
     event = device.kernel("shade", "shade")(
         device.queue, (pixels,), None, buffers.params, buffers.views, buffers.lights, rastered.shadow_depth,
         rastered.camera_depth, rastered.tri_id, buffers.tri_vertices, buffers.tri_normal, buffers.tri_vertex_normals,
-        buffers.tri_albedo, buffers.offsets, scatter, visible, out)
+        buffers.tri_albedo, buffers.offsets, scatter, visible, buffers.light_textures, buffers.texels, out)
     timer.add("shade", event)
     return device.read(out, (image.height, image.width, 4), np.float32)[..., :3]

@@ -6,16 +6,20 @@ from ..device import Device, StageTimer
 from ..inputs import FrameBuffers
 from ..scene.model import TRAVERSALS
 from .integrand import DeviceIntegrand
+from .light_texture import TextureTables, untextured_tables
 from .raster import RasterResult
 from .rectify import Epipolar
 
 
 def traverse(device: Device, buffers: FrameBuffers, rastered: RasterResult, epipolar: Epipolar,
-             integrand: DeviceIntegrand, scatter, timer: StageTimer) -> None:
-    """Add one light's in-scattered radiance into `scatter` (float4 per camera sample)."""
+             integrand: DeviceIntegrand, scatter, timer: StageTimer,
+             texture: TextureTables | None = None) -> None:
+    """Add one light's in-scattered radiance into `scatter` (float4 per camera sample);
+    `texture`: the light's texture tables (stage light_texture; None: an untextured light)."""
+    texture = texture if texture is not None else untextured_tables(device)
     traversal = TRAVERSALS.index(buffers.inputs.scene.render.traversal)  # TRAVERSAL 0: tree, 1: scan
     kernel = device.kernel("traverse", "traverse", {"TRAVERSAL": traversal})
     event = kernel(device.queue, (buffers.inputs.samples,), None, buffers.params, buffers.views, buffers.lights,
                    epipolar.buffer, epipolar.tree, integrand.params, integrand.data, rastered.camera_depth,
-                   buffers.offsets, scatter)
+                   buffers.offsets, texture.params, texture.basis, texture.prefix, scatter)
     timer.add("traverse", event)

@@ -1,0 +1,123 @@
+/* light_texture.h — a light's texture on the device (docs/light-textures.md): the bilinear
+ * texel of the light ray through a point (raymarch, shade, light_texture_rectify), and the
+ * radiance of a lit run of a textured light from the rectified prefix sums (traverse).
+ * clrays/reference/light_texture.py is the same lookup on the host. */
+#ifndef CLRAYS_LIGHT_TEXTURE_H
+#define CLRAYS_LIGHT_TEXTURE_H
+#include "integrand.h"
+
+inline int texture_wrap(int i, int n, int wrap)
+{
+    if (wrap == TEXTURE_WRAP_REPEAT) {
+        i %= n;
+        return i < 0 ? i + n : i;
+    }
+    return clamp(i, 0, n - 1);
+}
+
+/* The texture's factor on the light that reaches p (eye space): 1 for an untextured light,
+ * 0 behind a spot light. Texel centres at i + ½, bilinear between them (within a cube
+ * face, clamped at its edges). */
+inline float3 light_texture(global const light_texture_t* texture, global const float4* texels,
+                            global const light_t* light, float3 p)
+{
+    if (!texture->textured) return (float3)(1.0f);
+    float sx, sy;
+    int w = texture->width, h = texture->height;
+    global const float4* t = texels + texture->first_texel;
+    if (light->type == LIGHT_POINT) {
+        /* A cube: the face of the major axis (as light_view_index), seen from the light along
+         * F with up U and right F × U (+x, -x, +y, -y, +z, -z as the cube shadow map's faces);
+         * six faces of w × w stacked in rows. */
+        float3 d = p - light->position.xyz, a = fabs(d);
+        int axis = (a.x >= a.y && a.x >= a.z) ? 0 : (a.y >= a.z ? 1 : 2);
+        float major = axis == 0 ? d.x : (axis == 1 ? d.y : d.z);
+        int face = 2 * axis + (major < 0.0f ? 1 : 0);
+        float3 forward = (float3)(axis == 0, axis == 1, axis == 2) * (major < 0.0f ? -1.0f : 1.0f);
+        float3 up = axis == 1 ? (float3)(0.0f, 0.0f, 1.0f) : (float3)(0.0f, 1.0f, 0.0f);
+        float along = dot(d, forward);
+        if (!(along > 0.0f)) return (float3)(0.0f);
+        sx = dot(d, cross(forward, up)) / along;
+        sy = dot(d, up) / along;
+        h = w;
+        t += face * w * w;
+    } else if (light->type == LIGHT_DIRECTIONAL) {
+        float3 q = p - texture->origin.xyz;
+        sx = 2.0f * dot(q, texture->right.xyz) * texture->scale_x;
+        sy = 2.0f * dot(q, texture->up.xyz) * texture->scale_y;
+    } else {
+        float3 w = p - light->position.xyz;
+        float along = dot(w, light->direction.xyz);
+        if (!(along > 0.0f)) return (float3)(0.0f);
+        sx = dot(w, texture->right.xyz) * texture->scale_x / along;
+        sy = dot(w, texture->up.xyz) * texture->scale_y / along;
+    }
+    /* Clamped so that the int conversion below stays defined far outside the image. */
+    float fx = clamp((sx + 1.0f) * 0.5f * (float)w - 0.5f, -1e9f, 1e9f);
+    float fy = clamp((1.0f - sy) * 0.5f * (float)h - 0.5f, -1e9f, 1e9f);
+    float x0 = floor(fx), y0 = floor(fy);
+    float tx = fx - x0, ty = fy - y0;
+    int ix = (int)x0, iy = (int)y0;
+    int xa = texture_wrap(ix, w, texture->wrap), xb = texture_wrap(ix + 1, w, texture->wrap);
+    int ya = texture_wrap(iy, h, texture->wrap), yb = texture_wrap(iy + 1, h, texture->wrap);
+    float3 top = mix(t[ya * w + xa].xyz, t[ya * w + xb].xyz, tx);
+    float3 bottom = mix(t[yb * w + xa].xyz, t[yb * w + xb].xyz, tx);
+    return mix(top, bottom, ty);
+}
+
+/* One row's prefix sum at γ: cells of gamma_step, values at the cell boundaries
+ * (n + 1 of them), linear in between. */
+inline float prefix_at(global const float* prefix, int n, float cell)
+{
+    int k = clamp((int)floor(cell), 0, n - 1);
+    float f = clamp(cell - (float)k, 0.0f, 1.0f);
+    return mix(prefix[k], prefix[k + 1], f);
+}
+
+/* Radiance of the lit run [gamma0, gamma1) of ray `ray` along one slice of a textured light
+ * (docs/light-textures.md, minmax): with T̄ the texture's mean over the run,
+ *
+ *   L = T̄·L_untextured + (1/sinβ)·Σ_i B_i(β)·[∫T·Γ_i - T̄·∫Γ_i]
+ *
+ * L_untextured is the integrand stage's segment (any mode); the sum is the low-rank SVD's
+ * estimate of ∫(T - T̄)·I, which vanishes for a constant texture, so the SVD's own error
+ * only enters multiplied by the texture's variation within the run. row_prefix holds the
+ * slice's prefix sums: [channel][0..rank][n + 1], term 0 of T alone, term i + 1 of T·Γ_i;
+ * basis holds B[channel][rank][n_beta], then ∫Γ as P[channel][rank][n + 1]. */
+inline float3 textured_run_radiance(global const textured_integrand_t* ti, global const float* basis,
+                                    global const float* row_prefix, float gamma_step, const integrand_row_t* ray,
+                                    float3 untextured, float gamma0, float gamma1)
+{
+    int n = ti->gamma_samples, rank = ti->rank;
+    float c0 = gamma0 / gamma_step, c1 = gamma1 / gamma_step;
+    float span = ti->beta_max - ti->beta_min;
+    float row_t = 0.0f;
+    int j = 0;
+    if (span > 0.0f) {
+        float lo = sqrt(clamp(ray->beta - ti->beta_min, 0.0f, span));
+        float hi = sqrt(clamp(ti->beta_max - ray->beta, 0.0f, span));
+        j = grid_split(M_2_PI_F * atan2(lo, hi) * (float)(ti->n_beta - 1), ti->n_beta, &row_t);
+    }
+    size_t row_length = (size_t)(n + 1);
+    float radiance[3];
+    float base[3] = {untextured.x, untextured.y, untextured.z};
+    for (int c = 0; c < 3; ++c) {
+        global const float* q = row_prefix + (size_t)c * (rank + 1) * row_length;
+        /* The mean over the run; a run shorter than 1e-3 of a cell takes its cell's value. */
+        float mean = c1 - c0 > 1e-3f ? (prefix_at(q, n, c1) - prefix_at(q, n, c0)) / (gamma1 - gamma0)
+                                     : (q[clamp((int)c0, 0, n - 1) + 1] - q[clamp((int)c0, 0, n - 1)]) / gamma_step;
+        float correction = 0.0f;
+        for (int i = 0; i < rank; ++i) {
+            global const float* b = basis + ((size_t)c * rank + i) * ti->n_beta;
+            global const float* p = basis + (size_t)3 * rank * ti->n_beta + ((size_t)c * rank + i) * row_length;
+            global const float* qi = q + (size_t)(i + 1) * row_length;
+            float b_i = mix(b[j], b[j + 1], row_t);
+            correction += b_i * ((prefix_at(qi, n, c1) - prefix_at(qi, n, c0))
+                                 - mean * (prefix_at(p, n, c1) - prefix_at(p, n, c0)));
+        }
+        radiance[c] = mean * base[c] + correction / ray->sin_beta;
+    }
+    return (float3)(radiance[0], radiance[1], radiance[2]);
+}
+
+#endif

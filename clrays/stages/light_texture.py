@@ -1,0 +1,188 @@
+"""Stage light_texture: a textured light's texture rectified beside its shadow map, folded
+into per-row prefix sums through a low-rank integrand (docs/light-textures.md, minmax).
+Host side of `cl/light_texture.cl`.
+
+    texture_tables = light_texture(device, buffers, light, epipolar, integrand, timer)
+
+Per frame and textured light:
+1. On the host (float64), the integrand sinβ·I(β, γ) of docs/integrand.md in the tree's own
+   γ, sampled on 64 × 64 (β, γ) nodes and factorised, K ≈ Σ_i B_i(β)·Γ_i(γ) (the paper's
+   SVD; Nyström-extended to the integrand table's β rows and the tree's γ cells), with the
+   prefix sums P_i of Γ_i over the cells.
+2. On the device, `light_texture_rectify` looks the texture up on every (slice, γ cell)
+   light ray, T[α, γ], and `light_texture_prefix` sums T and T·Γ_i along each row.
+3. traverse turns a lit run into radiance with `textured_run_radiance` (cl/light_texture.h):
+   N lookups per run, whatever the texture holds.
+
+`pack_light_textures` packs every light's texture for the kernels that look one up per
+point (raymarch, shade).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .. import structs
+from ..reference.light_texture import texture_frame, textured
+from ..scene.model import DirectionalLight, SpotLight
+from .integrand import SVD_RELATIVE_CUTOFF, SVD_SAMPLES, _beta_nodes, integrand_exact
+
+if TYPE_CHECKING:
+    from ..device import Device, StageTimer
+    from ..inputs import FrameBuffers
+    from .integrand import DeviceIntegrand
+    from .rectify import Epipolar
+
+
+def pack_light_textures(scene, eye_ws: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(light_texture_t per light, float4 texels of every texture one after another) for a
+    scene in eye space (at least one texel, so the buffer exists)."""
+    entries = np.zeros(max(len(scene.lights), 1), dtype=structs.light_texture_dtype)
+    chunks, first = [], 0
+    for index, light in enumerate(scene.lights):
+        if not textured(light):
+            continue
+        entry = entries[index]
+        right, up = texture_frame(light.direction) if hasattr(light, "direction") else (np.zeros(3), np.zeros(3))
+        entry["right"], entry["up"] = structs.float4(right), structs.float4(up)
+        entry["origin"] = structs.float4(-np.asarray(eye_ws, dtype=np.float64))  # the world origin
+        if isinstance(light, SpotLight):
+            entry["scale_x"] = entry["scale_y"] = 1.0 / math.tan(math.radians(light.cone_deg))
+            entry["wrap"] = structs.TEXTURE_WRAP_CLAMP
+        elif not isinstance(light, DirectionalLight):  # a point light's cube: its faces fix the frame
+            entry["scale_x"] = entry["scale_y"] = 1.0
+            entry["wrap"] = structs.TEXTURE_WRAP_CLAMP
+        else:
+            entry["scale_x"], entry["scale_y"] = 1.0 / light.texture_size[0], 1.0 / light.texture_size[1]
+            entry["wrap"] = structs.TEXTURE_WRAP_REPEAT if light.texture_wrap == "repeat" else structs.TEXTURE_WRAP_CLAMP
+        entry["first_texel"], entry["width"], entry["height"] = first, light.texture.width, light.texture.height
+        entry["textured"] = 1
+        texels = np.zeros((light.texture.height * light.texture.width, 4), dtype=np.float32)
+        texels[:, :3] = light.texture.texels.reshape(-1, 3)
+        chunks.append(texels)
+        first += len(texels)
+    texels = np.concatenate(chunks) if chunks else np.zeros((1, 4), dtype=np.float32)
+    return entries, texels
+
+
+# --------------------------------------------------------------------------- the low-rank integrand in γ
+
+
+@dataclass(frozen=True)
+class GammaBasis:
+    """sinβ·I(β, γ) ≈ Σ_i B_i(β)·Γ_i(γ) per channel (float64): B (3, rank, n_beta) on the sin²
+    β nodes over [beta_min, beta_max], Γ (3, rank, n) at the centres of n cells of
+    gamma_step, P (3, rank, n + 1) = gamma_step·cumsum(Γ), 0 first."""
+
+    basis_beta: np.ndarray
+    gamma: np.ndarray
+    prefix: np.ndarray
+    beta_min: float
+    beta_max: float
+    rank: int
+
+
+def gamma_basis(light_kind, medium, power, d_el, beta_min, beta_max, gamma_step, n, n_beta, rank) -> GammaBasis:
+    """The truncated SVD of K = sinβ·I(β, γ) (docs/integrand.md's I, in the tree's γ: the
+    light angle, or s·sinβ for a directional light) sampled on SVD_SAMPLES² nodes (β on
+    sin²-spaced nodes, γ at cell centres over [0, n·gamma_step]), extended to the n_beta
+    β nodes and the n γ cells by Nyström: B_i(β) = Σ_k K(β, γ_k)·v_ik and
+    Γ_i(γ) = Σ_j u_ji·K(β_j, γ)/σ_i, which on the sample grid is exactly the truncated SVD.
+
+    Beyond a point light's ray end (γ ≥ π - β) no run is ever integrated; K there is K at
+    the end (0 when σt > 0), which keeps it continuous for the fit."""
+    kind = "directional" if light_kind == "directional" else "point"
+    gamma_max = n * gamma_step
+
+    def k(beta, gamma):
+        beta, gamma = np.meshgrid(beta, gamma, indexing="ij")
+        if kind == "point":
+            gamma = np.minimum(gamma, (math.pi - beta) * (1.0 - 1e-9))
+        sin_beta = np.maximum(np.sin(beta), structs.SIN_BETA_MIN)
+        value = integrand_exact(kind, medium.sigma_s, medium.sigma_t, medium.phase, power, d_el, beta, gamma)
+        return np.moveaxis(value * sin_beta[..., None], -1, 0)  # (3, len(beta), len(gamma))
+
+    beta_samples = _beta_nodes(beta_min, beta_max, SVD_SAMPLES)
+    gamma_samples = (np.arange(SVD_SAMPLES) + 0.5) * (gamma_max / SVD_SAMPLES)
+    samples = k(beta_samples, gamma_samples)
+    beta_rows = _beta_nodes(beta_min, beta_max, n_beta)
+    cells = (np.arange(n) + 0.5) * gamma_step
+    at_rows, at_cells = k(beta_rows, gamma_samples), k(beta_samples, cells)
+    basis_beta = np.zeros((3, rank, n_beta))
+    gamma = np.zeros((3, rank, n))
+    # A grey medium (one σt) makes the channels proportional: K_c = a_c·K with a_c = σs_c·power_c.
+    # One factorisation then serves all three, its B scaled by a_c / a_0 (one SVD, not three).
+    amplitude = np.asarray(medium.sigma_s, dtype=np.float64) * np.broadcast_to(np.asarray(power, float), (3,))
+    grey = np.all(medium.sigma_t == medium.sigma_t[0]) and amplitude[0] > 0
+    for c in range(1 if grey else 3):
+        u, sigma, vt = np.linalg.svd(samples[c], full_matrices=False)
+        keep = min(rank, int(np.sum(sigma > SVD_RELATIVE_CUTOFF * max(sigma[0], 1e-300))))
+        for i in range(keep):
+            basis_beta[c, i] = at_rows[c] @ vt[i]
+            gamma[c, i] = u[:, i] @ at_cells[c] / sigma[i]
+    if grey:
+        basis_beta[1:] = basis_beta[0] * (amplitude[1:] / amplitude[0])[:, None, None]
+        gamma[1:] = gamma[0]
+    prefix = np.zeros((3, rank, n + 1))
+    prefix[..., 1:] = gamma_step * np.cumsum(gamma, axis=-1)
+    return GammaBasis(basis_beta, gamma, prefix, float(beta_min), float(beta_max), rank)
+
+
+# --------------------------------------------------------------------------- the stage
+
+
+@dataclass
+class TextureTables:
+    """One textured light's tables on the device, as traverse reads them."""
+
+    params: object  # textured_integrand_t
+    basis: object  # float[]: B, then P (cl/light_texture.h)
+    prefix: object  # float[slices][3][rank + 1][n + 1]
+    rank: int
+
+
+def untextured_tables(device: Device) -> TextureTables:
+    """What traverse gets for a light without a texture: textured = 0, nothing to read."""
+    params = np.zeros(1, dtype=structs.textured_integrand_dtype)
+    return TextureTables(device.buffer(params, writable=False), device.buffer(nbytes=4), device.buffer(nbytes=4), 0)
+
+
+def light_texture(device: Device, buffers: FrameBuffers, light_index: int, epipolar: Epipolar,
+                  integrand: DeviceIntegrand, timer: StageTimer) -> TextureTables:
+    """Stage light_texture for one textured light: the low-rank integrand in γ (host), the
+    rectified texture and its per-row prefix sums (device)."""
+    start = time.perf_counter()
+    scene = buffers.inputs.scene
+    light = scene.lights[light_index]
+    directional = isinstance(light, DirectionalLight)
+    n, slices = int(epipolar.params["gamma_samples"]), int(epipolar.params["slices"])
+    gamma_step = float(epipolar.params["gamma_step"])
+    n_beta = max(int(integrand.tables.n_beta), 16)
+    rank = scene.render.svd_rank
+    basis = gamma_basis("directional" if directional else "point", scene.medium,
+                        light.irradiance if directional else light.intensity, epipolar.d_el,
+                        epipolar.beta_min, epipolar.beta_max, gamma_step, n, n_beta, rank)
+    params = np.zeros(1, dtype=structs.textured_integrand_dtype)
+    params["beta_min"], params["beta_max"] = basis.beta_min, basis.beta_max
+    params["n_beta"], params["rank"], params["gamma_samples"], params["slices"] = n_beta, rank, n, slices
+    params["textured"] = 1
+    params_buffer = device.buffer(params, writable=False)
+    packed = np.concatenate([basis.basis_beta.ravel(), basis.prefix.ravel()]).astype(np.float32)
+    basis_buffer = device.buffer(packed, writable=False)
+    gamma_buffer = device.buffer(np.ascontiguousarray(basis.gamma, dtype=np.float32), writable=False)
+    timer.add_host("light_texture", (time.perf_counter() - start) * 1e3)
+    rectified = device.buffer(nbytes=16 * slices * n)
+    event = device.kernel("light_texture", "light_texture_rectify")(
+        device.queue, (n, slices), None, buffers.lights, epipolar.buffer, buffers.light_textures, buffers.texels,
+        rectified)
+    timer.add("light_texture", event)
+    prefix = device.buffer(nbytes=4 * slices * 3 * (rank + 1) * (n + 1))
+    event = device.kernel("light_texture", "light_texture_prefix")(
+        device.queue, (3 * (rank + 1), slices), None, epipolar.buffer, params_buffer, gamma_buffer, rectified,
+        prefix)
+    timer.add("light_texture", event)
+    return TextureTables(params_buffer, basis_buffer, prefix, rank)
