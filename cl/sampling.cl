@@ -257,7 +257,7 @@ kernel void line_refine(global const frame_t* frame, global const light_t* light
         int left = j - 1, right = j + 1;
         while (samples[left].w == 0.0f) --left;   /* j % step == 0 and j = n - 1 are computed: */
         while (samples[right].w == 0.0f) ++right; /* both loops end within step samples */
-        if (radiance_breaks(samples[left].xyz, samples[right].xyz, textured->textured ? threshold : 4.0f * threshold)) {
+        if (radiance_breaks(samples[left].xyz, samples[right].xyz, 4.0f * threshold)) {
             result.xyz = line_sample_radiance(frame, lights, ep, tree, integrand, tables, &texture, ranges, sides,
                                               line[i * n + j].x, i, j, n, counts);
             result.w = 1.0f;
