@@ -183,20 +183,26 @@ class SceneBvh:
                                np.stack([edges[..., 2], zero, -edges[..., 0]], axis=-1),
                                np.stack([-edges[..., 1], edges[..., 0], zero], axis=-1)], axis=1)
         poly_lo, poly_hi = polygons.min(axis=1), polygons.max(axis=1)
+        # The polygon's side of every axis, once: its plane's offset and its extent along
+        # each edge axis; a box then costs one projection of its centre per axis.
+        plane = dot(normal, polygons[:, 0])
+        extent = np.einsum("nak,nvk->nav", axes, polygons)
+        extent_lo, extent_hi = extent.min(axis=2), extent.max(axis=2)
+        abs_normal, abs_axes = np.abs(normal), np.abs(axes)
 
         def meets_boxes(q, lo, hi):
+            # Cheapest first: the box axes, then the plane, then the edge axes on what is left.
             keep = np.all(poly_lo[q] <= hi, axis=1) & np.all(poly_hi[q] >= lo, axis=1)
-            q, lo, hi = q[keep], lo[keep], hi[keep]
-            center, half = (lo + hi) / 2, (hi - lo) / 2
-            rel = polygons[q] - center[:, None, :]  # (M, k, 3)
-            n = normal[q]
-            keep_n = np.abs(dot(n, rel[:, 0])) <= dot(np.abs(n), half)
-            a = axes[q]  # (M, 3k, 3)
-            proj = np.einsum("mak,mvk->mav", a, rel)  # (M, 3k, k)
-            radius = np.einsum("mak,mk->ma", np.abs(a), half)
-            keep_e = np.all((proj.min(axis=2) <= radius) & (proj.max(axis=2) >= -radius), axis=1)
-            out = np.zeros(len(keep), dtype=bool)
-            out[np.flatnonzero(keep)] = keep_n & keep_e
+            where = np.flatnonzero(keep)
+            center, half = (lo[where] + hi[where]) / 2, (hi[where] - lo[where]) / 2
+            qk = q[where]
+            plane_ok = np.abs(plane[qk] - dot(normal[qk], center)) <= dot(abs_normal[qk], half)
+            where, center, half, qk = where[plane_ok], center[plane_ok], half[plane_ok], qk[plane_ok]
+            at = np.einsum("mak,mk->ma", axes[qk], center)
+            radius = np.einsum("mak,mk->ma", abs_axes[qk], half)
+            edge_ok = np.all((extent_lo[qk] - at <= radius) & (extent_hi[qk] - at >= -radius), axis=1)
+            out = np.zeros(len(q), dtype=bool)
+            out[where[edge_ok]] = True
             return out
 
         return self.candidates(len(polygons), meets_boxes)
