@@ -235,9 +235,11 @@ class SceneBvh:
         K, c, kept = halfspaces
         row_of = np.full(len(self.triangles), -1, dtype=np.int64)
         row_of[kept] = np.arange(len(kept))
-        live = np.flatnonzero(hi > lo)
-        pair_ray, pair_tri = self._polygon_candidates(self._shadow_polygons(light, origins[live], dirs[live],
-                                                                            lo[live], hi[live]))
+        live = np.flatnonzero(hi > lo) if len(kept) else np.zeros(0, dtype=np.int64)
+        pair_ray, pair_tri = np.zeros(0, np.int64), np.zeros(0, np.int64)
+        if len(live):
+            pair_ray, pair_tri = self._polygon_candidates(self._shadow_polygons(light, origins[live], dirs[live],
+                                                                                lo[live], hi[live]))
         pair_ray = live[pair_ray]
         row = row_of[pair_tri]
         pair_ray, row = pair_ray[row >= 0], row[row >= 0]
