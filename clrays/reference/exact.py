@@ -47,6 +47,9 @@ from ..scene.model import Scene
 #: machine (measured at 160×90 on demo, sun, behind and bunny: 120–270 µs; the full
 #: 640×360 bunny: 330 µs), for estimates. Candidates grow slowly with the triangle count.
 SECONDS_PER_RAY_LIGHT = 3.0e-4
+#: Camera rays per batch on the BVH: the (ray, node) and (ray, triangle) pair arrays of
+#: a batch stay in the tens of MB.
+BVH_CHUNK_RAYS = 4096
 # Progress without a bar (stderr not a terminal): a line per this many percent.
 PROGRESS_LINE_PERCENT = 10
 
