@@ -21,8 +21,11 @@ from ..device import Device, StageTimer
 from ..inputs import FrameBuffers, FrameInputs, light_pass_inputs
 from .raster import RasterResult
 
-#: Work-items per triangle and view of `visibility_bound`, each taking every this-many-th
-#: row of the triangle's texel rectangle (cl/visibility.cl's BOUND_ROW_SPLIT).
+#: `visibility_bound` does a triangle's texel rectangle of up to this many rows in one
+#: work-item (most triangles of a fine mesh: one item each, no idle ones) and leaves
+#: taller ones to `visibility_bound_split`, which gives each BOUND_ROW_SPLIT work-items,
+#: each taking every BOUND_ROW_SPLIT-th row (a floor's rectangle can be a whole face).
+BOUND_SMALL_ROWS = 8
 BOUND_ROW_SPLIT = 16
 
 
@@ -58,13 +61,20 @@ def visibility_bound(device: Device, buffers: FrameBuffers, light_index: int, ti
     if count:
         vertices = device.buffer(inputs.tri_vertices, writable=False)
         views = device.buffer(inputs.views, writable=False)
+        big_items = device.buffer(nbytes=4 * count)
+        big_count = device.buffer(nbytes=4)
+        first_pass = device.kernel("visibility", "visibility_bound")
+        split_pass = device.kernel("visibility", "visibility_bound_split")
         # Only the cube faces the frame can read (`view_needed`, as raster.shadow does): no
         # sample projects into the others, so their texels are never asked for.
         for view in np.flatnonzero(inputs.view_needed[1:]) + 1:
-            event = device.kernel("visibility", "visibility_bound")(
-                device.queue, (count, BOUND_ROW_SPLIT), None, vertices, np.int32(count), views,
-                np.int32(view), np.int32(1), bound)
-            timer.add("visibility", event)
+            device.fill(big_count, np.int32(0), 4, timer, "visibility")
+            timer.add("visibility", first_pass(
+                device.queue, (count,), None, vertices, np.int32(count), views, np.int32(view), np.int32(1), bound,
+                np.int32(BOUND_SMALL_ROWS), big_items, big_count))
+            timer.add("visibility", split_pass(
+                device.queue, (count, BOUND_ROW_SPLIT), None, vertices, views, np.int32(view), np.int32(1), bound,
+                big_items, big_count))
     return bound, inputs.shadow_texels
 
 
