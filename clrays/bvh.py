@@ -34,6 +34,17 @@ class Bvh:
         return 0 if self.triangle_count > 1 else -1
 
 
+@dataclass
+class BvhTopology:
+    """The tree alone: what depends on the triangles' order in space, not on where they
+    are exactly. A rigidly moved scene (eye space, as the camera moves) keeps it and
+    only refits its boxes (`refit_bvh`)."""
+
+    children: np.ndarray  # (n - 1, 2) int64, leaves as -(triangle + 1)
+    levels: list  # internal node indices per depth, deepest first
+    triangle_count: int
+
+
 def _spread_bits(x: np.ndarray) -> np.ndarray:
     """10-bit integers with two zero bits inserted between their bits (for 30-bit Morton codes)."""
     x = x.astype(np.uint64) & np.uint64(0x3FF)
@@ -55,14 +66,23 @@ def _highest_bit(x: np.ndarray) -> np.ndarray:
 
 def build_bvh(triangles: np.ndarray) -> Bvh:
     """The BVH of (T, 3, 3) triangles (any float dtype; boxes are rounded outwards to
-    float32 and padded by BOX_PAD_REL)."""
+    float32 and padded by BOX_PAD_REL): `refit_bvh(bvh_topology(triangles), triangles)`."""
+    return refit_bvh(bvh_topology(triangles), triangles)
+
+
+def _triangle_boxes(tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    # Corner by corner: numpy reduces a middle axis of length 3 far more slowly.
+    return (np.minimum(np.minimum(tri[:, 0], tri[:, 1]), tri[:, 2]),
+            np.maximum(np.maximum(tri[:, 0], tri[:, 1]), tri[:, 2]))
+
+
+def bvh_topology(triangles: np.ndarray) -> BvhTopology:
+    """The tree of (T, 3, 3) triangles, without boxes (module docstring)."""
     tri = np.asarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
     n = len(tri)
     if n <= 1:
-        return Bvh(np.zeros((0, 4), np.float32), np.zeros((0, 2), np.int32), n)
-    # Corner by corner: numpy reduces a middle axis of length 3 far more slowly.
-    tri_lo = np.minimum(np.minimum(tri[:, 0], tri[:, 1]), tri[:, 2])
-    tri_hi = np.maximum(np.maximum(tri[:, 0], tri[:, 1]), tri[:, 2])
+        return BvhTopology(np.zeros((0, 2), np.int64), [], n)
+    tri_lo, tri_hi = _triangle_boxes(tri)
     centroid = (tri_lo + tri_hi) / 2
     lo, hi = centroid.min(axis=0), centroid.max(axis=0)
     cell = np.clip((centroid - lo) / np.maximum(hi - lo, 1e-300) * 1023.0, 0, 1023).astype(np.uint64)
@@ -127,7 +147,7 @@ def build_bvh(triangles: np.ndarray) -> Bvh:
     right = np.where(last == gamma + 1, -(gamma + 2), gamma + 1)
     children = np.stack([left, right], axis=1)
 
-    # Depth of every internal node (top-down), then boxes refit from the deepest level up.
+    # Depth of every internal node (top-down): the levels the refit goes up by.
     depth = np.full(n - 1, -1, dtype=np.int64)
     depth[0] = 0
     frontier = np.array([0])
@@ -137,15 +157,33 @@ def build_bvh(triangles: np.ndarray) -> Bvh:
         kids = children[frontier].ravel()
         frontier = kids[kids >= 0]
         depth[frontier] = level
-    # One array of boxes, internal nodes first, then the leaves in sorted order, so a
-    # level's refit is two gathers per side: child c ≥ 0 is row c, leaf -(k + 1) row n - 1 + k.
-    box_lo = np.concatenate([np.empty((n - 1, 3)), tri_lo[order]])
-    box_hi = np.concatenate([np.empty((n - 1, 3)), tri_hi[order]])
-    rows = np.where(children >= 0, children, n - 2 - children)
+    # Leaves name triangles, not sorted positions.
+    leaf = children < 0
+    children[leaf] = -(order[-children[leaf] - 1] + 1)
     by_depth = np.argsort(-depth, kind="stable")
     level_ends = np.cumsum(np.bincount(depth)[::-1])
-    for first, last in zip(np.concatenate([[0], level_ends[:-1]]), level_ends):
-        nodes = by_depth[first:last]
+    levels = [by_depth[first:last] for first, last in zip(np.concatenate([[0], level_ends[:-1]]), level_ends)]
+    return BvhTopology(children, levels, n)
+
+
+def refit_bvh(topology: BvhTopology, triangles: np.ndarray) -> Bvh:
+    """The boxes of `topology` around `triangles` (the same triangles, in the same order,
+    moved or not: any tree is a valid BVH once its boxes hold its triangles), refit from the
+    deepest level up, rounded outwards to float32 and padded by BOX_PAD_REL."""
+    tri = np.asarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
+    n = topology.triangle_count
+    if len(tri) != n:
+        raise ValueError(f"refit_bvh: the topology holds {n} triangles, got {len(tri)}")
+    if n <= 1:
+        return Bvh(np.zeros((0, 4), np.float32), np.zeros((0, 2), np.int32), n)
+    tri_lo, tri_hi = _triangle_boxes(tri)
+    children = topology.children
+    # One array of boxes, internal nodes first, then the triangles, so a level's refit is
+    # two gathers per side: child c ≥ 0 is row c, leaf -(t + 1) row n - 1 + t.
+    box_lo = np.concatenate([np.empty((n - 1, 3)), tri_lo])
+    box_hi = np.concatenate([np.empty((n - 1, 3)), tri_hi])
+    rows = np.where(children >= 0, children, n - 2 - children)
+    for nodes in topology.levels:
         left, right = rows[nodes, 0], rows[nodes, 1]
         box_lo[nodes] = np.minimum(box_lo[left], box_lo[right])
         box_hi[nodes] = np.maximum(box_hi[left], box_hi[right])
@@ -155,9 +193,6 @@ def build_bvh(triangles: np.ndarray) -> Bvh:
     bounds = np.zeros((n - 1, 2, 4), dtype=np.float32)
     bounds[:, 0, :3] = np.nextafter((node_lo - pad).astype(np.float32), np.float32(-np.inf))
     bounds[:, 1, :3] = np.nextafter((node_hi + pad).astype(np.float32), np.float32(np.inf))
-    # Leaves name triangles, not sorted positions.
-    leaf = children < 0
-    children[leaf] = -(order[-children[leaf] - 1] + 1)
     return Bvh(bounds.reshape(-1, 4), children.astype(np.int32), n)
 
 

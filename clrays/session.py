@@ -40,7 +40,7 @@ from .stages.raymarch import raymarch
 from .stages.rectify import Epipolar, rectify
 from .stages.shade import shade
 from .stages.traverse import traverse
-from .stages.visibility import bound_atlas, upload_bvh, visibility, visibility_bound
+from .stages.visibility import bound_atlas, bvh_topology_of, upload_bvh, visibility, visibility_bound
 
 #: The rectified texture of a light whose shadow map is empty (nothing casts a shadow)
 #: is π everywhere whatever its size, so it is built at this size (the minimum).
@@ -164,8 +164,9 @@ class Renderer:
 
     def _visibility(self, buffers: FrameBuffers, rastered: RasterResult, keys: StageKeys, reuse: Reuse,
                     timer: StageTimer):
-        """The visibility stage: each light's bound map kept while its shadow map is, the BVH
-        while the eye-space triangles are; None unless `render.surface_shadows` is exact."""
+        """The visibility stage: each light's bound map kept while its shadow map is, the BVH's
+        tree while the geometry is and its boxes while the eye-space triangles are; None
+        unless `render.surface_shadows` is exact."""
         scene = buffers.inputs.scene
         if scene.render.surface_shadows != "exact" or not scene.lights:
             return None
@@ -175,7 +176,12 @@ class Renderer:
                   for index in range(len(scene.lights))]
         atlas = reuse.keep("bound_atlas", digest("bound", tuple(keys.shadow)),
                            lambda: bound_atlas(device, buffers, bounds))
-        bvh = reuse.keep("bvh", digest("bvh", keys.camera), lambda: upload_bvh(device, buffers.inputs, timer))
+        # The tree depends on the geometry only, its boxes on the eye-space triangles too
+        # (geometry and eye position), not on where the camera looks.
+        topology = reuse.keep("bvh.topology", digest("bvh.topology", keys.geometry),
+                              lambda: bvh_topology_of(buffers.inputs, timer))
+        bvh = reuse.keep("bvh", digest("bvh", keys.geometry, buffers.inputs.eye_ws),
+                         lambda: upload_bvh(device, buffers.inputs, topology, timer))
         reuse.record.note("visibility", COMPUTED)
         return visibility(device, buffers, rastered, atlas, bvh, timer)
 

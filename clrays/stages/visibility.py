@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import structs
-from ..bvh import Bvh, build_bvh
+from ..bvh import Bvh, BvhTopology, bvh_topology, refit_bvh
 from ..device import Device, StageTimer
 from ..inputs import FrameBuffers, FrameInputs, light_pass_inputs
 from .raster import RasterResult
@@ -36,14 +36,23 @@ class DeviceBvh:
     node_bounds: object
     node_children: object
     root: int
-    build_ms: float  # host build time
+    build_ms: float  # host refit time
 
 
-def upload_bvh(device: Device, inputs: FrameInputs, timer: StageTimer) -> DeviceBvh:
-    """Build (on the host, timed as `bvh`) and upload the BVH of the eye-space triangles the
-    device intersects, so its boxes hold exactly the float32 vertices the rays meet."""
+def bvh_topology_of(inputs: FrameInputs, timer: StageTimer) -> BvhTopology:
+    """The BVH's tree over the world-space triangles (host, timed as `bvh`): it depends on
+    the geometry alone, so a session keeps it while the camera moves."""
     start = time.perf_counter()
-    bvh: Bvh = build_bvh(inputs.tri_vertices[:, :3].reshape(-1, 3, 3))
+    topology = bvh_topology(inputs.scene.geometry.triangles)
+    timer.add_host("bvh", (time.perf_counter() - start) * 1e3)
+    return topology
+
+
+def upload_bvh(device: Device, inputs: FrameInputs, topology: BvhTopology, timer: StageTimer) -> DeviceBvh:
+    """Refit `topology` around the eye-space triangles the device intersects, so its boxes
+    hold exactly the float32 vertices the rays meet (host, timed as `bvh`), and upload it."""
+    start = time.perf_counter()
+    bvh: Bvh = refit_bvh(topology, inputs.tri_vertices[:, :3].reshape(-1, 3, 3))
     milliseconds = (time.perf_counter() - start) * 1e3
     timer.add_host("bvh", milliseconds)
     return DeviceBvh(device.buffer(bvh.node_bounds, writable=False),
