@@ -227,7 +227,8 @@ inline float own_surface_slack(global const light_t* light, global const view_t*
  * Shadowed: every centre of the 3×3 texels around `lookup` holds a blocker nearer than
  * the bias. */
 inline int map_decision(global const light_t* light, global const view_t* views, global const uint* shadow_depth,
-                        global const uint* bound, float3 start, float3 lookup, float3 n, float reach)
+                        global const uint* bound, float3 start, float3 lookup, float3 n,
+                        global const float4* tri_vertices, int tri)
 {
     global const view_t* view = views + light_view_index(light, start);
     float2 texel;
@@ -235,13 +236,19 @@ inline int map_decision(global const light_t* light, global const view_t* views,
     if (!view_project(view, start, &texel, &depth)) return -1;
     if (texel.x < 0.0f || texel.y < 0.0f || texel.x >= (float)view->width || texel.y >= (float)view->height)
         return 1; /* outside the map: no occluder (a map covers every occluder) */
-    float tolerance = fmin(SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth),
-                           own_surface_slack(light, view, start, n, depth, reach));
     int tx = (int)texel.x, ty = (int)texel.y;
-    if (depth <= as_float(bound[view->depth_offset + ty * view->width + tx]) + tolerance) return 1;
+    float bound_depth = as_float(bound[view->depth_offset + ty * view->width + tx]);
+    /* Lit when depth ≤ bound + min(bias, slack), both ≥ 0: decided without the slack's
+     * trigonometry at either end (same answer as computing it first). */
+    if (depth <= bound_depth) return 1;
+    if (depth <= bound_depth + SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth)) {
+        float reach = 0.0f; /* of the sample's triangle from the view's origin */
+        for (int k = 0; k < 3; ++k) reach = fmax(reach, length(tri_vertices[3 * tri + k].xyz - view->origin.xyz));
+        if (depth <= bound_depth + own_surface_slack(light, view, start, n, depth, reach)) return 1;
+    }
     view = views + light_view_index(light, lookup);
     if (!view_project(view, lookup, &texel, &depth)) return -1;
-    tolerance = SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth);
+    float tolerance = SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth);
     tx = (int)texel.x;
     ty = (int)texel.y;
     for (int j = -1; j <= 1; ++j)
@@ -280,10 +287,7 @@ kernel void visibility(global const frame_t* frame, global const view_t* views, 
         float3 side = dot(n, to_light) >= 0.0f ? n : -n;
         float3 start = p + side * (SHADOW_RAY_OFFSET_REL * (length(p) + to_light_distance));
         float3 lookup = p + n * shadow_texel_size(light, length(p - light->position.xyz));
-        float reach = 0.0f; /* of the sample's triangle from the light's view origin */
-        global const view_t* view = views + light_view_index(light, start);
-        for (int k = 0; k < 3; ++k) reach = fmax(reach, length(tri_vertices[3 * tri + k].xyz - view->origin.xyz));
-        int decided = map_decision(light, views, shadow_depth, bound, start, lookup, n, reach);
+        int decided = map_decision(light, views, shadow_depth, bound, start, lookup, n, tri_vertices, tri);
         if (decided >= 0) {
             out[l] = (float)decided;
             continue;
