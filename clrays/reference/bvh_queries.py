@@ -13,10 +13,11 @@ test. The float64 arithmetic of `geometry` then runs on the (query, triangle) pa
   only if it crosses the path from x to the light, and these paths fill the planar
   triangle (light, P0, P1) — for a directional light, the parallelogram swept from P0–P1
   back along the light's direction to the scene's bounds. A separating-axis test
-  (the box's 3 axes, the polygon's normal, the 9 products of box axes and polygon edges)
+  (the box's 3 axes, the polygon's normal, the products of box axes and polygon edges)
   keeps the boxes that polygon may meet.
 
-Boxes are padded by PAD_REL of the scene's coordinate scale, far above the float64
+Boxes are padded by PAD_REL of the scene's coordinate scale (and, against a polygon, of
+the polygon's, whose far corner may lie well outside the scene), far above the float64
 rounding of the tests, so a triangle that the all-triangles arithmetic would count is
 never left out; an extra candidate changes nothing (its clip is empty, its hit is not
 the nearest), so the images are those of the all-triangles code up to rounding.
@@ -183,6 +184,8 @@ class SceneBvh:
                                np.stack([edges[..., 2], zero, -edges[..., 0]], axis=-1),
                                np.stack([-edges[..., 1], edges[..., 0], zero], axis=-1)], axis=1)
         poly_lo, poly_hi = polygons.min(axis=1), polygons.max(axis=1)
+        poly_pad = PAD_REL * np.abs(polygons).max(axis=(1, 2))
+        poly_lo, poly_hi = poly_lo - poly_pad[:, None], poly_hi + poly_pad[:, None]
         # The polygon's side of every axis, once: its plane's offset and its extent along
         # each edge axis; a box then costs one projection of its centre per axis.
         plane = dot(normal, polygons[:, 0])
@@ -194,8 +197,8 @@ class SceneBvh:
             # Cheapest first: the box axes, then the plane, then the edge axes on what is left.
             keep = np.all(poly_lo[q] <= hi, axis=1) & np.all(poly_hi[q] >= lo, axis=1)
             where = np.flatnonzero(keep)
-            center, half = (lo[where] + hi[where]) / 2, (hi[where] - lo[where]) / 2
             qk = q[where]
+            center, half = (lo[where] + hi[where]) / 2, (hi[where] - lo[where]) / 2 + poly_pad[qk, None]
             plane_ok = np.abs(plane[qk] - dot(normal[qk], center)) <= dot(abs_normal[qk], half)
             where, center, half, qk = where[plane_ok], center[plane_ok], half[plane_ok], qk[plane_ok]
             at = np.einsum("mak,mk->ma", axes[qk], center)
