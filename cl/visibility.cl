@@ -1,8 +1,9 @@
 /* visibility — exact hard shadows on surfaces: per camera sample and light, 1 when the
  * segment to the light is clear, else 0. The shadow map decides where its neighbourhood
  * is unanimous; the other samples cast a shadow ray through the BVH (docs/design.md §4, visibility).
- * visibility_bound reads tri_vertices, views; writes bound (a lower bound of the depth of
- * every triangle that touches each texel, atomic min).
+ * visibility_bound, visibility_bound_split read tri_vertices, views; write bound (a lower
+ * bound of the depth of every triangle that touches each texel, atomic min) and the list
+ * of triangles whose rectangles the split pass takes (big_items, big_count).
  * visibility reads frame, views, lights, shadow_depth, bound, camera_depth, tri_id,
  * tri_vertices, tri_normal, offsets, node_bounds, node_children; writes visible
  * (float per sample and light, [sample][light]). */
@@ -15,8 +16,6 @@
 #define SHADOW_RAY_OFFSET_REL 2e-6f
 /* Bounds are shrunk by this relative margin against float32 rounding of the bound itself. */
 #define BOUND_MARGIN_REL 1e-5f
-/* Each triangle's texel rectangle is split over this many work-items by rows. */
-#define BOUND_ROW_SPLIT 16
 
 /* Closest point of triangle abc to p (Ericson, Real-Time Collision Detection §5.1.5). */
 inline float3 closest_on_triangle(float3 p, float3 a, float3 b, float3 c)
@@ -72,11 +71,10 @@ inline float frustum_side(global const view_t* view, int plane, float3 q, float 
  *     along the texel's cone, bounded by the cone's half-angle ρ: h / cos(max(φ - ρ, 0)));
  *   orthographic: max(nearest vertex, the plane's depth at the texel's nearest corner).
  * A triangle thinner than a texel, which the centre-sampled map may miss, is still here. */
-kernel void visibility_bound(global const float4* tri_vertices, int count, global const view_t* views,
-                             int first_view, int view_count, global uint* bound)
+inline void bound_triangle(global const float4* tri_vertices, global const view_t* views, int first_view,
+                           int view_count, global uint* bound, int item, int row_first, int row_step,
+                           int small_rows, global int* big_items, volatile global int* big_count)
 {
-    int item = get_global_id(0);
-    if (item >= count * view_count) return;
     int tri = item / view_count;
     global const view_t* view = views + first_view + item % view_count;
     float3 vertex[3], in_view[3];
@@ -120,7 +118,11 @@ kernel void visibility_bound(global const float4* tri_vertices, int count, globa
     int x0 = max((int)floor(fmax(lo.x, -2.0f)) - 1, 0), y0 = max((int)floor(fmax(lo.y, -2.0f)) - 1, 0);
     int x1 = min((int)floor(fmin(hi.x, (float)view->width + 2.0f)) + 1, view->width - 1);
     int y1 = min((int)floor(fmin(hi.y, (float)view->height + 2.0f)) + 1, view->height - 1);
-    if (x0 > x1 || y0 + (int)get_global_id(1) > y1) return; /* outside the view, or no row for this item */
+    if (x0 > x1 || y0 + row_first > y1) return; /* outside the view, or no row for this item */
+    if (small_rows > 0 && y1 - y0 + 1 > small_rows) {
+        big_items[atomic_inc(big_count)] = item; /* many rows: the split pass takes it */
+        return;
+    }
     float3 normal = cross(vertex[1] - vertex[0], vertex[2] - vertex[0]);
     float normal_length = length(normal);
     float3 n = normal_length > 0.0f ? normal / normal_length : (float3)(0.0f);
@@ -145,7 +147,7 @@ kernel void visibility_bound(global const float4* tri_vertices, int count, globa
      * depth): a texel already at or under it is skipped before its cone maths, which
      * leaves the atomic-min result unchanged. */
     uint floor_bits = as_uint(fmax(nearest - BOUND_MARGIN_REL * fabs(nearest) - BOUND_MARGIN_REL * extent, 0.0f));
-    for (int ty = y0 + get_global_id(1); ty <= y1; ty += BOUND_ROW_SPLIT) {
+    for (int ty = y0 + row_first; ty <= y1; ty += row_step) {
         for (int tx = x0; tx <= x1; ++tx) {
             if (bound[view->depth_offset + ty * view->width + tx] <= floor_bits) continue;
             float depth = nearest;
@@ -171,6 +173,29 @@ kernel void visibility_bound(global const float4* tri_vertices, int count, globa
             if (as_uint(depth) < *texel) atomic_min(texel, as_uint(depth)); /* the read spares most atomics */
         }
     }
+}
+
+/* Two passes, because a triangle's rectangle may hold a few texels or a whole face:
+ * visibility_bound takes one work-item per triangle and view and does the rectangles of
+ * up to `small_rows` rows at once, listing the others in big_items; visibility_bound_split
+ * then spreads each listed rectangle's rows over the global size of its dimension 1. */
+kernel void visibility_bound(global const float4* tri_vertices, int count, global const view_t* views,
+                             int first_view, int view_count, global uint* bound, int small_rows,
+                             global int* big_items, volatile global int* big_count)
+{
+    int item = get_global_id(0);
+    if (item >= count * view_count) return;
+    bound_triangle(tri_vertices, views, first_view, view_count, bound, item, 0, 1, small_rows, big_items, big_count);
+}
+
+kernel void visibility_bound_split(global const float4* tri_vertices, global const view_t* views, int first_view,
+                                   int view_count, global uint* bound, global const int* big_items,
+                                   global const int* big_count)
+{
+    int index = get_global_id(0);
+    if (index >= *big_count) return;
+    bound_triangle(tri_vertices, views, first_view, view_count, bound, big_items[index], get_global_id(1),
+                   get_global_size(1), 0, 0, 0);
 }
 
 /* How far the sample's own triangle (plane through p with unit normal n, largest distance
@@ -202,7 +227,8 @@ inline float own_surface_slack(global const light_t* light, global const view_t*
  * Shadowed: every centre of the 3×3 texels around `lookup` holds a blocker nearer than
  * the bias. */
 inline int map_decision(global const light_t* light, global const view_t* views, global const uint* shadow_depth,
-                        global const uint* bound, float3 start, float3 lookup, float3 n, float reach)
+                        global const uint* bound, float3 start, float3 lookup, float3 n,
+                        global const float4* tri_vertices, int tri)
 {
     global const view_t* view = views + light_view_index(light, start);
     float2 texel;
@@ -210,13 +236,19 @@ inline int map_decision(global const light_t* light, global const view_t* views,
     if (!view_project(view, start, &texel, &depth)) return -1;
     if (texel.x < 0.0f || texel.y < 0.0f || texel.x >= (float)view->width || texel.y >= (float)view->height)
         return 1; /* outside the map: no occluder (a map covers every occluder) */
-    float tolerance = fmin(SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth),
-                           own_surface_slack(light, view, start, n, depth, reach));
     int tx = (int)texel.x, ty = (int)texel.y;
-    if (depth <= as_float(bound[view->depth_offset + ty * view->width + tx]) + tolerance) return 1;
+    float bound_depth = as_float(bound[view->depth_offset + ty * view->width + tx]);
+    /* Lit when depth ≤ bound + min(bias, slack), both ≥ 0: decided without the slack's
+     * trigonometry at either end (same answer as computing it first). */
+    if (depth <= bound_depth) return 1;
+    if (depth <= bound_depth + SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth)) {
+        float reach = 0.0f; /* of the sample's triangle from the view's origin */
+        for (int k = 0; k < 3; ++k) reach = fmax(reach, length(tri_vertices[3 * tri + k].xyz - view->origin.xyz));
+        if (depth <= bound_depth + own_surface_slack(light, view, start, n, depth, reach)) return 1;
+    }
     view = views + light_view_index(light, lookup);
     if (!view_project(view, lookup, &texel, &depth)) return -1;
-    tolerance = SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth);
+    float tolerance = SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth);
     tx = (int)texel.x;
     ty = (int)texel.y;
     for (int j = -1; j <= 1; ++j)
@@ -255,10 +287,7 @@ kernel void visibility(global const frame_t* frame, global const view_t* views, 
         float3 side = dot(n, to_light) >= 0.0f ? n : -n;
         float3 start = p + side * (SHADOW_RAY_OFFSET_REL * (length(p) + to_light_distance));
         float3 lookup = p + n * shadow_texel_size(light, length(p - light->position.xyz));
-        float reach = 0.0f; /* of the sample's triangle from the light's view origin */
-        global const view_t* view = views + light_view_index(light, start);
-        for (int k = 0; k < 3; ++k) reach = fmax(reach, length(tri_vertices[3 * tri + k].xyz - view->origin.xyz));
-        int decided = map_decision(light, views, shadow_depth, bound, start, lookup, n, reach);
+        int decided = map_decision(light, views, shadow_depth, bound, start, lookup, n, tri_vertices, tri);
         if (decided >= 0) {
             out[l] = (float)decided;
             continue;

@@ -34,6 +34,17 @@ class Bvh:
         return 0 if self.triangle_count > 1 else -1
 
 
+@dataclass
+class BvhTopology:
+    """The tree alone: what depends on the triangles' order in space, not on where they
+    are exactly. A rigidly moved scene (eye space, as the camera moves) keeps it and
+    only refits its boxes (`refit_bvh`)."""
+
+    children: np.ndarray  # (n - 1, 2) int64, leaves as -(triangle + 1)
+    levels: list  # internal node indices per depth, deepest first
+    triangle_count: int
+
+
 def _spread_bits(x: np.ndarray) -> np.ndarray:
     """10-bit integers with two zero bits inserted between their bits (for 30-bit Morton codes)."""
     x = x.astype(np.uint64) & np.uint64(0x3FF)
@@ -44,24 +55,34 @@ def _spread_bits(x: np.ndarray) -> np.ndarray:
     return x
 
 
-def _leading_zeros(x: np.ndarray) -> np.ndarray:
-    """Leading zero bits of uint64 values (64 for 0), exact: each 32-bit half goes through
-    frexp, which is exact for integers below 2**53."""
-    hi = (x >> np.uint64(32)).astype(np.float64)
-    lo = (x & np.uint64(0xFFFFFFFF)).astype(np.float64)
-    hi_bits = np.frexp(hi)[1]  # bit length: 0 for 0
-    lo_bits = np.frexp(lo)[1]
-    return np.where(hi_bits > 0, 32 - hi_bits, 64 - lo_bits).astype(np.int64)
+def _highest_bit(x: np.ndarray) -> np.ndarray:
+    """The highest set bit of uint64 values, as a power of two (0 for 0): the bits below it
+    are smeared to ones, then the value less its half is that bit."""
+    x = x.copy()
+    for shift in (1, 2, 4, 8, 16, 32):
+        x |= x >> np.uint64(shift)
+    return x - (x >> np.uint64(1))
 
 
 def build_bvh(triangles: np.ndarray) -> Bvh:
     """The BVH of (T, 3, 3) triangles (any float dtype; boxes are rounded outwards to
-    float32 and padded by BOX_PAD_REL)."""
+    float32 and padded by BOX_PAD_REL): `refit_bvh(bvh_topology(triangles), triangles)`."""
+    return refit_bvh(bvh_topology(triangles), triangles)
+
+
+def _triangle_boxes(tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    # Corner by corner: numpy reduces a middle axis of length 3 far more slowly.
+    return (np.minimum(np.minimum(tri[:, 0], tri[:, 1]), tri[:, 2]),
+            np.maximum(np.maximum(tri[:, 0], tri[:, 1]), tri[:, 2]))
+
+
+def bvh_topology(triangles: np.ndarray) -> BvhTopology:
+    """The tree of (T, 3, 3) triangles, without boxes (module docstring)."""
     tri = np.asarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
     n = len(tri)
     if n <= 1:
-        return Bvh(np.zeros((0, 4), np.float32), np.zeros((0, 2), np.int32), n)
-    tri_lo, tri_hi = tri.min(axis=1), tri.max(axis=1)
+        return BvhTopology(np.zeros((0, 2), np.int64), [], n)
+    tri_lo, tri_hi = _triangle_boxes(tri)
     centroid = (tri_lo + tri_hi) / 2
     lo, hi = centroid.min(axis=0), centroid.max(axis=0)
     cell = np.clip((centroid - lo) / np.maximum(hi - lo, 1e-300) * 1023.0, 0, 1023).astype(np.uint64)
@@ -71,38 +92,53 @@ def build_bvh(triangles: np.ndarray) -> Bvh:
     # Sorted position in the low bits makes every key unique (Karras §4's tie-break).
     keys = (morton[order] << np.uint64(32)) | np.arange(n, dtype=np.uint64)
 
-    def delta(i: np.ndarray, j: np.ndarray) -> np.ndarray:
-        """Common prefix length of keys i and j; -1 where j is outside [0, n)."""
+    # Two keys share more leading bits than keys i and k exactly when their XOR is below
+    # the highest bit of keys[i] ^ keys[k] (its "bound"), so the searches below compare
+    # integers instead of counting bits; 2**63 (above every XOR of keys < 2**62) stands for
+    # a neighbour outside [0, n), with whom no key shares anything.
+    outside = np.uint64(1 << 63)
+    neighbour_bound = _highest_bit(keys[:-1] ^ keys[1:])  # keys k and k + 1
+
+    def longer_prefix(i: np.ndarray, j: np.ndarray, bound: np.ndarray) -> np.ndarray:
+        """Whether keys i and j share more leading bits than `bound` stands for; false
+        where j is outside [0, n)."""
         inside = (j >= 0) & (j < n)
-        jj = np.clip(j, 0, n - 1)
-        return np.where(inside, _leading_zeros(keys[i] ^ keys[jj]), -1)
+        return inside & ((keys[i] ^ keys[np.clip(j, 0, n - 1)]) < bound)
 
     i = np.arange(n - 1, dtype=np.int64)
-    direction = np.where(delta(i, i + 1) - delta(i, i - 1) >= 0, 1, -1)
-    delta_min = delta(i, i - direction)
-    # The far end of each node's key range: an exponential, then a binary search.
+    bound_next = neighbour_bound  # keys i, i + 1
+    bound_prev = np.concatenate([[outside], neighbour_bound[:-1]])  # keys i - 1, i
+    # Karras's direction: towards the neighbour sharing the longer prefix (never a tie for
+    # unique keys); the other neighbour's prefix is the least the range's keys share.
+    direction = np.where(bound_next <= bound_prev, 1, -1)
+    bound_min = np.where(direction > 0, bound_prev, bound_next)
+    # The far end of each node's key range: an exponential, then a binary search, each
+    # pass over the nodes still searching only.
     length_max = np.full(n - 1, 2, dtype=np.int64)
-    grow = delta(i, i + length_max * direction) > delta_min
-    while grow.any():
-        length_max = np.where(grow, length_max * 2, length_max)
-        grow &= delta(i, i + length_max * direction) > delta_min
+    active = np.flatnonzero(longer_prefix(i, i + 2 * direction, bound_min))
+    while active.size:
+        length_max[active] *= 2
+        active = active[longer_prefix(active, active + length_max[active] * direction[active], bound_min[active])]
     length = np.zeros(n - 1, dtype=np.int64)
     step = length_max // 2
-    while (step >= 1).any():
-        take = (step >= 1) & (delta(i, i + (length + step) * direction) > delta_min)
-        length = np.where(take, length + step, length)
-        step //= 2
+    active = i
+    while active.size:
+        s = step[active]
+        take = longer_prefix(active, active + (length[active] + s) * direction[active], bound_min[active])
+        length[active[take]] += s[take]
+        step[active] = s // 2
+        active = active[s // 2 >= 1]
     j = i + length * direction
-    delta_node = delta(i, j)
-    # The split: the last key sharing more than delta_node bits with key i.
+    bound_node = _highest_bit(keys[i] ^ keys[j])
+    # The split: the last key sharing more leading bits with key i than key j does.
     split = np.zeros(n - 1, dtype=np.int64)
-    searching = np.ones(n - 1, dtype=bool)  # a node stops after its step of 1
+    active = i  # a node stops after its step of 1
     divisor = 2
-    while searching.any():
-        step = (length + divisor - 1) // divisor
-        take = searching & (delta(i, i + (split + step) * direction) > delta_node)
-        split = np.where(take, split + step, split)
-        searching &= step > 1
+    while active.size:
+        step = (length[active] + divisor - 1) // divisor
+        take = longer_prefix(active, active + (split[active] + step) * direction[active], bound_node[active])
+        split[active[take]] += step[take]
+        active = active[step > 1]
         divisor *= 2
     gamma = i + split * direction + np.minimum(direction, 0)
     first, last = np.minimum(i, j), np.maximum(i, j)
@@ -111,7 +147,7 @@ def build_bvh(triangles: np.ndarray) -> Bvh:
     right = np.where(last == gamma + 1, -(gamma + 2), gamma + 1)
     children = np.stack([left, right], axis=1)
 
-    # Depth of every internal node (top-down), then boxes refit from the deepest level up.
+    # Depth of every internal node (top-down): the levels the refit goes up by.
     depth = np.full(n - 1, -1, dtype=np.int64)
     depth[0] = 0
     frontier = np.array([0])
@@ -121,27 +157,42 @@ def build_bvh(triangles: np.ndarray) -> Bvh:
         kids = children[frontier].ravel()
         frontier = kids[kids >= 0]
         depth[frontier] = level
-    node_lo = np.empty((n - 1, 3))
-    node_hi = np.empty((n - 1, 3))
-    leaf_lo, leaf_hi = tri_lo[order], tri_hi[order]
-    for d in range(level - 1, -1, -1):
-        nodes = np.nonzero(depth == d)[0]
-        child_lo = np.empty((len(nodes), 2, 3))
-        child_hi = np.empty((len(nodes), 2, 3))
-        for side in (0, 1):
-            c = children[nodes, side]
-            leaf = c < 0
-            child_lo[leaf, side], child_hi[leaf, side] = leaf_lo[-c[leaf] - 1], leaf_hi[-c[leaf] - 1]
-            child_lo[~leaf, side], child_hi[~leaf, side] = node_lo[c[~leaf]], node_hi[c[~leaf]]
-        node_lo[nodes], node_hi[nodes] = child_lo.min(axis=1), child_hi.max(axis=1)
-
-    pad = BOX_PAD_REL * (np.max(tri_hi.max(axis=0) - tri_lo.min(axis=0)) + np.max(np.abs(tri)))
-    bounds = np.zeros((n - 1, 2, 4), dtype=np.float32)
-    bounds[:, 0, :3] = np.nextafter((node_lo - pad).astype(np.float32), np.float32(-np.inf))
-    bounds[:, 1, :3] = np.nextafter((node_hi + pad).astype(np.float32), np.float32(np.inf))
     # Leaves name triangles, not sorted positions.
     leaf = children < 0
     children[leaf] = -(order[-children[leaf] - 1] + 1)
+    by_depth = np.argsort(-depth, kind="stable")
+    level_ends = np.cumsum(np.bincount(depth)[::-1])
+    levels = [by_depth[first:last] for first, last in zip(np.concatenate([[0], level_ends[:-1]]), level_ends)]
+    return BvhTopology(children, levels, n)
+
+
+def refit_bvh(topology: BvhTopology, triangles: np.ndarray) -> Bvh:
+    """The boxes of `topology` around `triangles` (the same triangles, in the same order,
+    moved or not: any tree is a valid BVH once its boxes hold its triangles), refit from the
+    deepest level up, rounded outwards to float32 and padded by BOX_PAD_REL."""
+    tri = np.asarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
+    n = topology.triangle_count
+    if len(tri) != n:
+        raise ValueError(f"refit_bvh: the topology holds {n} triangles, got {len(tri)}")
+    if n <= 1:
+        return Bvh(np.zeros((0, 4), np.float32), np.zeros((0, 2), np.int32), n)
+    tri_lo, tri_hi = _triangle_boxes(tri)
+    children = topology.children
+    # One array of boxes, internal nodes first, then the triangles, so a level's refit is
+    # two gathers per side: child c ≥ 0 is row c, leaf -(t + 1) row n - 1 + t.
+    box_lo = np.concatenate([np.empty((n - 1, 3)), tri_lo])
+    box_hi = np.concatenate([np.empty((n - 1, 3)), tri_hi])
+    rows = np.where(children >= 0, children, n - 2 - children)
+    for nodes in topology.levels:
+        left, right = rows[nodes, 0], rows[nodes, 1]
+        box_lo[nodes] = np.minimum(box_lo[left], box_lo[right])
+        box_hi[nodes] = np.maximum(box_hi[left], box_hi[right])
+    node_lo, node_hi = box_lo[:n - 1], box_hi[:n - 1]
+
+    pad = BOX_PAD_REL * (np.max(tri_hi.max(axis=0) - tri_lo.min(axis=0)) + max(-tri_lo.min(), tri_hi.max()))
+    bounds = np.zeros((n - 1, 2, 4), dtype=np.float32)
+    bounds[:, 0, :3] = np.nextafter((node_lo - pad).astype(np.float32), np.float32(-np.inf))
+    bounds[:, 1, :3] = np.nextafter((node_hi + pad).astype(np.float32), np.float32(np.inf))
     return Bvh(bounds.reshape(-1, 4), children.astype(np.int32), n)
 
 

@@ -47,7 +47,7 @@ from .stages.rectify import Epipolar, rectify
 from .stages.sampling import SampleCounts, epipolar_sampling
 from .stages.shade import shade
 from .stages.traverse import traverse
-from .stages.visibility import bound_atlas, upload_bvh, visibility, visibility_bound
+from .stages.visibility import bound_atlas, bvh_topology_of, upload_bvh, visibility, visibility_bound
 
 #: The rectified texture of a light whose shadow map is empty (nothing casts a shadow)
 #: is π everywhere whatever its size, so it is built at this size (the minimum).
@@ -142,6 +142,7 @@ class Renderer:
         check_device_memory(device, inputs)
         buffers = upload(device, inputs)  # the scene in eye space, packed into device structs
         keys = StageKeys(buffers.inputs)
+        bvh = self._bvh(buffers, keys, reuse, timer)  # (visibility's BVH, on the host before the device is busy)
         rastered, maps = self._raster(buffers, keys, reuse, timer)  # raster: camera depth and ids, shadow maps
         textures, samples = [], None
         scatter = device.buffer(nbytes=16 * buffers.inputs.samples)  # in-scattered radiance per camera sample
@@ -172,15 +173,28 @@ class Renderer:
                 else:  # per camera sample; and a light that casts no shadow, whose 16 slices are too few to sample
                     traverse(device, buffers, rastered, epipolar, tables, scatter, timer, texture)
             reuse.record.note("traverse", COMPUTED)
-        visible = self._visibility(buffers, rastered, keys, reuse, timer)  # visibility: exact surface shadows
+        visible = self._visibility(buffers, rastered, keys, reuse, timer, bvh)  # visibility: exact surface shadows
         image = shade(device, buffers, rastered, scatter, timer, visible)  # shade: surfaces, attenuation, + scatter
         reuse.record.note("shade", COMPUTED)
         return image, tuple(reuse.record.status()), tuple(textures), samples
 
+    def _bvh(self, buffers: FrameBuffers, keys: StageKeys, reuse: Reuse, timer: StageTimer):
+        """The visibility stage's BVH, or None when the stage does not run: its tree kept
+        while the geometry is, its boxes while the eye-space triangles are (geometry and
+        eye position; not where the camera looks). Built before the frame's kernels are
+        queued, so on a CPU device the host build does not share the cores with them."""
+        scene = buffers.inputs.scene
+        if scene.render.surface_shadows != "exact" or not scene.lights:
+            return None
+        topology = reuse.keep("bvh.topology", digest("bvh.topology", keys.geometry),
+                              lambda: bvh_topology_of(buffers.inputs, timer))
+        return reuse.keep("bvh", digest("bvh", keys.geometry, buffers.inputs.eye_ws),
+                          lambda: upload_bvh(self.device, buffers.inputs, topology, timer))
+
     def _visibility(self, buffers: FrameBuffers, rastered: RasterResult, keys: StageKeys, reuse: Reuse,
-                    timer: StageTimer):
-        """The visibility stage: each light's bound map kept while its shadow map is, the BVH
-        while the eye-space triangles are; None unless `render.surface_shadows` is exact."""
+                    timer: StageTimer, bvh):
+        """The visibility stage: each light's bound map kept while its shadow map is, and the
+        frame's BVH (`_bvh`); None unless `render.surface_shadows` is exact."""
         scene = buffers.inputs.scene
         if scene.render.surface_shadows != "exact" or not scene.lights:
             return None
@@ -190,7 +204,6 @@ class Renderer:
                   for index in range(len(scene.lights))]
         atlas = reuse.keep("bound_atlas", digest("bound", tuple(keys.shadow)),
                            lambda: bound_atlas(device, buffers, bounds))
-        bvh = reuse.keep("bvh", digest("bvh", keys.camera), lambda: upload_bvh(device, buffers.inputs, timer))
         reuse.record.note("visibility", COMPUTED)
         return visibility(device, buffers, rastered, atlas, bvh, timer)
 

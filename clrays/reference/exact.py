@@ -5,7 +5,7 @@ channel (docs/design.md §1, §4),
 
     L = L_surf·e^{-σt·D} + Σ_lights Σ_{lit [a, b]} ∫_a^b e^{-σt·s}·σs·ρ(cosθ)·Lin(x_s) ds
 
-- D is the first hit of the ray (Möller–Trumbore against every triangle), or camera.far
+- D is the first hit of the ray (Möller–Trumbore), or camera.far
   (clamped: `radiometry.effective_far`) for a miss, in which case L_surf is the background.
 - L_surf = albedo/π · Σ_lights Lin(x)·max(0, n·ω_l)·V(x), n the shading normal (the
   geometric normal, or on a smooth mesh the interpolated vertex normals) turned towards the
@@ -24,7 +24,11 @@ channel (docs/design.md §1, §4),
   Gauss–Legendre (`light_texture.textured_in_scatter`); its texture also multiplies Lin
   on surfaces.
 
-Cost is O(pixels × triangles); rays go in chunks so memory stays around 100 MB.
+The three geometric queries (first hit, shadow ray, lit set) run on a BVH
+(`bvh_queries.SceneBvh`), which lists the few triangles each ray can meet, so the cost
+grows with pixels × those candidates, not pixels × triangles; `bvh=False` tests every
+triangle (`AllTriangles`), the yardstick the BVH path is tested against. Rays go in
+chunks so memory stays around 100 MB.
 """
 from __future__ import annotations
 
@@ -37,24 +41,28 @@ from . import radiometry
 from ..scene.camera import primary_rays, sample_offsets
 from .geometry import (BUDGET_BYTES, CLIP_PAIR_BYTES, dot, lit_intervals, occluded, raycast, shadow_halfspaces,
                        triangle_normals)
+from .bvh_queries import SceneBvh
 from .light_texture import light_texture, textured, textured_in_scatter
 from .radiometry import in_scatter_segments, light_incident, propagation_direction, rgb
 from ..scene.model import Scene
 
 
-#: Ray–triangle pairs per second that `exact` clips and integrates on the 2-core CI-class
-#: machine (measured on demo, bunny and sun at 64×36: 1.7–2.3 million), for estimates.
-PAIRS_PER_SECOND = 2.0e6
+#: Seconds per camera ray and light that `exact` on the BVH takes on the 2-core CI-class
+#: machine (measured at 160×90 on demo, sun, behind and bunny: 120–270 µs; the full
+#: 640×360 bunny: 330 µs), for estimates. Candidates grow slowly with the triangle count.
+SECONDS_PER_RAY_LIGHT = 3.0e-4
+#: Camera rays per batch on the BVH: the (ray, node) and (ray, triangle) pair arrays of
+#: a batch stay in the tens of MB.
+BVH_CHUNK_RAYS = 4096
 # Progress without a bar (stderr not a terminal): a line per this many percent.
 PROGRESS_LINE_PERCENT = 10
 
 
 def estimate_seconds(scene: Scene, pixels: int | None = None) -> float:
-    """Rough run time of `exact` on `pixels` pixels (default: the whole image): its cost is
-    rays × triangles × lights, at PAIRS_PER_SECOND."""
+    """Rough run time of `exact` on `pixels` pixels (default: the whole image): rays ×
+    lights at SECONDS_PER_RAY_LIGHT."""
     pixels = scene.image.width * scene.image.height if pixels is None else pixels
-    pairs = pixels * scene.image.spp * max(scene.geometry.count, 1) * max(len(scene.lights), 1)
-    return pairs / PAIRS_PER_SECOND
+    return pixels * scene.image.spp * max(len(scene.lights), 1) * SECONDS_PER_RAY_LIGHT
 
 
 def _shading_normals(geometry, tri: np.ndarray, ids: np.ndarray, x: np.ndarray, face: np.ndarray) -> np.ndarray:
@@ -85,15 +93,33 @@ def _shading_normals(geometry, tri: np.ndarray, ids: np.ndarray, x: np.ndarray, 
     return shading
 
 
-def _radiance(scene: Scene, eye: np.ndarray, dirs: np.ndarray, prepared, quad: dict) -> np.ndarray:
-    """Radiance (N, 3) of unit rays from the eye (the model in the module docstring)."""
+class AllTriangles:
+    """The three geometric queries of `exact` against every triangle (`geometry`): the
+    cost is rays × triangles. `SceneBvh` answers the same on a BVH; this is its yardstick."""
+
+    def __init__(self, triangles):
+        self.triangles = np.asarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
+
+    def raycast(self, origins, dirs, t_max=np.inf):
+        return raycast(origins, dirs, self.triangles, t_max=t_max)
+
+    def occluded(self, points, light, normals=None):
+        return occluded(points, light, self.triangles, normals=normals)
+
+    def lit_intervals(self, origins, dirs, D, light, halfspaces, lamp_radius: float = 0.0):
+        return lit_intervals(origins, dirs, D, light, self.triangles, halfspaces=halfspaces, lamp_radius=lamp_radius)
+
+
+def _radiance(scene: Scene, eye: np.ndarray, dirs: np.ndarray, prepared, quad: dict, queries) -> np.ndarray:
+    """Radiance (N, 3) of unit rays from the eye (the model in the module docstring);
+    `queries`: `SceneBvh` or `AllTriangles`."""
     n = len(dirs)
     tri = np.asarray(scene.geometry.triangles, dtype=np.float64).reshape(-1, 3, 3)
     medium = scene.medium
     sigma_s = rgb(medium.sigma_s)
     sigma_t = sigma_s + rgb(medium.sigma_a)
     far = radiometry.effective_far(scene)
-    t, idx = raycast(eye, dirs, tri, t_max=far)
+    t, idx = queries.raycast(eye, dirs, t_max=far)
     hit = idx >= 0
     D = np.where(hit, t, far)
     surf = np.zeros((n, 3))
@@ -114,15 +140,15 @@ def _radiance(scene: Scene, eye: np.ndarray, dirs: np.ndarray, prepared, quad: d
             lin = light_incident(light, x, sigma_t) * cos_l[:, None] * light_texture(light, x)
             lit = np.flatnonzero(np.any(lin > 0, axis=1))
             if len(lit):
-                blocked = occluded(x[lit], light, tri, normals=nrm[lit])
+                blocked = queries.occluded(x[lit], light, normals=nrm[lit])
                 lin[lit[blocked]] = 0.0
             irradiance += lin
         surf[hits] = np.asarray(scene.geometry.albedo, dtype=np.float64)[idx[hits]] / math.pi * irradiance
     out = surf * np.exp(-sigma_t * D[:, None])
     if np.any(sigma_s > 0):
         for light, halfspaces in prepared:
-            ray, a, b = lit_intervals(eye, dirs, D, light, tri, halfspaces=halfspaces,
-                                      lamp_radius=radiometry.lamp_radius(scene))
+            ray, a, b = queries.lit_intervals(eye, dirs, D, light, halfspaces,
+                                              lamp_radius=radiometry.lamp_radius(scene))
             if textured(light):  # cut at the texture's texel centres (clrays.reference.light_texture)
                 seg = textured_in_scatter(light, medium, eye, dirs[ray], a, b)
             else:
@@ -133,19 +159,20 @@ def _radiance(scene: Scene, eye: np.ndarray, dirs: np.ndarray, prepared, quad: d
 
 
 def render_exact(scene: Scene, progress: bool = False, rows=None, *, panels: int = 8,
-                 tol: float | None = 1e-10) -> np.ndarray:
+                 tol: float | None = 1e-10, bvh: bool = True) -> np.ndarray:
     """Ground-truth radiance image (H, W, 3) float64 (or (len(rows), W, 3) with `rows`).
 
     Each pixel is the mean over its `image.spp` sample rays (`camera.primary_rays`, one
     definition of pixel rays for every method) of the radiance described in the module
     docstring. `rows` selects image rows (a slice or indices) for tests on big images;
     `progress` shows a tqdm bar over ray chunks (or, a function, lines of text); `panels` and `tol` are the point-light
-    quadrature's starting panel count and relative tolerance (tol=None: one fixed pass).
+    quadrature's starting panel count and relative tolerance (tol=None: one fixed pass);
+    `bvh` as in `exact_pixels`.
     """
     image = scene.image
     row_idx = np.atleast_1d(np.arange(image.height)[slice(None) if rows is None else rows])
     ys, xs = np.repeat(row_idx, image.width), np.tile(np.arange(image.width), len(row_idx))
-    radiance = exact_pixels(scene, ys, xs, progress, panels=panels, tol=tol)
+    radiance = exact_pixels(scene, ys, xs, progress, panels=panels, tol=tol, bvh=bvh)
     return radiance.reshape(len(row_idx), image.width, 3)
 
 
@@ -171,20 +198,27 @@ class _ProgressLines:
 
 
 def exact_pixels(scene: Scene, ys, xs, progress=False, *, panels: int = 8,
-                 tol: float | None = 1e-10) -> np.ndarray:
+                 tol: float | None = 1e-10, bvh: bool = True) -> np.ndarray:
     """Ground-truth radiance (N, 3) float64 of the pixels (ys[i], xs[i]): what
     `render_exact` gives there, at a cost proportional to the number of pixels (for
     measuring error on a fixed subset of a large image). `progress`: True for a tqdm bar,
-    or a function that takes a line of text, called every PROGRESS_LINE_PERCENT."""
+    or a function that takes a line of text, called every PROGRESS_LINE_PERCENT.
+    `bvh`: find the triangles each ray can meet on a BVH (`bvh_queries.SceneBvh`), or,
+    False, test every triangle (`AllTriangles`: same images up to rounding, slow)."""
     image, camera = scene.image, scene.camera
     ys, xs = np.asarray(ys, dtype=np.intp), np.asarray(xs, dtype=np.intp)
     offsets = sample_offsets(image.spp)
     eye = np.asarray(camera.position, dtype=np.float64)
     tri = np.asarray(scene.geometry.triangles, dtype=np.float64).reshape(-1, 3, 3)
     prepared = [(light, shadow_halfspaces(light, tri)) for light in scene.lights]
-    # Chunks small enough for the (rays × triangles) clipping, and not so small that
-    # per-chunk overhead dominates when there are few triangles.
-    chunk = int(np.clip(BUDGET_BYTES // (CLIP_PAIR_BYTES * (len(tri) + 1)), 64, 16384))
+    if bvh:
+        queries = SceneBvh.build(tri)
+        chunk = BVH_CHUNK_RAYS
+    else:
+        queries = AllTriangles(tri)
+        # Chunks small enough for the (rays × triangles) clipping, and not so small that
+        # per-chunk overhead dominates when there are few triangles.
+        chunk = int(np.clip(BUDGET_BYTES // (CLIP_PAIR_BYTES * (len(tri) + 1)), 64, 16384))
     starts = range(0, len(ys), chunk)
     bar = None
     if callable(progress):
@@ -199,7 +233,7 @@ def exact_pixels(scene: Scene, ys, xs, progress=False, *, panels: int = 8,
         # One sample offset at a time keeps the ray array at H·W·3 floats.
         dirs = primary_rays(camera, image, offsets[k:k + 1])[ys, xs, 0, :]
         for s in starts:
-            total[s:s + chunk] += _radiance(scene, eye, dirs[s:s + chunk], prepared, quad)
+            total[s:s + chunk] += _radiance(scene, eye, dirs[s:s + chunk], prepared, quad, queries)
             if bar is not None:
                 bar.update(1)
     if bar is not None:

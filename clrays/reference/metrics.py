@@ -23,11 +23,12 @@ def luminance(image: np.ndarray) -> np.ndarray:
 
 
 def depth_map(scene: Scene) -> np.ndarray:
-    """Distance to the first surface through each pixel centre (inf: none), float64."""
-    from .geometry import raycast
+    """Distance to the first surface through each pixel centre (inf: none), float64; ray
+    casts on a BVH (`bvh_queries.SceneBvh`, the same hits as against every triangle)."""
+    from .bvh_queries import SceneBvh
 
     dirs = primary_rays(scene.camera, scene.image, np.array([[0.5, 0.5]])).reshape(-1, 3)
-    t, _ = raycast(scene.camera.position, dirs, scene.geometry.triangles, t_max=effective_far(scene))
+    t, _ = SceneBvh.build(scene.geometry.triangles).raycast(scene.camera.position, dirs, t_max=effective_far(scene))
     return t.reshape(scene.image.height, scene.image.width)
 
 
@@ -50,8 +51,8 @@ def depth_edges(depth: np.ndarray, relative: float = 0.05) -> np.ndarray:
 
 def depth_edges_at(scene: Scene, ys, xs, relative: float = 0.05) -> np.ndarray:
     """`depth_edges` for the pixels (ys[i], xs[i]) only, from float64 ray casts of each
-    pixel and its 4 neighbours: for error on a pixel subset of a large image."""
-    from .geometry import raycast
+    pixel and its 4 neighbours (on a BVH): for error on a pixel subset of a large image."""
+    from .bvh_queries import SceneBvh
 
     ys, xs = np.asarray(ys), np.asarray(xs)
     h, w = scene.image.height, scene.image.width
@@ -59,8 +60,8 @@ def depth_edges_at(scene: Scene, ys, xs, relative: float = 0.05) -> np.ndarray:
     neighbours = [(0, 0), (-1, 0), (1, 0), (0, -1), (0, 1)]
     cy = np.stack([np.clip(ys + dy, 0, h - 1) for dy, _ in neighbours])
     cx = np.stack([np.clip(xs + dx, 0, w - 1) for _, dx in neighbours])
-    t, _ = raycast(scene.camera.position, dirs[cy.ravel(), cx.ravel()], scene.geometry.triangles,
-                   t_max=effective_far(scene))
+    t, _ = SceneBvh.build(scene.geometry.triangles).raycast(scene.camera.position, dirs[cy.ravel(), cx.ravel()],
+                                                            t_max=effective_far(scene))
     depth = np.where(np.isfinite(t), t, -1.0).reshape(len(neighbours), -1)
     centre, around = depth[0], depth[1:]
     jump = ((centre < 0) != (around < 0)) | (np.abs(around - centre) > relative * np.maximum(np.abs(around),

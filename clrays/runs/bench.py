@@ -12,7 +12,7 @@ and records, per point, the frame time (median of `repeats` renders after a warm
 wall clock, host work included), the median device time per stage, the device memory,
 and the error against `exact`: relative RMSE of luminance and the 99th-percentile
 relative error, on pixels with at least 1% of the mean radiance, depth edges excluded
-(`clrays.reference.metrics`). `exact` costs pixels × triangles, so the error is measured on a
+(`clrays.reference.metrics`). `exact` takes minutes on a full frame, so the error is measured on a
 fixed, seeded random subset of pixels (`pixels`, default 4000), the same for every
 point; the references are kept on disk (`clrays.runs.references`).
 """

@@ -16,13 +16,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import structs
-from ..bvh import Bvh, build_bvh
+from ..bvh import Bvh, BvhTopology, bvh_topology, refit_bvh
 from ..device import Device, StageTimer
 from ..inputs import FrameBuffers, FrameInputs, light_pass_inputs
 from .raster import RasterResult
 
-#: Work-items per triangle and view of `visibility_bound`, each taking every this-many-th
-#: row of the triangle's texel rectangle (cl/visibility.cl's BOUND_ROW_SPLIT).
+#: `visibility_bound` does a triangle's texel rectangle of up to this many rows in one
+#: work-item (most triangles of a fine mesh: one item each, no idle ones) and leaves
+#: taller ones to `visibility_bound_split`, which gives each BOUND_ROW_SPLIT work-items,
+#: each taking every BOUND_ROW_SPLIT-th row (a floor's rectangle can be a whole face).
+BOUND_SMALL_ROWS = 8
 BOUND_ROW_SPLIT = 16
 
 
@@ -33,14 +36,23 @@ class DeviceBvh:
     node_bounds: object
     node_children: object
     root: int
-    build_ms: float  # host build time
+    build_ms: float  # host refit time
 
 
-def upload_bvh(device: Device, inputs: FrameInputs, timer: StageTimer) -> DeviceBvh:
-    """Build (on the host, timed as `bvh`) and upload the BVH of the eye-space triangles the
-    device intersects, so its boxes hold exactly the float32 vertices the rays meet."""
+def bvh_topology_of(inputs: FrameInputs, timer: StageTimer) -> BvhTopology:
+    """The BVH's tree over the world-space triangles (host, timed as `bvh`): it depends on
+    the geometry alone, so a session keeps it while the camera moves."""
     start = time.perf_counter()
-    bvh: Bvh = build_bvh(inputs.tri_vertices[:, :3].reshape(-1, 3, 3))
+    topology = bvh_topology(inputs.scene.geometry.triangles)
+    timer.add_host("bvh", (time.perf_counter() - start) * 1e3)
+    return topology
+
+
+def upload_bvh(device: Device, inputs: FrameInputs, topology: BvhTopology, timer: StageTimer) -> DeviceBvh:
+    """Refit `topology` around the eye-space triangles the device intersects, so its boxes
+    hold exactly the float32 vertices the rays meet (host, timed as `bvh`), and upload it."""
+    start = time.perf_counter()
+    bvh: Bvh = refit_bvh(topology, inputs.tri_vertices[:, :3].reshape(-1, 3, 3))
     milliseconds = (time.perf_counter() - start) * 1e3
     timer.add_host("bvh", milliseconds)
     return DeviceBvh(device.buffer(bvh.node_bounds, writable=False),
@@ -55,13 +67,23 @@ def visibility_bound(device: Device, buffers: FrameBuffers, light_index: int, ti
     bound = device.buffer(nbytes=4 * texels)
     device.fill(bound, structs.DEPTH_EMPTY, 4 * texels, timer, "visibility")
     count = inputs.tri_vertices.shape[0] // 3
-    view_count = len(inputs.views) - 1
     if count:
-        event = device.kernel("visibility", "visibility_bound")(
-            device.queue, (count * view_count, BOUND_ROW_SPLIT), None,
-            device.buffer(inputs.tri_vertices, writable=False), np.int32(count),
-            device.buffer(inputs.views, writable=False), np.int32(1), np.int32(view_count), bound)
-        timer.add("visibility", event)
+        vertices = device.buffer(inputs.tri_vertices, writable=False)
+        views = device.buffer(inputs.views, writable=False)
+        big_items = device.buffer(nbytes=4 * count)
+        big_count = device.buffer(nbytes=4)
+        first_pass = device.kernel("visibility", "visibility_bound")
+        split_pass = device.kernel("visibility", "visibility_bound_split")
+        # Only the cube faces the frame can read (`view_needed`, as raster.shadow does): no
+        # sample projects into the others, so their texels are never asked for.
+        for view in np.flatnonzero(inputs.view_needed[1:]) + 1:
+            device.fill(big_count, np.int32(0), 4, timer, "visibility")
+            timer.add("visibility", first_pass(
+                device.queue, (count,), None, vertices, np.int32(count), views, np.int32(view), np.int32(1), bound,
+                np.int32(BOUND_SMALL_ROWS), big_items, big_count))
+            timer.add("visibility", split_pass(
+                device.queue, (count, BOUND_ROW_SPLIT), None, vertices, views, np.int32(view), np.int32(1), bound,
+                big_items, big_count))
     return bound, inputs.shadow_texels
 
 

@@ -198,3 +198,31 @@ def test_stage_cache_keeps_the_most_recent():
     assert len(cache) == 3
     with pytest.raises(ValueError):
         StageCache(0)
+
+
+def test_the_bvh_tree_outlives_a_moving_camera(device, monkeypatch):
+    """The visibility stage's BVH: its tree is built once per geometry, its boxes refit
+    only when the eye moves (not when the camera only turns), and every frame is the
+    frame computed from scratch."""
+    import clrays.stages.visibility as stage
+
+    calls = {"tree": 0, "refit": 0}
+
+    def counted(name, function):
+        def wrapper(*args, **kwargs):
+            calls[name] += 1
+            return function(*args, **kwargs)
+        return wrapper
+
+    monkeypatch.setattr(stage, "bvh_topology", counted("tree", stage.bvh_topology))
+    monkeypatch.setattr(stage, "refit_bvh", counted("refit", stage.refit_bvh))
+    session = Renderer(device)
+    base = make_scene(_slats(), **SMALL)
+    cameras = [base.camera, replace(base.camera, look_at=base.camera.look_at + v3(0.5, 0.2, 0)),
+               replace(base.camera, position=base.camera.position + v3(1.0, 0.3, 0))]
+    for camera in cameras:
+        scene = replace(base, camera=camera)
+        kept = session.render(scene)
+        np.testing.assert_array_equal(kept.image, Renderer(device, reuse=False).render(scene).image)
+    # The scratch renders above count too: 3 trees and 3 refits of their own.
+    assert calls == {"tree": 1 + 3, "refit": 2 + 3}
