@@ -188,6 +188,24 @@ OBJECTS = _typed("objects", {
               notes="shading: `smooth` interpolates vertex normals across each triangle, `flat` uses each "
                     "triangle's own normal ([below](#shading-normals))"),
     ),
+    "relief": (
+        Field("center", "vec3", REQUIRED, notes="scene units: the base rectangle's centre"),
+        Field("normal", "direction", REQUIRED, notes="normalised; the relief rises this way"),
+        Field("up", "direction", REQUIRED, rule="not parallel to `normal`",
+              notes="the image's up (row 0 is its top edge), projected into the base plane"),
+        Field("size", "`[w, h]`", REQUIRED, 0.0, low_open=True, rule="both",
+              notes="the base rectangle along the image's rows and columns, scene units"),
+        Field("depth_map", "string", REQUIRED,
+              rule=f"`.png` (8- or 16-bit), `.exr` or `.npy`, a regular file of at most {MAX_MESH_BYTES >> 20} MiB, "
+                   f"at least 2 × 2 texels",
+              notes="displacement per texel, white (1) is full `height`; an alpha channel of 0 is a hole. "
+                    "Relative paths start at the YAML file's folder"),
+        Field("height", "number", REQUIRED, 0.0,
+              notes="scene units along `normal` for depth 1; 0 is a flat quad (holes still cut)"),
+        Field("albedo_map", "string", shown_default="`albedo` everywhere",
+              notes="colour per texel (`.png`, `.exr`, `.npy`), the depth map's size; its alpha, if any, "
+                    "cuts holes too"),
+    ),
 })
 
 TRANSFORM = Section("objects.transform", (
