@@ -271,7 +271,7 @@ def _relief_image(node: Node, base_dir: Path) -> tuple[np.ndarray, Path]:
 
 
 def read_relief(m: dict[str, Node], base_dir: Path) -> relief_images.Relief:
-    """A relief's keys (docs/design.md §12): its texel frame, displacement, holes and colours."""
+    """A relief's keys (docs/design.md, "Relief objects"): its texel frame, displacement, holes and colours."""
     keys = OBJECTS["relief"]
     normal, up = direction(m["normal"]), direction(m["up"])
     if np.linalg.norm(np.cross(normal, up)) < PARALLEL_TOLERANCE:

@@ -1,4 +1,4 @@
-"""Relief objects: a base rectangle with a depth per texel (docs/design.md §12).
+"""Relief objects: a base rectangle with a depth per texel (docs/design.md, "Relief objects").
 
 A relief is the base rectangle `center`, `normal`, `up`, `size: [w, h]` and a depth
 image; texel (row r, column c) of an H × W image sits at the texel's centre,
