@@ -97,7 +97,6 @@ def splat_in_order(frame: ReliefFrame, displacement: np.ndarray, viewer: Viewer,
     u_e, v_e, _ = epipole(frame, viewer)
     rows, cols = displacement.shape
     row_rank = processing_order(np.arange(rows) + 0.5, v_e)
-    column_rank = processing_order(np.arange(cols) + 0.5, u_e)
     # Rank of each texel in the sweep: rows in their order, each row's columns in theirs.
     order = np.lexsort((np.broadcast_to(column_rank[None, :], (rows, cols)).ravel(),
                         np.broadcast_to(row_rank[:, None], (rows, cols)).ravel()))
@@ -136,26 +135,35 @@ def splat_zbuffer(frame: ReliefFrame, displacement: np.ndarray, viewer: Viewer, 
 EMPTY = np.nan
 
 
-def _fill_pass(coordinate_i, attributes, valid, along_rank, cells_out):
-    """One 1D pass over every line (row of the arrays): for consecutive texels k−1, k of a
-    line in `along_rank` order, both valid, the output texels whose centres lie in
-    [min(x_{k−1}, x_k), max(...)) get the attributes interpolated linearly between them;
-    a later write wins. Returns (lines, cells_out, A) with NaN where nothing was written."""
-    lines, length = coordinate_i.shape
+def segment_order(length: int, epipole_coordinate: float) -> np.ndarray:
+    """The order in which a line's segments (k, k + 1), k = 0 … length − 2, are drawn:
+    McMillan's order, each segment ranked by its end nearer the epipole, the farthest first
+    (so segments on the two sides of the epipole interleave, and the nearest wins)."""
+    centres = np.arange(length) + 0.5
+    nearer = np.maximum(processing_order(centres[:-1], epipole_coordinate),
+                        processing_order(centres[1:], epipole_coordinate))
+    return np.argsort(nearer, kind="stable")
+
+
+def _fill_pass(coordinate_i, attributes, valid, segments, cells_out):
+    """One 1D pass over every line (row of the arrays): for each segment k, k + 1 of a line,
+    in the order `segments`, both ends valid, the output texels whose centres lie in
+    [min(x_k, x_k+1), max(...)) get the attributes interpolated linearly between its
+    ends; a later write wins. Returns (lines, cells_out, A), NaN where nothing was written."""
+    lines, _ = coordinate_i.shape
     out = np.full((lines, cells_out, attributes.shape[2]), EMPTY)
-    order = np.argsort(along_rank, kind="stable")
     centres = np.arange(cells_out) + 0.5
     for line in range(lines):
-        x, attr, ok = coordinate_i[line, order], attributes[line, order], valid[line, order]
-        for k in range(1, length):
-            if not (ok[k - 1] and ok[k]):
+        x, attr, ok = coordinate_i[line], attributes[line], valid[line]
+        for k in segments:
+            if not (ok[k] and ok[k + 1]):
                 continue
-            lo, hi = sorted((x[k - 1], x[k]))
+            lo, hi = sorted((x[k], x[k + 1]))
             hit = (centres >= lo) & (centres < hi)
             if not hit.any():
                 continue
-            t = (centres[hit] - x[k - 1]) / (x[k] - x[k - 1])
-            out[line, hit] = attr[k - 1] + t[:, None] * (attr[k] - attr[k - 1])
+            t = (centres[hit] - x[k]) / (x[k + 1] - x[k])
+            out[line, hit] = attr[k] + t[:, None] * (attr[k + 1] - attr[k])
     return out
 
 
@@ -180,16 +188,14 @@ def prewarp_two_pass(frame: ReliefFrame, displacement: np.ndarray, viewer: Viewe
     u_i = (u_s + k1 * displacement) / (1.0 + k3 * displacement) - origin[0]
     # Row pass: intermediate (rows, target columns, [u_s, v_s, d]).
     attributes = np.stack([u_s, v_s, displacement], axis=2)
-    column_rank = processing_order(np.arange(cols) + 0.5, u_e)
     # An edge of a row belongs to the surface if a cell beside it is kept.
     kept = solid[:-1, :-1] & solid[:-1, 1:] & solid[1:, :-1] & solid[1:, 1:]
-    middle = _fill_pass(u_i, attributes, solid, column_rank, shape[1])
+    middle = _fill_pass(u_i, attributes, solid, segment_order(cols, u_e), shape[1])
     # Column pass: each intermediate column, v_i from its (v_s, d).
     d = middle[:, :, 2]
     v_i = (middle[:, :, 1] + k2 * d) / (1.0 + k3 * d) - origin[1]
     valid = ~np.isnan(d)
-    row_rank = processing_order(np.arange(rows) + 0.5, v_e)
-    out = _fill_pass(v_i.T, middle.transpose(1, 0, 2), valid.T, row_rank, shape[0]).transpose(1, 0, 2)
+    out = _fill_pass(v_i.T, middle.transpose(1, 0, 2), valid.T, segment_order(rows, v_e), shape[0]).transpose(1, 0, 2)
     # A filled texel whose source point falls in a hole cell is not surface.
     cell_r = np.clip(np.floor(out[:, :, 1] - 0.5), 0, rows - 2)
     cell_c = np.clip(np.floor(out[:, :, 0] - 0.5), 0, cols - 2)

@@ -112,7 +112,7 @@ def _bump_field(rng, n):
 def test_two_pass_warp_sees_what_rays_through_the_triangles_see(side):
     """At every target texel centre on the base plane, the viewer's ray through it hits
     the height-field triangles iff the two-pass warp wrote that texel, and the point the
-    warp rebuilds lies at the hit's distance (under 5e-3 of it at the median, 2 % at the 99th percentile, 5 % at worst:
+    warp rebuilds lies at the hit's distance (measured: 2e-5 of it at the median, 6e-4 at the 99th percentile, 1.5e-3 at worst:
     the passes interpolate along rows and columns, the triangles along their planes)."""
     rng = np.random.default_rng(20 + side)
     n = 32
@@ -145,5 +145,5 @@ def test_two_pass_warp_sees_what_rays_through_the_triangles_see(side):
         points = (frame.corner + warped[..., 0, None] * frame.a + warped[..., 1, None] * frame.b
                   + warped[..., 2, None] * frame.f)
         error = np.abs(np.linalg.norm(points - origins, axis=-1) - t)[both] / t[both]
-        assert np.median(error) < 5e-3
-        assert np.percentile(error, 99) < 0.02 and error.max() < 0.05
+        assert np.median(error) < 1e-4
+        assert np.percentile(error, 99) < 2e-3 and error.max() < 5e-3
