@@ -97,6 +97,7 @@ def splat_in_order(frame: ReliefFrame, displacement: np.ndarray, viewer: Viewer,
     u_e, v_e, _ = epipole(frame, viewer)
     rows, cols = displacement.shape
     row_rank = processing_order(np.arange(rows) + 0.5, v_e)
+    column_rank = processing_order(np.arange(cols) + 0.5, u_e)
     # Rank of each texel in the sweep: rows in their order, each row's columns in theirs.
     order = np.lexsort((np.broadcast_to(column_rank[None, :], (rows, cols)).ravel(),
                         np.broadcast_to(row_rank[:, None], (rows, cols)).ravel()))
