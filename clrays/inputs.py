@@ -19,6 +19,7 @@ from .errors import ClraysError
 from .reference.radiometry import effective_far, lamp_radius
 from .scene.costs import with_derived_sizes
 from .stages.cube_faces import sampled_cube_faces
+from .stages.relief import place_reliefs
 from .scene.model import DirectionalLight, Scene, SpotLight
 
 #: Spot lights wider than this use a cube map: a single perspective map of a wide
@@ -76,6 +77,10 @@ class FrameInputs:
     # (V,) bool per view: whether the frame can read it; raster skips the others (the cube
     # faces that the camera's view misses, clrays.stages.cube_faces)
     view_needed: np.ndarray = None
+    # Relief objects drawn by their pre-warp (clrays.stages.relief): their triangles come
+    # last, and the raster stage draws only the first `raster_triangles` (None: all).
+    reliefs: tuple = ()
+    raster_triangles: int | None = None
 
     @property
     def light_views(self) -> list[tuple[int, int]]:
@@ -91,6 +96,7 @@ def frame_inputs(scene: Scene) -> FrameInputs:
     """Pack a scene into the device structs, in eye space; sizes the scene leaves unset
     are derived from its image first (`inputs.scene` holds them)."""
     scene = with_derived_sizes(scene)
+    scene, reliefs, raster_triangles = place_reliefs(scene)  # reliefs' triangles last, for the pre-warp
     eye_ws = np.asarray(scene.camera.position, dtype=np.float64)
     image, camera, medium = scene.image, scene.camera, scene.medium
     tris = scene.geometry.triangles - eye_ws  # float64 translation, then float32
@@ -190,6 +196,8 @@ def frame_inputs(scene: Scene) -> FrameInputs:
         shadow_texels=texels,
         light_anchor_ws=np.array(anchors, dtype=np.float64).reshape(-1, 3),
         view_needed=np.array(needed, dtype=bool),
+        reliefs=reliefs,
+        raster_triangles=raster_triangles,
     )
 
 

@@ -146,11 +146,12 @@ def segment_order(length: int, epipole_coordinate: float) -> np.ndarray:
     return np.argsort(nearer, kind="stable")
 
 
-def _fill_pass(coordinate_i, attributes, valid, segments, cells_out):
+def _fill_pass(coordinate_i, attributes, valid, segments, cells_out, accept=None):
     """One 1D pass over every line (row of the arrays): for each segment k, k + 1 of a line,
     in the order `segments`, both ends valid, the output texels whose centres lie in
     [min(x_k, x_k+1), max(...)) get the attributes interpolated linearly between its
-    ends; a later write wins. Returns (lines, cells_out, A), NaN where nothing was written."""
+    ends, unless `accept(values)` says no; a later write wins. Returns (lines, cells_out,
+    A), NaN where nothing was written."""
     lines, _ = coordinate_i.shape
     out = np.full((lines, cells_out, attributes.shape[2]), EMPTY)
     centres = np.arange(cells_out) + 0.5
@@ -160,11 +161,15 @@ def _fill_pass(coordinate_i, attributes, valid, segments, cells_out):
             if not (ok[k] and ok[k + 1]):
                 continue
             lo, hi = sorted((x[k], x[k + 1]))
-            hit = (centres >= lo) & (centres < hi)
-            if not hit.any():
+            hit = np.flatnonzero((centres >= lo) & (centres < hi))
+            if len(hit) == 0:
                 continue
             t = (centres[hit] - x[k]) / (x[k + 1] - x[k])
-            out[line, hit] = attr[k] + t[:, None] * (attr[k + 1] - attr[k])
+            values = attr[k] + t[:, None] * (attr[k + 1] - attr[k])
+            if accept is not None:
+                keep = accept(values)
+                hit, values = hit[keep], values[keep]
+            out[line, hit] = values
     return out
 
 
@@ -186,22 +191,24 @@ def prewarp_two_pass(frame: ReliefFrame, displacement: np.ndarray, viewer: Viewe
     u_e, v_e, _ = epipole(frame, viewer)
     u_s = np.broadcast_to(np.arange(cols)[None, :] + 0.5, displacement.shape)
     v_s = np.broadcast_to(np.arange(rows)[:, None] + 0.5, displacement.shape)
-    u_i = (u_s + k1 * displacement) / (1.0 + k3 * displacement) - origin[0]
+    # 1 + k3·d ≤ 0: the texel is as far from the base plane as the viewer or beyond; its
+    # ray meets the plane behind the viewer, and the warp leaves it out.
+    ahead = 1.0 + k3 * displacement > 0
+    u_i = (u_s + k1 * displacement) / np.where(ahead, 1.0 + k3 * displacement, 1.0) - origin[0]
     # Row pass: intermediate (rows, target columns, [u_s, v_s, d]).
     attributes = np.stack([u_s, v_s, displacement], axis=2)
-    # An edge of a row belongs to the surface if a cell beside it is kept.
-    kept = solid[:-1, :-1] & solid[:-1, 1:] & solid[1:, :-1] & solid[1:, 1:]
-    middle = _fill_pass(u_i, attributes, solid, segment_order(cols, u_e), shape[1])
-    # Column pass: each intermediate column, v_i from its (v_s, d).
+    middle = _fill_pass(u_i, attributes, solid & ahead, segment_order(cols, u_e), shape[1])
+    # Column pass: each intermediate column, v_i from its (v_s, d); a value whose source
+    # point lies in a hole cell (a corner of alpha 0) is not written.
     d = middle[:, :, 2]
     v_i = (middle[:, :, 1] + k2 * d) / (1.0 + k3 * d) - origin[1]
-    valid = ~np.isnan(d)
-    out = _fill_pass(v_i.T, middle.transpose(1, 0, 2), valid.T, segment_order(rows, v_e), shape[0]).transpose(1, 0, 2)
-    # A filled texel whose source point falls in a hole cell is not surface.
-    cell_r = np.clip(np.floor(out[:, :, 1] - 0.5), 0, rows - 2)
-    cell_c = np.clip(np.floor(out[:, :, 0] - 0.5), 0, cols - 2)
-    written = ~np.isnan(out[:, :, 2])
-    in_hole = np.zeros(shape, bool)
-    in_hole[written] = ~kept[cell_r[written].astype(int), cell_c[written].astype(int)]
-    out[in_hole] = EMPTY
-    return out
+    kept = solid[:-1, :-1] & solid[:-1, 1:] & solid[1:, :-1] & solid[1:, 1:]
+
+    def outside_holes(values):
+        cell_r = np.clip(np.floor(values[:, 1] - 0.5), 0, rows - 2).astype(int)
+        cell_c = np.clip(np.floor(values[:, 0] - 0.5), 0, cols - 2).astype(int)
+        return kept[cell_r, cell_c]
+
+    out = _fill_pass(v_i.T, middle.transpose(1, 0, 2), ~np.isnan(d).T, segment_order(rows, v_e), shape[0],
+                     outside_holes)
+    return out.transpose(1, 0, 2)

@@ -13,7 +13,8 @@ from typing import Any
 from .animation import EASINGS
 from .limits import MAX_LIGHTS, MAX_MESH_BYTES, MAX_OBJECTS, MAX_SCENE_BYTES, MAX_TRIANGLES
 from .costs import MAX_GAMMA_SAMPLES, MAX_SHADOW_MAP, MAX_SLICES, MIN_GAMMA_SAMPLES, MIN_SHADOW_MAP, MIN_SLICES
-from .model import INTEGRAND_MODES, METHODS, NORMALS, SURFACE_SHADOWS, TRAVERSALS, Camera, Image, Render
+from .model import (INTEGRAND_MODES, METHODS, NORMALS, RELIEF_MODES, SURFACE_SHADOWS, TRAVERSALS, Camera, Image,
+                    Render)
 
 FORMAT_VERSION = 1
 MAX_IMAGE_PIXELS = 1 << 26
@@ -257,6 +258,10 @@ RENDER = Section("render", (
           notes="min-max, `integrand: svd`: rank of the factorisation", read_by=("minmax",)),
     Field("traversal", "string", Render.traversal, choices=TRAVERSALS,
           notes="min-max: min-max tree traversal or a linear scan", read_by=("minmax",)),
+    Field("relief", "string", Render.relief, choices=RELIEF_MODES,
+          notes="how relief objects reach the depth maps: `prewarp` warps each relief's depth image for "
+                "every view and maps it onto its base rectangle, `triangles` rasterizes its height-field "
+                "triangles (the same surface, for comparison)", read_by=_RASTER_METHODS),
 ))
 
 

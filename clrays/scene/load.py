@@ -298,14 +298,14 @@ def read_relief(m: dict[str, Node], base_dir: Path) -> relief_images.Relief:
     return relief_images.Relief(frame, height * depth, solid, albedo)
 
 
-def _relief(m: dict[str, Node], base_dir: Path) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
-    """A relief's height-field triangles, and their albedo when it has an albedo_map."""
+def _relief(m: dict[str, Node], base_dir: Path):
+    """(the relief, its height-field triangles, their albedo when it has an albedo_map)."""
     relief = read_relief(m, base_dir)
     triangles, albedo = relief.triangles()
     if len(triangles) == 0:
         m["depth_map"].fail("a depth map with at least one cell of four texels whose alpha is not 0",
                             f"{show(m['depth_map'])} (every cell is a hole)")
-    return triangles, albedo
+    return relief, triangles, albedo
 
 
 _BUILDERS: dict[str, Callable[[dict[str, Node], Path], _Shape]] = {
@@ -338,6 +338,7 @@ class _Object:
     local: np.ndarray  # (T, 3, 3) before the transform
     local_normals: np.ndarray | None  # (T, 3, 3) before the transform, for a smooth object
     parts: tuple[np.ndarray, np.ndarray, np.ndarray]  # translate (3,), rotation 3x3, scale (3,)
+    relief: relief_images.Relief | None = None  # a relief object's texels, for the pre-warp
 
 
 def _object(node: Node, base_dir: Path) -> _Object:
@@ -345,8 +346,9 @@ def _object(node: Node, base_dir: Path) -> _Object:
     kind, m = typed(node, kinds(OBJECTS), OBJECT.optional)
     albedo = _read(OBJECT["albedo"], m.get("albedo"))
     parts = _transform_parts(m.get("transform"))
+    relief = None
     if kind == "relief":  # its colours come per triangle from its albedo_map, if it has one
-        local, texel_albedo = _relief(m, base_dir)
+        relief, local, texel_albedo = _relief(m, base_dir)
         local_normals = None
         if texel_albedo is not None:
             albedo = texel_albedo
@@ -358,7 +360,7 @@ def _object(node: Node, base_dir: Path) -> _Object:
         triangles = transform_points(matrix, local)
         if local_normals is not None:
             normals = transform_normals(matrix, local_normals)
-    return _Object(triangles, normals, albedo, local, local_normals, parts)
+    return _Object(triangles, normals, albedo, local, local_normals, parts, relief)
 
 
 def _tessellated_count(node: Node) -> int:
@@ -385,6 +387,7 @@ def _geometry(node: Node | None, base_dir: Path, rigs: list | None = None) -> Ge
     """All objects flattened; `rigs`, when given, receives each object's ObjectRig."""
     tris, albedo, ids = [np.zeros((0, 3, 3))], [np.zeros((0, 3))], [np.zeros(0, np.int32)]
     smooth_normals: list[tuple[slice, np.ndarray]] = []
+    reliefs: list[relief_images.ReliefRecord] = []
     start = 0
     items = sequence(node, "a list of objects") if node is not None else []
     if len(items) > MAX_OBJECTS:
@@ -399,6 +402,8 @@ def _geometry(node: Node | None, base_dir: Path, rigs: list | None = None) -> Ge
                                   obj.local_normals))
         if obj.normals is not None:
             smooth_normals.append((slice(start, start + count), obj.normals))
+        if obj.relief is not None:
+            reliefs.append(relief_images.relief_record(obj.relief, slice(start, start + count), obj.local))
         start += count
         _check_triangle_count(item, i, start)  # a mesh's count is known once it is read
         tris.append(obj.triangles)
@@ -410,7 +415,8 @@ def _geometry(node: Node | None, base_dir: Path, rigs: list | None = None) -> Ge
     for rows, object_normals in smooth_normals:
         normals[rows], smooth[rows] = object_normals, True
     return Geometry(triangles=triangles, albedo=np.ascontiguousarray(np.concatenate(albedo), dtype=np.float64),
-                    object_id=np.concatenate(ids).astype(np.int32), normals=normals, smooth=smooth)
+                    object_id=np.concatenate(ids).astype(np.int32), normals=normals, smooth=smooth,
+                    reliefs=tuple(reliefs))
 
 
 # --------------------------------------------------------------------------- animation

@@ -30,6 +30,8 @@ TRAVERSALS = ("tree", "scan")
 SURFACE_SHADOWS = ("exact", "map", "pcf")
 PHASE_TYPES = ("isotropic", "hg")
 NORMALS = ("smooth", "flat")  # a mesh's shading normals: interpolated vertex normals, or each face's own
+# How the raster stage draws relief objects: by their pre-warp, or as their triangles (the same surface).
+RELIEF_MODES = ("prewarp", "triangles")
 
 
 @dataclass(frozen=True)
@@ -106,6 +108,7 @@ class Render:
     integrand: str = "table"  # one of INTEGRAND_MODES
     svd_rank: int = 4
     traversal: str = "tree"  # one of TRAVERSALS
+    relief: str = "prewarp"  # one of RELIEF_MODES
 
 
 @dataclass(frozen=True)
@@ -120,6 +123,8 @@ class Geometry:
     object_id: np.ndarray  # (T,) int32, index into Scene.objects order
     normals: np.ndarray = None  # (T, 3, 3) float64, world space, unit; None: the face normals
     smooth: np.ndarray = None  # (T,) bool; None: no triangle is smooth
+    # The relief objects among them (clrays.scene.relief.ReliefRecord): their rows and texels.
+    reliefs: tuple = ()
 
     def __post_init__(self):
         if self.normals is None:

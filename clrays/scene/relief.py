@@ -206,6 +206,69 @@ class Relief:
         return relief_triangles(self.frame, self.displacement, self.solid, self.albedo)
 
 
+@dataclass(frozen=True)
+class ReliefRecord:
+    """A relief as the renderer's pre-warp needs it (`Geometry.reliefs`): where its
+    triangles are, its texels, and four of its vertices that pin its frame, so that the
+    frame in world space follows the triangles wherever a transform or an animation put
+    them (`world_frame`)."""
+
+    rows: slice  # its triangles in Geometry.triangles
+    relief: Relief  # texels and frame in the object's own coordinates
+    handles: np.ndarray  # (4,) int: indices into its vertices (rows, flattened to (3T, 3))
+    handle_points: np.ndarray  # (4, 3) those vertices in the object's own coordinates
+    cell_triangle: np.ndarray  # (H - 1, W - 1) int32: the cell's first triangle within rows, −1 for a hole
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.relief.displacement.shape
+
+
+def relief_record(relief: Relief, rows: slice, local_triangles: np.ndarray) -> ReliefRecord:
+    """The record of a relief whose triangles (`relief.triangles()`, in its own frame) sit at
+    `rows` of the scene's geometry."""
+    vertices = local_triangles.reshape(-1, 3)
+    first = 0
+    second = int(np.argmax(np.linalg.norm(vertices - vertices[first], axis=1)))
+    line = vertices[second] - vertices[first]
+    off_line = np.linalg.norm(np.cross(vertices - vertices[first], line), axis=1)
+    third = int(np.argmax(off_line))
+    normal = np.cross(line, vertices[third] - vertices[first])
+    fourth = int(np.argmax(np.abs((vertices - vertices[first]) @ normal)))
+    handles = np.array([first, second, third, fourth])
+    kept = np.ones(relief.displacement.shape, bool) if relief.solid is None else relief.solid
+    cells = kept[:-1, :-1] & kept[:-1, 1:] & kept[1:, :-1] & kept[1:, 1:]
+    cell_triangle = np.full(cells.shape, -1, np.int32)
+    cell_triangle[cells] = 2 * np.arange(int(cells.sum()), dtype=np.int32)
+    return ReliefRecord(rows, relief, handles, vertices[handles].copy(), cell_triangle)
+
+
+def world_frame(record: ReliefRecord, triangles: np.ndarray) -> tuple[ReliefFrame, np.ndarray]:
+    """(frame, displacement) of a relief where `triangles` (the scene's, world space) put it.
+
+    The object's transform is affine, and an affine map keeps P = C_s + u·a + v·b + d·f in
+    that form with the mapped C_s, a, b, f: the four handle vertices give the map. A flat
+    relief (its vertices in one plane, constant d) pins only the plane: it becomes a relief
+    of displacement 0 in that plane."""
+    local = record.handle_points
+    world = triangles[record.rows].reshape(-1, 3)[record.handles]
+    frame = record.relief.frame
+    homogeneous = np.concatenate([local, np.ones((4, 1))], axis=1)
+    scale = max(float(np.abs(local - local[0]).max()), 1e-300)
+    if abs(np.linalg.det(local[1:] - local[0])) > 1e-9 * scale ** 3:
+        affine = np.linalg.solve(homogeneous, world)  # rows: x, y, z weights, then the translation
+        linear, shift = affine[:3].T, affine[3]
+        mapped = ReliefFrame(linear @ frame.corner + shift, linear @ frame.a, linear @ frame.b, linear @ frame.f)
+        return mapped, record.relief.displacement
+    # Flat: solve W_k = X + u_k·a' + v_k·b' on three handles (u, v: their texel coordinates).
+    basis = np.stack([frame.a, frame.b, frame.f], axis=1)
+    uvd = np.linalg.solve(basis, (local[:3] - frame.corner).T).T
+    system = np.concatenate([np.ones((3, 1)), uvd[:, :2]], axis=1)
+    origin, a, b = np.linalg.solve(system, world[:3])
+    normal = np.cross(a, b)
+    return ReliefFrame(origin, a, b, normal / np.linalg.norm(normal)), np.zeros_like(record.relief.displacement)
+
+
 def write_mesh(triangles: np.ndarray, path: Path, albedo: np.ndarray | None = None) -> None:
     """Write triangles (T, 3, 3) as a binary PLY (shared vertices are not merged: two per
     cell, the same floats as the renderer's), or OBJ / STL by suffix; with `albedo` a PLY
