@@ -92,17 +92,114 @@ kernel void relief_warp_columns(global const float4* middle, int rows, int cols,
     }
 }
 
+
+/* The most cells a sample tests along each axis of the box of the warped points around it:
+ * it spans more only across a depth edge, where those points belong to unrelated parts. */
+#define RELIEF_MAX_BOX 12
+/* How far, in cells, the sample's own line is searched each way from those points. */
+#define RELIEF_CORRIDOR 8.0f
+/* How far, in target texels, a sample whose warped texels are empty looks for one. */
+#define RELIEF_GAP_SEARCH 16
+
+/* The nearer of the ray's hits with cell (r, c)'s two triangles and *t, in *t and *tri. */
+inline void relief_test_cell(int r, int c, int cols, global const int* cell_triangle,
+                             global const float4* tri_vertices, int first_triangle, float3 origin, float3 dir,
+                             float* t, int* tri)
+{
+    int first = cell_triangle[r * (cols - 1) + c];
+    if (first < 0) return;
+    for (int second = 0; second < 2; ++second) {
+        int candidate = first_triangle + first + second;
+        float hit = relief_intersect(origin, dir, tri_vertices[3 * candidate].xyz, tri_vertices[3 * candidate + 1].xyz,
+                                     tri_vertices[3 * candidate + 2].xyz);
+        if (hit < *t) { *t = hit; *tri = candidate; }
+    }
+}
+
+/* The first hit of a view sample's ray with the relief (INFINITY: none), and its triangle.
+ *
+ * The ray meets the base plane at (u, v); the four warped texels around that point name the
+ * source points seen through their centres. The ray is tested against the triangles of every
+ * cell in the box of those points, widened by a cell, and of the cells that the ray's own
+ * trace on the base plane (the line of its points' (u, v)) crosses within RELIEF_CORRIDOR cells
+ * of them, where its true hit lies. The box alone is enough except at grazing views over a
+ * ridge, where the two 1D passes may leave a warped point that lies on no ray's hit: a skin
+ * stretched between two rows' entries. Depth and triangle are then those the triangles give
+ * the ray. dual_a, dual_b, dual_f: the rows of the inverse of [a b f], so u = dual_a·(X − corner). */
+inline float relief_hit(float3 origin, float3 dir, float4 corner, float4 dual_a, float4 dual_b, float4 dual_f,
+                        float u0, float v0, int target_rows, int target_cols, global const float4* warped,
+                        int rows, int cols, global const int* cell_triangle, global const float4* tri_vertices,
+                        int first_triangle, int* tri)
+{
+    float t = INFINITY;
+    *tri = -1;
+    float along = dot(dual_f.xyz, dir);
+    if (along == 0.0f) return t;
+    float3 q = origin + dir * (-dot(dual_f.xyz, origin - corner.xyz) / along);
+    float u = dot(dual_a.xyz, q - corner.xyz) - u0, v = dot(dual_b.xyz, q - corner.xyz) - v0;
+    if (!(u >= -1.0f && u < (float)target_cols + 1.0f && v >= -1.0f && v < (float)target_rows + 1.0f)) return t;
+    int j0 = (int)floor(u - 0.5f), i0 = (int)floor(v - 0.5f);
+    float2 lo = (float2)(INFINITY), hi = (float2)(-INFINITY);
+    for (int i = max(i0, 0); i <= min(i0 + 1, target_rows - 1); ++i)
+        for (int j = max(j0, 0); j <= min(j0 + 1, target_cols - 1); ++j) {
+            float4 e = warped[(size_t)i * target_cols + j];
+            if (isnan(e.z)) continue;
+            lo = fmin(lo, e.xy);
+            hi = fmax(hi, e.xy);
+        }
+    /* None: the two passes left a gap here. Each row resolves visibility along itself alone,
+     * so at a grazing view a row's raised texel can hide, in that row, what the ray passing
+     * between two rows sees; the nearest warped texel along the target row or column stands
+     * in, and the search along the ray's trace below finds the hit. */
+    for (int reach = 1; reach <= RELIEF_GAP_SEARCH && !(lo.x <= hi.x); ++reach) {
+        int2 probe[4] = {(int2)(i0, j0 - reach), (int2)(i0, j0 + 1 + reach), (int2)(i0 - reach, j0),
+                         (int2)(i0 + 1 + reach, j0)};
+        for (int p = 0; p < 4; ++p) {
+            if (probe[p].x < 0 || probe[p].x >= target_rows || probe[p].y < 0 || probe[p].y >= target_cols) continue;
+            float4 e = warped[(size_t)probe[p].x * target_cols + probe[p].y];
+            if (isnan(e.z)) continue;
+            lo = fmin(lo, e.xy);
+            hi = fmax(hi, e.xy);
+        }
+    }
+    if (!(lo.x <= hi.x)) return t;
+    /* Cell (r, c) lies between texel centres: u_s in [c + ½, c + 3/2), v_s in [r + ½, r + 3/2). */
+    int c0 = max((int)floor(lo.x - 0.5f) - 1, 0), c1 = min((int)floor(hi.x - 0.5f) + 1, cols - 2);
+    int r0 = max((int)floor(lo.y - 0.5f) - 1, 0), r1 = min((int)floor(hi.y - 0.5f) + 1, rows - 2);
+    c1 = min(c1, c0 + RELIEF_MAX_BOX - 1);
+    r1 = min(r1, r0 + RELIEF_MAX_BOX - 1);
+    for (int r = r0; r <= r1; ++r)
+        for (int c = c0; c <= c1; ++c)
+            relief_test_cell(r, c, cols, cell_triangle, tri_vertices, first_triangle, origin, dir, &t, tri);
+    /* The ray's trace on the base plane, in cell coordinates (u_s − ½, v_s − ½), walked cell by
+     * cell (Amanatides–Woo) over 2·RELIEF_CORRIDOR around the point nearest the box's centre. */
+    float2 start = (float2)(dot(dual_a.xyz, origin - corner.xyz), dot(dual_b.xyz, origin - corner.xyz)) - 0.5f;
+    float2 step = (float2)(dot(dual_a.xyz, dir), dot(dual_b.xyz, dir));
+    float step_length = length(step);
+    if (step_length == 0.0f) return t;
+    float2 unit = step / step_length;
+    float2 from = start + (dot(0.5f * (lo + hi) - 0.5f - start, unit) - RELIEF_CORRIDOR) * unit;
+    int2 cell = convert_int2(floor(from));
+    int2 direction = (int2)(unit.x > 0.0f ? 1 : -1, unit.y > 0.0f ? 1 : -1);
+    float2 delta = fabs(1.0f / unit);
+    float2 next = (float2)((unit.x > 0.0f ? (float)cell.x + 1.0f - from.x : from.x - (float)cell.x) * delta.x,
+                           (unit.y > 0.0f ? (float)cell.y + 1.0f - from.y : from.y - (float)cell.y) * delta.y);
+    for (float walked = 0.0f; walked <= 2.0f * RELIEF_CORRIDOR;) {
+        if (cell.x >= 0 && cell.x <= cols - 2 && cell.y >= 0 && cell.y <= rows - 2)
+            relief_test_cell(cell.y, cell.x, cols, cell_triangle, tri_vertices, first_triangle, origin, dir, &t, tri);
+        if (next.x < next.y) { walked = next.x; next.x += delta.x; cell.x += direction.x; }
+        else { walked = next.y; next.y += delta.y; cell.y += direction.y; }
+    }
+    return t;
+}
+
 #define RELIEF_MAP_ARGS global const view_t* views, int view_index, global const float2* offsets,              \
                         int sample_count, float4 corner, float4 dual_a, float4 dual_b, float4 dual_f,        \
                         float u0, float v0, int target_rows, int target_cols, global const float4* warped,  \
                         int rows, int cols, global const int* cell_triangle, global const float4* tri_vertices, \
                         int first_triangle
 
-/* Mapping, one work-item per view sample: its ray meets the base plane at (u, v); the warped
- * texel there names the source point seen through it; the ray is then tested against the
- * triangles of that cell and its 8 neighbours, so depth and triangle are those the triangles
- * give the ray. BODY sees idx, t and tri. dual_a, dual_b, dual_f: the rows of the inverse of
- * the matrix [a b f], so that u = dual_a·(X − corner). */
+/* Mapping, one work-item per view sample (relief_hit); BODY sees idx, t and tri. */
 #define FOR_THE_RELIEF_HIT(BODY)                                                                      \
     global const view_t* view = views + view_index;                                                   \
     int id = get_global_id(0);                                                                        \
@@ -110,28 +207,9 @@ kernel void relief_warp_columns(global const float4* middle, int rows, int cols,
     int s = id % sample_count, pixel = id / sample_count;                                             \
     float3 origin, dir;                                                                               \
     view_ray(view, view_screen(view, pixel % view->width, pixel / view->width, offsets[s]), &origin, &dir); \
-    float along = dot(dual_f.xyz, dir);                                                               \
-    if (along == 0.0f) return;                                                                        \
-    float3 q = origin + dir * (-dot(dual_f.xyz, origin - corner.xyz) / along);                        \
-    float u = dot(dual_a.xyz, q - corner.xyz) - u0, v = dot(dual_b.xyz, q - corner.xyz) - v0;         \
-    if (!(u >= 0.0f && u < (float)target_cols && v >= 0.0f && v < (float)target_rows)) return;        \
-    float4 e = warped[(size_t)(int)v * target_cols + (int)u];                                         \
-    if (isnan(e.z)) return;                                                                           \
-    int cell_r = (int)floor(e.y - 0.5f), cell_c = (int)floor(e.x - 0.5f);                             \
-    float t = INFINITY;                                                                               \
-    int tri = -1;                                                                                     \
-    for (int r = max(cell_r - 1, 0); r <= min(cell_r + 1, rows - 2); ++r)                             \
-        for (int c = max(cell_c - 1, 0); c <= min(cell_c + 1, cols - 2); ++c) {                       \
-            int first = cell_triangle[r * (cols - 1) + c];                                            \
-            if (first < 0) continue;                                                                  \
-            for (int second = 0; second < 2; ++second) {                                                  \
-                int candidate = first_triangle + first + second;                                   \
-                float hit = relief_intersect(origin, dir, tri_vertices[3 * candidate].xyz,            \
-                                             tri_vertices[3 * candidate + 1].xyz,                     \
-                                             tri_vertices[3 * candidate + 2].xyz);                    \
-                if (hit < t) { t = hit; tri = candidate; }                                            \
-            }                                                                                         \
-        }                                                                                             \
+    int tri;                                                                                          \
+    float t = relief_hit(origin, dir, corner, dual_a, dual_b, dual_f, u0, v0, target_rows, target_cols, warped, \
+                         rows, cols, cell_triangle, tri_vertices, first_triangle, &tri);              \
     if (tri < 0) return;                                                                              \
     int idx = view->depth_offset + id;                                                                \
     BODY

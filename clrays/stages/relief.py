@@ -23,7 +23,7 @@ from ..scene.relief import ReliefFrame, world_frame
 #: How far outside its base rectangle a warped texel is still drawn, in rectangle sizes:
 #: a grazing view stretches the warp towards the horizon, and the target grid (and its
 #: memory) with it; what lands farther out is left out.
-MAX_TARGET_SPREAD = 1.0
+MAX_TARGET_SPREAD = 4.0
 
 
 @dataclass(frozen=True)
