@@ -178,13 +178,16 @@ inline float relief_hit(float3 origin, float3 dir, float4 corner, float4 dual_a,
     float step_length = length(step);
     if (step_length == 0.0f) return t;
     float2 unit = step / step_length;
-    float2 from = start + (dot(0.5f * (lo + hi) - 0.5f - start, unit) - RELIEF_CORRIDOR) * unit;
+    float from_along = dot(0.5f * (lo + hi) - 0.5f - start, unit) - RELIEF_CORRIDOR;
+    float2 from = start + from_along * unit;
+    /* The trace reaches the box's hit at t·|step|: a nearer hit lies before it (a cell of slack). */
+    float walk = fmin(2.0f * RELIEF_CORRIDOR, t * step_length - from_along + 1.5f);
     int2 cell = convert_int2(floor(from));
     int2 direction = (int2)(unit.x > 0.0f ? 1 : -1, unit.y > 0.0f ? 1 : -1);
     float2 delta = fabs(1.0f / unit);
     float2 next = (float2)((unit.x > 0.0f ? (float)cell.x + 1.0f - from.x : from.x - (float)cell.x) * delta.x,
                            (unit.y > 0.0f ? (float)cell.y + 1.0f - from.y : from.y - (float)cell.y) * delta.y);
-    for (float walked = 0.0f; walked <= 2.0f * RELIEF_CORRIDOR;) {
+    for (float walked = 0.0f; walked <= walk;) {
         if (cell.x >= 0 && cell.x <= cols - 2 && cell.y >= 0 && cell.y <= rows - 2)
             relief_test_cell(cell.y, cell.x, cols, cell_triangle, tri_vertices, first_triangle, origin, dir, &t, tri);
         if (next.x < next.y) { walked = next.x; next.x += delta.x; cell.x += direction.x; }
