@@ -17,7 +17,7 @@ import numpy as np
 from .. import structs
 from ..device import Device, StageTimer
 from ..reference.prewarp import Viewer, epipole, prewarp_coefficients, segment_order
-from ..scene.model import Geometry, Scene
+from ..scene.model import Scene
 from ..scene.relief import ReliefFrame, world_frame
 
 #: How far outside its base rectangle a warped texel is still drawn, in rectangle sizes:
@@ -179,7 +179,3 @@ class ReliefDrawer:
                 np.int32(cols), self._texel_buffers(index)[2], tri_vertices, np.int32(placed.first_triangle),
                 *targets))
 
-
-def relief_triangle_count(geometry: Geometry) -> int:
-    """How many of a scene's triangles belong to reliefs."""
-    return sum(record.rows.stop - record.rows.start for record in geometry.reliefs)
