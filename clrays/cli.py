@@ -20,7 +20,7 @@ from click.core import ParameterSource
 
 from .device import list_devices, select_device
 from .errors import ClraysError, DeviceError, OutputError
-from .image_io import check_finite, check_output_path, make_folder, write_image
+from .image_io import check_finite, check_folder, check_output_path, make_folder, write_image
 from .reference.exact import estimate_seconds
 from .runs import bench as bench_run
 from .runs.references import parse_reference
@@ -572,6 +572,27 @@ def bench(scenes, resolutions, repeats, pixels, quick, volume, out, cache, progr
         "resolutions": [f"{width}x{height}" for width, height in resolutions], "scenes": paths})
     click.echo(bench_run.markdown_summary(points))
     click.echo(f"wrote {out}/bench.csv, bench.png, summary.md, machine.json")
+
+
+@main.command("relief-to-mesh", section="Tools", epilog="""
+\b
+Examples:
+  clrays relief-to-mesh scenes/lattice.yaml -o out/lattice.ply
+  clrays relief-to-mesh scenes/lattice.yaml -o out/lattice.obj --object 2
+""")
+@click.argument("scene", type=click.Path(path_type=Path))
+@option("--object", "index", type=int, default=None, metavar="I", group=SCENE,
+        help="The relief to convert: objects.I of the scene (default: the first relief).")
+@overrides_option("Override a scene field (repeatable), e.g. --set objects.0.height=0.1.")
+@option("-o", "--output", required=True, type=click.Path(path_type=Path), group=OUTPUT,
+        help="Mesh file: .ply, .obj or .stl, in world space (the object's transform applied).")
+def relief_to_mesh(scene: Path, index, overrides, output: Path) -> None:
+    """Write a relief object of SCENE as its height-field triangles (two per texel cell)."""
+    from .scene.relief import relief_to_mesh as convert
+
+    check_folder(output)
+    index, count = convert(scene, output, index, overrides)
+    click.echo(f"objects.{index}: {count} triangles -> {output}")
 
 
 @main.command(section="Tools", epilog="""

@@ -20,6 +20,7 @@ from .reference.radiometry import effective_far, lamp_radius
 from .scene.costs import with_derived_sizes
 from .stages.cube_faces import sampled_cube_faces
 from .stages.light_texture import pack_light_textures
+from .stages.relief import place_reliefs
 from .scene.model import DirectionalLight, Scene, SpotLight
 
 #: Spot lights wider than this use a cube map: a single perspective map of a wide
@@ -79,6 +80,10 @@ class FrameInputs:
     view_needed: np.ndarray = None
     light_textures: np.ndarray = None  # light_texture_t[] per light (clrays.stages.light_texture)
     texels: np.ndarray = None  # (N, 4) float32: every light's texture texels
+    # Relief objects drawn by their pre-warp (clrays.stages.relief): their triangles come
+    # last, and the raster stage draws only the first `raster_triangles` (None: all).
+    reliefs: tuple = ()
+    raster_triangles: int | None = None
 
     @property
     def light_views(self) -> list[tuple[int, int]]:
@@ -94,6 +99,7 @@ def frame_inputs(scene: Scene) -> FrameInputs:
     """Pack a scene into the device structs, in eye space; sizes the scene leaves unset
     are derived from its image first (`inputs.scene` holds them)."""
     scene = with_derived_sizes(scene)
+    scene, reliefs, raster_triangles = place_reliefs(scene)  # reliefs' triangles last, for the pre-warp
     eye_ws = np.asarray(scene.camera.position, dtype=np.float64)
     image, camera, medium = scene.image, scene.camera, scene.medium
     tris = scene.geometry.triangles - eye_ws  # float64 translation, then float32
@@ -194,6 +200,8 @@ def frame_inputs(scene: Scene) -> FrameInputs:
         light_anchor_ws=np.array(anchors, dtype=np.float64).reshape(-1, 3),
         view_needed=np.array(needed, dtype=bool),
         **dict(zip(("light_textures", "texels"), pack_light_textures(scene, eye_ws))),
+        reliefs=reliefs,
+        raster_triangles=raster_triangles,
     )
 
 

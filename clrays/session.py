@@ -327,7 +327,7 @@ class StageKeys:
     def __init__(self, inputs: FrameInputs):
         scene = inputs.scene
         self.inputs = inputs
-        self.geometry = digest(scene.geometry.triangles)
+        self.geometry = digest(scene.geometry.triangles, inputs.raster_triangles)  # + which are pre-warped
         # raster.camera: the eye-space triangles (geometry and eye), the camera view, the sample offsets.
         self.camera = digest("camera", self.geometry, inputs.eye_ws, inputs.views[:1], inputs.offsets)
         # raster.shadow: the geometry, the light's views relative to its anchor and which of

@@ -14,8 +14,8 @@ from .animation import EASINGS
 from .limits import MAX_LIGHTS, MAX_MESH_BYTES, MAX_OBJECTS, MAX_SCENE_BYTES, MAX_TRIANGLES
 from .costs import (MAX_GAMMA_SAMPLES, MAX_LINE_SAMPLES, MAX_SHADOW_MAP, MAX_SLICES, MIN_GAMMA_SAMPLES,
                     MIN_LINE_SAMPLES, MIN_SHADOW_MAP, MIN_SLICES)
-from .model import (INTEGRAND_MODES, METHODS, NORMALS, SAMPLINGS, SURFACE_SHADOWS, TEXTURE_WRAPS, TRAVERSALS, Camera,
-                    DirectionalLight, Image, Render)
+from .model import (INTEGRAND_MODES, METHODS, NORMALS, RELIEF_MODES, SAMPLINGS, SURFACE_SHADOWS, TEXTURE_WRAPS,
+                    TRAVERSALS, Camera, DirectionalLight, Image, Render)
 from .textures import MAX_TEXTURE_SIDE
 
 FORMAT_VERSION = 1
@@ -211,6 +211,24 @@ OBJECTS = _typed("objects", {
               notes="shading: `smooth` interpolates vertex normals across each triangle, `flat` uses each "
                     "triangle's own normal ([below](#shading-normals))"),
     ),
+    "relief": (
+        Field("center", "vec3", REQUIRED, notes="scene units: the base rectangle's centre"),
+        Field("normal", "direction", REQUIRED, notes="normalised; the relief rises this way"),
+        Field("up", "direction", REQUIRED, rule="not parallel to `normal`",
+              notes="the image's up (row 0 is its top edge), projected into the base plane"),
+        Field("size", "`[w, h]`", REQUIRED, 0.0, low_open=True, rule="both",
+              notes="the base rectangle along the image's rows and columns, scene units"),
+        Field("depth_map", "string", REQUIRED,
+              rule=f"`.png` (8- or 16-bit), `.exr` or `.npy`, a regular file of at most {MAX_MESH_BYTES >> 20} MiB, "
+                   f"at least 2 × 2 texels",
+              notes="displacement per texel, white (1) is full `height`; an alpha channel of 0 is a hole. "
+                    "Relative paths start at the YAML file's folder"),
+        Field("height", "number", REQUIRED, 0.0,
+              notes="scene units along `normal` for depth 1; 0 is a flat quad (holes still cut)"),
+        Field("albedo_map", "string", shown_default="`albedo` everywhere",
+              notes="colour per texel (`.png`, `.exr`, `.npy`), the depth map's size; its alpha, if any, "
+                    "cuts holes too"),
+    ),
 })
 
 TRANSFORM = Section("objects.transform", (
@@ -277,6 +295,10 @@ RENDER = Section("render", (
           notes="`sampling: epipolar`: neighbouring line samples whose camera distance or unshadowed "
                 "in-scattering differ by more than this fraction are a break, computed both; a pixel whose "
                 "distance differs this much from its line samples' walks its own rays", read_by=("minmax",)),
+    Field("relief", "string", Render.relief, choices=RELIEF_MODES,
+          notes="how relief objects reach the depth maps: `prewarp` warps each relief's depth image for "
+                "every view and maps it onto its base rectangle, `triangles` rasterizes its height-field "
+                "triangles (the same surface, for comparison)", read_by=_RASTER_METHODS),
 ))
 
 

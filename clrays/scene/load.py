@@ -22,6 +22,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from . import geometry as primitives
+from . import relief as relief_images
 from ..errors import SceneError
 from .animation import Animation, Key, ObjectRig, Track
 from .files import FileRefused, read_regular_file
@@ -309,6 +310,57 @@ def _mesh(m: dict[str, Node], base_dir: Path) -> _Shape:
     return triangles, normals if smooth else None
 
 
+def _relief_image(node: Node, base_dir: Path) -> tuple[np.ndarray, Path]:
+    """An image key of a relief read into (H, W, C) floats; a one-line error naming the
+    key, its value and the reason otherwise."""
+    if not isinstance(node.value, str) or not node.value.strip():
+        node.fail("an image file path (.png, .exr or .npy)")
+    path = Path(node.value)
+    path = path if path.is_absolute() else base_dir / path
+    try:
+        return relief_images.read_image(path), path
+    except (ValueError, OSError) as exc:
+        node.fail("a readable 2D image (.png 8 or 16 bit, .exr or .npy)", f"{show(node)} ({exc}: {path})")
+
+
+def read_relief(m: dict[str, Node], base_dir: Path) -> relief_images.Relief:
+    """A relief's keys (docs/design.md, "Relief objects"): its texel frame, displacement, holes and colours."""
+    keys = OBJECTS["relief"]
+    normal, up = direction(m["normal"]), direction(m["up"])
+    if np.linalg.norm(np.cross(normal, up)) < PARALLEL_TOLERANCE:
+        m["up"].fail("a direction not parallel to normal")
+    size = numbers(m["size"], 2, "a list of 2 numbers [w, h] > 0", keys["size"].low, lo_open=True)
+    height = _read(keys["height"], m["height"])
+    image, _ = _relief_image(m["depth_map"], base_dir)
+    depth, alpha = relief_images.depth_and_alpha(image)
+    if relief_images.cell_count(depth.shape) > MAX_TRIANGLES:  # before building them: they may be huge
+        m["depth_map"].fail(f"at most {MAX_TRIANGLES} triangles (two per cell of four texels)",
+                            f"{show(m['depth_map'])} ({depth.shape[1]} × {depth.shape[0]} texels: "
+                            f"{relief_images.cell_count(depth.shape)} triangles)")
+    solid = np.ones(depth.shape, bool) if alpha is None else alpha > 0
+    albedo = None
+    if "albedo_map" in m:
+        colours, _ = _relief_image(m["albedo_map"], base_dir)
+        if colours.shape[:2] != depth.shape:
+            m["albedo_map"].fail(f"an image of the depth map's size, {depth.shape[1]} × {depth.shape[0]}",
+                                 f"{show(m['albedo_map'])} ({colours.shape[1]} × {colours.shape[0]})")
+        albedo, colour_alpha = relief_images.colour_and_alpha(colours)
+        if colour_alpha is not None:
+            solid &= colour_alpha > 0
+    frame = relief_images.relief_frame(vec3(m["center"]), normal, up, size, depth.shape)
+    return relief_images.Relief(frame, height * depth, solid, albedo)
+
+
+def _relief(m: dict[str, Node], base_dir: Path):
+    """(the relief, its height-field triangles, their albedo when it has an albedo_map)."""
+    relief = read_relief(m, base_dir)
+    triangles, albedo = relief.triangles()
+    if len(triangles) == 0:
+        m["depth_map"].fail("a depth map with at least one cell of four texels whose alpha is not 0",
+                            f"{show(m['depth_map'])} (every cell is a hole)")
+    return relief, triangles, albedo
+
+
 _BUILDERS: dict[str, Callable[[dict[str, Node], Path], _Shape]] = {
     "triangles": lambda m, _: _triangles(m),
     "plane": lambda m, _: _plane(m),
@@ -335,10 +387,11 @@ class _Object:
 
     triangles: np.ndarray  # (T, 3, 3) world space
     normals: np.ndarray | None  # (T, 3, 3) world space, unit, for a smooth object (else each is the face normal)
-    albedo: np.ndarray  # (3,)
+    albedo: np.ndarray  # (3,), or (T, 3) for a relief with an albedo_map
     local: np.ndarray  # (T, 3, 3) before the transform
     local_normals: np.ndarray | None  # (T, 3, 3) before the transform, for a smooth object
     parts: tuple[np.ndarray, np.ndarray, np.ndarray]  # translate (3,), rotation 3x3, scale (3,)
+    relief: relief_images.Relief | None = None  # a relief object's texels, for the pre-warp
 
 
 def _object(node: Node, base_dir: Path) -> _Object:
@@ -346,14 +399,21 @@ def _object(node: Node, base_dir: Path) -> _Object:
     kind, m = typed(node, kinds(OBJECTS), OBJECT.optional)
     albedo = _read(OBJECT["albedo"], m.get("albedo"))
     parts = _transform_parts(m.get("transform"))
-    local, local_normals = _BUILDERS[kind](m, base_dir)
+    relief = None
+    if kind == "relief":  # its colours come per triangle from its albedo_map, if it has one
+        relief, local, texel_albedo = _relief(m, base_dir)
+        local_normals = None
+        if texel_albedo is not None:
+            albedo = texel_albedo
+    else:
+        local, local_normals = _BUILDERS[kind](m, base_dir)
     triangles, normals = local, local_normals
     if "transform" in m:
         matrix = affine(*parts)
         triangles = transform_points(matrix, local)
         if local_normals is not None:
             normals = transform_normals(matrix, local_normals)
-    return _Object(triangles, normals, albedo, local, local_normals, parts)
+    return _Object(triangles, normals, albedo, local, local_normals, parts, relief)
 
 
 def _tessellated_count(node: Node) -> int:
@@ -380,6 +440,7 @@ def _geometry(node: Node | None, base_dir: Path, rigs: list | None = None) -> Ge
     """All objects flattened; `rigs`, when given, receives each object's ObjectRig."""
     tris, albedo, ids = [np.zeros((0, 3, 3))], [np.zeros((0, 3))], [np.zeros(0, np.int32)]
     smooth_normals: list[tuple[slice, np.ndarray]] = []
+    reliefs: list[relief_images.ReliefRecord] = []
     start = 0
     items = sequence(node, "a list of objects") if node is not None else []
     if len(items) > MAX_OBJECTS:
@@ -394,6 +455,8 @@ def _geometry(node: Node | None, base_dir: Path, rigs: list | None = None) -> Ge
                                   obj.local_normals))
         if obj.normals is not None:
             smooth_normals.append((slice(start, start + count), obj.normals))
+        if obj.relief is not None:
+            reliefs.append(relief_images.relief_record(obj.relief, slice(start, start + count), obj.local))
         start += count
         _check_triangle_count(item, i, start)  # a mesh's count is known once it is read
         tris.append(obj.triangles)
@@ -405,7 +468,8 @@ def _geometry(node: Node | None, base_dir: Path, rigs: list | None = None) -> Ge
     for rows, object_normals in smooth_normals:
         normals[rows], smooth[rows] = object_normals, True
     return Geometry(triangles=triangles, albedo=np.ascontiguousarray(np.concatenate(albedo), dtype=np.float64),
-                    object_id=np.concatenate(ids).astype(np.int32), normals=normals, smooth=smooth)
+                    object_id=np.concatenate(ids).astype(np.int32), normals=normals, smooth=smooth,
+                    reliefs=tuple(reliefs))
 
 
 # --------------------------------------------------------------------------- animation
@@ -593,3 +657,16 @@ def load_scene(path: Path | str, overrides: Sequence[str] = ()) -> Scene:
     except FileRefused as exc:
         raise SceneError(f"{path}: cannot read scene file: {exc}") from None
     return _parse(text, str(path), path, overrides)
+
+
+def object_kinds(path: Path | str, overrides: Sequence[str] = ()) -> list[str]:
+    """The `type` of each object of a scene file, in order (for `relief_to_mesh`, which
+    needs to know which objects are reliefs; the scene itself keeps only triangles)."""
+    scene = load_scene(path, overrides)  # validates everything first
+    del scene
+    text = read_regular_file(path, MAX_SCENE_BYTES).decode("utf-8")
+    root = compose(text, "", mark_where(str(path)), str(path))
+    for override in ([overrides] if isinstance(overrides, str) else overrides):
+        apply_override(root, override)
+    objects = root.value.get("objects")
+    return [item.value["type"].value for item in objects.value] if objects is not None else []

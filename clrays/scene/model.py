@@ -33,6 +33,8 @@ SURFACE_SHADOWS = ("exact", "map", "pcf")
 TEXTURE_WRAPS = ("repeat", "clamp")  # a directional light's texture beyond its first tile
 PHASE_TYPES = ("isotropic", "hg")
 NORMALS = ("smooth", "flat")  # a mesh's shading normals: interpolated vertex normals, or each face's own
+# How the raster stage draws relief objects: by their pre-warp, or as their triangles (the same surface).
+RELIEF_MODES = ("prewarp", "triangles")
 
 
 @dataclass(frozen=True)
@@ -136,6 +138,7 @@ class Render:
     line_samples: int | None = None  # epipolar: samples along each slice's line
     initial_step: int = 8  # epipolar: every initial_step-th line sample walks its row
     refine_threshold: float = 0.02  # epipolar: relative change in distance or unshadowed radiance that is a break
+    relief: str = "prewarp"  # one of RELIEF_MODES
 
 
 @dataclass(frozen=True)
@@ -150,6 +153,8 @@ class Geometry:
     object_id: np.ndarray  # (T,) int32, index into Scene.objects order
     normals: np.ndarray = None  # (T, 3, 3) float64, world space, unit; None: the face normals
     smooth: np.ndarray = None  # (T,) bool; None: no triangle is smooth
+    # The relief objects among them (clrays.scene.relief.ReliefRecord): their rows and texels.
+    reliefs: tuple = ()
 
     def __post_init__(self):
         if self.normals is None:

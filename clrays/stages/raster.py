@@ -12,6 +12,7 @@ import numpy as np
 from .. import structs
 from ..device import Device, StageTimer
 from ..inputs import FrameBuffers, light_pass_inputs
+from .relief import ReliefDrawer
 
 
 @dataclass
@@ -27,6 +28,8 @@ def _launch(device: Device, buffers: FrameBuffers, name: str, defines: dict | No
     work-item per triangle, lists the triangles taller than RASTER_BIG_ROWS; `name_rows`
     draws those with one work-item per (triangle, view row) (docs/design.md §4.1)."""
     count = buffers.inputs.tri_vertices.shape[0] // 3
+    if buffers.inputs.raster_triangles is not None:  # the reliefs' triangles, last, are pre-warped instead
+        count = buffers.inputs.raster_triangles
     if count == 0:
         return
     big_count = device.buffer(np.zeros(1, np.uint32))
@@ -54,19 +57,26 @@ def raster_camera(device: Device, buffers: FrameBuffers, timer: StageTimer) -> t
     samples, spp = inputs.samples, inputs.scene.image.spp
     camera_depth = device.buffer(nbytes=4 * samples)
     tri_id = device.buffer(nbytes=4 * samples)
+    reliefs = ReliefDrawer(device, inputs.reliefs, inputs.eye_ws, timer)  # eye space, as the triangles
     if _atomic64(device):
         # One pass: depth and triangle packed into a 64-bit key, then split.
         defines = {"RASTER_ATOMIC64": 1}
         nearest = device.buffer(nbytes=8 * samples)
         device.fill(nearest, np.uint64((int(structs.DEPTH_EMPTY) << 32) | 0xFFFFFFFF), 8 * samples, timer, "raster")
         _launch(device, buffers, "raster_nearest", defines, 0, buffers.offsets, spp, (nearest,), timer)
+        reliefs.map("relief_map_nearest", defines, buffers.views, inputs.views, 0, buffers.offsets, spp,
+                    buffers.tri_vertices, (nearest,))
         timer.add("raster", device.kernel("raster", "raster_split", defines)(
             device.queue, (samples,), None, nearest, np.int32(samples), camera_depth, tri_id))
         return camera_depth, tri_id
     device.fill(camera_depth, structs.DEPTH_EMPTY, 4 * samples, timer, "raster")
     device.fill(tri_id, np.int32(-1), 4 * samples, timer, "raster")
     _rasterize(device, buffers, 0, buffers.offsets, spp, camera_depth, timer)
+    reliefs.map("relief_map_depth", None, buffers.views, inputs.views, 0, buffers.offsets, spp, buffers.tri_vertices,
+                (camera_depth,))
     _launch(device, buffers, "raster_resolve", None, 0, buffers.offsets, spp, (camera_depth, tri_id), timer)
+    reliefs.map("relief_map_resolve", None, buffers.views, inputs.views, 0, buffers.offsets, spp,
+                buffers.tri_vertices, (camera_depth, tri_id))
     return camera_depth, tri_id
 
 
@@ -93,9 +103,12 @@ def raster_shadow_map(device: Device, buffers: FrameBuffers, light_index: int, t
     depth = device.buffer(nbytes=4 * texels)
     device.fill(depth, structs.DEPTH_EMPTY, 4 * texels, timer, "raster")
     centre = device.buffer(np.array([[0.5, 0.5]], dtype=np.float32), writable=False)
+    reliefs = ReliefDrawer(device, inputs.reliefs, inputs.light_anchor_ws[0], timer)  # anchored, as the triangles
     for view_index in range(1, len(inputs.views)):
         if inputs.view_needed[view_index]:  # a cube face the frame cannot read stays empty
             _rasterize(device, light_buffers, view_index, centre, 1, depth, timer)
+            reliefs.map("relief_map_depth", None, light_buffers.views, inputs.views, view_index, centre, 1,
+                        light_buffers.tri_vertices, (depth,))
     return ShadowMap(depth, inputs.shadow_texels, inputs.scene.geometry.count)
 
 

@@ -463,7 +463,7 @@ MESH = {"type": "mesh", "file": "meshes/tetrahedron.obj"}
 ROT = "objects.0.transform.rotate"
 
 BAD_OBJECTS = [
-    ({"type": "torus"}, r"objects\.0\.type: expected one of 'triangles', 'plane', 'box', 'sphere', 'mesh', got 'torus'"),
+    ({"type": "torus"}, r"objects\.0\.type: expected one of 'triangles', 'plane', 'box', 'sphere', 'mesh', 'relief', got 'torus'"),
     ({"min": [0, 0, 0]}, r"objects\.0: missing required key 'type'"),
     ({**BOX, "radius": 1}, r"objects\.0\.radius: unknown key; expected one of: type, min, max, albedo, transform"),
     ({**BOX, "colour": 1}, r"objects\.0\.colour: unknown key"),
