@@ -28,7 +28,7 @@ from clrays.scene.load import load_scene  # noqa: E402
 from clrays.session import Renderer  # noqa: E402
 
 SCENES = ("demo", "bunny", "behind", "sun")
-STAGES = ("raster", "rectify", "minmax", "integrand", "traverse", "shade")
+STAGES = ("raster", "rectify", "minmax", "integrand", "traverse", "visibility", "bvh", "shade")
 
 
 def main() -> None:

@@ -14,9 +14,9 @@
  *                 samples either side (no break lies between them)
  *   gather        per camera sample: interpolate each of its two slices at its β when
  *                 the samples there match its distance and unshadowed weight and each
- *                 other's radiance, else walk that
- *                 row for the camera sample itself (the fix-up); blend the two slices as
- *                 traverse does
+ *                 other's radiance, blending the two slices as traverse does; list it
+ *                 for fix_up where a slice cannot
+ *   fix_up        per listed camera sample: walk those rows for the sample itself
  *
  * Line sample j of slice i lies in the half-plane of the slice's centre at the
  * pseudo-angle q = lo_i + (hi_i - lo_i)·j/(n - 1) (pseudo_beta, a monotonic stand-in for
@@ -280,71 +280,89 @@ kernel void line_fill(global const epipolar_t* ep, int n, global float4* radianc
     samples[j] = (float4)(mix(samples[left].xyz, samples[right].xyz, t), 0.0f);
 }
 
-/* The radiance of slice i at a camera sample (direction dir, own line value `own`): the
- * line samples either side of its β when they match it (1 in *interpolated), else the
- * camera sample's own walk along row i. `own.y` < 0:
- * its unshadowed weight is not computed yet. Interpolation needs it for a spot light
- * only: the weight of other lights is smooth between two lines, but a spot light's
- * cone has its silhouette along the slices (the cone contains the light), so it can
- * pass between a camera sample and its lines. */
-inline float3 slice_radiance(global const epipolar_t* ep, global const float2* tree, global const light_t* light,
-                             global const integrand_t* integrand, global const float* tables,
-                             const row_texture_t* texture, global const frame_t* frame, global const float2* ranges,
-                             global const float2* line, global const float4* radiance, int n, float threshold,
-                             int i, float q, float3 dir, float2* own, int* interpolated)
+/* Whether slice i interpolates at a camera sample (own line value `own`, pseudo-angle q,
+ * sin β): the two line samples either side of its q match it (distance, and for a spot
+ * light, whose cone's silhouette runs along the slices and so can pass between a camera
+ * sample and its lines, the unshadowed weight), their weights do not break, and their
+ * radiances agree; then *value is the straight line between them. Otherwise (an edge lies
+ * between them, the camera sample is off both lines' surfaces, a shadow's edge crosses
+ * the line, the light's own radiance jumps: its cone, the epipole) the fix-up walks the
+ * row for the camera sample. Taking the one sample on its side of an edge instead was
+ * tried: it ignores the change in β between them, 0.8 % on a 24-pixel image in opaque fog. */
+inline int slice_interpolates(global const light_t* light, global const float2* ranges, global const float2* line,
+                              global const float4* radiance, int n, float threshold, int i, float q,
+                              float sin_beta, float2 own, float3* value)
 {
     float lo = ranges[i].x, hi = ranges[i].y;
     float f = hi > lo ? clamp((q - lo) / (hi - lo), 0.0f, 1.0f) * (float)(n - 1) : 0.0f;
     int j = min((int)f, n - 2);
     float s = f - (float)j;
-    global const float2* samples = line + i * n;
-    global const float4* values = radiance + i * n;
-    float2 a = samples[j], b = samples[j + 1];
-    *interpolated = 1;
-    if (a.x < 0.0f) { /* the slice does not cross the screen */
-    } else if (!weight_breaks(a, b, threshold)) {
-        float2 between = mix(a, b, s);
-        if (own->y < 0.0f) between.y = own->y;
-        float4 va = values[j], vb = values[j + 1];
-        if (line_matches(between, *own, threshold) && !radiance_breaks(va.xyz, vb.xyz, threshold))
-            return mix(va.xyz, vb.xyz, s) / radiance_scale(light, length(cross(dir, ep->axis.xyz)));
-    }
-    /* Else (an edge lies between the two, or the camera sample is off both lines' surfaces,
-     * or a shadow's edge crosses the line between them) and where the light's own
-     * radiance jumps between them (its cone, the epipole), the camera sample walks the
-     * row itself. Taking the one sample on its side of an edge
-     * instead was tried: it ignores the change in β between them, 0.8 % on a 24-pixel
-     * image in opaque fog. */
-    *interpolated = 0;
-    ray_span_t span;
-    if (!ray_span(ep, light, frame, integrand, dir, own->x, &span)) return (float3)(0.0f);
-    return row_radiance(ep, tree, i, &span, integrand, tables, frame, texture);
+    float2 a = line[i * n + j], b = line[i * n + j + 1];
+    if (a.x < 0.0f || weight_breaks(a, b, threshold)) return 0; /* a.x < 0: the slice misses the screen */
+    float2 between = mix(a, b, s);
+    if (own.y < 0.0f) between.y = own.y; /* not a spot light: the weight is not compared */
+    float4 va = radiance[i * n + j], vb = radiance[i * n + j + 1];
+    if (!line_matches(between, own, threshold) || radiance_breaks(va.xyz, vb.xyz, threshold)) return 0;
+    *value = mix(va.xyz, vb.xyz, s) / radiance_scale(light, sin_beta);
+    return 1;
 }
 
+/* A camera sample's direction, distance, two nearest slices and their weight, as gather
+ * and fix_up both take them. */
+inline float3 gather_ray(global const frame_t* frame, global const view_t* views, global const float2* offsets,
+                         global const uint* camera_depth, global const epipolar_t* ep, int sample, float* distance,
+                         int* i0, int* i1, float* t)
+{
+    float3 dir = camera_ray(frame, views, offsets, sample);
+    *distance = fmin(as_float(camera_depth[sample]), frame->far);
+    slices_around(ep, atan2_approx(dot(dir, ep->w.xyz), dot(dir, ep->u.xyz)), i0, i1, t);
+    return dir;
+}
+
+/* Per camera sample: add each of its two slices' interpolated radiance, weighted as
+ * traverse blends them; list the sample in `fixups` (index·4 + a bit per slice) for
+ * fix_up when a slice cannot interpolate. No walk here, so the kernel stays branch-light. */
 kernel void gather(global const frame_t* frame, global const view_t* views, global const light_t* lights,
+                   global const epipolar_t* ep, global const uint* camera_depth, global const float2* offsets,
+                   global const float2* ranges, global const float2* line, global const float4* radiance, int n,
+                   float threshold, global float4* scatter, global uint* fixups, global uint* counts)
+{
+    int sample = get_global_id(0);
+    if (sample >= frame->width * frame->height * frame->spp) return;
+    float distance, t;
+    int i0, i1;
+    float3 dir = gather_ray(frame, views, offsets, camera_depth, ep, sample, &distance, &i0, &i1, &t);
+    float cos_beta = dot(dir, ep->axis.xyz), sin_beta = length(cross(dir, ep->axis.xyz));
+    float q = pseudo_beta(cos_beta, sin_beta);
+    global const light_t* light = lights + ep->light_index;
+    float2 own = (float2)(distance, light->type == LIGHT_SPOT ? unshadowed_weight(ep, light, dir, distance) : -1.0f);
+    float3 near0 = (float3)(0.0f), near1 = (float3)(0.0f);
+    int from0 = slice_interpolates(light, ranges, line, radiance, n, threshold, i0, q, sin_beta, own, &near0);
+    int from1 = slice_interpolates(light, ranges, line, radiance, n, threshold, i1, q, sin_beta, own, &near1);
+    scatter[sample] += (float4)((1.0f - t) * near0 + t * near1, 0.0f);
+    if (!(from0 && from1)) fixups[atomic_inc(counts + COUNT_FIXED_UP)] = (uint)sample << 2 | !from0 | !from1 << 1;
+}
+
+/* Per listed camera sample: walk the rows of the slices it could not interpolate, as
+ * traverse does, and add them with their weights. */
+kernel void fix_up(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                    global const epipolar_t* ep, global const float2* tree, global const integrand_t* integrand,
                    global const float* tables, global const uint* camera_depth, global const float2* offsets,
                    global const textured_integrand_t* textured, global const float* texture_basis,
-                   global const float* texture_prefix, global const float2* ranges, global const float2* line,
-                   global const float4* radiance, int n, float threshold, global float4* scatter,
-                   global uint* counts)
+                   global const float* texture_prefix, global const uint* fixups, int count, global float4* scatter)
 {
+    int k = get_global_id(0);
+    if (k >= count) return;
     row_texture_t texture = {textured, texture_basis, texture_prefix};
-    int sample = get_global_id(0);
-    if (sample < frame->width * frame->height * frame->spp) {
-        float3 dir = camera_ray(frame, views, offsets, sample);
-        float distance = fmin(as_float(camera_depth[sample]), frame->far);
-        float q = pseudo_beta(dot(dir, ep->axis.xyz), length(cross(dir, ep->axis.xyz)));
-        global const light_t* light = lights + ep->light_index;
-        float2 own = (float2)(distance, light->type == LIGHT_SPOT ? unshadowed_weight(ep, light, dir, distance) : -1.0f);
-        int i0, i1, from0, from1;
-        float t;
-        slices_around(ep, atan2_approx(dot(dir, ep->w.xyz), dot(dir, ep->u.xyz)), &i0, &i1, &t);
-        float3 near0 = slice_radiance(ep, tree, light, integrand, tables, &texture, frame, ranges, line, radiance, n,
-                                      threshold, i0, q, dir, &own, &from0);
-        float3 near1 = slice_radiance(ep, tree, light, integrand, tables, &texture, frame, ranges, line, radiance, n,
-                                      threshold, i1, q, dir, &own, &from1);
-        scatter[sample] += (float4)(mix(near0, near1, t), 0.0f);
-        if (!(from0 && from1)) atomic_inc(counts + COUNT_FIXED_UP);
-    }
+    uint entry = fixups[k];
+    int sample = entry >> 2;
+    float distance, t;
+    int i0, i1;
+    float3 dir = gather_ray(frame, views, offsets, camera_depth, ep, sample, &distance, &i0, &i1, &t);
+    ray_span_t span;
+    if (!ray_span(ep, lights + ep->light_index, frame, integrand, dir, distance, &span)) return;
+    float3 walked = (float3)(0.0f);
+    if (entry & 1) walked += (1.0f - t) * row_radiance(ep, tree, i0, &span, integrand, tables, frame, &texture);
+    if (entry & 2) walked += t * row_radiance(ep, tree, i1, &span, integrand, tables, frame, &texture);
+    scatter[sample] += (float4)(walked, 0.0f);
 }

@@ -289,6 +289,7 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
         sizes += [(f"min-max tree of light {index}", tree) for index in range(len(scene.lights))]
         if scene.render.sampling == "epipolar":  # per line sample: (distance, weight), radiance twice, one light at a time
             sizes.append(("epipolar line samples", 40 * scene.render.slices * scene.render.line_samples))
+            sizes.append(("epipolar fix-up list", 4 * samples))
         # A textured light's rectified texture and prefix sums (clrays.stages.light_texture).
         sizes += [(f"texture prefix sums of light {index}",
                    4 * scene.render.slices * 3 * (scene.render.svd_rank + 1) * (gamma_samples + 1)

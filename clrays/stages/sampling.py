@@ -146,8 +146,13 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
         n32, threshold, radiance, refined, counts)
     radiance = refined
     run("line_fill", (n, slices), None, epipolar.buffer, n32, radiance)
+    fixups = device.buffer(nbytes=4 * samples)  # camera samples listed for fix_up
     run("gather", (samples,), None, buffers.params, buffers.views, buffers.lights, epipolar.buffer,
-        epipolar.tree, integrand.params, integrand.data, rastered.camera_depth, buffers.offsets, texture.params,
-        texture.basis, texture.prefix, ranges_buffer, line, radiance, n32, threshold, scatter, counts)
+        rastered.camera_depth, buffers.offsets, ranges_buffer, line, radiance, n32, threshold, scatter, fixups,
+        counts)
     computed, fixed_up = (int(count) for count in device.read(counts, 2, np.uint32))
+    if fixed_up:
+        run("fix_up", (fixed_up,), None, buffers.params, buffers.views, buffers.lights, epipolar.buffer,
+            epipolar.tree, integrand.params, integrand.data, rastered.camera_depth, buffers.offsets, texture.params,
+            texture.basis, texture.prefix, fixups, np.int32(fixed_up), scatter)
     return SampleCounts(computed, samples - fixed_up, fixed_up)
