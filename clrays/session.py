@@ -3,7 +3,8 @@
     raster → rectify → minmax → integrand → traverse → visibility → shade  (method `minmax`)
     raster → raymarch → visibility → shade                                 (method `raymarch`)
 
-(`visibility` runs with `render.surface_shadows: exact`, the default.)
+(`visibility` runs with `render.surface_shadows: exact`, the default; `shadow_filter`
+takes its place with `surface_shadows: filtered`.)
 
 `Renderer._frame` is that figure, one line per stage. The `exact` reference runs on
 the host in float64 instead (clrays.reference.exact).
@@ -39,6 +40,7 @@ from .stages.raster import RasterResult, ShadowMap, map_is_empty, raster_camera,
 from .stages.raymarch import raymarch
 from .stages.rectify import Epipolar, rectify
 from .stages.shade import shade
+from .stages.shadow_filter import depth_ranges, frame_filter, shadow_filter, shadow_filter_moments
 from .stages.traverse import traverse
 from .stages.visibility import bound_atlas, upload_bvh, visibility, visibility_bound
 
@@ -165,8 +167,11 @@ class Renderer:
     def _visibility(self, buffers: FrameBuffers, rastered: RasterResult, keys: StageKeys, reuse: Reuse,
                     timer: StageTimer):
         """The visibility stage: each light's bound map kept while its shadow map is, the BVH
-        while the eye-space triangles are; None unless `render.surface_shadows` is exact."""
+        while the eye-space triangles are; None unless `render.surface_shadows` is exact
+        (or filtered: then the shadow_filter stage answers instead)."""
         scene = buffers.inputs.scene
+        if scene.render.surface_shadows == "filtered" and scene.lights:
+            return self._shadow_filter(buffers, rastered, keys, reuse, timer)
         if scene.render.surface_shadows != "exact" or not scene.lights:
             return None
         device = self.device
@@ -178,6 +183,16 @@ class Renderer:
         bvh = reuse.keep("bvh", digest("bvh", keys.camera), lambda: upload_bvh(device, buffers.inputs, timer))
         reuse.record.note("visibility", COMPUTED)
         return visibility(device, buffers, rastered, atlas, bvh, timer)
+
+    def _shadow_filter(self, buffers: FrameBuffers, rastered: RasterResult, keys: StageKeys, reuse: Reuse,
+                       timer: StageTimer):
+        """The shadow_filter stage: the blurred moment maps kept while the shadow maps and the
+        filter's type and radius are, then the visibility of every camera sample."""
+        device, chosen = self.device, frame_filter(buffers.inputs)
+        key = digest("moments", tuple(keys.shadow), chosen.type, chosen.radius, depth_ranges(buffers.inputs))
+        maps = reuse.keep("shadow_filter.moments", key, lambda: shadow_filter_moments(device, buffers, rastered, timer))
+        reuse.record.note("shadow_filter", COMPUTED)
+        return shadow_filter(device, buffers, rastered, maps, timer)
 
     def _exact(self, scene: Scene, reuse: Reuse, timer: StageTimer, progress: bool):
         """The float64 reference, one host stage."""

@@ -13,7 +13,8 @@ from typing import Any
 from .animation import EASINGS
 from .limits import MAX_LIGHTS, MAX_MESH_BYTES, MAX_OBJECTS, MAX_SCENE_BYTES, MAX_TRIANGLES
 from .costs import MAX_GAMMA_SAMPLES, MAX_SHADOW_MAP, MAX_SLICES, MIN_GAMMA_SAMPLES, MIN_SHADOW_MAP, MIN_SLICES
-from .model import INTEGRAND_MODES, METHODS, NORMALS, SURFACE_SHADOWS, TRAVERSALS, Camera, Image, Render
+from .model import (INTEGRAND_MODES, METHODS, NORMALS, SHADOW_FILTERS, SURFACE_SHADOWS, TRAVERSALS, Camera, Image,
+                    Render, ShadowFilter)
 
 FORMAT_VERSION = 1
 MAX_IMAGE_PIXELS = 1 << 26
@@ -220,9 +221,14 @@ RENDER = Section("render", (
     Field("surface_shadows", "string", Render.surface_shadows, choices=SURFACE_SHADOWS,
           notes="hard shadows on surfaces: `exact` casts a shadow ray (through a BVH) wherever the shadow map "
                 "cannot decide and matches the `exact` reference; `map` is the shadow-map test alone; `pcf` "
-                "filters it over `pcf` texels. Setting only `pcf` > 0 implies `pcf`", read_by=_RASTER_METHODS),
+                "filters it over `pcf` texels; `filtered` softens it as `shadow_filter` says. Setting only `pcf` > 0 "
+                "implies `pcf`, setting only `shadow_filter` implies `filtered`", read_by=_RASTER_METHODS),
     Field("pcf", "integer", Render.pcf, 0, 16,
           notes="`surface_shadows: pcf`: filter radius in texels (0 = hard)", read_by=_RASTER_METHODS),
+    Field("shadow_filter", "mapping or string", shown_default="`{type: msm_hamburger}` with `surface_shadows: "
+                                                           "filtered`, else unused",
+          notes="[render.shadow_filter](#rendershadow_filter): filtered surface shadows; a string is its `type`",
+          read_by=_RASTER_METHODS),
     Field("slices", "integer", Render.slices, 16, 16384,
           shown_default=f"from the image: 4 × its perimeter or `shadow_map`, the smaller, as a power of two in "
                         f"[{MIN_SLICES}, {MAX_SLICES}]",
@@ -240,6 +246,22 @@ RENDER = Section("render", (
     Field("traversal", "string", Render.traversal, choices=TRAVERSALS,
           notes="min-max: min-max tree traversal or a linear scan", read_by=("minmax",)),
 ))
+
+
+SHADOW_FILTER = Section("render.shadow_filter", (
+    Field("type", "string", ShadowFilter.type, choices=SHADOW_FILTERS,
+          notes="`hard`: the map's test (as `surface_shadows: map`); `pcf`: the test averaged over the "
+                "(2·radius + 1)² texels around the receiver's; `vsm`: Chebyshev's bound from 2 prefiltered moments; "
+                "`msm_hamburger`, `msm_hausdorff`: the 4-moment bound on ℝ or on [0, 1] "
+                "([docs/design.md §12](design.md#12-filtered-surface-shadows))"),
+    Field("radius", "integer", ShadowFilter.radius, 0, 16,
+          notes="texels: the box of `pcf`, and the separable box blur of the moment maps"),
+    Field("depth_bias", "number", ShadowFilter.depth_bias, 0.0, 64.0,
+          notes="texels at the receiver's depth, taken off it before the test"),
+    Field("moment_bias", "number", ShadowFilter.moment_bias, 0.0, 0.5,
+          notes="`msm_*`: how far the moments are pulled towards those of depth 0.5; `vsm`: the least variance "
+                "(normalised depth²). Measured in bench/RESULTS.md"),
+), rules=("With `shadow_filter` set, `surface_shadows` is `filtered` (or left out) and `pcf` is 0.",))
 
 
 def unread_render_keys(render: Render, method: str) -> list[str]:
@@ -271,4 +293,4 @@ ANIMATION = Section("animation", (
 #: Every section, by the name the docs' markers use, in the order of the format.
 SECTIONS: dict[str, Section] = {section.name: section for section in (
     TOP, IMAGE, CAMERA, *LIGHTS.values(), MEDIUM, *PHASES.values(), OBJECT, *OBJECTS.values(), TRANSFORM,
-    ROTATE, RENDER, ANIMATION)}
+    ROTATE, RENDER, SHADOW_FILTER, ANIMATION)}

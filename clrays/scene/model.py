@@ -27,7 +27,10 @@ METHODS = ("minmax", "raymarch", "exact")
 INTEGRAND_MODES = ("table", "svd", "analytic")
 TRAVERSALS = ("tree", "scan")
 # Hard surface shadows: shadow rays where the map cannot decide, the map alone, or the map filtered.
-SURFACE_SHADOWS = ("exact", "map", "pcf")
+SURFACE_SHADOWS = ("exact", "map", "pcf", "filtered")  # filtered: `render.shadow_filter` decides
+# Filtered surface shadows (`render.shadow_filter.type`, docs/design.md §12): the map's test, PCF, or a
+# reconstruction from prefiltered moments (2 for VSM, 4 for the moment shadow maps).
+SHADOW_FILTERS = ("hard", "pcf", "vsm", "msm_hamburger", "msm_hausdorff")
 PHASE_TYPES = ("isotropic", "hg")
 NORMALS = ("smooth", "flat")  # a mesh's shading normals: interpolated vertex normals, or each face's own
 
@@ -92,6 +95,16 @@ class Medium:
 
 
 @dataclass(frozen=True)
+class ShadowFilter:
+    """`render.shadow_filter`: how `surface_shadows: filtered` softens the shadow map."""
+
+    type: str = "msm_hamburger"  # one of SHADOW_FILTERS
+    radius: int = 2  # texels: the (2·radius + 1)² box of PCF, and of the moment maps' prefilter
+    depth_bias: float = 1.5  # texels (at the receiver's depth), taken off the receiver's depth
+    moment_bias: float = 3e-5  # msm: weight pulling the moments towards 0.5; vsm: the least variance
+
+
+@dataclass(frozen=True)
 class Render:
     method: str = "minmax"  # one of METHODS
     steps: int = 256  # raymarch samples per pixel
@@ -100,6 +113,7 @@ class Render:
     shadow_map: int | None = None  # shadow map side, texels (cube maps: per face)
     surface_shadows: str = "exact"  # one of SURFACE_SHADOWS
     pcf: int = 0  # surface_shadows `pcf`: filter radius in texels
+    shadow_filter: ShadowFilter | None = None  # surface_shadows `filtered`: None until it is set
     # min-max method
     slices: int | None = None  # epipolar slices
     gamma_samples: int | None = None  # γ texels per slice
