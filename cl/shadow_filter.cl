@@ -1,4 +1,4 @@
-/* shadow_filter — filtered surface shadows (render.shadow_filter, docs/design.md §12): per
+/* shadow_filter — filtered surface shadows (render.shadow_filter, docs/design.md §9): per
  * camera sample and light, the lit fraction of a filter footprint around its shadow-map texel.
  * shadow_filter_moments reads shadow_depth; writes moments (float4 (z, z², z³, z⁴) per texel,
  *   z the depth normalised to the light's [near, far]).
@@ -22,7 +22,7 @@
 #endif
 
 /* Index in the light's depth (or moment) atlas of texel (tx, ty) of `view`, which may lie
- * past the view's edges (docs/design.md §12, cube seams). */
+ * past the view's edges (docs/design.md §9, cube seams). */
 inline int cube_texel(global const light_t* light, global const view_t* views, global const view_t* view,
                       int tx, int ty)
 {
@@ -91,7 +91,7 @@ inline float three_point_weight(float4 b, float z, float other1, float other2)
 
 /* The other two support points z1 ≤ z2 of the distribution with moments (1, b) that has a
  * point at z: the roots of c0 + c1·x + c2·x², B·c = (1, z, z²), B the Hankel matrix of
- * (1, b1, b2 | b1, b2, b3 | b2, b3, b4) through its L·D·Lᵀ factors (docs/design.md §12). */
+ * (1, b1, b2 | b1, b2, b3 | b2, b3, b4) through its L·D·Lᵀ factors (docs/design.md §9). */
 inline void three_point_support(float4 b, float z, float* z1, float* z2)
 {
     float d11 = b.y - b.x * b.x;
@@ -116,7 +116,7 @@ inline float three_point_shadow(float4 b, float z, float z1, float z2)
     return 1.0f - three_point_weight(b, z, z1, z2);
 }
 
-/* The moments pulled towards those of depth 0.5 (the moment bias, docs/design.md §12). */
+/* The moments pulled towards those of depth 0.5 (the moment bias, docs/design.md §9). */
 inline float4 biased_moments(float4 b, float moment_bias)
 {
     return mix(b, (float4)(0.5f), moment_bias);

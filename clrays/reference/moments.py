@@ -1,5 +1,5 @@
 """Float64 numpy references of the filtered shadow tests of `render.shadow_filter`
-(docs/design.md §12): the moment vector of a depth, and the visibility that VSM and the
+(docs/design.md §9): the moment vector of a depth, and the visibility that VSM and the
 two four-moment reconstructions (Hamburger, Hausdorff) take from filtered moments.
 
 Depths here are normalised: 0 at the light's near end, 1 at its far end (the device
@@ -8,14 +8,14 @@ stage maps each light's depths so). Every function takes arrays and broadcasts.
 The moment reconstructions return the *visibility* 1 − G, G being the sharpest lower
 bound of the shadow intensity P(depth < z) over all distributions with those moments:
 so they never darken a receiver more than the true distribution does, and their errors
-are light leaks (docs/design.md §12).
+are light leaks (docs/design.md §9).
 """
 from __future__ import annotations
 
 import numpy as np
 
 #: The moments are pulled this far towards those of (0.5, 0.5, 0.5, 0.5) before a
-#: reconstruction (docs/design.md §12, the moment bias): keeps the Hankel matrix
+#: reconstruction (docs/design.md §9, the moment bias): keeps the Hankel matrix
 #: invertible where a filter saw a single depth.
 MOMENT_BIAS_CENTRE = 0.5
 
@@ -46,7 +46,7 @@ def _three_point_support(b: np.ndarray, z: np.ndarray):
     """The two other support points z1 ≤ z2 of the distribution with moments (1, b1..b4)
     that has a point at z: the roots of c0 + c1·x + c2·x² where B·c = (1, z, z²), B the
     Hankel matrix of (1, b1, b2 | b1, b2, b3 | b2, b3, b4), solved through its Cholesky
-    factors (docs/design.md §12, steps 2–3)."""
+    factors (docs/design.md §9, steps 2–3)."""
     b1, b2, b3, b4 = (b[..., k] for k in range(4))
     d11 = b2 - b1 * b1  # B = L·D·Lᵀ with unit lower-triangular L
     l21 = (b3 - b1 * b2) / d11
@@ -97,7 +97,7 @@ def msm_hamburger_visibility(moments, depth, moment_bias: float) -> np.ndarray:
 def msm_hausdorff_visibility(moments, depth, moment_bias: float) -> np.ndarray:
     """Four moments on [0, 1] (Hausdorff): as Hamburger where the three-point support
     lies in [0, 1]; otherwise the four-point support {0, z, z_free, 1}, z_free the point
-    that makes its moments match (docs/design.md §12)."""
+    that makes its moments match (docs/design.md §9)."""
     b = _biased(moments, moment_bias)
     z = np.asarray(depth, dtype=np.float64) * np.ones(b.shape[:-1])
     z1, z2 = _three_point_support(b, z)

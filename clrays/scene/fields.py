@@ -253,7 +253,7 @@ SHADOW_FILTER = Section("render.shadow_filter", (
           notes="`hard`: the map's test (as `surface_shadows: map`); `pcf`: the test averaged over the "
                 "(2·radius + 1)² texels around the receiver's; `vsm`: Chebyshev's bound from 2 prefiltered moments; "
                 "`msm_hamburger`, `msm_hausdorff`: the 4-moment bound on ℝ or on [0, 1] "
-                "([docs/design.md §12](design.md#12-filtered-surface-shadows))"),
+                "([docs/design.md §9](design.md#9-filtered-surface-shadows))"),
     Field("radius", "integer", ShadowFilter.radius, 0, 16,
           notes="texels: the box of `pcf`, and the separable box blur of the moment maps"),
     Field("depth_bias", "number", ShadowFilter.depth_bias, 0.0, 64.0,

@@ -28,7 +28,7 @@ INTEGRAND_MODES = ("table", "svd", "analytic")
 TRAVERSALS = ("tree", "scan")
 # Hard surface shadows: shadow rays where the map cannot decide, the map alone, or the map filtered.
 SURFACE_SHADOWS = ("exact", "map", "pcf", "filtered")  # filtered: `render.shadow_filter` decides
-# Filtered surface shadows (`render.shadow_filter.type`, docs/design.md §12): the map's test, PCF, or a
+# Filtered surface shadows (`render.shadow_filter.type`, docs/design.md §9): the map's test, PCF, or a
 # reconstruction from prefiltered moments (2 for VSM, 4 for the moment shadow maps).
 SHADOW_FILTERS = ("hard", "pcf", "vsm", "msm_hamburger", "msm_hausdorff")
 PHASE_TYPES = ("isotropic", "hg")

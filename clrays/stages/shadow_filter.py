@@ -1,5 +1,5 @@
 """Stage shadow_filter: filtered surface shadows (`render.surface_shadows: filtered`, the
-filter `render.shadow_filter`). Host side of `cl/shadow_filter.cl` (docs/design.md §12).
+filter `render.shadow_filter`). Host side of `cl/shadow_filter.cl` (docs/design.md §9).
 
 After raster, for the moment filters (`vsm`, `msm_hamburger`, `msm_hausdorff`), each
 light's shadow map becomes a map of moment vectors (z, z², z³, z⁴) of its depths

@@ -1,4 +1,4 @@
-"""Stage shadow_filter (render.shadow_filter, docs/design.md §12): each reconstruction
+"""Stage shadow_filter (render.shadow_filter, docs/design.md §9): each reconstruction
 against its float64 numpy reference and against the true visibility of synthetic 1–3-delta
 depth distributions; the moment maps' prefilter against a numpy blur; the filters in a
 frame against the map's own test and against PCF."""
@@ -55,7 +55,7 @@ def test_reconstruction_never_darkens_below_the_true_visibility(name):
 @pytest.mark.parametrize("name", ["msm_hamburger", "msm_hausdorff"])
 def test_moment_bound_is_the_sharpest_one(name):
     """The closed form is the linear programme's optimum over distributions on a fine grid
-    (on ℝ, taken wide, for Hamburger; on [0, 1] for Hausdorff), docs/design.md §12."""
+    (on ℝ, taken wide, for Hamburger; on [0, 1] for Hausdorff), docs/design.md §9."""
     from scipy.optimize import linprog
 
     moments, receivers, _, depths = delta_distributions(40, seed=5, with_depths=True)
@@ -133,7 +133,7 @@ def test_pcf_filter_matches_pcf_away_from_cube_seams(renderer):
 
 def test_msm_is_closer_to_pcf_than_vsm_where_occluders_overlap(renderer):
     """Two plates over the floor at different heights: behind the overlap VSM leaks
-    light, 4MSM much less (docs/design.md §12)."""
+    light, 4MSM much less (docs/design.md §9)."""
     plates = []
     for height, shift in ((1.5, 0.0), (3.0, 0.6)):
         plates.append([[-1 + shift, height, -1], [1 + shift, height, -1], [1 + shift, height, 1]])
