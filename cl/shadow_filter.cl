@@ -2,7 +2,7 @@
  * camera sample and light, the lit fraction of a filter footprint around its shadow-map texel.
  * shadow_filter_moments reads shadow_depth; writes moments (float4 (z, z², z³, z⁴) per texel,
  *   z the depth normalised to the light's [near, far]).
- * shadow_filter_blur reads moments; writes the same rows (axis 0) or columns (axis 1) box-blurred.
+ * shadow_filter_blur reads moments; writes one view's rows (axis 0) or columns (axis 1) box-blurred.
  * shadow_filter_visibility reads frame, views, lights, shadow_depth or the blurred moments,
  *   camera_depth, tri_id, tri_normal, offsets; writes visible (float per sample and light),
  *   which shade reads as it reads the visibility stage's.
@@ -22,21 +22,26 @@
 #endif
 
 /* Index in the light's depth (or moment) atlas of texel (tx, ty) of `view`, which may lie
- * past the view's edges (docs/design.md §9, cube seams). */
-inline int cube_texel(global const light_t* light, global const view_t* views, global const view_t* view,
-                      int tx, int ty)
+ * past the view's edges (docs/design.md §9, cube seams). A neighbouring face that raster
+ * left empty (the frame reads none of it: view_needed 0) is not read; the texel clamps to
+ * `view`'s edge instead, as on a single view. */
+inline int cube_texel(global const light_t* light, global const view_t* views, global const int* view_needed,
+                      global const view_t* view, int tx, int ty)
 {
     if (light->view_count == 6 && (tx < 0 || ty < 0 || tx >= view->width || ty >= view->height)) {
         float sx = 2.0f * ((float)tx + 0.5f) / (float)view->width - 1.0f;
         float sy = 1.0f - 2.0f * ((float)ty + 0.5f) / (float)view->height;
         float3 p = view->origin.xyz + view->forward.xyz + sx * view->scale_x * view->right.xyz
                    + sy * view->scale_y * view->up.xyz;
-        view = views + light_view_index(light, p);
-        float2 texel;
-        float depth;
-        view_project(view, p, &texel, &depth);
-        tx = (int)floor(texel.x);
-        ty = (int)floor(texel.y);
+        int neighbour = light_view_index(light, p);
+        if (view_needed[neighbour]) {
+            view = views + neighbour;
+            float2 texel;
+            float depth;
+            view_project(view, p, &texel, &depth);
+            tx = (int)floor(texel.x);
+            ty = (int)floor(texel.y);
+        }
     }
     tx = clamp(tx, 0, view->width - 1);
     ty = clamp(ty, 0, view->height - 1);
@@ -56,22 +61,28 @@ kernel void shadow_filter_moments(global const uint* shadow_depth, int first_tex
     moments[first_texel + i] = (float4)(z, z2, z2 * z, z2 * z2);
 }
 
-/* One pass of the separable (2·radius + 1)-texel box blur over every view of one light. */
-kernel void shadow_filter_blur(global const view_t* views, global const light_t* lights, int light_index,
-                               int radius, int axis, global const float4* source, global float4* target)
+/* One pass of the separable (2·radius + 1)-texel box blur over one view of a light. */
+kernel void shadow_filter_blur(global const view_t* views, global const light_t* lights,
+                               global const int* view_needed, int light_index, int view_index, int radius, int axis,
+                               global const float4* source, global float4* target)
 {
     global const light_t* light = lights + light_index;
-    global const view_t* first = views + light->first_view;
-    int face_texels = first->width * first->height; /* every view of a light has the same size */
+    global const view_t* view = views + view_index;
     int i = get_global_id(0);
-    if (i >= face_texels * light->view_count) return;
-    global const view_t* view = first + i / face_texels;
-    int in_face = i % face_texels;
-    int tx = in_face % view->width, ty = in_face / view->width;
+    if (i >= view->width * view->height) return;
+    int tx = i % view->width, ty = i / view->width;
+    int step = axis == 0 ? 1 : view->width;
+    int along = axis == 0 ? tx : ty, extent = axis == 0 ? view->width : view->height;
     float4 sum = (float4)(0.0f);
-    for (int k = -radius; k <= radius; ++k)
-        sum += source[cube_texel(light, views, view, tx + (axis == 0 ? k : 0), ty + (axis == 1 ? k : 0))];
-    target[view->depth_offset + in_face] = sum / (float)(2 * radius + 1);
+    if (along >= radius && along + radius < extent) { /* inside the view: no seam, no clamp */
+        global const float4* centre = source + view->depth_offset + i;
+        for (int k = -radius; k <= radius; ++k) sum += centre[k * step];
+    } else {
+        for (int k = -radius; k <= radius; ++k)
+            sum += source[cube_texel(light, views, view_needed, view, tx + (axis == 0 ? k : 0),
+                                     ty + (axis == 1 ? k : 0))];
+    }
+    target[view->depth_offset + i] = sum / (float)(2 * radius + 1);
 }
 
 /* Chebyshev's one-sided bound (VSM): the lit fraction is at most σ² / (σ² + (z − μ)²). */
@@ -174,6 +185,7 @@ kernel void shadow_filter_reconstruct(global const float4* moments, global const
 
 /* The lit fraction of p for one light: 1 outside its map, as the map's own test. */
 inline float filtered_visibility(global const light_t* light, global const view_t* views,
+                                 global const int* view_needed,
                                  global const uint* shadow_depth, global const float4* moments, float2 depth_range,
                                  float3 p, int radius, float depth_bias, float moment_bias)
 {
@@ -192,7 +204,7 @@ inline float filtered_visibility(global const light_t* light, global const view_
     float lit = 0.0f;
     for (int j = -radius; j <= radius; ++j)
         for (int i = -radius; i <= radius; ++i)
-            lit += depth <= as_float(shadow_depth[cube_texel(light, views, view, tx + i, ty + j)]) + tolerance
+            lit += depth <= as_float(shadow_depth[cube_texel(light, views, view_needed, view, tx + i, ty + j)]) + tolerance
                        ? 1.0f : 0.0f;
     return lit / (float)((2 * radius + 1) * (2 * radius + 1));
 #else
@@ -205,7 +217,7 @@ inline float filtered_visibility(global const light_t* light, global const view_
 }
 
 kernel void shadow_filter_visibility(global const frame_t* frame, global const view_t* views,
-                                     global const light_t* lights, global const uint* shadow_depth,
+                                     global const int* view_needed, global const light_t* lights, global const uint* shadow_depth,
                                      global const float4* moments, global const float2* depth_range,
                                      global const uint* camera_depth, global const int* tri_id,
                                      global const float4* tri_normal, global const float2* offsets, int radius,
@@ -230,7 +242,7 @@ kernel void shadow_filter_visibility(global const frame_t* frame, global const v
         if (eye_in_lamp(light, frame->lamp_radius)) continue;
         /* The normal offset by a texel of shade's own map test. */
         float3 lookup = p + n * shadow_texel_size(light, length(p - light->position.xyz));
-        out[l] = filtered_visibility(light, views, shadow_depth, moments, depth_range[l], lookup, radius, depth_bias,
+        out[l] = filtered_visibility(light, views, view_needed, shadow_depth, moments, depth_range[l], lookup, radius, depth_bias,
                                      moment_bias);
     }
 }

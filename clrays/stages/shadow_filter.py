@@ -70,6 +70,11 @@ class MomentMaps:
     depth_range: object  # float2 per light: (near, 1 / (far − near))
 
 
+def view_needed_buffer(device: Device, inputs: FrameInputs):
+    """int per view: 1 where raster drew it (the frame reads it), as the kernels test it."""
+    return device.buffer(inputs.view_needed.astype(np.int32), writable=False)
+
+
 def shadow_filter_moments(device: Device, buffers: FrameBuffers, rastered: RasterResult,
                           timer: StageTimer) -> MomentMaps:
     """Write and prefilter the moment maps of every light (none are written for `hard` and
@@ -82,6 +87,7 @@ def shadow_filter_moments(device: Device, buffers: FrameBuffers, rastered: Raste
         return MomentMaps(device.buffer(nbytes=16), depth_range)
     moments = device.buffer(nbytes=16 * inputs.shadow_texels)
     scratch = device.buffer(nbytes=16 * inputs.shadow_texels) if chosen.radius else None
+    needed = view_needed_buffer(device, inputs)
     write = device.kernel("shadow_filter", "shadow_filter_moments")
     blur = device.kernel("shadow_filter", "shadow_filter_blur")
     for index, (first, count) in enumerate(inputs.light_views):
@@ -90,11 +96,18 @@ def shadow_filter_moments(device: Device, buffers: FrameBuffers, rastered: Raste
         timer.add("shadow_filter", write(device.queue, (texels,), None, rastered.shadow_depth, np.int32(first_texel),
                                          np.int32(texels), np.float32(ranges[index, 0]), np.float32(ranges[index, 1]),
                                          moments))
-        if chosen.radius:
-            for axis, source, target in ((0, moments, scratch), (1, scratch, moments)):  # rows, then columns
-                timer.add("shadow_filter", blur(device.queue, (texels,), None, buffers.views, buffers.lights,
-                                                np.int32(index), np.int32(chosen.radius), np.int32(axis), source,
-                                                target))
+        if not chosen.radius:
+            continue
+        # Rows of every view first, then columns: a column pass across a seam reads the
+        # neighbouring face's rows already blurred. Faces the frame does not read are skipped.
+        for axis, source, target in ((0, moments, scratch), (1, scratch, moments)):
+            for view_index in range(first, first + count):
+                if not inputs.view_needed[view_index]:
+                    continue
+                face_texels = int(inputs.views[view_index]["width"] * inputs.views[view_index]["height"])
+                timer.add("shadow_filter", blur(device.queue, (face_texels,), None, buffers.views, buffers.lights,
+                                                needed, np.int32(index), np.int32(view_index),
+                                                np.int32(chosen.radius), np.int32(axis), source, target))
     return MomentMaps(moments, depth_range)
 
 
@@ -106,7 +119,8 @@ def shadow_filter(device: Device, buffers: FrameBuffers, rastered: RasterResult,
     lights = max(len(inputs.scene.lights), 1)
     visible = device.buffer(nbytes=4 * inputs.samples * lights)
     kernel = device.kernel("shadow_filter", "shadow_filter_visibility", {"SHADOW_FILTER": FILTER_CODES[chosen.type]})
-    event = kernel(device.queue, (inputs.samples,), None, buffers.params, buffers.views, buffers.lights,
+    event = kernel(device.queue, (inputs.samples,), None, buffers.params, buffers.views,
+                   view_needed_buffer(device, inputs), buffers.lights,
                    rastered.shadow_depth, maps.moments, maps.depth_range, rastered.camera_depth, rastered.tri_id,
                    buffers.tri_normal, buffers.offsets, np.int32(chosen.radius), np.float32(chosen.depth_bias),
                    np.float32(chosen.moment_bias), visible)
