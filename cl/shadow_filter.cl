@@ -21,6 +21,10 @@
 #define SHADOW_FILTER SHADOW_FILTER_MSM_HAMBURGER
 #endif
 
+/* The receiver's slope is counted up to this (about 83°): beyond, its bias would lift
+ * whole shadows off grazing surfaces. */
+#define MAX_BIAS_SLOPE 8.0f
+
 /* Index in the light's depth (or moment) atlas of texel (tx, ty) of `view`, which may lie
  * past the view's edges (docs/design.md §9, cube seams). A neighbouring face that raster
  * left empty (the frame reads none of it: view_needed 0) is not read; the texel clamps to
@@ -183,11 +187,14 @@ kernel void shadow_filter_reconstruct(global const float4* moments, global const
     if (i < count) visible[i] = moment_visibility(moments[i], depth[i], moment_bias);
 }
 
-/* The lit fraction of p for one light: 1 outside its map, as the map's own test. */
+/* The lit fraction of p for one light: 1 outside its map, as the map's own test. `slope`
+ * is tan of the angle between the receiver's normal and the light: across a footprint of
+ * `radius` texels the receiver's own depth moves by up to radius·slope texels, which the
+ * tolerance takes in, or a sloped receiver would shadow itself (docs/design.md §9, bias). */
 inline float filtered_visibility(global const light_t* light, global const view_t* views,
                                  global const int* view_needed,
                                  global const uint* shadow_depth, global const float4* moments, float2 depth_range,
-                                 float3 p, int radius, float depth_bias, float moment_bias)
+                                 float3 p, float slope, int radius, float depth_bias, float moment_bias)
 {
 #if SHADOW_FILTER == SHADOW_FILTER_HARD
     return shadow_visibility(light, views, shadow_depth, p, depth_bias, 0);
@@ -198,7 +205,7 @@ inline float filtered_visibility(global const light_t* light, global const view_
     if (!view_project(view, p, &texel, &depth)) return 1.0f;
     if (texel.x < 0.0f || texel.y < 0.0f || texel.x >= (float)view->width || texel.y >= (float)view->height)
         return 1.0f;
-    float tolerance = depth_bias * shadow_texel_size(light, depth);
+    float tolerance = (depth_bias + (float)radius * slope) * shadow_texel_size(light, depth);
     int tx = (int)texel.x, ty = (int)texel.y;
 #if SHADOW_FILTER == SHADOW_FILTER_PCF
     float lit = 0.0f;
@@ -240,9 +247,13 @@ kernel void shadow_filter_visibility(global const frame_t* frame, global const v
     for (int l = 0; l < frame->light_count; ++l) {
         global const light_t* light = lights + l;
         if (eye_in_lamp(light, frame->lamp_radius)) continue;
+        float3 to_light;
+        light_incident(light, frame->sigma_t.xyz, p, &to_light);
+        float cosine = fabs(dot(n, to_light));
+        float slope = fmin(sqrt(fmax(1.0f - cosine * cosine, 0.0f)) / cosine, MAX_BIAS_SLOPE);
         /* The normal offset by a texel of shade's own map test. */
         float3 lookup = p + n * shadow_texel_size(light, length(p - light->position.xyz));
-        out[l] = filtered_visibility(light, views, view_needed, shadow_depth, moments, depth_range[l], lookup, radius, depth_bias,
-                                     moment_bias);
+        out[l] = filtered_visibility(light, views, view_needed, shadow_depth, moments, depth_range[l], lookup, slope,
+                                     radius, depth_bias, moment_bias);
     }
 }

@@ -12,7 +12,7 @@ import pytest
 from clrays.device import StageTimer
 from clrays.inputs import frame_inputs, upload
 from clrays.reference import moments as reference
-from clrays.scene.model import ShadowFilter, SpotLight
+from clrays.scene.model import DirectionalLight, ShadowFilter, SpotLight
 from clrays.stages.raster import RasterResult, raster_shadow_map, shadow_atlas
 from clrays.stages.shadow_filter import depth_ranges, reconstruct, shadow_filter_moments
 from conftest import grid_plane, make_scene, v3
@@ -123,12 +123,28 @@ def test_hard_filter_is_the_maps_own_test(renderer):
     np.testing.assert_array_equal(renderer.render(hard).image, renderer.render(scene).image)
 
 
-def test_pcf_filter_matches_pcf_away_from_cube_seams(renderer):
-    """A single view has no seams: the filter's PCF is `surface_shadows: pcf`."""
-    scene = spot_scene(surface_shadows="pcf", pcf=2)
-    filtered = replace(scene, render=replace(scene.render, surface_shadows="filtered", pcf=0,
-                                             shadow_filter=ShadowFilter("pcf", 2)))
+def test_pcf_filter_of_radius_0_is_the_maps_own_test(renderer):
+    scene = spot_scene(surface_shadows="map")
+    filtered = replace(scene, render=replace(scene.render, surface_shadows="filtered",
+                                             shadow_filter=ShadowFilter("pcf", 0)))
     np.testing.assert_array_equal(renderer.render(filtered).image, renderer.render(scene).image)
+
+
+@pytest.mark.parametrize("kind", ["pcf", "vsm", "msm_hamburger", "msm_hausdorff"])
+def test_a_lit_slope_does_not_shadow_itself(renderer, kind):
+    """A floor under a low sun (25° above it) with nothing above: across a 4-texel radius
+    its own depth moves by ~8 texels, which the slope term of the bias takes in; the
+    plain `pcf` of surface_shadows, without it, darkens it (acne)."""
+    sun = DirectionalLight(v3(-0.9, -0.42, 0.0) / np.linalg.norm([-0.9, -0.42, 0.0]), np.full(3, 3.0))
+    base = make_scene(grid_plane(0.0, 6.0, 4), [sun], width=48, height=36, position=(0, 5, 7), look_at=(0, 0, 0),
+                      sigma_s=0.0, sigma_a=0.0, shadow_map=256)
+    unshadowed = renderer.render(replace(base, render=replace(base.render, surface_shadows="exact"))).image
+    filtered = renderer.render(replace(base, render=replace(base.render, surface_shadows="filtered",
+                                                            shadow_filter=ShadowFilter(kind, 4)))).image
+    plain_pcf = renderer.render(replace(base, render=replace(base.render, surface_shadows="pcf", pcf=4))).image
+    lit = unshadowed.sum(axis=2) > 0
+    assert np.abs(filtered - unshadowed)[lit].max() < 1e-3 * unshadowed.max()
+    assert np.mean(plain_pcf[lit] < 0.99 * unshadowed[lit]) > 0.05  # the acne the slope term removes
 
 
 def test_msm_is_closer_to_pcf_than_vsm_where_occluders_overlap(renderer):
