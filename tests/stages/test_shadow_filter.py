@@ -165,3 +165,54 @@ def test_msm_is_closer_to_pcf_than_vsm_where_occluders_overlap(renderer):
     pcf = image("pcf")
     errors = {kind: float(np.sqrt(np.mean((image(kind) - pcf) ** 2))) for kind in ("vsm", "msm_hamburger")}
     assert errors["msm_hamburger"] < 0.5 * errors["vsm"], errors
+
+
+def test_blur_runs_across_cube_seams(device):
+    """A function of the direction, smooth over the whole sphere, stored in a cube map:
+    blurred across the seams it stays close to itself at the faces' edges, where clamping
+    at each face's edge (what the kernels do beside a face the frame does not read) is
+    off by a first-order amount."""
+    radius, side = 3, 64
+    inputs = frame_inputs(make_scene(grid_plane(-1.0), shadow_map=side))  # one point light: a cube map
+    first, count = inputs.light_views[0]
+    assert count == 6
+    views = inputs.views[first:first + count]
+    axis = np.array([1.0, 2.0, 3.0]) / np.sqrt(14.0)
+    centre = (np.arange(side) + 0.5) / side * 2 - 1
+    sx, sy = np.meshgrid(centre, -centre)
+    values = np.zeros((inputs.shadow_texels, 4), dtype=np.float32)
+    for view in views:
+        direction = (view["forward"][:3] + sx[..., None] * view["right"][:3] + sy[..., None] * view["up"][:3])
+        f = direction @ axis / np.linalg.norm(direction, axis=-1)
+        offset = int(view["depth_offset"])
+        values[offset:offset + side * side] = f.reshape(-1, 1)
+    expected = values[:, 0].reshape(6, side, side)
+    edge = np.zeros((side, side), dtype=bool)
+    edge[:radius], edge[-radius:], edge[:, :radius], edge[:, -radius:] = True, True, True, True
+    # Within `radius` of a cube corner three faces meet and the box is turned (docs/design.md §9).
+    corner = np.zeros((side, side), dtype=bool)
+    for rows in (slice(None, radius), slice(-radius, None)):
+        for columns in (slice(None, radius), slice(-radius, None)):
+            corner[rows, columns] = True
+
+    def blurred(needed):
+        buffers = upload(device, replace(inputs, view_needed=needed))
+        source = device.buffer(values)
+        scratch = device.buffer(nbytes=values.nbytes)
+        blur = device.kernel("shadow_filter", "shadow_filter_blur")
+        needed_buffer = device.buffer(needed.astype(np.int32), writable=False)
+        for axis_index, src, dst in ((0, source, scratch), (1, scratch, source)):
+            for view_index in range(first, first + count):
+                blur(device.queue, (side * side,), None, buffers.views, buffers.lights, needed_buffer, np.int32(0),
+                     np.int32(view_index), np.int32(radius), np.int32(axis_index), src, dst)
+        return device.read(source, values.shape, np.float32)[:, 0].reshape(6, side, side)
+
+    seams = np.abs(blurred(np.ones(len(inputs.views), dtype=bool)) - expected)
+    clamped = np.abs(blurred(np.r_[True, np.zeros(6, dtype=bool)]) - expected)
+    along, inside = edge & ~corner, ~edge
+    # A box blur of a curved function is off by a second-order amount everywhere: the
+    # faces' insides, where no seam is read, say how much.
+    interior = seams[:, inside].max()
+    assert seams[:, along].max() < 1.5 * interior < 0.5 * clamped[:, along].max(), (
+        seams[:, along].max(), interior, clamped[:, along].max())
+    assert seams[:, corner].max() < 0.5 * clamped[:, corner].max()
