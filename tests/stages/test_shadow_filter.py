@@ -17,7 +17,7 @@ from clrays.stages.raster import RasterResult, raster_shadow_map, shadow_atlas
 from clrays.stages.shadow_filter import depth_ranges, reconstruct, shadow_filter_moments
 from conftest import grid_plane, make_scene, v3
 
-MOMENT_BIAS = 3e-5
+MOMENT_BIAS = ShadowFilter.moment_bias  # the default, 3e-6
 RECONSTRUCTIONS = {"vsm": lambda b, z: reference.vsm_visibility(b, z, MOMENT_BIAS),
                    "msm_hamburger": lambda b, z: reference.msm_hamburger_visibility(b, z, MOMENT_BIAS),
                    "msm_hausdorff": lambda b, z: reference.msm_hausdorff_visibility(b, z, MOMENT_BIAS)}
