@@ -2,6 +2,7 @@
 
     raster → rectify → minmax → integrand → traverse → visibility → shade  (method `minmax`)
     raster → raymarch → visibility → shade                                 (method `raymarch`)
+    raster → rectify → integrand → volume_moments → visibility → shade     (method `moments`)
 
 (`visibility` runs with `render.surface_shadows: exact`, the default; `shadow_filter`
 takes its place with `surface_shadows: filtered`.)
@@ -42,6 +43,7 @@ from .stages.rectify import Epipolar, rectify
 from .stages.shade import shade
 from .stages.shadow_filter import depth_ranges, frame_filter, shadow_filter, shadow_filter_moments
 from .stages.traverse import traverse
+from .stages.volume_moments import volume_moments
 from .stages.visibility import bound_atlas, upload_bvh, visibility, visibility_bound
 
 #: The rectified texture of a light whose shadow map is empty (nothing casts a shadow)
@@ -49,7 +51,8 @@ from .stages.visibility import bound_atlas, upload_bvh, visibility, visibility_b
 UNSHADOWED_SIZE = 16
 
 #: Stage labels of the volume stages of each method, as timings and statuses name them.
-VOLUME_STAGES = {"minmax": ("rectify", "minmax", "integrand", "traverse"), "raymarch": ("raymarch",)}
+VOLUME_STAGES = {"minmax": ("rectify", "minmax", "integrand", "traverse"), "raymarch": ("raymarch",),
+                 "moments": ("rectify", "integrand", "volume_moments")}
 
 
 @dataclass
@@ -154,11 +157,15 @@ class Renderer:
                 if epipolar is None:  # no visible ray has any extent in γ
                     continue
                 textures.append((int(epipolar.params["slices"]), int(epipolar.params["gamma_samples"])))
-                self._minmax(epipolar, reuse, timer)  # minmax: the 1D min-max mipmap of every row
+                if method == "minmax":
+                    self._minmax(epipolar, reuse, timer)  # minmax: the 1D min-max mipmap of every row
                 tables = reuse.stage("integrand", keys.integrand(index, epipolar),  # integrand: lit run → radiance
                                      lambda: integrand(device, scene, light, epipolar, timer), per_light=True)
-                traverse(device, buffers, rastered, epipolar, tables, scatter, timer)  # traverse: walk the trees
-            reuse.record.note("traverse", COMPUTED)
+                if method == "moments":  # volume_moments: prefix sums of moments, one reconstruction per ray
+                    volume_moments(device, buffers, rastered, epipolar, tables, scatter, timer)
+                else:
+                    traverse(device, buffers, rastered, epipolar, tables, scatter, timer)  # traverse: walk the trees
+            reuse.record.note(VOLUME_STAGES[method][-1], COMPUTED)
         visible = self._visibility(buffers, rastered, keys, reuse, timer)  # visibility: exact surface shadows
         image = shade(device, buffers, rastered, scatter, timer, visible)  # shade: surfaces, attenuation, + scatter
         reuse.record.note("shade", COMPUTED)

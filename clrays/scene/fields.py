@@ -208,7 +208,8 @@ ROTATE = Section("objects.transform.rotate", (
           notes="quaternion form"),
 ), rules=("Exactly one form: `axis` with `angle_deg`, `euler_deg` (with `order` or not), or `quaternion`.",))
 
-_RASTER_METHODS = ("minmax", "raymarch")  # the methods with shadow maps; exact has none
+_RASTER_METHODS = ("minmax", "raymarch", "moments")  # the methods with shadow maps; exact has none
+_EPIPOLAR_METHODS = ("minmax", "moments")  # the methods with a rectified texture and integrand tables
 
 RENDER = Section("render", (
     Field("method", "string", Render.method, choices=METHODS, notes="volumetric integrator (README: Methods)"),
@@ -232,17 +233,17 @@ RENDER = Section("render", (
     Field("slices", "integer", Render.slices, 16, 16384,
           shown_default=f"from the image: 4 × its perimeter or `shadow_map`, the smaller, as a power of two in "
                         f"[{MIN_SLICES}, {MAX_SLICES}]",
-          notes="min-max: epipolar slices", read_by=("minmax",)),
+          notes="min-max: epipolar slices", read_by=_EPIPOLAR_METHODS),
     Field("gamma_samples", "integer", Render.gamma_samples, 16, 16384,
           shown_default=f"from the image: 8 × its diagonal or `shadow_map`, the smaller, as a power of two in "
                         f"[{MIN_GAMMA_SAMPLES}, {MAX_GAMMA_SAMPLES}]",
-          notes="min-max: samples along each slice (rounded up to a power of two)", read_by=("minmax",)),
+          notes="min-max: samples along each slice (rounded up to a power of two)", read_by=_EPIPOLAR_METHODS),
     Field("integrand", "string", Render.integrand, choices=INTEGRAND_MODES,
           notes="min-max: how the scattering integrand is evaluated ([docs/integrand.md](integrand.md)); "
                 "`analytic` exists for directional lights only (a point light's closed form needs σt = 0)",
-          read_by=("minmax",)),
+          read_by=_EPIPOLAR_METHODS),
     Field("svd_rank", "integer", Render.svd_rank, 1, 16,
-          notes="min-max, `integrand: svd`: rank of the factorisation", read_by=("minmax",)),
+          notes="min-max, `integrand: svd`: rank of the factorisation", read_by=_EPIPOLAR_METHODS),
     Field("traversal", "string", Render.traversal, choices=TRAVERSALS,
           notes="min-max: min-max tree traversal or a linear scan", read_by=("minmax",)),
 ))

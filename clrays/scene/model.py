@@ -23,7 +23,7 @@ RGB = np.ndarray
 
 #: The choices of the scene's enumerated fields, written once: the loader, the command
 #: line, the session and the docs read them from here.
-METHODS = ("minmax", "raymarch", "exact")
+METHODS = ("minmax", "raymarch", "exact", "moments")
 INTEGRAND_MODES = ("table", "svd", "analytic")
 TRAVERSALS = ("tree", "scan")
 # Hard surface shadows: shadow rays where the map cannot decide, the map alone, or the map filtered.
