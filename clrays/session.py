@@ -274,10 +274,15 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
         sizes.append((f"shadow map of light {index}", 4 * int((views["width"] * views["height"]).sum())))
     if len(inputs.light_views) > 1:
         sizes.append(("shadow maps of all lights together", 4 * inputs.shadow_texels))
-    if scene.render.method == "minmax" and np.any(scene.medium.sigma_s > 0):
+    if scene.render.method in ("minmax", "moments") and np.any(scene.medium.sigma_s > 0):
         gamma_samples = 1 << max(int(np.ceil(np.log2(scene.render.gamma_samples))), 1)
         tree = 8 * scene.render.slices * 2 * gamma_samples
         sizes += [(f"min-max tree of light {index}", tree) for index in range(len(scene.lights))]
+        if scene.render.method == "moments":  # double prefix sums, the larger case (volume_moments.py)
+            prefix = 32 * scene.render.slices * (gamma_samples + 1)
+            sizes.append(("moment prefix sums of one light", prefix))
+    if scene.render.surface_shadows == "filtered":  # the moment maps and their blur's scratch (shadow_filter.py)
+        sizes += [("moment maps", 16 * inputs.shadow_texels), ("moment maps' blur scratch", 16 * inputs.shadow_texels)]
     return sizes
 
 
