@@ -52,11 +52,14 @@ kernel void volume_moments_prefix(global const epipolar_t* ep, global const floa
     }
 }
 
-/* Radiance of [gamma_begin, gamma_end) of ray beta along one row: per chunk, the lit
- * fraction from the chunk's mean moments times the chunk's unshadowed radiance. */
-inline float3 moments_row(global const epipolar_t* ep, global const prefix_t* row, const integrand_row_t* ray,
-                          float gamma_begin, float gamma_end, global const integrand_t* in,
-                          global const float* tables, global const frame_t* frame, float moment_bias)
+/* Radiance of [gamma_begin, gamma_end) of ray beta between two rows (weights 1 − t, t):
+ * per chunk, the two rows' mean moments blended as traverse blends their radiance, one
+ * reconstruction of the lit fraction, times the chunk's unshadowed radiance, which is the
+ * same ray's in both rows. */
+inline float3 moments_rows(global const epipolar_t* ep, global const prefix_t* row0, global const prefix_t* row1,
+                           float t, const integrand_row_t* ray, float gamma_begin, float gamma_end,
+                           global const integrand_t* in, global const float* tables, global const frame_t* frame,
+                           float moment_bias)
 {
     int n = ep->gamma_samples;
     float3 radiance = (float3)(0.0f);
@@ -68,7 +71,9 @@ inline float3 moments_row(global const epipolar_t* ep, global const prefix_t* ro
         int i1 = clamp((int)ceil(g1 / ep->gamma_step), i0, n);
         float lit = 1.0f;
         if (i1 > i0) {
-            float4 mean = FROM_PREFIX((row[i1] - row[i0]) / (prefix_scalar_t)(i1 - i0));
+            prefix_scalar_t count = (prefix_scalar_t)(i1 - i0);
+            float4 mean = mix(FROM_PREFIX((row0[i1] - row0[i0]) / count), FROM_PREFIX((row1[i1] - row1[i0]) / count),
+                              t);
             lit = msm_hamburger_visibility(mean, receiver, moment_bias);
         }
         if (lit > 0.0f) radiance += lit * segment_radiance(in, tables, frame, ray, g0, g1);
@@ -130,15 +135,12 @@ kernel void volume_moments_scatter(global const frame_t* frame, global const vie
     }
     size_t stride = (size_t)ep->gamma_samples + 1;
     integrand_row_t ray = integrand_row(integrand, beta, sin_beta, cos_beta);
-    float3 near0 = moments_row(ep, prefix + i0 * stride, &ray, gamma_begin, gamma_lamp0, integrand, tables, frame,
-                               moment_bias);
-    float3 near1 = moments_row(ep, prefix + i1 * stride, &ray, gamma_begin, gamma_lamp0, integrand, tables, frame,
-                               moment_bias);
-    if (gamma_lamp1 < gamma_end) {
-        near0 += moments_row(ep, prefix + i0 * stride, &ray, gamma_lamp1, gamma_end, integrand, tables, frame,
-                             moment_bias);
-        near1 += moments_row(ep, prefix + i1 * stride, &ray, gamma_lamp1, gamma_end, integrand, tables, frame,
-                             moment_bias);
-    }
-    scatter[sample] += (float4)(mix(near0, near1, t), 0.0f);
+    global const prefix_t* row0 = prefix + i0 * stride;
+    global const prefix_t* row1 = prefix + i1 * stride;
+    float3 radiance = moments_rows(ep, row0, row1, t, &ray, gamma_begin, gamma_lamp0, integrand, tables, frame,
+                                   moment_bias);
+    if (gamma_lamp1 < gamma_end)
+        radiance += moments_rows(ep, row0, row1, t, &ray, gamma_lamp1, gamma_end, integrand, tables, frame,
+                                 moment_bias);
+    scatter[sample] += (float4)(radiance, 0.0f);
 }
