@@ -28,12 +28,26 @@ from clrays.session import Renderer  # noqa: E402
 METHODS = ("minmax", "moments")
 
 
+def write_images(folder: Path, name: str, minmax, moments) -> None:
+    from PIL import Image
+
+    from clrays.image_io import make_folder, write_image
+    from clrays.runs.compare import heat_map
+
+    make_folder(folder)
+    write_image(folder / f"{name}_minmax.png", minmax)
+    write_image(folder / f"{name}_moments.png", moments)
+    Image.fromarray(heat_map(moments, minmax)).save(folder / f"{name}_moments_diff.png")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("scenes", nargs="*", default=["demo", "bunny", "behind", "sun"])
     parser.add_argument("--size", default="1280x720")
     parser.add_argument("--pixels", type=int, default=1000)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--images", type=Path, help="write <scene>_minmax.png, <scene>_moments.png and "
+                        "<scene>_moments_diff.png (heat map against minmax: red brighter, blue darker) here")
     args = parser.parse_args()
     width, height = (int(v) for v in args.size.split("x"))
     print(f"{width}×{height}; times: median of {args.repeats} frames, interleaved; errors against exact on "
@@ -61,6 +75,9 @@ def main() -> None:
                              statistics.median(r.stage_ms.get("traverse", r.stage_ms.get("volume_moments", 0.0))
                                                for r in results), error)
         (mw, md, mt, me), (ow, od, ot, oe) = cells["minmax"], cells["moments"]
+        if args.images:
+            images = {method: results[-1].image for method, results in runs.items()}
+            write_images(args.images, name, images["minmax"], images["moments"])
         print(f"| {name} | {mw:.0f} | {ow:.0f} | {ow / mw:.2f} | {md:.0f} | {od:.0f} | {od / md:.2f} | {mt:.0f} "
               f"| {ot:.0f} | {100 * me.rmse:.2f} / {100 * me.p99:.1f} | {100 * oe.rmse:.2f} / {100 * oe.p99:.1f} |",
               flush=True)
