@@ -43,9 +43,12 @@ def test_moments_matches_raymarch_on_a_single_step(renderer, kind):
     assert error.rmse < 0.03, error
 
 
-def test_moments_shows_its_leaks_where_blockers_overlap(renderer):
-    """The demo's slats cut many shafts across a ray: the lit fraction is right, where it
-    lies along the ray is not, so the error is real (measured, not hidden)."""
+@pytest.mark.xfail(strict=True, reason="moments places a part's lit fraction nowhere in particular: slats that "
+                   "cut several shafts across each eighth of a ray give rel. RMSE 7.6 % against raymarch (p99 33 %; "
+                   "minmax: < 1 %), docs/design.md §9")
+def test_moments_matches_raymarch_where_shafts_alternate(renderer):
+    """Seven slats cut many shafts across each ray: within a part of a ray the lit fraction
+    is right, where it lies is not, and the part's radiance is not uniform."""
     scene = single_step_scene("point")
     slats = []
     for x in np.linspace(-3, 3, 7):
@@ -57,4 +60,4 @@ def test_moments_shows_its_leaks_where_blockers_overlap(renderer):
     scene = replace(scene, geometry=geometry)
     reference = renderer.render(scene, "raymarch").image
     error = image_error(renderer.render(scene, "moments").image, reference)
-    assert 0.0 < error.mean < 0.5, error
+    assert error.rmse < 0.01, error
