@@ -57,7 +57,8 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     renderer = Renderer(reuse=False)
     for name in args.scenes:
-        scene = load_scene(REPO / "scenes" / f"{name}.yaml", overrides=[f"image.width={width}", f"image.height={height}"])
+        scene = load_scene(REPO / "scenes" / f"{name}.yaml",
+                           overrides=[f"image.width={width}", f"image.height={height}"])
         ys, xs = error_pixels(width, height, args.pixels)
         reference = exact_pixels(scene, ys, xs)[:, None, :]
         edges = metrics.depth_edges_at(scene, ys, xs)[:, None]

@@ -133,9 +133,10 @@ inline float filtered_visibility(global const light_t* light, global const view_
 #if SHADOW_FILTER == SHADOW_FILTER_PCF
     float lit = 0.0f;
     for (int j = -radius; j <= radius; ++j)
-        for (int i = -radius; i <= radius; ++i)
-            lit += depth <= as_float(shadow_depth[cube_texel(light, views, view_needed, view, tx + i, ty + j)]) + tolerance
-                       ? 1.0f : 0.0f;
+        for (int i = -radius; i <= radius; ++i) {
+            float blocker = as_float(shadow_depth[cube_texel(light, views, view_needed, view, tx + i, ty + j)]);
+            lit += depth <= blocker + tolerance ? 1.0f : 0.0f;
+        }
     return lit / (float)((2 * radius + 1) * (2 * radius + 1));
 #else
     /* The blurred map holds the box mean of the moments around this texel: the same
@@ -147,7 +148,8 @@ inline float filtered_visibility(global const light_t* light, global const view_
 }
 
 kernel void shadow_filter_visibility(global const frame_t* frame, global const view_t* views,
-                                     global const int* view_needed, global const light_t* lights, global const uint* shadow_depth,
+                                     global const int* view_needed, global const light_t* lights,
+                                     global const uint* shadow_depth,
                                      global const float4* moments, global const float2* depth_range,
                                      global const uint* camera_depth, global const int* tri_id,
                                      global const float4* tri_normal, global const float2* offsets, int radius,
