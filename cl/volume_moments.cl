@@ -65,6 +65,7 @@ inline float3 moments_rows(global const epipolar_t* ep, global const prefix_t* r
     float3 radiance = (float3)(0.0f);
     float chunk = (gamma_end - gamma_begin) / (float)MOMENT_CHUNKS;
     float receiver = ray->beta * M_1_PI_F;
+    float run_start = -1.0f; /* γ ≥ 0 where a run of wholly lit parts began */
     for (int c = 0; c < MOMENT_CHUNKS; ++c) {
         float g0 = gamma_begin + c * chunk, g1 = c + 1 == MOMENT_CHUNKS ? gamma_end : g0 + chunk;
         int i0 = clamp((int)floor(g0 / ep->gamma_step), 0, n);
@@ -76,8 +77,17 @@ inline float3 moments_rows(global const epipolar_t* ep, global const prefix_t* r
                               t);
             lit = msm_hamburger_visibility(mean, receiver, moment_bias);
         }
+        if (lit >= 1.0f) { /* wholly lit parts in a row are one lit run, integrated once */
+            if (run_start < 0.0f) run_start = g0;
+            continue;
+        }
+        if (run_start >= 0.0f) {
+            radiance += segment_radiance(in, tables, frame, ray, run_start, g0);
+            run_start = -1.0f;
+        }
         if (lit > 0.0f) radiance += lit * segment_radiance(in, tables, frame, ray, g0, g1);
     }
+    if (run_start >= 0.0f) radiance += segment_radiance(in, tables, frame, ray, run_start, gamma_end);
     return radiance;
 }
 
