@@ -5,12 +5,13 @@
  * volume_moments_scatter reads frame, views, lights, epipolar, prefix, integrand, tables,
  *   camera_depth, offsets; adds into scatter (float4 per camera sample).
  *
- *   row α:   S[0]   S[1]   S[2]  ...  S[n-1]          z = S / π, b(z) = (z, z², z³, z⁴)
- *   prefix:  P[0]=0 P[1]   P[2]  ...  P[n]            P[i+1] = P[i] + b(S[i] / π)
+ *   row α:   S[0]   S[1]   S[2]  ...  S[n-1]          z = beta_depth(S): [β_min, β_max] → [0.05, 0.95]
+ *   prefix:  P[0]=0 P[1]   P[2]  ...  P[n]            P[i+1] = P[i] + (z, z², z³, z⁴) of S[i]
  *   a ray's [γa, γb): texels [ia, ib): mean moments (P[ib] − P[ia]) / (ib − ia)
  *
  * A ray (β, γ) is lit where β < S, so its lit fraction over [γa, γb) is the mass of the
- * texels' S at or beyond β: one reconstruction from the mean moments, whatever the
+ * texels' S at or beyond β (β_min, β_max: the frame's visible rays, so clamping S to
+ * them changes no ray's answer but narrows the distribution the bound works with): one reconstruction from the mean moments, whatever the
  * number of shadow edges in between, times the unshadowed radiance of the interval.
  * MOMENT_CHUNKS splits the ray's γ range in equal parts, each with its own fraction. */
 #include "integrand.h"
@@ -35,7 +36,17 @@ typedef float prefix_scalar_t;
 #define FROM_PREFIX(v) (v)
 #endif
 
-kernel void volume_moments_prefix(global const epipolar_t* ep, global const float2* tree, global prefix_t* prefix)
+/* β as the depth the moments are taken of: the visible rays' [β_min, β_max] onto
+ * [0.05, 0.95], clamped. Clamped values sit 0.05 inside [0, 1]: distributions on {0, 1}
+ * alone have the moments that the moment bias pulls towards, so it could not keep their
+ * Hankel matrix invertible. */
+inline float beta_depth(float beta, float beta_min, float inverse_beta_range)
+{
+    return 0.05f + 0.9f * clamp((beta - beta_min) * inverse_beta_range, 0.0f, 1.0f);
+}
+
+kernel void volume_moments_prefix(global const epipolar_t* ep, global const float2* tree, float beta_min,
+                                  float inverse_beta_range, global prefix_t* prefix)
 {
     int slice = get_global_id(0);
     if (slice >= ep->slices) return;
@@ -45,7 +56,7 @@ kernel void volume_moments_prefix(global const epipolar_t* ep, global const floa
     prefix_t sum = (prefix_t)(0);
     out[0] = sum;
     for (int i = 0; i < n; ++i) {
-        float z = fmin(row[i].x * M_1_PI_F, 1.0f);
+        float z = beta_depth(row[i].x, beta_min, inverse_beta_range);
         float z2 = z * z;
         sum += TO_PREFIX(((float4)(z, z2, z2 * z, z2 * z2)));
         out[i + 1] = sum;
@@ -59,12 +70,11 @@ kernel void volume_moments_prefix(global const epipolar_t* ep, global const floa
 inline float3 moments_rows(global const epipolar_t* ep, global const prefix_t* row0, global const prefix_t* row1,
                            float t, const integrand_row_t* ray, float gamma_begin, float gamma_end,
                            global const integrand_t* in, global const float* tables, global const frame_t* frame,
-                           float moment_bias)
+                           float receiver, float moment_bias)
 {
     int n = ep->gamma_samples;
     float3 radiance = (float3)(0.0f);
     float chunk = (gamma_end - gamma_begin) / (float)MOMENT_CHUNKS;
-    float receiver = ray->beta * M_1_PI_F;
     float run_start = -1.0f; /* γ ≥ 0 where a run of wholly lit parts began */
     for (int c = 0; c < MOMENT_CHUNKS; ++c) {
         float g0 = gamma_begin + c * chunk, g1 = c + 1 == MOMENT_CHUNKS ? gamma_end : g0 + chunk;
@@ -95,7 +105,8 @@ kernel void volume_moments_scatter(global const frame_t* frame, global const vie
                                    global const light_t* lights, global const epipolar_t* epipolar,
                                    global const prefix_t* prefix, global const integrand_t* integrand,
                                    global const float* tables, global const uint* camera_depth,
-                                   global const float2* offsets, float moment_bias, global float4* scatter)
+                                   global const float2* offsets, float beta_min, float inverse_beta_range,
+                                   float moment_bias, global float4* scatter)
 {
     int sample = get_global_id(0);
     if (sample >= frame->width * frame->height * frame->spp) return;
@@ -147,10 +158,11 @@ kernel void volume_moments_scatter(global const frame_t* frame, global const vie
     integrand_row_t ray = integrand_row(integrand, beta, sin_beta, cos_beta);
     global const prefix_t* row0 = prefix + i0 * stride;
     global const prefix_t* row1 = prefix + i1 * stride;
+    float receiver = beta_depth(beta, beta_min, inverse_beta_range);
     float3 radiance = moments_rows(ep, row0, row1, t, &ray, gamma_begin, gamma_lamp0, integrand, tables, frame,
-                                   moment_bias);
+                                   receiver, moment_bias);
     if (gamma_lamp1 < gamma_end)
         radiance += moments_rows(ep, row0, row1, t, &ray, gamma_lamp1, gamma_end, integrand, tables, frame,
-                                 moment_bias);
+                                 receiver, moment_bias);
     scatter[sample] += (float4)(radiance, 0.0f);
 }

@@ -1,5 +1,5 @@
 """Stage volume_moments (method `moments`): per rectified row, prefix sums of the moment
-vector of S/π along γ; per camera sample, the lit fraction of its γ range reconstructed
+vector of S (mapped from the visible rays' β range to [0, 1]) along γ; per camera sample, the lit fraction of its γ range reconstructed
 from the mean moments (4MSM, Hamburger) times the range's unshadowed radiance. Host side
 of `cl/volume_moments.cl` (docs/design.md §9, the volume).
 
@@ -24,8 +24,8 @@ VOLUME_MOMENT_BIAS = 3e-6
 #: within a part the lit texels are taken to carry the part's mean radiance, which the
 #: integrand's variation along γ (extinction, phase) breaks. Measured on the single-step
 #: scenes of tests/methods/test_moments.py, rel. RMSE against raymarch, directional /
-#: point / spot: 1 part 76 / 30 / 27 %, 4 parts 7.6 / 6.1 / 4.4 %, 8 parts 2.2 / 2.0 /
-#: 1.1 %, 16 parts 0.5 / 1.0 / 0.5 %; the cost grows with the parts.
+#: point / spot: 1 part 42 / 13 / 11 %, 4 parts 4.1 / 3.1 / 3.5 %, 8 parts 1.3 / 2.1 /
+#: 1.1 %, 16 parts 0.5 / 0.9 / 0.9 %; the cost grows with the parts.
 MOMENT_CHUNKS = 8
 
 
@@ -41,11 +41,14 @@ def volume_moments(device: Device, buffers: FrameBuffers, rastered: RasterResult
     double = _double_prefix(device)
     defines = {"PREFIX_DOUBLE": int(double), "MOMENT_CHUNKS": chunks}
     prefix = device.buffer(nbytes=(32 if double else 16) * slices * (gamma_samples + 1))
+    # z = (S − β_min) / (β_max − β_min): the visible rays' β range, as wide as [0, 1] can hold it.
+    beta_min = np.float32(epipolar.beta_min)
+    inverse_range = np.float32(1.0 / max(epipolar.beta_max - epipolar.beta_min, 1e-6))
     event = device.kernel("volume_moments", "volume_moments_prefix", defines)(
-        device.queue, (slices,), None, epipolar.buffer, epipolar.tree, prefix)
+        device.queue, (slices,), None, epipolar.buffer, epipolar.tree, beta_min, inverse_range, prefix)
     timer.add("volume_moments", event)
     event = device.kernel("volume_moments", "volume_moments_scatter", defines)(
         device.queue, (buffers.inputs.samples,), None, buffers.params, buffers.views, buffers.lights,
         epipolar.buffer, prefix, integrand.params, integrand.data, rastered.camera_depth, buffers.offsets,
-        np.float32(VOLUME_MOMENT_BIAS), scatter)
+        beta_min, inverse_range, np.float32(VOLUME_MOMENT_BIAS), scatter)
     timer.add("volume_moments", event)

@@ -38,13 +38,13 @@ def test_moments_matches_raymarch_on_a_single_step(renderer, kind):
     moments = renderer.render(scene, "moments").image
     error = image_error(moments, reference)
     assert error.pixels > 500
-    # Measured 2.2 / 2.0 / 1.1 % (directional / point / spot; minmax: 0.1-0.2 %): what
+    # Measured 1.3 / 2.1 / 1.1 % (directional / point / spot; minmax: 0.1-0.2 %): what
     # remains is the integrand's variation within each of the 8 parts of a ray.
     assert error.rmse < 0.03, error
 
 
 @pytest.mark.xfail(strict=True, reason="moments places a part's lit fraction nowhere in particular: slats that "
-                   "cut several shafts across each eighth of a ray give rel. RMSE 7.6 % against raymarch (p99 33 %; "
+                   "cut several shafts across each eighth of a ray give rel. RMSE 4.6 % against raymarch (p99 24 %; "
                    "minmax: < 1 %), docs/design.md §9")
 def test_moments_matches_raymarch_where_shafts_alternate(renderer):
     """Seven slats cut many shafts across each ray: within a part of a ray the lit fraction
