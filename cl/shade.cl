@@ -3,8 +3,9 @@
  * averaged over the pixel's samples.
  * Reads frame, views, lights, shadow_depth, camera_depth, tri_id, tri_vertices,
  * tri_normal, tri_vertex_normals, tri_albedo, offsets, scatter, visible (the visibility
- * stage's answer per sample and light, with surface_shadows exact), light_textures and
- * texels (a light's texture, docs/light-textures.md); writes image (one
+ * stage's answer per sample and light, with surface_shadows exact; the shadow_filter stage's
+ * with surface_shadows filtered), light_textures and texels (a light's texture,
+ * docs/light-textures.md); writes image (one
  * float4 per pixel, linear rgb). */
 #include "light_texture.h"
 
@@ -84,7 +85,8 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                 float visible;
                 if (eye_in_lamp(lights + l, frame->lamp_radius))
                     visible = 1.0f;
-                else if (frame->surface_shadows == SURFACE_SHADOWS_EXACT)
+                else if (frame->surface_shadows == SURFACE_SHADOWS_EXACT
+                         || frame->surface_shadows == SURFACE_SHADOWS_FILTERED)
                     visible = visible_exact[sample * frame->light_count + l];
                 else
                     visible = shadow_visibility(lights + l, views, shadow_depth, lookup, SURFACE_BIAS_TEXELS,

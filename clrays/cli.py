@@ -30,7 +30,7 @@ from .runs.video import DEFAULT_CRF, video_encoder_options
 from .runs.sweep import axes_from, format_table, run_sweep
 from .scene.fields import unread_render_keys
 from .scene.load import load_scene
-from .scene.model import METHODS
+from .scene.model import METHODS, SHADOW_FILTERS
 from .session import Renderer
 
 #: Option sections of a command's --help, in this order (then any other, then "Other").
@@ -593,6 +593,57 @@ def relief_to_mesh(scene: Path, index, overrides, output: Path) -> None:
     check_folder(output)
     index, count = convert(scene, output, index, overrides)
     click.echo(f"objects.{index}: {count} triangles -> {output}")
+
+
+def _filter_names(context, parameter, text: str) -> tuple[str, ...]:
+    """Click callback: comma-separated shadow filter types, usage error otherwise."""
+    names = tuple(name.strip() for name in text.split(",") if name.strip())
+    unknown = [name for name in names if name not in SHADOW_FILTERS]
+    if unknown or not names:
+        raise click.BadParameter(f"expected filter types out of {', '.join(SHADOW_FILTERS)}, got {text!r}")
+    return names
+
+
+@main.command(section="Study", epilog="""
+\b
+Examples:
+  clrays compare scenes/bunny.yaml -o out/compare --radius 2
+  clrays compare scenes/demo.yaml -o out/compare --set image.width=320 --set image.height=180 --exact-pixels 2000
+  clrays compare scenes/sun.yaml -o out/sun --filters vsm,msm_hamburger --radius 4
+
+\b
+Writes <filter>.png, <filter>_diff.png (red: brighter than the reference, a light leak;
+blue: darker), reference_pcf.png, compare.csv and compare.md.
+""")
+@click.argument("scene", type=click.Path(path_type=Path))
+@overrides_option("Override a scene field (repeatable), e.g. --set image.width=320.")
+@option("--radius", type=click.IntRange(0, 16), default=2, show_default=True, group=SCENE,
+        help="Filter radius in texels, for every filter and the PCF reference.")
+@option("--filters", default=",".join(SHADOW_FILTERS), show_default=True, callback=_filter_names, group=SCENE,
+        help="Comma-separated render.shadow_filter types to compare.")
+@option("--repeats", type=click.IntRange(1, 100), default=3, show_default=True, group=RUN,
+        help="Timed frames per filter (after one warm-up); the median is reported.")
+@option("--exact-pixels", type=click.IntRange(0), default=0, show_default=True, group=RUN,
+        help="Also measure each filter against `exact` on this many pixels (0: not).")
+@option("-o", "--output", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path), group=OUTPUT,
+        help="Folder for the images, heat maps and tables (created).")
+@exposure_option("PNG images")
+@device_option()
+def compare(scene, overrides, radius, filters, repeats, exact_pixels, out_dir, exposure, device) -> None:
+    """Compare the surface shadow filters of SCENE with PCF at the same radius.
+
+    For each filter: its image, a heat map of its difference from the reference, and its
+    relative RMSE, p99, light-leak pixel count and time (docs/design.md §9).
+    """
+    from .runs.compare import compare as run_compare, markdown_table
+
+    _check_scene_file(scene)
+    loaded = load_scene(scene, overrides)
+    rows = run_compare(loaded, out_dir, radius=radius, filters=filters, repeats=repeats, exact_pixels=exact_pixels,
+                       renderer=Renderer(device, reuse=False), log=lambda line: click.echo(line, err=True),
+                       exposure=exposure)
+    click.echo(markdown_table(rows), nl=False)
+    click.echo(f"wrote {out_dir}/compare.md, compare.csv and the images")
 
 
 @main.command(section="Tools", epilog="""

@@ -174,7 +174,8 @@ def frame_inputs(scene: Scene) -> FrameInputs:
     params["steps"] = scene.render.steps
     params["jitter"] = int(scene.render.jitter)
     params["surface_shadows"] = {"exact": structs.SURFACE_SHADOWS_EXACT, "map": structs.SURFACE_SHADOWS_MAP,
-                                 "pcf": structs.SURFACE_SHADOWS_PCF}[scene.render.surface_shadows]
+                                 "pcf": structs.SURFACE_SHADOWS_PCF,
+                                 "filtered": structs.SURFACE_SHADOWS_FILTERED}[scene.render.surface_shadows]
     params["pcf"] = scene.render.pcf if scene.render.surface_shadows == "pcf" else 0
 
     normals = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])

@@ -5,9 +5,11 @@
 (`traverse` samples along epipolar lines with `render.sampling: epipolar`, the default,
 and walks every camera sample's rows with `pixel`.)
     raster → raymarch → visibility → shade                                 (method `raymarch`)
+    raster → rectify → integrand → volume_moments → visibility → shade     (method `moments`)
 
-(`visibility` runs with `render.surface_shadows: exact`, the default; a textured light adds
-`light_texture` between integrand and traverse, docs/light-textures.md.)
+(`visibility` runs with `render.surface_shadows: exact`, the default; `shadow_filter`
+takes its place with `surface_shadows: filtered`; a textured light adds `light_texture`
+between integrand and traverse, docs/light-textures.md.)
 
 `Renderer._frame` is that figure, one line per stage. The `exact` reference runs on
 the host in float64 instead (clrays.reference.exact).
@@ -46,7 +48,9 @@ from .stages.raymarch import raymarch
 from .stages.rectify import Epipolar, rectify
 from .stages.sampling import SampleCounts, epipolar_sampling
 from .stages.shade import shade
+from .stages.shadow_filter import depth_ranges, frame_filter, shadow_filter, shadow_filter_moments
 from .stages.traverse import traverse
+from .stages.volume_moments import volume_moments
 from .stages.visibility import bound_atlas, bvh_topology_of, upload_bvh, visibility, visibility_bound
 
 #: The rectified texture of a light whose shadow map is empty (nothing casts a shadow)
@@ -54,7 +58,8 @@ from .stages.visibility import bound_atlas, bvh_topology_of, upload_bvh, visibil
 UNSHADOWED_SIZE = 16
 
 #: Stage labels of the volume stages of each method, as timings and statuses name them.
-VOLUME_STAGES = {"minmax": ("rectify", "minmax", "integrand", "traverse"), "raymarch": ("raymarch",)}
+VOLUME_STAGES = {"minmax": ("rectify", "minmax", "integrand", "traverse"), "raymarch": ("raymarch",),
+                 "moments": ("rectify", "integrand", "volume_moments")}
 
 
 @dataclass
@@ -161,9 +166,13 @@ class Renderer:
                 if epipolar is None:  # no visible ray has any extent in γ
                     continue
                 textures.append((int(epipolar.params["slices"]), int(epipolar.params["gamma_samples"])))
-                self._minmax(epipolar, reuse, timer)  # minmax: the 1D min-max mipmap of every row
+                if method == "minmax":
+                    self._minmax(epipolar, reuse, timer)  # minmax: the 1D min-max mipmap of every row
                 tables = reuse.stage("integrand", keys.integrand(index, epipolar),  # integrand: lit run → radiance
                                      lambda: integrand(device, scene, light, epipolar, timer), per_light=True)
+                if method == "moments":  # volume_moments: prefix sums of moments, one reconstruction per ray
+                    volume_moments(device, buffers, rastered, epipolar, tables, scatter, timer)
+                    continue
                 texture = reuse.stage("light_texture", keys.light_texture(index, epipolar),  # texture: T·Γ_i prefix sums
                                       lambda: light_texture(device, buffers, index, epipolar, tables, timer),
                                       per_light=True) if textured(light) else None
@@ -172,7 +181,7 @@ class Renderer:
                     samples = counts if samples is None else samples + counts
                 else:  # per camera sample; and a light that casts no shadow, whose 16 slices are too few to sample
                     traverse(device, buffers, rastered, epipolar, tables, scatter, timer, texture)
-            reuse.record.note("traverse", COMPUTED)
+            reuse.record.note(VOLUME_STAGES[method][-1], COMPUTED)
         visible = self._visibility(buffers, rastered, keys, reuse, timer, bvh)  # visibility: exact surface shadows
         image = shade(device, buffers, rastered, scatter, timer, visible)  # shade: surfaces, attenuation, + scatter
         reuse.record.note("shade", COMPUTED)
@@ -194,8 +203,11 @@ class Renderer:
     def _visibility(self, buffers: FrameBuffers, rastered: RasterResult, keys: StageKeys, reuse: Reuse,
                     timer: StageTimer, bvh):
         """The visibility stage: each light's bound map kept while its shadow map is, and the
-        frame's BVH (`_bvh`); None unless `render.surface_shadows` is exact."""
+        frame's BVH (`_bvh`); None unless `render.surface_shadows` is exact (or filtered:
+        then the shadow_filter stage answers instead)."""
         scene = buffers.inputs.scene
+        if scene.render.surface_shadows == "filtered" and scene.lights:
+            return self._shadow_filter(buffers, rastered, keys, reuse, timer)
         if scene.render.surface_shadows != "exact" or not scene.lights:
             return None
         device = self.device
@@ -206,6 +218,16 @@ class Renderer:
                            lambda: bound_atlas(device, buffers, bounds))
         reuse.record.note("visibility", COMPUTED)
         return visibility(device, buffers, rastered, atlas, bvh, timer)
+
+    def _shadow_filter(self, buffers: FrameBuffers, rastered: RasterResult, keys: StageKeys, reuse: Reuse,
+                       timer: StageTimer):
+        """The shadow_filter stage: the blurred moment maps kept while the shadow maps and the
+        filter's type and radius are, then the visibility of every camera sample."""
+        device, chosen = self.device, frame_filter(buffers.inputs)
+        key = digest("moments", tuple(keys.shadow), chosen.type, chosen.radius, depth_ranges(buffers.inputs))
+        maps = reuse.keep("shadow_filter.moments", key, lambda: shadow_filter_moments(device, buffers, rastered, timer))
+        reuse.record.note("shadow_filter", COMPUTED)
+        return shadow_filter(device, buffers, rastered, maps, timer)
 
     def _exact(self, scene: Scene, reuse: Reuse, timer: StageTimer, progress: bool):
         """The float64 reference, one host stage."""
@@ -283,7 +305,7 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
         sizes.append((f"shadow map of light {index}", 4 * int((views["width"] * views["height"]).sum())))
     if len(inputs.light_views) > 1:
         sizes.append(("shadow maps of all lights together", 4 * inputs.shadow_texels))
-    if scene.render.method == "minmax" and np.any(scene.medium.sigma_s > 0):
+    if scene.render.method in ("minmax", "moments") and np.any(scene.medium.sigma_s > 0):
         gamma_samples = 1 << max(int(np.ceil(np.log2(scene.render.gamma_samples))), 1)
         tree = 8 * scene.render.slices * 2 * gamma_samples
         sizes += [(f"min-max tree of light {index}", tree) for index in range(len(scene.lights))]
@@ -297,6 +319,11 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
                   for index, light in enumerate(scene.lights) if textured(light)]
     if inputs.texels is not None and any(textured(light) for light in scene.lights):
         sizes.append(("light textures", 16 * len(inputs.texels)))
+        if scene.render.method == "moments":  # double prefix sums, the larger case (volume_moments.py)
+            prefix = 32 * scene.render.slices * (gamma_samples + 1)
+            sizes.append(("moment prefix sums of one light", prefix))
+    if scene.render.surface_shadows == "filtered":  # the moment maps and their blur's scratch (shadow_filter.py)
+        sizes += [("moment maps", 16 * inputs.shadow_texels), ("moment maps' blur scratch", 16 * inputs.shadow_texels)]
     return sizes
 
 

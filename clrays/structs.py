@@ -26,6 +26,13 @@ INTEGRAND_ANALYTIC = 2
 SURFACE_SHADOWS_EXACT = 0  # frame_t.surface_shadows
 SURFACE_SHADOWS_MAP = 1
 SURFACE_SHADOWS_PCF = 2
+SURFACE_SHADOWS_FILTERED = 3  # the shadow_filter stage's answer, read like the visibility stage's
+
+SHADOW_FILTER_HARD = 0  # cl/shadow_filter.cl's SHADOW_FILTER option (render.shadow_filter.type)
+SHADOW_FILTER_PCF = 1
+SHADOW_FILTER_VSM = 2
+SHADOW_FILTER_MSM_HAMBURGER = 3
+SHADOW_FILTER_MSM_HAUSDORFF = 4
 
 TRAVERSAL_TREE = 0  # cl/traverse.cl's TRAVERSAL option
 TRAVERSAL_SCAN = 1
@@ -61,7 +68,7 @@ RASTER_BIG_TRIANGLES = 64
 KERNEL_CONSTANTS = {
     name: value for name, value in dict(globals()).items()
     if name.startswith(("PROJECTION_", "LIGHT_", "PHASE_", "INTEGRAND_", "TRAVERSAL_", "RASTER_", "SURFACE_SHADOWS_",
-                         "TEXTURE_WRAP_"))
+                         "TEXTURE_WRAP_", "SHADOW_FILTER_"))
     or name in ("DEPTH_EMPTY", "SIN_BETA_MIN")
 }
 

@@ -74,6 +74,7 @@ def sweep(scene: Scene, quick: bool = False, volume: bool = False) -> list[tuple
     if volume:
         points = [("raymarch", f"steps={steps}", {"steps": steps}) for steps in (32, 64, 128, 256, 512, 1024)]
         points.append(("minmax", "defaults", {}))
+        points.append(("moments", "defaults", {}))
         points += [("minmax", f"{key}={value}", {key: value})
                    for key, value in (("slices", 256), ("slices", 512), ("gamma_samples", 256),
                                       ("gamma_samples", 512))]
@@ -82,7 +83,8 @@ def sweep(scene: Scene, quick: bool = False, volume: bool = False) -> list[tuple
         return [("raymarch", "steps=32 shadow_map=256", {"steps": 32, "shadow_map": 256}),
                 ("raymarch", "steps=256 shadow_map=256", {"steps": 256, "shadow_map": 256}),
                 ("minmax", "shadow_map=256", {"shadow_map": 256}),
-                ("minmax", "shadow_map=256 traversal=scan", {"shadow_map": 256, "traversal": "scan"})]
+                ("minmax", "shadow_map=256 traversal=scan", {"shadow_map": 256, "traversal": "scan"}),
+                ("moments", "shadow_map=256", {"shadow_map": 256})]
     # Large frames get a coarser grid: a 1280×720 raymarch at 2048 steps takes a minute.
     large = scene.image.width * scene.image.height > 500_000
     points = []
@@ -93,6 +95,8 @@ def sweep(scene: Scene, quick: bool = False, volume: bool = False) -> list[tuple
     defaults = dataclasses.asdict(with_derived_sizes(scene).render)
     points.append(("minmax", f"defaults (slices={defaults['slices']} gamma_samples={defaults['gamma_samples']} "
                              f"shadow_map={defaults['shadow_map']})", {}))
+    points.append(("moments", f"defaults (slices={defaults['slices']} gamma_samples={defaults['gamma_samples']} "
+                              f"shadow_map={defaults['shadow_map']})", {}))
     one_at_a_time = {
         "slices": (512,) if large else (128, 256, 512, 2048),
         "gamma_samples": (512,) if large else (128, 256, 512, 2048),
@@ -227,7 +231,7 @@ def plot(points: list[BenchPoint], path: Path) -> None:
     columns = min(len(groups), 2)
     rows = math.ceil(len(groups) / columns)
     figure, axes = plt.subplots(rows, columns, figsize=(6.5 * columns, 4.8 * rows), squeeze=False)
-    colours = {"raymarch": "tab:orange", "minmax": "tab:blue"}
+    colours = {"raymarch": "tab:orange", "minmax": "tab:blue", "moments": "tab:green"}
     for axis, key in zip(axes.ravel(), groups):
         group = [p for p in points if (p.scene, p.resolution) == key]
         for method, colour in colours.items():

@@ -14,8 +14,8 @@ from .animation import EASINGS
 from .limits import MAX_LIGHTS, MAX_MESH_BYTES, MAX_OBJECTS, MAX_SCENE_BYTES, MAX_TRIANGLES
 from .costs import (MAX_GAMMA_SAMPLES, MAX_LINE_SAMPLES, MAX_SHADOW_MAP, MAX_SLICES, MIN_GAMMA_SAMPLES,
                     MIN_LINE_SAMPLES, MIN_SHADOW_MAP, MIN_SLICES)
-from .model import (INTEGRAND_MODES, METHODS, NORMALS, RELIEF_MODES, SAMPLINGS, SURFACE_SHADOWS, TEXTURE_WRAPS,
-                    TRAVERSALS, Camera, DirectionalLight, Image, Render)
+from .model import (INTEGRAND_MODES, METHODS, NORMALS, RELIEF_MODES, SAMPLINGS, SHADOW_FILTERS, SURFACE_SHADOWS,
+                    TEXTURE_WRAPS, TRAVERSALS, Camera, DirectionalLight, Image, Render, ShadowFilter)
 from .textures import MAX_TEXTURE_SIDE
 
 FORMAT_VERSION = 1
@@ -248,7 +248,8 @@ ROTATE = Section("objects.transform.rotate", (
           notes="quaternion form"),
 ), rules=("Exactly one form: `axis` with `angle_deg`, `euler_deg` (with `order` or not), or `quaternion`.",))
 
-_RASTER_METHODS = ("minmax", "raymarch")  # the methods with shadow maps; exact has none
+_RASTER_METHODS = ("minmax", "raymarch", "moments")  # the methods with shadow maps; exact has none
+_EPIPOLAR_METHODS = ("minmax", "moments")  # the methods with a rectified texture and integrand tables
 
 RENDER = Section("render", (
     Field("method", "string", Render.method, choices=METHODS, notes="volumetric integrator (README: Methods)"),
@@ -261,23 +262,28 @@ RENDER = Section("render", (
     Field("surface_shadows", "string", Render.surface_shadows, choices=SURFACE_SHADOWS,
           notes="hard shadows on surfaces: `exact` casts a shadow ray (through a BVH) wherever the shadow map "
                 "cannot decide and matches the `exact` reference; `map` is the shadow-map test alone; `pcf` "
-                "filters it over `pcf` texels. Setting only `pcf` > 0 implies `pcf`", read_by=_RASTER_METHODS),
+                "filters it over `pcf` texels; `filtered` softens it as `shadow_filter` says. Setting only `pcf` > 0 "
+                "implies `pcf`, setting only `shadow_filter` implies `filtered`", read_by=_RASTER_METHODS),
     Field("pcf", "integer", Render.pcf, 0, 16,
           notes="`surface_shadows: pcf`: filter radius in texels (0 = hard)", read_by=_RASTER_METHODS),
+    Field("shadow_filter", "mapping or string", shown_default="`{type: msm_hamburger}` with `surface_shadows: "
+                                                           "filtered`, else unused",
+          notes="[render.shadow_filter](#rendershadow_filter): filtered surface shadows; a string is its `type`",
+          read_by=_RASTER_METHODS),
     Field("slices", "integer", Render.slices, 16, 16384,
           shown_default=f"from the image: 4 × its perimeter or `shadow_map`, the smaller, as a power of two in "
                         f"[{MIN_SLICES}, {MAX_SLICES}]",
-          notes="min-max: epipolar slices", read_by=("minmax",)),
+          notes="min-max: epipolar slices", read_by=_EPIPOLAR_METHODS),
     Field("gamma_samples", "integer", Render.gamma_samples, 16, 16384,
           shown_default=f"from the image: 8 × its diagonal or `shadow_map`, the smaller, as a power of two in "
                         f"[{MIN_GAMMA_SAMPLES}, {MAX_GAMMA_SAMPLES}]",
-          notes="min-max: samples along each slice (rounded up to a power of two)", read_by=("minmax",)),
+          notes="min-max: samples along each slice (rounded up to a power of two)", read_by=_EPIPOLAR_METHODS),
     Field("integrand", "string", Render.integrand, choices=INTEGRAND_MODES,
           notes="min-max: how the scattering integrand is evaluated ([docs/integrand.md](integrand.md)); "
                 "`analytic` exists for directional lights only (a point light's closed form needs σt = 0)",
-          read_by=("minmax",)),
+          read_by=_EPIPOLAR_METHODS),
     Field("svd_rank", "integer", Render.svd_rank, 1, 16,
-          notes="min-max, `integrand: svd`: rank of the factorisation", read_by=("minmax",)),
+          notes="min-max, `integrand: svd`: rank of the factorisation", read_by=_EPIPOLAR_METHODS),
     Field("traversal", "string", Render.traversal, choices=TRAVERSALS,
           notes="min-max: min-max tree traversal or a linear scan", read_by=("minmax",)),
     Field("sampling", "string", Render.sampling, choices=SAMPLINGS,
@@ -300,6 +306,22 @@ RENDER = Section("render", (
                 "every view and maps it onto its base rectangle, `triangles` rasterizes its height-field "
                 "triangles (the same surface, for comparison)", read_by=_RASTER_METHODS),
 ))
+
+
+SHADOW_FILTER = Section("render.shadow_filter", (
+    Field("type", "string", ShadowFilter.type, choices=SHADOW_FILTERS,
+          notes="`hard`: the map's test (as `surface_shadows: map`); `pcf`: the test averaged over the "
+                "(2·radius + 1)² texels around the receiver's; `vsm`: Chebyshev's bound from 2 prefiltered moments; "
+                "`msm_hamburger`, `msm_hausdorff`: the 4-moment bound on ℝ or on [0, 1] "
+                "([docs/design.md §9](design.md#9-filtered-surface-shadows))"),
+    Field("radius", "integer", ShadowFilter.radius, 0, 16,
+          notes="texels: the box of `pcf`, and the separable box blur of the moment maps"),
+    Field("depth_bias", "number", ShadowFilter.depth_bias, 0.0, 64.0,
+          notes="texels at the receiver's depth, taken off it before the test"),
+    Field("moment_bias", "number", ShadowFilter.moment_bias, 0.0, 0.5,
+          notes="`msm_*`: how far the moments are pulled towards those of depth 0.5; `vsm`: the least variance "
+                "(normalised depth²). Measured in bench/RESULTS.md"),
+), rules=("With `shadow_filter` set, `surface_shadows` is `filtered` (or left out) and `pcf` is 0.",))
 
 
 def unread_render_keys(render: Render, method: str) -> list[str]:
@@ -331,4 +353,4 @@ ANIMATION = Section("animation", (
 #: Every section, by the name the docs' markers use, in the order of the format.
 SECTIONS: dict[str, Section] = {section.name: section for section in (
     TOP, IMAGE, CAMERA, *LIGHTS.values(), MEDIUM, *PHASES.values(), OBJECT, *OBJECTS.values(), TRANSFORM,
-    ROTATE, RENDER, ANIMATION)}
+    ROTATE, RENDER, SHADOW_FILTER, ANIMATION)}

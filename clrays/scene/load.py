@@ -27,10 +27,10 @@ from ..errors import SceneError
 from .animation import Animation, Key, ObjectRig, Track
 from .files import FileRefused, read_regular_file
 from .fields import (ANIMATION, CAMERA, FORMAT_VERSION, IMAGE, LIGHTS, MAX_IMAGE_PIXELS, MEDIUM, OBJECT, OBJECTS,
-                     PHASES, QUATERNION_TOLERANCE, RENDER, ROTATE, TOP, TRANSFORM, Field, kinds)
+                     PHASES, QUATERNION_TOLERANCE, RENDER, ROTATE, SHADOW_FILTER, TOP, TRANSFORM, Field, kinds)
 from .limits import MAX_LIGHTS, MAX_OBJECTS, MAX_SCENE_BYTES, MAX_TRIANGLES
 from .model import (Camera, DirectionalLight, Geometry, Image, Light, LightTexture, Medium, Phase, PointLight, Render,
-                    Scene, SpotLight)
+                    Scene, ShadowFilter, SpotLight)
 from .textures import TextureError, cube_from_cross, cube_from_faces, read_texture
 from .transforms import (affine, matrix_to_quat, quat_to_matrix, rotation_axis_angle, rotation_euler,
                          transform_normals, transform_points)
@@ -203,7 +203,10 @@ def _render(node: Node | None) -> Render:
     m = mapping(node, optional=RENDER.optional)
     # A size left out stays None: the renderer derives it from the image (clrays.scene.costs).
     values = {field.key: None if field.default is None and field.key not in m else _read(field, m.get(field.key))
-              for field in RENDER.fields}
+              for field in RENDER.fields if field.key != "shadow_filter"}
+    values["shadow_filter"] = _shadow_filter(m, values)
+    if values["surface_shadows"] == "filtered" and values["shadow_filter"] is None:
+        values["shadow_filter"] = ShadowFilter()
     if values["pcf"] > 0:
         if "surface_shadows" not in m:
             values["surface_shadows"] = "pcf"  # the key before surface_shadows existed: pcf alone filters
@@ -211,6 +214,26 @@ def _render(node: Node | None) -> Render:
             m["pcf"].fail(f"0 with surface_shadows: {values['surface_shadows']} (a filter radius needs "
                           f"surface_shadows: pcf)", str(values["pcf"]))
     return Render(**values)
+
+
+def _shadow_filter(m: dict[str, Node], values: dict[str, Any]) -> ShadowFilter | None:
+    """`render.shadow_filter` (a mapping, or a string naming its type), checked against
+    `surface_shadows` and `pcf`, which it must not contradict (docs/scene-format.md)."""
+    node = m.get("shadow_filter")
+    if node is None:
+        return None
+    if "surface_shadows" not in m:
+        values["surface_shadows"] = "filtered"  # a filter alone asks for filtered shadows
+    elif values["surface_shadows"] != "filtered":
+        node.fail(f"no shadow_filter with render.surface_shadows: {values['surface_shadows']} (a filter needs "
+                  f"surface_shadows: filtered, or surface_shadows left out)", "a shadow_filter")
+    if values["pcf"] > 0:
+        m["pcf"].fail("0 with render.shadow_filter (its radius is the filter's: shadow_filter: {type: pcf, "
+                      "radius: N})", str(values["pcf"]))
+    if isinstance(node.value, str):
+        return ShadowFilter(type=choice(node, SHADOW_FILTER["type"].choices))
+    keys = mapping(node, optional=SHADOW_FILTER.optional)
+    return ShadowFilter(**{field.key: _read(field, keys.get(field.key)) for field in SHADOW_FILTER.fields})
 
 
 # --------------------------------------------------------------------------- objects

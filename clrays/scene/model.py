@@ -23,14 +23,17 @@ RGB = np.ndarray
 
 #: The choices of the scene's enumerated fields, written once: the loader, the command
 #: line, the session and the docs read them from here.
-METHODS = ("minmax", "raymarch", "exact")
+METHODS = ("minmax", "raymarch", "exact", "moments")
 INTEGRAND_MODES = ("table", "svd", "analytic")
 TRAVERSALS = ("tree", "scan")
 # min-max: in-scattering at samples along epipolar lines, interpolated; or walked for every camera sample.
 SAMPLINGS = ("epipolar", "pixel")
 # Hard surface shadows: shadow rays where the map cannot decide, the map alone, or the map filtered.
-SURFACE_SHADOWS = ("exact", "map", "pcf")
+SURFACE_SHADOWS = ("exact", "map", "pcf", "filtered")  # filtered: `render.shadow_filter` decides
 TEXTURE_WRAPS = ("repeat", "clamp")  # a directional light's texture beyond its first tile
+# Filtered surface shadows (`render.shadow_filter.type`, docs/design.md §9): the map's test, PCF, or a
+# reconstruction from prefiltered moments (2 for VSM, 4 for the moment shadow maps).
+SHADOW_FILTERS = ("hard", "pcf", "vsm", "msm_hamburger", "msm_hausdorff")
 PHASE_TYPES = ("isotropic", "hg")
 NORMALS = ("smooth", "flat")  # a mesh's shading normals: interpolated vertex normals, or each face's own
 # How the raster stage draws relief objects: by their pre-warp, or as their triangles (the same surface).
@@ -120,6 +123,18 @@ class Medium:
 
 
 @dataclass(frozen=True)
+class ShadowFilter:
+    """`render.shadow_filter`: how `surface_shadows: filtered` softens the shadow map."""
+
+    type: str = "msm_hamburger"  # one of SHADOW_FILTERS
+    radius: int = 2  # texels: the (2·radius + 1)² box of PCF, and of the moment maps' prefilter
+    depth_bias: float = 1.5  # texels (at the receiver's depth), taken off the receiver's depth
+    # msm: weight pulling the moments towards 0.5; vsm: the least variance. The smallest that keeps the
+    # float32 reconstruction within 1e-3 of its bound (bench/RESULTS.md, "Filtered surface shadows").
+    moment_bias: float = 3e-6
+
+
+@dataclass(frozen=True)
 class Render:
     method: str = "minmax"  # one of METHODS
     steps: int = 256  # raymarch samples per pixel
@@ -128,6 +143,7 @@ class Render:
     shadow_map: int | None = None  # shadow map side, texels (cube maps: per face)
     surface_shadows: str = "exact"  # one of SURFACE_SHADOWS
     pcf: int = 0  # surface_shadows `pcf`: filter radius in texels
+    shadow_filter: ShadowFilter | None = None  # surface_shadows `filtered`: None until it is set
     # min-max method
     slices: int | None = None  # epipolar slices
     gamma_samples: int | None = None  # γ texels per slice

@@ -433,7 +433,7 @@ BAD = [
     ({"background": [0, 0]}, r"background: expected a list of 3 numbers"),
     ({"background": "black"}, r"background: expected a number >= 0, got 'black'"),
     # render
-    ({"render": {"method": "pathtrace"}}, r"render\.method: expected one of 'minmax', 'raymarch', 'exact', got 'pathtrace'"),
+    ({"render": {"method": "pathtrace"}}, r"render\.method: expected one of 'minmax', 'raymarch', 'exact', 'moments', got 'pathtrace'"),
     ({"render": {"steps": 0}}, r"render\.steps: expected an integer in \[1, 65536\], got 0"),
     ({"render": {"steps": 65537}}, r"render\.steps: expected an integer in \[1, 65536\], got 65537"),
     ({"render": {"steps": 2.5}}, r"render\.steps: expected an integer in \[1, 65536\], got 2\.5"),
@@ -449,7 +449,7 @@ BAD = [
     ({"render": {"jitter": 1}}, r"render\.jitter: expected true or false, got 1"),
     ({"render": {"pcf": -1}}, r"render\.pcf: expected an integer in \[0, 16\], got -1"),
     ({"render": {"surface_shadows": "soft"}},
-     r"render\.surface_shadows: expected one of 'exact', 'map', 'pcf', got 'soft'"),
+     r"render\.surface_shadows: expected one of 'exact', 'map', 'pcf', 'filtered', got 'soft'"),
     ({"render": {"surface_shadows": "map", "pcf": 2}},
      r"render\.pcf: expected 0 with surface_shadows: map \(a filter radius needs surface_shadows: pcf\), got 2"),
     ({"render": {"sptes": 3}}, r"render\.sptes: unknown key \(did you mean 'steps'\?\)"),

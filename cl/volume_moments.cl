@@ -1,0 +1,168 @@
+/* volume_moments — in-scattered radiance per camera sample from prefix sums of moments
+ * along each rectified row (method `moments`, docs/design.md §9, the volume).
+ * volume_moments_prefix reads tree (level 0: the rectified S[α, γ]); writes prefix
+ *   ((gamma_samples + 1) moment sums per row, the first 0).
+ * volume_moments_scatter reads frame, views, lights, epipolar, prefix, integrand, tables,
+ *   camera_depth, offsets; adds into scatter (float4 per camera sample).
+ *
+ *   row α:   S[0]   S[1]   S[2]  ...  S[n-1]          z = beta_depth(S): [β_min, β_max] → [0.05, 0.95]
+ *   prefix:  P[0]=0 P[1]   P[2]  ...  P[n]            P[i+1] = P[i] + (z, z², z³, z⁴) of S[i]
+ *   a ray's [γa, γb): texels [ia, ib): mean moments (P[ib] − P[ia]) / (ib − ia)
+ *
+ * A ray (β, γ) is lit where β < S, so its lit fraction over [γa, γb) is the mass of the
+ * texels' S at or beyond β (β_min, β_max: the frame's visible rays, so clamping S to
+ * them changes no ray's answer but narrows the distribution the bound works with): one reconstruction from the mean moments, whatever the
+ * number of shadow edges in between, times the unshadowed radiance of the interval.
+ * MOMENT_CHUNKS splits the ray's γ range in equal parts, each with its own fraction. */
+#include "integrand.h"
+#include "moments.h"
+
+#ifndef MOMENT_CHUNKS
+#define MOMENT_CHUNKS 8
+#endif
+
+/* Prefix sums in double where the device has it: a difference of two sums of up to
+ * 16384 terms keeps the float32 precision of the mean it gives (docs/design.md §9). */
+#if defined(cl_khr_fp64) && PREFIX_DOUBLE
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+typedef double4 prefix_t;
+typedef double prefix_scalar_t;
+#define TO_PREFIX(v) convert_double4(v)
+#define FROM_PREFIX(v) convert_float4(v)
+#else
+typedef float4 prefix_t;
+typedef float prefix_scalar_t;
+#define TO_PREFIX(v) (v)
+#define FROM_PREFIX(v) (v)
+#endif
+
+/* β as the depth the moments are taken of: the visible rays' [β_min, β_max] onto
+ * [0.05, 0.95], clamped. Clamped values sit 0.05 inside [0, 1]: distributions on {0, 1}
+ * alone have the moments that the moment bias pulls towards, so it could not keep their
+ * Hankel matrix invertible. */
+inline float beta_depth(float beta, float beta_min, float inverse_beta_range)
+{
+    return 0.05f + 0.9f * clamp((beta - beta_min) * inverse_beta_range, 0.0f, 1.0f);
+}
+
+kernel void volume_moments_prefix(global const epipolar_t* ep, global const float2* tree, float beta_min,
+                                  float inverse_beta_range, global prefix_t* prefix)
+{
+    int slice = get_global_id(0);
+    if (slice >= ep->slices) return;
+    int n = ep->gamma_samples;
+    global const float2* row = tree + (size_t)slice * 2 * n; /* level 0 of the row's min-max tree */
+    global prefix_t* out = prefix + (size_t)slice * (n + 1);
+    prefix_t sum = (prefix_t)(0);
+    out[0] = sum;
+    for (int i = 0; i < n; ++i) {
+        float z = beta_depth(row[i].x, beta_min, inverse_beta_range);
+        float z2 = z * z;
+        sum += TO_PREFIX(((float4)(z, z2, z2 * z, z2 * z2)));
+        out[i + 1] = sum;
+    }
+}
+
+/* Radiance of [gamma_begin, gamma_end) of ray beta between two rows (weights 1 − t, t):
+ * per chunk, the two rows' mean moments blended as traverse blends their radiance, one
+ * reconstruction of the lit fraction, times the chunk's unshadowed radiance, which is the
+ * same ray's in both rows. */
+inline float3 moments_rows(global const epipolar_t* ep, global const prefix_t* row0, global const prefix_t* row1,
+                           float t, const integrand_row_t* ray, float gamma_begin, float gamma_end,
+                           global const integrand_t* in, global const float* tables, global const frame_t* frame,
+                           float receiver, float moment_bias)
+{
+    int n = ep->gamma_samples;
+    float3 radiance = (float3)(0.0f);
+    float chunk = (gamma_end - gamma_begin) / (float)MOMENT_CHUNKS;
+    float run_start = -1.0f; /* γ ≥ 0 where a run of wholly lit parts began */
+    for (int c = 0; c < MOMENT_CHUNKS; ++c) {
+        float g0 = gamma_begin + c * chunk, g1 = c + 1 == MOMENT_CHUNKS ? gamma_end : g0 + chunk;
+        int i0 = clamp((int)floor(g0 / ep->gamma_step), 0, n);
+        int i1 = clamp((int)ceil(g1 / ep->gamma_step), i0, n);
+        float lit = 1.0f;
+        if (i1 > i0) {
+            prefix_scalar_t count = (prefix_scalar_t)(i1 - i0);
+            float4 mean = mix(FROM_PREFIX((row0[i1] - row0[i0]) / count), FROM_PREFIX((row1[i1] - row1[i0]) / count),
+                              t);
+            lit = msm_hamburger_visibility(mean, receiver, moment_bias);
+        }
+        if (lit >= 1.0f) { /* wholly lit parts in a row are one lit run, integrated once */
+            if (run_start < 0.0f) run_start = g0;
+            continue;
+        }
+        if (run_start >= 0.0f) {
+            radiance += segment_radiance(in, tables, frame, ray, run_start, g0);
+            run_start = -1.0f;
+        }
+        if (lit > 0.0f) radiance += lit * segment_radiance(in, tables, frame, ray, g0, g1);
+    }
+    if (run_start >= 0.0f) radiance += segment_radiance(in, tables, frame, ray, run_start, gamma_end);
+    return radiance;
+}
+
+kernel void volume_moments_scatter(global const frame_t* frame, global const view_t* views,
+                                   global const light_t* lights, global const epipolar_t* epipolar,
+                                   global const prefix_t* prefix, global const integrand_t* integrand,
+                                   global const float* tables, global const uint* camera_depth,
+                                   global const float2* offsets, float beta_min, float inverse_beta_range,
+                                   float moment_bias, global float4* scatter)
+{
+    int sample = get_global_id(0);
+    if (sample >= frame->width * frame->height * frame->spp) return;
+    global const epipolar_t* ep = epipolar;
+    int pixel = sample / frame->spp;
+    float3 origin, dir;
+    view_ray(views, view_screen(views, pixel % frame->width, pixel / frame->width, offsets[sample % frame->spp]),
+             &origin, &dir);
+    float distance = fmin(as_float(camera_depth[sample]), frame->far);
+    int light_type = lights[ep->light_index].type;
+
+    /* The ray's β, γ range, lamp chord and slices, exactly as traverse.cl takes them. */
+    float cos_beta = dot(dir, ep->axis.xyz);
+    float sin_beta = fmax(length(cross(dir, ep->axis.xyz)), SIN_BETA_MIN);
+    float beta = fmin(atan2(sin_beta, cos_beta), nextafter(M_PI_F, 0.0f));
+    float begin = 0.0f, end = distance;
+    if (light_type == LIGHT_SPOT && !spot_interval(lights + ep->light_index, dir, distance, &begin, &end))
+        return;
+    float gamma_begin = light_type == LIGHT_DIRECTIONAL ? begin * sin_beta
+                                                        : atan2(begin * sin_beta, ep->d_el - begin * cos_beta);
+    float gamma_end = light_type == LIGHT_DIRECTIONAL ? end * sin_beta
+                                                      : atan2(end * sin_beta, ep->d_el - end * cos_beta);
+    if (!(gamma_end > gamma_begin)) return;
+    float gamma_lamp0 = gamma_end, gamma_lamp1 = gamma_end;
+    float radius = frame->lamp_radius, miss = ep->d_el * sin_beta;
+    if (light_type != LIGHT_DIRECTIONAL && miss < radius) {
+        float closest = ep->d_el * cos_beta, half_chord = sqrt(radius * radius - miss * miss);
+        float s0 = clamp(closest - half_chord, begin, end), s1 = clamp(closest + half_chord, begin, end);
+        gamma_lamp0 = atan2(s0 * sin_beta, ep->d_el - s0 * cos_beta);
+        gamma_lamp1 = atan2(s1 * sin_beta, ep->d_el - s1 * cos_beta);
+    }
+    float alpha = atan2(dot(dir, ep->w.xyz), dot(dir, ep->u.xyz));
+    float offset = alpha - ep->alpha_min;
+    offset -= 2.0f * M_PI_F * floor(offset / (2.0f * M_PI_F));
+    if (!ep->full_circle && offset > M_PI_F + 0.5f * ep->alpha_step * (float)ep->slices)
+        offset -= 2.0f * M_PI_F;
+    float f = offset / ep->alpha_step - 0.5f;
+    int i0 = (int)floor(f);
+    float t = f - (float)i0;
+    int i1 = i0 + 1;
+    if (ep->full_circle) {
+        i0 = (i0 + ep->slices) % ep->slices;
+        i1 = i1 % ep->slices;
+    } else {
+        i0 = clamp(i0, 0, ep->slices - 1);
+        i1 = clamp(i1, 0, ep->slices - 1);
+    }
+    size_t stride = (size_t)ep->gamma_samples + 1;
+    integrand_row_t ray = integrand_row(integrand, beta, sin_beta, cos_beta);
+    global const prefix_t* row0 = prefix + i0 * stride;
+    global const prefix_t* row1 = prefix + i1 * stride;
+    float receiver = beta_depth(beta, beta_min, inverse_beta_range);
+    float3 radiance = moments_rows(ep, row0, row1, t, &ray, gamma_begin, gamma_lamp0, integrand, tables, frame,
+                                   receiver, moment_bias);
+    if (gamma_lamp1 < gamma_end)
+        radiance += moments_rows(ep, row0, row1, t, &ray, gamma_lamp1, gamma_end, integrand, tables, frame,
+                                 receiver, moment_bias);
+    scatter[sample] += (float4)(radiance, 0.0f);
+}
