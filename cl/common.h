@@ -23,42 +23,6 @@
     || !defined(SURFACE_SHADOWS_EXACT) || !defined(SURFACE_SHADOWS_MAP) || !defined(SURFACE_SHADOWS_PCF) \
     || !defined(SIN_BETA_MIN) || !defined(TEXTURE_WRAP_REPEAT) || !defined(TEXTURE_WRAP_CLAMP)
 #error "the constants of clrays/structs.py are missing: build with clrays.device.build_options()"
-/* A light's texture (docs/light-textures.md; cl/light_texture.h looks it up): texels
- * width × height from texels[first_texel], row 0 on top. A light ray maps to screen
- * coordinates (sx, sy) ∈ [-1, 1]² over the image:
- *   spot:        w = p - position; (sx, sy) = (w·right, w·up)·(scale_x, scale_y)/(w·direction)
- *                scale = 1/tan(cone): the image fills the square around the cone
- *   directional: q = p - origin;   (sx, sy) = 2·(q·right, q·up)·(scale_x, scale_y)
- *                origin = the world origin in eye space, scale = 1/texture_size */
-typedef struct {
-    float4 right;
-    float4 up;
-    float4 origin;
-    float scale_x;
-    float scale_y;
-    int first_texel;
-    int width;
-    int height;
-    int wrap;     /* TEXTURE_WRAP_* */
-    int textured; /* 0: a white light, nothing to look up */
-    int _pad0;
-} light_texture_t;
-
-/* The low-rank integrand of a textured light in (β, γ) (docs/light-textures.md, minmax):
- * I(β, γ)·sinβ ≈ Σ_i B_i(β)·Γ_i(γ), B_i on n_beta sin²-spaced rows over [beta_min, beta_max]
- * (as integrand_t's), Γ_i on the gamma_samples cells of the min-max tree; each of the
- * slices rows stores prefix sums of T·Γ_i (cl/light_texture.cl). */
-typedef struct {
-    float beta_min;
-    float beta_max;
-    int n_beta;
-    int rank;
-    int gamma_samples;
-    int slices;
-    int textured;     /* 0: the light has no texture and traverse reads nothing here */
-    int _pad0;
-} textured_integrand_t;
-
 #endif
 
 /* A pinhole or orthographic view: the camera, a spot light's map, a cube face,
