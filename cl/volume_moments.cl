@@ -14,8 +14,8 @@
  * them changes no ray's answer but narrows the distribution the bound works with): one reconstruction from the mean moments, whatever the
  * number of shadow edges in between, times the unshadowed radiance of the interval.
  * MOMENT_CHUNKS splits the ray's γ range in equal parts, each with its own fraction. */
-#include "integrand.h"
 #include "moments.h"
+#include "walk.h"
 
 #ifndef MOMENT_CHUNKS
 #define MOMENT_CHUNKS 8
@@ -116,53 +116,20 @@ kernel void volume_moments_scatter(global const frame_t* frame, global const vie
     view_ray(views, view_screen(views, pixel % frame->width, pixel / frame->width, offsets[sample % frame->spp]),
              &origin, &dir);
     float distance = fmin(as_float(camera_depth[sample]), frame->far);
-    int light_type = lights[ep->light_index].type;
-
-    /* The ray's β, γ range, lamp chord and slices, exactly as traverse.cl takes them. */
-    float cos_beta = dot(dir, ep->axis.xyz);
-    float sin_beta = fmax(length(cross(dir, ep->axis.xyz)), SIN_BETA_MIN);
-    float beta = fmin(atan2(sin_beta, cos_beta), nextafter(M_PI_F, 0.0f));
-    float begin = 0.0f, end = distance;
-    if (light_type == LIGHT_SPOT && !spot_interval(lights + ep->light_index, dir, distance, &begin, &end))
-        return;
-    float gamma_begin = light_type == LIGHT_DIRECTIONAL ? begin * sin_beta
-                                                        : atan2(begin * sin_beta, ep->d_el - begin * cos_beta);
-    float gamma_end = light_type == LIGHT_DIRECTIONAL ? end * sin_beta
-                                                      : atan2(end * sin_beta, ep->d_el - end * cos_beta);
-    if (!(gamma_end > gamma_begin)) return;
-    float gamma_lamp0 = gamma_end, gamma_lamp1 = gamma_end;
-    float radius = frame->lamp_radius, miss = ep->d_el * sin_beta;
-    if (light_type != LIGHT_DIRECTIONAL && miss < radius) {
-        float closest = ep->d_el * cos_beta, half_chord = sqrt(radius * radius - miss * miss);
-        float s0 = clamp(closest - half_chord, begin, end), s1 = clamp(closest + half_chord, begin, end);
-        gamma_lamp0 = atan2(s0 * sin_beta, ep->d_el - s0 * cos_beta);
-        gamma_lamp1 = atan2(s1 * sin_beta, ep->d_el - s1 * cos_beta);
-    }
-    float alpha = atan2(dot(dir, ep->w.xyz), dot(dir, ep->u.xyz));
-    float offset = alpha - ep->alpha_min;
-    offset -= 2.0f * M_PI_F * floor(offset / (2.0f * M_PI_F));
-    if (!ep->full_circle && offset > M_PI_F + 0.5f * ep->alpha_step * (float)ep->slices)
-        offset -= 2.0f * M_PI_F;
-    float f = offset / ep->alpha_step - 0.5f;
-    int i0 = (int)floor(f);
-    float t = f - (float)i0;
-    int i1 = i0 + 1;
-    if (ep->full_circle) {
-        i0 = (i0 + ep->slices) % ep->slices;
-        i1 = i1 % ep->slices;
-    } else {
-        i0 = clamp(i0, 0, ep->slices - 1);
-        i1 = clamp(i1, 0, ep->slices - 1);
-    }
+    /* The ray's β, γ range, lamp chord and slices, as traverse.cl takes them (walk.h). */
+    ray_span_t span;
+    if (!ray_span(ep, lights + ep->light_index, frame, integrand, dir, distance, &span)) return;
+    int i0, i1;
+    float t;
+    nearest_slices(ep, dir, &i0, &i1, &t);
     size_t stride = (size_t)ep->gamma_samples + 1;
-    integrand_row_t ray = integrand_row(integrand, beta, sin_beta, cos_beta);
     global const prefix_t* row0 = prefix + i0 * stride;
     global const prefix_t* row1 = prefix + i1 * stride;
-    float receiver = beta_depth(beta, beta_min, inverse_beta_range);
-    float3 radiance = moments_rows(ep, row0, row1, t, &ray, gamma_begin, gamma_lamp0, integrand, tables, frame,
-                                   receiver, moment_bias);
-    if (gamma_lamp1 < gamma_end)
-        radiance += moments_rows(ep, row0, row1, t, &ray, gamma_lamp1, gamma_end, integrand, tables, frame,
-                                 receiver, moment_bias);
+    float receiver = beta_depth(span.ray.beta, beta_min, inverse_beta_range);
+    float3 radiance = moments_rows(ep, row0, row1, t, &span.ray, span.gamma_begin, span.gamma_lamp0, integrand, tables,
+                                   frame, receiver, moment_bias);
+    if (span.gamma_lamp1 < span.gamma_end)
+        radiance += moments_rows(ep, row0, row1, t, &span.ray, span.gamma_lamp1, span.gamma_end, integrand, tables,
+                                 frame, receiver, moment_bias);
     scatter[sample] += (float4)(radiance, 0.0f);
 }
