@@ -2,10 +2,12 @@
 docs/design.md §4.5 "Epipolar sampling"). Host side of `cl/sampling.cl`.
 
 Instead of every camera sample walking the rows of its two nearest slices (stage
-traverse), samples placed along each slice's line on the screen walk their own row,
-every `render.initial_step`-th one and those beside a break; the rest are interpolated
-along the line, and each camera sample interpolates its two slices at its β, walking a
-row itself only where no line sample lies at its distance (the fix-up).
+traverse), samples placed along each slice's line on the screen walk their own row:
+every `render.initial_step`-th one, those beside a break (an edge, a spot light's cone)
+and those between computed samples whose radiance differs (a shadow's edge); the rest
+are interpolated along the line. Each camera sample interpolates its two slices at its
+β, and walks a row itself (the fix-up pass) only where the samples there do not stand
+for it.
 """
 from __future__ import annotations
 
@@ -21,6 +23,7 @@ from .integrand import DeviceIntegrand
 from .light_texture import TextureTables, untextured_tables
 from .raster import RasterResult
 from .rectify import Epipolar, poles_on_screen
+
 
 @dataclass
 class SampleCounts:
