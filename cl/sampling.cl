@@ -34,17 +34,6 @@
 #define COUNT_COMPUTED 0
 #define COUNT_FIXED_UP 1
 
-/* The camera ray through the centre of sample `sample` of the frame, and its distance. */
-inline float3 camera_ray(global const frame_t* frame, global const view_t* views, global const float2* offsets,
-                         int sample)
-{
-    int pixel = sample / frame->spp;
-    float3 origin, dir;
-    view_ray(views, view_screen(views, pixel % frame->width, pixel / frame->width, offsets[sample % frame->spp]),
-             &origin, &dir);
-    return dir;
-}
-
 /* atan2 within 3 ulp (a minimax polynomial after reducing to [0, tan π/8]): PoCL's
  * atan2 costs as much as the rest of a camera sample's interpolation. Used for what
  * only places a value (a camera sample's slice weight, the unshadowed weight), never

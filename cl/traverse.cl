@@ -17,10 +17,7 @@ kernel void traverse(global const frame_t* frame, global const view_t* views, gl
     int sample = get_global_id(0);
     if (sample >= frame->width * frame->height * frame->spp) return;
     global const epipolar_t* ep = epipolar;
-    int pixel = sample / frame->spp;
-    float3 origin, dir;
-    view_ray(views, view_screen(views, pixel % frame->width, pixel / frame->width, offsets[sample % frame->spp]),
-             &origin, &dir);
+    float3 dir = camera_ray(frame, views, offsets, sample);
     float distance = fmin(as_float(camera_depth[sample]), frame->far);
     ray_span_t span;
     if (!ray_span(ep, lights + ep->light_index, frame, integrand, dir, distance, &span)) return;

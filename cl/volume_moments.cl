@@ -111,10 +111,7 @@ kernel void volume_moments_scatter(global const frame_t* frame, global const vie
     int sample = get_global_id(0);
     if (sample >= frame->width * frame->height * frame->spp) return;
     global const epipolar_t* ep = epipolar;
-    int pixel = sample / frame->spp;
-    float3 origin, dir;
-    view_ray(views, view_screen(views, pixel % frame->width, pixel / frame->width, offsets[sample % frame->spp]),
-             &origin, &dir);
+    float3 dir = camera_ray(frame, views, offsets, sample);
     float distance = fmin(as_float(camera_depth[sample]), frame->far);
     /* The ray's β, γ range, lamp chord and slices, as traverse.cl takes them (walk.h). */
     ray_span_t span;

@@ -47,6 +47,17 @@ typedef struct {
     float gamma_lamp1;
 } ray_span_t;
 
+/* The unit direction of camera sample `sample` (its pixel's ray through its offset). */
+inline float3 camera_ray(global const frame_t* frame, global const view_t* views, global const float2* offsets,
+                         int sample)
+{
+    int pixel = sample / frame->spp;
+    float3 origin, dir;
+    view_ray(views, view_screen(views, pixel % frame->width, pixel / frame->width, offsets[sample % frame->spp]),
+             &origin, &dir);
+    return dir;
+}
+
 /* β of a unit direction, with sin β and cos β. Clamped, not tested: a ray through a
  * point light (β = 0) or straight away from a light (β = π) has a finite integral, and
  * the clamp gives it a γ extent of SIN_BETA_MIN·s that the row coordinates resolve. β
@@ -181,17 +192,6 @@ inline float3 row_radiance(global const epipolar_t* ep, global const float2* tre
     if (span->gamma_lamp1 < span->gamma_end)
         radiance += walk_row(ep, row, &span->ray, span->gamma_lamp1, span->gamma_end, in, tables, frame, texture,
                              row_prefix);
-    return radiance;
-}
-
-/* The radiance the ray would gather if nothing cast a shadow: what epipolar sampling
- * refines on, since it breaks where the ray's extent or the light's cone does. */
-inline float3 unshadowed_radiance(const ray_span_t* span, global const integrand_t* in, global const float* tables,
-                                  global const frame_t* frame)
-{
-    float3 radiance = segment_radiance(in, tables, frame, &span->ray, span->gamma_begin, span->gamma_lamp0);
-    if (span->gamma_lamp1 < span->gamma_end)
-        radiance += segment_radiance(in, tables, frame, &span->ray, span->gamma_lamp1, span->gamma_end);
     return radiance;
 }
 
