@@ -1,7 +1,8 @@
 """Epipolar sampling (`render.sampling: epipolar`, minmax's default) against the walk of
 every camera sample (`pixel`), which it interpolates (docs/design.md §4.5). Surfaces are
 black (albedo 0), so the images hold the in-scattering alone, the only part sampling
-changes. Tolerances are about twice the errors measured when they were written."""
+changes. Tolerances are about twice the largest errors measured when they were written
+(given beside each)."""
 from dataclasses import replace
 
 import numpy as np
@@ -38,6 +39,10 @@ def _shafts(light, extra=(), **kwargs):
 
 POINT = PointLight(v3(0.3, 5.0, -0.5), np.full(3, 60.0))
 
+#: Epipolar against the walk, relative RMSE and p99 of luminance, depth edges out: measured
+#: at most 0.18 % and 1.18 % over the depth-break, epipole and directional cases below.
+RMSE_TOLERANCE, P99_TOLERANCE = 0.004, 0.025
+
 
 @pytest.mark.parametrize("occluder", ["pole", "sphere"])
 def test_interpolation_matches_the_walk_across_depth_breaks(renderer, occluder):
@@ -49,7 +54,7 @@ def test_interpolation_matches_the_walk_across_depth_breaks(renderer, occluder):
         extra = [sphere_triangles(v3(-0.5, 1.2, -1.0), 0.9, 24), box_triangles([-8, 0, -4.2], [8, 8, -4.0])]
     error, epipolar = _error(renderer, _shafts(POINT, extra))
     assert epipolar.samples.fixed_up > 0  # the breaks were found
-    assert error.rmse < 0.01 and error.p99 < 0.03, error
+    assert error.rmse < RMSE_TOLERANCE and error.p99 < P99_TOLERANCE, error
 
 
 CAMERA = dict(position=(0.0, 2.0, 8.0), look_at=(0.0, 1.5, 0.0), fov_deg=50.0)
@@ -65,7 +70,7 @@ EPIPOLES = {  # where the light projects, for the camera above
 def test_epipole_anywhere(renderer, where):
     scene = _shafts(PointLight(EPIPOLES[where], np.full(3, 60.0)), **CAMERA)
     error, _ = _error(renderer, scene)
-    assert error.rmse < 0.01 and error.p99 < 0.03, error
+    assert error.rmse < RMSE_TOLERANCE and error.p99 < P99_TOLERANCE, error
 
 
 @pytest.mark.parametrize("direction", ["along the view", "against the view", "across the view"])
@@ -80,7 +85,7 @@ def test_directional_light_parallel_to_the_view(renderer, direction):
                        [DirectionalLight(light_direction, np.full(3, 1.5))], width=96, height=64, far=25.0,
                        sigma_s=0.08, sigma_a=0.02, albedo=0.0, **CAMERA)
     error, _ = _error(renderer, scene)
-    assert error.rmse < 0.01 and error.p99 < 0.03, error
+    assert error.rmse < RMSE_TOLERANCE and error.p99 < P99_TOLERANCE, error
 
 
 def test_no_seams_between_slices(renderer):
@@ -93,10 +98,10 @@ def test_no_seams_between_slices(renderer):
     epipolar, pixel = _both(renderer, scene)
     lum_e, lum_p = epipolar.image.sum(-1), pixel.image.sum(-1)
     inside = lum_p > 0.05 * lum_p.max()
-    assert np.max(np.abs(lum_e - lum_p)[inside] / lum_p[inside]) < 0.05
+    assert np.max(np.abs(lum_e - lum_p)[inside] / lum_p[inside]) < 0.02  # measured 0.77 %
     for axis in (0, 1):
         steps_e, steps_p = np.abs(np.diff(lum_e, axis=axis)), np.abs(np.diff(lum_p, axis=axis))
-        assert steps_e.max() <= 1.05 * steps_p.max() + 1e-6
+        assert steps_e.max() <= 1.05 * steps_p.max() + 1e-6  # measured: equal
 
 
 def test_orbit_adds_no_flicker(renderer):
@@ -115,8 +120,8 @@ def test_orbit_adds_no_flicker(renderer):
                 changes[sampling].append(np.mean(np.abs(image - previous[sampling])))
             previous[sampling] = image
     epipolar, pixel = np.array(changes["epipolar"]), np.array(changes["pixel"])
-    assert np.max(np.abs(epipolar - pixel) / pixel) < 0.05
-    assert epipolar.mean() <= 1.02 * pixel.mean()
+    assert np.max(np.abs(epipolar - pixel) / pixel) < 1e-3  # measured 1.6e-4
+    assert epipolar.mean() <= 1.001 * pixel.mean()  # measured 1.00002
 
 
 def test_stats_count_what_sampling_did(renderer):
