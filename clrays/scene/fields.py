@@ -177,6 +177,9 @@ PHASES = _typed("medium.phase", {
 
 OBJECT = Section("objects", (
     Field("albedo", "RGB", 0.8, 0.0, 1.0, rule="per channel", notes="diffuse reflectance"),
+    Field("opacity", "RGB", 1.0, 0.0, 1.0, rule="per channel",
+          notes="1 is opaque; below 1 the surface reflects `opacity` of what an opaque one would and lets "
+                "`1 − opacity` through, per channel, light included ([translucent objects](#translucent-objects))"),
     Field("transform", "mapping", shown_default="none",
           notes="[transform](#transform), applied to the object's local geometry"),
 ))

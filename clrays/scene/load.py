@@ -411,6 +411,7 @@ class _Object:
     triangles: np.ndarray  # (T, 3, 3) world space
     normals: np.ndarray | None  # (T, 3, 3) world space, unit, for a smooth object (else each is the face normal)
     albedo: np.ndarray  # (3,), or (T, 3) for a relief with an albedo_map
+    opacity: np.ndarray  # (3,)
     local: np.ndarray  # (T, 3, 3) before the transform
     local_normals: np.ndarray | None  # (T, 3, 3) before the transform, for a smooth object
     parts: tuple[np.ndarray, np.ndarray, np.ndarray]  # translate (3,), rotation 3x3, scale (3,)
@@ -421,6 +422,7 @@ def _object(node: Node, base_dir: Path) -> _Object:
     _reject_normals_off_meshes(node)
     kind, m = typed(node, kinds(OBJECTS), OBJECT.optional)
     albedo = _read(OBJECT["albedo"], m.get("albedo"))
+    opacity = _read(OBJECT["opacity"], m.get("opacity"))
     parts = _transform_parts(m.get("transform"))
     relief = None
     if kind == "relief":  # its colours come per triangle from its albedo_map, if it has one
@@ -436,7 +438,7 @@ def _object(node: Node, base_dir: Path) -> _Object:
         triangles = transform_points(matrix, local)
         if local_normals is not None:
             normals = transform_normals(matrix, local_normals)
-    return _Object(triangles, normals, albedo, local, local_normals, parts, relief)
+    return _Object(triangles, normals, albedo, opacity, local, local_normals, parts, relief)
 
 
 def _tessellated_count(node: Node) -> int:
@@ -462,6 +464,7 @@ def _check_triangle_count(node: Node, index: int, count: int) -> None:
 def _geometry(node: Node | None, base_dir: Path, rigs: list | None = None) -> Geometry:
     """All objects flattened; `rigs`, when given, receives each object's ObjectRig."""
     tris, albedo, ids = [np.zeros((0, 3, 3))], [np.zeros((0, 3))], [np.zeros(0, np.int32)]
+    opacity = [np.ones((0, 3))]
     smooth_normals: list[tuple[slice, np.ndarray]] = []
     reliefs: list[relief_images.ReliefRecord] = []
     start = 0
@@ -484,6 +487,7 @@ def _geometry(node: Node | None, base_dir: Path, rigs: list | None = None) -> Ge
         _check_triangle_count(item, i, start)  # a mesh's count is known once it is read
         tris.append(obj.triangles)
         albedo.append(np.broadcast_to(obj.albedo, (count, 3)))
+        opacity.append(np.broadcast_to(obj.opacity, (count, 3)))
         ids.append(np.full(count, i, dtype=np.int32))
     triangles = np.ascontiguousarray(np.concatenate(tris), dtype=np.float64)
     normals = primitives.flat_normals(triangles)  # once for all objects: per object, it dominated loading
@@ -492,7 +496,12 @@ def _geometry(node: Node | None, base_dir: Path, rigs: list | None = None) -> Ge
         normals[rows], smooth[rows] = object_normals, True
     return Geometry(triangles=triangles, albedo=np.ascontiguousarray(np.concatenate(albedo), dtype=np.float64),
                     object_id=np.concatenate(ids).astype(np.int32), normals=normals, smooth=smooth,
-                    reliefs=tuple(reliefs))
+                    reliefs=tuple(reliefs), opacity=_opacity_or_none(np.concatenate(opacity)))
+
+
+def _opacity_or_none(opacity: np.ndarray) -> np.ndarray | None:
+    """None when every triangle is opaque: such a scene keeps the opaque-only path."""
+    return None if bool((opacity == 1.0).all()) else np.ascontiguousarray(opacity, dtype=np.float64)
 
 
 # --------------------------------------------------------------------------- animation

@@ -171,6 +171,9 @@ class Geometry:
     smooth: np.ndarray = None  # (T,) bool; None: no triangle is smooth
     # The relief objects among them (clrays.scene.relief.ReliefRecord): their rows and texels.
     reliefs: tuple = ()
+    # (T, 3) float64 per-channel opacity in [0, 1] (docs/scene-format.md, translucent objects);
+    # None when every triangle is opaque, which is the fast opaque-only path.
+    opacity: np.ndarray | None = None
 
     def __post_init__(self):
         if self.normals is None:
@@ -181,6 +184,15 @@ class Geometry:
     @property
     def count(self) -> int:
         return int(self.triangles.shape[0])
+
+    @property
+    def translucent(self) -> bool:
+        """Whether any triangle lets light through."""
+        return self.opacity is not None
+
+    def opacity_or_ones(self) -> np.ndarray:
+        """(T, 3) per-channel opacity, ones for an opaque-only scene."""
+        return np.ones((self.count, 3)) if self.opacity is None else self.opacity
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Axis-aligned bounds (lo, hi); a unit box at the origin when there are no triangles."""

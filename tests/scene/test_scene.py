@@ -128,6 +128,18 @@ def test_full_scene_geometry():
     np.testing.assert_array_equal(g.albedo[g.object_id == 1], [[0.6, 0.6, 0.5]] * 128)
     np.testing.assert_array_equal(g.albedo[g.object_id == 2], 0.8)  # default
     np.testing.assert_array_equal(g.triangles[0], [[0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    assert g.opacity is None and not g.translucent  # every object opaque: the opaque-only path
+
+
+def test_opacity_per_object_and_channel():
+    tree = yaml.safe_load(FULL)
+    tree["objects"][1]["opacity"] = [0.2, 0.9, 0.9]
+    tree["objects"][3]["opacity"] = 0.5
+    g = load_text(yaml.safe_dump(tree)).geometry
+    assert g.translucent and g.opacity.shape == (g.count, 3)
+    np.testing.assert_array_equal(g.opacity[g.object_id == 1], [[0.2, 0.9, 0.9]] * 128)
+    np.testing.assert_array_equal(g.opacity[g.object_id == 3], 0.5)
+    np.testing.assert_array_equal(g.opacity[(g.object_id != 1) & (g.object_id != 3)], 1.0)
 
 
 def test_defaults():
@@ -465,7 +477,7 @@ ROT = "objects.0.transform.rotate"
 BAD_OBJECTS = [
     ({"type": "torus"}, r"objects\.0\.type: expected one of 'triangles', 'plane', 'box', 'sphere', 'mesh', 'relief', got 'torus'"),
     ({"min": [0, 0, 0]}, r"objects\.0: missing required key 'type'"),
-    ({**BOX, "radius": 1}, r"objects\.0\.radius: unknown key; expected one of: type, min, max, albedo, transform"),
+    ({**BOX, "radius": 1}, r"objects\.0\.radius: unknown key; expected one of: type, min, max, albedo, opacity, transform"),
     ({**BOX, "colour": 1}, r"objects\.0\.colour: unknown key"),
     ({**BOX, "max": DELETE}, r"objects\.0: missing required key 'max'"),
     ({**BOX, "max": [1, 0, 1]}, r"objects\.0\.max: expected a point above min \[-1, 0, -1\] on every axis, got \[1, 0, 1\]"),
@@ -473,6 +485,11 @@ BAD_OBJECTS = [
     ({**BOX, "albedo": -0.1}, r"objects\.0\.albedo: expected a number in \[0, 1\], got -0\.1"),
     ({**BOX, "albedo": [0.5, 1.01, 0.5]}, r"objects\.0\.albedo\.1: expected a number in \[0, 1\], got 1\.01"),
     ({**BOX, "albedo": True}, r"objects\.0\.albedo: expected a number in \[0, 1\], got true"),
+    ({**BOX, "opacity": -0.1}, r"objects\.0\.opacity: expected a number in \[0, 1\], got -0\.1"),
+    ({**BOX, "opacity": 1.2}, r"objects\.0\.opacity: expected a number in \[0, 1\], got 1\.2"),
+    ({**BOX, "opacity": float("nan")}, r"objects\.0\.opacity: expected a .*number in \[0, 1\], got \.nan"),
+    ({**BOX, "opacity": [0.5, 0.5]}, r"objects\.0\.opacity: expected a list of 3 numbers \(RGB\) or a single number in \[0, 1\], got \[0\.5, 0\.5\]"),
+    ({**BOX, "opacity": [0.5, 2, 0.5]}, r"objects\.0\.opacity\.1: expected a number in \[0, 1\], got 2"),
     ({**SPHERE, "radius": 0}, r"objects\.0\.radius: expected a number > 0, got 0"),
     ({**SPHERE, "radius": -2}, r"objects\.0\.radius: expected a number > 0, got -2"),
     ({**SPHERE, "segments": 3}, r"objects\.0\.segments: expected an integer in \[4, 1024\], got 3"),
