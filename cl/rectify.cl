@@ -2,7 +2,7 @@
  * light angle γ, the view angle β of the light ray's blocker, S[α, γ] (docs/design.md §2, §3).
  * Reads views, lights, shadow_depth, epipolar; writes level 0 of the min-max tree
  * (float2 (S, S) per texel). rectify_bounds reads camera_depth and reduces the
- * β and γ ranges the visible rays need.
+ * β and γ ranges the visible rays need (as pseudo-angles, see pseudo_angle).
  *
  *   tree row α: | level 0: N texels | level 1: N/2 | level 2: N/4 | ... | 1 | (float2 min, max)
  *               0                   N            3N/2                    2N-1 */
@@ -10,39 +10,56 @@
 
 #define PI_F 3.14159265358979f
 
+/* Camera samples per rectify_bounds work-item (clrays/stages/rectify.py BOUNDS_CHUNK). */
+#ifndef BOUNDS_CHUNK
+#define BOUNDS_CHUNK 16
+#endif
+
 inline float3 slice_direction(global const epipolar_t* ep, float alpha)
 {
     return ep->u.xyz * cos(alpha) + ep->w.xyz * sin(alpha);
 }
 
-/* β and γ of the point at distance s along unit eye ray dir (docs/design.md §2, §3). */
-inline float2 epipolar_beta_gamma(global const epipolar_t* ep, int light_type, float3 dir, float s)
+/* A stand-in for the angle θ ∈ [0, π] of (x, y), y ≥ 0, that rises with it: tan(θ/2) up to
+ * π/2, 2 - cot(θ/2) above. rectify_bounds reduces it instead of θ and the host takes the arc
+ * tangent of the extremes only (clrays/stages/rectify.py angle_of_pseudo): PoCL's atan2 cost
+ * more than the rest of the kernel, twice per camera sample. */
+inline float pseudo_angle(float x, float y)
 {
-    float cos_beta = dot(dir, ep->axis.xyz);
-    float sin_beta = length(cross(dir, ep->axis.xyz));
-    float beta = atan2(sin_beta, cos_beta);
-    float gamma = light_type == LIGHT_DIRECTIONAL ? s * sin_beta
-                                                  : atan2(s * sin_beta, ep->d_el - s * cos_beta);
-    return (float2)(beta, gamma);
+    float r = sqrt(x * x + y * y);
+    return x >= 0.0f ? (r + x > 0.0f ? y / (r + x) : 0.0f) : 2.0f - y / (r - x);
 }
 
+/* One work-item per BOUNDS_CHUNK camera samples: it reduces their β and γ in registers and
+ * then updates the three bounds, so the atomics do not serialize every sample on them. */
 kernel void rectify_bounds(global const frame_t* frame, global const view_t* views,
                            global const light_t* lights, global const epipolar_t* epipolar,
                            global const uint* camera_depth, global const float2* offsets,
                            global uint* bounds)
 {
-    int sample = get_global_id(0);
-    if (sample >= frame->width * frame->height * frame->spp) return;
-    int pixel = sample / frame->spp;
-    float3 origin, dir;
-    view_ray(views, view_screen(views, pixel % frame->width, pixel / frame->width, offsets[sample % frame->spp]),
-             &origin, &dir);
-    float distance = fmin(as_float(camera_depth[sample]), frame->far);
-    float2 bg = epipolar_beta_gamma(epipolar, lights[epipolar->light_index].type, dir, distance);
+    int samples = frame->width * frame->height * frame->spp;
+    int first = get_global_id(0) * BOUNDS_CHUNK, last = min(first + BOUNDS_CHUNK, samples);
+    if (first >= samples) return;
+    int directional = lights[epipolar->light_index].type == LIGHT_DIRECTIONAL;
+    float q_beta_min = INFINITY, q_beta_max = 0.0f, gamma_max = 0.0f;
+    for (int sample = first; sample < last; ++sample) {
+        int pixel = sample / frame->spp;
+        float3 origin, dir;
+        view_ray(views, view_screen(views, pixel % frame->width, pixel / frame->width, offsets[sample % frame->spp]),
+                 &origin, &dir);
+        float s = fmin(as_float(camera_depth[sample]), frame->far);
+        float cos_beta = dot(dir, epipolar->axis.xyz), sin_beta = length(cross(dir, epipolar->axis.xyz));
+        float q_beta = pseudo_angle(cos_beta, sin_beta);
+        /* γ (docs/design.md §3): s·sin β for a directional light, else the angle at the light. */
+        float gamma = directional ? s * sin_beta : pseudo_angle(epipolar->d_el - s * cos_beta, s * sin_beta);
+        q_beta_min = fmin(q_beta_min, q_beta);
+        q_beta_max = fmax(q_beta_max, q_beta);
+        gamma_max = fmax(gamma_max, gamma);
+    }
     /* Non-negative floats order like their bit patterns, so uint atomics reduce them. */
-    atomic_min(bounds + 0, as_uint(bg.x));
-    atomic_max(bounds + 1, as_uint(bg.x));
-    atomic_max(bounds + 2, as_uint(bg.y));
+    atomic_min(bounds + 0, as_uint(q_beta_min));
+    atomic_max(bounds + 1, as_uint(q_beta_max));
+    atomic_max(bounds + 2, as_uint(gamma_max));
 }
 
 kernel void rectify(global const view_t* views, global const light_t* lights,
