@@ -1,12 +1,13 @@
 /* rectify — the shadow map resampled into epipolar coordinates: for each slice α and
  * light angle γ, the view angle β of the light ray's blocker, S[α, γ] (docs/design.md §2, §3).
- * Reads views, lights, shadow_depth, epipolar; writes level 0 of the min-max tree
+ * Reads views, lights, shadow_depth, epipolar, slice_sides, texel_angles; writes level 0 of the min-max tree
  * (float2 (S, S) per texel). rectify_bounds reads camera_depth and reduces the
  * β and γ ranges the visible rays need (as pseudo-angles, see pseudo_angle).
  *
  *   tree row α: | level 0: N texels | level 1: N/2 | level 2: N/4 | ... | 1 | (float2 min, max)
  *               0                   N            3N/2                    2N-1 */
 #include "lighting.h"
+#include "atan2_approx.h"
 
 #define PI_F 3.14159265358979f
 
@@ -14,11 +15,6 @@
 #ifndef BOUNDS_CHUNK
 #define BOUNDS_CHUNK 16
 #endif
-
-inline float3 slice_direction(global const epipolar_t* ep, float alpha)
-{
-    return ep->u.xyz * cos(alpha) + ep->w.xyz * sin(alpha);
-}
 
 /* A stand-in for the angle θ ∈ [0, π] of (x, y), y ≥ 0, that rises with it: tan(θ/2) up to
  * π/2, 2 - cot(θ/2) above. rectify_bounds reduces it instead of θ and the host takes the arc
@@ -62,20 +58,23 @@ kernel void rectify_bounds(global const frame_t* frame, global const view_t* vie
     atomic_max(bounds + 2, as_uint(gamma_max));
 }
 
+/* slice_sides[α] = u·cos α + w·sin α at the slice's centre and texel_angles[γ] = (γ, cos γ,
+ * sin γ) come from the host (clrays/stages/rectify.py rectify_tables): the same for every
+ * texel of a row or column, they cost the kernel no trigonometry. Texel centres, except
+ * texel 0 at γ = 0: the eye's own light ray (through the eye, the same for every slice). A
+ * ray straight away from the light (β → π) spans only γ < SIN_BETA_MIN·s, far less than
+ * half a texel, and its visibility is that ray's. */
 kernel void rectify(global const view_t* views, global const light_t* lights,
                     global const uint* shadow_depth, global const epipolar_t* epipolar,
-                    global float2* tree)
+                    global const float4* slice_sides, global const float4* texel_angles, global float2* tree)
 {
     int texel = get_global_id(0), slice = get_global_id(1);
     global const epipolar_t* ep = epipolar;
     if (texel >= ep->gamma_samples || slice >= ep->slices) return;
     global const light_t* light = lights + ep->light_index;
-    float alpha = ep->alpha_min + ((float)slice + 0.5f) * ep->alpha_step;
-    /* Texel centres, except texel 0 at γ = 0: the eye's own light ray (through the eye, the
-     * same for every slice). A ray straight away from the light (β → π) spans only
-     * γ < SIN_BETA_MIN·s, far less than half a texel, and its visibility is that ray's. */
-    float gamma = texel == 0 ? 0.0f : ((float)texel + 0.5f) * ep->gamma_step;
-    float3 r = slice_direction(ep, alpha);
+    float4 angle = texel_angles[texel];
+    float gamma = angle.x, cos_gamma = angle.y, sin_gamma = angle.z;
+    float3 r = slice_sides[slice].xyz;
     float blocker_beta;
     if (light->type == LIGHT_DIRECTIONAL) {
         /* Light ray: γ·r + t·ω. The orthographic map stores depth along -ω from its
@@ -88,10 +87,10 @@ kernel void rectify(global const view_t* views, global const light_t* lights,
         if (texel_xy.x >= 0.0f && texel_xy.y >= 0.0f && texel_xy.x < (float)view->width && texel_xy.y < (float)view->height)
             stored = shadow_texel(view, shadow_depth, (int)texel_xy.x, (int)texel_xy.y);
         float t_blocker = -(stored + dot(view->origin.xyz, view->forward.xyz));
-        blocker_beta = stored == INFINITY ? PI_F : atan2(gamma, t_blocker);
+        blocker_beta = stored == INFINITY ? PI_F : atan2_approx(gamma, t_blocker);
     } else {
         /* Light ray from l at angle γ to l → e, in slice α. */
-        float3 dir = -ep->axis.xyz * cos(gamma) + r * sin(gamma);
+        float3 dir = -ep->axis.xyz * cos_gamma + r * sin_gamma;
         {
             /* Spot lights: outside the cone the map has no texel and the ray counts as
              * unblocked; traverse clips each eye ray to the cone analytically, so the
@@ -104,7 +103,7 @@ kernel void rectify(global const view_t* views, global const light_t* lights,
             if (view_project(view, probe, &texel_xy, &unused))
                 stored = shadow_texel(view, shadow_depth, (int)texel_xy.x, (int)texel_xy.y);
             blocker_beta = stored == INFINITY ? PI_F
-                                              : atan2(stored * sin(gamma), ep->d_el - stored * cos(gamma));
+                                              : atan2_approx(stored * sin_gamma, ep->d_el - stored * cos_gamma);
         }
     }
     tree[(size_t)slice * 2 * ep->gamma_samples + texel] = (float2)(blocker_beta, blocker_beta);

@@ -112,6 +112,27 @@ def epipolar_frame(scene, buffers: FrameBuffers, light_index: int) -> np.ndarray
     return params
 
 
+def slice_sides(params: np.ndarray) -> np.ndarray:
+    """(slices, 4) float32: u·cos α + w·sin α at each slice's centre, the direction its
+    half-plane opens towards."""
+    u, w = params["u"][:3].astype(float), params["w"][:3].astype(float)
+    alpha = float(params["alpha_min"]) + (np.arange(int(params["slices"])) + 0.5) * float(params["alpha_step"])
+    sides = np.zeros((len(alpha), 4), dtype=np.float32)
+    sides[:, :3] = np.outer(np.cos(alpha), u) + np.outer(np.sin(alpha), w)
+    return sides
+
+
+def texel_angles(params: np.ndarray) -> np.ndarray:
+    """(gamma_samples, 4) float32: (γ, cos γ, sin γ, 0) of each texel of a row: its centre,
+    texel 0 at γ = 0 (cl/rectify.cl rectify)."""
+    n = int(params["gamma_samples"])
+    gamma = (np.arange(n, dtype=np.float32) + np.float32(0.5)) * np.float32(params["gamma_step"])
+    gamma[0] = 0.0
+    angles = np.zeros((n, 4), dtype=np.float32)
+    angles[:, 0], angles[:, 1], angles[:, 2] = gamma, np.cos(gamma.astype(float)), np.sin(gamma.astype(float))
+    return angles
+
+
 def angle_of_pseudo(q: float) -> float:
     """The angle θ ∈ [0, π] of cl/rectify.cl pseudo_angle q: 2·atan(q) up to q = 1, π - 2·atan(2 - q)
     above (q = 2 - cot(θ/2)); +inf (no camera sample) stays +inf."""
@@ -146,7 +167,10 @@ def rectify(device: Device, buffers: FrameBuffers, rastered: RasterResult, light
     frame_buffer = device.buffer(params.reshape(1), writable=False)
     slices = int(params["slices"])
     tree = device.buffer(nbytes=8 * slices * 2 * n)
+    sides = device.buffer(slice_sides(params), writable=False)
+    angles = device.buffer(texel_angles(params), writable=False)
     event = device.kernel("rectify", "rectify", {"BOUNDS_CHUNK": BOUNDS_CHUNK})(
-        device.queue, (n, slices), None, buffers.views, buffers.lights, rastered.shadow_depth, frame_buffer, tree)
+        device.queue, (n, slices), None, buffers.views, buffers.lights, rastered.shadow_depth, frame_buffer, sides,
+        angles, tree)
     timer.add("rectify", event)
     return Epipolar(params, frame_buffer, tree, float(beta_min), float(beta_max), float(gamma_max))
