@@ -7,8 +7,9 @@
  * One work-item per triangle: it clips the triangle to the view's near side,
  * projects the polygon, and per pixel row ray-tests the samples in the row's span of
  * the polygon; triangles taller than RASTER_BIG_ROWS go to a second pass with one
- * work-item per (triangle, row it spans) (`*_rows`). The ray test (not interpolation) makes depth exact along the sample
- * ray, and two-sided. Depth buffer layout per view: [height][width][samples]. */
+ * work-item per (triangle, row it spans) (`*_rows`). The ray test (not interpolation)
+ * makes depth exact along the sample ray, and two-sided. Depth buffer layout per view:
+ * [height][width][samples]. */
 #include "lighting.h"
 
 /* Barycentric slack: float32 rounding can put a ray through a shared edge outside

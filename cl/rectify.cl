@@ -1,7 +1,7 @@
 /* rectify — the shadow map resampled into epipolar coordinates: for each slice α and
  * light angle γ, the view angle β of the light ray's blocker, S[α, γ] (docs/design.md §2, §3).
- * Reads views, lights, shadow_depth, epipolar, slice_sides, texel_angles; writes level 0 of the min-max tree
- * (float2 (S, S) per texel). rectify_bounds reads camera_depth and reduces the
+ * Reads views, lights, shadow_depth, epipolar, slice_sides, texel_angles; writes level 0
+ * of the min-max tree (float2 (S, S) per texel). rectify_bounds reads camera_depth and reduces the
  * β and γ ranges the visible rays need (as pseudo-angles, see pseudo_angle).
  *
  *   tree row α: | level 0: N texels | level 1: N/2 | level 2: N/4 | ... | 1 | (float2 min, max)
@@ -59,7 +59,7 @@ kernel void rectify_bounds(global const frame_t* frame, global const view_t* vie
 }
 
 /* slice_sides[α] = u·cos α + w·sin α at the slice's centre and texel_angles[γ] = (γ, cos γ,
- * sin γ) come from the host (clrays/stages/rectify.py rectify_tables): the same for every
+ * sin γ) come from the host (clrays/stages/rectify.py slice_sides, texel_angles): the same for every
  * texel of a row or column, they cost the kernel no trigonometry. Texel centres, except
  * texel 0 at γ = 0: the eye's own light ray (through the eye, the same for every slice). A
  * ray straight away from the light (β → π) spans only γ < SIN_BETA_MIN·s, far less than
