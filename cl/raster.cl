@@ -7,8 +7,9 @@
  * One work-item per triangle: it clips the triangle to the view's near side,
  * projects the polygon, and per pixel row ray-tests the samples in the row's span of
  * the polygon; triangles taller than RASTER_BIG_ROWS go to a second pass with one
- * work-item per row (`*_rows`). The ray test (not interpolation) makes depth exact along the sample
- * ray, and two-sided. Depth buffer layout per view: [height][width][samples]. */
+ * work-item per (triangle, row it spans) (`*_rows`). The ray test (not interpolation)
+ * makes depth exact along the sample ray, and two-sided. Depth buffer layout per view:
+ * [height][width][samples]. */
 #include "lighting.h"
 
 /* Barycentric slack: float32 rounding can put a ray through a shared edge outside
@@ -128,36 +129,40 @@ inline int row_span(const float2 corner[4], int count, int y, int width, int* x0
     }
 
 /* Pass 1, one work-item per triangle: it visits every covered sample of its rows, unless
- * it spans more than RASTER_BIG_ROWS rows; then it lists itself in `big` (while there is
- * room) for pass 2, so a floor plane does not keep one work-item busy for the whole view.
- * The samples and the atomic updates are the same either way, so is the depth map. */
+ * it spans more than RASTER_BIG_ROWS rows; then it lists itself in `big` as (triangle,
+ * first row, last row) (while there is room) for pass 2, so a floor plane does not keep
+ * one work-item busy for the whole view. The samples and the atomic updates are the same
+ * either way, so is the depth map. */
 #define FOR_EACH_COVERED_SAMPLE(BODY)                                                       \
     int tri = get_global_id(0);                                                             \
     if (tri >= tri_count) return;                                                           \
     PROJECT_TRIANGLE                                                                        \
     if (y1 - y0 + 1 > RASTER_BIG_ROWS) {                                                    \
         uint slot = atomic_inc(big_count);                                                  \
-        if (slot < RASTER_BIG_TRIANGLES) { big[slot] = tri; return; }                       \
+        if (slot < RASTER_BIG_TRIANGLES) { vstore3((int3)(tri, y0, y1), slot, big); return; } \
     }                                                                                       \
     for (int y = y0; y <= y1; ++y) COVERED_SAMPLES_OF_ROW(y, BODY)
 
-/* Pass 2, one work-item per (listed big triangle, view row). */
+/* Pass 2, one work-item per (listed triangle, row): the host expands pass 1's list into
+ * `rows` (clrays/stages/raster.py), so no work-item waits on a row outside its triangle. */
 #define FOR_EACH_COVERED_SAMPLE_OF_BIG_ROW(BODY)                                            \
-    int slot = get_global_id(0), y = get_global_id(1);                                      \
-    if (slot >= (int)min(*big_count, (uint)RASTER_BIG_TRIANGLES)) return;                   \
-    int tri = big[slot];                                                                    \
+    int item = get_global_id(0);                                                            \
+    if (item >= row_count) return;                                                          \
+    int tri = rows[item].x, y = rows[item].y;                                               \
     PROJECT_TRIANGLE                                                                        \
-    if (y < y0 || y > y1) return;                                                           \
     COVERED_SAMPLES_OF_ROW(y, BODY)
 
 #define RASTER_ARGS global const float4* tri_vertices, int tri_count, global const view_t* views, \
                     int view_index, global const float2* offsets, int sample_count,           \
                     global uint* big_count, global int* big
 
+#define RASTER_ROWS_ARGS global const float4* tri_vertices, global const view_t* views, int view_index, \
+                         global const float2* offsets, int sample_count, global const int2* rows, int row_count
+
 /* Each pass-1 kernel `name` has a pass-2 twin `name_rows`. */
 #define RASTER_KERNELS(name, TARGET, BODY)                                                  \
     kernel void name(RASTER_ARGS, TARGET) { FOR_EACH_COVERED_SAMPLE(BODY) }                \
-    kernel void name##_rows(RASTER_ARGS, TARGET) { FOR_EACH_COVERED_SAMPLE_OF_BIG_ROW(BODY) }
+    kernel void name##_rows(RASTER_ROWS_ARGS, TARGET) { FOR_EACH_COVERED_SAMPLE_OF_BIG_ROW(BODY) }
 
 RASTER_KERNELS(raster_depth, global uint* depth, atomic_min(depth + idx, as_uint(t));)
 

@@ -27,32 +27,13 @@
  * Radiance is kept times sin β for point and spot lights (radiance_scale): what remains
  * varies slowly even next to the light, where the brightest pixels are. */
 #include "walk.h"
+#include "atan2_approx.h"
 
 /* The counters of clrays.stages.sampling.SampleCounts: line samples that walked their
  * row, camera samples that walked at least one row themselves (the fix-ups). Both are
  * rare next to the camera samples, so plain global atomics do. */
 #define COUNT_COMPUTED 0
 #define COUNT_FIXED_UP 1
-
-/* atan2 within 3 ulp (a minimax polynomial after reducing to [0, tan π/8]): PoCL's
- * atan2 costs as much as the rest of a camera sample's interpolation. Used for what
- * only places a value (a camera sample's slice weight, the unshadowed weight), never
- * for what the tree walk compares. */
-inline float atan2_approx(float y, float x)
-{
-    float ax = fabs(x), ay = fabs(y);
-    float big = fmax(ax, ay), small = fmin(ax, ay);
-    float t = big > 0.0f ? small / big : 0.0f;
-    int reduced = t > 0.41421356f;
-    float r = reduced ? (t - 1.0f) / (t + 1.0f) : t;
-    float z = r * r;
-    float a = (((8.05374449538e-2f * z - 1.38776856032e-1f) * z + 1.99777106478e-1f) * z - 3.33329491539e-1f) * z * r
-              + r;
-    a = reduced ? a + M_PI_4_F : a;
-    a = ay > ax ? M_PI_2_F - a : a;
-    a = x < 0.0f ? M_PI_F - a : a;
-    return copysign(a, y);
-}
 
 /* Line samples are spaced evenly in q = tan(β/2) for β ≤ π/2 and 2 - cot(β/2) above: q
  * rises with β at between 1/2 and 1 times its rate, and needs no arc tangent from cos β

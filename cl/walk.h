@@ -113,8 +113,10 @@ inline void slices_around(global const epipolar_t* ep, float alpha, int* i0, int
     *t = f - (float)*i0;
     *i1 = *i0 + 1;
     if (ep->full_circle) {
-        *i0 = (*i0 + ep->slices) % ep->slices;
-        *i1 = *i1 % ep->slices;
+        /* i0 ∈ [-1, slices - 1] and i1 ∈ [0, slices] here: a conditional wrap, not an
+         * integer modulo (an integer division per camera sample on PoCL). */
+        *i0 = *i0 < 0 ? *i0 + ep->slices : *i0;
+        *i1 = *i1 >= ep->slices ? *i1 - ep->slices : *i1;
     } else {
         *i0 = clamp(*i0, 0, ep->slices - 1);
         *i1 = clamp(*i1, 0, ep->slices - 1);

@@ -60,9 +60,10 @@ SIN_BETA_MIN = 1e-9
 
 # raster: a triangle spanning more than RASTER_BIG_ROWS rows of a view (a floor plane)
 # is drawn by one work-item per row in a second pass instead of looping over its rows
-# alone; up to RASTER_BIG_TRIANGLES of them per launch, the rest draw their own rows.
+# alone; up to RASTER_BIG_TRIANGLES of them per launch (the host reads the list and
+# launches just their rows), the rest draw their own rows.
 RASTER_BIG_ROWS = 32
-RASTER_BIG_TRIANGLES = 64
+RASTER_BIG_TRIANGLES = 1 << 16
 
 #: Every constant above by its C name: the `-D` options of every kernel build.
 KERNEL_CONSTANTS = {

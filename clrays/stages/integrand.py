@@ -160,7 +160,8 @@ def _phase_g(phase: Phase) -> float:
 def hg_phase(cos_theta, g: float) -> np.ndarray:
     """Henyey–Greenstein ρ(cosθ) = (1-g²)/(4π(1+g²-2g·cosθ)^{3/2}); g = 0 is isotropic 1/(4π)."""
     c = np.clip(np.asarray(cos_theta, dtype=np.float64), -1.0, 1.0)
-    return (1.0 - g * g) / (4.0 * math.pi * (1.0 + g * g - 2.0 * g * c) ** 1.5)
+    d = 1.0 + g * g - 2.0 * g * c
+    return (1.0 - g * g) / (4.0 * math.pi * (d * np.sqrt(d)))  # d·√d: no pow()
 
 
 # --------------------------------------------------------------------------- the integrand

@@ -25,21 +25,32 @@ class RasterResult:
 def _launch(device: Device, buffers: FrameBuffers, name: str, defines: dict | None, view_index: int, offsets,
             sample_count: int, target: tuple, timer: StageTimer) -> None:
     """The two passes of one raster kernel over every triangle for one view: `name`, one
-    work-item per triangle, lists the triangles taller than RASTER_BIG_ROWS; `name_rows`
-    draws those with one work-item per (triangle, view row) (docs/design.md §4.1)."""
+    work-item per triangle, lists the triangles taller than RASTER_BIG_ROWS with their rows;
+    `name_rows` draws those with one work-item per (triangle, row) (docs/design.md §4.1)."""
     count = buffers.inputs.tri_vertices.shape[0] // 3
     if buffers.inputs.raster_triangles is not None:  # the reliefs' triangles, last, are pre-warped instead
         count = buffers.inputs.raster_triangles
     if count == 0:
         return
     big_count = device.buffer(np.zeros(1, np.uint32))
-    big = device.buffer(nbytes=4 * structs.RASTER_BIG_TRIANGLES)
-    args = (buffers.tri_vertices, np.int32(count), buffers.views, np.int32(view_index), offsets,
-            np.int32(sample_count), big_count, big) + target
-    timer.add("raster", device.kernel("raster", name, defines)(device.queue, (count,), None, *args))
-    height = int(buffers.inputs.views[view_index]["height"])
+    capacity = min(count, structs.RASTER_BIG_TRIANGLES)  # a triangle lists itself at most once
+    big = device.buffer(nbytes=12 * capacity)  # (triangle, first row, last row)
+    timer.add("raster", device.kernel("raster", name, defines)(
+        device.queue, (count,), None, buffers.tri_vertices, np.int32(count), buffers.views, np.int32(view_index),
+        offsets, np.int32(sample_count), big_count, big, *target))
+    listed = min(int(device.read(big_count, 1, np.uint32)[0]), capacity)
+    if not listed:
+        return
+    # Pass 1's list expanded to its rows on the host (a few thousand entries): a grid of
+    # (listed, view height) work-items cost more in empty ones than the rows themselves.
+    tri, first, last = device.read(big, (listed, 3), np.int32).T
+    spans = last - first + 1
+    rows = np.empty((int(spans.sum()), 2), np.int32)
+    rows[:, 0] = np.repeat(tri, spans)
+    rows[:, 1] = np.arange(len(rows)) - np.repeat(np.cumsum(spans) - spans, spans) + np.repeat(first, spans)
     timer.add("raster", device.kernel("raster", f"{name}_rows", defines)(
-        device.queue, (structs.RASTER_BIG_TRIANGLES, height), None, *args))
+        device.queue, (len(rows),), None, buffers.tri_vertices, buffers.views, np.int32(view_index), offsets,
+        np.int32(sample_count), device.buffer(rows, writable=False), np.int32(len(rows)), *target))
 
 
 def _rasterize(device: Device, buffers: FrameBuffers, view_index: int, offsets, sample_count: int,

@@ -22,7 +22,7 @@ from ..scene.camera import camera_basis
 from .integrand import DeviceIntegrand
 from .light_texture import TextureTables, untextured_tables
 from .raster import RasterResult
-from .rectify import Epipolar, poles_on_screen
+from .rectify import Epipolar, poles_on_screen, slice_sides
 
 
 @dataclass
@@ -104,16 +104,6 @@ def pseudo_beta(beta: np.ndarray) -> np.ndarray:
     half = np.asarray(beta, dtype=float) / 2
     with np.errstate(divide="ignore"):
         return np.where(half <= np.pi / 4, np.tan(half), 2.0 - 1.0 / np.tan(half))
-
-
-def slice_sides(params: np.ndarray) -> np.ndarray:
-    """(slices, 4) float32: u·cos α + w·sin α at each slice's centre, the direction its
-    half-plane opens towards."""
-    u, w = params["u"][:3].astype(float), params["w"][:3].astype(float)
-    alpha = float(params["alpha_min"]) + (np.arange(int(params["slices"])) + 0.5) * float(params["alpha_step"])
-    sides = np.zeros((len(alpha), 4), dtype=np.float32)
-    sides[:, :3] = np.outer(np.cos(alpha), u) + np.outer(np.sin(alpha), w)
-    return sides
 
 
 def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterResult, epipolar: Epipolar,

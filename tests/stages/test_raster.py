@@ -99,3 +99,19 @@ def test_map_is_empty_asks_the_device(device):
                            width=16, height=12, shadow_map=64)
         buffers = upload(device, frame_inputs(scene))
         assert map_is_empty(device, raster_shadow_map(device, buffers, 0, StageTimer())) is empty
+
+
+def test_more_tall_triangles_than_pass_2_lists_give_the_same_maps(device, monkeypatch):
+    # Pass 2 takes RASTER_BIG_TRIANGLES tall triangles per launch; the others draw their own
+    # rows in pass 1. With room for one, the depth maps must still be the same bits.
+    from clrays import structs
+    from clrays.device import Device
+    from conftest import TEST_DEVICE
+
+    scene = _scene(spp=2, shadow_map=256)
+    _, depth, tri, shadow = _rasterized(device, scene)
+    monkeypatch.setitem(structs.KERNEL_CONSTANTS, "RASTER_BIG_TRIANGLES", 1)
+    monkeypatch.setattr(structs, "RASTER_BIG_TRIANGLES", 1)
+    _, depth_one, tri_one, shadow_one = _rasterized(Device(TEST_DEVICE), scene)
+    assert np.array_equal(depth, depth_one) and np.array_equal(tri, tri_one)
+    assert np.array_equal(shadow, shadow_one)

@@ -161,3 +161,41 @@ def test_rectify_matches_numpy_walk_of_the_shadow_map(device, kind):
     worst = np.unravel_index(np.argmax(error), error.shape)
     assert error.max() <= BETA_TOLERANCE, f"slice, texel {worst}: device {rectified[worst]}"
     assert same_texel.mean() > 0.99, "only light rays on a texel's edge may read its neighbour"
+
+
+@pytest.mark.parametrize("kind", LIGHTS)
+def test_bounds_match_numpy_over_the_camera_samples(device, kind):
+    # rectify_bounds reduces pseudo-angles (tan(θ/2), 2 - cot(θ/2)) on the device and the
+    # host takes the arc tangent of the extremes: the β range and γ_max must be those of
+    # a float64 loop over the same camera samples (docs/design.md §4.2).
+    from clrays.scene.camera import primary_rays
+
+    scene = _scene(LIGHTS[kind])
+    buffers = upload(device, frame_inputs(scene))
+    timer = StageTimer()
+    camera_depth, tri_id = raster_camera(device, buffers, timer)
+    rastered = RasterResult(camera_depth, tri_id, shadow_atlas(device, buffers, [raster_shadow_map(device, buffers, 0,
+                                                                                                 timer)]))
+    epipolar = rectify(device, buffers, rastered, 0, timer)
+    depth = device.read(camera_depth, buffers.inputs.samples, np.uint32).view(np.float32).astype(np.float64)
+    distance = np.minimum(depth, float(buffers.inputs.params["far"]))
+    dirs = primary_rays(scene.camera, scene.image).reshape(-1, 3)
+    axis = _vector(epipolar.params["axis"])
+    cos_beta, sin_beta = dirs @ axis, np.linalg.norm(np.cross(dirs, axis), axis=1)
+    beta = np.arctan2(sin_beta, cos_beta)
+    d_el = epipolar.d_el
+    gamma = distance * sin_beta if kind == "directional" else np.arctan2(distance * sin_beta,
+                                                                         d_el - distance * cos_beta)
+    # float32 directions and products on the device against float64 here.
+    assert epipolar.beta_min == pytest.approx(beta.min(), abs=2e-6)
+    assert epipolar.beta_max == pytest.approx(min(beta.max(), math.pi), abs=2e-6)
+    assert epipolar.gamma_max == pytest.approx(gamma.max(), rel=2e-6, abs=2e-6)
+
+
+def test_angle_of_pseudo_inverts_the_pseudo_angle():
+    from clrays.stages.rectify import angle_of_pseudo
+
+    theta = np.linspace(0.0, math.pi, 1001)
+    q = np.where(theta <= math.pi / 2, np.tan(theta / 2), 2.0 - 1.0 / np.tan(np.maximum(theta, 1e-300) / 2))
+    assert np.allclose([angle_of_pseudo(v) for v in q], theta, rtol=0, atol=1e-12)
+    assert angle_of_pseudo(math.inf) == math.inf
