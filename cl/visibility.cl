@@ -5,8 +5,9 @@
  * bound of the depth of every triangle that touches each texel, atomic min) and the list
  * of triangles whose rectangles the split pass takes (big_items, big_count).
  * visibility reads frame, views, lights, shadow_depth, bound, camera_depth, tri_id,
- * tri_vertices, tri_normal, offsets, node_bounds, node_children; writes visible
- * (float per sample and light, [sample][light]). */
+ * tri_vertices, tri_normal, tri_vertex_normals, offsets, node_bounds, node_children; writes
+ * visible (float per sample and light, [sample][light]; 0 where the surface turns away
+ * from the light, which shade then weighs by zero). */
 #include "lighting.h"
 #include "bvh.h"
 
@@ -64,6 +65,98 @@ inline float frustum_side(global const view_t* view, int plane, float3 q, float 
     }
 }
 
+/* A texel's square grown by this many texels on each side is what a triangle's polygon
+ * must meet to write there: the one texel the rectangle was always grown by, plus a
+ * quarter against the rounding of the projection and of the edges below. */
+#define COVER_GROWTH 1.25f
+
+/* Texel coordinates (x right, y down, texel (i, j) covers [i, i + 1) × [j, j + 1)) of q,
+ * a point in view coordinates (right, up, forward); perspective needs q.z > 0. */
+inline float2 texel_coordinates(global const view_t* view, float3 q, int perspective)
+{
+    float z = perspective ? q.z : 1.0f;
+    float2 s = (float2)(q.x / (z * view->scale_x), q.y / (z * view->scale_y));
+    return (float2)((s.x + 1.0f) * 0.5f * (float)view->width, (1.0f - s.y) * 0.5f * (float)view->height);
+}
+
+/* Whether every corner lies within two texels of the view: then the texel maths below
+ * stays in the range where float32 rounding is far under a texel. */
+inline int near_the_view(global const view_t* view, const float2* corner, int corners)
+{
+    for (int k = 0; k < corners; ++k)
+        if (!(fabs(corner[k].x - 0.5f * view->width) <= 0.5f * view->width + 2.0f
+              && fabs(corner[k].y - 0.5f * view->height) <= 0.5f * view->height + 2.0f))
+            return 0;
+    return 1;
+}
+
+/* Clips the polygon (view coordinates, 3 corners in, up to 8 out) to the view's frustum
+ * (near plane and four sides, Sutherland–Hodgman, planes a little outside the view so that
+ * rounding never clips a texel's edge); returns the corner count, 0 when nothing is left. */
+inline int clip_to_frustum(global const view_t* view, float3* polygon, float extent)
+{
+    float3 clipped[8];
+    float grow = 1.0f + 4.0f / (float)min(view->width, view->height);
+    int corners = 3;
+    for (int plane = 0; plane < 5 && corners > 0; ++plane) {
+        int kept = 0;
+        for (int k = 0; k < corners; ++k) {
+            float3 a = polygon[k], b = polygon[(k + 1) % corners];
+            float fa = frustum_side(view, plane, a, grow, extent), fb = frustum_side(view, plane, b, grow, extent);
+            if (fa >= 0.0f) clipped[kept++] = a;
+            if ((fa >= 0.0f) != (fb >= 0.0f)) clipped[kept++] = a + (b - a) * (fa / (fa - fb));
+        }
+        corners = kept;
+        for (int k = 0; k < corners; ++k) polygon[k] = clipped[k];
+    }
+    return corners;
+}
+
+/* The convex polygon's edges as half-planes a·x + b·y + c ≥ 0 (edge = (a, b, c)) holding
+ * it, in texel coordinates; the count. None (the whole rectangle is kept) when the
+ * polygon is so thin that rounding could flip its orientation (area under 4 texels²);
+ * edges shorter than half a texel are left out, as their direction is mostly rounding
+ * (fewer half-planes only keep more texels). */
+inline int polygon_edges(const float2* corner, int corners, float3* edge)
+{
+    float area = 0.0f; /* twice the signed area */
+    for (int k = 1; k + 1 < corners; ++k) {
+        float2 u = corner[k] - corner[0], v = corner[k + 1] - corner[0];
+        area += u.x * v.y - u.y * v.x;
+    }
+    if (!(fabs(area) >= 8.0f)) return 0;
+    float orientation = area > 0.0f ? 1.0f : -1.0f;
+    int edges = 0;
+    for (int k = 0; k < corners; ++k) {
+        float2 from = corner[k], along = corner[(k + 1) % corners] - from;
+        if (fabs(along.x) + fabs(along.y) < 0.5f) continue;
+        float a = -orientation * along.y, b = orientation * along.x;
+        edge[edges++] = (float3)(a, b, -(a * from.x + b * from.y));
+    }
+    return edges;
+}
+
+/* Narrows [*first, *last] to the texels of row ty whose square, grown by COVER_GROWTH,
+ * meets every half-plane; 0 when none does. */
+inline int row_span(const float3* edge, int edges, int ty, int* first, int* last)
+{
+    float y_low = (float)ty - COVER_GROWTH, y_high = (float)ty + 1.0f + COVER_GROWTH;
+    float left = (float)*first, right = (float)*last;
+    for (int k = 0; k < edges; ++k) {
+        float a = edge[k].x, rest = edge[k].z + fmax(edge[k].y * y_low, edge[k].y * y_high);
+        if (a > 0.0f) /* the square's right side x = tx + 1 + growth is the most inside */
+            left = fmax(left, ceil(-rest / a - 1.0f - COVER_GROWTH));
+        else if (a < 0.0f) /* its left side x = tx - growth */
+            right = fmin(right, floor(rest / -a + COVER_GROWTH));
+        else if (rest < 0.0f)
+            return 0;
+    }
+    if (!(left <= right)) return 0;
+    *first = (int)left;
+    *last = (int)right;
+    return 1;
+}
+
 /* The conservative bound map: every texel a triangle may touch (its projected rectangle
  * of its part inside the frustum, grown by a texel) gets a depth no
  * larger than the triangle's nearest point inside that texel's footprint:
@@ -90,30 +183,24 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
      * Sutherland–Hodgman, planes a little outside the view), then its texel rectangle.
      * A triangle wholly in front of a perspective view's origin (or any, orthographic)
      * skips the clipping: its vertices' rectangle, clamped to the view, is enough. */
-    float3 polygon[8], clipped[8];
+    float3 polygon[8];
     int corners = 3;
     for (int k = 0; k < 3; ++k) polygon[k] = in_view[k];
-    float grow = 1.0f + 4.0f / (float)min(view->width, view->height);
-    int in_front = !perspective || fmin(in_view[0].z, fmin(in_view[1].z, in_view[2].z)) > 1e-5f * extent;
-    for (int plane = in_front ? 5 : 0; plane < 5 && corners > 0; ++plane) {
-        int kept = 0;
-        for (int k = 0; k < corners; ++k) {
-            float3 a = polygon[k], b = polygon[(k + 1) % corners];
-            float fa = frustum_side(view, plane, a, grow, extent), fb = frustum_side(view, plane, b, grow, extent);
-            if (fa >= 0.0f) clipped[kept++] = a;
-            if ((fa >= 0.0f) != (fb >= 0.0f)) clipped[kept++] = a + (b - a) * (fa / (fa - fb));
-        }
-        corners = kept;
-        for (int k = 0; k < corners; ++k) polygon[k] = clipped[k];
+    float2 corner[8]; /* the polygon's corners in texel coordinates */
+    int clip = perspective && fmin(in_view[0].z, fmin(in_view[1].z, in_view[2].z)) <= 1e-5f * extent;
+    if (!clip) {
+        for (int k = 0; k < 3; ++k) corner[k] = texel_coordinates(view, polygon[k], perspective);
+        clip = !near_the_view(view, corner, 3);
     }
-    if (corners == 0) return;
+    if (clip) {
+        corners = clip_to_frustum(view, polygon, extent);
+        if (corners == 0) return;
+        for (int k = 0; k < corners; ++k) corner[k] = texel_coordinates(view, polygon[k], perspective);
+    }
     float2 lo = (float2)(INFINITY), hi = (float2)(-INFINITY);
     for (int k = 0; k < corners; ++k) {
-        float z = perspective ? polygon[k].z : 1.0f;
-        float2 s = (float2)(polygon[k].x / (z * view->scale_x), polygon[k].y / (z * view->scale_y));
-        float2 texel = (float2)((s.x + 1.0f) * 0.5f * (float)view->width, (1.0f - s.y) * 0.5f * (float)view->height);
-        lo = fmin(lo, texel);
-        hi = fmax(hi, texel);
+        lo = fmin(lo, corner[k]);
+        hi = fmax(hi, corner[k]);
     }
     int x0 = max((int)floor(fmax(lo.x, -2.0f)) - 1, 0), y0 = max((int)floor(fmax(lo.y, -2.0f)) - 1, 0);
     int x1 = min((int)floor(fmin(hi.x, (float)view->width + 2.0f)) + 1, view->width - 1);
@@ -147,8 +234,12 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
      * depth): a texel already at or under it is skipped before its cone maths, which
      * leaves the atomic-min result unchanged. */
     uint floor_bits = as_uint(fmax(nearest - BOUND_MARGIN_REL * fabs(nearest) - BOUND_MARGIN_REL * extent, 0.0f));
+    float3 edge[8];
+    int edges = polygon_edges(corner, corners, edge);
     for (int ty = y0 + row_first; ty <= y1; ty += row_step) {
-        for (int tx = x0; tx <= x1; ++tx) {
+        int first = x0, last = x1;
+        if (!row_span(edge, edges, ty, &first, &last)) continue;
+        for (int tx = first; tx <= last; ++tx) {
             if (bound[view->depth_offset + ty * view->width + tx] <= floor_bits) continue;
             float depth = nearest;
             if (perspective && normal_length > 0.0f) {
@@ -257,10 +348,27 @@ inline int map_decision(global const light_t* light, global const view_t* views,
     return 0;
 }
 
+/* Whether shade's cosine for this light is ≤ 0 wherever the sample lies on its triangle,
+ * so its visibility is never read: the flat normal n (already facing the camera) turns
+ * away from the light and, on a smooth triangle, so does every vertex normal (flipped
+ * with n), whose weighted sum is shade's shading normal. The margin keeps the float32
+ * rounding of that sum from ever making shade's cosine positive where this says ≤ 0. */
+inline int turned_away(global const float4* tri_normal, global const float4* tri_vertex_normals, int tri, float3 n,
+                       float3 to_light)
+{
+    const float margin = -1e-4f;
+    if (dot(n, to_light) > margin) return 0;
+    if (tri_normal[tri].w == 0.0f) return 1;
+    float side = dot(n, tri_normal[tri].xyz) >= 0.0f ? 1.0f : -1.0f;
+    for (int k = 0; k < 3; ++k)
+        if (side * dot(tri_vertex_normals[3 * tri + k].xyz, to_light) > margin) return 0;
+    return 1;
+}
+
 kernel void visibility(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                        global const uint* shadow_depth, global const uint* bound, global const uint* camera_depth,
                        global const int* tri_id, global const float4* tri_vertices, global const float4* tri_normal,
-                       global const float2* offsets, global const float4* node_bounds,
+                       global const float4* tri_vertex_normals, global const float2* offsets, global const float4* node_bounds,
                        global const int2* node_children, int root, global float* visible)
 {
     int sample = get_global_id(0);
@@ -282,6 +390,10 @@ kernel void visibility(global const frame_t* frame, global const view_t* views, 
         float3 to_light;
         float3 incident = light_incident(light, frame->sigma_t.xyz, p, &to_light);
         if (incident.x + incident.y + incident.z == 0.0f || eye_in_lamp(light, frame->lamp_radius)) continue;
+        if (turned_away(tri_normal, tri_vertex_normals, tri, n, to_light)) {
+            out[l] = 0.0f; /* shade weighs this light by a cosine ≤ 0: no map test, no ray */
+            continue;
+        }
         float to_light_distance = light->type == LIGHT_DIRECTIONAL ? 0.0f : length(light->position.xyz - p);
         /* The ray leaves on the light's side of the surface, as the exact reference's does. */
         float3 side = dot(n, to_light) >= 0.0f ? n : -n;
