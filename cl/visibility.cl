@@ -2,9 +2,10 @@
  * segment to the light is clear, else 0. The shadow map decides where its neighbourhood
  * is unanimous; the other samples cast a shadow ray through the BVH (docs/design.md §4, visibility).
  * visibility_bound, visibility_bound_split read tri_vertices, views; write bound (a lower
- * bound of the depth of every triangle that touches each texel, atomic min) and the list
- * of triangles whose rectangles the split pass takes (big_items, big_count).
- * visibility reads frame, views, lights, shadow_depth, bound, camera_depth, tri_id,
+ * bound of the depth of every triangle that touches each texel, atomic min), writer (the
+ * one triangle that touches each texel, or WRITER_MANY) and the list of triangles whose
+ * rectangles the split pass takes (big_items, big_count).
+ * visibility reads frame, views, lights, shadow_depth, bound, writer, camera_depth, tri_id,
  * tri_vertices, tri_normal, tri_vertex_normals, offsets, node_bounds, node_children; writes
  * visible (float per sample and light, [sample][light]; 0 where the surface turns away
  * from the light, which shade then weighs by zero). */
@@ -157,6 +158,20 @@ inline int row_span(const float3* edge, int edges, int ty, int* first, int* last
     return 1;
 }
 
+/* The writer map beside the bound map: per texel, the one triangle that touches it
+ * (WRITER_NONE: none yet), or WRITER_MANY once a second one does (both from
+ * clrays/structs.py). A sample whose texel's only writer is its own triangle is lit: no
+ * other triangle comes near its segment to the light, which projects into that texel, and
+ * a ray skips its own triangle. */
+
+inline void note_writer(global int* texel_writer, int tri)
+{
+    int seen = *texel_writer; /* the read spares the atomics once a texel is decided */
+    if (seen == tri || seen == WRITER_MANY) return;
+    int before = atomic_cmpxchg(texel_writer, WRITER_NONE, tri);
+    if (before != WRITER_NONE && before != tri) atomic_xchg(texel_writer, WRITER_MANY);
+}
+
 /* The conservative bound map: every texel a triangle may touch (its projected rectangle
  * of its part inside the frustum, grown by a texel) gets a depth no
  * larger than the triangle's nearest point inside that texel's footprint:
@@ -165,8 +180,8 @@ inline int row_span(const float3* edge, int edges, int ty, int* first, int* last
  *   orthographic: max(nearest vertex, the plane's depth at the texel's nearest corner).
  * A triangle thinner than a texel, which the centre-sampled map may miss, is still here. */
 inline void bound_triangle(global const float4* tri_vertices, global const view_t* views, int first_view,
-                           int view_count, global uint* bound, int item, int row_first, int row_step,
-                           int small_rows, global int* big_items, volatile global int* big_count)
+                           int view_count, global uint* bound, global int* writer, int item, int row_first,
+                           int row_step, int small_rows, global int* big_items, volatile global int* big_count)
 {
     int tri = item / view_count;
     global const view_t* view = views + first_view + item % view_count;
@@ -240,6 +255,7 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
         int first = x0, last = x1;
         if (!row_span(edge, edges, ty, &first, &last)) continue;
         for (int tx = first; tx <= last; ++tx) {
+            note_writer(writer + view->depth_offset + ty * view->width + tx, tri);
             if (bound[view->depth_offset + ty * view->width + tx] <= floor_bits) continue;
             float depth = nearest;
             if (perspective && normal_length > 0.0f) {
@@ -271,21 +287,22 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
  * up to `small_rows` rows at once, listing the others in big_items; visibility_bound_split
  * then spreads each listed rectangle's rows over the global size of its dimension 1. */
 kernel void visibility_bound(global const float4* tri_vertices, int count, global const view_t* views,
-                             int first_view, int view_count, global uint* bound, int small_rows,
+                             int first_view, int view_count, global uint* bound, global int* writer, int small_rows,
                              global int* big_items, volatile global int* big_count)
 {
     int item = get_global_id(0);
     if (item >= count * view_count) return;
-    bound_triangle(tri_vertices, views, first_view, view_count, bound, item, 0, 1, small_rows, big_items, big_count);
+    bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, item, 0, 1, small_rows, big_items,
+                   big_count);
 }
 
 kernel void visibility_bound_split(global const float4* tri_vertices, global const view_t* views, int first_view,
-                                   int view_count, global uint* bound, global const int* big_items,
-                                   global const int* big_count)
+                                   int view_count, global uint* bound, global int* writer,
+                                   global const int* big_items, global const int* big_count)
 {
     int index = get_global_id(0);
     if (index >= *big_count) return;
-    bound_triangle(tri_vertices, views, first_view, view_count, bound, big_items[index], get_global_id(1),
+    bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, big_items[index], get_global_id(1),
                    get_global_size(1), 0, 0, 0);
 }
 
@@ -314,11 +331,11 @@ inline float own_surface_slack(global const light_t* light, global const view_t*
 /* How the map decides one sample: 1 lit, 0 shadowed, -1 undecided (cast a ray).
  * Lit: the bound map says no triangle in the texel of `start` comes nearer the light than
  * the sample's own depth, less what its own surface may have written there (at most the
- * map's bias).
+ * map's bias); or the writer map says no triangle but the sample's own touches that texel.
  * Shadowed: every centre of the 3×3 texels around `lookup` holds a blocker nearer than
  * the bias. */
 inline int map_decision(global const light_t* light, global const view_t* views, global const uint* shadow_depth,
-                        global const uint* bound, float3 start, float3 lookup, float3 n,
+                        global const uint* bound, global const int* writer, float3 start, float3 lookup, float3 n,
                         global const float4* tri_vertices, int tri)
 {
     global const view_t* view = views + light_view_index(light, start);
@@ -329,9 +346,9 @@ inline int map_decision(global const light_t* light, global const view_t* views,
         return 1; /* outside the map: no occluder (a map covers every occluder) */
     int tx = (int)texel.x, ty = (int)texel.y;
     float bound_depth = as_float(bound[view->depth_offset + ty * view->width + tx]);
+    if (depth <= bound_depth || writer[view->depth_offset + ty * view->width + tx] == tri) return 1;
     /* Lit when depth ≤ bound + min(bias, slack), both ≥ 0: decided without the slack's
      * trigonometry at either end (same answer as computing it first). */
-    if (depth <= bound_depth) return 1;
     if (depth <= bound_depth + SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth)) {
         float reach = 0.0f; /* of the sample's triangle from the view's origin */
         for (int k = 0; k < 3; ++k) reach = fmax(reach, length(tri_vertices[3 * tri + k].xyz - view->origin.xyz));
@@ -366,7 +383,8 @@ inline int turned_away(global const float4* tri_normal, global const float4* tri
 }
 
 kernel void visibility(global const frame_t* frame, global const view_t* views, global const light_t* lights,
-                       global const uint* shadow_depth, global const uint* bound, global const uint* camera_depth,
+                       global const uint* shadow_depth, global const uint* bound, global const int* writer,
+                       global const uint* camera_depth,
                        global const int* tri_id, global const float4* tri_vertices, global const float4* tri_normal,
                        global const float4* tri_vertex_normals, global const float2* offsets, global const float4* node_bounds,
                        global const int2* node_children, int root, global float* visible)
@@ -399,7 +417,7 @@ kernel void visibility(global const frame_t* frame, global const view_t* views, 
         float3 side = dot(n, to_light) >= 0.0f ? n : -n;
         float3 start = p + side * (SHADOW_RAY_OFFSET_REL * (length(p) + to_light_distance));
         float3 lookup = p + n * shadow_texel_size(light, length(p - light->position.xyz));
-        int decided = map_decision(light, views, shadow_depth, bound, start, lookup, n, tri_vertices, tri);
+        int decided = map_decision(light, views, shadow_depth, bound, writer, start, lookup, n, tri_vertices, tri);
         if (decided >= 0) {
             out[l] = (float)decided;
             continue;
