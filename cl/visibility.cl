@@ -249,31 +249,38 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
      * depth): a texel already at or under it is skipped before its cone maths, which
      * leaves the atomic-min result unchanged. */
     uint floor_bits = as_uint(fmax(nearest - BOUND_MARGIN_REL * fabs(nearest) - BOUND_MARGIN_REL * extent, 0.0f));
+    /* The texel maths in view coordinates (right, up, forward), per row what a row shares:
+     * the centre of texel (tx, ty) looks along (x, y, 1), x = ((2·tx + 1)/width - 1)·scale_x,
+     * y = (1 - (2·ty + 1)/height)·scale_y (view_direction, unnormalised). */
+    float3 n_view = (float3)(dot(n, view->right.xyz), dot(n, view->up.xyz), n_forward);
+    float inverse_width = 1.0f / (float)view->width, inverse_height = 1.0f / (float)view->height;
+    /* Orthographic: the plane's depth (plane - n_r·x - n_u·y) / n_f is linear across the
+     * texel, so its least corner is the same one in every texel, (tx + corner_x, ty + corner_y). */
+    int corner_x = n_view.x * n_forward > 0.0f, corner_y = n_view.y * n_forward < 0.0f;
     float3 edge[8];
     int edges = polygon_edges(corner, corners, edge);
     for (int ty = y0 + row_first; ty <= y1; ty += row_step) {
         int first = x0, last = x1;
         if (!row_span(edge, edges, ty, &first, &last)) continue;
+        float y_centre = (1.0f - (2.0f * (float)ty + 1.0f) * inverse_height) * view->scale_y;
+        float row_dot = n_view.z + n_view.y * y_centre, row_length2 = 1.0f + y_centre * y_centre;
+        float y_corner = (1.0f - 2.0f * (float)(ty + corner_y) * inverse_height) * view->scale_y;
+        float row_plane = plane - n_view.y * y_corner;
         for (int tx = first; tx <= last; ++tx) {
             note_writer(writer + view->depth_offset + ty * view->width + tx, tri);
             if (bound[view->depth_offset + ty * view->width + tx] <= floor_bits) continue;
             float depth = nearest;
             if (perspective && normal_length > 0.0f) {
-                float cos_phi = dot(n, view_direction(view, tx + 0.5f, ty + 0.5f));
+                float x_centre = ((2.0f * (float)tx + 1.0f) * inverse_width - 1.0f) * view->scale_x;
+                float cos_phi = (row_dot + n_view.x * x_centre) * rsqrt(row_length2 + x_centre * x_centre);
                 float sin_phi = sqrt(fmax(1.0f - cos_phi * cos_phi, 0.0f));
                 /* cos(φ - ρ) ≥ the largest n·u over the texel's cone; φ ≤ ρ: the foot may be inside */
                 float cos_gap = cos_phi >= cos_rho ? 1.0f : cos_phi * cos_rho + sin_phi * sin_rho;
                 if (cos_gap <= 0.0f) continue; /* no ray of this texel meets the plane */
                 depth = fmax(depth, plane / cos_gap);
             } else if (!perspective && fabs(n_forward) > 1e-6f) {
-                float corner_min = INFINITY;
-                for (int corner = 0; corner < 4; ++corner) {
-                    float sx = 2.0f * (float)(tx + (corner & 1)) / (float)view->width - 1.0f;
-                    float sy = 1.0f - 2.0f * (float)(ty + (corner >> 1)) / (float)view->height;
-                    float3 at = view->right.xyz * (sx * view->scale_x) + view->up.xyz * (sy * view->scale_y);
-                    corner_min = fmin(corner_min, (plane - dot(n, at)) / n_forward);
-                }
-                depth = fmax(depth, corner_min);
+                float x_corner = (2.0f * (float)(tx + corner_x) * inverse_width - 1.0f) * view->scale_x;
+                depth = fmax(depth, (row_plane - n_view.x * x_corner) / n_forward);
             }
             depth = fmax(depth - BOUND_MARGIN_REL * fabs(depth) - BOUND_MARGIN_REL * extent, 0.0f);
             global uint* texel = bound + view->depth_offset + ty * view->width + tx;
