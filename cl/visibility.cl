@@ -67,9 +67,11 @@ inline float frustum_side(global const view_t* view, int plane, float3 q, float 
 }
 
 /* A texel's square grown by this many texels on each side is what a triangle's polygon
- * must meet to write there: the one texel the rectangle was always grown by, plus a
- * quarter against the rounding of the projection and of the edges below. */
-#define COVER_GROWTH 1.25f
+ * must meet to write there. The segment from a sample to the light projects to one point,
+ * inside its texel and inside the polygon of every triangle it crosses, so only rounding
+ * needs a margin: of the corners (≤ 2e-4 texels within two texels of the view) and of the
+ * edges' directions (polygon_edges), several hundred times under this. */
+#define COVER_GROWTH 0.25f
 
 /* Texel coordinates (x right, y down, texel (i, j) covers [i, i + 1) × [j, j + 1)) of q,
  * a point in view coordinates (right, up, forward); perspective needs q.z > 0. */
@@ -115,22 +117,29 @@ inline int clip_to_frustum(global const view_t* view, float3* polygon, float ext
 
 /* The convex polygon's edges as half-planes a·x + b·y + c ≥ 0 (edge = (a, b, c)) holding
  * it, in texel coordinates; the count. None (the whole rectangle is kept) when the
- * polygon is so thin that rounding could flip its orientation (area under 4 texels²);
- * edges shorter than half a texel are left out, as their direction is mostly rounding
- * (fewer half-planes only keep more texels). */
+ * polygon is so thin that rounding could flip its orientation: twice its area under 0.01
+ * texel × its perimeter, where the corners' rounding moves it by under 1e-3 × perimeter.
+ * An edge shorter than 0.05 texel or 2e-3 of the polygon's size is left out (fewer
+ * half-planes only keep more texels): the rounding of its direction could tilt its line
+ * by 0.03 texel across the polygon. */
 inline int polygon_edges(const float2* corner, int corners, float3* edge)
 {
-    float area = 0.0f; /* twice the signed area */
-    for (int k = 1; k + 1 < corners; ++k) {
-        float2 u = corner[k] - corner[0], v = corner[k + 1] - corner[0];
+    float area = 0.0f, perimeter = 0.0f; /* twice the signed area */
+    float2 lo = corner[0], hi = corner[0];
+    for (int k = 0; k < corners; ++k) {
+        float2 u = corner[k] - corner[0], v = corner[(k + 1) % corners] - corner[0];
         area += u.x * v.y - u.y * v.x;
+        perimeter += fabs(v.x - u.x) + fabs(v.y - u.y);
+        lo = fmin(lo, corner[k]);
+        hi = fmax(hi, corner[k]);
     }
-    if (!(fabs(area) >= 8.0f)) return 0;
+    if (!(fabs(area) >= 0.01f * perimeter)) return 0;
     float orientation = area > 0.0f ? 1.0f : -1.0f;
+    float shortest = fmax(0.05f, 2e-3f * fmax(hi.x - lo.x, hi.y - lo.y));
     int edges = 0;
     for (int k = 0; k < corners; ++k) {
         float2 from = corner[k], along = corner[(k + 1) % corners] - from;
-        if (fabs(along.x) + fabs(along.y) < 0.5f) continue;
+        if (fabs(along.x) + fabs(along.y) < shortest) continue;
         float a = -orientation * along.y, b = orientation * along.x;
         edge[edges++] = (float3)(a, b, -(a * from.x + b * from.y));
     }
