@@ -181,13 +181,14 @@ inline void note_writer(global int* texel_writer, int tri)
     if (before != WRITER_NONE && before != tri) atomic_xchg(texel_writer, WRITER_MANY);
 }
 
-/* The conservative bound map: every texel a triangle may touch (its projected rectangle
- * of its part inside the frustum, grown by a texel) gets a depth no
- * larger than the triangle's nearest point inside that texel's footprint:
+/* The conservative bound map: every texel a triangle may touch (per row, the span whose
+ * squares, grown by COVER_GROWTH, meet the projection of its part inside the frustum)
+ * gets a depth no larger than the triangle's nearest point inside that texel's footprint:
  *   perspective: max(distance to the closest point of the triangle, distance to its plane
  *     along the texel's cone, bounded by the cone's half-angle ρ: h / cos(max(φ - ρ, 0)));
  *   orthographic: max(nearest vertex, the plane's depth at the texel's nearest corner).
- * A triangle thinner than a texel, which the centre-sampled map may miss, is still here. */
+ * A triangle thinner than a texel, which the centre-sampled map may miss, is still here.
+ * The same texels get the triangle in the writer map (note_writer). */
 inline void bound_triangle(global const float4* tri_vertices, global const view_t* views, int first_view,
                            int view_count, global uint* bound, global int* writer, int item, int row_first,
                            int row_step, int small_rows, global int* big_items, volatile global int* big_count)

@@ -4,9 +4,11 @@ Host side of `cl/visibility.cl` and `cl/bvh.h` (docs/design.md §4, visibility).
 Per camera sample and light, the shadow map answers where its neighbourhood is
 unanimous: lit where a conservative bound map (every triangle that touches a texel,
 however thin, at a depth no larger than its own there) has nothing nearer the light than
-the sample, shadowed where every texel centre around it holds a blocker. The rest, the
-samples on shadow edges, ask the BVH whether the segment to the light is blocked, so a
-shadow edge lands where the `exact` reference puts it.
+the sample, or where the writer map beside it says the sample's own triangle is the only
+one touching its texel; shadowed where every texel centre around it holds a blocker. The
+rest, the samples on shadow edges, ask the BVH whether the segment to the light is
+blocked, so a shadow edge lands where the `exact` reference puts it. A sample whose
+surface turns away from the light needs neither: shade weighs it by zero.
 """
 from __future__ import annotations
 
