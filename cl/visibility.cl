@@ -207,7 +207,7 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
     /* The part of the triangle inside the view's frustum (near plane and four sides,
      * Sutherland–Hodgman, planes a little outside the view), then its texel rectangle.
      * A triangle wholly in front of a perspective view's origin (or any, orthographic)
-     * skips the clipping: its vertices' rectangle, clamped to the view, is enough. */
+     * skips the clipping when its corners stay within two texels of the view. */
     float3 polygon[8];
     int corners = 3;
     for (int k = 0; k < 3; ++k) polygon[k] = in_view[k];
@@ -401,9 +401,9 @@ inline int turned_away(global const float4* tri_normal, global const float4* tri
 
 kernel void visibility(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                        global const uint* shadow_depth, global const uint* bound, global const int* writer,
-                       global const uint* camera_depth,
-                       global const int* tri_id, global const float4* tri_vertices, global const float4* tri_normal,
-                       global const float4* tri_vertex_normals, global const float2* offsets, global const float4* node_bounds,
+                       global const uint* camera_depth, global const int* tri_id, global const float4* tri_vertices,
+                       global const float4* tri_normal, global const float4* tri_vertex_normals,
+                       global const float2* offsets, global const float4* node_bounds,
                        global const int2* node_children, int root, global float* visible)
 {
     int sample = get_global_id(0);

@@ -122,7 +122,8 @@ def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, bo
     visible = device.buffer(nbytes=4 * inputs.samples * lights)
     event = device.kernel("visibility", "visibility")(
         device.queue, (inputs.samples,), None, buffers.params, buffers.views, buffers.lights,
-        rastered.shadow_depth, bound.bound, bound.writer, rastered.camera_depth, rastered.tri_id, buffers.tri_vertices,
-        buffers.tri_normal, buffers.tri_vertex_normals, buffers.offsets, bvh.node_bounds, bvh.node_children, np.int32(bvh.root), visible)
+        rastered.shadow_depth, bound.bound, bound.writer, rastered.camera_depth, rastered.tri_id,
+        buffers.tri_vertices, buffers.tri_normal, buffers.tri_vertex_normals, buffers.offsets, bvh.node_bounds,
+        bvh.node_children, np.int32(bvh.root), visible)
     timer.add("visibility", event)
     return visible

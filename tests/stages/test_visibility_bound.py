@@ -70,7 +70,10 @@ def test_bound_and_writer_maps_hold_every_triangle_they_must(device, kind):
         for tri, triangle in enumerate(triangles):
             t, _ = raycast(origins, directions, triangle[None], t_min=0.0 if perspective else 1.0)
             hit = np.isfinite(t)
-            depth = t[hit] * (np.linalg.norm(directions[hit], axis=1) if perspective else 1.0) - (0 if perspective else 1e3)
+            if perspective:
+                depth = t[hit] * np.linalg.norm(directions[hit], axis=1)
+            else:
+                depth = t[hit] - 1e3
             # No depth of the triangle in a texel lies under the texel's bound (float32 margin 1e-5).
             lowest = np.full(touching.shape, np.inf)
             np.minimum.at(lowest, texel[hit], depth)
