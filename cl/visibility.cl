@@ -2,11 +2,13 @@
  * segment to the light is clear, else 0. The shadow map decides where its neighbourhood
  * is unanimous; the other samples cast a shadow ray through the BVH (docs/design.md §4, visibility).
  * visibility_bound, visibility_bound_split read tri_vertices, views; write bound (a lower
- * bound of the depth of every triangle that touches each texel, atomic min) and the list
- * of triangles whose rectangles the split pass takes (big_items, big_count).
- * visibility reads frame, views, lights, shadow_depth, bound, camera_depth, tri_id,
- * tri_vertices, tri_normal, offsets, node_bounds, node_children; writes visible
- * (float per sample and light, [sample][light]). */
+ * bound of the depth of every triangle that touches each texel, atomic min), writer (the
+ * one triangle that touches each texel, or WRITER_MANY) and the list of triangles whose
+ * rectangles the split pass takes (big_items, big_count).
+ * visibility reads frame, views, lights, shadow_depth, bound, writer, camera_depth, tri_id,
+ * tri_vertices, tri_normal, tri_vertex_normals, offsets, node_bounds, node_children; writes
+ * visible (float per sample and light, [sample][light]; 0 where the surface turns away
+ * from the light, which shade then weighs by zero). */
 #include "lighting.h"
 #include "bvh.h"
 
@@ -64,16 +66,132 @@ inline float frustum_side(global const view_t* view, int plane, float3 q, float 
     }
 }
 
-/* The conservative bound map: every texel a triangle may touch (its projected rectangle
- * of its part inside the frustum, grown by a texel) gets a depth no
- * larger than the triangle's nearest point inside that texel's footprint:
+/* A texel's square grown by this many texels on each side is what a triangle's polygon
+ * must meet to write there. The segment from a sample to the light projects to one point,
+ * inside its texel and inside the polygon of every triangle it crosses, so only rounding
+ * needs a margin: of the corners (≤ 2e-4 texels within two texels of the view) and of the
+ * edges' directions (polygon_edges), several hundred times under this. */
+#define COVER_GROWTH 0.25f
+
+/* Texel coordinates (x right, y down, texel (i, j) covers [i, i + 1) × [j, j + 1)) of q,
+ * a point in view coordinates (right, up, forward); perspective needs q.z > 0. */
+inline float2 texel_coordinates(global const view_t* view, float3 q, int perspective)
+{
+    float z = perspective ? q.z : 1.0f;
+    float2 s = (float2)(q.x / (z * view->scale_x), q.y / (z * view->scale_y));
+    return (float2)((s.x + 1.0f) * 0.5f * (float)view->width, (1.0f - s.y) * 0.5f * (float)view->height);
+}
+
+/* Whether every corner lies within two texels of the view: then the texel maths below
+ * stays in the range where float32 rounding is far under a texel. */
+inline int near_the_view(global const view_t* view, const float2* corner, int corners)
+{
+    for (int k = 0; k < corners; ++k)
+        if (!(fabs(corner[k].x - 0.5f * view->width) <= 0.5f * view->width + 2.0f
+              && fabs(corner[k].y - 0.5f * view->height) <= 0.5f * view->height + 2.0f))
+            return 0;
+    return 1;
+}
+
+/* Clips the polygon (view coordinates, 3 corners in, up to 8 out) to the view's frustum
+ * (near plane and four sides, Sutherland–Hodgman, planes a little outside the view so that
+ * rounding never clips a texel's edge); returns the corner count, 0 when nothing is left. */
+inline int clip_to_frustum(global const view_t* view, float3* polygon, float extent)
+{
+    float3 clipped[8];
+    float grow = 1.0f + 4.0f / (float)min(view->width, view->height);
+    int corners = 3;
+    for (int plane = 0; plane < 5 && corners > 0; ++plane) {
+        int kept = 0;
+        for (int k = 0; k < corners; ++k) {
+            float3 a = polygon[k], b = polygon[(k + 1) % corners];
+            float fa = frustum_side(view, plane, a, grow, extent), fb = frustum_side(view, plane, b, grow, extent);
+            if (fa >= 0.0f) clipped[kept++] = a;
+            if ((fa >= 0.0f) != (fb >= 0.0f)) clipped[kept++] = a + (b - a) * (fa / (fa - fb));
+        }
+        corners = kept;
+        for (int k = 0; k < corners; ++k) polygon[k] = clipped[k];
+    }
+    return corners;
+}
+
+/* The convex polygon's edges as half-planes a·x + b·y + c ≥ 0 (edge = (a, b, c)) holding
+ * it, in texel coordinates; the count. None (the whole rectangle is kept) when the
+ * polygon is so thin that rounding could flip its orientation: twice its area under 0.01
+ * texel × its perimeter, where the corners' rounding moves it by under 1e-3 × perimeter.
+ * An edge shorter than 0.05 texel or 2e-3 of the polygon's size is left out (fewer
+ * half-planes only keep more texels): the rounding of its direction could tilt its line
+ * by 0.03 texel across the polygon. */
+inline int polygon_edges(const float2* corner, int corners, float3* edge)
+{
+    float area = 0.0f, perimeter = 0.0f; /* twice the signed area */
+    float2 lo = corner[0], hi = corner[0];
+    for (int k = 0; k < corners; ++k) {
+        float2 u = corner[k] - corner[0], v = corner[(k + 1) % corners] - corner[0];
+        area += u.x * v.y - u.y * v.x;
+        perimeter += fabs(v.x - u.x) + fabs(v.y - u.y);
+        lo = fmin(lo, corner[k]);
+        hi = fmax(hi, corner[k]);
+    }
+    if (!(fabs(area) >= 0.01f * perimeter)) return 0;
+    float orientation = area > 0.0f ? 1.0f : -1.0f;
+    float shortest = fmax(0.05f, 2e-3f * fmax(hi.x - lo.x, hi.y - lo.y));
+    int edges = 0;
+    for (int k = 0; k < corners; ++k) {
+        float2 from = corner[k], along = corner[(k + 1) % corners] - from;
+        if (fabs(along.x) + fabs(along.y) < shortest) continue;
+        float a = -orientation * along.y, b = orientation * along.x;
+        edge[edges++] = (float3)(a, b, -(a * from.x + b * from.y));
+    }
+    return edges;
+}
+
+/* Narrows [*first, *last] to the texels of row ty whose square, grown by COVER_GROWTH,
+ * meets every half-plane; 0 when none does. */
+inline int row_span(const float3* edge, int edges, int ty, int* first, int* last)
+{
+    float y_low = (float)ty - COVER_GROWTH, y_high = (float)ty + 1.0f + COVER_GROWTH;
+    float left = (float)*first, right = (float)*last;
+    for (int k = 0; k < edges; ++k) {
+        float a = edge[k].x, rest = edge[k].z + fmax(edge[k].y * y_low, edge[k].y * y_high);
+        if (a > 0.0f) /* the square's right side x = tx + 1 + growth is the most inside */
+            left = fmax(left, ceil(-rest / a - 1.0f - COVER_GROWTH));
+        else if (a < 0.0f) /* its left side x = tx - growth */
+            right = fmin(right, floor(rest / -a + COVER_GROWTH));
+        else if (rest < 0.0f)
+            return 0;
+    }
+    if (!(left <= right)) return 0;
+    *first = (int)left;
+    *last = (int)right;
+    return 1;
+}
+
+/* The writer map beside the bound map: per texel, the one triangle that touches it
+ * (WRITER_NONE: none yet), or WRITER_MANY once a second one does (both from
+ * clrays/structs.py). A sample whose texel's only writer is its own triangle is lit: no
+ * other triangle comes near its segment to the light, which projects into that texel, and
+ * a ray skips its own triangle. */
+
+inline void note_writer(global int* texel_writer, int tri)
+{
+    int seen = *texel_writer; /* the read spares the atomics once a texel is decided */
+    if (seen == tri || seen == WRITER_MANY) return;
+    int before = atomic_cmpxchg(texel_writer, WRITER_NONE, tri);
+    if (before != WRITER_NONE && before != tri) atomic_xchg(texel_writer, WRITER_MANY);
+}
+
+/* The conservative bound map: every texel a triangle may touch (per row, the span whose
+ * squares, grown by COVER_GROWTH, meet the projection of its part inside the frustum)
+ * gets a depth no larger than the triangle's nearest point inside that texel's footprint:
  *   perspective: max(distance to the closest point of the triangle, distance to its plane
  *     along the texel's cone, bounded by the cone's half-angle ρ: h / cos(max(φ - ρ, 0)));
  *   orthographic: max(nearest vertex, the plane's depth at the texel's nearest corner).
- * A triangle thinner than a texel, which the centre-sampled map may miss, is still here. */
+ * A triangle thinner than a texel, which the centre-sampled map may miss, is still here.
+ * The same texels get the triangle in the writer map (note_writer). */
 inline void bound_triangle(global const float4* tri_vertices, global const view_t* views, int first_view,
-                           int view_count, global uint* bound, int item, int row_first, int row_step,
-                           int small_rows, global int* big_items, volatile global int* big_count)
+                           int view_count, global uint* bound, global int* writer, int item, int row_first,
+                           int row_step, int small_rows, global int* big_items, volatile global int* big_count)
 {
     int tri = item / view_count;
     global const view_t* view = views + first_view + item % view_count;
@@ -89,31 +207,25 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
     /* The part of the triangle inside the view's frustum (near plane and four sides,
      * Sutherland–Hodgman, planes a little outside the view), then its texel rectangle.
      * A triangle wholly in front of a perspective view's origin (or any, orthographic)
-     * skips the clipping: its vertices' rectangle, clamped to the view, is enough. */
-    float3 polygon[8], clipped[8];
+     * skips the clipping when its corners stay within two texels of the view. */
+    float3 polygon[8];
     int corners = 3;
     for (int k = 0; k < 3; ++k) polygon[k] = in_view[k];
-    float grow = 1.0f + 4.0f / (float)min(view->width, view->height);
-    int in_front = !perspective || fmin(in_view[0].z, fmin(in_view[1].z, in_view[2].z)) > 1e-5f * extent;
-    for (int plane = in_front ? 5 : 0; plane < 5 && corners > 0; ++plane) {
-        int kept = 0;
-        for (int k = 0; k < corners; ++k) {
-            float3 a = polygon[k], b = polygon[(k + 1) % corners];
-            float fa = frustum_side(view, plane, a, grow, extent), fb = frustum_side(view, plane, b, grow, extent);
-            if (fa >= 0.0f) clipped[kept++] = a;
-            if ((fa >= 0.0f) != (fb >= 0.0f)) clipped[kept++] = a + (b - a) * (fa / (fa - fb));
-        }
-        corners = kept;
-        for (int k = 0; k < corners; ++k) polygon[k] = clipped[k];
+    float2 corner[8]; /* the polygon's corners in texel coordinates */
+    int clip = perspective && fmin(in_view[0].z, fmin(in_view[1].z, in_view[2].z)) <= 1e-5f * extent;
+    if (!clip) {
+        for (int k = 0; k < 3; ++k) corner[k] = texel_coordinates(view, polygon[k], perspective);
+        clip = !near_the_view(view, corner, 3);
     }
-    if (corners == 0) return;
+    if (clip) {
+        corners = clip_to_frustum(view, polygon, extent);
+        if (corners == 0) return;
+        for (int k = 0; k < corners; ++k) corner[k] = texel_coordinates(view, polygon[k], perspective);
+    }
     float2 lo = (float2)(INFINITY), hi = (float2)(-INFINITY);
     for (int k = 0; k < corners; ++k) {
-        float z = perspective ? polygon[k].z : 1.0f;
-        float2 s = (float2)(polygon[k].x / (z * view->scale_x), polygon[k].y / (z * view->scale_y));
-        float2 texel = (float2)((s.x + 1.0f) * 0.5f * (float)view->width, (1.0f - s.y) * 0.5f * (float)view->height);
-        lo = fmin(lo, texel);
-        hi = fmax(hi, texel);
+        lo = fmin(lo, corner[k]);
+        hi = fmax(hi, corner[k]);
     }
     int x0 = max((int)floor(fmax(lo.x, -2.0f)) - 1, 0), y0 = max((int)floor(fmax(lo.y, -2.0f)) - 1, 0);
     int x1 = min((int)floor(fmin(hi.x, (float)view->width + 2.0f)) + 1, view->width - 1);
@@ -147,26 +259,38 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
      * depth): a texel already at or under it is skipped before its cone maths, which
      * leaves the atomic-min result unchanged. */
     uint floor_bits = as_uint(fmax(nearest - BOUND_MARGIN_REL * fabs(nearest) - BOUND_MARGIN_REL * extent, 0.0f));
+    /* The texel maths in view coordinates (right, up, forward), per row what a row shares:
+     * the centre of texel (tx, ty) looks along (x, y, 1), x = ((2·tx + 1)/width - 1)·scale_x,
+     * y = (1 - (2·ty + 1)/height)·scale_y (view_direction, unnormalised). */
+    float3 n_view = (float3)(dot(n, view->right.xyz), dot(n, view->up.xyz), n_forward);
+    float inverse_width = 1.0f / (float)view->width, inverse_height = 1.0f / (float)view->height;
+    /* Orthographic: the plane's depth (plane - n_r·x - n_u·y) / n_f is linear across the
+     * texel, so its least corner is the same one in every texel, (tx + corner_x, ty + corner_y). */
+    int corner_x = n_view.x * n_forward > 0.0f, corner_y = n_view.y * n_forward < 0.0f;
+    float3 edge[8];
+    int edges = polygon_edges(corner, corners, edge);
     for (int ty = y0 + row_first; ty <= y1; ty += row_step) {
-        for (int tx = x0; tx <= x1; ++tx) {
+        int first = x0, last = x1;
+        if (!row_span(edge, edges, ty, &first, &last)) continue;
+        float y_centre = (1.0f - (2.0f * (float)ty + 1.0f) * inverse_height) * view->scale_y;
+        float row_dot = n_view.z + n_view.y * y_centre, row_length2 = 1.0f + y_centre * y_centre;
+        float y_corner = (1.0f - 2.0f * (float)(ty + corner_y) * inverse_height) * view->scale_y;
+        float row_plane = plane - n_view.y * y_corner;
+        for (int tx = first; tx <= last; ++tx) {
+            note_writer(writer + view->depth_offset + ty * view->width + tx, tri);
             if (bound[view->depth_offset + ty * view->width + tx] <= floor_bits) continue;
             float depth = nearest;
             if (perspective && normal_length > 0.0f) {
-                float cos_phi = dot(n, view_direction(view, tx + 0.5f, ty + 0.5f));
+                float x_centre = ((2.0f * (float)tx + 1.0f) * inverse_width - 1.0f) * view->scale_x;
+                float cos_phi = (row_dot + n_view.x * x_centre) * rsqrt(row_length2 + x_centre * x_centre);
                 float sin_phi = sqrt(fmax(1.0f - cos_phi * cos_phi, 0.0f));
                 /* cos(φ - ρ) ≥ the largest n·u over the texel's cone; φ ≤ ρ: the foot may be inside */
                 float cos_gap = cos_phi >= cos_rho ? 1.0f : cos_phi * cos_rho + sin_phi * sin_rho;
                 if (cos_gap <= 0.0f) continue; /* no ray of this texel meets the plane */
                 depth = fmax(depth, plane / cos_gap);
             } else if (!perspective && fabs(n_forward) > 1e-6f) {
-                float corner_min = INFINITY;
-                for (int corner = 0; corner < 4; ++corner) {
-                    float sx = 2.0f * (float)(tx + (corner & 1)) / (float)view->width - 1.0f;
-                    float sy = 1.0f - 2.0f * (float)(ty + (corner >> 1)) / (float)view->height;
-                    float3 at = view->right.xyz * (sx * view->scale_x) + view->up.xyz * (sy * view->scale_y);
-                    corner_min = fmin(corner_min, (plane - dot(n, at)) / n_forward);
-                }
-                depth = fmax(depth, corner_min);
+                float x_corner = (2.0f * (float)(tx + corner_x) * inverse_width - 1.0f) * view->scale_x;
+                depth = fmax(depth, (row_plane - n_view.x * x_corner) / n_forward);
             }
             depth = fmax(depth - BOUND_MARGIN_REL * fabs(depth) - BOUND_MARGIN_REL * extent, 0.0f);
             global uint* texel = bound + view->depth_offset + ty * view->width + tx;
@@ -180,21 +304,22 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
  * up to `small_rows` rows at once, listing the others in big_items; visibility_bound_split
  * then spreads each listed rectangle's rows over the global size of its dimension 1. */
 kernel void visibility_bound(global const float4* tri_vertices, int count, global const view_t* views,
-                             int first_view, int view_count, global uint* bound, int small_rows,
+                             int first_view, int view_count, global uint* bound, global int* writer, int small_rows,
                              global int* big_items, volatile global int* big_count)
 {
     int item = get_global_id(0);
     if (item >= count * view_count) return;
-    bound_triangle(tri_vertices, views, first_view, view_count, bound, item, 0, 1, small_rows, big_items, big_count);
+    bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, item, 0, 1, small_rows, big_items,
+                   big_count);
 }
 
 kernel void visibility_bound_split(global const float4* tri_vertices, global const view_t* views, int first_view,
-                                   int view_count, global uint* bound, global const int* big_items,
-                                   global const int* big_count)
+                                   int view_count, global uint* bound, global int* writer,
+                                   global const int* big_items, global const int* big_count)
 {
     int index = get_global_id(0);
     if (index >= *big_count) return;
-    bound_triangle(tri_vertices, views, first_view, view_count, bound, big_items[index], get_global_id(1),
+    bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, big_items[index], get_global_id(1),
                    get_global_size(1), 0, 0, 0);
 }
 
@@ -223,11 +348,11 @@ inline float own_surface_slack(global const light_t* light, global const view_t*
 /* How the map decides one sample: 1 lit, 0 shadowed, -1 undecided (cast a ray).
  * Lit: the bound map says no triangle in the texel of `start` comes nearer the light than
  * the sample's own depth, less what its own surface may have written there (at most the
- * map's bias).
+ * map's bias); or the writer map says no triangle but the sample's own touches that texel.
  * Shadowed: every centre of the 3×3 texels around `lookup` holds a blocker nearer than
  * the bias. */
 inline int map_decision(global const light_t* light, global const view_t* views, global const uint* shadow_depth,
-                        global const uint* bound, float3 start, float3 lookup, float3 n,
+                        global const uint* bound, global const int* writer, float3 start, float3 lookup, float3 n,
                         global const float4* tri_vertices, int tri)
 {
     global const view_t* view = views + light_view_index(light, start);
@@ -238,9 +363,9 @@ inline int map_decision(global const light_t* light, global const view_t* views,
         return 1; /* outside the map: no occluder (a map covers every occluder) */
     int tx = (int)texel.x, ty = (int)texel.y;
     float bound_depth = as_float(bound[view->depth_offset + ty * view->width + tx]);
+    if (depth <= bound_depth || writer[view->depth_offset + ty * view->width + tx] == tri) return 1;
     /* Lit when depth ≤ bound + min(bias, slack), both ≥ 0: decided without the slack's
      * trigonometry at either end (same answer as computing it first). */
-    if (depth <= bound_depth) return 1;
     if (depth <= bound_depth + SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth)) {
         float reach = 0.0f; /* of the sample's triangle from the view's origin */
         for (int k = 0; k < 3; ++k) reach = fmax(reach, length(tri_vertices[3 * tri + k].xyz - view->origin.xyz));
@@ -257,9 +382,27 @@ inline int map_decision(global const light_t* light, global const view_t* views,
     return 0;
 }
 
+/* Whether shade's cosine for this light is ≤ 0 wherever the sample lies on its triangle,
+ * so its visibility is never read: the flat normal n (already facing the camera) turns
+ * away from the light and, on a smooth triangle, so does every vertex normal (flipped
+ * with n), whose weighted sum is shade's shading normal. The margin keeps the float32
+ * rounding of that sum from ever making shade's cosine positive where this says ≤ 0. */
+inline int turned_away(global const float4* tri_normal, global const float4* tri_vertex_normals, int tri, float3 n,
+                       float3 to_light)
+{
+    const float margin = -1e-4f;
+    if (dot(n, to_light) > margin) return 0;
+    if (tri_normal[tri].w == 0.0f) return 1;
+    float side = dot(n, tri_normal[tri].xyz) >= 0.0f ? 1.0f : -1.0f;
+    for (int k = 0; k < 3; ++k)
+        if (side * dot(tri_vertex_normals[3 * tri + k].xyz, to_light) > margin) return 0;
+    return 1;
+}
+
 kernel void visibility(global const frame_t* frame, global const view_t* views, global const light_t* lights,
-                       global const uint* shadow_depth, global const uint* bound, global const uint* camera_depth,
-                       global const int* tri_id, global const float4* tri_vertices, global const float4* tri_normal,
+                       global const uint* shadow_depth, global const uint* bound, global const int* writer,
+                       global const uint* camera_depth, global const int* tri_id, global const float4* tri_vertices,
+                       global const float4* tri_normal, global const float4* tri_vertex_normals,
                        global const float2* offsets, global const float4* node_bounds,
                        global const int2* node_children, int root, global float* visible)
 {
@@ -282,12 +425,16 @@ kernel void visibility(global const frame_t* frame, global const view_t* views, 
         float3 to_light;
         float3 incident = light_incident(light, frame->sigma_t.xyz, p, &to_light);
         if (incident.x + incident.y + incident.z == 0.0f || eye_in_lamp(light, frame->lamp_radius)) continue;
+        if (turned_away(tri_normal, tri_vertex_normals, tri, n, to_light)) {
+            out[l] = 0.0f; /* shade weighs this light by a cosine ≤ 0: no map test, no ray */
+            continue;
+        }
         float to_light_distance = light->type == LIGHT_DIRECTIONAL ? 0.0f : length(light->position.xyz - p);
         /* The ray leaves on the light's side of the surface, as the exact reference's does. */
         float3 side = dot(n, to_light) >= 0.0f ? n : -n;
         float3 start = p + side * (SHADOW_RAY_OFFSET_REL * (length(p) + to_light_distance));
         float3 lookup = p + n * shadow_texel_size(light, length(p - light->position.xyz));
-        int decided = map_decision(light, views, shadow_depth, bound, start, lookup, n, tri_vertices, tri);
+        int decided = map_decision(light, views, shadow_depth, bound, writer, start, lookup, n, tri_vertices, tri);
         if (decided >= 0) {
             out[l] = (float)decided;
             continue;

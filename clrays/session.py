@@ -322,6 +322,8 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
         if scene.render.method == "moments":  # double prefix sums, the larger case (volume_moments.py)
             prefix = 32 * scene.render.slices * (gamma_samples + 1)
             sizes.append(("moment prefix sums of one light", prefix))
+    if scene.render.surface_shadows == "exact" and scene.lights:  # visibility's bound and writer maps, every light's
+        sizes.append(("bound and writer maps", 8 * inputs.shadow_texels))
     if scene.render.surface_shadows == "filtered":  # the moment maps and their blur's scratch (shadow_filter.py)
         sizes += [("moment maps", 16 * inputs.shadow_texels), ("moment maps' blur scratch", 16 * inputs.shadow_texels)]
     return sizes

@@ -42,6 +42,9 @@ TEXTURE_WRAP_CLAMP = 1
 
 DEPTH_EMPTY = np.uint32(0x7F800000)  # as_uint(+inf): a depth buffer's texel where nothing was rasterized
 
+WRITER_NONE = -1  # the visibility stage's writer map: no triangle touches this texel
+WRITER_MANY = -2  # two or more do (else the one triangle's index)
+
 # A point or spot light is a lamp: a ball of radius LAMP_RADIUS_REL × the scene's size around
 # it holds no medium (clrays.reference.radiometry says why and what it changes); the radius
 # reaches the device per frame, in frame_t.lamp_radius.
@@ -69,7 +72,7 @@ RASTER_BIG_TRIANGLES = 1 << 16
 KERNEL_CONSTANTS = {
     name: value for name, value in dict(globals()).items()
     if name.startswith(("PROJECTION_", "LIGHT_", "PHASE_", "INTEGRAND_", "TRAVERSAL_", "RASTER_", "SURFACE_SHADOWS_",
-                         "TEXTURE_WRAP_", "SHADOW_FILTER_"))
+                         "TEXTURE_WRAP_", "SHADOW_FILTER_", "WRITER_"))
     or name in ("DEPTH_EMPTY", "SIN_BETA_MIN")
 }
 

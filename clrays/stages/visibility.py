@@ -4,9 +4,11 @@ Host side of `cl/visibility.cl` and `cl/bvh.h` (docs/design.md §4, visibility).
 Per camera sample and light, the shadow map answers where its neighbourhood is
 unanimous: lit where a conservative bound map (every triangle that touches a texel,
 however thin, at a depth no larger than its own there) has nothing nearer the light than
-the sample, shadowed where every texel centre around it holds a blocker. The rest, the
-samples on shadow edges, ask the BVH whether the segment to the light is blocked, so a
-shadow edge lands where the `exact` reference puts it.
+the sample, or where the writer map beside it says the sample's own triangle is the only
+one touching its texel; shadowed where every texel centre around it holds a blocker. The
+rest, the samples on shadow edges, ask the BVH whether the segment to the light is
+blocked, so a shadow edge lands where the `exact` reference puts it. A sample whose
+surface turns away from the light needs neither: shade weighs it by zero.
 """
 from __future__ import annotations
 
@@ -59,13 +61,25 @@ def upload_bvh(device: Device, inputs: FrameInputs, topology: BvhTopology, timer
                      device.buffer(bvh.node_children, writable=False), bvh.root, milliseconds)
 
 
-def visibility_bound(device: Device, buffers: FrameBuffers, light_index: int, timer: StageTimer):
-    """One light's bound map (uint[its texels], as_uint(depth)), in the light-anchored
-    space of its shadow map (clrays.inputs.light_pass_inputs), so the depths match."""
+@dataclass
+class BoundMap:
+    """A light's (or every light's, back to back) bound and writer maps, texel for texel
+    the layout of its shadow map."""
+
+    bound: object  # uint per texel, as_uint(depth): no triangle touching the texel is nearer
+    writer: object  # int per texel: the one triangle that touches it, -1 none, -2 several
+    texels: int
+
+
+def visibility_bound(device: Device, buffers: FrameBuffers, light_index: int, timer: StageTimer) -> BoundMap:
+    """One light's bound and writer maps, in the light-anchored space of its shadow map
+    (clrays.inputs.light_pass_inputs), so the depths match."""
     inputs = light_pass_inputs(buffers.inputs, light_index)
     texels = max(inputs.shadow_texels, 1)
     bound = device.buffer(nbytes=4 * texels)
     device.fill(bound, structs.DEPTH_EMPTY, 4 * texels, timer, "visibility")
+    writer = device.buffer(nbytes=4 * texels)
+    device.fill(writer, np.int32(structs.WRITER_NONE), 4 * texels, timer, "visibility")
     count = inputs.tri_vertices.shape[0] // 3
     if count:
         vertices = device.buffer(inputs.tri_vertices, writable=False)
@@ -80,25 +94,45 @@ def visibility_bound(device: Device, buffers: FrameBuffers, light_index: int, ti
             device.fill(big_count, np.int32(0), 4, timer, "visibility")
             timer.add("visibility", first_pass(
                 device.queue, (count,), None, vertices, np.int32(count), views, np.int32(view), np.int32(1), bound,
-                np.int32(BOUND_SMALL_ROWS), big_items, big_count))
-            timer.add("visibility", split_pass(
-                device.queue, (count, BOUND_ROW_SPLIT), None, vertices, views, np.int32(view), np.int32(1), bound,
-                big_items, big_count))
-    return bound, inputs.shadow_texels
+                writer, np.int32(BOUND_SMALL_ROWS), big_items, big_count))
+            listed = int(device.read(big_count, 1, np.int32)[0])
+            if listed:
+                nearest_first(device, big_items, listed, inputs, view)
+                timer.add("visibility", split_pass(
+                    device.queue, (listed, BOUND_ROW_SPLIT), None, vertices, views, np.int32(view), np.int32(1),
+                    bound, writer, big_items, big_count))
+    return BoundMap(bound, writer, inputs.shadow_texels)
 
 
-def bound_atlas(device: Device, buffers: FrameBuffers, bounds: list):
-    """Every light's bound map back to back, at the depth offsets of the frame's views."""
+def nearest_first(device: Device, big_items, listed: int, inputs: FrameInputs, view: int) -> None:
+    """Reorders the split pass's list by the distance of each triangle's centroid from the
+    view (orthographic: its depth), nearest first. The result is the same in any order; in
+    this one a far floor under nearer triangles mostly finds their bounds already below its
+    own nearest depth and skips its texel maths (bound_triangle's floor_bits)."""
+    items = device.read(big_items, listed, np.int32)
+    centroids = inputs.tri_vertices[:, :3].reshape(-1, 3, 3)[items].astype(np.float64).mean(axis=1)
+    centroids -= np.asarray(inputs.views[view]["origin"][:3], np.float64)
+    if inputs.views[view]["projection"] == structs.PROJECTION_PERSPECTIVE:
+        distance = np.linalg.norm(centroids, axis=1)
+    else:
+        distance = centroids @ np.asarray(inputs.views[view]["forward"][:3], np.float64)
+    device.cl.enqueue_copy(device.queue, big_items, np.ascontiguousarray(items[np.argsort(distance, kind="stable")]))
+
+
+def bound_atlas(device: Device, buffers: FrameBuffers, bounds: list[BoundMap]) -> BoundMap:
+    """Every light's bound and writer maps back to back, at the depth offsets of the frame's views."""
     if len(bounds) == 1:
-        return bounds[0][0]
-    atlas = device.buffer(nbytes=4 * max(buffers.inputs.shadow_texels, 1))
-    for (first, _), (bound, texels) in zip(buffers.inputs.light_views, bounds):
+        return bounds[0]
+    texels = max(buffers.inputs.shadow_texels, 1)
+    atlas = BoundMap(device.buffer(nbytes=4 * texels), device.buffer(nbytes=4 * texels), texels)
+    for (first, _), light in zip(buffers.inputs.light_views, bounds):
         offset = 4 * int(buffers.inputs.views[first]["depth_offset"])
-        device.cl.enqueue_copy(device.queue, atlas, bound, byte_count=4 * texels, dst_offset=offset)
+        for whole, part in ((atlas.bound, light.bound), (atlas.writer, light.writer)):
+            device.cl.enqueue_copy(device.queue, whole, part, byte_count=4 * light.texels, dst_offset=offset)
     return atlas
 
 
-def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, bound, bvh: DeviceBvh,
+def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, bound: BoundMap, bvh: DeviceBvh,
                timer: StageTimer):
     """float[samples × lights]: 1 where the sample sees the light, 0 where it does not."""
     inputs = buffers.inputs
@@ -106,7 +140,8 @@ def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, bo
     visible = device.buffer(nbytes=4 * inputs.samples * lights)
     event = device.kernel("visibility", "visibility")(
         device.queue, (inputs.samples,), None, buffers.params, buffers.views, buffers.lights,
-        rastered.shadow_depth, bound, rastered.camera_depth, rastered.tri_id, buffers.tri_vertices,
-        buffers.tri_normal, buffers.offsets, bvh.node_bounds, bvh.node_children, np.int32(bvh.root), visible)
+        rastered.shadow_depth, bound.bound, bound.writer, rastered.camera_depth, rastered.tri_id,
+        buffers.tri_vertices, buffers.tri_normal, buffers.tri_vertex_normals, buffers.offsets, bvh.node_bounds,
+        bvh.node_children, np.int32(bvh.root), visible)
     timer.add("visibility", event)
     return visible
