@@ -99,6 +99,20 @@ def test_a_worker_killed_midway_loses_only_its_frame_and_resume_renders_nothing_
     client.wait_for_workers(2, timeout=120)
 
 
+def _running_tasks(dask_worker) -> int:
+    return len(dask_worker.state.all_running_tasks)  # cancelled tasks still running included
+
+
+def _wait_until_idle(client, timeout: float = 120.0) -> None:
+    """Until no worker thread runs a task, cancelled ones included (an interrupted run
+    cancels its futures, but a frame already running finishes and writes its file): a
+    fixed sleep raced such frames on a loaded machine."""
+    deadline = time.monotonic() + timeout
+    while any(client.processing().values()) or any(client.run(_running_tasks).values()):
+        assert time.monotonic() < deadline, f"workers still busy after {timeout:g} s"
+        time.sleep(0.1)
+
+
 def test_an_interrupted_run_resumes_with_the_missing_frames_only(tmp_path, executor):
     scene = load_scene(write_scene(tmp_path, FRAMES), SMALL)
     pattern = tmp_path / "f_{:03d}.png"
@@ -109,7 +123,7 @@ def test_an_interrupted_run_resumes_with_the_missing_frames_only(tmp_path, execu
 
     with pytest.raises(KeyboardInterrupt):
         render_sequence(scene, pattern, on_frame=stop_after_four, executor=executor)
-    time.sleep(1.0)  # a frame in flight on a worker may still land; it then counts as done
+    _wait_until_idle(executor.client)  # a frame in flight on a worker may still land; it then counts as done
     present = {int(p.stem[2:]) for p in tmp_path.glob("f_*.png")}
     assert 4 <= len(present) < FRAMES
     resumed = render_sequence(scene, pattern, executor=executor)
