@@ -251,7 +251,7 @@ def upload(device: Device, inputs: FrameInputs) -> FrameBuffers:
     )
 
 
-def light_pass_inputs(inputs: FrameInputs, light_index: int) -> FrameInputs:
+def light_pass_inputs(inputs: FrameInputs, light_index: int, triangles: int | None = None) -> FrameInputs:
     """The inputs of one light's shadow-map pass, anchored at the light.
 
     Vertices and the light's views are translated (float64, on the host) so the map's
@@ -259,7 +259,8 @@ def light_pass_inputs(inputs: FrameInputs, light_index: int) -> FrameInputs:
     eye space, so they depend only on the geometry and the light. That is what lets a
     render session keep a static light's map while the camera moves (docs/design.md §7). The
     camera view stays in views[0]; the light's views follow from views[1], with depth
-    offsets from 0, and `shadow_texels` counts this light's texels only.
+    offsets from 0, and `shadow_texels` counts this light's texels only. `triangles`: how
+    many of the frame's triangles the pass reads (None: all it carries).
     """
     first, count = inputs.light_views[light_index]
     anchor = inputs.light_anchor_ws[light_index]
@@ -271,7 +272,8 @@ def light_pass_inputs(inputs: FrameInputs, light_index: int) -> FrameInputs:
     light["first_view"] = 1
     if light["type"][0] != structs.LIGHT_DIRECTIONAL:
         light["position"] = 0.0
-    triangles = inputs.scene.geometry.triangles[:len(inputs.tri_vertices) // 3] - anchor  # those the frame carries
+    carried = len(inputs.tri_vertices) // 3
+    triangles = inputs.scene.geometry.triangles[:carried if triangles is None else triangles] - anchor
     vertices = triangles.reshape(-1, 3)
     return replace(
         inputs,

@@ -92,7 +92,7 @@ def raster_shadow_map(device: Device, buffers: FrameBuffers, light_index: int, t
     """Rasterize one light's views from the geometry translated to the light (float64 on
     the host), so the depths do not depend on the eye and a render session keeps a static
     light's map while the camera moves (docs/design.md §5, §7)."""
-    inputs = light_pass_inputs(buffers.inputs, light_index)
+    inputs = light_pass_inputs(buffers.inputs, light_index, buffers.inputs.raster_triangles)  # not a relief's
     light_buffers = replace(buffers, inputs=inputs,
                             views=device.buffer(inputs.views, writable=False),
                             lights=device.buffer(inputs.lights, writable=False),
