@@ -21,8 +21,9 @@ import numpy as np
 
 from .relief import ReliefRecord, world_frame
 
-#: World placements kept per relief (a sweep or a sequence revisits a few).
-PLACEMENTS_KEPT = 4
+#: World placements kept per relief: a still relief needs one, a sweep that moves it revisits a few,
+#: and each costs memory of the order of its triangles (the faces: 32 bytes per triangle).
+PLACEMENTS_KEPT = 2
 
 
 def handle_points(record: ReliefRecord, triangles: np.ndarray) -> np.ndarray:
