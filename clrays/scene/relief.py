@@ -229,6 +229,12 @@ class ReliefRecord:
         """What a frame derives from the relief's texels, kept with it (clrays.scene.relief_frame)."""
         return {}
 
+    def __getstate__(self):
+        """Pickled without the memo (a scene sent to a worker process): it is rebuilt there."""
+        state = dict(self.__dict__)
+        state.pop("memo", None)
+        return state
+
 
 def relief_record(relief: Relief, rows: slice, local_triangles: np.ndarray) -> ReliefRecord:
     """The record of a relief whose triangles (`relief.triangles()`, in its own frame) sit at

@@ -4,6 +4,8 @@ buffers carry, the visibility BVH's kept subtree and boxes; and a relief listed 
 other objects (its triangles moved last) rendering as one listed after them."""
 from __future__ import annotations
 
+import pickle
+
 import numpy as np
 import pytest
 
@@ -109,3 +111,13 @@ def test_relief_listed_first_renders_as_listed_last(tmp_path, shadows):
     error = image_error(first, last)
     assert error.pixels > 1000
     assert error.rmse < 1e-5, error
+
+
+def test_a_pickled_relief_leaves_what_it_keeps_behind(tmp_path):
+    """A scene sent to a worker process does not carry the relief's kept points and faces."""
+    scene = _scene(tmp_path)
+    bounds = scene.geometry.bounds()
+    assert scene.geometry.reliefs[0].memo
+    copy = pickle.loads(pickle.dumps(scene))
+    assert copy.geometry.reliefs[0].memo == {}
+    np.testing.assert_array_equal(np.stack(copy.geometry.bounds()), np.stack(bounds))
