@@ -357,7 +357,8 @@ class StageKeys:
         self.inputs = inputs
         # The triangles (a relief's by its texels and placement, clrays.reuse.geometry_parts),
         # which are pre-warped, and how many the device buffers carry.
-        self.geometry = digest(*geometry_parts(scene.geometry), inputs.raster_triangles, len(inputs.tri_vertices))
+        self.geometry = digest(*geometry_parts(scene.geometry, triangles_only=True), inputs.raster_triangles,
+                               len(inputs.tri_vertices))
         # raster.camera: the eye-space triangles (geometry and eye), the camera view, the sample offsets.
         self.camera = digest("camera", self.geometry, inputs.eye_ws, inputs.views[:1], inputs.offsets)
         # raster.shadow: the geometry, the light's views relative to its anchor and which of

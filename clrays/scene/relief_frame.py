@@ -77,17 +77,19 @@ def relief_farthest(record: ReliefRecord, triangles: np.ndarray, point: np.ndarr
     return placed["farthest"]
 
 
-def relief_digest_parts(record: ReliefRecord, triangles: np.ndarray, albedo: np.ndarray) -> tuple:
+def relief_digest_parts(record: ReliefRecord, triangles: np.ndarray, albedo: np.ndarray | None) -> tuple:
     """What fixes the relief's rows of a Geometry: its texels (and albedo map), digested once
-    per relief, its handle vertices, and its first triangle's albedo (the object's albedo
-    when it has no albedo map). Its normals are its triangles' face normals."""
+    per relief, its handle vertices, and, unless `albedo` is None (a key of the triangles
+    alone), its first triangle's albedo (the object's albedo when it has no albedo map).
+    Its normals are its triangles' face normals."""
     if "digest" not in record.memo:
         from ..reuse import digest
 
         relief = record.relief
         record.memo["digest"] = digest("relief", relief.frame, relief.displacement, relief.solid, relief.albedo,
                                        record.rows.stop - record.rows.start, record.handles, record.handle_points)
-    return (record.rows.start, record.memo["digest"], handle_points(record, triangles), albedo[record.rows.start])
+    return (record.rows.start, record.memo["digest"], handle_points(record, triangles),
+            None if albedo is None else albedo[record.rows.start])
 
 
 def relief_faces(record: ReliefRecord, geometry) -> tuple[np.ndarray, np.ndarray]:

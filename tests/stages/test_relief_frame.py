@@ -68,6 +68,11 @@ def test_geometry_digest_follows_the_relief(tmp_path):
     assert key(_scene(tmp_path, overrides=["objects.2.albedo=[0.7, 0.6, 0.6]"])) != base
     assert key(_scene(tmp_path, overrides=["objects.2.height=0.46"])) != base
     assert key(_scene(tmp_path, overrides=["objects.1.radius=0.31"])) != base
+    # The stages' key of the triangles alone: a new albedo keeps it, a move does not.
+    shape = lambda scene: digest(*geometry_parts(scene.geometry, triangles_only=True))  # noqa: E731
+    assert shape(_scene(tmp_path, overrides=["objects.2.albedo=[0.7, 0.6, 0.6]"])) == shape(_scene(tmp_path))
+    assert shape(_scene(tmp_path, overrides=["objects.2.transform.translate=[0.1, -0.2, 0.31]"])) \
+        != shape(_scene(tmp_path))
 
 
 @pytest.mark.parametrize("shadows, carried", [("map", False), ("pcf", False), ("exact", True), ("filtered", True)])
