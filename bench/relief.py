@@ -8,9 +8,13 @@ The relief is a field of Gaussian bumps without holes (2·1023² = 2 093 058 tri
 1024²) on a floor, under a spot light in fog; the mesh is what `relief_to_mesh` writes
 for it (a PLY). Each setting is rendered once untimed (kernel builds), then 3 times
 alternating relief and mesh; the table gives the median wall time of a frame, the
-median of its stage times (device events and host stages), and the relief pass's and
-the raster's share. The error is `metrics.image_error` against `exact` (of the mesh,
-the same triangles) on `--pixels` pixels of `bench.error_pixels`, depth edges excluded.
+median of its stage times (device events and host stages), the relief pass's, the
+raster's and the visibility BVH's (host) share, and the mesh frame's wall time over the
+relief frame's. A relief keeps what frames derive from its texels (its bounds, digest,
+faces, BVH subtree and boxes: docs/design.md, "What a frame carries"), so the row
+"relief, first" is one frame of the same scene loaded afresh, which derives them. The
+error is `metrics.image_error` against `exact` (of the mesh, the same triangles) on
+`--pixels` pixels of `bench.error_pixels`, depth edges excluded.
 """
 from __future__ import annotations
 
@@ -70,8 +74,8 @@ def main() -> None:
     np.save(folder / "bumps.npy", bump_field(args.texels))
     renderer = Renderer(reuse=False)
     print(f"{width}×{height}, {args.method}, relief {args.texels}² texels; times in ms (median of 3)\n")
-    print("| surface_shadows | frame | wall | stages | relief pass | raster | triangles drawn by raster |")
-    print("|---|---|---|---|---|---|---|")
+    print("| surface_shadows | frame | wall | stages | relief pass | raster | bvh (host) | triangles drawn by raster |")
+    print("|---|---|---|---|---|---|---|---|")
     errors = {}
     for shadows in ("map", "exact"):
         path = folder / f"relief_{shadows}.yaml"
@@ -86,14 +90,20 @@ def main() -> None:
         for _ in range(3):
             for name, scene in scenes.items():
                 runs[name].append(renderer.render(scene, args.method))
+        runs["relief, first"] = [renderer.render(load_scene(path), args.method)]
+        scenes["relief, first"] = scenes["relief"]
         for name, results in runs.items():
             geometry = scenes[name].geometry
             drawn = geometry.count - sum(r.rows.stop - r.rows.start for r in geometry.reliefs)
             print(f"| {shadows} | {name} | {statistics.median(r.wall_ms for r in results):.0f} "
                   f"| {statistics.median(sum(r.stage_ms.values()) for r in results):.0f} "
                   f"| {statistics.median(r.stage_ms.get('relief', 0.0) for r in results):.0f} "
-                  f"| {statistics.median(r.stage_ms.get('raster', 0.0) for r in results):.0f} | {drawn} |", flush=True)
-        errors[shadows] = {name: results[-1].image for name, results in runs.items()}
+                  f"| {statistics.median(r.stage_ms.get('raster', 0.0) for r in results):.0f} "
+                  f"| {statistics.median(r.stage_ms.get('bvh', 0.0) for r in results):.0f} | {drawn} |", flush=True)
+        ratio = (statistics.median(r.wall_ms for r in runs["mesh"])
+                 / statistics.median(r.wall_ms for r in runs["relief"]))
+        print(f"| {shadows} | mesh / relief wall | {ratio:.2f}× | | | | | |", flush=True)
+        errors[shadows] = {name: results[-1].image for name, results in runs.items() if name != "relief, first"}
     ys, xs = error_pixels(width, height, args.pixels)
     mesh_scene = load_scene(folder / "relief_map.yaml", ["objects.1={type: mesh, file: relief.ply, normals: flat, "
                                                          "albedo: [0.7, 0.6, 0.5]}"])

@@ -1,7 +1,7 @@
 /* relief — a relief object drawn into one view by its pre-warp (docs/design.md, "Relief objects").
- * Reads displacement, solid, cell_triangle (the relief's texels), tri_vertices (its height-field
- * triangles), views; writes middle and warped (the two 1D passes), then the view's depth
- * (as_uint(t), atomic min) and, for the camera, the nearest triangle, as raster.cl does.
+ * Reads displacement, solid, cell_triangle (the relief's texels), views; writes middle and warped
+ * (the two 1D passes), then the view's depth (as_uint(t), atomic min) and, for the camera, the
+ * nearest triangle, as raster.cl does.
  *
  *   source texels (rows × cols)     middle (rows × target_cols)      warped (target_rows × target_cols)
  *   u_s = c + ½, v_s = r + ½   --rows-->  u moved to u_i, filled  --columns-->  v moved to v_i, filled
@@ -101,19 +101,35 @@ kernel void relief_warp_columns(global const float4* middle, int rows, int cols,
 /* How far, in target texels, a sample whose warped texels are empty looks for one. */
 #define RELIEF_GAP_SEARCH 16
 
-/* The nearer of the ray's hits with cell (r, c)'s two triangles and *t, in *t and *tri. */
-inline void relief_test_cell(int r, int c, int cols, global const int* cell_triangle,
-                             global const float4* tri_vertices, int first_triangle, float3 origin, float3 dir,
-                             float* t, int* tri)
+/* The relief in the view's space: texel (r, c) sits at corner + (c + ½)·a + (r + ½)·b + d·f
+ * (clrays/scene/relief.py), so the mapping builds the cells it tests from the texels and
+ * needs none of the relief's triangles on the device (docs/design.md, "What a frame carries"). */
+typedef struct {
+    float3 corner, a, b, f;
+    global const float* displacement;
+    int cols;
+} relief_surface_t;
+
+inline float3 relief_point(const relief_surface_t* surface, int r, int c)
 {
-    int first = cell_triangle[r * (cols - 1) + c];
+    return surface->corner + ((float)c + 0.5f) * surface->a + ((float)r + 0.5f) * surface->b
+           + surface->displacement[(size_t)r * surface->cols + c] * surface->f;
+}
+
+/* The nearer of the ray's hits with cell (r, c)'s two triangles and *t, in *t and *tri: the
+ * triangles (p00, p11, p01) and (p00, p10, p11) of `relief_triangles`, ids first_triangle +
+ * the cell's first + 0 or 1. */
+inline void relief_test_cell(int r, int c, global const int* cell_triangle, const relief_surface_t* surface,
+                             int first_triangle, float3 origin, float3 dir, float* t, int* tri)
+{
+    int first = cell_triangle[r * (surface->cols - 1) + c];
     if (first < 0) return;
-    for (int second = 0; second < 2; ++second) {
-        int candidate = first_triangle + first + second;
-        float hit = relief_intersect(origin, dir, tri_vertices[3 * candidate].xyz, tri_vertices[3 * candidate + 1].xyz,
-                                     tri_vertices[3 * candidate + 2].xyz);
-        if (hit < *t) { *t = hit; *tri = candidate; }
-    }
+    float3 p00 = relief_point(surface, r, c), p01 = relief_point(surface, r, c + 1);
+    float3 p10 = relief_point(surface, r + 1, c), p11 = relief_point(surface, r + 1, c + 1);
+    float hit = relief_intersect(origin, dir, p00, p11, p01);
+    if (hit < *t) { *t = hit; *tri = first_triangle + first; }
+    hit = relief_intersect(origin, dir, p00, p10, p11);
+    if (hit < *t) { *t = hit; *tri = first_triangle + first + 1; }
 }
 
 /* The first hit of a view sample's ray with the relief (INFINITY: none), and its triangle.
@@ -128,7 +144,7 @@ inline void relief_test_cell(int r, int c, int cols, global const int* cell_tria
  * the ray. dual_a, dual_b, dual_f: the rows of the inverse of [a b f], so u = dual_a·(X − corner). */
 inline float relief_hit(float3 origin, float3 dir, float4 corner, float4 dual_a, float4 dual_b, float4 dual_f,
                         float u0, float v0, int target_rows, int target_cols, global const float4* warped,
-                        int rows, int cols, global const int* cell_triangle, global const float4* tri_vertices,
+                        int rows, int cols, global const int* cell_triangle, const relief_surface_t* surface,
                         int first_triangle, int* tri)
 {
     float t = INFINITY;
@@ -170,7 +186,7 @@ inline float relief_hit(float3 origin, float3 dir, float4 corner, float4 dual_a,
     r1 = min(r1, r0 + RELIEF_MAX_BOX - 1);
     for (int r = r0; r <= r1; ++r)
         for (int c = c0; c <= c1; ++c)
-            relief_test_cell(r, c, cols, cell_triangle, tri_vertices, first_triangle, origin, dir, &t, tri);
+            relief_test_cell(r, c, cell_triangle, surface, first_triangle, origin, dir, &t, tri);
     /* The ray's trace on the base plane, in cell coordinates (u_s − ½, v_s − ½), walked cell by
      * cell (Amanatides–Woo) over 2·RELIEF_CORRIDOR around the point nearest the box's centre. */
     float2 start = (float2)(dot(dual_a.xyz, origin - corner.xyz), dot(dual_b.xyz, origin - corner.xyz)) - 0.5f;
@@ -189,7 +205,7 @@ inline float relief_hit(float3 origin, float3 dir, float4 corner, float4 dual_a,
                            (unit.y > 0.0f ? (float)cell.y + 1.0f - from.y : from.y - (float)cell.y) * delta.y);
     for (float walked = 0.0f; walked <= walk;) {
         if (cell.x >= 0 && cell.x <= cols - 2 && cell.y >= 0 && cell.y <= rows - 2)
-            relief_test_cell(cell.y, cell.x, cols, cell_triangle, tri_vertices, first_triangle, origin, dir, &t, tri);
+            relief_test_cell(cell.y, cell.x, cell_triangle, surface, first_triangle, origin, dir, &t, tri);
         if (next.x < next.y) { walked = next.x; next.x += delta.x; cell.x += direction.x; }
         else { walked = next.y; next.y += delta.y; cell.y += direction.y; }
     }
@@ -199,8 +215,8 @@ inline float relief_hit(float3 origin, float3 dir, float4 corner, float4 dual_a,
 #define RELIEF_MAP_ARGS global const view_t* views, int view_index, global const float2* offsets,              \
                         int sample_count, float4 corner, float4 dual_a, float4 dual_b, float4 dual_f,        \
                         float u0, float v0, int target_rows, int target_cols, global const float4* warped,  \
-                        int rows, int cols, global const int* cell_triangle, global const float4* tri_vertices, \
-                        int first_triangle
+                        int rows, int cols, global const int* cell_triangle, global const float* displacement, \
+                        float4 axis_a, float4 axis_b, float4 axis_f, int first_triangle
 
 /* Mapping, one work-item per view sample (relief_hit); BODY sees idx, t and tri. */
 #define FOR_THE_RELIEF_HIT(BODY)                                                                      \
@@ -211,8 +227,9 @@ inline float relief_hit(float3 origin, float3 dir, float4 corner, float4 dual_a,
     float3 origin, dir;                                                                               \
     view_ray(view, view_screen(view, pixel % view->width, pixel / view->width, offsets[s]), &origin, &dir); \
     int tri;                                                                                          \
+    relief_surface_t surface = {corner.xyz, axis_a.xyz, axis_b.xyz, axis_f.xyz, displacement, cols};   \
     float t = relief_hit(origin, dir, corner, dual_a, dual_b, dual_f, u0, v0, target_rows, target_cols, warped, \
-                         rows, cols, cell_triangle, tri_vertices, first_triangle, &tri);              \
+                         rows, cols, cell_triangle, &surface, first_triangle, &tri);                  \
     if (tri < 0) return;                                                                              \
     int idx = view->depth_offset + id;                                                                \
     BODY

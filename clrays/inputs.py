@@ -20,7 +20,8 @@ from .reference.radiometry import effective_far, lamp_radius
 from .scene.costs import with_derived_sizes
 from .stages.cube_faces import sampled_cube_faces
 from .stages.light_texture import pack_light_textures
-from .stages.relief import place_reliefs
+from .scene.relief_frame import relief_faces
+from .stages.relief import carries_relief_triangles, place_reliefs
 from .scene.model import DirectionalLight, Scene, SpotLight
 
 #: Spot lights wider than this use a cube map: a single perspective map of a wide
@@ -69,7 +70,7 @@ class FrameInputs:
     lights: np.ndarray  # light_t[]
     params: np.ndarray  # frame_t
     offsets: np.ndarray  # (spp, 2) float32 sample offsets
-    tri_vertices: np.ndarray  # (3T, 4) float32, eye space
+    tri_vertices: np.ndarray  # (3T, 4) float32, eye space (a pre-warped relief's only where carries_relief_triangles)
     tri_normal: np.ndarray  # (T, 4) float32, unit geometric normals; w = 1 where the triangle is shaded smooth
     tri_vertex_normals: np.ndarray  # (3T, 4) float32, the shading normal at each vertex; (0, 4) when none is smooth
     tri_albedo: np.ndarray  # (T, 4) float32
@@ -102,7 +103,12 @@ def frame_inputs(scene: Scene) -> FrameInputs:
     scene, reliefs, raster_triangles = place_reliefs(scene)  # reliefs' triangles last, for the pre-warp
     eye_ws = np.asarray(scene.camera.position, dtype=np.float64)
     image, camera, medium = scene.image, scene.camera, scene.medium
-    tris = scene.geometry.triangles - eye_ws  # float64 translation, then float32
+    # A relief drawn by its pre-warp needs no vertices on the device (relief.cl builds its
+    # cells from the texels), only its faces' normals and albedo, kept with it; only the
+    # exact and filtered surface shadows read its vertices (docs/design.md, "What a frame carries").
+    drawn = scene.geometry.count if raster_triangles is None else raster_triangles
+    carried = scene.geometry.count if carries_relief_triangles(scene) else drawn
+    tris = scene.geometry.triangles[:carried] - eye_ws  # float64 translation, then float32
     lo, hi = scene.geometry.bounds()  # world space: the directional maps must not depend on the eye
 
     right, up, forward = camera_basis(camera)
@@ -178,15 +184,21 @@ def frame_inputs(scene: Scene) -> FrameInputs:
                                  "filtered": structs.SURFACE_SHADOWS_FILTERED}[scene.render.surface_shadows]
     params["pcf"] = scene.render.pcf if scene.render.surface_shadows == "pcf" else 0
 
-    normals = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    normals = np.cross(tris[:drawn, 1] - tris[:drawn, 0], tris[:drawn, 2] - tris[:drawn, 0])
     length = np.linalg.norm(normals, axis=1, keepdims=True)
     normals = np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
     pad = lambda a: np.concatenate([a, np.zeros((len(a), 1))], axis=1).astype(np.float32)  # noqa: E731
-    smooth = scene.geometry.smooth
+    smooth = scene.geometry.smooth[:drawn]  # a relief is flat
     tri_normal = pad(normals)
     tri_normal[:, 3] = smooth  # the shade kernel's flag: interpolate the vertex normals
-    # Normals do not move with eye space's translation; a frame without smooth triangles uploads none.
-    vertex_normals = scene.geometry.normals.reshape(-1, 3) if smooth.any() else np.zeros((0, 3))
+    tri_albedo = pad(scene.geometry.albedo[:drawn])
+    if drawn < scene.geometry.count:  # the reliefs' faces, after the others (place_reliefs)
+        faces = [relief_faces(record, scene.geometry) for record in scene.geometry.reliefs]
+        tri_normal = np.concatenate([tri_normal] + [normal for normal, _ in faces])
+        tri_albedo = np.concatenate([tri_albedo] + [albedo for _, albedo in faces])
+    # Normals do not move with eye space's translation; a frame without smooth triangles uploads
+    # none, and shade reads them for smooth triangles only, none of which is a relief's.
+    vertex_normals = scene.geometry.normals[:drawn].reshape(-1, 3) if smooth.any() else np.zeros((0, 3))
     return FrameInputs(
         scene=scene, eye_ws=eye_ws,
         views=np.array(views, dtype=structs.view_dtype),
@@ -196,7 +208,7 @@ def frame_inputs(scene: Scene) -> FrameInputs:
         tri_vertices=pad(tris.reshape(-1, 3)),
         tri_normal=tri_normal,
         tri_vertex_normals=pad(vertex_normals),
-        tri_albedo=pad(scene.geometry.albedo),
+        tri_albedo=tri_albedo,
         shadow_texels=texels,
         light_anchor_ws=np.array(anchors, dtype=np.float64).reshape(-1, 3),
         view_needed=np.array(needed, dtype=bool),
@@ -239,7 +251,7 @@ def upload(device: Device, inputs: FrameInputs) -> FrameBuffers:
     )
 
 
-def light_pass_inputs(inputs: FrameInputs, light_index: int) -> FrameInputs:
+def light_pass_inputs(inputs: FrameInputs, light_index: int, triangles: int | None = None) -> FrameInputs:
     """The inputs of one light's shadow-map pass, anchored at the light.
 
     Vertices and the light's views are translated (float64, on the host) so the map's
@@ -247,7 +259,8 @@ def light_pass_inputs(inputs: FrameInputs, light_index: int) -> FrameInputs:
     eye space, so they depend only on the geometry and the light. That is what lets a
     render session keep a static light's map while the camera moves (docs/design.md §7). The
     camera view stays in views[0]; the light's views follow from views[1], with depth
-    offsets from 0, and `shadow_texels` counts this light's texels only.
+    offsets from 0, and `shadow_texels` counts this light's texels only. `triangles`: how
+    many of the frame's triangles the pass reads (None: all it carries).
     """
     first, count = inputs.light_views[light_index]
     anchor = inputs.light_anchor_ws[light_index]
@@ -259,7 +272,8 @@ def light_pass_inputs(inputs: FrameInputs, light_index: int) -> FrameInputs:
     light["first_view"] = 1
     if light["type"][0] != structs.LIGHT_DIRECTIONAL:
         light["position"] = 0.0
-    triangles = inputs.scene.geometry.triangles - anchor
+    carried = len(inputs.tri_vertices) // 3
+    triangles = inputs.scene.geometry.triangles[:carried if triangles is None else triangles] - anchor
     vertices = triangles.reshape(-1, 3)
     return replace(
         inputs,

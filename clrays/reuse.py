@@ -63,8 +63,25 @@ def scene_digest(scene, *, render: bool = True) -> bytes:
     animation, which only make other scenes). `render=False` leaves out the render
     settings, for references whose own settings are given separately."""
     return digest(scene.image, scene.camera, scene.lights, scene.medium, scene.background,
-                  scene.geometry.triangles, scene.geometry.albedo, scene.geometry.normals, scene.geometry.smooth,
-                  scene.render if render else None)
+                  *geometry_parts(scene.geometry), scene.render if render else None)
+
+
+def geometry_parts(geometry, triangles_only: bool = False) -> tuple:
+    """What fixes a Geometry's triangles, albedo and normals (`triangles_only`: its
+    triangles), to digest: its arrays; a relief's rows by its texels and placement instead
+    (clrays.scene.relief_frame), so a frame does not hash its millions of triangles."""
+    if not geometry.reliefs:
+        if triangles_only:
+            return (geometry.triangles,)
+        return geometry.triangles, geometry.albedo, geometry.normals, geometry.smooth
+    from .scene.relief_frame import other_rows, relief_digest_parts
+
+    albedo = None if triangles_only else geometry.albedo
+    parts = [relief_digest_parts(record, geometry.triangles, albedo) for record in geometry.reliefs]
+    parts += [(rows.start, geometry.triangles[rows]) if triangles_only else
+              (rows.start, geometry.triangles[rows], geometry.albedo[rows], geometry.normals[rows],
+               geometry.smooth[rows]) for rows in other_rows(geometry.count, geometry.reliefs)]
+    return ("reliefs", geometry.count, tuple(parts))
 
 
 class StageCache:

@@ -35,7 +35,7 @@ from .device import Device, StageTimer
 from .errors import ClraysError
 from .inputs import FrameBuffers, FrameInputs, frame_inputs, upload
 from .reference.radiometry import effective_far
-from .reuse import COMPUTED, REUSED, Reuse, StageCache, StageRecord, digest, scene_digest
+from .reuse import COMPUTED, REUSED, Reuse, StageCache, StageRecord, digest, geometry_parts, scene_digest
 from .scene.costs import with_derived_sizes
 from .scene.model import METHODS, Render, Scene
 from .stages.integrand import integrand, integrand_table_size
@@ -357,7 +357,10 @@ class StageKeys:
     def __init__(self, inputs: FrameInputs):
         scene = inputs.scene
         self.inputs = inputs
-        self.geometry = digest(scene.geometry.triangles, inputs.raster_triangles)  # + which are pre-warped
+        # The triangles (a relief's by its texels and placement, clrays.reuse.geometry_parts),
+        # which are pre-warped, and how many the device buffers carry.
+        self.geometry = digest(*geometry_parts(scene.geometry, triangles_only=True), inputs.raster_triangles,
+                               len(inputs.tri_vertices))
         # raster.camera: the eye-space triangles (geometry and eye), the camera view, the sample offsets.
         self.camera = digest("camera", self.geometry, inputs.eye_ws, inputs.views[:1], inputs.offsets)
         # raster.shadow: the geometry, the light's views relative to its anchor and which of

@@ -86,8 +86,10 @@ def scene_size(scene) -> float:
     """The diagonal of the bounds of the scene's triangles, the camera position and every
     point or spot light's position, in scene units (0 only for a scene with no triangles
     whose camera sits at its only light)."""
-    points = [scene.geometry.triangles.reshape(-1, 3), np.reshape(scene.camera.position, (1, 3))]
+    points = [np.reshape(scene.camera.position, (1, 3))]
     points += [np.reshape(light.position, (1, 3)) for light in scene.lights if not isinstance(light, DirectionalLight)]
+    if scene.geometry.count:  # the triangles' bounds: a relief's from its texels (Geometry.bounds)
+        points += [np.stack(scene.geometry.bounds())]
     points = np.concatenate(points).astype(np.float64)
     return float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
 
@@ -96,9 +98,10 @@ def effective_far(scene) -> float:
     """Where every method ends the rays that hit nothing (module docstring, Far): camera.far,
     clamped where going further changes no float32 radiance."""
     eye = np.asarray(scene.camera.position, dtype=np.float64)
-    points = [scene.geometry.triangles.reshape(-1, 3), eye.reshape(1, 3)]
+    points = [eye.reshape(1, 3)]
     points += [np.reshape(light.position, (1, 3)) for light in scene.lights if not isinstance(light, DirectionalLight)]
-    reach = float(np.sqrt(((np.concatenate(points) - eye) ** 2).sum(axis=1).max()))
+    reach = max(float(np.sqrt(((np.concatenate(points) - eye) ** 2).sum(axis=1).max())),
+                scene.geometry.farthest_from(eye))  # a relief's part from its texels
     sigma_t = np.asarray(scene.medium.sigma_t, dtype=np.float64)
     optical = FAR_OPTICAL_DEPTH / float(sigma_t[sigma_t > 0].min()) if (sigma_t > 0).any() else 0.0
     # A light of any power sits within `reach`, so what lies a further `optical` away is

@@ -195,11 +195,33 @@ class Geometry:
         return np.ones((self.count, 3)) if self.opacity is None else self.opacity
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """Axis-aligned bounds (lo, hi); a unit box at the origin when there are no triangles."""
+        """Axis-aligned bounds (lo, hi); a unit box at the origin when there are no triangles.
+        A relief's part comes from its texels (clrays.scene.relief_frame), not its triangles."""
         if self.count == 0:
             return np.full(3, -1.0), np.full(3, 1.0)
-        pts = self.triangles.reshape(-1, 3)
-        return pts.min(axis=0), pts.max(axis=0)
+        if not self.reliefs:
+            pts = self.triangles.reshape(-1, 3)
+            return pts.min(axis=0), pts.max(axis=0)
+        from .relief_frame import other_rows, relief_bounds
+
+        parts = [relief_bounds(record, self.triangles) for record in self.reliefs]
+        parts += [(pts.min(axis=0), pts.max(axis=0)) for rows in other_rows(self.count, self.reliefs)
+                  for pts in [self.triangles[rows].reshape(-1, 3)]]
+        return np.min([lo for lo, _ in parts], axis=0), np.max([hi for _, hi in parts], axis=0)
+
+    def farthest_from(self, point) -> float:
+        """Distance from `point` to the farthest triangle vertex (0 without triangles); a
+        relief's part from its texels, as `bounds`."""
+        point = np.asarray(point, dtype=np.float64)
+        if not self.reliefs:
+            squared = ((self.triangles.reshape(-1, 3) - point) ** 2).sum(axis=1)
+            return float(np.sqrt(squared.max())) if len(squared) else 0.0
+        from .relief_frame import other_rows, relief_farthest
+
+        squared = [relief_farthest(record, self.triangles, point) for record in self.reliefs]
+        squared += [float(((self.triangles[rows].reshape(-1, 3) - point) ** 2).sum(axis=1).max())
+                    for rows in other_rows(self.count, self.reliefs)]
+        return float(np.sqrt(max(squared)))
 
 
 @dataclass(frozen=True)

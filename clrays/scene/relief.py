@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import io
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -222,6 +223,17 @@ class ReliefRecord:
     @property
     def shape(self) -> tuple[int, int]:
         return self.relief.displacement.shape
+
+    @cached_property
+    def memo(self) -> dict:
+        """What a frame derives from the relief's texels, kept with it (clrays.scene.relief_frame)."""
+        return {}
+
+    def __getstate__(self):
+        """Pickled without the memo (a scene sent to a worker process): it is rebuilt there."""
+        state = dict(self.__dict__)
+        state.pop("memo", None)
+        return state
 
 
 def relief_record(relief: Relief, rows: slice, local_triangles: np.ndarray) -> ReliefRecord:

@@ -75,19 +75,17 @@ def raster_camera(device: Device, buffers: FrameBuffers, timer: StageTimer) -> t
         nearest = device.buffer(nbytes=8 * samples)
         device.fill(nearest, np.uint64((int(structs.DEPTH_EMPTY) << 32) | 0xFFFFFFFF), 8 * samples, timer, "raster")
         _launch(device, buffers, "raster_nearest", defines, 0, buffers.offsets, spp, (nearest,), timer)
-        reliefs.map("relief_map_nearest", defines, buffers.views, inputs.views, 0, buffers.offsets, spp,
-                    buffers.tri_vertices, (nearest,))
+        reliefs.map("relief_map_nearest", defines, buffers.views, inputs.views, 0, buffers.offsets, spp, (nearest,))
         timer.add("raster", device.kernel("raster", "raster_split", defines)(
             device.queue, (samples,), None, nearest, np.int32(samples), camera_depth, tri_id))
         return camera_depth, tri_id
     device.fill(camera_depth, structs.DEPTH_EMPTY, 4 * samples, timer, "raster")
     device.fill(tri_id, np.int32(-1), 4 * samples, timer, "raster")
     _rasterize(device, buffers, 0, buffers.offsets, spp, camera_depth, timer)
-    reliefs.map("relief_map_depth", None, buffers.views, inputs.views, 0, buffers.offsets, spp, buffers.tri_vertices,
-                (camera_depth,))
+    reliefs.map("relief_map_depth", None, buffers.views, inputs.views, 0, buffers.offsets, spp, (camera_depth,))
     _launch(device, buffers, "raster_resolve", None, 0, buffers.offsets, spp, (camera_depth, tri_id), timer)
     reliefs.map("relief_map_resolve", None, buffers.views, inputs.views, 0, buffers.offsets, spp,
-                buffers.tri_vertices, (camera_depth, tri_id))
+                (camera_depth, tri_id))
     return camera_depth, tri_id
 
 
@@ -105,7 +103,7 @@ def raster_shadow_map(device: Device, buffers: FrameBuffers, light_index: int, t
     """Rasterize one light's views from the geometry translated to the light (float64 on
     the host), so the depths do not depend on the eye and a render session keeps a static
     light's map while the camera moves (docs/design.md §5, §7)."""
-    inputs = light_pass_inputs(buffers.inputs, light_index)
+    inputs = light_pass_inputs(buffers.inputs, light_index, buffers.inputs.raster_triangles)  # not a relief's
     light_buffers = replace(buffers, inputs=inputs,
                             views=device.buffer(inputs.views, writable=False),
                             lights=device.buffer(inputs.lights, writable=False),
@@ -118,8 +116,7 @@ def raster_shadow_map(device: Device, buffers: FrameBuffers, light_index: int, t
     for view_index in range(1, len(inputs.views)):
         if inputs.view_needed[view_index]:  # a cube face the frame cannot read stays empty
             _rasterize(device, light_buffers, view_index, centre, 1, depth, timer)
-            reliefs.map("relief_map_depth", None, light_buffers.views, inputs.views, view_index, centre, 1,
-                        light_buffers.tri_vertices, (depth,))
+            reliefs.map("relief_map_depth", None, light_buffers.views, inputs.views, view_index, centre, 1, (depth,))
     return ShadowMap(depth, inputs.shadow_texels, inputs.scene.geometry.count)
 
 

@@ -18,7 +18,7 @@ from .. import structs
 from ..device import Device, StageTimer
 from ..reference.prewarp import Viewer, epipole, prewarp_coefficients, segment_order
 from ..scene.model import Scene
-from ..scene.relief import ReliefFrame, world_frame
+from ..scene.relief import ReliefFrame, ReliefRecord, world_frame
 
 #: How far outside its base rectangle a warped texel is still drawn, in rectangle sizes:
 #: a grazing view stretches the warp towards the horizon, and the target grid (and its
@@ -40,24 +40,47 @@ class PlacedRelief:
 
 def place_reliefs(scene: Scene) -> tuple[Scene, tuple[PlacedRelief, ...], int | None]:
     """With `render.relief: prewarp`, the scene with its reliefs' triangles moved after all
-    the others (same triangles, another order), the reliefs placed, and how many triangles
-    the raster stage draws itself; the scene unchanged, (), None otherwise."""
+    the others (same triangles, another order; nothing moves where they are last already,
+    as a scene that lists its reliefs last has them), the reliefs placed, and how many
+    triangles the raster stage draws itself; the scene unchanged, (), None otherwise."""
     geometry = scene.geometry
     if scene.render.relief != "prewarp" or not geometry.reliefs:
         return scene, (), None
-    is_relief = np.zeros(geometry.count, bool)
+    drawn = geometry.count - sum(record.rows.stop - record.rows.start for record in geometry.reliefs)
+    records, start = [], drawn
     for record in geometry.reliefs:
-        is_relief[record.rows] = True
-    order = np.concatenate([np.flatnonzero(~is_relief)] + [np.arange(geometry.count)[r.rows] for r in geometry.reliefs])
-    placed, start = [], int((~is_relief).sum())
-    for record in geometry.reliefs:
+        rows = slice(start, start + record.rows.stop - record.rows.start)
+        records.append(record if rows == record.rows else _moved_record(record, rows))
+        start = rows.stop
+    if any(moved is not record for moved, record in zip(records, geometry.reliefs)):
+        is_relief = np.zeros(geometry.count, bool)
+        for record in geometry.reliefs:
+            is_relief[record.rows] = True
+        order = np.concatenate([np.flatnonzero(~is_relief)]
+                               + [np.arange(geometry.count)[r.rows] for r in geometry.reliefs])
+        geometry = replace(geometry, triangles=geometry.triangles[order], albedo=geometry.albedo[order],
+                           object_id=geometry.object_id[order], normals=geometry.normals[order],
+                           smooth=geometry.smooth[order], reliefs=tuple(records))
+    placed = []
+    for record in records:
         frame, displacement = world_frame(record, geometry.triangles)
-        placed.append(PlacedRelief(frame, displacement, record.relief.solid, record.cell_triangle, start))
-        start += record.rows.stop - record.rows.start
-    moved = replace(geometry, triangles=geometry.triangles[order], albedo=geometry.albedo[order],
-                    object_id=geometry.object_id[order], normals=geometry.normals[order],
-                    smooth=geometry.smooth[order], reliefs=())
-    return replace(scene, geometry=moved), tuple(placed), int((~is_relief).sum())
+        placed.append(PlacedRelief(frame, displacement, record.relief.solid, record.cell_triangle, record.rows.start))
+    return replace(scene, geometry=geometry), tuple(placed), drawn
+
+
+def _moved_record(record: ReliefRecord, rows: slice) -> ReliefRecord:
+    """The record at other rows, sharing what frames derived from its texels (the memo holds
+    nothing that depends on where its rows are)."""
+    moved = replace(record, rows=rows)
+    moved.__dict__["memo"] = record.memo
+    return moved
+
+
+def carries_relief_triangles(scene: Scene) -> bool:
+    """Whether a frame's triangle buffers hold its reliefs' triangles besides the pre-warp:
+    the exact surface shadows' BVH and bound map, and the filtered shadows' depth range,
+    read them (docs/design.md, "What a frame carries"). Otherwise they are left out."""
+    return scene.render.surface_shadows in ("exact", "filtered") and bool(scene.lights)
 
 
 @dataclass
@@ -160,9 +183,10 @@ class ReliefDrawer:
         return self._warps[key]
 
     def map(self, kernel: str, defines, views_buffer, views: np.ndarray, view_index: int, offsets,
-            sample_count: int, tri_vertices, targets: tuple) -> None:
+            sample_count: int, targets: tuple) -> None:
         """Every relief mapped onto view `view_index` by `kernel` (relief_map_depth,
-        relief_map_resolve or relief_map_nearest) into `targets`."""
+        relief_map_resolve or relief_map_nearest) into `targets`: the cells it tests are
+        built from the texels, so the relief's triangles need not be on the device."""
         view = views[view_index]
         for index, (placed, frame) in enumerate(self.reliefs):
             warp = self.warp(index, view)
@@ -176,6 +200,6 @@ class ReliefDrawer:
                 np.int32(sample_count), _vector(frame.corner), _vector(dual[0]), _vector(dual[1]),
                 _vector(dual[2]), np.float32(warp.u0), np.float32(warp.v0),
                 np.int32(warp.target_rows), np.int32(warp.target_cols), warp.warped, np.int32(rows),
-                np.int32(cols), self._texel_buffers(index)[2], tri_vertices, np.int32(placed.first_triangle),
-                *targets))
+                np.int32(cols), self._texel_buffers(index)[2], self._texel_buffers(index)[0], _vector(frame.a),
+                _vector(frame.b), _vector(frame.f), np.int32(placed.first_triangle), *targets))
 

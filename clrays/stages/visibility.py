@@ -19,6 +19,7 @@ import numpy as np
 
 from .. import structs
 from ..bvh import Bvh, BvhTopology, bvh_topology, refit_bvh
+from ..relief_bvh import JoinedTopology, geometry_bvh_topology, refit_frame_bvh
 from ..device import Device, StageTimer
 from ..inputs import FrameBuffers, FrameInputs, light_pass_inputs
 from .raster import RasterResult
@@ -45,7 +46,8 @@ def bvh_topology_of(inputs: FrameInputs, timer: StageTimer) -> BvhTopology:
     """The BVH's tree over the world-space triangles (host, timed as `bvh`): it depends on
     the geometry alone, so a session keeps it while the camera moves."""
     start = time.perf_counter()
-    topology = bvh_topology(inputs.scene.geometry.triangles)
+    geometry = inputs.scene.geometry  # a relief's subtree is kept with it (clrays.relief_bvh)
+    topology = geometry_bvh_topology(geometry) if geometry.reliefs else bvh_topology(geometry.triangles)
     timer.add_host("bvh", (time.perf_counter() - start) * 1e3)
     return topology
 
@@ -54,7 +56,8 @@ def upload_bvh(device: Device, inputs: FrameInputs, topology: BvhTopology, timer
     """Refit `topology` around the eye-space triangles the device intersects, so its boxes
     hold exactly the float32 vertices the rays meet (host, timed as `bvh`), and upload it."""
     start = time.perf_counter()
-    bvh: Bvh = refit_bvh(topology, inputs.tri_vertices[:, :3].reshape(-1, 3, 3))
+    bvh: Bvh = (refit_frame_bvh(topology, inputs) if isinstance(topology, JoinedTopology)  # a relief's boxes kept
+                else refit_bvh(topology, inputs.tri_vertices[:, :3].reshape(-1, 3, 3)))
     milliseconds = (time.perf_counter() - start) * 1e3
     timer.add_host("bvh", milliseconds)
     return DeviceBvh(device.buffer(bvh.node_bounds, writable=False),
