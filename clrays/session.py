@@ -7,7 +7,9 @@ and walks every camera sample's rows with `pixel`.)
     raster → raymarch → visibility → shade                                 (method `raymarch`)
     raster → rectify → integrand → volume_moments → visibility → shade     (method `moments`)
 
-(`visibility` runs with `render.surface_shadows: exact`, the default; `shadow_filter`
+(A scene with translucent objects adds `transparency` after raster: the layers in front of
+the opaque depth, the fog up to each, their composite, which shade reads; docs/design.md §10.
+`visibility` runs with `render.surface_shadows: exact`, the default; `shadow_filter`
 takes its place with `surface_shadows: filtered`; a textured light adds `light_texture`
 between integrand and traverse, docs/light-textures.md.)
 
@@ -50,6 +52,7 @@ from .stages.sampling import SampleCounts, epipolar_sampling
 from .stages.shade import shade
 from .stages.shadow_filter import depth_ranges, frame_filter, shadow_filter, shadow_filter_moments
 from .stages.traverse import traverse
+from .stages.transparency import Layers, composite, opaque_camera_vertices, translucent_layers, translucent_triangles
 from .stages.volume_moments import volume_moments
 from .stages.visibility import bound_atlas, bvh_topology_of, upload_bvh, visibility, visibility_bound
 
@@ -149,6 +152,7 @@ class Renderer:
         keys = StageKeys(buffers.inputs)
         bvh = self._bvh(buffers, keys, reuse, timer)  # (visibility's BVH, on the host before the device is busy)
         rastered, maps = self._raster(buffers, keys, reuse, timer)  # raster: camera depth and ids, shadow maps
+        layers = self._layers(buffers, rastered, reuse, timer)  # transparency: translucent layers before the opaque depth
         textures, samples = [], None
         scatter = device.buffer(nbytes=16 * buffers.inputs.samples)  # in-scattered radiance per camera sample
         device.fill(scatter, np.float32(0), 16 * buffers.inputs.samples)
@@ -157,10 +161,15 @@ class Renderer:
         elif method == "raymarch":
             reuse.record.note("raymarch", COMPUTED)
             raymarch(device, buffers, rastered, scatter, timer)  # raymarch: the brute-force reference
+            if layers is not None:  # and up to each translucent layer
+                layers.add_in_scatter(device, timer, lambda r, s, t: raymarch(device, buffers, r, s, t))
         else:
             for index, light in enumerate(scene.lights):
                 if eye_in_lamp(scene, light):  # d_el → 0: no epipolar frame, nothing visible is shadowed
                     lamp_in_scatter(device, buffers, rastered, light, scatter, timer)
+                    if layers is not None:
+                        layers.add_in_scatter(device, timer, lambda r, s, t, light=light: lamp_in_scatter(
+                            device, buffers, r, light, s, t))
                     continue
                 epipolar = self._rectify(buffers, rastered, maps, keys, index, reuse, timer)  # rectify: S[α, γ]
                 if epipolar is None:  # no visible ray has any extent in γ
@@ -172,6 +181,9 @@ class Renderer:
                                      lambda: integrand(device, scene, light, epipolar, timer), per_light=True)
                 if method == "moments":  # volume_moments: prefix sums of moments, one reconstruction per ray
                     volume_moments(device, buffers, rastered, epipolar, tables, scatter, timer)
+                    if layers is not None:
+                        layers.add_in_scatter(device, timer, lambda r, s, t, e=epipolar, i=tables: volume_moments(
+                            device, buffers, r, e, i, s, t))
                     continue
                 texture = reuse.stage("light_texture", keys.light_texture(index, epipolar),  # texture: T·Γ_i prefix sums
                                       lambda: light_texture(device, buffers, index, epipolar, tables, timer),
@@ -181,11 +193,25 @@ class Renderer:
                     samples = counts if samples is None else samples + counts
                 else:  # per camera sample; and a light that casts no shadow, whose 16 slices are too few to sample
                     traverse(device, buffers, rastered, epipolar, tables, scatter, timer, texture)
+                if layers is not None:  # each translucent layer's own rays walk the same trees
+                    layers.add_in_scatter(device, timer, lambda r, s, t, e=epipolar, i=tables, x=texture: traverse(
+                        device, buffers, r, e, i, s, t, x))
             reuse.record.note(VOLUME_STAGES[method][-1], COMPUTED)
         visible = self._visibility(buffers, rastered, keys, reuse, timer, bvh)  # visibility: exact surface shadows
-        image = shade(device, buffers, rastered, scatter, timer, visible)  # shade: surfaces, attenuation, + scatter
+        # transparency: the layers' surfaces and fog composited in front of the opaque samples
+        transparency = composite(device, buffers, rastered, layers, timer) if layers is not None else None
+        image = shade(device, buffers, rastered, scatter, timer, visible, transparency)  # shade: surfaces, attenuation, + scatter
         reuse.record.note("shade", COMPUTED)
         return image, tuple(reuse.record.status()), tuple(textures), samples
+
+    def _layers(self, buffers: FrameBuffers, rastered: RasterResult, reuse: Reuse, timer: StageTimer) -> Layers | None:
+        """The transparency stage's layers (clrays.stages.transparency); None, and the stage
+        skipped, when every object is opaque: then nothing of it runs."""
+        if not buffers.inputs.scene.geometry.translucent:
+            reuse.skip("transparency")
+            return None
+        reuse.record.note("transparency", COMPUTED)
+        return translucent_layers(self.device, buffers, rastered, timer)
 
     def _bvh(self, buffers: FrameBuffers, keys: StageKeys, reuse: Reuse, timer: StageTimer):
         """The visibility stage's BVH, or None when the stage does not run: its tree kept
@@ -244,8 +270,18 @@ class Renderer:
         triangle ids, and each light's shadow map (anchored at the light, so a moving
         camera keeps it). Returns the frame's RasterResult and the per-light maps."""
         device = self.device
-        camera_depth, tri_id = reuse.stage("raster.camera", keys.camera,
-                                           lambda: raster_camera(device, buffers, timer))
+        camera_buffers, camera_key = buffers, keys.camera
+        if buffers.inputs.scene.geometry.translucent:  # the camera depth is the opaque one (stages/transparency.py)
+            camera_buffers = replace(buffers, tri_vertices=None)
+            camera_key = digest(keys.camera, "opaque", translucent_triangles(buffers.inputs.scene))
+
+        def camera():
+            if camera_buffers.tri_vertices is None:
+                opaque = device.buffer(opaque_camera_vertices(buffers.inputs), writable=False)
+                return raster_camera(device, replace(camera_buffers, tri_vertices=opaque), timer)
+            return raster_camera(device, camera_buffers, timer)
+
+        camera_depth, tri_id = reuse.stage("raster.camera", camera_key, camera)
         maps = [reuse.stage("raster.shadow", keys.shadow[index],
                             lambda index=index: raster_shadow_map(device, buffers, index, timer), per_light=True)
                 for index in range(len(buffers.inputs.scene.lights))]

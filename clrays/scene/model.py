@@ -34,6 +34,10 @@ TEXTURE_WRAPS = ("repeat", "clamp")  # a directional light's texture beyond its 
 # Filtered surface shadows (`render.shadow_filter.type`, docs/design.md §9): the map's test, PCF, or a
 # reconstruction from prefiltered moments (2 for VSM, 4 for the moment shadow maps).
 SHADOW_FILTERS = ("hard", "pcf", "vsm", "msm_hamburger", "msm_hausdorff")
+# Translucent surfaces seen by the camera (`render.transparency.type`, docs/design.md §10): the K
+# nearest layers in order, or moment-based order-independent transparency (MBOIT).
+TRANSPARENCY_TYPES = ("depth_peeling", "moments")
+TRANSPARENCY_WARPS = ("none", "log")  # MBOIT's depth warp before the moments are taken
 PHASE_TYPES = ("isotropic", "hg")
 NORMALS = ("smooth", "flat")  # a mesh's shading normals: interpolated vertex normals, or each face's own
 # How the raster stage draws relief objects: by their pre-warp, or as their triangles (the same surface).
@@ -135,6 +139,18 @@ class ShadowFilter:
 
 
 @dataclass(frozen=True)
+class Transparency:
+    """`render.transparency`: how the camera composites translucent surfaces (docs/design.md §10)."""
+
+    type: str = "depth_peeling"  # one of TRANSPARENCY_TYPES
+    layers: int = 8  # depth_peeling: the nearest layers composited; those behind them are dropped
+    warp: str = "log"  # moments: one of TRANSPARENCY_WARPS
+    # moments: weight pulling the normalised moments towards those of depth 0.5 (cl/moments.h),
+    # measured on scenes/glass_row.yaml (bench/RESULTS.md, "Translucent objects: camera side").
+    moment_bias: float = 5e-5
+
+
+@dataclass(frozen=True)
 class Render:
     method: str = "minmax"  # one of METHODS
     steps: int = 256  # raymarch samples per pixel
@@ -155,6 +171,7 @@ class Render:
     initial_step: int = 8  # epipolar: every initial_step-th line sample walks its row
     refine_threshold: float = 0.02  # epipolar: relative change in distance or unshadowed radiance that is a break
     relief: str = "prewarp"  # one of RELIEF_MODES
+    transparency: Transparency | None = None  # translucent surfaces: None takes Transparency()'s defaults
 
 
 @dataclass(frozen=True)
