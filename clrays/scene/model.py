@@ -147,7 +147,7 @@ class Transparency:
     warp: str = "log"  # moments: one of TRANSPARENCY_WARPS
     # moments: weight pulling the normalised moments towards those of depth 0.5 (cl/moments.h),
     # measured on scenes/glass_row.yaml (bench/RESULTS.md, "Translucent objects: camera side").
-    moment_bias: float = 5e-5
+    moment_bias: float = 5e-3
 
 
 @dataclass(frozen=True)
