@@ -339,8 +339,8 @@ TRANSPARENCY = Section("render.transparency", (
     Field("layers", "integer", Transparency.layers, 1, 64,
           notes="`depth_peeling`: layers composited; surfaces behind the last are left out"),
     Field("warp", "string", Transparency.warp, choices=TRANSPARENCY_WARPS,
-          notes="`moments`: depth before the moments are taken, linear or logarithmic between the nearest "
-                "translucent surface of the ray and its end"),
+          notes="`moments`: the depth coordinate of the moments, linear or logarithmic between the nearest and "
+                "the farthest distance of the translucent objects from the camera"),
     Field("moment_bias", "number", Transparency.moment_bias, 0.0, 0.5,
           notes="`moments`: how far the normalised moments are pulled towards those of depth 0.5. "
                 "Measured in bench/RESULTS.md"),
