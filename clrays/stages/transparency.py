@@ -20,6 +20,7 @@ from ..scene.model import Scene, Transparency
 from .raster import RasterResult
 
 LABEL = "transparency"
+FOG_LABEL = "transparency.fog"  # the in-scatter stages run up to each layer, timed apart
 
 
 def transparency_of(scene: Scene) -> Transparency:
@@ -58,7 +59,7 @@ def depth_range(inputs) -> tuple[float, float]:
 
 class _Relabelled:
     """A StageTimer that books every event under one label: the in-scatter stages run for the
-    layers count as transparency, not as the frame's own raymarch or traverse."""
+    layers count as transparency.fog, not as the frame's own raymarch or traverse."""
 
     def __init__(self, timer: StageTimer, label: str):
         self.timer, self.label = timer, label
@@ -87,7 +88,7 @@ class Layers:
         """Add one light's in-scattering up to every layer: `in_scatter(rastered, scatter,
         timer)` is the method's own stage (raymarch, traverse…) run with each slot's depths as
         the camera depth, so the layers see the fog exactly as the opaque depth does."""
-        relabelled = _Relabelled(timer, LABEL)
+        relabelled = _Relabelled(timer, FOG_LABEL)
         depth = device.buffer(nbytes=4 * self.samples)
         scatter = device.buffer(nbytes=16 * self.samples)
         for slot in range(self.slots):
