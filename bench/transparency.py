@@ -1,6 +1,6 @@
 """MBOIT against depth peeling at 1, 2, 4 and 8 layers on scenes/glass_row.yaml (five
 overlapping coloured panes in fog), timed in the same run (bench/RESULTS.md, "Translucent
-objects: camera side"):
+objects: the camera side"):
 
     .venv/bin/python bench/transparency.py --methods minmax raymarch --repeats 5
 

@@ -12,8 +12,9 @@
 #define SURFACE_BIAS_TEXELS 1.5f /* depth tolerance of the surface shadow test */
 
 /* A scene with translucent objects builds shade with SHADE_TRANSPARENCY: the transparency stage's
- * T(D) and the light of the layers in front of each sample (docs/design.md §10) come as two more
- * buffers. Opaque-only scenes build it without, and their images are unchanged. */
+ * T(D) and the light of the layers in front of each sample (docs/design.md, translucent surfaces:
+ * the camera side) come as two more buffers. Opaque-only scenes build it without, and their
+ * images are unchanged. */
 #ifdef SHADE_TRANSPARENCY
 #define TRANSPARENCY_ARGS , global const float4* transmittance, global const float4* in_front
 #else

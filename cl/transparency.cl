@@ -1,7 +1,7 @@
 /* transparency — the translucent surfaces each camera ray meets in front of its opaque depth,
- * and their composite (docs/design.md §10): layers found by depth peeling (nearest first) or
- * gathered in no order for MBOIT, then per sample the transmittance T(D) of all of them and the
- * light they add in front, Σ_k α_k·T(z_k⁻)·(e^{-σt z_k}·S_k + L(0, z_k)).
+ * and their composite (docs/design.md, translucent surfaces: the camera side): layers found
+ * by depth peeling (nearest first) or gathered in no order for MBOIT, then per sample the
+ * transmittance T(D) of all of them and the light they add in front, Σ_k α_k·T(z_k⁻)·(e^{-σt z_k}·S_k + L(0, z_k)).
  * Reads frame, views, offsets, camera_depth (the opaque depth), tri_vertices, translucent (the
  * translucent triangles' indices), and for the composite lights, shadow_depth, tri_normal,
  * tri_albedo, tri_opacity, light_textures, texels, layer_scatter (L(0, z_k) per layer);
@@ -154,8 +154,9 @@ inline float3 surface_radiance(global const frame_t* frame, global const view_t*
     return albedo * irradiance * M_1_PI_F;
 }
 
-/* MBOIT's depth coordinate in [0, 1] (docs/design.md §10): depth, or log depth, between the
- * nearest and farthest distance of the translucent triangles from the eye. */
+/* MBOIT's depth coordinate in [0, 1] (docs/design.md, translucent surfaces: the camera side):
+ * depth, or log depth, between the nearest and farthest distance of the translucent triangles
+ * from the eye. */
 inline float warped_depth(float z, float2 range)
 {
 #if TRANSPARENCY_LOG_WARP
@@ -219,7 +220,8 @@ kernel void transparency_composite(global const frame_t* frame, global const vie
         int tri = layer_tri[k * samples + sample];
         if (tri < 0) break;
         float3 a = absorbance(tri_opacity[tri].xyz);
-        float w = warped_depth(as_float(layer_depth[k * samples + sample]), depth_range), mean = (a.x + a.y + a.z) / 3.0f;
+        float w = warped_depth(as_float(layer_depth[k * samples + sample]), depth_range);
+        float mean = (a.x + a.y + a.z) / 3.0f;
         b0 += a;
         total += mean;
         b += mean * (float4)(w, w * w, w * w * w, w * w * w * w);

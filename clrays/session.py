@@ -8,7 +8,8 @@ and walks every camera sample's rows with `pixel`.)
     raster → rectify → integrand → volume_moments → visibility → shade     (method `moments`)
 
 (A scene with translucent objects adds `transparency` after raster: the layers in front of
-the opaque depth, the fog up to each, their composite, which shade reads; docs/design.md §10.
+the opaque depth, the fog up to each, their composite, which shade reads; docs/design.md,
+translucent surfaces: the camera side.
 `visibility` runs with `render.surface_shadows: exact`, the default; `shadow_filter`
 takes its place with `surface_shadows: filtered`; a textured light adds `light_texture`
 between integrand and traverse, docs/light-textures.md.)
@@ -37,7 +38,7 @@ from .device import Device, StageTimer
 from .errors import ClraysError
 from .inputs import FrameBuffers, FrameInputs, frame_inputs, upload
 from .reference.radiometry import effective_far
-from .reuse import COMPUTED, REUSED, Reuse, StageCache, StageRecord, digest, scene_digest
+from .reuse import COMPUTED, REUSED, SKIPPED, Reuse, StageCache, StageRecord, digest, scene_digest
 from .scene.costs import with_derived_sizes
 from .scene.model import METHODS, Render, Scene
 from .stages.integrand import integrand, integrand_table_size
@@ -202,7 +203,9 @@ class Renderer:
         transparency = composite(device, buffers, rastered, layers, timer) if layers is not None else None
         image = shade(device, buffers, rastered, scatter, timer, visible, transparency)  # shade: surfaces, attenuation, + scatter
         reuse.record.note("shade", COMPUTED)
-        return image, tuple(reuse.record.status()), tuple(textures), samples
+        # The stages that ran: a frame identical to this one counts them reused (not the skipped ones).
+        ran = tuple(stage for stage, status in reuse.record.status().items() if status != SKIPPED)
+        return image, ran, tuple(textures), samples
 
     def _layers(self, buffers: FrameBuffers, rastered: RasterResult, reuse: Reuse, timer: StageTimer) -> Layers | None:
         """The transparency stage's layers (clrays.stages.transparency); None, and the stage

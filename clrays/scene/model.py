@@ -34,8 +34,9 @@ TEXTURE_WRAPS = ("repeat", "clamp")  # a directional light's texture beyond its 
 # Filtered surface shadows (`render.shadow_filter.type`, docs/design.md §9): the map's test, PCF, or a
 # reconstruction from prefiltered moments (2 for VSM, 4 for the moment shadow maps).
 SHADOW_FILTERS = ("hard", "pcf", "vsm", "msm_hamburger", "msm_hausdorff")
-# Translucent surfaces seen by the camera (`render.transparency.type`, docs/design.md §10): the K
-# nearest layers in order, or moment-based order-independent transparency (MBOIT).
+# Translucent surfaces seen by the camera (`render.transparency.type`, docs/design.md, translucent
+# surfaces: the camera side): the K nearest layers in order, or moment-based order-independent
+# transparency (MBOIT).
 TRANSPARENCY_TYPES = ("depth_peeling", "moments")
 TRANSPARENCY_WARPS = ("none", "log")  # MBOIT's depth warp before the moments are taken
 PHASE_TYPES = ("isotropic", "hg")
@@ -140,13 +141,14 @@ class ShadowFilter:
 
 @dataclass(frozen=True)
 class Transparency:
-    """`render.transparency`: how the camera composites translucent surfaces (docs/design.md §10)."""
+    """`render.transparency`: how the camera composites translucent surfaces (docs/design.md,
+    translucent surfaces: the camera side)."""
 
     type: str = "depth_peeling"  # one of TRANSPARENCY_TYPES
     layers: int = 8  # depth_peeling: the nearest layers composited; those behind them are dropped
     warp: str = "log"  # moments: one of TRANSPARENCY_WARPS
     # moments: weight pulling the normalised moments towards those of depth 0.5 (cl/moments.h),
-    # measured on scenes/glass_row.yaml (bench/RESULTS.md, "Translucent objects: camera side").
+    # measured on scenes/glass_row.yaml (bench/RESULTS.md, "Translucent objects: the camera side").
     moment_bias: float = 5e-3
 
 

@@ -1,6 +1,6 @@
 """Stage transparency: the translucent surfaces in front of each camera sample's opaque depth,
-the fog's in-scattering up to each of them, and their composite (docs/design.md §10). Host
-side of `cl/transparency.cl`.
+the fog's in-scattering up to each of them, and their composite (docs/design.md, translucent
+surfaces: the camera side). Host side of `cl/transparency.cl`.
 
     layers (peel or gather) → in-scatter up to each layer (the method's own stage) → composite
 

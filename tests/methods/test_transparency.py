@@ -1,4 +1,5 @@
-"""Translucent objects seen by the camera (docs/design.md §10, the transparency stage): a pane
+"""Translucent objects seen by the camera (the transparency stage; docs/design.md, translucent
+surfaces: the camera side): a pane
 blends over the wall behind it, depth peeling composites its layers in order, MBOIT comes close
 to it, and an opaque-only scene runs none of it."""
 from __future__ import annotations
