@@ -54,17 +54,20 @@ def main() -> None:
     parser.add_argument("--size", help="WxH (default: the scene's)")
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--sweep", action="store_true", help="also MBOIT's warp × moment_bias (no images)")
-    parser.add_argument("--images", type=Path, default=REPO / "bench" / "results-transparency")
+    parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                        help="a scene override, as clrays render --set (repeatable)")
+    parser.add_argument("--images", type=Path, default=REPO / "bench" / "results-transparency",
+                        help="folder of the images and heat maps; '' writes none")
     args = parser.parse_args()
-    overrides = []
+    overrides = list(args.overrides)
     if args.size:
         width, height = args.size.split("x")
-        overrides = [f"image.width={width}", f"image.height={height}"]
+        overrides += [f"image.width={width}", f"image.height={height}"]
     runs = configurations(args.sweep)
     scenes = {label: load_scene(REPO / "scenes" / f"{args.scene}.yaml",
                                 overrides=overrides + [f"render.transparency={value}"]) for label, value in runs.items()}
     image = next(iter(scenes.values())).image
-    print(f"{args.scene}, {image.width}×{image.height}; times: median of {args.repeats} frames, interleaved; "
+    print(f"{args.scene} {' '.join(args.overrides)}, {image.width}×{image.height}; times: median of {args.repeats} frames, interleaved; "
           f"errors against {REFERENCE}, relative RMSE %\n")
     print("| method | transparency | wall ms | device ms | transparency ms | transparency.fog ms "
           "| RMSE luminance % | RMSE RGB % |")
@@ -89,7 +92,7 @@ def main() -> None:
             error = metrics.image_error(images[label], reference)
             print(f"| {method} | {label} | {wall:.0f} | {device:.0f} | {layers:.1f} | {fog:.1f} "
                   f"| {100 * error.rmse:.3f} | {100 * rgb_rmse(images[label], reference):.3f} |")
-        if args.images and not args.sweep:
+        if str(args.images) not in ("", ".") and not args.sweep:
             write_images(args.images, method, images, reference)
 
 

@@ -53,7 +53,7 @@ from .stages.sampling import SampleCounts, epipolar_sampling
 from .stages.shade import shade
 from .stages.shadow_filter import depth_ranges, frame_filter, shadow_filter, shadow_filter_moments
 from .stages.traverse import traverse
-from .stages.transparency import Layers, composite, opaque_camera_vertices, translucent_layers, translucent_triangles
+from .stages.transparency import Films, composite, opaque_camera_vertices, translucent_films, translucent_triangles
 from .stages.volume_moments import volume_moments
 from .stages.visibility import bound_atlas, bvh_topology_of, upload_bvh, visibility, visibility_bound
 
@@ -153,7 +153,7 @@ class Renderer:
         keys = StageKeys(buffers.inputs)
         bvh = self._bvh(buffers, keys, reuse, timer)  # (visibility's BVH, on the host before the device is busy)
         rastered, maps = self._raster(buffers, keys, reuse, timer)  # raster: camera depth and ids, shadow maps
-        layers = self._layers(buffers, rastered, reuse, timer)  # transparency: translucent layers before the opaque depth
+        films = self._films(buffers, rastered, reuse, timer)  # transparency: translucent films before the opaque depth
         textures, samples = [], None
         scatter = device.buffer(nbytes=16 * buffers.inputs.samples)  # in-scattered radiance per camera sample
         device.fill(scatter, np.float32(0), 16 * buffers.inputs.samples)
@@ -162,14 +162,14 @@ class Renderer:
         elif method == "raymarch":
             reuse.record.note("raymarch", COMPUTED)
             raymarch(device, buffers, rastered, scatter, timer)  # raymarch: the brute-force reference
-            if layers is not None:  # and up to each translucent layer
-                layers.add_in_scatter(device, timer, lambda r, s, t: raymarch(device, buffers, r, s, t))
+            if films is not None:  # and up to each translucent film
+                films.add_in_scatter(device, timer, lambda r, s, t: raymarch(device, buffers, r, s, t))
         else:
             for index, light in enumerate(scene.lights):
                 if eye_in_lamp(scene, light):  # d_el → 0: no epipolar frame, nothing visible is shadowed
                     lamp_in_scatter(device, buffers, rastered, light, scatter, timer)
-                    if layers is not None:
-                        layers.add_in_scatter(device, timer, lambda r, s, t, light=light: lamp_in_scatter(
+                    if films is not None:
+                        films.add_in_scatter(device, timer, lambda r, s, t, light=light: lamp_in_scatter(
                             device, buffers, r, light, s, t))
                     continue
                 epipolar = self._rectify(buffers, rastered, maps, keys, index, reuse, timer)  # rectify: S[α, γ]
@@ -182,8 +182,8 @@ class Renderer:
                                      lambda: integrand(device, scene, light, epipolar, timer), per_light=True)
                 if method == "moments":  # volume_moments: prefix sums of moments, one reconstruction per ray
                     volume_moments(device, buffers, rastered, epipolar, tables, scatter, timer)
-                    if layers is not None:
-                        layers.add_in_scatter(device, timer, lambda r, s, t, e=epipolar, i=tables: volume_moments(
+                    if films is not None:
+                        films.add_in_scatter(device, timer, lambda r, s, t, e=epipolar, i=tables: volume_moments(
                             device, buffers, r, e, i, s, t))
                     continue
                 texture = reuse.stage("light_texture", keys.light_texture(index, epipolar),  # texture: T·Γ_i prefix sums
@@ -194,27 +194,27 @@ class Renderer:
                     samples = counts if samples is None else samples + counts
                 else:  # per camera sample; and a light that casts no shadow, whose 16 slices are too few to sample
                     traverse(device, buffers, rastered, epipolar, tables, scatter, timer, texture)
-                if layers is not None:  # each translucent layer's own rays walk the same trees
-                    layers.add_in_scatter(device, timer, lambda r, s, t, e=epipolar, i=tables, x=texture: traverse(
+                if films is not None:  # each translucent film's own rays walk the same trees
+                    films.add_in_scatter(device, timer, lambda r, s, t, e=epipolar, i=tables, x=texture: traverse(
                         device, buffers, r, e, i, s, t, x))
             reuse.record.note(VOLUME_STAGES[method][-1], COMPUTED)
         visible = self._visibility(buffers, rastered, keys, reuse, timer, bvh)  # visibility: exact surface shadows
-        # transparency: the layers' surfaces and fog composited in front of the opaque samples
-        transparency = composite(device, buffers, rastered, layers, timer) if layers is not None else None
+        # transparency: the films' surfaces and fog composited in front of the opaque samples
+        transparency = composite(device, buffers, rastered, films, timer) if films is not None else None
         image = shade(device, buffers, rastered, scatter, timer, visible, transparency)  # shade: surfaces, attenuation, + scatter
         reuse.record.note("shade", COMPUTED)
         # The stages that ran: a frame identical to this one counts them reused (not the skipped ones).
         ran = tuple(stage for stage, status in reuse.record.status().items() if status != SKIPPED)
         return image, ran, tuple(textures), samples
 
-    def _layers(self, buffers: FrameBuffers, rastered: RasterResult, reuse: Reuse, timer: StageTimer) -> Layers | None:
-        """The transparency stage's layers (clrays.stages.transparency); None, and the stage
+    def _films(self, buffers: FrameBuffers, rastered: RasterResult, reuse: Reuse, timer: StageTimer) -> Films | None:
+        """The transparency stage's films (clrays.stages.transparency); None, and the stage
         skipped, when every object is opaque: then nothing of it runs."""
         if not buffers.inputs.scene.geometry.translucent:
             reuse.skip("transparency")
             return None
         reuse.record.note("transparency", COMPUTED)
-        return translucent_layers(self.device, buffers, rastered, timer)
+        return translucent_films(self.device, buffers, rastered, timer)
 
     def _bvh(self, buffers: FrameBuffers, keys: StageKeys, reuse: Reuse, timer: StageTimer):
         """The visibility stage's BVH, or None when the stage does not run: its tree kept

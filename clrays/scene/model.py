@@ -144,8 +144,12 @@ class Transparency:
     """`render.transparency`: how the camera composites translucent surfaces (docs/design.md,
     translucent surfaces: the camera side)."""
 
+    # depth_peeling by default: exact up to `layers` films, and no slower than MBOIT on glass_row,
+    # where the fog up to each film, the same work for both, is most of the stage (bench/RESULTS.md).
     type: str = "depth_peeling"  # one of TRANSPARENCY_TYPES
-    layers: int = 8  # depth_peeling: the nearest layers composited; those behind them are dropped
+    # The nearest layers composited; those behind them are dropped. Peeling stops where no sample
+    # finds another layer, so a frame with fewer films pays for those only.
+    layers: int = 8
     warp: str = "log"  # moments: one of TRANSPARENCY_WARPS
     # moments: weight pulling the normalised moments towards those of depth 0.5 (cl/moments.h),
     # measured on scenes/glass_row.yaml (bench/RESULTS.md, "Translucent objects: the camera side").

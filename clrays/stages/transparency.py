@@ -72,7 +72,7 @@ class _Relabelled:
 
 
 @dataclass
-class Layers:
+class Films:
     """The translucent hits of every camera sample, slot-major (cl/transparency.cl), and the
     in-scattered radiance L(0, z_k) up to each."""
 
@@ -106,7 +106,7 @@ def _layer_args(buffers: FrameBuffers, rastered: RasterResult, translucent, coun
             np.int32(count))
 
 
-def translucent_layers(device: Device, buffers: FrameBuffers, rastered: RasterResult, timer: StageTimer) -> Layers:
+def translucent_films(device: Device, buffers: FrameBuffers, rastered: RasterResult, timer: StageTimer) -> Films:
     """Each camera sample's translucent hits in front of its opaque depth: the `layers` nearest
     in order (depth_peeling), or all of them in no order (moments)."""
     inputs = buffers.inputs
@@ -135,10 +135,10 @@ def translucent_layers(device: Device, buffers: FrameBuffers, rastered: RasterRe
         device.fill(scatter, np.float32(0), 16 * slots * samples, timer, LABEL)
     # The in-scatter stages read the layers' depths as the camera depth: the same shadow maps,
     # the same camera, a slot's depth instead of the opaque one.
-    return Layers(slots, depth, tri, scatter, samples, rastered)
+    return Films(slots, depth, tri, scatter, samples, rastered)
 
 
-def composite(device: Device, buffers: FrameBuffers, rastered: RasterResult, layers: Layers,
+def composite(device: Device, buffers: FrameBuffers, rastered: RasterResult, layers: Films,
               timer: StageTimer) -> tuple[object, object]:
     """(transmittance, in_front), float4 per camera sample: T(D) of the sample's layers, and the
     light they add in front of the opaque sample (cl/transparency.cl); shade composites them."""
