@@ -50,6 +50,7 @@ from .stages.sampling import SampleCounts, epipolar_sampling
 from .stages.shade import shade
 from .stages.shadow_filter import depth_ranges, frame_filter, shadow_filter, shadow_filter_moments
 from .stages.traverse import traverse
+from .stages.translucency import opaque_occluder_buffers, rectify_layers, refuse_translucency, translucency
 from .stages.volume_moments import volume_moments
 from .stages.visibility import bound_atlas, bvh_topology_of, upload_bvh, visibility, visibility_bound
 
@@ -145,10 +146,13 @@ class Renderer:
         if not self._cull_faces:
             inputs = replace(inputs, view_needed=np.ones_like(inputs.view_needed))
         check_device_memory(device, inputs)
+        refuse_translucency(scene, method)  # (moments: no transmittance term)
         buffers = upload(device, inputs)  # the scene in eye space, packed into device structs
         keys = StageKeys(buffers.inputs)
-        bvh = self._bvh(buffers, keys, reuse, timer)  # (visibility's BVH, on the host before the device is busy)
+        occluders = opaque_occluder_buffers(device, buffers)  # (translucent triangles block no shadow ray)
+        bvh = self._bvh(occluders, keys, reuse, timer)  # (visibility's BVH, on the host before the device is busy)
         rastered, maps = self._raster(buffers, keys, reuse, timer)  # raster: camera depth and ids, shadow maps
+        layers = self._translucency(buffers, keys, reuse, timer)  # translucency: layers nearest each light
         textures, samples = [], None
         scatter = device.buffer(nbytes=16 * buffers.inputs.samples)  # in-scattered radiance per camera sample
         device.fill(scatter, np.float32(0), 16 * buffers.inputs.samples)
@@ -156,7 +160,7 @@ class Renderer:
             reuse.skip(*VOLUME_STAGES[method])  # no medium: no volume stages at all
         elif method == "raymarch":
             reuse.record.note("raymarch", COMPUTED)
-            raymarch(device, buffers, rastered, scatter, timer)  # raymarch: the brute-force reference
+            raymarch(device, buffers, rastered, scatter, timer, layers)  # raymarch: the brute-force reference
         else:
             for index, light in enumerate(scene.lights):
                 if eye_in_lamp(scene, light):  # d_el → 0: no epipolar frame, nothing visible is shadowed
@@ -176,16 +180,29 @@ class Renderer:
                 texture = reuse.stage("light_texture", keys.light_texture(index, epipolar),  # texture: T·Γ_i prefix sums
                                       lambda: light_texture(device, buffers, index, epipolar, tables, timer),
                                       per_light=True) if textured(light) else None
+                rectified = None if layers is None else \
+                    rectify_layers(device, buffers, layers, epipolar, timer)  # (translucent layers in α, γ)
                 if scene.render.sampling == "epipolar" and not epipolar.unshadowed:  # traverse: walk the trees
-                    counts = epipolar_sampling(device, buffers, rastered, epipolar, tables, scatter, timer, texture)
+                    counts = epipolar_sampling(device, buffers, rastered, epipolar, tables, scatter, timer, texture,
+                                               rectified)
                     samples = counts if samples is None else samples + counts
                 else:  # per camera sample; and a light that casts no shadow, whose 16 slices are too few to sample
-                    traverse(device, buffers, rastered, epipolar, tables, scatter, timer, texture)
+                    traverse(device, buffers, rastered, epipolar, tables, scatter, timer, texture, rectified)
             reuse.record.note(VOLUME_STAGES[method][-1], COMPUTED)
-        visible = self._visibility(buffers, rastered, keys, reuse, timer, bvh)  # visibility: exact surface shadows
-        image = shade(device, buffers, rastered, scatter, timer, visible)  # shade: surfaces, attenuation, + scatter
+        visible = self._visibility(occluders, rastered, keys, reuse, timer, bvh)  # visibility: exact surface shadows
+        image = shade(device, buffers, rastered, scatter, timer, visible, layers)  # shade: surfaces, attenuation, + scatter
         reuse.record.note("shade", COMPUTED)
         return image, tuple(reuse.record.status()), tuple(textures), samples
+
+    def _translucency(self, buffers: FrameBuffers, keys: StageKeys, reuse: Reuse, timer: StageTimer):
+        """The translucency stage, kept while the shadow maps' inputs and the layer count
+        are (the opacities are in `keys.geometry`); skipped, None, in an opaque-only scene."""
+        scene = buffers.inputs.scene
+        if not scene.geometry.translucent or not scene.lights:
+            reuse.skip("translucency")
+            return None
+        return reuse.stage("translucency", digest("translucency", tuple(keys.shadow), scene.render.translucent_layers),
+                           lambda: translucency(self.device, buffers, timer))
 
     def _bvh(self, buffers: FrameBuffers, keys: StageKeys, reuse: Reuse, timer: StageTimer):
         """The visibility stage's BVH, or None when the stage does not run: its tree kept
@@ -260,8 +277,9 @@ class Renderer:
         (up to float32 rounding where the run is clipped) without rectifying the full one."""
         device, key = self.device, keys.trees(index)
         # A textured light keeps its full texture size: the texture is rectified on its rows.
+        # So does a light with translucent layers: its texture carries their transmittance.
         if self._skip_unshadowed and not textured(buffers.inputs.scene.lights[index]) \
-                and map_is_empty(device, maps[index]):
+                and not buffers.inputs.scene.geometry.translucent and map_is_empty(device, maps[index]):
             render = buffers.inputs.scene.render
             small = replace(buffers.inputs.scene, render=replace(render, slices=UNSHADOWED_SIZE,
                                                                    gamma_samples=UNSHADOWED_SIZE))
@@ -356,6 +374,8 @@ class StageKeys:
         scene = inputs.scene
         self.inputs = inputs
         self.geometry = digest(scene.geometry.triangles, inputs.raster_triangles)  # + which are pre-warped
+        if scene.geometry.translucent:  # which triangles are opaque occluders, and what the others let through
+            self.geometry = digest(self.geometry, scene.geometry.opacity)
         # raster.camera: the eye-space triangles (geometry and eye), the camera view, the sample offsets.
         self.camera = digest("camera", self.geometry, inputs.eye_ws, inputs.views[:1], inputs.offsets)
         # raster.shadow: the geometry, the light's views relative to its anchor and which of

@@ -308,6 +308,10 @@ RENDER = Section("render", (
           notes="how relief objects reach the depth maps: `prewarp` warps each relief's depth image for "
                 "every view and maps it onto its base rectangle, `triangles` rasterizes its height-field "
                 "triangles (the same surface, for comparison)", read_by=_RASTER_METHODS),
+    Field("translucent_layers", "integer", Render.translucent_layers, 1, 16,
+          notes="translucent objects: how many translucent surfaces, nearest the light first, each light's "
+                "transmittance map keeps per texel; light crossing more passes the first this many "
+                "([docs/design.md](design.md#translucent-occluders-the-light-side))", read_by=("minmax", "raymarch")),
 ))
 
 

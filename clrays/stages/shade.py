@@ -10,7 +10,7 @@ from .raster import RasterResult
 
 
 def shade(device: Device, buffers: FrameBuffers, rastered: RasterResult, scatter, timer: StageTimer,
-          visible=None) -> np.ndarray:
+          visible=None, layers=None) -> np.ndarray:
     """Returns linear radiance, (H, W, 3) float32. `visible`: the visibility stage's answer
     (float per sample and light), read where `render.surface_shadows` is `exact`."""
     image = buffers.inputs.scene.image
@@ -18,9 +18,11 @@ def shade(device: Device, buffers: FrameBuffers, rastered: RasterResult, scatter
     out = device.buffer(nbytes=16 * pixels)
     if visible is None:
         visible = device.buffer(nbytes=4)  # never read: the map decides
-    event = device.kernel("shade", "shade")(
+    # A scene with translucent objects: the light's transmittance per surface sample (translucency stage).
+    defines, extra = (layers.defines(), layers.args()) if layers is not None else (None, ())
+    event = device.kernel("shade", "shade", defines)(
         device.queue, (pixels,), None, buffers.params, buffers.views, buffers.lights, rastered.shadow_depth,
         rastered.camera_depth, rastered.tri_id, buffers.tri_vertices, buffers.tri_normal, buffers.tri_vertex_normals,
-        buffers.tri_albedo, buffers.offsets, scatter, visible, buffers.light_textures, buffers.texels, out)
+        buffers.tri_albedo, buffers.offsets, scatter, visible, buffers.light_textures, buffers.texels, out, *extra)
     timer.add("shade", event)
     return device.read(out, (image.height, image.width, 4), np.float32)[..., :3]
