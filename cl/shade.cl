@@ -46,7 +46,7 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                   global const float4* tri_vertex_normals, global const float4* tri_albedo,
                   global const float2* offsets, global const float4* scatter,
                   global const float* visible_exact, global const light_texture_t* light_textures,
-                  global const float4* texels, global float4* image TRANSLUCENCY_ARGS)
+                  global const float4* texels, global float4* image TRANSLUCENCY_ARGS SURFACE_THROUGH_ARGS)
 {
     int pixel = get_global_id(0);
     if (pixel >= frame->width * frame->height) return;
@@ -95,8 +95,10 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                                                 frame->pcf);
 #ifdef TRANSLUCENT_LAYERS /* through the translucent surfaces nearer the light (translucency.h) */
                 if (visible > 0.0f)
-                    incident *= light_transmittance(lights + l, views, layer_depth, layer_clear, layer_stride, lookup,
-                                                    SURFACE_BIAS_TEXELS);
+                    incident *= has_surface_through
+                                    ? surface_through[sample * frame->light_count + l].xyz
+                                    : light_transmittance(lights + l, views, layer_depth, layer_clear, layer_stride,
+                                                          lookup, SURFACE_BIAS_TEXELS);
 #endif
                 irradiance += incident * (cosine * visible);
             }

@@ -8,6 +8,7 @@
  *             T0 = c0     T1 = c0·c1      T(K−1) = Π c_k     c = 1 − opacity */
 #include "raster.cl"
 #include "translucency.h"
+#include "bvh.h"
 
 /* A surface counts as a new layer only beyond the previous one by this many float ulps
  * (about 1e-5 relative): the two triangles of a pane meet the rays along their shared
@@ -90,5 +91,119 @@ kernel void translucency_rectify(global const view_t* views, global const light_
         }
         layer_beta[out + k] = beta;
         rectified_clear[out + k] = stored != INFINITY ? layer_clear[k * layer_stride + index] : (uint2)(0xffffffffu, 0xffffu);
+    }
+}
+
+/* translucency_surface — with `render.surface_shadows: exact`, the transmittance that
+ * reaches each camera sample's surface from each light, as the exact reference computes
+ * it: where the layers of the 3 × 3 texels around the sample's lookup agree, their
+ * transmittance; elsewhere (the edges of a translucent shadow) a shadow ray through the
+ * translucent triangles' own BVH, multiplying (1 − α) of every one it crosses.
+ * Reads frame, views, lights, layers, camera_depth, tri_id, tri_normal, offsets, the
+ * translucent triangles (eye space), their clear and BVH; writes surface_through
+ * (float4 per sample and light). Opaque occluders are the visibility stage's. */
+#ifndef SHADOW_RAY_OFFSET_REL
+#define SHADOW_RAY_OFFSET_REL 2e-6f /* visibility.cl's: the shadow ray leaves the surface */
+#endif
+#define SURFACE_BIAS_TEXELS 1.5f /* shade.cl's depth tolerance of the surface lookups */
+
+/* The product of (1 − α) of every translucent triangle but `skip` that crosses
+ * origin + t·dir, t ∈ (0, t_max): bvh_occluded's walk, visiting every hit. */
+inline float3 bvh_transmittance(global const float4* node_bounds, global const int2* node_children, int root,
+                                global const float4* vertices, global const float4* triangle_clear,
+                                float3 origin, float3 dir, float t_max)
+{
+    float3 inv_dir = 1.0f / dir;
+    float3 through = (float3)(1.0f);
+    int stack[BVH_STACK];
+    int top = 0;
+    stack[top++] = root;
+    while (top > 0) {
+        int node = stack[--top];
+        if (node < 0) {
+            int tri = -node - 1;
+            if (ray_meets_triangle(origin, dir, 0.0f, t_max, vertices[3 * tri].xyz, vertices[3 * tri + 1].xyz,
+                                   vertices[3 * tri + 2].xyz))
+                through *= triangle_clear[tri].xyz;
+            continue;
+        }
+        if (!ray_meets_box(origin, inv_dir, t_max, node_bounds[2 * node], node_bounds[2 * node + 1])) continue;
+        if (top + 2 > BVH_STACK) return (float3)(0.0f);
+        int2 children = node_children[node];
+        stack[top++] = children.y;
+        stack[top++] = children.x;
+    }
+    return through;
+}
+
+/* Transmittance of the texel (tx, ty) of a view at `depth`, as light_transmittance reads it. */
+inline float3 texel_layers(global const view_t* view, global const float* layer_depth,
+                           global const uint2* layer_clear, int layer_stride, int tx, int ty, float depth)
+{
+    tx = clamp(tx, 0, view->width - 1);
+    ty = clamp(ty, 0, view->height - 1);
+    int index = view->depth_offset + ty * view->width + tx;
+    float3 through = (float3)(1.0f);
+    for (int k = 0; k < TRANSLUCENT_LAYERS; ++k) {
+        if (!(layer_depth[k * layer_stride + index] < depth)) break;
+        through = unpack_clear(layer_clear[k * layer_stride + index]);
+    }
+    return through;
+}
+
+kernel void translucency_surface(global const frame_t* frame, global const view_t* views,
+                                 global const light_t* lights, global const uint* camera_depth,
+                                 global const int* tri_id, global const float4* tri_normal,
+                                 global const float2* offsets, global const float4* vertices,
+                                 global const float4* triangle_clear, global const float4* node_bounds,
+                                 global const int2* node_children, int root, global float4* surface_through
+                                 TRANSLUCENCY_ARGS)
+{
+    int sample = get_global_id(0);
+    if (sample >= frame->width * frame->height * frame->spp) return;
+    int pixel = sample / frame->spp;
+    global float4* out = surface_through + sample * frame->light_count;
+    for (int l = 0; l < frame->light_count; ++l) out[l] = (float4)(1.0f);
+    float distance = as_float(camera_depth[sample]);
+    int tri = tri_id[sample];
+    if (tri < 0 || distance > frame->far) return;
+    float3 origin, dir;
+    view_ray(views, view_screen(views, pixel % frame->width, pixel / frame->width, offsets[sample % frame->spp]),
+             &origin, &dir);
+    float3 p = origin + distance * dir;
+    float3 n = tri_normal[tri].xyz;
+    if (dot(n, dir) > 0.0f) n = -n;
+    for (int l = 0; l < frame->light_count; ++l) {
+        global const light_t* light = lights + l;
+        float3 to_light;
+        float3 incident = light_incident(light, frame->sigma_t.xyz, p, &to_light);
+        if (incident.x + incident.y + incident.z == 0.0f || eye_in_lamp(light, frame->lamp_radius)) continue;
+        /* The layers decide where the 3 × 3 texels around the lookup agree (shade's lookup point). */
+        float3 lookup = p + n * shadow_texel_size(light, length(p - light->position.xyz));
+        global const view_t* view = views + light_view_index(light, lookup);
+        float2 texel;
+        float depth;
+        if (view_project(view, lookup, &texel, &depth)) {
+            float reach = depth - SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth);
+            int tx = (int)texel.x, ty = (int)texel.y;
+            float3 centre = texel_layers(view, layer_depth, layer_clear, layer_stride, tx, ty, reach);
+            int agree = texel.x >= 1.0f && texel.y >= 1.0f && texel.x < (float)view->width - 1.0f
+                        && texel.y < (float)view->height - 1.0f;
+            for (int j = -1; j <= 1 && agree; ++j)
+                for (int i = -1; i <= 1 && agree; ++i)
+                    agree = all(texel_layers(view, layer_depth, layer_clear, layer_stride, tx + i, ty + j, reach)
+                                == centre);
+            if (agree) {
+                out[l] = (float4)(centre, 1.0f);
+                continue;
+            }
+        }
+        float to_light_distance = light->type == LIGHT_DIRECTIONAL ? 0.0f : length(light->position.xyz - p);
+        float3 side = dot(n, to_light) >= 0.0f ? n : -n;
+        float3 start = p + side * (SHADOW_RAY_OFFSET_REL * (length(p) + to_light_distance));
+        float3 ray = light->type == LIGHT_DIRECTIONAL ? to_light : light->position.xyz - start;
+        float t_max = light->type == LIGHT_DIRECTIONAL ? INFINITY : 1.0f;
+        out[l] = (float4)(bvh_transmittance(node_bounds, node_children, root, vertices, triangle_clear, start, ray,
+                                            t_max), 1.0f);
     }
 }

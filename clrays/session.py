@@ -50,7 +50,8 @@ from .stages.sampling import SampleCounts, epipolar_sampling
 from .stages.shade import shade
 from .stages.shadow_filter import depth_ranges, frame_filter, shadow_filter, shadow_filter_moments
 from .stages.traverse import traverse
-from .stages.translucency import opaque_occluder_buffers, rectify_layers, refuse_translucency, translucency
+from .stages.translucency import (opaque_occluder_buffers, rectify_layers, refuse_translucency,
+                                  surface_transmittance, translucency)
 from .stages.volume_moments import volume_moments
 from .stages.visibility import bound_atlas, bvh_topology_of, upload_bvh, visibility, visibility_bound
 
@@ -190,7 +191,9 @@ class Renderer:
                     traverse(device, buffers, rastered, epipolar, tables, scatter, timer, texture, rectified)
             reuse.record.note(VOLUME_STAGES[method][-1], COMPUTED)
         visible = self._visibility(occluders, rastered, keys, reuse, timer, bvh)  # visibility: exact surface shadows
-        image = shade(device, buffers, rastered, scatter, timer, visible, layers)  # shade: surfaces, attenuation, + scatter
+        through = None if layers is None or scene.render.surface_shadows != "exact" else \
+            surface_transmittance(device, buffers, rastered, layers, timer)  # (translucent shadows' exact edges)
+        image = shade(device, buffers, rastered, scatter, timer, visible, layers, through)  # shade: surfaces, attenuation, + scatter
         reuse.record.note("shade", COMPUTED)
         return image, tuple(reuse.record.status()), tuple(textures), samples
 

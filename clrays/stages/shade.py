@@ -10,7 +10,7 @@ from .raster import RasterResult
 
 
 def shade(device: Device, buffers: FrameBuffers, rastered: RasterResult, scatter, timer: StageTimer,
-          visible=None, layers=None) -> np.ndarray:
+          visible=None, layers=None, surface_through=None) -> np.ndarray:
     """Returns linear radiance, (H, W, 3) float32. `visible`: the visibility stage's answer
     (float per sample and light), read where `render.surface_shadows` is `exact`."""
     image = buffers.inputs.scene.image
@@ -19,7 +19,12 @@ def shade(device: Device, buffers: FrameBuffers, rastered: RasterResult, scatter
     if visible is None:
         visible = device.buffer(nbytes=4)  # never read: the map decides
     # A scene with translucent objects: the light's transmittance per surface sample (translucency stage).
-    defines, extra = (layers.defines(), layers.args()) if layers is not None else (None, ())
+    # `surface_through`: the translucency stage's per sample and light, with exact surface shadows.
+    defines, extra = None, ()
+    if layers is not None:
+        given = surface_through is not None
+        defines = layers.defines()
+        extra = layers.args() + (surface_through if given else device.buffer(nbytes=16), np.int32(given))
     event = device.kernel("shade", "shade", defines)(
         device.queue, (pixels,), None, buffers.params, buffers.views, buffers.lights, rastered.shadow_depth,
         rastered.camera_depth, rastered.tri_id, buffers.tri_vertices, buffers.tri_normal, buffers.tri_vertex_normals,

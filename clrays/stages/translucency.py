@@ -202,3 +202,28 @@ def rectify_layers(device: Device, buffers: FrameBuffers, layers: Layers, epipol
         device.queue, (n, slices), None, buffers.views, buffers.lights, layers.depth, layers.clear,
         np.int32(layers.stride), epipolar.buffer, beta, clear, rows))
     return RectifiedLayers(beta, clear, rows, layers.count)
+
+
+def surface_transmittance(device: Device, buffers: FrameBuffers, rastered, layers: Layers, timer: StageTimer):
+    """float4[samples × lights]: what reaches each camera sample's surface of each light
+    through the translucent surfaces (cl/translucency.cl, translucency_surface): the layers
+    where they agree around the sample, else a shadow ray through the translucent
+    triangles' BVH, so the edges of a coloured shadow land where `exact` puts them."""
+    from ..bvh import build_bvh
+
+    inputs = buffers.inputs
+    geometry = inputs.scene.geometry
+    drawn = geometry.count if inputs.raster_triangles is None else inputs.raster_triangles
+    rows = np.flatnonzero(see_through(geometry)[:drawn])
+    vertices = np.ascontiguousarray(inputs.tri_vertices.reshape(-1, 3, 4)[rows].reshape(-1, 4))
+    clear = np.zeros((len(rows), 4), np.float32)
+    clear[:, :3] = 1.0 - geometry.opacity_or_ones()[rows]
+    bvh = build_bvh(vertices[:, :3].reshape(-1, 3, 3))
+    lights = max(len(inputs.scene.lights), 1)
+    out = device.buffer(nbytes=16 * inputs.samples * lights)
+    timer.add("translucency", device.kernel("translucency", "translucency_surface", layers.defines())(
+        device.queue, (inputs.samples,), None, buffers.params, buffers.views, buffers.lights, rastered.camera_depth,
+        rastered.tri_id, buffers.tri_normal, buffers.offsets, device.buffer(vertices, writable=False),
+        device.buffer(clear, writable=False), device.buffer(bvh.node_bounds, writable=False),
+        device.buffer(bvh.node_children, writable=False), np.int32(bvh.root), out, *layers.args()))
+    return out
