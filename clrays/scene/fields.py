@@ -309,8 +309,8 @@ RENDER = Section("render", (
                 "every view and maps it onto its base rectangle, `triangles` rasterizes its height-field "
                 "triangles (the same surface, for comparison)", read_by=_RASTER_METHODS),
     Field("translucent_layers", "integer", Render.translucent_layers, 1, 16,
-          notes="translucent objects: how many translucent surfaces, nearest the light first, each light's "
-                "transmittance map keeps per texel; light crossing more passes the first this many "
+          notes="translucent objects: how many translucent surfaces each light's map keeps per texel, nearest "
+                "the light first; along a light ray, those beyond that many let it through unattenuated "
                 "([docs/design.md](design.md#translucent-occluders-the-light-side))", read_by=("minmax", "raymarch")),
 ))
 
