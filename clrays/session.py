@@ -9,7 +9,9 @@ and walks every camera sample's rows with `pixel`.)
 
 (`visibility` runs with `render.surface_shadows: exact`, the default; `shadow_filter`
 takes its place with `surface_shadows: filtered`; a textured light adds `light_texture`
-between integrand and traverse, docs/light-textures.md.)
+between integrand and traverse, docs/light-textures.md; a scene with translucent
+objects adds `translucency` after raster: each light's translucent layers, which
+raymarch, traverse and shade look up, docs/design.md "Translucent occluders".)
 
 `Renderer._frame` is that figure, one line per stage. The `exact` reference runs on
 the host in float64 instead (clrays.reference.exact).
@@ -343,6 +345,14 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
         if scene.render.method == "moments":  # double prefix sums, the larger case (volume_moments.py)
             prefix = 32 * scene.render.slices * (gamma_samples + 1)
             sizes.append(("moment prefix sums of one light", prefix))
+    if scene.geometry.translucent and scene.lights:  # the translucency stage's layers (translucency.py)
+        layers = scene.render.translucent_layers
+        sizes.append(("translucent layers", 12 * layers * inputs.shadow_texels))
+        if scene.render.method == "minmax":
+            texels = scene.render.slices * (1 << max(int(np.ceil(np.log2(scene.render.gamma_samples))), 1))
+            sizes.append(("rectified translucent layers of one light", 12 * layers * texels))
+        if scene.render.surface_shadows == "exact":
+            sizes.append(("surface transmittance", 16 * samples * len(scene.lights)))
     if scene.render.surface_shadows == "filtered":  # the moment maps and their blur's scratch (shadow_filter.py)
         sizes += [("moment maps", 16 * inputs.shadow_texels), ("moment maps' blur scratch", 16 * inputs.shadow_texels)]
     return sizes
