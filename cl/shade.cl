@@ -5,9 +5,11 @@
  * tri_normal, tri_vertex_normals, tri_albedo, offsets, scatter, visible (the visibility
  * stage's answer per sample and light, with surface_shadows exact; the shadow_filter stage's
  * with surface_shadows filtered), light_textures and texels (a light's texture,
- * docs/light-textures.md); writes image (one
+ * docs/light-textures.md), and with translucent objects the translucency stage's layers
+ * (translucency.h); writes image (one
  * float4 per pixel, linear rgb). */
 #include "light_texture.h"
+#include "translucency.h"
 
 #define SURFACE_BIAS_TEXELS 1.5f /* depth tolerance of the surface shadow test */
 
@@ -54,7 +56,8 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                   global const float4* tri_vertex_normals, global const float4* tri_albedo,
                   global const float2* offsets, global const float4* scatter,
                   global const float* visible_exact, global const light_texture_t* light_textures,
-                  global const float4* texels, global float4* image TRANSPARENCY_ARGS)
+                  global const float4* texels, global float4* image TRANSLUCENCY_ARGS SURFACE_THROUGH_ARGS
+                  TRANSPARENCY_ARGS)
 {
     int pixel = get_global_id(0);
     if (pixel >= frame->width * frame->height) return;
@@ -101,6 +104,13 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                 else
                     visible = shadow_visibility(lights + l, views, shadow_depth, lookup, SURFACE_BIAS_TEXELS,
                                                 frame->pcf);
+#ifdef TRANSLUCENT_LAYERS /* through the translucent surfaces nearer the light (translucency.h) */
+                if (visible > 0.0f)
+                    incident *= has_surface_through
+                                    ? surface_through[sample * frame->light_count + l].xyz
+                                    : light_transmittance(lights + l, views, layer_depth, layer_clear, layer_stride,
+                                                          lookup, SURFACE_BIAS_TEXELS);
+#endif
                 irradiance += incident * (cosine * visible);
             }
             surface = tri_albedo[tri].xyz * irradiance * M_1_PI_F;

@@ -4,13 +4,14 @@
  * transmittance T(D) of all of them and the light they add in front, Σ_k α_k·T(z_k⁻)·(e^{-σt z_k}·S_k + L(0, z_k)).
  * Reads frame, views, offsets, camera_depth (the opaque depth), tri_vertices, translucent (the
  * translucent triangles' indices), and for the composite lights, shadow_depth, tri_normal,
- * tri_albedo, tri_opacity, light_textures, texels, layer_scatter (L(0, z_k) per layer);
- * writes layer_depth, layer_tri ([slot][sample]), and transmittance, in_front (float4 per sample).
+ * tri_albedo, tri_opacity, light_textures, texels, film_scatter (L(0, z_k) per layer);
+ * writes film_depth, film_tri ([slot][sample]), and transmittance, in_front (float4 per sample).
  *
- *   layer buffers, slot-major:  | slot 0: sample 0 … S-1 | slot 1: sample 0 … S-1 | …
+ *   film buffers, slot-major:   | slot 0: sample 0 … S-1 | slot 1: sample 0 … S-1 | …
  *   so that one slot's depths are a camera-depth-shaped buffer the in-scatter stages read. */
 #include "light_texture.h"
 #include "moments.h"
+#include "translucency.h"
 
 #ifndef TRANSPARENCY_MOMENTS
 #define TRANSPARENCY_MOMENTS 0 /* 1: MBOIT's estimate of T(z_k⁻) instead of the ordered product */
@@ -64,7 +65,7 @@ inline float hit_distance(float3 origin, float3 dir, global const float4* tri_ve
 /* Depth peeling: `layers` passes, each the nearest hit beyond the previous layer, nearest first;
  * empty slots hold depth 0 (the in-scatter stages then add nothing) and triangle −1. `used` is
  * raised to the most layers any sample found, so the stages after run no empty slot. */
-kernel void transparency_peel(LAYER_ARGS, int layers, global uint* layer_depth, global int* layer_tri,
+kernel void transparency_peel(LAYER_ARGS, int layers, global uint* film_depth, global int* film_tri,
                               global int* used)
 {
     SAMPLE_RAY
@@ -83,13 +84,13 @@ kernel void transparency_peel(LAYER_ARGS, int layers, global uint* layer_depth, 
             }
         }
         if (nearest_tri < 0) break;
-        layer_depth[found * samples + sample] = as_uint(nearest);
-        layer_tri[found * samples + sample] = nearest_tri;
+        film_depth[found * samples + sample] = as_uint(nearest);
+        film_tri[found * samples + sample] = nearest_tri;
         previous = nearest;
     }
     for (int k = found; k < layers; ++k) {
-        layer_depth[k * samples + sample] = 0u;
-        layer_tri[k * samples + sample] = -1;
+        film_depth[k * samples + sample] = 0u;
+        film_tri[k * samples + sample] = -1;
     }
     atomic_max(used, found);
 }
@@ -107,7 +108,7 @@ kernel void transparency_count(LAYER_ARGS, global int* used)
 
 /* MBOIT, second pass: every hit in front of the opaque depth, in the order of the triangle list
  * (no sorting), the same surface once; `slots` ≥ the count of the first pass. */
-kernel void transparency_gather(LAYER_ARGS, int slots, global uint* layer_depth, global int* layer_tri)
+kernel void transparency_gather(LAYER_ARGS, int slots, global uint* film_depth, global int* film_tri)
 {
     SAMPLE_RAY
     int found = 0;
@@ -117,24 +118,26 @@ kernel void transparency_gather(LAYER_ARGS, int slots, global uint* layer_depth,
         if (!(t < opaque)) continue;
         int same = 0;
         for (int k = 0; k < found; ++k)
-            same |= fabs(as_float(layer_depth[k * samples + sample]) - t) <= SAME_SURFACE_REL * t;
+            same |= fabs(as_float(film_depth[k * samples + sample]) - t) <= SAME_SURFACE_REL * t;
         if (same) continue;
-        layer_depth[found * samples + sample] = as_uint(t);
-        layer_tri[found * samples + sample] = tri;
+        film_depth[found * samples + sample] = as_uint(t);
+        film_tri[found * samples + sample] = tri;
         ++found;
     }
     for (int k = found; k < slots; ++k) {
-        layer_depth[k * samples + sample] = 0u;
-        layer_tri[k * samples + sample] = -1;
+        film_depth[k * samples + sample] = 0u;
+        film_tri[k * samples + sample] = -1;
     }
 }
 
 /* S_k: the light a surface of albedo `albedo` at p reflects towards the camera, as shade.cl's
  * two-sided Lambertian with the shadow-map test (its flat normal: smooth shading normals are
- * shade.cl's own). Weighted by the layer's opacity by the caller. */
+ * shade.cl's own), and through the translucent surfaces nearer the light (translucency.h) when
+ * the light side's layers are given. Weighted by the layer's opacity by the caller. */
 inline float3 surface_radiance(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                                global const uint* shadow_depth, global const light_texture_t* light_textures,
-                               global const float4* texels, float3 p, float3 n, float3 dir, float3 albedo)
+                               global const float4* texels, float3 p, float3 n, float3 dir, float3 albedo
+                               TRANSLUCENCY_ARGS)
 {
     if (dot(n, dir) > 0.0f) n = -n; /* two-sided: face the camera */
     float3 irradiance = (float3)(0.0f);
@@ -148,6 +151,11 @@ inline float3 surface_radiance(global const frame_t* frame, global const view_t*
         if (!eye_in_lamp(lights + l, frame->lamp_radius)) {
             float3 lookup = p + n * shadow_texel_size(lights + l, length(p - lights[l].position.xyz));
             visible = shadow_visibility(lights + l, views, shadow_depth, lookup, SURFACE_BIAS_TEXELS, 0);
+#ifdef TRANSLUCENT_LAYERS
+            if (visible > 0.0f)
+                incident *= light_transmittance(lights + l, views, layer_depth, layer_clear, layer_stride, lookup,
+                                                SURFACE_BIAS_TEXELS);
+#endif
         }
         irradiance += incident * (cosine * visible);
     }
@@ -197,10 +205,10 @@ kernel void transparency_composite(global const frame_t* frame, global const vie
                                    global const uint* shadow_depth, global const float4* tri_vertices,
                                    global const float4* tri_normal, global const float4* tri_albedo,
                                    global const float4* tri_opacity, global const light_texture_t* light_textures,
-                                   global const float4* texels, int slots, global const uint* layer_depth,
-                                   global const int* layer_tri, global const float4* layer_scatter,
+                                   global const float4* texels, int slots, global const uint* film_depth,
+                                   global const int* film_tri, global const float4* film_scatter,
                                    float2 depth_range, float moment_bias, global float4* transmittance,
-                                   global float4* in_front)
+                                   global float4* in_front TRANSLUCENCY_ARGS)
 {
     int sample = get_global_id(0);
     int samples = frame->width * frame->height * frame->spp;
@@ -217,10 +225,10 @@ kernel void transparency_composite(global const frame_t* frame, global const vie
     float4 b = (float4)(0.0f);
     float total = 0.0f;
     for (int k = 0; k < slots; ++k) {
-        int tri = layer_tri[k * samples + sample];
+        int tri = film_tri[k * samples + sample];
         if (tri < 0) break;
         float3 a = absorbance(tri_opacity[tri].xyz);
-        float w = warped_depth(as_float(layer_depth[k * samples + sample]), depth_range);
+        float w = warped_depth(as_float(film_depth[k * samples + sample]), depth_range);
         float mean = (a.x + a.y + a.z) / 3.0f;
         b0 += a;
         total += mean;
@@ -230,13 +238,13 @@ kernel void transparency_composite(global const frame_t* frame, global const vie
 #endif
     float3 through = (float3)(1.0f), light = (float3)(0.0f), weights = (float3)(0.0f);
     for (int k = 0; k < slots; ++k) {
-        int tri = layer_tri[k * samples + sample];
+        int tri = film_tri[k * samples + sample];
         if (tri < 0) break;
-        float z = as_float(layer_depth[k * samples + sample]);
+        float z = as_float(film_depth[k * samples + sample]);
         float3 alpha = tri_opacity[tri].xyz;
         float3 surface = surface_radiance(frame, views, lights, shadow_depth, light_textures, texels, origin + z * dir,
-                                          tri_normal[tri].xyz, dir, tri_albedo[tri].xyz);
-        float3 radiance = surface * exp(-sigma_t * z) + layer_scatter[k * samples + sample].xyz;
+                                          tri_normal[tri].xyz, dir, tri_albedo[tri].xyz TRANSLUCENCY_PASS);
+        float3 radiance = surface * exp(-sigma_t * z) + film_scatter[k * samples + sample].xyz;
 #if TRANSPARENCY_MOMENTS
         float in_front_fraction = absorbance_in_front(b, warped_depth(z, depth_range), moment_bias);
         float3 weight = alpha * exp(-b0 * in_front_fraction);

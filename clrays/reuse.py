@@ -62,8 +62,8 @@ def scene_digest(scene, *, render: bool = True) -> bytes:
     """Everything about a scene that can change an image (not its source path or its
     animation, which only make other scenes). `render=False` leaves out the render
     settings, for references whose own settings are given separately."""
-    # Opacity only where an object is translucent: an opaque-only scene keeps its digest.
-    translucent = () if scene.geometry.opacity is None else (scene.geometry.opacity,)
+    # Opacity only where some object is translucent, so an opaque-only scene keeps its digest.
+    translucent = (scene.geometry.opacity,) if scene.geometry.translucent else ()
     return digest(scene.image, scene.camera, scene.lights, scene.medium, scene.background,
                   scene.geometry.triangles, scene.geometry.albedo, scene.geometry.normals, scene.geometry.smooth,
                   scene.render if render else None, *translucent)

@@ -309,6 +309,10 @@ RENDER = Section("render", (
           notes="how relief objects reach the depth maps: `prewarp` warps each relief's depth image for "
                 "every view and maps it onto its base rectangle, `triangles` rasterizes its height-field "
                 "triangles (the same surface, for comparison)", read_by=_RASTER_METHODS),
+    Field("translucent_layers", "integer", Render.translucent_layers, 1, 16,
+          notes="translucent objects: how many translucent surfaces each light's map keeps per texel, nearest "
+                "the light first; along a light ray, those beyond that many let it through unattenuated "
+                "([docs/design.md](design.md#translucent-occluders-the-light-side))", read_by=("minmax", "raymarch")),
     Field("transparency", "mapping or string", shown_default="`{type: depth_peeling, layers: 8}`",
           notes="[render.transparency](#rendertransparency): how the camera composites "
                 "[translucent objects](#translucent-objects); a string is its `type`. Read only where an "

@@ -56,7 +56,8 @@ def place_reliefs(scene: Scene) -> tuple[Scene, tuple[PlacedRelief, ...], int | 
         start += record.rows.stop - record.rows.start
     moved = replace(geometry, triangles=geometry.triangles[order], albedo=geometry.albedo[order],
                     object_id=geometry.object_id[order], normals=geometry.normals[order],
-                    smooth=geometry.smooth[order], reliefs=())
+                    smooth=geometry.smooth[order], reliefs=(),
+                    opacity=None if geometry.opacity is None else geometry.opacity[order])
     return replace(scene, geometry=moved), tuple(placed), int((~is_relief).sum())
 
 

@@ -139,9 +139,11 @@ def translucent_films(device: Device, buffers: FrameBuffers, rastered: RasterRes
 
 
 def composite(device: Device, buffers: FrameBuffers, rastered: RasterResult, layers: Films,
-              timer: StageTimer) -> tuple[object, object]:
+              timer: StageTimer, light_layers=None) -> tuple[object, object]:
     """(transmittance, in_front), float4 per camera sample: T(D) of the sample's layers, and the
-    light they add in front of the opaque sample (cl/transparency.cl); shade composites them."""
+    light they add in front of the opaque sample (cl/transparency.cl); shade composites them.
+    `light_layers`: the translucency stage's layers (clrays.stages.translucency), through which
+    the light reaches each film; None: a scene without lights."""
     inputs = buffers.inputs
     settings = transparency_of(inputs.scene)
     samples = inputs.samples
@@ -149,6 +151,10 @@ def composite(device: Device, buffers: FrameBuffers, rastered: RasterResult, lay
     opacity[:, :3] = inputs.scene.geometry.opacity_or_ones()
     defines = {"TRANSPARENCY_MOMENTS": int(settings.type == "moments"),
                "TRANSPARENCY_LOG_WARP": int(settings.warp == "log")}
+    light_args = ()
+    if light_layers is not None:
+        defines.update(light_layers.defines())
+        light_args = light_layers.args()
     transmittance, in_front = device.buffer(nbytes=16 * samples), device.buffer(nbytes=16 * samples)
     near, far = depth_range(inputs)
     timer.add(LABEL, device.kernel("transparency", "transparency_composite", defines)(
@@ -156,5 +162,5 @@ def composite(device: Device, buffers: FrameBuffers, rastered: RasterResult, lay
         rastered.shadow_depth, buffers.tri_vertices, buffers.tri_normal, buffers.tri_albedo,
         device.buffer(opacity, writable=False), buffers.light_textures, buffers.texels, np.int32(layers.slots),
         layers.depth, layers.tri, layers.scatter, np.array([near, far], np.float32),
-        np.float32(settings.moment_bias), transmittance, in_front))
+        np.float32(settings.moment_bias), transmittance, in_front, *light_args))
     return transmittance, in_front

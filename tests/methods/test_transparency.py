@@ -63,8 +63,8 @@ class CompositeSpy:
         self.frames = []
         original = clrays.session.composite
 
-        def spy(device, buffers, rastered, layers, timer):
-            out = original(device, buffers, rastered, layers, timer)
+        def spy(device, buffers, rastered, layers, timer, *light_layers):
+            out = original(device, buffers, rastered, layers, timer, *light_layers)
             samples = layers.samples
             read = lambda buffer, shape, dtype: device.read(buffer, shape, dtype)  # noqa: E731
             self.frames.append({
