@@ -10,7 +10,11 @@ import numpy as np
 import pytest
 
 import clrays.session
-from clrays.reference.metrics import image_error
+from clrays.reference.exact import render_exact
+from clrays.reference.metrics import depth_edges, depth_map, image_error
+from clrays.reference.radiometry import effective_far
+from clrays.reference.translucency import TranslucentQueries
+from clrays.scene.camera import primary_rays
 from clrays.scene.load import load_scene, parse_scene
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -120,3 +124,38 @@ def test_moments_come_close_to_eight_layer_peeling(renderer):
     peeled = renderer.render(small_row("render.transparency={type: depth_peeling, layers: 8}")).image
     moments = renderer.render(small_row("render.transparency=moments")).image
     assert image_error(moments, peeled).rmse < 0.02
+
+
+def films_seen(scene) -> np.ndarray:
+    """(H, W) bool: pixels whose centre ray crosses a translucent surface before its first opaque hit."""
+    queries = TranslucentQueries(scene.geometry)
+    eye = np.asarray(scene.camera.position, dtype=np.float64)
+    dirs = primary_rays(scene.camera, scene.image, np.array([[0.5, 0.5]])).reshape(-1, 3)
+    far = effective_far(scene)
+    t, _ = queries.first_opaque_hit(eye, dirs, far)
+    ray, _, _ = queries.crossings(eye, dirs, np.where(np.isfinite(t), t, far))
+    seen = np.zeros(len(dirs), bool)
+    seen[ray] = True
+    return seen.reshape(scene.image.height, scene.image.width)
+
+
+_EXACT: dict = {}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", ["depth_peeling", "moments"])
+@pytest.mark.parametrize("method", ["raymarch", "minmax"])
+def test_glass_pane_with_its_film_agrees_with_exact(renderer, method, kind):
+    """scenes/glass_pane.yaml at 160×90, the pane seen by the camera included, depth edges out:
+    within 1 % relative RMSE of exact (measured: raymarch 0.18 %, minmax 0.34 %), and the
+    pixels that see the pane within 0.1 % (measured 1.2e-5: its lit face outshines the fog)."""
+    overrides = ["image.width=160", "image.height=90", "render.steps=1024", f"render.transparency={kind}"]
+    scene = load_scene(ROOT / "scenes" / "glass_pane.yaml", overrides=overrides)
+    if "glass_pane" not in _EXACT:
+        _EXACT["glass_pane"] = render_exact(scene)
+    reference = _EXACT["glass_pane"]
+    edges, films = depth_edges(depth_map(scene)), films_seen(scene)
+    assert (films & ~edges).sum() > 40
+    image = renderer.render(scene, method).image
+    assert image_error(image, reference, edges).rmse < 0.01
+    assert image_error(image, reference, edges | ~films).rmse < 0.001
