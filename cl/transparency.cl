@@ -96,26 +96,31 @@ kernel void transparency_peel(LAYER_ARGS, int layers, global uint* film_depth, g
 }
 
 /* MBOIT, first pass: how many hits the sample's ray has in front of its opaque depth (an upper
- * bound: the same surface met twice counts twice), raised into `used`, the slots to gather. */
-kernel void transparency_count(LAYER_ARGS, global int* used)
+ * bound: the same surface met twice counts twice) into `counts`, and raised into `used`, the
+ * slots to gather. */
+kernel void transparency_count(LAYER_ARGS, global int* counts, global int* used)
 {
     SAMPLE_RAY
     int count = 0;
     for (int i = 0; i < translucent_count; ++i)
         count += hit_distance(origin, dir, tri_vertices, translucent[i]) < opaque;
+    counts[sample] = count;
     atomic_max(used, count);
 }
 
 /* MBOIT, second pass: every hit in front of the opaque depth, in the order of the triangle list
- * (no sorting), the same surface once; `slots` ≥ the count of the first pass. */
-kernel void transparency_gather(LAYER_ARGS, int slots, global uint* film_depth, global int* film_tri)
+ * (no sorting), the same surface once; `slots` ≥ the count of the first pass. A sample stops at
+ * its count of hits (most samples meet none, and pay for the first pass only). */
+kernel void transparency_gather(LAYER_ARGS, global const int* counts, int slots, global uint* film_depth,
+                                global int* film_tri)
 {
     SAMPLE_RAY
-    int found = 0;
-    for (int i = 0; i < translucent_count && found < slots; ++i) {
+    int found = 0, met = 0, count = counts[sample];
+    for (int i = 0; i < translucent_count && met < count; ++i) {
         int tri = translucent[i];
         float t = hit_distance(origin, dir, tri_vertices, tri);
         if (!(t < opaque)) continue;
+        ++met;
         int same = 0;
         for (int k = 0; k < found; ++k)
             same |= fabs(as_float(film_depth[k * samples + sample]) - t) <= SAME_SURFACE_REL * t;

@@ -123,13 +123,14 @@ def translucent_films(device: Device, buffers: FrameBuffers, rastered: RasterRes
             device.queue, (samples,), None, *args, np.int32(slots), depth, tri, used))
         slots = int(device.read(used, 1, np.int32)[0])  # peeling stops where no sample finds another layer
     else:
+        counts = device.buffer(nbytes=4 * samples)
         timer.add(LABEL, device.kernel("transparency", "transparency_count")(
-            device.queue, (samples,), None, *args, used))
+            device.queue, (samples,), None, *args, counts, used))
         slots = int(device.read(used, 1, np.int32)[0])
         depth, tri = device.buffer(nbytes=4 * slots * samples), device.buffer(nbytes=4 * slots * samples)
         if slots:
             timer.add(LABEL, device.kernel("transparency", "transparency_gather")(
-                device.queue, (samples,), None, *args, np.int32(slots), depth, tri))
+                device.queue, (samples,), None, *args, counts, np.int32(slots), depth, tri))
     scatter = device.buffer(nbytes=16 * slots * samples)
     if slots:
         device.fill(scatter, np.float32(0), 16 * slots * samples, timer, LABEL)
