@@ -57,7 +57,8 @@ from .stages.shadow_filter import depth_ranges, frame_filter, shadow_filter, sha
 from .stages.traverse import traverse
 from .stages.translucency import (opaque_occluder_buffers, rectify_layers, refuse_translucency,
                                   surface_transmittance, translucency)
-from .stages.transparency import Films, composite, opaque_camera_vertices, translucent_films, translucent_triangles
+from .stages.transparency import (Films, composite, opaque_camera_vertices, translucent_films, translucent_triangles,
+                                  transparency_of)
 from .stages.volume_moments import volume_moments
 from .stages.visibility import bound_atlas, bvh_topology_of, upload_bvh, visibility, visibility_bound
 
@@ -388,6 +389,13 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
             sizes.append(("rectified translucent layers of one light", 12 * layers * texels))
         if scene.render.surface_shadows == "exact":
             sizes.append(("surface transmittance", 16 * samples * len(scene.lights)))
+    if scene.geometry.translucent:  # the transparency stage's films (transparency.py): depth, triangle, fog per slot
+        # Peeling's layers bound its slots; moments gather every film a ray meets, counted here as at
+        # most 64 (the most layers peeling takes) or the translucent triangles, the fewer.
+        settings = transparency_of(scene)
+        slots = settings.layers if settings.type == "depth_peeling" else min(len(translucent_triangles(scene)), 64)
+        sizes += [("translucent films seen by the camera", 24 * slots * samples),
+                  ("films' transmittance and light", 32 * samples)]
     if scene.render.surface_shadows == "filtered":  # the moment maps and their blur's scratch (shadow_filter.py)
         sizes += [("moment maps", 16 * inputs.shadow_texels), ("moment maps' blur scratch", 16 * inputs.shadow_texels)]
     return sizes
