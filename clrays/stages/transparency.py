@@ -35,12 +35,21 @@ def translucent_triangles(scene: Scene) -> np.ndarray:
     return np.flatnonzero((scene.geometry.opacity < 1.0).any(axis=1)).astype(np.int32)
 
 
+def film_triangles(inputs) -> np.ndarray:
+    """The translucent triangles the camera sees as films: not a relief's, which its pre-warp
+    draws into the camera depth as an opaque surface (docs/design.md)."""
+    indices = translucent_triangles(inputs.scene)
+    if inputs.raster_triangles is not None:
+        indices = indices[indices < inputs.raster_triangles]
+    return indices
+
+
 def opaque_camera_vertices(inputs) -> np.ndarray:
     """The frame's eye-space vertices with every translucent triangle collapsed onto its first
     vertex: the camera raster meets none of them (a zero-area triangle has no ray hit), so the
     camera depth is the opaque depth D the layers lie in front of."""
     vertices = inputs.tri_vertices.reshape(-1, 3, 4).copy()
-    translucent = translucent_triangles(inputs.scene)
+    translucent = film_triangles(inputs)
     vertices[translucent] = vertices[translucent, :1]
     return vertices.reshape(-1, 4)
 
@@ -49,8 +58,10 @@ def depth_range(inputs) -> tuple[float, float]:
     """(nearest, farthest) distance from the eye of any point of a translucent triangle: the
     range MBOIT's warp maps to [0, 1]. The nearest is the distance to their bounding box (a
     lower bound), kept off 0 for the log warp."""
-    vertices = inputs.tri_vertices.reshape(-1, 3, 4)[translucent_triangles(inputs.scene), :, :3].astype(np.float64)
+    vertices = inputs.tri_vertices.reshape(-1, 3, 4)[film_triangles(inputs), :, :3].astype(np.float64)
     points = vertices.reshape(-1, 3)
+    if len(points) == 0:  # no film: the composite has nothing to warp
+        return 1.0, 2.0
     far = float(np.linalg.norm(points, axis=1).max())
     lo, hi = points.min(axis=0), points.max(axis=0)
     near = float(np.linalg.norm(np.maximum(np.maximum(lo, -hi), 0.0)))
@@ -112,7 +123,7 @@ def translucent_films(device: Device, buffers: FrameBuffers, rastered: RasterRes
     inputs = buffers.inputs
     settings = transparency_of(inputs.scene)
     samples = inputs.samples
-    indices = translucent_triangles(inputs.scene)
+    indices = film_triangles(inputs)
     translucent = device.buffer(indices, writable=False)
     args = _layer_args(buffers, rastered, translucent, len(indices))
     used = device.buffer(np.zeros(1, np.int32))
