@@ -64,10 +64,12 @@ def main() -> None:
         width, height = args.size.split("x")
         overrides += [f"image.width={width}", f"image.height={height}"]
     runs = configurations(args.sweep)
-    scenes = {label: load_scene(REPO / "scenes" / f"{args.scene}.yaml",
-                                overrides=overrides + [f"render.transparency={value}"]) for label, value in runs.items()}
+    scene_path = REPO / "scenes" / f"{args.scene}.yaml"
+    scenes = {label: load_scene(scene_path, overrides=overrides + [f"render.transparency={value}"])
+              for label, value in runs.items()}
     image = next(iter(scenes.values())).image
-    print(f"{args.scene} {' '.join(args.overrides)}, {image.width}×{image.height}; times: median of {args.repeats} frames, interleaved; "
+    print(f"{args.scene} {' '.join(args.overrides)}, {image.width}×{image.height}; times: median of {args.repeats} "
+          f"frames, interleaved; "
           f"errors against {REFERENCE}, relative RMSE %\n")
     print("| method | transparency | wall ms | device ms | transparency ms | transparency.fog ms "
           "| RMSE luminance % | RMSE RGB % |")

@@ -1,7 +1,8 @@
 /* transparency — the translucent surfaces each camera ray meets in front of its opaque depth,
  * and their composite (docs/design.md, translucent surfaces: the camera side): layers found
  * by depth peeling (nearest first) or gathered in no order for MBOIT, then per sample the
- * transmittance T(D) of all of them and the light they add in front, Σ_k α_k·T(z_k⁻)·(e^{-σt z_k}·S_k + L(0, z_k)).
+ * transmittance T(D) of all of them and the light they add in front,
+ * Σ_k α_k·T(z_k⁻)·(e^{-σt z_k}·S_k + L(0, z_k)).
  * Reads frame, views, offsets, camera_depth (the opaque depth), tri_vertices, translucent (the
  * translucent triangles' indices), and for the composite lights, shadow_depth, tri_normal,
  * tri_albedo, tri_opacity, light_textures, texels, film_scatter (L(0, z_k) per layer);

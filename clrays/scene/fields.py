@@ -339,7 +339,8 @@ TRANSPARENCY = Section("render.transparency", (
     Field("type", "string", Transparency.type, choices=TRANSPARENCY_TYPES,
           notes="`depth_peeling`: the `layers` nearest translucent surfaces of each camera ray, composited in "
                 "order; `moments`: every one of them, composited with a transmittance reconstructed from 4 power "
-                "moments of the absorbance, in no order (MBOIT; [docs/design.md](design.md#translucent-surfaces-the-camera-side))"),
+                "moments of the absorbance, in no order "
+                "(MBOIT; [docs/design.md](design.md#translucent-surfaces-the-camera-side))"),
     Field("layers", "integer", Transparency.layers, 1, 64,
           notes="`depth_peeling`: layers composited; surfaces behind the last are left out"),
     Field("warp", "string", Transparency.warp, choices=TRANSPARENCY_WARPS,
