@@ -269,3 +269,11 @@ def test_moments_refuses_translucent_objects(tmp_path):
     assert code == 1
     assert "render.method: moments does not support translucent objects (objects.1.opacity)" in output
     assert "Traceback" not in output and len(output.strip().splitlines()) == 1
+
+
+def test_translucent_relief_by_prewarp_is_refused(tmp_path):
+    code, output = run_cli("render", REPO / "scenes" / "lattice.yaml", "-o", tmp_path / "l.png",
+                           "--set", "image.width=16", "--set", "image.height=9", "--set", "objects.8.opacity=0.5")
+    assert code == 1
+    assert "objects.8.opacity: a relief object is opaque on the device" in output
+    assert len(output.strip().splitlines()) == 1
