@@ -13,6 +13,16 @@
 
 #define SURFACE_BIAS_TEXELS 1.5f /* depth tolerance of the surface shadow test */
 
+/* A scene with translucent objects builds shade with SHADE_TRANSPARENCY: the transparency stage's
+ * T(D) and the light of the layers in front of each sample (docs/design.md, translucent surfaces:
+ * the camera side) come as two more buffers. Opaque-only scenes build it without, and their
+ * images are unchanged. */
+#ifdef SHADE_TRANSPARENCY
+#define TRANSPARENCY_ARGS , global const float4* transmittance, global const float4* in_front
+#else
+#define TRANSPARENCY_ARGS
+#endif
+
 /* The shading normal of a smooth triangle where the sample ray meets it: its three vertex
  * normals weighted by the barycentric coordinates of the hit (Möller–Trumbore on the ray,
  * clamped to the triangle, as a sample by an edge may land just outside), normalised.
@@ -46,7 +56,8 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                   global const float4* tri_vertex_normals, global const float4* tri_albedo,
                   global const float2* offsets, global const float4* scatter,
                   global const float* visible_exact, global const light_texture_t* light_textures,
-                  global const float4* texels, global float4* image TRANSLUCENCY_ARGS SURFACE_THROUGH_ARGS)
+                  global const float4* texels, global float4* image TRANSLUCENCY_ARGS SURFACE_THROUGH_ARGS
+                  TRANSPARENCY_ARGS)
 {
     int pixel = get_global_id(0);
     if (pixel >= frame->width * frame->height) return;
@@ -104,7 +115,12 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
             }
             surface = tri_albedo[tri].xyz * irradiance * M_1_PI_F;
         }
+#ifdef SHADE_TRANSPARENCY
+        total += transmittance[sample].xyz * (surface * exp(-sigma_t * distance) + scatter[sample].xyz)
+                 + in_front[sample].xyz;
+#else
         total += surface * exp(-sigma_t * distance) + scatter[sample].xyz;
+#endif
     }
     image[pixel] = (float4)(total / (float)frame->spp, 1.0f);
 }

@@ -7,7 +7,10 @@ and walks every camera sample's rows with `pixel`.)
     raster → raymarch → visibility → shade                                 (method `raymarch`)
     raster → rectify → integrand → volume_moments → visibility → shade     (method `moments`)
 
-(`visibility` runs with `render.surface_shadows: exact`, the default; `shadow_filter`
+(A scene with translucent objects adds `transparency` after raster: the layers in front of
+the opaque depth, the fog up to each, their composite, which shade reads; docs/design.md,
+translucent surfaces: the camera side.
+`visibility` runs with `render.surface_shadows: exact`, the default; `shadow_filter`
 takes its place with `surface_shadows: filtered`; a textured light adds `light_texture`
 between integrand and traverse, docs/light-textures.md; a scene with translucent
 objects adds `translucency` after raster: each light's translucent layers, which
@@ -37,7 +40,7 @@ from .device import Device, StageTimer
 from .errors import ClraysError
 from .inputs import FrameBuffers, FrameInputs, frame_inputs, upload
 from .reference.radiometry import effective_far
-from .reuse import COMPUTED, REUSED, Reuse, StageCache, StageRecord, digest, scene_digest
+from .reuse import COMPUTED, REUSED, SKIPPED, Reuse, StageCache, StageRecord, digest, scene_digest
 from .scene.costs import with_derived_sizes
 from .scene.model import METHODS, Render, Scene
 from .stages.integrand import integrand, integrand_table_size
@@ -54,6 +57,7 @@ from .stages.shadow_filter import depth_ranges, frame_filter, shadow_filter, sha
 from .stages.traverse import traverse
 from .stages.translucency import (opaque_occluder_buffers, rectify_layers, refuse_translucency,
                                   surface_transmittance, translucency)
+from .stages.transparency import Films, composite, opaque_camera_vertices, translucent_films, translucent_triangles
 from .stages.volume_moments import volume_moments
 from .stages.visibility import bound_atlas, bvh_topology_of, upload_bvh, visibility, visibility_bound
 
@@ -156,6 +160,7 @@ class Renderer:
         bvh = self._bvh(occluders, keys, reuse, timer)  # (visibility's BVH, on the host before the device is busy)
         rastered, maps = self._raster(buffers, keys, reuse, timer)  # raster: camera depth and ids, shadow maps
         layers = self._translucency(buffers, keys, reuse, timer)  # translucency: layers nearest each light
+        films = self._films(buffers, rastered, reuse, timer)  # transparency: translucent films before the opaque depth
         textures, samples = [], None
         scatter = device.buffer(nbytes=16 * buffers.inputs.samples)  # in-scattered radiance per camera sample
         device.fill(scatter, np.float32(0), 16 * buffers.inputs.samples)
@@ -164,10 +169,15 @@ class Renderer:
         elif method == "raymarch":
             reuse.record.note("raymarch", COMPUTED)
             raymarch(device, buffers, rastered, scatter, timer, layers)  # raymarch: the brute-force reference
+            if films is not None:  # and up to each translucent film
+                films.add_in_scatter(device, timer, lambda r, s, t: raymarch(device, buffers, r, s, t, layers))
         else:
             for index, light in enumerate(scene.lights):
                 if eye_in_lamp(scene, light):  # d_el → 0: no epipolar frame, nothing visible is shadowed
                     lamp_in_scatter(device, buffers, rastered, light, scatter, timer)
+                    if films is not None:
+                        films.add_in_scatter(device, timer, lambda r, s, t, light=light: lamp_in_scatter(
+                            device, buffers, r, light, s, t))
                     continue
                 epipolar = self._rectify(buffers, rastered, maps, keys, index, reuse, timer)  # rectify: S[α, γ]
                 if epipolar is None:  # no visible ray has any extent in γ
@@ -191,13 +201,30 @@ class Renderer:
                     samples = counts if samples is None else samples + counts
                 else:  # per camera sample; and a light that casts no shadow, whose 16 slices are too few to sample
                     traverse(device, buffers, rastered, epipolar, tables, scatter, timer, texture, rectified)
+                if films is not None:  # each translucent film's own rays walk the same trees
+                    films.add_in_scatter(device, timer, lambda r, s, t, e=epipolar, i=tables, x=texture, y=rectified:
+                                         traverse(device, buffers, r, e, i, s, t, x, y))
             reuse.record.note(VOLUME_STAGES[method][-1], COMPUTED)
         visible = self._visibility(occluders, rastered, keys, reuse, timer, bvh)  # visibility: exact surface shadows
         through = None if layers is None or scene.render.surface_shadows != "exact" else \
             surface_transmittance(device, buffers, rastered, layers, timer)  # (translucent shadows' exact edges)
-        image = shade(device, buffers, rastered, scatter, timer, visible, layers, through)  # shade: surfaces, attenuation, + scatter
+        # transparency: the films' surfaces and fog composited in front of the opaque samples
+        transparency = None if films is None else composite(device, buffers, rastered, films, timer, layers)
+        image = shade(device, buffers, rastered, scatter, timer, visible, layers, through,  # shade: surfaces,
+                      transparency)                                                         # attenuation, + scatter
         reuse.record.note("shade", COMPUTED)
-        return image, tuple(reuse.record.status()), tuple(textures), samples
+        # The stages that ran: a frame identical to this one counts them reused (not the skipped ones).
+        ran = tuple(stage for stage, status in reuse.record.status().items() if status != SKIPPED)
+        return image, ran, tuple(textures), samples
+
+    def _films(self, buffers: FrameBuffers, rastered: RasterResult, reuse: Reuse, timer: StageTimer) -> Films | None:
+        """The transparency stage's films (clrays.stages.transparency); None, and the stage
+        skipped, when every object is opaque: then nothing of it runs."""
+        if not buffers.inputs.scene.geometry.translucent:
+            reuse.skip("transparency")
+            return None
+        reuse.record.note("transparency", COMPUTED)
+        return translucent_films(self.device, buffers, rastered, timer)
 
     def _translucency(self, buffers: FrameBuffers, keys: StageKeys, reuse: Reuse, timer: StageTimer):
         """The translucency stage, kept while the shadow maps' inputs and the layer count
@@ -266,8 +293,18 @@ class Renderer:
         triangle ids, and each light's shadow map (anchored at the light, so a moving
         camera keeps it). Returns the frame's RasterResult and the per-light maps."""
         device = self.device
-        camera_depth, tri_id = reuse.stage("raster.camera", keys.camera,
-                                           lambda: raster_camera(device, buffers, timer))
+        camera_buffers, camera_key = buffers, keys.camera
+        if buffers.inputs.scene.geometry.translucent:  # the camera depth is the opaque one (stages/transparency.py)
+            camera_buffers = replace(buffers, tri_vertices=None)
+            camera_key = digest(keys.camera, "opaque", translucent_triangles(buffers.inputs.scene))
+
+        def camera():
+            if camera_buffers.tri_vertices is None:
+                opaque = device.buffer(opaque_camera_vertices(buffers.inputs), writable=False)
+                return raster_camera(device, replace(camera_buffers, tri_vertices=opaque), timer)
+            return raster_camera(device, camera_buffers, timer)
+
+        camera_depth, tri_id = reuse.stage("raster.camera", camera_key, camera)
         maps = [reuse.stage("raster.shadow", keys.shadow[index],
                             lambda index=index: raster_shadow_map(device, buffers, index, timer), per_light=True)
                 for index in range(len(buffers.inputs.scene.lights))]
