@@ -9,7 +9,8 @@ Times: the scene as written against the same scene with the pane opaque
 (`objects.1.opacity=1`, which takes the opaque-only path), every stage computed (no
 reuse), median of `--frames` frames after a warm-up. Error: relative RMSE of luminance
 (`clrays.reference.metrics.image_error`) and per channel, depth edges out and the pixels
-whose rays cross the pane (grown by a pixel): their compositing is the camera side's.
+whose rays cross the pane (grown by a pixel), whose compositing is the camera side's;
+`--films` keeps those in.
 """
 from __future__ import annotations
 
@@ -67,14 +68,16 @@ def times(size: list[str], frames: int) -> None:
                   f"| {walk:.0f} | {runs[0].device_bytes / 2**20:.0f} |")
 
 
-def errors(size: list[str], steps: int) -> None:
+def errors(size: list[str], steps: int, films: bool) -> None:
     print("| method | sampling | rel. RMSE | R, G, B rel. RMSE | mean | p99 |")
     print("|---|---|---:|---|---:|---:|")
     scene = clrays.load_scene(SCENE, overrides=size + [f"render.steps={steps}"])
     start = time.perf_counter()
     reference = render_exact(scene)
     exact_s = time.perf_counter() - start
-    exclude = depth_edges(depth_map(scene)) | crossing_pixels(scene)
+    exclude = depth_edges(depth_map(scene))
+    if not films:
+        exclude |= crossing_pixels(scene)
     keep = ~exclude
     for method, sampling in (("raymarch", "epipolar"), ("minmax", "epipolar"), ("minmax", "pixel")):
         image = clrays.render(clrays.load_scene(SCENE, overrides=size + [f"render.steps={steps}",
@@ -94,11 +97,13 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=3)
     parser.add_argument("--error", action="store_true", help="error against exact instead of times")
     parser.add_argument("--steps", type=int, default=1024, help="raymarch steps for --error")
+    parser.add_argument("--films", action="store_true",
+                        help="--error over the pixels that see the pane too (the camera side's compositing)")
     args = parser.parse_args()
     width, height = args.size.split("x")
     size = [f"image.width={width}", f"image.height={height}"]
     if args.error:
-        errors(size, args.steps)
+        errors(size, args.steps, args.films)
     else:
         times(size, args.frames)
 

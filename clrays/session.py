@@ -40,7 +40,7 @@ from .device import Device, StageTimer
 from .errors import ClraysError
 from .inputs import FrameBuffers, FrameInputs, frame_inputs, upload
 from .reference.radiometry import effective_far
-from .reuse import COMPUTED, REUSED, Reuse, StageCache, StageRecord, digest, scene_digest
+from .reuse import COMPUTED, REUSED, SKIPPED, Reuse, StageCache, StageRecord, digest, scene_digest
 from .scene.costs import with_derived_sizes
 from .scene.model import METHODS, Render, Scene
 from .stages.integrand import integrand, integrand_table_size
@@ -214,7 +214,9 @@ class Renderer:
         image = shade(device, buffers, rastered, scatter, timer, visible, layers, through,  # shade: surfaces,
                       transparency)                                                         # attenuation, + scatter
         reuse.record.note("shade", COMPUTED)
-        return image, tuple(reuse.record.status()), tuple(textures), samples
+        # The stages that ran: a frame identical to this one counts them reused (not the skipped ones).
+        ran = tuple(stage for stage, status in reuse.record.status().items() if status != SKIPPED)
+        return image, ran, tuple(textures), samples
 
     def _films(self, buffers: FrameBuffers, rastered: RasterResult, reuse: Reuse, timer: StageTimer) -> Films | None:
         """The transparency stage's films (clrays.stages.transparency); None, and the stage
