@@ -3,9 +3,11 @@
  * (for a spot light, over the part of the ray inside its cone), with a shadow-map
  * lookup per sample.
  * Reads frame, views, lights, shadow_depth, camera_depth, offsets, light_textures,
- * texels (a light's texture multiplies it per sample, docs/light-textures.md); writes scatter
+ * texels (a light's texture multiplies it per sample, docs/light-textures.md), and with
+ * translucent objects the translucency stage's layers (translucency.h); writes scatter
  * (one float4 per camera sample, rgb radiance). */
 #include "light_texture.h"
+#include "translucency.h"
 
 /* A per-ray number in [0, 1): jitter that is repeatable from run to run. */
 inline float hash_unit(uint a)
@@ -26,7 +28,7 @@ kernel void raymarch(global const frame_t* frame, global const view_t* views,
                      global const light_t* lights, global const uint* shadow_depth,
                      global const uint* camera_depth, global const float2* offsets,
                      global const light_texture_t* light_textures, global const float4* texels,
-                     global float4* scatter)
+                     global float4* scatter TRANSLUCENCY_ARGS)
 {
     int sample = get_global_id(0);
     int pixel = sample / frame->spp;
@@ -62,6 +64,9 @@ kernel void raymarch(global const frame_t* frame, global const view_t* views,
              * itself, and a bias would light a texel-thick layer behind every occluder. */
             float visible = unshadowed ? 1.0f : shadow_visibility(light, views, shadow_depth, p, 0.0f, 0);
             if (visible == 0.0f) continue;
+#ifdef TRANSLUCENT_LAYERS /* through the translucent surfaces nearer the light (translucency.h) */
+            incident *= light_transmittance(light, views, layer_depth, layer_clear, layer_stride, p, 0.0f);
+#endif
             /* The light's path e^{-σt·(s + d(s))}, d the distance to the light (0 for a
              * directional light), is linear in s across the step to first order, with slope
              * σt·(1 + d'), d' = -to_light·dir: integrated exactly over [start, start + dt],

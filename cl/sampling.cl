@@ -188,9 +188,10 @@ kernel void line_scatter(global const frame_t* frame, global const view_t* views
                          global const textured_integrand_t* textured, global const float* texture_basis,
                          global const float* texture_prefix, global const float2* ranges,
                          global const float4* sides, global const float2* line, int n, int step, float threshold,
-                         global float4* radiance, global uint* counts)
+                         global float4* radiance, global uint* counts RECTIFIED_LAYER_ARGS)
 {
     row_texture_t texture = {textured, texture_basis, texture_prefix};
+    ATTACH_RECTIFIED_LAYERS(texture) /* translucent objects only (translucent_walk.h) */
     int j = get_global_id(0), i = get_global_id(1);
     if (j >= n || i >= ep->slices) return;
     global const float2* samples = line + i * n;
@@ -216,9 +217,10 @@ kernel void line_refine(global const frame_t* frame, global const light_t* light
                         global const textured_integrand_t* textured, global const float* texture_basis,
                         global const float* texture_prefix, global const float2* ranges,
                         global const float4* sides, global const float2* line, int n, float threshold,
-                        global const float4* radiance, global float4* refined, global uint* counts)
+                        global const float4* radiance, global float4* refined, global uint* counts RECTIFIED_LAYER_ARGS)
 {
     row_texture_t texture = {textured, texture_basis, texture_prefix};
+    ATTACH_RECTIFIED_LAYERS(texture) /* translucent objects only (translucent_walk.h) */
     int j = get_global_id(0), i = get_global_id(1);
     if (j >= n || i >= ep->slices) return;
     global const float4* samples = radiance + i * n;
@@ -320,11 +322,12 @@ kernel void fix_up(global const frame_t* frame, global const view_t* views, glob
                    global const epipolar_t* ep, global const float2* tree, global const integrand_t* integrand,
                    global const float* tables, global const uint* camera_depth, global const float2* offsets,
                    global const textured_integrand_t* textured, global const float* texture_basis,
-                   global const float* texture_prefix, global const uint* fixups, int count, global float4* scatter)
+                   global const float* texture_prefix, global const uint* fixups, int count, global float4* scatter RECTIFIED_LAYER_ARGS)
 {
     int k = get_global_id(0);
     if (k >= count) return;
     row_texture_t texture = {textured, texture_basis, texture_prefix};
+    ATTACH_RECTIFIED_LAYERS(texture) /* translucent objects only (translucent_walk.h) */
     uint entry = fixups[k];
     int sample = entry >> 2;
     float distance, t;

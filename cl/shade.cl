@@ -5,11 +5,23 @@
  * tri_normal, tri_vertex_normals, tri_albedo, offsets, scatter, visible (the visibility
  * stage's answer per sample and light, with surface_shadows exact; the shadow_filter stage's
  * with surface_shadows filtered), light_textures and texels (a light's texture,
- * docs/light-textures.md); writes image (one
+ * docs/light-textures.md), and with translucent objects the translucency stage's layers
+ * (translucency.h); writes image (one
  * float4 per pixel, linear rgb). */
 #include "light_texture.h"
+#include "translucency.h"
 
 #define SURFACE_BIAS_TEXELS 1.5f /* depth tolerance of the surface shadow test */
+
+/* A scene with translucent objects builds shade with SHADE_TRANSPARENCY: the transparency stage's
+ * T(D) and the light of the layers in front of each sample (docs/design.md, translucent surfaces:
+ * the camera side) come as two more buffers. Opaque-only scenes build it without, and their
+ * images are unchanged. */
+#ifdef SHADE_TRANSPARENCY
+#define TRANSPARENCY_ARGS , global const float4* transmittance, global const float4* in_front
+#else
+#define TRANSPARENCY_ARGS
+#endif
 
 /* The shading normal of a smooth triangle where the sample ray meets it: its three vertex
  * normals weighted by the barycentric coordinates of the hit (Möller–Trumbore on the ray,
@@ -44,7 +56,8 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                   global const float4* tri_vertex_normals, global const float4* tri_albedo,
                   global const float2* offsets, global const float4* scatter,
                   global const float* visible_exact, global const light_texture_t* light_textures,
-                  global const float4* texels, global float4* image)
+                  global const float4* texels, global float4* image TRANSLUCENCY_ARGS SURFACE_THROUGH_ARGS
+                  TRANSPARENCY_ARGS)
 {
     int pixel = get_global_id(0);
     if (pixel >= frame->width * frame->height) return;
@@ -91,11 +104,23 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                 else
                     visible = shadow_visibility(lights + l, views, shadow_depth, lookup, SURFACE_BIAS_TEXELS,
                                                 frame->pcf);
+#ifdef TRANSLUCENT_LAYERS /* through the translucent surfaces nearer the light (translucency.h) */
+                if (visible > 0.0f)
+                    incident *= has_surface_through
+                                    ? surface_through[sample * frame->light_count + l].xyz
+                                    : light_transmittance(lights + l, views, layer_depth, layer_clear, layer_stride,
+                                                          lookup, SURFACE_BIAS_TEXELS);
+#endif
                 irradiance += incident * (cosine * visible);
             }
             surface = tri_albedo[tri].xyz * irradiance * M_1_PI_F;
         }
+#ifdef SHADE_TRANSPARENCY
+        total += transmittance[sample].xyz * (surface * exp(-sigma_t * distance) + scatter[sample].xyz)
+                 + in_front[sample].xyz;
+#else
         total += surface * exp(-sigma_t * distance) + scatter[sample].xyz;
+#endif
     }
     image[pixel] = (float4)(total / (float)frame->spp, 1.0f);
 }

@@ -12,7 +12,7 @@ kernel void traverse(global const frame_t* frame, global const view_t* views, gl
                      global const integrand_t* integrand, global const float* tables,
                      global const uint* camera_depth, global const float2* offsets,
                      global const textured_integrand_t* textured, global const float* texture_basis,
-                     global const float* texture_prefix, global float4* scatter)
+                     global const float* texture_prefix, global float4* scatter RECTIFIED_LAYER_ARGS)
 {
     int sample = get_global_id(0);
     if (sample >= frame->width * frame->height * frame->spp) return;
@@ -25,6 +25,7 @@ kernel void traverse(global const frame_t* frame, global const view_t* views, gl
     float t;
     nearest_slices(ep, dir, &i0, &i1, &t);
     row_texture_t texture = {textured, texture_basis, texture_prefix};
+    ATTACH_RECTIFIED_LAYERS(texture) /* translucent objects only (translucent_walk.h) */
     float3 near0 = row_radiance(ep, tree, i0, &span, integrand, tables, frame, &texture);
     float3 near1 = row_radiance(ep, tree, i1, &span, integrand, tables, frame, &texture);
     scatter[sample] += (float4)(mix(near0, near1, t), 0.0f);

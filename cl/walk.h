@@ -22,6 +22,11 @@ typedef struct {
     global const textured_integrand_t* textured;
     global const float* basis;
     global const float* prefix;
+#ifdef TRANSLUCENT_LAYERS /* the rectified translucent layers (translucent_walk.h) */
+    global const float* layer_beta;
+    global const uint2* layer_clear;
+    global const int* layer_rows;
+#endif
 } row_texture_t;
 
 /* A lit run's radiance: the integrand tables' segment, times the light's texture along
@@ -180,6 +185,8 @@ inline float3 walk_row(global const epipolar_t* ep, global const float2* row, co
     return radiance;
 }
 
+#include "translucent_walk.h"
+
 /* The radiance of a ray's lit runs along slice i's row, the lamp's chord left out. */
 inline float3 row_radiance(global const epipolar_t* ep, global const float2* tree, int i, const ray_span_t* span,
                            global const integrand_t* in, global const float* tables, global const frame_t* frame,
@@ -189,6 +196,19 @@ inline float3 row_radiance(global const epipolar_t* ep, global const float2* tre
     size_t prefix_stride = texture->textured->textured
                                ? (size_t)3 * (texture->textured->rank + 1) * (ep->gamma_samples + 1) : 0;
     global const float* row_prefix = texture->prefix + i * prefix_stride;
+#ifdef TRANSLUCENT_LAYERS /* a row that translucent layers cross: texel by texel (translucent_walk.h) */
+    if (texture->layer_rows[i]) {
+        size_t layers_at = (size_t)i * ep->gamma_samples * TRANSLUCENT_LAYERS;
+        global const float* beta_row = texture->layer_beta + layers_at;
+        global const uint2* clear_row = texture->layer_clear + layers_at;
+        float3 radiance = walk_row_translucent(ep, row, beta_row, clear_row, &span->ray, span->gamma_begin,
+                                               span->gamma_lamp0, in, tables, frame, texture, row_prefix);
+        if (span->gamma_lamp1 < span->gamma_end)
+            radiance += walk_row_translucent(ep, row, beta_row, clear_row, &span->ray, span->gamma_lamp1,
+                                             span->gamma_end, in, tables, frame, texture, row_prefix);
+        return radiance;
+    }
+#endif
     float3 radiance = walk_row(ep, row, &span->ray, span->gamma_begin, span->gamma_lamp0, in, tables, frame, texture,
                                row_prefix);
     if (span->gamma_lamp1 < span->gamma_end)

@@ -62,8 +62,10 @@ def scene_digest(scene, *, render: bool = True) -> bytes:
     """Everything about a scene that can change an image (not its source path or its
     animation, which only make other scenes). `render=False` leaves out the render
     settings, for references whose own settings are given separately."""
+    # Opacity only where some object is translucent, so an opaque-only scene keeps its digest.
+    translucent = (scene.geometry.opacity,) if scene.geometry.translucent else ()
     return digest(scene.image, scene.camera, scene.lights, scene.medium, scene.background,
-                  *geometry_parts(scene.geometry), scene.render if render else None)
+                  *geometry_parts(scene.geometry), scene.render if render else None, *translucent)
 
 
 def geometry_parts(geometry, triangles_only: bool = False) -> tuple:

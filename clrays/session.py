@@ -7,9 +7,14 @@ and walks every camera sample's rows with `pixel`.)
     raster → raymarch → visibility → shade                                 (method `raymarch`)
     raster → rectify → integrand → volume_moments → visibility → shade     (method `moments`)
 
-(`visibility` runs with `render.surface_shadows: exact`, the default; `shadow_filter`
+(A scene with translucent objects adds `transparency` after raster: the layers in front of
+the opaque depth, the fog up to each, their composite, which shade reads; docs/design.md,
+translucent surfaces: the camera side.
+`visibility` runs with `render.surface_shadows: exact`, the default; `shadow_filter`
 takes its place with `surface_shadows: filtered`; a textured light adds `light_texture`
-between integrand and traverse, docs/light-textures.md.)
+between integrand and traverse, docs/light-textures.md; a scene with translucent
+objects adds `translucency` after raster: each light's translucent layers, which
+raymarch, traverse and shade look up, docs/design.md "Translucent occluders".)
 
 `Renderer._frame` is that figure, one line per stage. The `exact` reference runs on
 the host in float64 instead (clrays.reference.exact).
@@ -35,7 +40,7 @@ from .device import Device, StageTimer
 from .errors import ClraysError
 from .inputs import FrameBuffers, FrameInputs, frame_inputs, upload
 from .reference.radiometry import effective_far
-from .reuse import COMPUTED, REUSED, Reuse, StageCache, StageRecord, digest, geometry_parts, scene_digest
+from .reuse import COMPUTED, REUSED, SKIPPED, Reuse, StageCache, StageRecord, digest, geometry_parts, scene_digest
 from .scene.costs import with_derived_sizes
 from .scene.model import METHODS, Render, Scene
 from .stages.integrand import integrand, integrand_table_size
@@ -50,6 +55,10 @@ from .stages.sampling import SampleCounts, epipolar_sampling
 from .stages.shade import shade
 from .stages.shadow_filter import depth_ranges, frame_filter, shadow_filter, shadow_filter_moments
 from .stages.traverse import traverse
+from .stages.translucency import (opaque_occluder_buffers, rectify_layers, refuse_translucency,
+                                  surface_transmittance, translucency)
+from .stages.transparency import (Films, composite, opaque_camera_vertices, translucent_films, translucent_triangles,
+                                  transparency_of)
 from .stages.volume_moments import volume_moments
 from .stages.visibility import bound_atlas, bvh_topology_of, upload_bvh, visibility, visibility_bound
 
@@ -145,10 +154,14 @@ class Renderer:
         if not self._cull_faces:
             inputs = replace(inputs, view_needed=np.ones_like(inputs.view_needed))
         check_device_memory(device, inputs)
+        refuse_translucency(scene, method)  # (moments: no transmittance term)
         buffers = upload(device, inputs)  # the scene in eye space, packed into device structs
         keys = StageKeys(buffers.inputs)
-        bvh = self._bvh(buffers, keys, reuse, timer)  # (visibility's BVH, on the host before the device is busy)
+        occluders = opaque_occluder_buffers(device, buffers)  # (translucent triangles block no shadow ray)
+        bvh = self._bvh(occluders, keys, reuse, timer)  # (visibility's BVH, on the host before the device is busy)
         rastered, maps = self._raster(buffers, keys, reuse, timer)  # raster: camera depth and ids, shadow maps
+        layers = self._translucency(buffers, keys, reuse, timer)  # translucency: layers nearest each light
+        films = self._films(buffers, rastered, reuse, timer)  # transparency: translucent films before the opaque depth
         textures, samples = [], None
         scatter = device.buffer(nbytes=16 * buffers.inputs.samples)  # in-scattered radiance per camera sample
         device.fill(scatter, np.float32(0), 16 * buffers.inputs.samples)
@@ -156,11 +169,16 @@ class Renderer:
             reuse.skip(*VOLUME_STAGES[method])  # no medium: no volume stages at all
         elif method == "raymarch":
             reuse.record.note("raymarch", COMPUTED)
-            raymarch(device, buffers, rastered, scatter, timer)  # raymarch: the brute-force reference
+            raymarch(device, buffers, rastered, scatter, timer, layers)  # raymarch: the brute-force reference
+            if films is not None:  # and up to each translucent film
+                films.add_in_scatter(device, timer, lambda r, s, t: raymarch(device, buffers, r, s, t, layers))
         else:
             for index, light in enumerate(scene.lights):
                 if eye_in_lamp(scene, light):  # d_el → 0: no epipolar frame, nothing visible is shadowed
                     lamp_in_scatter(device, buffers, rastered, light, scatter, timer)
+                    if films is not None:
+                        films.add_in_scatter(device, timer, lambda r, s, t, light=light: lamp_in_scatter(
+                            device, buffers, r, light, s, t))
                     continue
                 epipolar = self._rectify(buffers, rastered, maps, keys, index, reuse, timer)  # rectify: S[α, γ]
                 if epipolar is None:  # no visible ray has any extent in γ
@@ -176,16 +194,48 @@ class Renderer:
                 texture = reuse.stage("light_texture", keys.light_texture(index, epipolar),  # texture: T·Γ_i prefix sums
                                       lambda: light_texture(device, buffers, index, epipolar, tables, timer),
                                       per_light=True) if textured(light) else None
+                rectified = None if layers is None else \
+                    rectify_layers(device, buffers, layers, epipolar, timer)  # (translucent layers in α, γ)
                 if scene.render.sampling == "epipolar" and not epipolar.unshadowed:  # traverse: walk the trees
-                    counts = epipolar_sampling(device, buffers, rastered, epipolar, tables, scatter, timer, texture)
+                    counts = epipolar_sampling(device, buffers, rastered, epipolar, tables, scatter, timer, texture,
+                                               rectified)
                     samples = counts if samples is None else samples + counts
                 else:  # per camera sample; and a light that casts no shadow, whose 16 slices are too few to sample
-                    traverse(device, buffers, rastered, epipolar, tables, scatter, timer, texture)
+                    traverse(device, buffers, rastered, epipolar, tables, scatter, timer, texture, rectified)
+                if films is not None:  # each translucent film's own rays walk the same trees
+                    films.add_in_scatter(device, timer, lambda r, s, t, e=epipolar, i=tables, x=texture, y=rectified:
+                                         traverse(device, buffers, r, e, i, s, t, x, y))
             reuse.record.note(VOLUME_STAGES[method][-1], COMPUTED)
-        visible = self._visibility(buffers, rastered, keys, reuse, timer, bvh)  # visibility: exact surface shadows
-        image = shade(device, buffers, rastered, scatter, timer, visible)  # shade: surfaces, attenuation, + scatter
+        visible = self._visibility(occluders, rastered, keys, reuse, timer, bvh)  # visibility: exact surface shadows
+        through = None if layers is None or scene.render.surface_shadows != "exact" else \
+            surface_transmittance(device, buffers, rastered, layers, timer)  # (translucent shadows' exact edges)
+        # transparency: the films' surfaces and fog composited in front of the opaque samples
+        transparency = None if films is None else composite(device, buffers, rastered, films, timer, layers)
+        image = shade(device, buffers, rastered, scatter, timer, visible, layers, through,  # shade: surfaces,
+                      transparency)                                                         # attenuation, + scatter
         reuse.record.note("shade", COMPUTED)
-        return image, tuple(reuse.record.status()), tuple(textures), samples
+        # The stages that ran: a frame identical to this one counts them reused (not the skipped ones).
+        ran = tuple(stage for stage, status in reuse.record.status().items() if status != SKIPPED)
+        return image, ran, tuple(textures), samples
+
+    def _films(self, buffers: FrameBuffers, rastered: RasterResult, reuse: Reuse, timer: StageTimer) -> Films | None:
+        """The transparency stage's films (clrays.stages.transparency); None, and the stage
+        skipped, when every object is opaque: then nothing of it runs."""
+        if not buffers.inputs.scene.geometry.translucent:
+            reuse.skip("transparency")
+            return None
+        reuse.record.note("transparency", COMPUTED)
+        return translucent_films(self.device, buffers, rastered, timer)
+
+    def _translucency(self, buffers: FrameBuffers, keys: StageKeys, reuse: Reuse, timer: StageTimer):
+        """The translucency stage, kept while the shadow maps' inputs and the layer count
+        are (the opacities are in `keys.geometry`); skipped, None, in an opaque-only scene."""
+        scene = buffers.inputs.scene
+        if not scene.geometry.translucent or not scene.lights:
+            reuse.skip("translucency")
+            return None
+        return reuse.stage("translucency", digest("translucency", tuple(keys.shadow), scene.render.translucent_layers),
+                           lambda: translucency(self.device, buffers, timer))
 
     def _bvh(self, buffers: FrameBuffers, keys: StageKeys, reuse: Reuse, timer: StageTimer):
         """The visibility stage's BVH, or None when the stage does not run: its tree kept
@@ -244,8 +294,18 @@ class Renderer:
         triangle ids, and each light's shadow map (anchored at the light, so a moving
         camera keeps it). Returns the frame's RasterResult and the per-light maps."""
         device = self.device
-        camera_depth, tri_id = reuse.stage("raster.camera", keys.camera,
-                                           lambda: raster_camera(device, buffers, timer))
+        camera_buffers, camera_key = buffers, keys.camera
+        if buffers.inputs.scene.geometry.translucent:  # the camera depth is the opaque one (stages/transparency.py)
+            camera_buffers = replace(buffers, tri_vertices=None)
+            camera_key = digest(keys.camera, "opaque", translucent_triangles(buffers.inputs.scene))
+
+        def camera():
+            if camera_buffers.tri_vertices is None:
+                opaque = device.buffer(opaque_camera_vertices(buffers.inputs), writable=False)
+                return raster_camera(device, replace(camera_buffers, tri_vertices=opaque), timer)
+            return raster_camera(device, camera_buffers, timer)
+
+        camera_depth, tri_id = reuse.stage("raster.camera", camera_key, camera)
         maps = [reuse.stage("raster.shadow", keys.shadow[index],
                             lambda index=index: raster_shadow_map(device, buffers, index, timer), per_light=True)
                 for index in range(len(buffers.inputs.scene.lights))]
@@ -260,8 +320,9 @@ class Renderer:
         (up to float32 rounding where the run is clipped) without rectifying the full one."""
         device, key = self.device, keys.trees(index)
         # A textured light keeps its full texture size: the texture is rectified on its rows.
+        # So does a light with translucent layers: its texture carries their transmittance.
         if self._skip_unshadowed and not textured(buffers.inputs.scene.lights[index]) \
-                and map_is_empty(device, maps[index]):
+                and not buffers.inputs.scene.geometry.translucent and map_is_empty(device, maps[index]):
             render = buffers.inputs.scene.render
             small = replace(buffers.inputs.scene, render=replace(render, slices=UNSHADOWED_SIZE,
                                                                    gamma_samples=UNSHADOWED_SIZE))
@@ -324,6 +385,21 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
             sizes.append(("moment prefix sums of one light", prefix))
     if scene.render.surface_shadows == "exact" and scene.lights:  # visibility's bound and writer maps, every light's
         sizes.append(("bound and writer maps", 8 * inputs.shadow_texels))
+    if scene.geometry.translucent and scene.lights:  # the translucency stage's layers (translucency.py)
+        layers = scene.render.translucent_layers
+        sizes.append(("translucent layers", 12 * layers * inputs.shadow_texels))
+        if scene.render.method == "minmax":
+            texels = scene.render.slices * (1 << max(int(np.ceil(np.log2(scene.render.gamma_samples))), 1))
+            sizes.append(("rectified translucent layers of one light", 12 * layers * texels))
+        if scene.render.surface_shadows == "exact":
+            sizes.append(("surface transmittance", 16 * samples * len(scene.lights)))
+    if scene.geometry.translucent:  # the transparency stage's films (transparency.py): depth, triangle, fog per slot
+        # Peeling's layers bound its slots; moments gather every film a ray meets, counted here as at
+        # most 64 (the most layers peeling takes) or the translucent triangles, the fewer.
+        settings = transparency_of(scene)
+        slots = settings.layers if settings.type == "depth_peeling" else min(len(translucent_triangles(scene)), 64)
+        sizes += [("translucent films seen by the camera", 24 * slots * samples),
+                  ("films' transmittance and light", 32 * samples)]
     if scene.render.surface_shadows == "filtered":  # the moment maps and their blur's scratch (shadow_filter.py)
         sizes += [("moment maps", 16 * inputs.shadow_texels), ("moment maps' blur scratch", 16 * inputs.shadow_texels)]
     return sizes
@@ -361,6 +437,8 @@ class StageKeys:
         # which are pre-warped, and how many the device buffers carry.
         self.geometry = digest(*geometry_parts(scene.geometry, triangles_only=True), inputs.raster_triangles,
                                len(inputs.tri_vertices))
+        if scene.geometry.translucent:  # which triangles are opaque occluders, and what the others let through
+            self.geometry = digest(self.geometry, scene.geometry.opacity)
         # raster.camera: the eye-space triangles (geometry and eye), the camera view, the sample offsets.
         self.camera = digest("camera", self.geometry, inputs.eye_ws, inputs.views[:1], inputs.offsets)
         # raster.shadow: the geometry, the light's views relative to its anchor and which of

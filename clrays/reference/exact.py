@@ -29,6 +29,11 @@ The three geometric queries (first hit, shadow ray, lit set) run on a BVH
 grows with pixels × those candidates, not pixels × triangles; `bvh=False` tests every
 triangle (`AllTriangles`), the yardstick the BVH path is tested against. Rays go in
 chunks so memory stays around 100 MB.
+
+A scene with translucent objects (`Geometry.translucent`) goes through
+`translucency.translucent_radiance` instead: light through translucent occluders is
+scaled by the product of their (1 − α), and the camera ray composites the translucent
+surfaces in front of its first opaque hit. An opaque-only scene never reaches it.
 """
 from __future__ import annotations
 
@@ -43,6 +48,7 @@ from .geometry import (BUDGET_BYTES, CLIP_PAIR_BYTES, dot, lit_intervals, occlud
                        triangle_normals)
 from .bvh_queries import SceneBvh
 from .light_texture import light_texture, textured, textured_in_scatter
+from .translucency import TranslucentQueries, translucent_radiance
 from .radiometry import in_scatter_segments, light_incident, propagation_direction, rgb
 from ..scene.model import Scene
 
@@ -210,8 +216,14 @@ def exact_pixels(scene: Scene, ys, xs, progress=False, *, panels: int = 8,
     offsets = sample_offsets(image.spp)
     eye = np.asarray(camera.position, dtype=np.float64)
     tri = np.asarray(scene.geometry.triangles, dtype=np.float64).reshape(-1, 3, 3)
+    radiance = _radiance
     prepared = [(light, shadow_halfspaces(light, tri)) for light in scene.lights]
-    if bvh:
+    if scene.geometry.translucent:  # translucent objects: their own queries and compositing (translucency.py)
+        radiance = translucent_radiance
+        queries = TranslucentQueries(scene.geometry, bvh=bvh)
+        prepared = [(light, queries.halfspaces(light)) for light in scene.lights]
+        chunk = BVH_CHUNK_RAYS if bvh else max(1, BUDGET_BYTES // (CLIP_PAIR_BYTES * (len(tri) + 1)))
+    elif bvh:
         queries = SceneBvh.build(tri)
         chunk = BVH_CHUNK_RAYS
     else:
@@ -233,7 +245,7 @@ def exact_pixels(scene: Scene, ys, xs, progress=False, *, panels: int = 8,
         # One sample offset at a time keeps the ray array at H·W·3 floats.
         dirs = primary_rays(camera, image, offsets[k:k + 1])[ys, xs, 0, :]
         for s in starts:
-            total[s:s + chunk] += _radiance(scene, eye, dirs[s:s + chunk], prepared, quad, queries)
+            total[s:s + chunk] += radiance(scene, eye, dirs[s:s + chunk], prepared, quad, queries)
             if bar is not None:
                 bar.update(1)
     if bar is not None:

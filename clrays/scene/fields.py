@@ -15,7 +15,8 @@ from .limits import MAX_LIGHTS, MAX_MESH_BYTES, MAX_OBJECTS, MAX_SCENE_BYTES, MA
 from .costs import (MAX_GAMMA_SAMPLES, MAX_LINE_SAMPLES, MAX_SHADOW_MAP, MAX_SLICES, MIN_GAMMA_SAMPLES,
                     MIN_LINE_SAMPLES, MIN_SHADOW_MAP, MIN_SLICES)
 from .model import (INTEGRAND_MODES, METHODS, NORMALS, RELIEF_MODES, SAMPLINGS, SHADOW_FILTERS, SURFACE_SHADOWS,
-                    TEXTURE_WRAPS, TRAVERSALS, Camera, DirectionalLight, Image, Render, ShadowFilter)
+                    TEXTURE_WRAPS, TRANSPARENCY_TYPES, TRANSPARENCY_WARPS, TRAVERSALS, Camera, DirectionalLight,
+                    Image, Render, ShadowFilter, Transparency)
 from .textures import MAX_TEXTURE_SIDE
 
 FORMAT_VERSION = 1
@@ -308,6 +309,14 @@ RENDER = Section("render", (
           notes="how relief objects reach the depth maps: `prewarp` warps each relief's depth image for "
                 "every view and maps it onto its base rectangle, `triangles` rasterizes its height-field "
                 "triangles (the same surface, for comparison)", read_by=_RASTER_METHODS),
+    Field("translucent_layers", "integer", Render.translucent_layers, 1, 16,
+          notes="translucent objects: how many translucent surfaces each light's map keeps per texel, nearest "
+                "the light first; along a light ray, those beyond that many let it through unattenuated "
+                "([docs/design.md](design.md#translucent-occluders-the-light-side))", read_by=("minmax", "raymarch")),
+    Field("transparency", "mapping or string", shown_default="`{type: depth_peeling, layers: 8}`",
+          notes="[render.transparency](#rendertransparency): how the camera composites "
+                "[translucent objects](#translucent-objects); a string is its `type`. Read only where an "
+                "object has `opacity` below 1", read_by=("minmax", "raymarch")),
 ))
 
 
@@ -325,6 +334,22 @@ SHADOW_FILTER = Section("render.shadow_filter", (
           notes="`msm_*`: how far the moments are pulled towards those of depth 0.5; `vsm`: the least variance "
                 "(normalised depth²). Measured in bench/RESULTS.md"),
 ), rules=("With `shadow_filter` set, `surface_shadows` is `filtered` (or left out) and `pcf` is 0.",))
+
+TRANSPARENCY = Section("render.transparency", (
+    Field("type", "string", Transparency.type, choices=TRANSPARENCY_TYPES,
+          notes="`depth_peeling`: the `layers` nearest translucent surfaces of each camera ray, composited in "
+                "order; `moments`: every one of them, composited with a transmittance reconstructed from 4 power "
+                "moments of the absorbance, in no order "
+                "(MBOIT; [docs/design.md](design.md#translucent-surfaces-the-camera-side))"),
+    Field("layers", "integer", Transparency.layers, 1, 64,
+          notes="`depth_peeling`: layers composited; surfaces behind the last are left out"),
+    Field("warp", "string", Transparency.warp, choices=TRANSPARENCY_WARPS,
+          notes="`moments`: the depth coordinate of the moments, linear or logarithmic between the nearest and "
+                "the farthest distance of the translucent objects from the camera"),
+    Field("moment_bias", "number", Transparency.moment_bias, 0.0, 0.5,
+          notes="`moments`: how far the normalised moments are pulled towards those of depth 0.5. "
+                "Measured in bench/RESULTS.md"),
+))
 
 
 def unread_render_keys(render: Render, method: str) -> list[str]:
@@ -356,4 +381,4 @@ ANIMATION = Section("animation", (
 #: Every section, by the name the docs' markers use, in the order of the format.
 SECTIONS: dict[str, Section] = {section.name: section for section in (
     TOP, IMAGE, CAMERA, *LIGHTS.values(), MEDIUM, *PHASES.values(), OBJECT, *OBJECTS.values(), TRANSFORM,
-    ROTATE, RENDER, SHADOW_FILTER, ANIMATION)}
+    ROTATE, RENDER, SHADOW_FILTER, TRANSPARENCY, ANIMATION)}

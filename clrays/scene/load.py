@@ -27,10 +27,11 @@ from ..errors import SceneError
 from .animation import Animation, Key, ObjectRig, Track
 from .files import FileRefused, read_regular_file
 from .fields import (ANIMATION, CAMERA, FORMAT_VERSION, IMAGE, LIGHTS, MAX_IMAGE_PIXELS, MEDIUM, OBJECT, OBJECTS,
-                     PHASES, QUATERNION_TOLERANCE, RENDER, ROTATE, SHADOW_FILTER, TOP, TRANSFORM, Field, kinds)
+                     PHASES, QUATERNION_TOLERANCE, RENDER, ROTATE, SHADOW_FILTER, TOP, TRANSFORM, TRANSPARENCY, Field,
+                     kinds)
 from .limits import MAX_LIGHTS, MAX_OBJECTS, MAX_SCENE_BYTES, MAX_TRIANGLES
 from .model import (Camera, DirectionalLight, Geometry, Image, Light, LightTexture, Medium, Phase, PointLight, Render,
-                    Scene, ShadowFilter, SpotLight)
+                    Scene, ShadowFilter, SpotLight, Transparency)
 from .textures import TextureError, cube_from_cross, cube_from_faces, read_texture
 from .transforms import (affine, matrix_to_quat, quat_to_matrix, rotation_axis_angle, rotation_euler,
                          transform_normals, transform_points)
@@ -203,8 +204,9 @@ def _render(node: Node | None) -> Render:
     m = mapping(node, optional=RENDER.optional)
     # A size left out stays None: the renderer derives it from the image (clrays.scene.costs).
     values = {field.key: None if field.default is None and field.key not in m else _read(field, m.get(field.key))
-              for field in RENDER.fields if field.key != "shadow_filter"}
+              for field in RENDER.fields if field.key not in ("shadow_filter", "transparency")}
     values["shadow_filter"] = _shadow_filter(m, values)
+    values["transparency"] = _transparency(m.get("transparency"))
     if values["surface_shadows"] == "filtered" and values["shadow_filter"] is None:
         values["shadow_filter"] = ShadowFilter()
     if values["pcf"] > 0:
@@ -234,6 +236,16 @@ def _shadow_filter(m: dict[str, Node], values: dict[str, Any]) -> ShadowFilter |
         return ShadowFilter(type=choice(node, SHADOW_FILTER["type"].choices))
     keys = mapping(node, optional=SHADOW_FILTER.optional)
     return ShadowFilter(**{field.key: _read(field, keys.get(field.key)) for field in SHADOW_FILTER.fields})
+
+
+def _transparency(node: Node | None) -> Transparency | None:
+    """`render.transparency` (a mapping, or a string naming its type); None when left out."""
+    if node is None:
+        return None
+    if isinstance(node.value, str):
+        return Transparency(type=choice(node, TRANSPARENCY["type"].choices))
+    keys = mapping(node, optional=TRANSPARENCY.optional)
+    return Transparency(**{field.key: _read(field, keys.get(field.key)) for field in TRANSPARENCY.fields})
 
 
 # --------------------------------------------------------------------------- objects

@@ -34,6 +34,11 @@ TEXTURE_WRAPS = ("repeat", "clamp")  # a directional light's texture beyond its 
 # Filtered surface shadows (`render.shadow_filter.type`, docs/design.md §9): the map's test, PCF, or a
 # reconstruction from prefiltered moments (2 for VSM, 4 for the moment shadow maps).
 SHADOW_FILTERS = ("hard", "pcf", "vsm", "msm_hamburger", "msm_hausdorff")
+# Translucent surfaces seen by the camera (`render.transparency.type`, docs/design.md, translucent
+# surfaces: the camera side): the K nearest layers in order, or moment-based order-independent
+# transparency (MBOIT).
+TRANSPARENCY_TYPES = ("depth_peeling", "moments")
+TRANSPARENCY_WARPS = ("none", "log")  # MBOIT's depth warp before the moments are taken
 PHASE_TYPES = ("isotropic", "hg")
 NORMALS = ("smooth", "flat")  # a mesh's shading normals: interpolated vertex normals, or each face's own
 # How the raster stage draws relief objects: by their pre-warp, or as their triangles (the same surface).
@@ -135,6 +140,23 @@ class ShadowFilter:
 
 
 @dataclass(frozen=True)
+class Transparency:
+    """`render.transparency`: how the camera composites translucent surfaces (docs/design.md,
+    translucent surfaces: the camera side)."""
+
+    # depth_peeling by default: exact up to `layers` films, and no slower than MBOIT on glass_row,
+    # where the fog up to each film, the same work for both, is most of the stage (bench/RESULTS.md).
+    type: str = "depth_peeling"  # one of TRANSPARENCY_TYPES
+    # The nearest layers composited; those behind them are dropped. Peeling stops where no sample
+    # finds another layer, so a frame with fewer films pays for those only.
+    layers: int = 8
+    warp: str = "log"  # moments: one of TRANSPARENCY_WARPS
+    # moments: weight pulling the normalised moments towards those of depth 0.5 (cl/moments.h),
+    # measured on scenes/glass_row.yaml (bench/RESULTS.md, "Translucent objects: the camera side").
+    moment_bias: float = 5e-3
+
+
+@dataclass(frozen=True)
 class Render:
     method: str = "minmax"  # one of METHODS
     steps: int = 256  # raymarch samples per pixel
@@ -155,6 +177,8 @@ class Render:
     initial_step: int = 6  # epipolar: every initial_step-th line sample walks its row
     refine_threshold: float = 0.02  # epipolar: relative change in distance or unshadowed radiance that is a break
     relief: str = "prewarp"  # one of RELIEF_MODES
+    translucent_layers: int = 4  # translucent surfaces per light texel, nearest the light first
+    transparency: Transparency | None = None  # translucent surfaces: None takes Transparency()'s defaults
 
 
 @dataclass(frozen=True)

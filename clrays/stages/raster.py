@@ -13,6 +13,7 @@ from .. import structs
 from ..device import Device, StageTimer
 from ..inputs import FrameBuffers, light_pass_inputs
 from .relief import ReliefDrawer
+from .translucency import opaque_occluders
 
 
 @dataclass
@@ -103,7 +104,9 @@ def raster_shadow_map(device: Device, buffers: FrameBuffers, light_index: int, t
     """Rasterize one light's views from the geometry translated to the light (float64 on
     the host), so the depths do not depend on the eye and a render session keeps a static
     light's map while the camera moves (docs/design.md §5, §7)."""
-    inputs = light_pass_inputs(buffers.inputs, light_index, buffers.inputs.raster_triangles)  # not a relief's
+    # Translucent triangles are no opaque occluders: they reach the light through the translucency
+    # stage. A relief's triangles are not carried (its pre-warp draws it).
+    inputs = light_pass_inputs(opaque_occluders(buffers.inputs), light_index, buffers.inputs.raster_triangles)
     light_buffers = replace(buffers, inputs=inputs,
                             views=device.buffer(inputs.views, writable=False),
                             lights=device.buffer(inputs.lights, writable=False),

@@ -7,10 +7,14 @@ from ..inputs import FrameBuffers
 from .raster import RasterResult
 
 
-def raymarch(device: Device, buffers: FrameBuffers, rastered: RasterResult, scatter, timer: StageTimer) -> None:
-    """Write every camera sample's in-scattered radiance (float4, rgb) into `scatter`."""
+def raymarch(device: Device, buffers: FrameBuffers, rastered: RasterResult, scatter, timer: StageTimer,
+             layers=None) -> None:
+    """Write every camera sample's in-scattered radiance (float4, rgb) into `scatter`.
+    `layers`: the translucency stage's, looked up per step (None: an opaque-only scene)."""
     samples = buffers.inputs.samples
-    event = device.kernel("raymarch", "raymarch")(
+    defines, extra = (layers.defines(), layers.args()) if layers is not None else (None, ())
+    event = device.kernel("raymarch", "raymarch", defines)(
         device.queue, (samples,), None, buffers.params, buffers.views, buffers.lights,
-        rastered.shadow_depth, rastered.camera_depth, buffers.offsets, buffers.light_textures, buffers.texels, scatter)
+        rastered.shadow_depth, rastered.camera_depth, buffers.offsets, buffers.light_textures, buffers.texels, scatter,
+        *extra)
     timer.add("raymarch", event)

@@ -108,9 +108,11 @@ def pseudo_beta(beta: np.ndarray) -> np.ndarray:
 
 def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterResult, epipolar: Epipolar,
                       integrand: DeviceIntegrand, scatter, timer: StageTimer,
-                      texture: TextureTables | None = None) -> SampleCounts:
+                      texture: TextureTables | None = None, layers=None) -> SampleCounts:
     """Add one light's in-scattered radiance into `scatter` (float4 per camera sample);
-    `texture`: the light's texture tables (stage light_texture; None: an untextured light)."""
+    `texture`: the light's texture tables (stage light_texture; None: an untextured light);
+    `layers`: its rectified translucent layers (stage translucency; None: an opaque-only scene),
+    which the kernels that walk rows take last."""
     texture = texture if texture is not None else untextured_tables(device)
     inputs = buffers.inputs
     render = inputs.scene.render
@@ -123,6 +125,9 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
     counts = device.buffer(np.zeros(2, dtype=np.uint32))
     samples, n32 = inputs.samples, np.int32(n)
     traversal = {"TRAVERSAL": TRAVERSALS.index(render.traversal)}
+    walked = ()  # the walking kernels' trailing arguments
+    if layers is not None:
+        traversal, walked = {**traversal, **layers.defines()}, layers.args()
 
     def run(name, global_size, local_size, *args):
         event = device.kernel("sampling", name, traversal)(device.queue, global_size, local_size, *args)
@@ -132,11 +137,11 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
         rastered.camera_depth, ranges_buffer, sides, n32, line)
     run("line_scatter", (n, slices), None, buffers.params, buffers.views, buffers.lights,
         epipolar.buffer, epipolar.tree, integrand.params, integrand.data, texture.params, texture.basis,
-        texture.prefix, ranges_buffer, sides, line, n32, step, threshold, radiance, counts)
+        texture.prefix, ranges_buffer, sides, line, n32, step, threshold, radiance, counts, *walked)
     refined = device.buffer(nbytes=16 * slices * n)
     run("line_refine", (n, slices), None, buffers.params, buffers.lights, epipolar.buffer, epipolar.tree,
         integrand.params, integrand.data, texture.params, texture.basis, texture.prefix, ranges_buffer, sides, line,
-        n32, threshold, radiance, refined, counts)
+        n32, threshold, radiance, refined, counts, *walked)
     radiance = refined
     run("line_fill", (n, slices), None, epipolar.buffer, n32, radiance)
     fixups = device.buffer(nbytes=4 * samples)  # camera samples listed for fix_up
@@ -147,5 +152,5 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
     if fixed_up:
         run("fix_up", (fixed_up,), None, buffers.params, buffers.views, buffers.lights, epipolar.buffer,
             epipolar.tree, integrand.params, integrand.data, rastered.camera_depth, buffers.offsets, texture.params,
-            texture.basis, texture.prefix, fixups, np.int32(fixed_up), scatter)
+            texture.basis, texture.prefix, fixups, np.int32(fixed_up), scatter, *walked)
     return SampleCounts(computed, samples - fixed_up, fixed_up)

@@ -10,17 +10,29 @@ from .raster import RasterResult
 
 
 def shade(device: Device, buffers: FrameBuffers, rastered: RasterResult, scatter, timer: StageTimer,
-          visible=None) -> np.ndarray:
+          visible=None, layers=None, surface_through=None, transparency=None) -> np.ndarray:
     """Returns linear radiance, (H, W, 3) float32. `visible`: the visibility stage's answer
-    (float per sample and light), read where `render.surface_shadows` is `exact`."""
+    (float per sample and light), read where `render.surface_shadows` is `exact`.
+    `transparency`: the transparency stage's (transmittance, in_front) buffers, which a scene
+    with translucent objects composites with (clrays.stages.transparency); None otherwise."""
     image = buffers.inputs.scene.image
     pixels = image.width * image.height
     out = device.buffer(nbytes=16 * pixels)
     if visible is None:
         visible = device.buffer(nbytes=4)  # never read: the map decides
-    event = device.kernel("shade", "shade")(
+    # A scene with translucent objects: the light's transmittance per surface sample (translucency stage).
+    # `surface_through`: the translucency stage's per sample and light, with exact surface shadows.
+    defines, extra = None, ()
+    if layers is not None:
+        given = surface_through is not None
+        defines = layers.defines()
+        extra = layers.args() + (surface_through if given else device.buffer(nbytes=16), np.int32(given))
+    if transparency is not None:  # the camera's translucent films (clrays.stages.transparency)
+        defines = {**(defines or {}), "SHADE_TRANSPARENCY": 1}
+        extra = extra + tuple(transparency)
+    event = device.kernel("shade", "shade", defines)(
         device.queue, (pixels,), None, buffers.params, buffers.views, buffers.lights, rastered.shadow_depth,
         rastered.camera_depth, rastered.tri_id, buffers.tri_vertices, buffers.tri_normal, buffers.tri_vertex_normals,
-        buffers.tri_albedo, buffers.offsets, scatter, visible, buffers.light_textures, buffers.texels, out)
+        buffers.tri_albedo, buffers.offsets, scatter, visible, buffers.light_textures, buffers.texels, out, *extra)
     timer.add("shade", event)
     return device.read(out, (image.height, image.width, 4), np.float32)[..., :3]

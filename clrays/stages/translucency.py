@@ -1,0 +1,230 @@
+"""Stage translucency: per light, the translucent surfaces nearest the light in every
+shadow-map texel, with the light's transmittance past each (docs/design.md,
+"Translucent occluders: the light side"). Host side of `cl/translucency.cl`; the
+lookup is `cl/translucency.h`.
+
+A scene with translucent objects (`Geometry.translucent`) splits its occluders: the
+opaque triangles alone make the shadow maps, the visibility stage's bound maps and BVH
+(`opaque_occluders`), so their binary visibility is as before, and the translucent ones
+make `render.translucent_layers` (K) layers per texel, by depth peeling from the light: K
+raster passes over the translucent triangles, each keeping the nearest depth beyond the
+previous layer. Layer k stores its depth and the RGB product of (1 − α) of layers 0 … k.
+A point of the medium or of a surface then receives the light times its shadow-map
+visibility times the transmittance of the last layer nearer the light than itself.
+
+An opaque-only scene never runs this stage, and builds no kernel with the lookup
+(`TRANSLUCENT_LAYERS` undefined), so its images are those of a renderer without it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .. import structs
+from ..device import Device, StageTimer
+from ..errors import ClraysError
+from ..inputs import FrameBuffers, FrameInputs, light_pass_inputs
+
+
+@dataclass
+class Layers:
+    """Every light's translucent layers, in the shadow atlas's layout (cl/translucency.h)."""
+
+    depth: object  # float[count · stride]
+    clear: object  # uint2[count · stride]
+    count: int  # K, layers per texel
+    stride: int  # texels of the shadow atlas: layer k starts at k · stride
+
+    def defines(self) -> dict:
+        """The -D options of a kernel that looks the layers up."""
+        return {"TRANSLUCENT_LAYERS": self.count}
+
+    def args(self) -> tuple:
+        """The kernel arguments of TRANSLUCENCY_ARGS, appended after a kernel's own."""
+        return self.depth, self.clear, np.int32(self.stride)
+
+
+def see_through(geometry) -> np.ndarray:
+    """(T,) bool: the triangles that let some light through (any channel of opacity < 1)."""
+    return np.any(geometry.opacity_or_ones() < 1.0, axis=1)
+
+
+def opaque_occluders(inputs: FrameInputs) -> FrameInputs:
+    """`inputs` with every translucent triangle collapsed onto its first vertex: a triangle
+    of no area, which no ray meets, so the shadow maps, bound maps and the BVH see the
+    opaque occluders only while every triangle keeps its index. Unchanged for an
+    opaque-only scene."""
+    geometry = inputs.scene.geometry
+    if not geometry.translucent:
+        return inputs
+    clear = see_through(geometry)
+    triangles = geometry.triangles.copy()
+    triangles[clear] = triangles[clear][:, :1]
+    vertices = inputs.tri_vertices.reshape(-1, 3, 4).copy()
+    carried = clear[:len(vertices)]  # a relief's rows, listed last, may not be carried (clrays.scene.relief_frame)
+    vertices[carried] = vertices[carried][:, :1]
+    scene = replace(inputs.scene, geometry=replace(geometry, triangles=triangles))
+    return replace(inputs, scene=scene, tri_vertices=vertices.reshape(-1, 4))
+
+
+def opaque_occluder_buffers(device: Device, buffers: FrameBuffers) -> FrameBuffers:
+    """`buffers` whose triangles are `opaque_occluders`'s (the visibility stage's BVH and
+    shadow rays); `buffers` itself for an opaque-only scene."""
+    if not buffers.inputs.scene.geometry.translucent:
+        return buffers
+    inputs = opaque_occluders(buffers.inputs)
+    return replace(buffers, inputs=inputs, tri_vertices=device.buffer(inputs.tri_vertices, writable=False))
+
+
+def refuse_translucency(scene, method: str) -> None:
+    """A one-line error for what cannot show translucent objects: the `moments` method and
+    relief objects drawn by their pre-warp on the device."""
+    geometry = scene.geometry
+    if not geometry.translucent:
+        return
+    clear = see_through(geometry)
+    first = int(geometry.object_id[np.flatnonzero(clear)[0]])
+    where = f"{scene.source}: " if scene.source else ""
+    if method == "moments":
+        raise ClraysError(f"{where}render.method: moments does not support translucent objects "
+                          f"(objects.{first}.opacity); use minmax, raymarch or exact")
+    for record in geometry.reliefs if scene.render.relief == "prewarp" else ():
+        if clear[record.rows].any():
+            index = int(geometry.object_id[record.rows.start])
+            raise ClraysError(f"{where}objects.{index}.opacity: a relief object is opaque on the device "
+                              f"(render.relief: prewarp draws its depth image); use opacity 1, "
+                              f"render.relief: triangles, or method exact")
+
+
+def _translucent_pass_inputs(inputs: FrameInputs, light_index: int) -> tuple[FrameInputs, np.ndarray]:
+    """One light's pass over the translucent triangles only (anchored at the light, as its
+    shadow map), and their (1 − α) as float4 rows."""
+    light_inputs = light_pass_inputs(inputs, light_index)
+    geometry = inputs.scene.geometry
+    drawn = geometry.count if inputs.raster_triangles is None else inputs.raster_triangles
+    rows = np.flatnonzero(see_through(geometry)[:drawn])
+    vertices = light_inputs.tri_vertices.reshape(-1, 3, 4)[rows].reshape(-1, 4)
+    clear = np.zeros((len(rows), 4), np.float32)
+    clear[:, :3] = 1.0 - geometry.opacity_or_ones()[rows]
+    return replace(light_inputs, tri_vertices=np.ascontiguousarray(vertices), raster_triangles=None), clear
+
+
+def _launch(device: Device, name: str, defines: dict, vertices, count: int, views, view_index: int, height: int,
+            target: tuple, timer: StageTimer) -> None:
+    """One raster kernel of cl/raster.cl's two passes (per triangle, then per row of the
+    tall ones), built in the translucency program."""
+    big_count = device.buffer(np.zeros(1, np.uint32))
+    big = device.buffer(nbytes=4 * structs.RASTER_BIG_TRIANGLES)
+    centre = device.buffer(np.array([[0.5, 0.5]], dtype=np.float32), writable=False)
+    args = (vertices, np.int32(count), views, np.int32(view_index), centre, np.int32(1), big_count, big) + target
+    timer.add("translucency", device.kernel("translucency", name, defines)(device.queue, (count,), None, *args))
+    timer.add("translucency", device.kernel("translucency", f"{name}_rows", defines)(
+        device.queue, (structs.RASTER_BIG_TRIANGLES, height), None, *args))
+
+
+def translucency(device: Device, buffers: FrameBuffers, timer: StageTimer) -> Layers:
+    """The layers of every light (module docstring), K = `render.translucent_layers`.
+    Peeling stops at the first layer that is empty everywhere in a light's map."""
+    inputs = buffers.inputs
+    count = inputs.scene.render.translucent_layers
+    defines = {"TRANSLUCENT_LAYERS": count}  # one build of cl/translucency.cl for all its kernels
+    stride = max(inputs.shadow_texels, 1)
+    layer_depth = device.buffer(nbytes=4 * count * stride)
+    layer_clear = device.buffer(nbytes=8 * count * stride)
+    # A layer's transmittance is read only where its depth is finite: no need to clear it.
+    device.fill(layer_depth, structs.DEPTH_EMPTY, 4 * count * stride, timer, "translucency")
+    for light_index in range(len(inputs.scene.lights)):
+        light_inputs, clear = _translucent_pass_inputs(inputs, light_index)
+        triangles = len(clear)
+        if triangles == 0:
+            continue
+        texels = max(light_inputs.shadow_texels, 1)
+        offset = int(inputs.views[inputs.light_views[light_index][0]]["depth_offset"])
+        vertices = device.buffer(light_inputs.tri_vertices, writable=False)
+        views = device.buffer(light_inputs.views, writable=False)
+        triangle_clear = device.buffer(clear, writable=False)
+        previous = device.buffer(nbytes=4 * texels)
+        device.fill(previous, np.uint32(0), 4 * texels, timer, "translucency")
+        previous_clear = device.buffer(nbytes=8 * texels)
+        for layer in range(count):
+            depth = device.buffer(nbytes=4 * texels)
+            tri = device.buffer(nbytes=4 * texels)
+            device.fill(depth, structs.DEPTH_EMPTY, 4 * texels, timer, "translucency")
+            device.fill(tri, np.int32(-1), 4 * texels, timer, "translucency")
+            for view in np.flatnonzero(light_inputs.view_needed[1:]) + 1:
+                height = int(light_inputs.views[view]["height"])
+                _launch(device, "translucency_peel", defines, vertices, triangles, views, int(view), height,
+                        (depth, previous), timer)
+                _launch(device, "raster_resolve", defines, vertices, triangles, views, int(view), height,
+                        (depth, tri), timer)
+            flag = device.buffer(np.zeros(1, np.uint32))
+            device.kernel("translucency", "raster_any", defines)(device.queue, (texels,), None, depth, np.int32(texels), flag)
+            if not device.read(flag, 1, np.uint32)[0]:
+                break  # no texel has this many layers: the rest stay empty
+            packed_depth = device.buffer(nbytes=4 * texels)
+            packed_clear = device.buffer(nbytes=8 * texels)
+            timer.add("translucency", device.kernel("translucency", "translucency_pack", defines)(
+                device.queue, (texels,), None, depth, tri, np.int32(texels), triangle_clear, np.int32(layer),
+                previous_clear, packed_depth, packed_clear))
+            at = layer * stride + offset
+            device.cl.enqueue_copy(device.queue, layer_depth, packed_depth, byte_count=4 * texels, dst_offset=4 * at)
+            device.cl.enqueue_copy(device.queue, layer_clear, packed_clear, byte_count=8 * texels, dst_offset=8 * at)
+            previous, previous_clear = depth, packed_clear
+    return Layers(layer_depth, layer_clear, count, stride)
+
+
+@dataclass
+class RectifiedLayers:
+    """One light's layers in its epipolar texture (cl/translucent_walk.h reads them)."""
+
+    beta: object  # float[slices][gamma_samples][K]: β of each layer on the texel's light ray, π for none
+    clear: object  # uint2[slices][gamma_samples][K]: transmittance past it, as Layers.clear
+    rows: object  # int[slices]: 1 where some texel of the slice has a layer
+    count: int
+
+    def defines(self) -> dict:
+        return {"TRANSLUCENT_LAYERS": self.count}
+
+    def args(self) -> tuple:
+        """The kernel arguments of RECTIFIED_LAYER_ARGS."""
+        return self.beta, self.clear, self.rows
+
+
+def rectify_layers(device: Device, buffers: FrameBuffers, layers: Layers, epipolar, timer: StageTimer
+                   ) -> RectifiedLayers:
+    """The layers of the light of `epipolar` (stage rectify's), resampled at the texels of
+    its rectified texture (timed with the translucency stage)."""
+    slices, n = int(epipolar.params["slices"]), int(epipolar.params["gamma_samples"])
+    beta = device.buffer(nbytes=4 * slices * n * layers.count)
+    clear = device.buffer(nbytes=8 * slices * n * layers.count)
+    rows = device.buffer(np.zeros(slices, np.int32))
+    timer.add("translucency", device.kernel("translucency", "translucency_rectify", layers.defines())(
+        device.queue, (n, slices), None, buffers.views, buffers.lights, layers.depth, layers.clear,
+        np.int32(layers.stride), epipolar.buffer, beta, clear, rows))
+    return RectifiedLayers(beta, clear, rows, layers.count)
+
+
+def surface_transmittance(device: Device, buffers: FrameBuffers, rastered, layers: Layers, timer: StageTimer):
+    """float4[samples × lights]: what reaches each camera sample's surface of each light
+    through the translucent surfaces (cl/translucency.cl, translucency_surface): the layers
+    where they agree around the sample, else a shadow ray through the translucent
+    triangles' BVH, so the edges of a coloured shadow land where `exact` puts them."""
+    from ..bvh import build_bvh
+
+    inputs = buffers.inputs
+    geometry = inputs.scene.geometry
+    drawn = geometry.count if inputs.raster_triangles is None else inputs.raster_triangles
+    rows = np.flatnonzero(see_through(geometry)[:drawn])
+    vertices = np.ascontiguousarray(inputs.tri_vertices.reshape(-1, 3, 4)[rows].reshape(-1, 4))
+    clear = np.zeros((len(rows), 4), np.float32)
+    clear[:, :3] = 1.0 - geometry.opacity_or_ones()[rows]
+    bvh = build_bvh(vertices[:, :3].reshape(-1, 3, 3))
+    lights = max(len(inputs.scene.lights), 1)
+    out = device.buffer(nbytes=16 * inputs.samples * lights)
+    timer.add("translucency", device.kernel("translucency", "translucency_surface", layers.defines())(
+        device.queue, (inputs.samples,), None, buffers.params, buffers.views, buffers.lights, rastered.camera_depth,
+        rastered.tri_id, buffers.tri_normal, buffers.offsets, device.buffer(vertices, writable=False),
+        device.buffer(clear, writable=False), device.buffer(bvh.node_bounds, writable=False),
+        device.buffer(bvh.node_children, writable=False), np.int32(bvh.root), out, *layers.args()))
+    return out

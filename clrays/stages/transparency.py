@@ -1,0 +1,178 @@
+"""Stage transparency: the translucent surfaces in front of each camera sample's opaque depth,
+the fog's in-scattering up to each of them, and their composite (docs/design.md, translucent
+surfaces: the camera side). Host side of `cl/transparency.cl`.
+
+    layers (peel or gather) → in-scatter up to each layer (the method's own stage) → composite
+
+A scene whose objects are all opaque runs none of it: the session skips the stage, and the
+camera raster, which draws the opaque triangles only here, draws them all there.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Callable
+
+import numpy as np
+
+from ..device import Device, StageTimer
+from ..inputs import FrameBuffers
+from ..scene.model import Scene, Transparency
+from .raster import RasterResult
+
+LABEL = "transparency"
+FOG_LABEL = "transparency.fog"  # the in-scatter stages run up to each layer, timed apart
+
+
+def transparency_of(scene: Scene) -> Transparency:
+    """The scene's `render.transparency`, its defaults when left out."""
+    return scene.render.transparency or Transparency()
+
+
+def translucent_triangles(scene: Scene) -> np.ndarray:
+    """Indices of the triangles that let light through (opacity below 1 in any channel)."""
+    if scene.geometry.opacity is None:
+        return np.zeros(0, np.int32)
+    return np.flatnonzero((scene.geometry.opacity < 1.0).any(axis=1)).astype(np.int32)
+
+
+def film_triangles(inputs) -> np.ndarray:
+    """The translucent triangles the camera sees as films: not a relief's, which its pre-warp
+    draws into the camera depth as an opaque surface (docs/design.md)."""
+    indices = translucent_triangles(inputs.scene)
+    if inputs.raster_triangles is not None:
+        indices = indices[indices < inputs.raster_triangles]
+    return indices
+
+
+def opaque_camera_vertices(inputs) -> np.ndarray:
+    """The frame's eye-space vertices with every translucent triangle collapsed onto its first
+    vertex: the camera raster meets none of them (a zero-area triangle has no ray hit), so the
+    camera depth is the opaque depth D the layers lie in front of."""
+    vertices = inputs.tri_vertices.reshape(-1, 3, 4).copy()
+    translucent = film_triangles(inputs)
+    vertices[translucent] = vertices[translucent, :1]
+    return vertices.reshape(-1, 4)
+
+
+def depth_range(inputs) -> tuple[float, float]:
+    """(nearest, farthest) distance from the eye of any point of a translucent triangle: the
+    range MBOIT's warp maps to [0, 1]. The nearest is the distance to their bounding box (a
+    lower bound), kept off 0 for the log warp."""
+    vertices = inputs.tri_vertices.reshape(-1, 3, 4)[film_triangles(inputs), :, :3].astype(np.float64)
+    points = vertices.reshape(-1, 3)
+    if len(points) == 0:  # no film: the composite has nothing to warp
+        return 1.0, 2.0
+    far = float(np.linalg.norm(points, axis=1).max())
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    near = float(np.linalg.norm(np.maximum(np.maximum(lo, -hi), 0.0)))
+    return max(near, 1e-4 * far), max(far * (1.0 + 1e-5), near * 1.001)
+
+
+class _Relabelled:
+    """A StageTimer that books every event under one label: the in-scatter stages run for the
+    layers count as transparency.fog, not as the frame's own raymarch or traverse."""
+
+    def __init__(self, timer: StageTimer, label: str):
+        self.timer, self.label = timer, label
+
+    def add(self, label: str, event) -> None:
+        self.timer.add(self.label, event)
+
+    def add_host(self, label: str, milliseconds: float) -> None:
+        self.timer.add_host(self.label, milliseconds)
+
+
+@dataclass
+class Films:
+    """The translucent hits of every camera sample, slot-major (cl/transparency.cl), and the
+    in-scattered radiance L(0, z_k) up to each."""
+
+    slots: int  # slots per sample that any sample fills (0: no ray meets a translucent surface)
+    depth: object  # uint[slots·samples]: as_uint(z_k), 0 in an empty slot
+    tri: object  # int[slots·samples]: the layer's triangle, −1 in an empty slot
+    scatter: object  # float4[slots·samples]: L(0, z_k)
+    samples: int
+    rastered: RasterResult
+
+    def add_in_scatter(self, device: Device, timer: StageTimer,
+                       in_scatter: Callable[[RasterResult, object, StageTimer], None]) -> None:
+        """Add one light's in-scattering up to every layer: `in_scatter(rastered, scatter,
+        timer)` is the method's own stage (raymarch, traverse…) run with each slot's depths as
+        the camera depth, so the layers see the fog exactly as the opaque depth does."""
+        relabelled = _Relabelled(timer, FOG_LABEL)
+        depth = device.buffer(nbytes=4 * self.samples)
+        scatter = device.buffer(nbytes=16 * self.samples)
+        for slot in range(self.slots):
+            device.cl.enqueue_copy(device.queue, depth, self.depth, byte_count=4 * self.samples,
+                                   src_offset=4 * slot * self.samples)
+            device.cl.enqueue_copy(device.queue, scatter, self.scatter, byte_count=16 * self.samples,
+                                   src_offset=16 * slot * self.samples)
+            in_scatter(replace(self.rastered, camera_depth=depth), scatter, relabelled)
+            device.cl.enqueue_copy(device.queue, self.scatter, scatter, byte_count=16 * self.samples,
+                                   dst_offset=16 * slot * self.samples)
+
+
+def _layer_args(buffers: FrameBuffers, rastered: RasterResult, translucent, count: int) -> tuple:
+    return (buffers.params, buffers.views, buffers.offsets, rastered.camera_depth, buffers.tri_vertices, translucent,
+            np.int32(count))
+
+
+def translucent_films(device: Device, buffers: FrameBuffers, rastered: RasterResult, timer: StageTimer) -> Films:
+    """Each camera sample's translucent hits in front of its opaque depth: the `layers` nearest
+    in order (depth_peeling), or all of them in no order (moments)."""
+    inputs = buffers.inputs
+    settings = transparency_of(inputs.scene)
+    samples = inputs.samples
+    indices = film_triangles(inputs)
+    translucent = device.buffer(indices, writable=False)
+    args = _layer_args(buffers, rastered, translucent, len(indices))
+    used = device.buffer(np.zeros(1, np.int32))
+    if settings.type == "depth_peeling":
+        slots = settings.layers
+        depth, tri = device.buffer(nbytes=4 * slots * samples), device.buffer(nbytes=4 * slots * samples)
+        timer.add(LABEL, device.kernel("transparency", "transparency_peel")(
+            device.queue, (samples,), None, *args, np.int32(slots), depth, tri, used))
+        slots = int(device.read(used, 1, np.int32)[0])  # peeling stops where no sample finds another layer
+    else:
+        counts = device.buffer(nbytes=4 * samples)
+        timer.add(LABEL, device.kernel("transparency", "transparency_count")(
+            device.queue, (samples,), None, *args, counts, used))
+        slots = int(device.read(used, 1, np.int32)[0])
+        depth, tri = device.buffer(nbytes=4 * slots * samples), device.buffer(nbytes=4 * slots * samples)
+        if slots:
+            timer.add(LABEL, device.kernel("transparency", "transparency_gather")(
+                device.queue, (samples,), None, *args, counts, np.int32(slots), depth, tri))
+    scatter = device.buffer(nbytes=16 * slots * samples)
+    if slots:
+        device.fill(scatter, np.float32(0), 16 * slots * samples, timer, LABEL)
+    # The in-scatter stages read the layers' depths as the camera depth: the same shadow maps,
+    # the same camera, a slot's depth instead of the opaque one.
+    return Films(slots, depth, tri, scatter, samples, rastered)
+
+
+def composite(device: Device, buffers: FrameBuffers, rastered: RasterResult, layers: Films,
+              timer: StageTimer, light_layers=None) -> tuple[object, object]:
+    """(transmittance, in_front), float4 per camera sample: T(D) of the sample's layers, and the
+    light they add in front of the opaque sample (cl/transparency.cl); shade composites them.
+    `light_layers`: the translucency stage's layers (clrays.stages.translucency), through which
+    the light reaches each film; None: a scene without lights."""
+    inputs = buffers.inputs
+    settings = transparency_of(inputs.scene)
+    samples = inputs.samples
+    opacity = np.zeros((inputs.scene.geometry.count, 4), np.float32)
+    opacity[:, :3] = inputs.scene.geometry.opacity_or_ones()
+    defines = {"TRANSPARENCY_MOMENTS": int(settings.type == "moments"),
+               "TRANSPARENCY_LOG_WARP": int(settings.warp == "log")}
+    light_args = ()
+    if light_layers is not None:
+        defines.update(light_layers.defines())
+        light_args = light_layers.args()
+    transmittance, in_front = device.buffer(nbytes=16 * samples), device.buffer(nbytes=16 * samples)
+    near, far = depth_range(inputs)
+    timer.add(LABEL, device.kernel("transparency", "transparency_composite", defines)(
+        device.queue, (samples,), None, buffers.params, buffers.views, buffers.offsets, buffers.lights,
+        rastered.shadow_depth, buffers.tri_vertices, buffers.tri_normal, buffers.tri_albedo,
+        device.buffer(opacity, writable=False), buffers.light_textures, buffers.texels, np.int32(layers.slots),
+        layers.depth, layers.tri, layers.scatter, np.array([near, far], np.float32),
+        np.float32(settings.moment_bias), transmittance, in_front, *light_args))
+    return transmittance, in_front

@@ -1,0 +1,179 @@
+"""Translucent objects seen by the camera (the transparency stage; docs/design.md, translucent
+surfaces: the camera side): a pane
+blends over the wall behind it, depth peeling composites its layers in order, MBOIT comes close
+to it, and an opaque-only scene runs none of it."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import clrays.session
+from clrays.reference.exact import render_exact
+from clrays.reference.metrics import depth_edges, depth_map, image_error
+from clrays.reference.radiometry import effective_far
+from clrays.reference.translucency import TranslucentQueries
+from clrays.scene.camera import primary_rays
+from clrays.scene.load import load_scene, parse_scene
+
+ROOT = Path(__file__).resolve().parents[2]
+
+# A wall, a pane in front of it lit from the camera's side; the light comes in at an angle, so
+# that the pane's own shadow falls on the wall beside the pixels where the camera sees it.
+PANE = """version: 1
+image: {width: 48, height: 36}
+camera: {position: [0, 1, 6], look_at: [0, 1, 0], fov_deg: 40}
+lights: [{type: directional, direction: [-1.2, -1, -1], irradiance: 2}]
+objects:
+  - {type: box, min: [-4, -1, -1.2], max: [4, 4, -1], albedo: 0.7}
+  - {type: plane, center: [0, 1, 3], normal: [0, 0, 1], size: 1.5, albedo: [0.9, 0.6, 0.3], opacity: [0.2, 0.9, 0.5]}
+"""
+OPACITY = np.array([0.2, 0.9, 0.5])
+
+
+@pytest.mark.parametrize("kind", ["depth_peeling", "moments"])
+@pytest.mark.parametrize("method", ["minmax", "raymarch"])
+def test_a_pane_blends_over_the_wall(renderer, method, kind):
+    """Fog off: opacity · (the pane, were it opaque) + (1 − opacity) · (the wall, with no pane)."""
+    blend = renderer.render(parse_scene(PANE, overrides=[f"render.transparency={kind}"]), method).image
+    pane = renderer.render(parse_scene(PANE, overrides=["objects.1.opacity=1"]), method).image
+    wall = renderer.render(parse_scene(PANE, overrides=["objects.1.opacity=1", "objects.1.size=1e-4"]), method).image
+    # Where the camera sees the pane: lit with the wall black (not where the pane's shadow falls).
+    seen = renderer.render(parse_scene(PANE, overrides=["objects.1.opacity=1", "objects.0.albedo=0"]),
+                           method).image.max(axis=2) > 1e-3
+    inside = seen & np.roll(seen, 1, 0) & np.roll(seen, -1, 0) & np.roll(seen, 1, 1) & np.roll(seen, -1, 1)
+    assert inside.sum() > 100
+    expected = OPACITY * pane + (1 - OPACITY) * wall
+    error = np.abs(blend - expected)[inside].max() / expected[inside].max()
+    assert error < 0.005  # the issue's bound; measured 3e-8 (peeling) and 6e-8 (moments), float32 rounding
+
+
+def test_an_opaque_scene_skips_the_stage(renderer):
+    scene = parse_scene(PANE, overrides=["objects.1.opacity=1"])
+    result = renderer.render(scene, "minmax", reuse=False)
+    assert result.stage_status["transparency"] == "skipped" and "transparency" not in result.stage_ms
+
+
+def small_row(*overrides):
+    return load_scene(ROOT / "scenes" / "glass_row.yaml",
+                      overrides=["image.width=64", "image.height=36", *overrides])
+
+
+class CompositeSpy:
+    """Keeps the layers and the composite's output of the frames rendered while it is installed."""
+
+    def __init__(self, monkeypatch):
+        self.frames = []
+        original = clrays.session.composite
+
+        def spy(device, buffers, rastered, layers, timer, *light_layers):
+            out = original(device, buffers, rastered, layers, timer, *light_layers)
+            samples = layers.samples
+            read = lambda buffer, shape, dtype: device.read(buffer, shape, dtype)  # noqa: E731
+            self.frames.append({
+                "depth": read(layers.depth, (layers.slots, samples), np.uint32).view(np.float32).astype(np.float64),
+                "tri": read(layers.tri, (layers.slots, samples), np.int32),
+                "scatter": read(layers.scatter, (layers.slots, samples, 4), np.float32)[..., :3].astype(np.float64),
+                "transmittance": read(out[0], (samples, 4), np.float32)[:, :3],
+                "in_front": read(out[1], (samples, 4), np.float32)[:, :3],
+                "opacity": buffers.inputs.scene.geometry.opacity_or_ones()})
+            return out
+
+        monkeypatch.setattr(clrays.session, "composite", spy)
+
+
+@pytest.mark.parametrize("method", ["minmax", "raymarch"])
+def test_peeling_every_layer_is_the_sorted_composite(renderer, monkeypatch, method):
+    """Black panes (albedo 0: S_k = 0) in fog, so each layer adds α_k·T(z_k⁻)·L(0, z_k): the
+    layers MBOIT gathers in no order, sorted and composited in float64, against 8-layer peeling
+    (more layers than the scene has)."""
+    spy = CompositeSpy(monkeypatch)
+    black = [f"objects.{i}.albedo=0" for i in range(2, 7)]
+    renderer.render(small_row(*black, "render.transparency={type: moments}"), method, reuse=False)
+    renderer.render(small_row(*black, "render.transparency={type: depth_peeling, layers: 8}"), method, reuse=False)
+    gathered, peeled = spy.frames
+    assert gathered["depth"].shape[0] == 5 and peeled["depth"].shape[0] == 5  # five panes, all met
+    opacity = gathered["opacity"]
+    through = np.ones((gathered["depth"].shape[1], 3))
+    light = np.zeros_like(through)
+    order = np.argsort(np.where(gathered["tri"] >= 0, gathered["depth"], np.inf), axis=0)
+    for k in range(order.shape[0]):
+        slot = order[k]
+        column = np.arange(order.shape[1])
+        tri = gathered["tri"][slot, column]
+        alpha = np.where((tri >= 0)[:, None], opacity[np.maximum(tri, 0)], 0.0)
+        light += alpha * through * gathered["scatter"][slot, column]
+        through *= 1 - alpha
+    assert (gathered["tri"] >= 0).sum(axis=0).max() == 5 and light.max() > 0
+    np.testing.assert_allclose(peeled["transmittance"], through, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(peeled["in_front"], light, rtol=1e-4, atol=1e-5 * light.max())
+
+
+def test_peeling_drops_the_layers_behind_the_last(renderer):
+    images = {k: renderer.render(small_row(f"render.transparency={{type: depth_peeling, layers: {k}}}")).image
+              for k in (1, 4, 5, 8)}
+    np.testing.assert_array_equal(images[5], images[8])  # five panes: the sixth pass finds nothing
+    assert image_error(images[4], images[8]).rmse > 1e-5
+    assert image_error(images[1], images[8]).rmse > 0.02
+
+
+def test_moments_come_close_to_eight_layer_peeling(renderer):
+    """MBOIT (4 moments, log warp, the defaults) against 8-layer peeling on the five-pane row:
+    bench/RESULTS.md has the figures at full size; measured here at 64×36: 1.08 %."""
+    peeled = renderer.render(small_row("render.transparency={type: depth_peeling, layers: 8}")).image
+    moments = renderer.render(small_row("render.transparency=moments")).image
+    assert image_error(moments, peeled).rmse < 0.02
+
+
+@pytest.mark.xfail(reason="MBOIT is not faster than 8-layer peeling here: both spend the stage on the fog up to "
+                          "each film, the same work, and with 10 translucent triangles peeling's passes cost little; "
+                          "measured on glass_row at 320×180 (bench/RESULTS.md): the stage 784 ms against 773 ms "
+                          "(its kernels 52.0 against 60.2 ms, the fog 732 against 712 ms); timings under load are "
+                          "noisy, so not strict. With the panes tessellated (640 triangles) MBOIT is faster: "
+                          "1450 against 1775 ms", strict=False)
+def test_moments_are_faster_than_eight_layer_peeling(renderer):
+    def stage_ms(kind):
+        times = []
+        for _ in range(3):
+            result = renderer.render(small_row(f"render.transparency={kind}"), reuse=False)
+            times.append(result.stage_ms["transparency"] + result.stage_ms["transparency.fog"])
+        return float(np.median(times))
+
+    peeled, moments = stage_ms("{type: depth_peeling, layers: 8}"), stage_ms("moments")
+    assert moments < peeled, f"moments {moments:.1f} ms, 8-layer peeling {peeled:.1f} ms"
+
+
+def films_seen(scene) -> np.ndarray:
+    """(H, W) bool: pixels whose centre ray crosses a translucent surface before its first opaque hit."""
+    queries = TranslucentQueries(scene.geometry)
+    eye = np.asarray(scene.camera.position, dtype=np.float64)
+    dirs = primary_rays(scene.camera, scene.image, np.array([[0.5, 0.5]])).reshape(-1, 3)
+    far = effective_far(scene)
+    t, _ = queries.first_opaque_hit(eye, dirs, far)
+    ray, _, _ = queries.crossings(eye, dirs, np.where(np.isfinite(t), t, far))
+    seen = np.zeros(len(dirs), bool)
+    seen[ray] = True
+    return seen.reshape(scene.image.height, scene.image.width)
+
+
+_EXACT: dict = {}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", ["depth_peeling", "moments"])
+@pytest.mark.parametrize("method", ["raymarch", "minmax"])
+def test_glass_pane_with_its_film_agrees_with_exact(renderer, method, kind):
+    """scenes/glass_pane.yaml at 160×90, the pane seen by the camera included, depth edges out:
+    within 1 % relative RMSE of exact (measured: raymarch 0.18 %, minmax 0.34 %), and the
+    pixels that see the pane within 0.1 % (measured 1.2e-5: its lit face outshines the fog)."""
+    overrides = ["image.width=160", "image.height=90", "render.steps=1024", f"render.transparency={kind}"]
+    scene = load_scene(ROOT / "scenes" / "glass_pane.yaml", overrides=overrides)
+    if "glass_pane" not in _EXACT:
+        _EXACT["glass_pane"] = render_exact(scene)
+    reference = _EXACT["glass_pane"]
+    edges, films = depth_edges(depth_map(scene)), films_seen(scene)
+    assert (films & ~edges).sum() > 40
+    image = renderer.render(scene, method).image
+    assert image_error(image, reference, edges).rmse < 0.01
+    assert image_error(image, reference, edges | ~films).rmse < 0.001
