@@ -25,19 +25,28 @@ class RasterResult:
 
 def _launch(device: Device, buffers: FrameBuffers, name: str, defines: dict | None, view_index: int, offsets,
             sample_count: int, target: tuple, timer: StageTimer) -> None:
-    """The two passes of one raster kernel over every triangle for one view: `name`, one
-    work-item per triangle, lists the triangles taller than RASTER_BIG_ROWS with their rows;
-    `name_rows` draws those with one work-item per (triangle, row) (docs/design.md §4.1)."""
+    """Both passes of one raster kernel over every triangle the frame draws, for one view."""
     count = buffers.inputs.tri_vertices.shape[0] // 3
     if buffers.inputs.raster_triangles is not None:  # the reliefs' triangles, last, are pre-warped instead
         count = buffers.inputs.raster_triangles
+    raster_passes(device, "raster", name, defines, buffers.tri_vertices, count, buffers.views, view_index, offsets,
+                  sample_count, target, timer)
+
+
+def raster_passes(device: Device, program: str, name: str, defines: dict | None, vertices, count: int, views,
+                  view_index: int, offsets, sample_count: int, target: tuple, timer: StageTimer,
+                  stage: str = "raster") -> None:
+    """The two passes of one raster kernel (cl/raster.cl's RASTER_KERNELS, built in
+    `program`) over `count` triangles for one view: `name`, one work-item per triangle,
+    lists the triangles taller than RASTER_BIG_ROWS with their rows; `name_rows` draws
+    those with one work-item per (triangle, row) (docs/design.md §4.1)."""
     if count == 0:
         return
     big_count = device.buffer(np.zeros(1, np.uint32))
     capacity = min(count, structs.RASTER_BIG_TRIANGLES)  # a triangle lists itself at most once
     big = device.buffer(nbytes=12 * capacity)  # (triangle, first row, last row)
-    timer.add("raster", device.kernel("raster", name, defines)(
-        device.queue, (count,), None, buffers.tri_vertices, np.int32(count), buffers.views, np.int32(view_index),
+    timer.add(stage, device.kernel(program, name, defines)(
+        device.queue, (count,), None, vertices, np.int32(count), views, np.int32(view_index),
         offsets, np.int32(sample_count), big_count, big, *target))
     listed = min(int(device.read(big_count, 1, np.uint32)[0]), capacity)
     if not listed:
@@ -49,8 +58,8 @@ def _launch(device: Device, buffers: FrameBuffers, name: str, defines: dict | No
     rows = np.empty((int(spans.sum()), 2), np.int32)
     rows[:, 0] = np.repeat(tri, spans)
     rows[:, 1] = np.arange(len(rows)) - np.repeat(np.cumsum(spans) - spans, spans) + np.repeat(first, spans)
-    timer.add("raster", device.kernel("raster", f"{name}_rows", defines)(
-        device.queue, (len(rows),), None, buffers.tri_vertices, buffers.views, np.int32(view_index), offsets,
+    timer.add(stage, device.kernel(program, f"{name}_rows", defines)(
+        device.queue, (len(rows),), None, vertices, views, np.int32(view_index), offsets,
         np.int32(sample_count), device.buffer(rows, writable=False), np.int32(len(rows)), *target))
 
 

@@ -110,17 +110,15 @@ def _translucent_pass_inputs(inputs: FrameInputs, light_index: int) -> tuple[Fra
     return replace(light_inputs, tri_vertices=np.ascontiguousarray(vertices), raster_triangles=None), clear
 
 
-def _launch(device: Device, name: str, defines: dict, vertices, count: int, views, view_index: int, height: int,
+def _launch(device: Device, name: str, defines: dict, vertices, count: int, views, view_index: int,
             target: tuple, timer: StageTimer) -> None:
-    """One raster kernel of cl/raster.cl's two passes (per triangle, then per row of the
-    tall ones), built in the translucency program."""
-    big_count = device.buffer(np.zeros(1, np.uint32))
-    big = device.buffer(nbytes=4 * structs.RASTER_BIG_TRIANGLES)
+    """Both passes of one raster kernel (clrays.stages.raster.raster_passes), built in the
+    translucency program, over the translucent triangles: one sample per texel, at its centre."""
+    from .raster import raster_passes  # raster imports this module (opaque_occluders)
+
     centre = device.buffer(np.array([[0.5, 0.5]], dtype=np.float32), writable=False)
-    args = (vertices, np.int32(count), views, np.int32(view_index), centre, np.int32(1), big_count, big) + target
-    timer.add("translucency", device.kernel("translucency", name, defines)(device.queue, (count,), None, *args))
-    timer.add("translucency", device.kernel("translucency", f"{name}_rows", defines)(
-        device.queue, (structs.RASTER_BIG_TRIANGLES, height), None, *args))
+    raster_passes(device, "translucency", name, defines, vertices, count, views, view_index, centre, 1, target,
+                  timer, stage="translucency")
 
 
 def translucency(device: Device, buffers: FrameBuffers, timer: StageTimer) -> Layers:
@@ -153,11 +151,9 @@ def translucency(device: Device, buffers: FrameBuffers, timer: StageTimer) -> La
             device.fill(depth, structs.DEPTH_EMPTY, 4 * texels, timer, "translucency")
             device.fill(tri, np.int32(-1), 4 * texels, timer, "translucency")
             for view in np.flatnonzero(light_inputs.view_needed[1:]) + 1:
-                height = int(light_inputs.views[view]["height"])
-                _launch(device, "translucency_peel", defines, vertices, triangles, views, int(view), height,
+                _launch(device, "translucency_peel", defines, vertices, triangles, views, int(view),
                         (depth, previous), timer)
-                _launch(device, "raster_resolve", defines, vertices, triangles, views, int(view), height,
-                        (depth, tri), timer)
+                _launch(device, "raster_resolve", defines, vertices, triangles, views, int(view), (depth, tri), timer)
             flag = device.buffer(np.zeros(1, np.uint32))
             device.kernel("translucency", "raster_any", defines)(device.queue, (texels,), None, depth, np.int32(texels), flag)
             if not device.read(flag, 1, np.uint32)[0]:

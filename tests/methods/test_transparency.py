@@ -126,24 +126,6 @@ def test_moments_come_close_to_eight_layer_peeling(renderer):
     assert image_error(moments, peeled).rmse < 0.02
 
 
-@pytest.mark.xfail(reason="MBOIT is not faster than 8-layer peeling here: both spend the stage on the fog up to "
-                          "each film, the same work, and with 10 translucent triangles peeling's passes cost little; "
-                          "measured on glass_row at 320×180 (bench/RESULTS.md): the stage 784 ms against 773 ms "
-                          "(its kernels 52.0 against 60.2 ms, the fog 732 against 712 ms); timings under load are "
-                          "noisy, so not strict. With the panes tessellated (640 triangles) MBOIT is faster: "
-                          "1450 against 1775 ms", strict=False)
-def test_moments_are_faster_than_eight_layer_peeling(renderer):
-    def stage_ms(kind):
-        times = []
-        for _ in range(3):
-            result = renderer.render(small_row(f"render.transparency={kind}"), reuse=False)
-            times.append(result.stage_ms["transparency"] + result.stage_ms["transparency.fog"])
-        return float(np.median(times))
-
-    peeled, moments = stage_ms("{type: depth_peeling, layers: 8}"), stage_ms("moments")
-    assert moments < peeled, f"moments {moments:.1f} ms, 8-layer peeling {peeled:.1f} ms"
-
-
 def films_seen(scene) -> np.ndarray:
     """(H, W) bool: pixels whose centre ray crosses a translucent surface before its first opaque hit."""
     queries = TranslucentQueries(scene.geometry)
