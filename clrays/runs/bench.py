@@ -3,18 +3,26 @@ against `exact` on the same scenes (`clrays bench`).
 
 For each scene and resolution the sweep renders
 
-- `raymarch` over `steps` × `shadow_map`;
-- `minmax` at its defaults and, one parameter at a time, over `slices`,
-  `gamma_samples`, `shadow_map`, `integrand` (svd rank 1–8, table, analytic where it
-  exists) and `traversal` (tree, scan);
+- `raymarch` on a ladder of step counts (`raymarch_ladder`): doubled from 32 until its
+  error reaches the lowest target, then one step count between the two that bracket each
+  target, so its cost at equal error is known to within a factor √2 of steps; where the
+  scene's shadow map stops it short of the lowest target, the ladder goes on at twice the
+  map;
+- `minmax` at its defaults and, one parameter at a time, at cheaper `slices`,
+  `gamma_samples`, `shadow_map` and `initial_step` (the points that can reach the higher
+  targets for less), at twice the sizes where its defaults miss the lowest target, and
+  `moments` at its defaults (the small frames of `--quick` and the 640×360 rows also
+  sweep `integrand` and `traversal`);
 
 and records, per point, the frame time (median of `repeats` renders after a warm-up,
-wall clock, host work included), the median device time per stage, the device memory,
-and the error against `exact`: relative RMSE of luminance and the 99th-percentile
+wall clock, host work included; a raymarch point that differs from the last one in its
+step count alone, which is a kernel argument, needs no warm-up), the median device time
+per stage, the device memory, the 1-minute load average of the machine when the point
+ended, and the error against `exact`: relative RMSE of luminance and the 99th-percentile
 relative error, on pixels with at least 1% of the mean radiance, depth edges excluded
-(`clrays.reference.metrics`). `exact` takes minutes on a full frame, so the error is measured on a
-fixed, seeded random subset of pixels (`pixels`, default 4000), the same for every
-point; the references are kept on disk (`clrays.runs.references`).
+(`clrays.reference.metrics`). `exact` takes minutes on a full frame, so the error is
+measured on a fixed, seeded random subset of pixels (`pixels`, default 4000), the same for
+every point; the references are kept on disk (`clrays.runs.references`).
 """
 from __future__ import annotations
 
@@ -22,6 +30,7 @@ import csv
 import dataclasses
 import json
 import math
+import os
 import platform
 import resource
 import statistics
@@ -39,7 +48,19 @@ from ..scene.load import load_scene
 from .references import EXACT, ReferenceCache
 
 DEFAULT_SCENES = ("scenes/demo.yaml", "scenes/bunny.yaml", "scenes/behind.yaml", "scenes/sun.yaml")
-RMSE_TARGETS = (0.01, 0.05)
+#: Relative RMSE targets of the headline: the speedup of minmax over raymarch is read at each.
+RMSE_TARGETS = (0.05, 0.01, 0.005)
+#: raymarch's ladder: the first step count, and the most (a 1280×720 frame at 2048 steps
+#: takes about a minute on the 2-core machine of bench/RESULTS.md).
+RAYMARCH_FIRST_STEPS = 32
+RAYMARCH_MOST_STEPS = 2048
+#: The largest shadow map the ladder and the minmax points go up to.
+MOST_SHADOW_MAP = 2048
+
+
+def target_tag(target: float) -> str:
+    """0.005 → "0.5%", 0.01 → "1%": the label of a target in the summary's keys and tables."""
+    return f"{target * 100:g}%"
 
 
 @dataclass
@@ -55,6 +76,7 @@ class BenchPoint:
     mean_error: float
     device_mib: float
     stage_ms: dict[str, float] = field(default_factory=dict)
+    load_average: float = math.nan  # the machine's 1-minute load average when the point ended
 
 
 def volume_only(scene: Scene) -> Scene:
@@ -66,56 +88,91 @@ def volume_only(scene: Scene) -> Scene:
 
 
 def sweep(scene: Scene, quick: bool = False, volume: bool = False) -> list[tuple[str, str, dict]]:
-    """(method, label, render overrides) of every point for one scene; `quick` keeps
-    a handful (two raymarch points, minmax defaults and scan) for a smoke run; `volume`
-    (volume-only error) a single shadow-map size and the main minmax settings."""
+    """(method, label, render overrides) of the minmax and moments points for one scene;
+    raymarch's step counts are searched instead (`raymarch_ladder`), but for `quick`, a
+    handful of fixed points (two of raymarch's among them) for a smoke run. `volume`
+    (volume-only error) and frames larger than 640×360 leave out the integrand and
+    traversal variants, which change the time, not the error at equal settings."""
     from ..scene.model import DirectionalLight
 
-    if volume:
-        points = [("raymarch", f"steps={steps}", {"steps": steps}) for steps in (32, 64, 128, 256, 512, 1024)]
-        points.append(("minmax", "defaults", {}))
-        points.append(("moments", "defaults", {}))
-        points += [("minmax", f"{key}={value}", {key: value})
-                   for key, value in (("slices", 256), ("slices", 512), ("gamma_samples", 256),
-                                      ("gamma_samples", 512))]
-        return points
     if quick:
         return [("raymarch", "steps=32 shadow_map=256", {"steps": 32, "shadow_map": 256}),
                 ("raymarch", "steps=256 shadow_map=256", {"steps": 256, "shadow_map": 256}),
                 ("minmax", "shadow_map=256", {"shadow_map": 256}),
                 ("minmax", "shadow_map=256 traversal=scan", {"shadow_map": 256, "traversal": "scan"}),
                 ("moments", "shadow_map=256", {"shadow_map": 256})]
-    # Large frames get a coarser grid: a 1280×720 raymarch at 2048 steps takes a minute.
-    large = scene.image.width * scene.image.height > 500_000
-    points = []
-    for shadow_map in (1024,) if large else (1024, 2048):
-        for steps in (128, 512) if large else (32, 64, 128, 256, 512, 1024):
-            points.append(("raymarch", f"steps={steps} shadow_map={shadow_map}",
-                           {"steps": steps, "shadow_map": shadow_map}))
     defaults = dataclasses.asdict(with_derived_sizes(scene).render)
-    points.append(("minmax", f"defaults (slices={defaults['slices']} gamma_samples={defaults['gamma_samples']} "
-                             f"shadow_map={defaults['shadow_map']})", {}))
-    points.append(("moments", f"defaults (slices={defaults['slices']} gamma_samples={defaults['gamma_samples']} "
-                              f"shadow_map={defaults['shadow_map']})", {}))
-    one_at_a_time = {
-        "slices": (512,) if large else (128, 256, 512, 2048),
-        "gamma_samples": (512,) if large else (128, 256, 512, 2048),
-        "shadow_map": (512,) if large else (256, 512, 2048),
-        "traversal": () if large else ("scan",),
-    }
-    for key, values in one_at_a_time.items():
-        for value in values:
-            if value != defaults[key]:
-                points.append(("minmax", f"{key}={value}", {key: value}))
-    if large:
+    label = (f"defaults (slices={defaults['slices']} gamma_samples={defaults['gamma_samples']} "
+             f"shadow_map={defaults['shadow_map']})")
+    points = [("minmax", label, {}), ("moments", label, {})]
+    # Cheaper than the defaults, one at a time: where the higher targets are reached for less.
+    cheaper = {"slices": defaults["slices"] // 2, "gamma_samples": defaults["gamma_samples"] // 2,
+               "shadow_map": defaults["shadow_map"] // 2, "initial_step": defaults["initial_step"] * 2}
+    points += [("minmax", f"{key}={value}", {key: value}) for key, value in cheaper.items()]
+    if volume or scene.image.width * scene.image.height > 640 * 360:
         return points
-    for rank in (1, 2, 4, 8):
+    points.append(("minmax", "traversal=scan", {"traversal": "scan"}))
+    for rank in (2, 4):
         points.append(("minmax", f"integrand=svd svd_rank={rank}", {"integrand": "svd", "svd_rank": rank}))
     if all(isinstance(light, DirectionalLight) for light in scene.lights):
         points.append(("minmax", "integrand=analytic", {"integrand": "analytic"}))
-    if defaults["integrand"] != "table":
-        points.append(("minmax", "integrand=table", {"integrand": "table"}))
     return points
+
+
+def finer_minmax(scene: Scene) -> tuple[str, dict]:
+    """Twice the default sizes (shadow map at most MOST_SHADOW_MAP): the minmax point tried
+    where the defaults miss the lowest target."""
+    defaults = with_derived_sizes(scene).render
+    finer = {"shadow_map": min(2 * defaults.shadow_map, MOST_SHADOW_MAP), "slices": 2 * defaults.slices,
+             "gamma_samples": 2 * defaults.gamma_samples}
+    return " ".join(f"{key}={value}" for key, value in finer.items()), finer
+
+
+def raymarch_ladder(measure_at, shadow_map: int, targets=RMSE_TARGETS, first: int = RAYMARCH_FIRST_STEPS,
+                    most: int = RAYMARCH_MOST_STEPS, most_map: int = MOST_SHADOW_MAP) -> list[BenchPoint]:
+    """raymarch's points, searched rather than swept: `measure_at(steps, shadow_map)` → a
+    BenchPoint. Steps double from `first` until the error reaches the lowest target (or
+    `most`); each target whose crossing lies between two rungs then gets one more point at
+    their geometric mean, so the cheapest point at or under a target costs at most √2× the
+    steps it needs. The uniform steps' error falls until the shadow map's remains (the
+    volume-only sun of bench/RESULTS.md), so the climb also stops at a doubling that cuts
+    the error by less than 1.25× within 2× of the lowest target; when the ladder ends short
+    of the lowest target, it is climbed again at twice the map, from the first rung within
+    2× of that target."""
+    lowest = min(targets)
+    points: dict[tuple[int, int], BenchPoint] = {}
+
+    def climb(map_size: int, steps: int) -> None:
+        previous = math.inf
+        while True:
+            point = points[(map_size, steps)] = measure_at(steps, map_size)
+            # Near the target, a doubling that no longer cuts the error by 1.25× meets the
+            # map's floor: more steps there cost the most and buy nothing.
+            floor = point.rmse <= 2 * lowest and point.rmse * 1.25 > previous
+            if point.rmse <= lowest or steps * 2 > most or floor:
+                return
+            previous = point.rmse
+            steps *= 2
+
+    def refine(map_size: int) -> None:
+        rungs = sorted((steps, point.rmse) for (size, steps), point in points.items() if size == map_size)
+        for target in sorted(targets, reverse=True):
+            passing = [steps for steps, rmse in rungs if rmse <= target]
+            failing = [steps for steps, rmse in rungs if rmse > target and passing and steps < min(passing)]
+            if passing and failing and min(passing) >= 2 * max(failing):
+                middle = int(round(math.sqrt(min(passing) * max(failing)) / 8) * 8)
+                if (map_size, middle) not in points:
+                    points[(map_size, middle)] = measure_at(middle, map_size)
+                    rungs = sorted((steps, point.rmse) for (size, steps), point in points.items()
+                                   if size == map_size)
+
+    climb(shadow_map, first)
+    refine(shadow_map)
+    if min(point.rmse for point in points.values()) > lowest and 2 * shadow_map <= most_map:
+        near = [steps for (size, steps), point in sorted(points.items()) if point.rmse <= 2 * lowest]
+        climb(2 * shadow_map, near[0] if near else most)
+        refine(2 * shadow_map)
+    return list(points.values())
 
 
 def error_pixels(width: int, height: int, count: int, seed: int = 20111) -> tuple[np.ndarray, np.ndarray]:
@@ -127,9 +184,11 @@ def error_pixels(width: int, height: int, count: int, seed: int = 20111) -> tupl
     return np.divmod(flat, width)
 
 
-def measure(renderer: Renderer, scene: Scene, method: str, repeats: int):
-    """Warm-up, then `repeats` timed frames: (median ms, spread, median stage ms, last result)."""
-    renderer.render(scene, method)
+def measure(renderer: Renderer, scene: Scene, method: str, repeats: int, warm_up: bool = True):
+    """A warm-up frame (kernels built, buffers allocated) unless `warm_up` is False, then
+    `repeats` timed frames: (median ms, spread, median stage ms, last result)."""
+    if warm_up:
+        renderer.render(scene, method)
     walls, stages, result = [], [], None
     for _ in range(repeats):
         start = time.perf_counter()
@@ -162,14 +221,30 @@ def run(scene_paths=DEFAULT_SCENES, resolutions=((640, 360),), repeats: int = 5,
         subset = error_pixels(image.width, image.height, pixels)
         log(f"{path} {image.width}x{image.height}: exact on {len(subset[0])} pixels ...")
         references.radiance(scene, EXACT, subset)
-        for method, label, overrides in points:
+        built = set()  # (method, every override but steps): kernels built, no warm-up needed
+
+        def point_at(method: str, label: str, overrides: dict) -> BenchPoint:
             variant = replace(scene, render=replace(scene.render, **overrides))
-            frame_ms, spread, stage_ms, result = measure(renderer, variant, method, repeats)
+            build = (method, tuple(sorted((key, value) for key, value in overrides.items() if key != "steps")))
+            frame_ms, spread, stage_ms, result = measure(renderer, variant, method, repeats, build not in built)
+            built.add(build)
             error = references.error(scene, EXACT, result.image, subset)
             point = BenchPoint(Path(path).stem, f"{image.width}x{image.height}", method, label, frame_ms, spread,
-                               error.rmse, error.p99, error.mean, result.device_bytes / 2**20, stage_ms)
+                               error.rmse, error.p99, error.mean, result.device_bytes / 2**20, stage_ms,
+                               os.getloadavg()[0])
             results.append(point)
-            log(f"  {method:8} {label:36} {frame_ms:9.1f} ms  rmse {error.rmse:7.3%}  p99 {error.p99:7.3%}")
+            log(f"  {method:8} {label:44} {frame_ms:9.1f} ms  rmse {error.rmse:7.3%}  p99 {error.p99:7.3%}  "
+                f"load {point.load_average:4.1f}")
+            return point
+
+        mine = [point_at(method, label, overrides) for method, label, overrides in points]
+        if quick:
+            continue
+        if not any(p.method == "minmax" and p.rmse <= min(RMSE_TARGETS) for p in mine):
+            point_at("minmax", *finer_minmax(scene))
+        raymarch_ladder(lambda steps, shadow_map: point_at("raymarch", f"steps={steps} shadow_map={shadow_map}",
+                                                           {"steps": steps, "shadow_map": shadow_map}),
+                        with_derived_sizes(scene).render.shadow_map)
     return results
 
 
@@ -197,7 +272,7 @@ def summary(points: list[BenchPoint]) -> list[dict]:
         row = {"scene": key[0], "resolution": key[1]}
         for target in RMSE_TARGETS:
             fast, slow = cheapest_at(group, "minmax", target), cheapest_at(group, "raymarch", target)
-            tag = f"{target:.0%}"
+            tag = target_tag(target)
             row[f"minmax_ms@{tag}"] = fast.frame_ms if fast else None
             row[f"minmax_setting@{tag}"] = fast.setting if fast else "not reached"
             row[f"raymarch_ms@{tag}"] = slow.frame_ms if slow else None
@@ -212,10 +287,10 @@ def write_csv(points: list[BenchPoint], path: Path) -> None:
     with open(path, "w", newline="") as handle:
         writer = csv.writer(handle)
         writer.writerow(["scene", "resolution", "method", "setting", "frame_ms", "frame_ms_spread", "rel_rmse",
-                         "p99_rel_error", "mean_rel_error", "device_mib"] + [f"{s}_ms" for s in stages])
+                         "p99_rel_error", "mean_rel_error", "device_mib", "load_average"] + [f"{s}_ms" for s in stages])
         for p in points:
             writer.writerow([p.scene, p.resolution, p.method, p.setting, f"{p.frame_ms:.2f}", f"{p.frame_ms_spread:.3f}",
-                             f"{p.rmse:.6f}", f"{p.p99:.6f}", f"{p.mean_error:.6f}", f"{p.device_mib:.1f}"]
+                             f"{p.rmse:.6f}", f"{p.p99:.6f}", f"{p.mean_error:.6f}", f"{p.device_mib:.1f}", f"{p.load_average:.2f}"]
                             + [f"{p.stage_ms.get(s, 0.0):.2f}" for s in stages])
 
 
@@ -278,7 +353,7 @@ def markdown_summary(points: list[BenchPoint]) -> str:
              "|---|---|---|---|---|---|"]
     for row in summary(points):
         for target in RMSE_TARGETS:
-            tag = f"{target:.0%}"
+            tag = target_tag(target)
             fast, slow, speedup = row[f"minmax_ms@{tag}"], row[f"raymarch_ms@{tag}"], row[f"speedup@{tag}"]
             lines.append(f"| {row['scene']} | {row['resolution']} | {tag} | "
                          f"{'—' if fast is None else f'{fast:.0f}'} ({row[f'minmax_setting@{tag}']}) | "
