@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from clrays.runs.bench import BenchPoint, cheapest_at, error_pixels, pareto_front, summary
+from clrays.runs.bench import (BenchPoint, cheapest_at, error_pixels, markdown_summary, pareto_front,
+                               raymarch_ladder, summary, target_tag)
 from clrays.cli import main
 
 DEMO = Path(__file__).resolve().parents[2] / "scenes" / "demo.yaml"
@@ -29,7 +30,49 @@ def test_speedup_compares_the_cheapest_points_that_reach_each_error():
     (row,) = summary(points)
     assert row["speedup@1%"] == pytest.approx(400 / 20)
     assert row["speedup@5%"] == pytest.approx(100 / 10)
+    assert row["speedup@0.5%"] is None and row["raymarch_setting@0.5%"] == "not reached"
     assert cheapest_at(points, "raymarch", 0.001) is None
+    assert "| 0.5% | — (not reached) |" in markdown_summary(points)
+
+
+def test_targets_are_labelled_as_percentages():
+    assert [target_tag(t) for t in (0.05, 0.01, 0.005)] == ["5%", "1%", "0.5%"]
+
+
+def _ladder(error_at):
+    """raymarch_ladder on a fake measure: error_at(steps, shadow_map) → rmse; the (steps,
+    map) pairs it asked for, in order."""
+    asked = []
+
+    def measure_at(steps, shadow_map):
+        asked.append((steps, shadow_map))
+        return _point("raymarch", steps * shadow_map / 1024, error_at(steps, shadow_map), f"{steps} {shadow_map}")
+
+    points = raymarch_ladder(measure_at, 1024, targets=(0.01, 0.005))
+    assert len(points) == len(asked) == len(set(asked))
+    return asked
+
+
+def test_raymarch_ladder_doubles_until_the_lowest_target_then_refines_each_crossing():
+    asked = _ladder(lambda steps, shadow_map: 1.0 / steps)  # 1 % at 100 steps, 0.5 % at 200
+    assert asked[:4] == [(32, 1024), (64, 1024), (128, 1024), (256, 1024)]
+    # 1 %: between 64 and 128 → 88 (fails); 0.5 %: between 128 and 256 → 184 (fails)
+    assert asked[4:] == [(88, 1024), (184, 1024)]
+
+
+def test_raymarch_ladder_goes_to_twice_the_map_where_the_map_stops_it():
+    # The error stops falling at 0.6 % with a 1024 map, at 0.1 % with a 2048 map.
+    asked = _ladder(lambda steps, shadow_map: max(1.0 / steps, 0.006 if shadow_map == 1024 else 0.001))
+    at_1024 = [steps for steps, size in asked if size == 1024]
+    at_2048 = [steps for steps, size in asked if size == 2048]
+    assert max(at_1024) == 512  # 256 → 512 cut the error by less than 1.25×: the floor, not 2048 steps
+    assert at_2048 == [128, 256, 184]  # from the first rung within 2× of 0.5 % (0.78 %), then 0.39 %: reached
+
+
+def test_raymarch_ladder_stops_at_the_most_steps():
+    asked = _ladder(lambda steps, shadow_map: 0.5)
+    assert [steps for steps, size in asked if size == 1024] == [32, 64, 128, 256, 512, 1024, 2048]
+    assert [steps for steps, size in asked if size == 2048] == [2048]  # one look at the larger map
 
 
 def test_error_pixels_are_fixed_and_distinct():
