@@ -8,11 +8,11 @@ For each scene and resolution the sweep renders
   target, so its cost at equal error is known to within a factor √2 of steps; where the
   scene's shadow map stops it short of the lowest target, the ladder goes on at twice the
   map;
-- `minmax` at its defaults and, one parameter at a time, at cheaper `slices`,
-  `gamma_samples`, `shadow_map` and `initial_step` (the points that can reach the higher
-  targets for less), at twice the sizes where its defaults miss the lowest target, and
-  `moments` at its defaults (the small frames of `--quick` and the 640×360 rows also
-  sweep `integrand` and `traversal`);
+- `minmax` at its defaults and, one parameter at a time, at half the `slices`,
+  `gamma_samples` or `shadow_map` (the points that can reach the higher targets for
+  less), and at twice the sizes where none of those reaches the lowest target (640×360
+  and smaller whole-image sweeps also try `integrand` and `traversal`); `moments` in
+  `--quick` only (bench/RESULTS.md compares it with minmax on its own);
 
 and records, per point, the frame time (median of `repeats` renders after a warm-up,
 wall clock, host work included; a raymarch point that differs from the last one in its
@@ -54,6 +54,9 @@ RMSE_TARGETS = (0.05, 0.01, 0.005)
 #: takes about a minute on the 2-core machine of bench/RESULTS.md).
 RAYMARCH_FIRST_STEPS = 32
 RAYMARCH_MOST_STEPS = 2048
+#: ... and a frame time past which it stops doubling (the next rung would take over twice
+#: as long): the ladder's cost stays bounded on a frame whose error falls slowly.
+RAYMARCH_MOST_FRAME_MS = 20_000
 #: The largest shadow map the ladder and the minmax points go up to.
 MOST_SHADOW_MAP = 2048
 
@@ -77,6 +80,10 @@ class BenchPoint:
     device_mib: float
     stage_ms: dict[str, float] = field(default_factory=dict)
     load_average: float = math.nan  # the machine's 1-minute load average when the point ended
+    # Median CPU time of the process per frame (every PoCL thread's, host work included):
+    # the work a frame does, which other processes on a shared machine change far less
+    # than its wall time.
+    cpu_ms: float = math.nan
 
 
 def volume_only(scene: Scene) -> Scene:
@@ -104,10 +111,10 @@ def sweep(scene: Scene, quick: bool = False, volume: bool = False) -> list[tuple
     defaults = dataclasses.asdict(with_derived_sizes(scene).render)
     label = (f"defaults (slices={defaults['slices']} gamma_samples={defaults['gamma_samples']} "
              f"shadow_map={defaults['shadow_map']})")
-    points = [("minmax", label, {}), ("moments", label, {})]
+    points = [("minmax", label, {})]
     # Cheaper than the defaults, one at a time: where the higher targets are reached for less.
     cheaper = {"slices": defaults["slices"] // 2, "gamma_samples": defaults["gamma_samples"] // 2,
-               "shadow_map": defaults["shadow_map"] // 2, "initial_step": defaults["initial_step"] * 2}
+               "shadow_map": defaults["shadow_map"] // 2}
     points += [("minmax", f"{key}={value}", {key: value}) for key, value in cheaper.items()]
     if volume or scene.image.width * scene.image.height > 640 * 360:
         return points
@@ -129,28 +136,31 @@ def finer_minmax(scene: Scene) -> tuple[str, dict]:
 
 
 def raymarch_ladder(measure_at, shadow_map: int, targets=RMSE_TARGETS, first: int = RAYMARCH_FIRST_STEPS,
-                    most: int = RAYMARCH_MOST_STEPS, most_map: int = MOST_SHADOW_MAP) -> list[BenchPoint]:
+                    most: int = RAYMARCH_MOST_STEPS, most_map: int = MOST_SHADOW_MAP,
+                    most_ms: float = RAYMARCH_MOST_FRAME_MS) -> list[BenchPoint]:
     """raymarch's points, searched rather than swept: `measure_at(steps, shadow_map)` → a
     BenchPoint. Steps double from `first` until the error reaches the lowest target (or
     `most`); each target whose crossing lies between two rungs then gets one more point at
     their geometric mean, so the cheapest point at or under a target costs at most √2× the
-    steps it needs. The uniform steps' error falls until the shadow map's remains (the
-    volume-only sun of bench/RESULTS.md), so the climb also stops at a doubling that cuts
-    the error by less than 1.25× within 2× of the lowest target; when the ladder ends short
-    of the lowest target, it is climbed again at twice the map, from the first rung within
-    2× of that target."""
+    steps it needs. The climb also stops after a frame of more than `most_ms`. The
+    uniform steps' error falls until the shadow map's remains (the volume-only sun of
+    bench/RESULTS.md), so it also stops at a doubling that cuts the error by less than
+    1.25× within 2× of the lowest target; a ladder that ends there, short of the lowest
+    target, is climbed again at twice the map, from its first rung within 2× of that
+    target."""
     lowest = min(targets)
     points: dict[tuple[int, int], BenchPoint] = {}
 
-    def climb(map_size: int, steps: int) -> None:
+    def climb(map_size: int, steps: int) -> bool:
+        """Up the ladder at one map size; True where it ended on the map's floor."""
         previous = math.inf
         while True:
             point = points[(map_size, steps)] = measure_at(steps, map_size)
             # Near the target, a doubling that no longer cuts the error by 1.25× meets the
             # map's floor: more steps there cost the most and buy nothing.
             floor = point.rmse <= 2 * lowest and point.rmse * 1.25 > previous
-            if point.rmse <= lowest or steps * 2 > most or floor:
-                return
+            if point.rmse <= lowest or steps * 2 > most or point.frame_ms > most_ms or floor:
+                return floor and point.rmse > lowest
             previous = point.rmse
             steps *= 2
 
@@ -166,11 +176,11 @@ def raymarch_ladder(measure_at, shadow_map: int, targets=RMSE_TARGETS, first: in
                     rungs = sorted((steps, point.rmse) for (size, steps), point in points.items()
                                    if size == map_size)
 
-    climb(shadow_map, first)
+    on_floor = climb(shadow_map, first)
     refine(shadow_map)
-    if min(point.rmse for point in points.values()) > lowest and 2 * shadow_map <= most_map:
+    if on_floor and 2 * shadow_map <= most_map:
         near = [steps for (size, steps), point in sorted(points.items()) if point.rmse <= 2 * lowest]
-        climb(2 * shadow_map, near[0] if near else most)
+        climb(2 * shadow_map, near[0])
         refine(2 * shadow_map)
     return list(points.values())
 
@@ -186,18 +196,20 @@ def error_pixels(width: int, height: int, count: int, seed: int = 20111) -> tupl
 
 def measure(renderer: Renderer, scene: Scene, method: str, repeats: int, warm_up: bool = True):
     """A warm-up frame (kernels built, buffers allocated) unless `warm_up` is False, then
-    `repeats` timed frames: (median ms, spread, median stage ms, last result)."""
+    `repeats` timed frames: (median ms, spread, median stage ms, last result, median CPU ms
+    of the process)."""
     if warm_up:
         renderer.render(scene, method)
-    walls, stages, result = [], [], None
+    walls, cpus, stages, result = [], [], [], None
     for _ in range(repeats):
-        start = time.perf_counter()
+        start, start_cpu = time.perf_counter(), time.process_time()
         result = renderer.render(scene, method)
         walls.append((time.perf_counter() - start) * 1e3)
+        cpus.append((time.process_time() - start_cpu) * 1e3)
         stages.append(result.stage_ms)
     median = statistics.median(walls)
     stage_ms = {label: statistics.median(s.get(label, 0.0) for s in stages) for label in stages[-1]}
-    return median, (max(walls) - min(walls)) / median, stage_ms, result
+    return median, (max(walls) - min(walls)) / median, stage_ms, result, statistics.median(cpus)
 
 
 def run(scene_paths=DEFAULT_SCENES, resolutions=((640, 360),), repeats: int = 5, pixels: int = 4000,
@@ -226,15 +238,16 @@ def run(scene_paths=DEFAULT_SCENES, resolutions=((640, 360),), repeats: int = 5,
         def point_at(method: str, label: str, overrides: dict) -> BenchPoint:
             variant = replace(scene, render=replace(scene.render, **overrides))
             build = (method, tuple(sorted((key, value) for key, value in overrides.items() if key != "steps")))
-            frame_ms, spread, stage_ms, result = measure(renderer, variant, method, repeats, build not in built)
+            frame_ms, spread, stage_ms, result, cpu_ms = measure(renderer, variant, method, repeats,
+                                                                 build not in built)
             built.add(build)
             error = references.error(scene, EXACT, result.image, subset)
             point = BenchPoint(Path(path).stem, f"{image.width}x{image.height}", method, label, frame_ms, spread,
                                error.rmse, error.p99, error.mean, result.device_bytes / 2**20, stage_ms,
-                               os.getloadavg()[0])
+                               os.getloadavg()[0], cpu_ms)
             results.append(point)
-            log(f"  {method:8} {label:44} {frame_ms:9.1f} ms  rmse {error.rmse:7.3%}  p99 {error.p99:7.3%}  "
-                f"load {point.load_average:4.1f}")
+            log(f"  {method:8} {label:44} {frame_ms:9.1f} ms (cpu {cpu_ms:9.1f})  rmse {error.rmse:7.3%}  "
+                f"p99 {error.p99:7.3%}  load {point.load_average:4.1f}")
             return point
 
         mine = [point_at(method, label, overrides) for method, label, overrides in points]
@@ -265,10 +278,15 @@ def pareto_front(points: list[BenchPoint]) -> list[BenchPoint]:
 
 
 def summary(points: list[BenchPoint]) -> list[dict]:
-    """Per scene and resolution: speedup of minmax over raymarch at equal error."""
+    """Per scene and resolution and target: speedup of minmax over raymarch at equal error,
+    by wall time and by CPU time. Where raymarch reaches no target, equal error needs more
+    than its costliest point: `speedup_above@` is that point's frame time over minmax's, a
+    lower bound."""
     rows = []
     for key in dict.fromkeys((p.scene, p.resolution) for p in points):
         group = [p for p in points if (p.scene, p.resolution) == key]
+        raymarch = [p for p in group if p.method == "raymarch"]
+        costliest = max(raymarch, key=lambda p: p.frame_ms) if raymarch else None
         row = {"scene": key[0], "resolution": key[1]}
         for target in RMSE_TARGETS:
             fast, slow = cheapest_at(group, "minmax", target), cheapest_at(group, "raymarch", target)
@@ -278,6 +296,11 @@ def summary(points: list[BenchPoint]) -> list[dict]:
             row[f"raymarch_ms@{tag}"] = slow.frame_ms if slow else None
             row[f"raymarch_setting@{tag}"] = slow.setting if slow else "not reached"
             row[f"speedup@{tag}"] = slow.frame_ms / fast.frame_ms if fast and slow else None
+            row[f"speedup_cpu@{tag}"] = slow.cpu_ms / fast.cpu_ms if fast and slow else None
+            above = fast and not slow and costliest
+            row[f"speedup_above@{tag}"] = costliest.frame_ms / fast.frame_ms if above else None
+            row[f"raymarch_costliest@{tag}"] = (f"{costliest.setting}: {costliest.rmse:.2%} in "
+                                                f"{costliest.frame_ms:.0f} ms") if above else ""
         rows.append(row)
     return rows
 
@@ -287,10 +310,10 @@ def write_csv(points: list[BenchPoint], path: Path) -> None:
     with open(path, "w", newline="") as handle:
         writer = csv.writer(handle)
         writer.writerow(["scene", "resolution", "method", "setting", "frame_ms", "frame_ms_spread", "rel_rmse",
-                         "p99_rel_error", "mean_rel_error", "device_mib", "load_average"] + [f"{s}_ms" for s in stages])
+                         "p99_rel_error", "mean_rel_error", "device_mib", "load_average", "cpu_ms"] + [f"{s}_ms" for s in stages])
         for p in points:
             writer.writerow([p.scene, p.resolution, p.method, p.setting, f"{p.frame_ms:.2f}", f"{p.frame_ms_spread:.3f}",
-                             f"{p.rmse:.6f}", f"{p.p99:.6f}", f"{p.mean_error:.6f}", f"{p.device_mib:.1f}", f"{p.load_average:.2f}"]
+                             f"{p.rmse:.6f}", f"{p.p99:.6f}", f"{p.mean_error:.6f}", f"{p.device_mib:.1f}", f"{p.load_average:.2f}", f"{p.cpu_ms:.1f}"]
                             + [f"{p.stage_ms.get(s, 0.0):.2f}" for s in stages])
 
 
@@ -349,16 +372,25 @@ def peak_host_mib() -> float:
 
 def markdown_summary(points: list[BenchPoint]) -> str:
     """The headline table, as it goes into bench/RESULTS.md."""
-    lines = ["| scene | resolution | target rel. RMSE | minmax (ms, setting) | raymarch (ms, setting) | speedup |",
-             "|---|---|---|---|---|---|"]
+    lines = ["| scene | resolution | target rel. RMSE | minmax (ms, setting) | raymarch (ms, setting) | speedup "
+             "| speedup, CPU time |",
+             "|---|---|---|---|---|---|---|"]
+
+    def times(value, spec):
+        return "—" if value is None else f"{value:{spec}}"
+
     for row in summary(points):
         for target in RMSE_TARGETS:
             tag = target_tag(target)
-            fast, slow, speedup = row[f"minmax_ms@{tag}"], row[f"raymarch_ms@{tag}"], row[f"speedup@{tag}"]
+            raymarch = f"{times(row[f'raymarch_ms@{tag}'], '.0f')} ({row[f'raymarch_setting@{tag}']})"
+            speedup = times(row[f"speedup@{tag}"], ".1f") + "×"
+            if row[f"speedup_above@{tag}"] is not None:
+                raymarch = f"not reached (costliest: {row[f'raymarch_costliest@{tag}']})"
+                speedup = f"> {row[f'speedup_above@{tag}']:.1f}×"
             lines.append(f"| {row['scene']} | {row['resolution']} | {tag} | "
-                         f"{'—' if fast is None else f'{fast:.0f}'} ({row[f'minmax_setting@{tag}']}) | "
-                         f"{'—' if slow is None else f'{slow:.0f}'} ({row[f'raymarch_setting@{tag}']}) | "
-                         f"{'—' if speedup is None else f'{speedup:.1f}×'} |")
+                         f"{times(row[f'minmax_ms@{tag}'], '.0f')} ({row[f'minmax_setting@{tag}']}) | {raymarch} | "
+                         f"{speedup.replace('—×', '—')} | {times(row[f'speedup_cpu@{tag}'], '.1f')}× |"
+                         .replace("| —× |", "| — |"))
     return "\n".join(lines)
 
 

@@ -25,28 +25,30 @@ def test_pareto_front_keeps_only_undominated_points():
 
 def test_speedup_compares_the_cheapest_points_that_reach_each_error():
     points = [_point("raymarch", 100, 0.04), _point("raymarch", 400, 0.009), _point("raymarch", 50, 0.2),
-              _point("minmax", 20, 0.008), _point("minmax", 10, 0.03)]
+              _point("minmax", 20, 0.008), _point("minmax", 10, 0.03), _point("minmax", 40, 0.004)]
     assert cheapest_at(points, "minmax", 0.01).frame_ms == 20
     (row,) = summary(points)
     assert row["speedup@1%"] == pytest.approx(400 / 20)
     assert row["speedup@5%"] == pytest.approx(100 / 10)
     assert row["speedup@0.5%"] is None and row["raymarch_setting@0.5%"] == "not reached"
     assert cheapest_at(points, "raymarch", 0.001) is None
-    assert "| 0.5% | — (not reached) |" in markdown_summary(points)
+    assert row["speedup_above@0.5%"] == pytest.approx(400 / 40)  # raymarch needs more than its 400 ms point
+    assert row["speedup_above@1%"] is None
+    assert "| 0.5% | 40 (40) | not reached (costliest: 400: 0.90% in 400 ms) | > 10.0× |" in markdown_summary(points)
 
 
 def test_targets_are_labelled_as_percentages():
     assert [target_tag(t) for t in (0.05, 0.01, 0.005)] == ["5%", "1%", "0.5%"]
 
 
-def _ladder(error_at):
-    """raymarch_ladder on a fake measure: error_at(steps, shadow_map) → rmse; the (steps,
-    map) pairs it asked for, in order."""
+def _ladder(error_at, ms_per_step=1.0):
+    """raymarch_ladder on a fake measure: error_at(steps, shadow_map) → rmse, a frame time
+    of ms_per_step per step; the (steps, map) pairs it asked for, in order."""
     asked = []
 
     def measure_at(steps, shadow_map):
         asked.append((steps, shadow_map))
-        return _point("raymarch", steps * shadow_map / 1024, error_at(steps, shadow_map), f"{steps} {shadow_map}")
+        return _point("raymarch", steps * ms_per_step, error_at(steps, shadow_map), f"{steps} {shadow_map}")
 
     points = raymarch_ladder(measure_at, 1024, targets=(0.01, 0.005))
     assert len(points) == len(asked) == len(set(asked))
@@ -69,10 +71,12 @@ def test_raymarch_ladder_goes_to_twice_the_map_where_the_map_stops_it():
     assert at_2048 == [128, 256, 184]  # from the first rung within 2× of 0.5 % (0.78 %), then 0.39 %: reached
 
 
-def test_raymarch_ladder_stops_at_the_most_steps():
-    asked = _ladder(lambda steps, shadow_map: 0.5)
-    assert [steps for steps, size in asked if size == 1024] == [32, 64, 128, 256, 512, 1024, 2048]
-    assert [steps for steps, size in asked if size == 2048] == [2048]  # one look at the larger map
+def test_raymarch_ladder_stops_at_the_most_steps_or_after_a_long_frame():
+    # Far from the target, the map is not what stops it: no larger map.
+    assert _ladder(lambda steps, shadow_map: 0.5) == [(steps, 1024) for steps in (32, 64, 128, 256, 512, 1024, 2048)]
+    # 1024 steps take 20.5 s, past RAYMARCH_MOST_FRAME_MS: the last rung.
+    assert _ladder(lambda steps, shadow_map: 0.5, ms_per_step=20) == [(steps, 1024) for steps in (32, 64, 128, 256,
+                                                                                                   512, 1024)]
 
 
 def test_error_pixels_are_fixed_and_distinct():
