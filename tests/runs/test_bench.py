@@ -101,6 +101,20 @@ def test_bench_command_writes_csv_plot_and_summary(tmp_path):
     assert any((tmp_path / "cache").iterdir())  # exact was cached
 
 
+def test_volume_only_skips_the_surface_shadows_it_cannot_show(device):
+    from clrays.runs.bench import volume_only
+    from clrays.scene.load import load_scene
+    from clrays.session import Renderer
+
+    volume = volume_only(load_scene(DEMO, ["image.width=32", "image.height=18"]))
+    with_exact = replace(volume, render=replace(volume.render, surface_shadows="exact"))
+    renderer = Renderer(device, reuse=False)
+    for method in ("minmax", "raymarch"):
+        fast, exact = renderer.render(volume, method), renderer.render(with_exact, method)
+        np.testing.assert_array_equal(fast.image, exact.image)
+        assert "visibility" in exact.stage_ms and "visibility" not in fast.stage_ms
+
+
 def test_bench_rejects_a_bad_resolution():
     result = CliRunner().invoke(main, ["bench", str(DEMO), "-r", "640by360"])
     assert result.exit_code == 2 and "WIDTHxHEIGHT" in result.output
