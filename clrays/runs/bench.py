@@ -54,9 +54,11 @@ RMSE_TARGETS = (0.05, 0.01, 0.005)
 #: takes about a minute on the 2-core machine of bench/RESULTS.md).
 RAYMARCH_FIRST_STEPS = 32
 RAYMARCH_MOST_STEPS = 2048
-#: ... and a frame time past which it stops doubling (the next rung would take over twice
-#: as long): the ladder's cost stays bounded on a frame whose error falls slowly.
-RAYMARCH_MOST_FRAME_MS = 20_000
+#: ... and a frame's CPU time past which it stops doubling (the next rung would take over
+#: twice as long): the ladder's cost stays bounded on a frame whose error falls slowly.
+#: CPU time, not wall time: on a shared machine the wall time of the same frame varied 3×
+#: with the load (bench/RESULTS.md, the re-run), its CPU time by a few per cent.
+RAYMARCH_MOST_FRAME_CPU_MS = 20_000
 #: The largest shadow map the ladder and the minmax points go up to.
 MOST_SHADOW_MAP = 2048
 
@@ -139,12 +141,12 @@ def finer_minmax(scene: Scene) -> tuple[str, dict]:
 
 def raymarch_ladder(measure_at, shadow_map: int, targets=RMSE_TARGETS, first: int = RAYMARCH_FIRST_STEPS,
                     most: int = RAYMARCH_MOST_STEPS, most_map: int = MOST_SHADOW_MAP,
-                    most_ms: float = RAYMARCH_MOST_FRAME_MS) -> list[BenchPoint]:
+                    most_cpu_ms: float = RAYMARCH_MOST_FRAME_CPU_MS) -> list[BenchPoint]:
     """raymarch's points, searched rather than swept: `measure_at(steps, shadow_map)` → a
     BenchPoint. Steps double from `first` until the error reaches the lowest target (or
     `most`); each target whose crossing lies between two rungs then gets one more point at
     their geometric mean, so the cheapest point at or under a target costs at most √2× the
-    steps it needs. The climb also stops after a frame of more than `most_ms`. The
+    steps it needs. The climb also stops after a frame of more than `most_cpu_ms` of CPU time. The
     uniform steps' error falls until the shadow map's remains (the volume-only sun of
     bench/RESULTS.md), so it also stops at a doubling that cuts the error by less than
     1.25× within 2× of the lowest target; a ladder that ends there, short of the lowest
@@ -161,7 +163,7 @@ def raymarch_ladder(measure_at, shadow_map: int, targets=RMSE_TARGETS, first: in
             # Near the target, a doubling that no longer cuts the error by 1.25× meets the
             # map's floor: more steps there cost the most and buy nothing.
             floor = point.rmse <= 2 * lowest and point.rmse * 1.25 > previous
-            if point.rmse <= lowest or steps * 2 > most or point.frame_ms > most_ms or floor:
+            if point.rmse <= lowest or steps * 2 > most or point.cpu_ms > most_cpu_ms or floor:
                 return floor and point.rmse > lowest
             previous = point.rmse
             steps *= 2
