@@ -99,11 +99,11 @@ def volume_only(scene: Scene) -> Scene:
 
 
 def sweep(scene: Scene, quick: bool = False, volume: bool = False) -> list[tuple[str, str, dict]]:
-    """(method, label, render overrides) of the minmax and moments points for one scene;
-    raymarch's step counts are searched instead (`raymarch_ladder`), but for `quick`, a
-    handful of fixed points (two of raymarch's among them) for a smoke run. `volume`
-    (volume-only error) and frames larger than 640×360 leave out the integrand and
-    traversal variants, which change the time, not the error at equal settings."""
+    """(method, label, render overrides) of the minmax points for one scene; raymarch's
+    step counts are searched instead (`raymarch_ladder`). `quick`: a handful of fixed
+    points of every method (two of raymarch's) for a smoke run. `volume` (volume-only
+    error) and frames larger than 640×360 leave out the integrand and traversal variants,
+    to keep the large runs short (the first run in bench/RESULTS.md compares them)."""
     from ..scene.model import DirectionalLight
 
     if quick:
@@ -146,12 +146,12 @@ def raymarch_ladder(measure_at, shadow_map: int, targets=RMSE_TARGETS, first: in
     BenchPoint. Steps double from `first` until the error reaches the lowest target (or
     `most`); each target whose crossing lies between two rungs then gets one more point at
     their geometric mean, so the cheapest point at or under a target costs at most √2× the
-    steps it needs. The climb also stops after a frame of more than `most_cpu_ms` of CPU time. The
-    uniform steps' error falls until the shadow map's remains (the volume-only sun of
-    bench/RESULTS.md), so it also stops at a doubling that cuts the error by less than
-    1.25× within 2× of the lowest target; a ladder that ends there, short of the lowest
-    target, is climbed again at twice the map, from its first rung within 2× of that
-    target."""
+    steps it needs. The climb also stops after a frame of more than `most_cpu_ms` of CPU
+    time. The uniform steps' error falls until the shadow map's remains (the volume-only
+    sun of bench/RESULTS.md), so it also stops at a doubling that cuts the error by less
+    than 1.25× within 2× of the lowest target; a ladder that ends there, short of the
+    lowest target, is climbed again at twice the map, from its first rung within 2× of
+    that target."""
     lowest = min(targets)
     points: dict[tuple[int, int], BenchPoint] = {}
 
