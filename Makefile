@@ -33,8 +33,10 @@ test-slow: $(STAMP)
 
 # The run-time/error benchmark behind bench/RESULTS.md (tens of minutes on 2 cores).
 bench: $(STAMP)
-	$(BIN)/clrays bench -r 640x360 -r 1280x720 --out bench/results
-	$(BIN)/clrays bench -r 640x360 --volume-only --out bench/results-volume
+	$(BIN)/clrays bench -r 1280x720 --volume-only --repeats 3 --out bench/results-volume/1280x720
+	$(BIN)/clrays bench -r 1280x720 --repeats 3 --out bench/results/1280x720
+	$(BIN)/clrays bench -r 640x360 --repeats 3 --out bench/results/640x360
+	$(BIN)/clrays bench -r 640x360 --volume-only --repeats 3 --out bench/results-volume/640x360
 
 info: $(STAMP)
 	$(BIN)/clrays info

@@ -557,8 +557,10 @@ Examples:
 def bench(scenes, resolutions, repeats, pixels, quick, volume, out, cache, progress, device) -> None:
     """Time every method and setting against its error versus `exact`.
 
-    Writes a CSV of every point, a log-log plot of error against time with the Pareto
-    front, and the headline table (speedup of minmax over raymarch at equal error).
+    raymarch's steps are searched (doubled from 32 until 0.5 % relative RMSE, then refined
+    at each target's crossing); minmax runs at its defaults and at cheaper sizes. Writes a
+    CSV of every point, a log-log plot of error against time with the Pareto front, and
+    the headline table (speedup of minmax over raymarch at 5, 1 and 0.5 % error).
     """
     for folder in (out, cache):  # fail before the sweep, not after it
         make_folder(folder)

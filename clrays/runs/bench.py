@@ -3,18 +3,26 @@ against `exact` on the same scenes (`clrays bench`).
 
 For each scene and resolution the sweep renders
 
-- `raymarch` over `steps` × `shadow_map`;
-- `minmax` at its defaults and, one parameter at a time, over `slices`,
-  `gamma_samples`, `shadow_map`, `integrand` (svd rank 1–8, table, analytic where it
-  exists) and `traversal` (tree, scan);
+- `raymarch` on a ladder of step counts (`raymarch_ladder`): doubled from 32 until its
+  error reaches the lowest target, then one step count between the two that bracket each
+  target, so its cost at equal error is known to within a factor √2 of steps; where the
+  scene's shadow map stops it short of the lowest target, the ladder goes on at twice the
+  map;
+- `minmax` at its defaults and, one parameter at a time, at half the `slices`,
+  `gamma_samples` or `shadow_map` (the points that can reach the higher targets for
+  less), and at twice the sizes where none of those reaches the lowest target (640×360
+  and smaller whole-image sweeps also try `integrand` and `traversal`); `moments` in
+  `--quick` only (bench/RESULTS.md compares it with minmax on its own);
 
 and records, per point, the frame time (median of `repeats` renders after a warm-up,
-wall clock, host work included), the median device time per stage, the device memory,
-and the error against `exact`: relative RMSE of luminance and the 99th-percentile
+wall clock, host work included; a raymarch point that differs from the last one in its
+step count alone, which is a kernel argument, needs no warm-up), the median device time
+per stage, the device memory, the 1-minute load average of the machine when the point
+ended, and the error against `exact`: relative RMSE of luminance and the 99th-percentile
 relative error, on pixels with at least 1% of the mean radiance, depth edges excluded
-(`clrays.reference.metrics`). `exact` takes minutes on a full frame, so the error is measured on a
-fixed, seeded random subset of pixels (`pixels`, default 4000), the same for every
-point; the references are kept on disk (`clrays.runs.references`).
+(`clrays.reference.metrics`). `exact` takes minutes on a full frame, so the error is
+measured on a fixed, seeded random subset of pixels (`pixels`, default 4000), the same for
+every point; the references are kept on disk (`clrays.runs.references`).
 """
 from __future__ import annotations
 
@@ -22,6 +30,7 @@ import csv
 import dataclasses
 import json
 import math
+import os
 import platform
 import resource
 import statistics
@@ -39,7 +48,24 @@ from ..scene.load import load_scene
 from .references import EXACT, ReferenceCache
 
 DEFAULT_SCENES = ("scenes/demo.yaml", "scenes/bunny.yaml", "scenes/behind.yaml", "scenes/sun.yaml")
-RMSE_TARGETS = (0.01, 0.05)
+#: Relative RMSE targets of the headline: the speedup of minmax over raymarch is read at each.
+RMSE_TARGETS = (0.05, 0.01, 0.005)
+#: raymarch's ladder: the first step count, and the most (a 1280×720 frame at 2048 steps
+#: takes about a minute on the 2-core machine of bench/RESULTS.md).
+RAYMARCH_FIRST_STEPS = 32
+RAYMARCH_MOST_STEPS = 2048
+#: ... and a frame's CPU time past which it stops doubling (the next rung would take over
+#: twice as long): the ladder's cost stays bounded on a frame whose error falls slowly.
+#: CPU time, not wall time: on a shared machine the wall time of the same frame varied 3×
+#: with the load (bench/RESULTS.md, the re-run), its CPU time by a few per cent.
+RAYMARCH_MOST_FRAME_CPU_MS = 20_000
+#: The largest shadow map the ladder and the minmax points go up to.
+MOST_SHADOW_MAP = 2048
+
+
+def target_tag(target: float) -> str:
+    """0.005 → "0.5%", 0.01 → "1%": the label of a target in the summary's keys and tables."""
+    return f"{target * 100:g}%"
 
 
 @dataclass
@@ -55,67 +81,112 @@ class BenchPoint:
     mean_error: float
     device_mib: float
     stage_ms: dict[str, float] = field(default_factory=dict)
+    load_average: float = math.nan  # the machine's 1-minute load average when the point ended
+    # Median CPU time of the process per frame (every PoCL thread's, host work included):
+    # the work a frame does, which other processes on a shared machine change far less
+    # than its wall time.
+    cpu_ms: float = math.nan
 
 
 def volume_only(scene: Scene) -> Scene:
     """The scene with black surfaces and background: its image is the in-scattered light
-    alone (attenuated), so its error is the volumetric method's, free of the hard
-    surface-shadow edges that every shadow-map method shares."""
+    alone (attenuated), so its error and its cost are the volumetric method's. Black
+    surfaces reflect nothing, so their shadows are not computed (`surface_shadows: map`
+    skips the exact visibility stage and its BVH; the image is the same to the bit)."""
     geometry = replace(scene.geometry, albedo=np.zeros_like(scene.geometry.albedo))
-    return replace(scene, geometry=geometry, background=np.zeros(3))
+    return replace(scene, geometry=geometry, background=np.zeros(3),
+                   render=replace(scene.render, surface_shadows="map"))
 
 
 def sweep(scene: Scene, quick: bool = False, volume: bool = False) -> list[tuple[str, str, dict]]:
-    """(method, label, render overrides) of every point for one scene; `quick` keeps
-    a handful (two raymarch points, minmax defaults and scan) for a smoke run; `volume`
-    (volume-only error) a single shadow-map size and the main minmax settings."""
+    """(method, label, render overrides) of the minmax points for one scene; raymarch's
+    step counts are searched instead (`raymarch_ladder`). `quick`: a handful of fixed
+    points of every method (two of raymarch's) for a smoke run. `volume` (volume-only
+    error) and frames larger than 640×360 leave out the integrand and traversal variants,
+    to keep the large runs short (the first run in bench/RESULTS.md compares them)."""
     from ..scene.model import DirectionalLight
 
-    if volume:
-        points = [("raymarch", f"steps={steps}", {"steps": steps}) for steps in (32, 64, 128, 256, 512, 1024)]
-        points.append(("minmax", "defaults", {}))
-        points.append(("moments", "defaults", {}))
-        points += [("minmax", f"{key}={value}", {key: value})
-                   for key, value in (("slices", 256), ("slices", 512), ("gamma_samples", 256),
-                                      ("gamma_samples", 512))]
-        return points
     if quick:
         return [("raymarch", "steps=32 shadow_map=256", {"steps": 32, "shadow_map": 256}),
                 ("raymarch", "steps=256 shadow_map=256", {"steps": 256, "shadow_map": 256}),
                 ("minmax", "shadow_map=256", {"shadow_map": 256}),
                 ("minmax", "shadow_map=256 traversal=scan", {"shadow_map": 256, "traversal": "scan"}),
                 ("moments", "shadow_map=256", {"shadow_map": 256})]
-    # Large frames get a coarser grid: a 1280×720 raymarch at 2048 steps takes a minute.
-    large = scene.image.width * scene.image.height > 500_000
-    points = []
-    for shadow_map in (1024,) if large else (1024, 2048):
-        for steps in (128, 512) if large else (32, 64, 128, 256, 512, 1024):
-            points.append(("raymarch", f"steps={steps} shadow_map={shadow_map}",
-                           {"steps": steps, "shadow_map": shadow_map}))
     defaults = dataclasses.asdict(with_derived_sizes(scene).render)
-    points.append(("minmax", f"defaults (slices={defaults['slices']} gamma_samples={defaults['gamma_samples']} "
-                             f"shadow_map={defaults['shadow_map']})", {}))
-    points.append(("moments", f"defaults (slices={defaults['slices']} gamma_samples={defaults['gamma_samples']} "
-                              f"shadow_map={defaults['shadow_map']})", {}))
-    one_at_a_time = {
-        "slices": (512,) if large else (128, 256, 512, 2048),
-        "gamma_samples": (512,) if large else (128, 256, 512, 2048),
-        "shadow_map": (512,) if large else (256, 512, 2048),
-        "traversal": () if large else ("scan",),
-    }
-    for key, values in one_at_a_time.items():
-        for value in values:
-            if value != defaults[key]:
-                points.append(("minmax", f"{key}={value}", {key: value}))
-    if large:
+    label = (f"defaults (slices={defaults['slices']} gamma_samples={defaults['gamma_samples']} "
+             f"shadow_map={defaults['shadow_map']})")
+    points = [("minmax", label, {})]
+    # Cheaper than the defaults, one at a time: where the higher targets are reached for less.
+    cheaper = {"slices": defaults["slices"] // 2, "gamma_samples": defaults["gamma_samples"] // 2,
+               "shadow_map": defaults["shadow_map"] // 2}
+    points += [("minmax", f"{key}={value}", {key: value}) for key, value in cheaper.items()]
+    if volume or scene.image.width * scene.image.height > 640 * 360:
         return points
-    for rank in (1, 2, 4, 8):
+    points.append(("minmax", "traversal=scan", {"traversal": "scan"}))
+    for rank in (2, 4):
         points.append(("minmax", f"integrand=svd svd_rank={rank}", {"integrand": "svd", "svd_rank": rank}))
     if all(isinstance(light, DirectionalLight) for light in scene.lights):
         points.append(("minmax", "integrand=analytic", {"integrand": "analytic"}))
-    if defaults["integrand"] != "table":
-        points.append(("minmax", "integrand=table", {"integrand": "table"}))
     return points
+
+
+def finer_minmax(scene: Scene) -> tuple[str, dict]:
+    """Twice the default sizes (shadow map at most MOST_SHADOW_MAP): the minmax point tried
+    where the defaults miss the lowest target."""
+    defaults = with_derived_sizes(scene).render
+    finer = {"shadow_map": min(2 * defaults.shadow_map, MOST_SHADOW_MAP), "slices": 2 * defaults.slices,
+             "gamma_samples": 2 * defaults.gamma_samples}
+    return " ".join(f"{key}={value}" for key, value in finer.items()), finer
+
+
+def raymarch_ladder(measure_at, shadow_map: int, targets=RMSE_TARGETS, first: int = RAYMARCH_FIRST_STEPS,
+                    most: int = RAYMARCH_MOST_STEPS, most_map: int = MOST_SHADOW_MAP,
+                    most_cpu_ms: float = RAYMARCH_MOST_FRAME_CPU_MS) -> list[BenchPoint]:
+    """raymarch's points, searched rather than swept: `measure_at(steps, shadow_map)` → a
+    BenchPoint. Steps double from `first` until the error reaches the lowest target (or
+    `most`); each target whose crossing lies between two rungs then gets one more point at
+    their geometric mean, so the cheapest point at or under a target costs at most √2× the
+    steps it needs. The climb also stops after a frame of more than `most_cpu_ms` of CPU
+    time. The uniform steps' error falls until the shadow map's remains (the volume-only
+    sun of bench/RESULTS.md), so it also stops at a doubling that cuts the error by less
+    than 1.25× within 2× of the lowest target; a ladder that ends there, short of the
+    lowest target, is climbed again at twice the map, from its first rung within 2× of
+    that target."""
+    lowest = min(targets)
+    points: dict[tuple[int, int], BenchPoint] = {}
+
+    def climb(map_size: int, steps: int) -> bool:
+        """Up the ladder at one map size; True where it ended on the map's floor."""
+        previous = math.inf
+        while True:
+            point = points[(map_size, steps)] = measure_at(steps, map_size)
+            # Near the target, a doubling that no longer cuts the error by 1.25× meets the
+            # map's floor: more steps there cost the most and buy nothing.
+            floor = point.rmse <= 2 * lowest and point.rmse * 1.25 > previous
+            if point.rmse <= lowest or steps * 2 > most or point.cpu_ms > most_cpu_ms or floor:
+                return floor and point.rmse > lowest
+            previous = point.rmse
+            steps *= 2
+
+    def refine(map_size: int) -> None:
+        rungs = sorted((steps, point.rmse) for (size, steps), point in points.items() if size == map_size)
+        for target in sorted(targets, reverse=True):
+            passing = [steps for steps, rmse in rungs if rmse <= target]
+            failing = [steps for steps, rmse in rungs if rmse > target and passing and steps < min(passing)]
+            if passing and failing and min(passing) >= 2 * max(failing):
+                middle = int(round(math.sqrt(min(passing) * max(failing)) / 8) * 8)
+                if (map_size, middle) not in points:
+                    points[(map_size, middle)] = measure_at(middle, map_size)
+                    rungs = sorted((steps, point.rmse) for (size, steps), point in points.items()
+                                   if size == map_size)
+
+    on_floor = climb(shadow_map, first)
+    refine(shadow_map)
+    if on_floor and 2 * shadow_map <= most_map:
+        near = [steps for (size, steps), point in sorted(points.items()) if point.rmse <= 2 * lowest]
+        climb(2 * shadow_map, near[0])
+        refine(2 * shadow_map)
+    return list(points.values())
 
 
 def error_pixels(width: int, height: int, count: int, seed: int = 20111) -> tuple[np.ndarray, np.ndarray]:
@@ -127,18 +198,22 @@ def error_pixels(width: int, height: int, count: int, seed: int = 20111) -> tupl
     return np.divmod(flat, width)
 
 
-def measure(renderer: Renderer, scene: Scene, method: str, repeats: int):
-    """Warm-up, then `repeats` timed frames: (median ms, spread, median stage ms, last result)."""
-    renderer.render(scene, method)
-    walls, stages, result = [], [], None
+def measure(renderer: Renderer, scene: Scene, method: str, repeats: int, warm_up: bool = True):
+    """A warm-up frame (kernels built, buffers allocated) unless `warm_up` is False, then
+    `repeats` timed frames: (median ms, spread, median stage ms, last result, median CPU ms
+    of the process)."""
+    if warm_up:
+        renderer.render(scene, method)
+    walls, cpus, stages, result = [], [], [], None
     for _ in range(repeats):
-        start = time.perf_counter()
+        start, start_cpu = time.perf_counter(), time.process_time()
         result = renderer.render(scene, method)
         walls.append((time.perf_counter() - start) * 1e3)
+        cpus.append((time.process_time() - start_cpu) * 1e3)
         stages.append(result.stage_ms)
     median = statistics.median(walls)
     stage_ms = {label: statistics.median(s.get(label, 0.0) for s in stages) for label in stages[-1]}
-    return median, (max(walls) - min(walls)) / median, stage_ms, result
+    return median, (max(walls) - min(walls)) / median, stage_ms, result, statistics.median(cpus)
 
 
 def run(scene_paths=DEFAULT_SCENES, resolutions=((640, 360),), repeats: int = 5, pixels: int = 4000,
@@ -162,14 +237,31 @@ def run(scene_paths=DEFAULT_SCENES, resolutions=((640, 360),), repeats: int = 5,
         subset = error_pixels(image.width, image.height, pixels)
         log(f"{path} {image.width}x{image.height}: exact on {len(subset[0])} pixels ...")
         references.radiance(scene, EXACT, subset)
-        for method, label, overrides in points:
+        built = set()  # (method, every override but steps): kernels built, no warm-up needed
+
+        def point_at(method: str, label: str, overrides: dict) -> BenchPoint:
             variant = replace(scene, render=replace(scene.render, **overrides))
-            frame_ms, spread, stage_ms, result = measure(renderer, variant, method, repeats)
+            build = (method, tuple(sorted((key, value) for key, value in overrides.items() if key != "steps")))
+            frame_ms, spread, stage_ms, result, cpu_ms = measure(renderer, variant, method, repeats,
+                                                                 build not in built)
+            built.add(build)
             error = references.error(scene, EXACT, result.image, subset)
             point = BenchPoint(Path(path).stem, f"{image.width}x{image.height}", method, label, frame_ms, spread,
-                               error.rmse, error.p99, error.mean, result.device_bytes / 2**20, stage_ms)
+                               error.rmse, error.p99, error.mean, result.device_bytes / 2**20, stage_ms,
+                               os.getloadavg()[0], cpu_ms)
             results.append(point)
-            log(f"  {method:8} {label:36} {frame_ms:9.1f} ms  rmse {error.rmse:7.3%}  p99 {error.p99:7.3%}")
+            log(f"  {method:8} {label:44} {frame_ms:9.1f} ms (cpu {cpu_ms:9.1f})  rmse {error.rmse:7.3%}  "
+                f"p99 {error.p99:7.3%}  load {point.load_average:4.1f}")
+            return point
+
+        mine = [point_at(method, label, overrides) for method, label, overrides in points]
+        if quick:
+            continue
+        if not any(p.method == "minmax" and p.rmse <= min(RMSE_TARGETS) for p in mine):
+            point_at("minmax", *finer_minmax(scene))
+        raymarch_ladder(lambda steps, shadow_map: point_at("raymarch", f"steps={steps} shadow_map={shadow_map}",
+                                                           {"steps": steps, "shadow_map": shadow_map}),
+                        with_derived_sizes(scene).render.shadow_map)
     return results
 
 
@@ -190,19 +282,29 @@ def pareto_front(points: list[BenchPoint]) -> list[BenchPoint]:
 
 
 def summary(points: list[BenchPoint]) -> list[dict]:
-    """Per scene and resolution: speedup of minmax over raymarch at equal error."""
+    """Per scene and resolution and target: speedup of minmax over raymarch at equal error,
+    by wall time and by CPU time. Where raymarch reaches no target, equal error needs more
+    than its costliest point: `speedup_above@` is that point's frame time over minmax's, a
+    lower bound."""
     rows = []
     for key in dict.fromkeys((p.scene, p.resolution) for p in points):
         group = [p for p in points if (p.scene, p.resolution) == key]
+        raymarch = [p for p in group if p.method == "raymarch"]
+        costliest = max(raymarch, key=lambda p: p.frame_ms) if raymarch else None
         row = {"scene": key[0], "resolution": key[1]}
         for target in RMSE_TARGETS:
             fast, slow = cheapest_at(group, "minmax", target), cheapest_at(group, "raymarch", target)
-            tag = f"{target:.0%}"
+            tag = target_tag(target)
             row[f"minmax_ms@{tag}"] = fast.frame_ms if fast else None
             row[f"minmax_setting@{tag}"] = fast.setting if fast else "not reached"
             row[f"raymarch_ms@{tag}"] = slow.frame_ms if slow else None
             row[f"raymarch_setting@{tag}"] = slow.setting if slow else "not reached"
             row[f"speedup@{tag}"] = slow.frame_ms / fast.frame_ms if fast and slow else None
+            row[f"speedup_cpu@{tag}"] = slow.cpu_ms / fast.cpu_ms if fast and slow else None
+            above = fast and not slow and costliest
+            row[f"speedup_above@{tag}"] = costliest.frame_ms / fast.frame_ms if above else None
+            row[f"raymarch_costliest@{tag}"] = (f"{costliest.setting}: {costliest.rmse:.2%} in "
+                                                f"{costliest.frame_ms:.0f} ms") if above else ""
         rows.append(row)
     return rows
 
@@ -212,10 +314,10 @@ def write_csv(points: list[BenchPoint], path: Path) -> None:
     with open(path, "w", newline="") as handle:
         writer = csv.writer(handle)
         writer.writerow(["scene", "resolution", "method", "setting", "frame_ms", "frame_ms_spread", "rel_rmse",
-                         "p99_rel_error", "mean_rel_error", "device_mib"] + [f"{s}_ms" for s in stages])
+                         "p99_rel_error", "mean_rel_error", "device_mib", "load_average", "cpu_ms"] + [f"{s}_ms" for s in stages])
         for p in points:
             writer.writerow([p.scene, p.resolution, p.method, p.setting, f"{p.frame_ms:.2f}", f"{p.frame_ms_spread:.3f}",
-                             f"{p.rmse:.6f}", f"{p.p99:.6f}", f"{p.mean_error:.6f}", f"{p.device_mib:.1f}"]
+                             f"{p.rmse:.6f}", f"{p.p99:.6f}", f"{p.mean_error:.6f}", f"{p.device_mib:.1f}", f"{p.load_average:.2f}", f"{p.cpu_ms:.1f}"]
                             + [f"{p.stage_ms.get(s, 0.0):.2f}" for s in stages])
 
 
@@ -274,16 +376,25 @@ def peak_host_mib() -> float:
 
 def markdown_summary(points: list[BenchPoint]) -> str:
     """The headline table, as it goes into bench/RESULTS.md."""
-    lines = ["| scene | resolution | target rel. RMSE | minmax (ms, setting) | raymarch (ms, setting) | speedup |",
-             "|---|---|---|---|---|---|"]
+    lines = ["| scene | resolution | target rel. RMSE | minmax (ms, setting) | raymarch (ms, setting) | speedup "
+             "| speedup, CPU time |",
+             "|---|---|---|---|---|---|---|"]
+
+    def times(value, spec):
+        return "—" if value is None else f"{value:{spec}}"
+
     for row in summary(points):
         for target in RMSE_TARGETS:
-            tag = f"{target:.0%}"
-            fast, slow, speedup = row[f"minmax_ms@{tag}"], row[f"raymarch_ms@{tag}"], row[f"speedup@{tag}"]
+            tag = target_tag(target)
+            raymarch = f"{times(row[f'raymarch_ms@{tag}'], '.0f')} ({row[f'raymarch_setting@{tag}']})"
+            speedup = times(row[f"speedup@{tag}"], ".1f") + "×"
+            if row[f"speedup_above@{tag}"] is not None:
+                raymarch = f"not reached (costliest: {row[f'raymarch_costliest@{tag}']})"
+                speedup = f"> {row[f'speedup_above@{tag}']:.1f}×"
             lines.append(f"| {row['scene']} | {row['resolution']} | {tag} | "
-                         f"{'—' if fast is None else f'{fast:.0f}'} ({row[f'minmax_setting@{tag}']}) | "
-                         f"{'—' if slow is None else f'{slow:.0f}'} ({row[f'raymarch_setting@{tag}']}) | "
-                         f"{'—' if speedup is None else f'{speedup:.1f}×'} |")
+                         f"{times(row[f'minmax_ms@{tag}'], '.0f')} ({row[f'minmax_setting@{tag}']}) | {raymarch} | "
+                         f"{speedup.replace('—×', '—')} | {times(row[f'speedup_cpu@{tag}'], '.1f')}× |"
+                         .replace("| —× |", "| — |"))
     return "\n".join(lines)
 
 

@@ -7,14 +7,15 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from clrays.runs.bench import BenchPoint, cheapest_at, error_pixels, pareto_front, summary
+from clrays.runs.bench import (BenchPoint, cheapest_at, error_pixels, markdown_summary, pareto_front,
+                               raymarch_ladder, summary, target_tag)
 from clrays.cli import main
 
 DEMO = Path(__file__).resolve().parents[2] / "scenes" / "demo.yaml"
 
 
 def _point(method, ms, rmse, setting=""):
-    return BenchPoint("s", "64x36", method, setting or f"{ms}", ms, 0.0, rmse, rmse, rmse, 1.0)
+    return BenchPoint("s", "64x36", method, setting or f"{ms}", ms, 0.0, rmse, rmse, rmse, 1.0, cpu_ms=ms)
 
 
 def test_pareto_front_keeps_only_undominated_points():
@@ -24,12 +25,58 @@ def test_pareto_front_keeps_only_undominated_points():
 
 def test_speedup_compares_the_cheapest_points_that_reach_each_error():
     points = [_point("raymarch", 100, 0.04), _point("raymarch", 400, 0.009), _point("raymarch", 50, 0.2),
-              _point("minmax", 20, 0.008), _point("minmax", 10, 0.03)]
+              _point("minmax", 20, 0.008), _point("minmax", 10, 0.03), _point("minmax", 40, 0.004)]
     assert cheapest_at(points, "minmax", 0.01).frame_ms == 20
     (row,) = summary(points)
     assert row["speedup@1%"] == pytest.approx(400 / 20)
     assert row["speedup@5%"] == pytest.approx(100 / 10)
+    assert row["speedup@0.5%"] is None and row["raymarch_setting@0.5%"] == "not reached"
     assert cheapest_at(points, "raymarch", 0.001) is None
+    assert row["speedup_above@0.5%"] == pytest.approx(400 / 40)  # raymarch needs more than its 400 ms point
+    assert row["speedup_above@1%"] is None
+    assert "| 0.5% | 40 (40) | not reached (costliest: 400: 0.90% in 400 ms) | > 10.0× |" in markdown_summary(points)
+
+
+def test_targets_are_labelled_as_percentages():
+    assert [target_tag(t) for t in (0.05, 0.01, 0.005)] == ["5%", "1%", "0.5%"]
+
+
+def _ladder(error_at, ms_per_step=1.0):
+    """raymarch_ladder on a fake measure: error_at(steps, shadow_map) → rmse, a frame time
+    of ms_per_step per step; the (steps, map) pairs it asked for, in order."""
+    asked = []
+
+    def measure_at(steps, shadow_map):
+        asked.append((steps, shadow_map))
+        return _point("raymarch", steps * ms_per_step, error_at(steps, shadow_map), f"{steps} {shadow_map}")
+
+    points = raymarch_ladder(measure_at, 1024, targets=(0.01, 0.005))
+    assert len(points) == len(asked) == len(set(asked))
+    return asked
+
+
+def test_raymarch_ladder_doubles_until_the_lowest_target_then_refines_each_crossing():
+    asked = _ladder(lambda steps, shadow_map: 1.0 / steps)  # 1 % at 100 steps, 0.5 % at 200
+    assert asked[:4] == [(32, 1024), (64, 1024), (128, 1024), (256, 1024)]
+    # 1 %: between 64 and 128 → 88 (fails); 0.5 %: between 128 and 256 → 184 (fails)
+    assert asked[4:] == [(88, 1024), (184, 1024)]
+
+
+def test_raymarch_ladder_goes_to_twice_the_map_where_the_map_stops_it():
+    # The error stops falling at 0.6 % with a 1024 map, at 0.1 % with a 2048 map.
+    asked = _ladder(lambda steps, shadow_map: max(1.0 / steps, 0.006 if shadow_map == 1024 else 0.001))
+    at_1024 = [steps for steps, size in asked if size == 1024]
+    at_2048 = [steps for steps, size in asked if size == 2048]
+    assert max(at_1024) == 512  # 256 → 512 cut the error by less than 1.25×: the floor, not 2048 steps
+    assert at_2048 == [128, 256, 184]  # from the first rung within 2× of 0.5 % (0.78 %), then 0.39 %: reached
+
+
+def test_raymarch_ladder_stops_at_the_most_steps_or_after_a_long_frame():
+    # Far from the target, the map is not what stops it: no larger map.
+    assert _ladder(lambda steps, shadow_map: 0.5) == [(steps, 1024) for steps in (32, 64, 128, 256, 512, 1024, 2048)]
+    # 1024 steps take 20.5 s of CPU time, past RAYMARCH_MOST_FRAME_CPU_MS: the last rung.
+    assert _ladder(lambda steps, shadow_map: 0.5, ms_per_step=20) == [(steps, 1024) for steps in (32, 64, 128, 256,
+                                                                                                   512, 1024)]
 
 
 def test_error_pixels_are_fixed_and_distinct():
@@ -52,6 +99,20 @@ def test_bench_command_writes_csv_plot_and_summary(tmp_path):
     assert (out / "bench.png").stat().st_size > 1000
     assert "speedup" in (out / "summary.md").read_text()
     assert any((tmp_path / "cache").iterdir())  # exact was cached
+
+
+def test_volume_only_skips_the_surface_shadows_it_cannot_show(device):
+    from clrays.runs.bench import volume_only
+    from clrays.scene.load import load_scene
+    from clrays.session import Renderer
+
+    volume = volume_only(load_scene(DEMO, ["image.width=32", "image.height=18"]))
+    with_exact = replace(volume, render=replace(volume.render, surface_shadows="exact"))
+    renderer = Renderer(device, reuse=False)
+    for method in ("minmax", "raymarch"):
+        fast, exact = renderer.render(volume, method), renderer.render(with_exact, method)
+        np.testing.assert_array_equal(fast.image, exact.image)
+        assert "visibility" in exact.stage_ms and "visibility" not in fast.stage_ms
 
 
 def test_bench_rejects_a_bad_resolution():
