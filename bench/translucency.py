@@ -24,32 +24,10 @@ import numpy as np
 import clrays
 from clrays.reference.exact import render_exact
 from clrays.reference.metrics import depth_edges, depth_map, image_error
-from clrays.reference.radiometry import effective_far
-from clrays.reference.translucency import TranslucentQueries
-from clrays.scene.camera import primary_rays
+from clrays.reference.translucency import film_pixels
 from clrays.session import Renderer
 
 SCENE = Path(__file__).resolve().parents[1] / "scenes" / "glass_pane.yaml"
-
-
-def crossing_pixels(scene) -> np.ndarray:
-    """Pixels whose centre ray crosses a translucent surface before its first opaque hit,
-    grown by a pixel."""
-    queries = TranslucentQueries(scene.geometry)
-    eye = np.asarray(scene.camera.position, dtype=np.float64)
-    dirs = primary_rays(scene.camera, scene.image, np.array([[0.5, 0.5]])).reshape(-1, 3)
-    far = effective_far(scene)
-    t, _ = queries.first_opaque_hit(eye, dirs, far)
-    ray, _, _ = queries.crossings(eye, dirs, np.where(np.isfinite(t), t, far))
-    hit = np.zeros(len(dirs), bool)
-    hit[ray] = True
-    hit = hit.reshape(scene.image.height, scene.image.width)
-    grown = hit.copy()
-    grown[1:] |= hit[:-1]
-    grown[:-1] |= hit[1:]
-    grown[:, 1:] |= hit[:, :-1]
-    grown[:, :-1] |= hit[:, 1:]
-    return grown
 
 
 def times(size: list[str], frames: int) -> None:
@@ -77,7 +55,7 @@ def errors(size: list[str], steps: int, films: bool) -> None:
     exact_s = time.perf_counter() - start
     exclude = depth_edges(depth_map(scene))
     if not films:
-        exclude |= crossing_pixels(scene)
+        exclude |= film_pixels(scene, grow=True)
     keep = ~exclude
     for method, sampling in (("raymarch", "epipolar"), ("minmax", "epipolar"), ("minmax", "pixel")):
         image = clrays.render(clrays.load_scene(SCENE, overrides=size + [f"render.steps={steps}",

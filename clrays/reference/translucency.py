@@ -297,3 +297,28 @@ def translucent_radiance(scene: Scene, eye: np.ndarray, dirs: np.ndarray, prepar
 
 
 __all__ = ["TranslucentQueries", "translucent_radiance"]
+
+
+def film_pixels(scene: Scene, grow: bool = False) -> np.ndarray:
+    """(H, W) bool: the pixels whose centre ray crosses a translucent surface before its
+    first opaque hit (`grow`: and their 4-neighbours), to leave out or pick out of a
+    comparison."""
+    from ..scene.camera import primary_rays
+
+    queries = TranslucentQueries(scene.geometry)
+    eye = np.asarray(scene.camera.position, dtype=np.float64)
+    dirs = primary_rays(scene.camera, scene.image, np.array([[0.5, 0.5]])).reshape(-1, 3)
+    far = radiometry.effective_far(scene)
+    t, _ = queries.first_opaque_hit(eye, dirs, far)
+    ray, _, _ = queries.crossings(eye, dirs, np.where(np.isfinite(t), t, far))
+    films = np.zeros(len(dirs), bool)
+    films[ray] = True
+    films = films.reshape(scene.image.height, scene.image.width)
+    if not grow:
+        return films
+    grown = films.copy()
+    grown[1:] |= films[:-1]
+    grown[:-1] |= films[1:]
+    grown[:, 1:] |= films[:, :-1]
+    grown[:, :-1] |= films[:, 1:]
+    return grown

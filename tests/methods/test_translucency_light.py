@@ -14,7 +14,7 @@ from clrays.reference.exact import render_exact
 from clrays.reference.geometry import occluded, raycast
 from clrays.reference.metrics import depth_edges, depth_map, image_error
 from clrays.reference.radiometry import effective_far, lamp_radius, light_position
-from clrays.reference.translucency import TranslucentQueries
+from clrays.reference.translucency import TranslucentQueries, film_pixels
 from clrays.scene.camera import primary_rays
 from clrays.scene.load import load_scene, parse_scene
 from clrays.session import Renderer
@@ -130,7 +130,7 @@ objects:
     blended = render_exact(with_opacity(RED_PANE))
     pane, floor = render_exact(with_opacity(1.0)), render_exact(with_opacity(0.0))
     alpha = np.asarray(RED_PANE)
-    seen = _films(with_opacity(RED_PANE), grow=False)
+    seen = film_pixels(with_opacity(RED_PANE), grow=False)
     assert seen.sum() > 10
     np.testing.assert_allclose(blended[seen], (alpha * pane + (1 - alpha) * floor)[seen], rtol=1e-12, atol=1e-15)
 
@@ -207,27 +207,6 @@ def _glass_pane_reference(scene):
     if "glass_pane" not in _REFERENCES:
         _REFERENCES["glass_pane"] = render_exact(scene)
     return _REFERENCES["glass_pane"]
-
-
-def _films(scene, grow: bool = True) -> np.ndarray:
-    """Pixels whose centre ray crosses a translucent surface before its first opaque hit,
-    grown by a pixel unless `grow` is False."""
-    queries = TranslucentQueries(scene.geometry)
-    eye = np.asarray(scene.camera.position, dtype=np.float64)
-    dirs = primary_rays(scene.camera, scene.image, np.array([[0.5, 0.5]])).reshape(-1, 3)
-    t, _ = queries.first_opaque_hit(eye, dirs, effective_far(scene))
-    ray, _, _ = queries.crossings(eye, dirs, np.where(np.isfinite(t), t, effective_far(scene)))
-    films = np.zeros(len(dirs), bool)
-    films[ray] = True
-    films = films.reshape(scene.image.height, scene.image.width)
-    if not grow:
-        return films
-    grown = films.copy()
-    grown[1:] |= films[:-1]
-    grown[:-1] |= films[1:]
-    grown[:, 1:] |= films[:, :-1]
-    grown[:, :-1] |= films[:, 1:]
-    return grown
 
 
 def test_opaque_scene_skips_the_stage(device):

@@ -12,9 +12,7 @@ import pytest
 import clrays.session
 from clrays.reference.exact import render_exact
 from clrays.reference.metrics import depth_edges, depth_map, image_error
-from clrays.reference.radiometry import effective_far
-from clrays.reference.translucency import TranslucentQueries
-from clrays.scene.camera import primary_rays
+from clrays.reference.translucency import film_pixels
 from clrays.scene.load import load_scene, parse_scene
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -126,19 +124,6 @@ def test_moments_come_close_to_eight_layer_peeling(renderer):
     assert image_error(moments, peeled).rmse < 0.02
 
 
-def films_seen(scene) -> np.ndarray:
-    """(H, W) bool: pixels whose centre ray crosses a translucent surface before its first opaque hit."""
-    queries = TranslucentQueries(scene.geometry)
-    eye = np.asarray(scene.camera.position, dtype=np.float64)
-    dirs = primary_rays(scene.camera, scene.image, np.array([[0.5, 0.5]])).reshape(-1, 3)
-    far = effective_far(scene)
-    t, _ = queries.first_opaque_hit(eye, dirs, far)
-    ray, _, _ = queries.crossings(eye, dirs, np.where(np.isfinite(t), t, far))
-    seen = np.zeros(len(dirs), bool)
-    seen[ray] = True
-    return seen.reshape(scene.image.height, scene.image.width)
-
-
 _EXACT: dict = {}
 
 
@@ -154,7 +139,7 @@ def test_glass_pane_with_its_film_agrees_with_exact(renderer, method, kind):
     if "glass_pane" not in _EXACT:
         _EXACT["glass_pane"] = render_exact(scene)
     reference = _EXACT["glass_pane"]
-    edges, films = depth_edges(depth_map(scene)), films_seen(scene)
+    edges, films = depth_edges(depth_map(scene)), film_pixels(scene)
     assert (films & ~edges).sum() > 40
     image = renderer.render(scene, method).image
     assert image_error(image, reference, edges).rmse < 0.01
