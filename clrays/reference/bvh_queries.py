@@ -88,7 +88,7 @@ class SceneBvh:
     # --- rays ---------------------------------------------------------------------------
 
     def _ray_candidates(self, origins, dirs, t_max) -> tuple[np.ndarray, np.ndarray]:
-        with np.errstate(divide="ignore"):
+        with np.errstate(divide="ignore", over="ignore"):  # ±inf for a zero or subnormal component: the slabs allow it
             inv_dir = 1.0 / dirs
 
         def meets_boxes(q, lo, hi):
