@@ -339,15 +339,16 @@ def _stage_statuses(result) -> dict[str, str]:
 def _print_stats(result) -> None:
     click.echo(f"method: {result.method}")
     status = _stage_statuses(result)
+    width = max([10, *(len(label) for label in (*result.stage_ms, *status))])  # one column for every label
     for label, ms in result.stage_ms.items():
         where = "host" if label in result.host_stages else "device"
-        click.echo(f"  {label:<10} {ms:9.2f} ms {f'({where})':<8}  {status.get(label, '')}".rstrip())
+        click.echo(f"  {label:<{width}} {ms:9.2f} ms {f'({where})':<8}  {status.get(label, '')}".rstrip())
     for label, text in status.items():
         if label not in result.stage_ms:
-            click.echo(f"  {label:<10} {'-':>9}              {text}")
+            click.echo(f"  {label:<{width}} {'-':>9}              {text}")
     if result.stage_ms:
-        click.echo(f"  {'total':<10} {sum(result.stage_ms.values()):9.2f} ms (device + host stages)")
-    click.echo(f"  wall       {result.wall_ms:9.2f} ms")
+        click.echo(f"  {'total':<{width}} {sum(result.stage_ms.values()):9.2f} ms (device + host stages)")
+    click.echo(f"  {'wall':<{width}} {result.wall_ms:9.2f} ms")
     if result.render is not None:
         render = result.render
         textures = ", ".join(f"{slices}×{texels}" for slices, texels in result.textures) or "none"
