@@ -41,6 +41,27 @@ inline void view_ray(global const view_t* view, float2 s, float3* origin, float3
     }
 }
 
+/* A camera sample's surface point p, its ray direction and its normal turned to face the
+ * camera (surfaces are two-sided, as shade has them). Returns 0 where the sample sees no
+ * surface (no triangle, or beyond far). */
+inline int camera_surface_point(global const frame_t* frame, global const view_t* views,
+                                global const uint* camera_depth, global const int* tri_id,
+                                global const float4* tri_normal, global const float2* offsets, int sample,
+                                float3* p, float3* dir, float3* n)
+{
+    int pixel = sample / frame->spp;
+    int x = pixel % frame->width, y = pixel / frame->width;
+    float distance = as_float(camera_depth[sample]);
+    int tri = tri_id[sample];
+    if (tri < 0 || distance > frame->far) return 0;
+    float3 origin;
+    view_ray(views, view_screen(views, x, y, offsets[sample % frame->spp]), &origin, dir);
+    *p = origin + distance * *dir;
+    *n = tri_normal[tri].xyz;
+    if (dot(*n, *dir) > 0.0f) *n = -*n;
+    return 1;
+}
+
 /* Project p into a view: continuous texel coordinates and depth (distance from the
  * origin for perspective views, along forward for orthographic ones). Returns 0
  * when p is behind a perspective view. */

@@ -157,18 +157,10 @@ kernel void shadow_filter_visibility(global const frame_t* frame, global const v
 {
     int sample = get_global_id(0);
     if (sample >= frame->width * frame->height * frame->spp) return;
-    int pixel = sample / frame->spp;
-    int x = pixel % frame->width, y = pixel / frame->width;
     global float* out = visible + sample * frame->light_count;
     for (int l = 0; l < frame->light_count; ++l) out[l] = 1.0f;
-    float distance = as_float(camera_depth[sample]);
-    int tri = tri_id[sample];
-    if (tri < 0 || distance > frame->far) return;
-    float3 origin, dir;
-    view_ray(views, view_screen(views, x, y, offsets[sample % frame->spp]), &origin, &dir);
-    float3 p = origin + distance * dir;
-    float3 n = tri_normal[tri].xyz;
-    if (dot(n, dir) > 0.0f) n = -n; /* two-sided: face the camera, as shade does */
+    float3 p, dir, n;
+    if (!camera_surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p, &dir, &n)) return;
     for (int l = 0; l < frame->light_count; ++l) {
         global const light_t* light = lights + l;
         if (eye_in_lamp(light, frame->lamp_radius)) continue;
