@@ -132,6 +132,21 @@ inline void relief_test_cell(int r, int c, global const int* cell_triangle, cons
     if (hit < *t) { *t = hit; *tri = first_triangle + first + 1; }
 }
 
+/* The ray parameter where the ray leaves the relief for good: the slab between the base plane's
+ * parallels at its lowest and highest solid texel (heights, along f) or the box of its cells,
+ * whichever it leaves first; the walk along the trace need not go past it. */
+inline float relief_leaves(float3 origin, float3 dir, float4 corner, float4 dual_a, float4 dual_b, float4 dual_f,
+                           float2 heights, int rows, int cols)
+{
+    float3 from_corner = origin - corner.xyz;
+    float3 at = (float3)(dot(dual_a.xyz, from_corner), dot(dual_b.xyz, from_corner), dot(dual_f.xyz, from_corner));
+    float3 rate = (float3)(dot(dual_a.xyz, dir), dot(dual_b.xyz, dir), dot(dual_f.xyz, dir));
+    /* Texel centres run from ½ to cols − ½ (rows − ½): the cells' box. */
+    float3 lo = (float3)(0.5f, 0.5f, heights.x), hi = (float3)((float)cols - 0.5f, (float)rows - 0.5f, heights.y);
+    float3 leave = fmax((lo - at) / rate, (hi - at) / rate);  /* rate 0: ±INFINITY, or NaN inside, ignored by fmin */
+    return fmin(fmin(leave.x, leave.y), leave.z);
+}
+
 /* The first hit of a view sample's ray with the relief (INFINITY: none), and its triangle.
  *
  * The ray meets the base plane at (u, v); the four warped texels around that point name the
@@ -145,7 +160,7 @@ inline void relief_test_cell(int r, int c, global const int* cell_triangle, cons
 inline float relief_hit(float3 origin, float3 dir, float4 corner, float4 dual_a, float4 dual_b, float4 dual_f,
                         float u0, float v0, int target_rows, int target_cols, global const float4* warped,
                         int rows, int cols, global const int* cell_triangle, const relief_surface_t* surface,
-                        int first_triangle, int* tri)
+                        int first_triangle, float2 heights, int* tri)
 {
     float t = INFINITY;
     *tri = -1;
@@ -188,22 +203,29 @@ inline float relief_hit(float3 origin, float3 dir, float4 corner, float4 dual_a,
         for (int c = c0; c <= c1; ++c)
             relief_test_cell(r, c, cell_triangle, surface, first_triangle, origin, dir, &t, tri);
     /* The ray's trace on the base plane, in cell coordinates (u_s − ½, v_s − ½), walked cell by
-     * cell (Amanatides–Woo) over 2·RELIEF_CORRIDOR around the point nearest the box's centre. */
+     * cell (Amanatides–Woo) from RELIEF_CORRIDOR before the box's corner nearest the viewer along
+     * it (the box is clipped to RELIEF_MAX_BOX across a depth edge, the walk is not). The cells
+     * are prisms along f, crossed in the ray's order, so the first hit the walk meets is the
+     * nearest: it stops a cell of slack past the box's hit or its own. Without a hit it goes on
+     * to where the ray leaves the relief (relief_leaves): a ray that grazes over a ridge the warp
+     * put in its way, or that sees a cell edge-on where the warp left a gap, hits farther along
+     * its trace than any fixed reach. */
     float2 start = (float2)(dot(dual_a.xyz, origin - corner.xyz), dot(dual_b.xyz, origin - corner.xyz)) - 0.5f;
     float2 step = (float2)(dot(dual_a.xyz, dir), dot(dual_b.xyz, dir));
     float step_length = length(step);
     if (step_length == 0.0f) return t;
     float2 unit = step / step_length;
-    float from_along = dot(0.5f * (lo + hi) - 0.5f - start, unit) - RELIEF_CORRIDOR;
+    float2 box_lo = lo - 0.5f - start, box_hi = hi - 0.5f - start;
+    float from_along = fmin(box_lo.x * unit.x, box_hi.x * unit.x) + fmin(box_lo.y * unit.y, box_hi.y * unit.y)
+                       - RELIEF_CORRIDOR;
     float2 from = start + from_along * unit;
-    /* The trace reaches the box's hit at t·|step|: a nearer hit lies before it (a cell of slack). */
-    float walk = fmin(2.0f * RELIEF_CORRIDOR, t * step_length - from_along + 1.5f);
+    float leave = relief_leaves(origin, dir, corner, dual_a, dual_b, dual_f, heights, rows, cols);
     int2 cell = convert_int2(floor(from));
     int2 direction = (int2)(unit.x > 0.0f ? 1 : -1, unit.y > 0.0f ? 1 : -1);
     float2 delta = fabs(1.0f / unit);
     float2 next = (float2)((unit.x > 0.0f ? (float)cell.x + 1.0f - from.x : from.x - (float)cell.x) * delta.x,
                            (unit.y > 0.0f ? (float)cell.y + 1.0f - from.y : from.y - (float)cell.y) * delta.y);
-    for (float walked = 0.0f; walked <= walk;) {
+    for (float walked = 0.0f; walked <= fmin(t, leave) * step_length - from_along + 1.5f;) {
         if (cell.x >= 0 && cell.x <= cols - 2 && cell.y >= 0 && cell.y <= rows - 2)
             relief_test_cell(cell.y, cell.x, cell_triangle, surface, first_triangle, origin, dir, &t, tri);
         if (next.x < next.y) { walked = next.x; next.x += delta.x; cell.x += direction.x; }
@@ -216,7 +238,7 @@ inline float relief_hit(float3 origin, float3 dir, float4 corner, float4 dual_a,
                         int sample_count, float4 corner, float4 dual_a, float4 dual_b, float4 dual_f,        \
                         float u0, float v0, int target_rows, int target_cols, global const float4* warped,  \
                         int rows, int cols, global const int* cell_triangle, global const float* displacement, \
-                        float4 axis_a, float4 axis_b, float4 axis_f, int first_triangle
+                        float4 axis_a, float4 axis_b, float4 axis_f, int first_triangle, float2 heights
 
 /* Mapping, one work-item per view sample (relief_hit); BODY sees idx, t and tri. */
 #define FOR_THE_RELIEF_HIT(BODY)                                                                      \
@@ -229,7 +251,7 @@ inline float relief_hit(float3 origin, float3 dir, float4 corner, float4 dual_a,
     int tri;                                                                                          \
     relief_surface_t surface = {corner.xyz, axis_a.xyz, axis_b.xyz, axis_f.xyz, displacement, cols};   \
     float t = relief_hit(origin, dir, corner, dual_a, dual_b, dual_f, u0, v0, target_rows, target_cols, warped, \
-                         rows, cols, cell_triangle, &surface, first_triangle, &tri);                  \
+                         rows, cols, cell_triangle, &surface, first_triangle, heights, &tri);                  \
     if (tri < 0) return;                                                                              \
     int idx = view->depth_offset + id;                                                                \
     BODY

@@ -141,6 +141,7 @@ class ReliefDrawer:
         self.reliefs = [(placed, _frame_in(placed, space_origin_ws)) for placed in reliefs]
         self._texels = {}
         self._warps = {}
+        self._slabs = {}
 
     def _texel_buffers(self, index: int):
         if index not in self._texels:
@@ -202,5 +203,17 @@ class ReliefDrawer:
                 _vector(dual[2]), np.float32(warp.u0), np.float32(warp.v0),
                 np.int32(warp.target_rows), np.int32(warp.target_cols), warp.warped, np.int32(rows),
                 np.int32(cols), self._texel_buffers(index)[2], self._texel_buffers(index)[0], _vector(frame.a),
-                _vector(frame.b), _vector(frame.f), np.int32(placed.first_triangle), *targets))
+                _vector(frame.b), _vector(frame.f), np.int32(placed.first_triangle), self._heights(index), *targets))
+
+    def _heights(self, index: int):
+        """(lowest, highest) displacement of relief `index`'s solid texels, as a float2: the
+        slab its surface lies in, beyond which a ray's walk along its trace stops."""
+        from pyopencl import cltypes
+
+        if index not in self._slabs:
+            placed = self.reliefs[index][0]
+            solid = placed.displacement[placed.solid]
+            low, high = (float(solid.min()), float(solid.max())) if solid.size else (0.0, 0.0)
+            self._slabs[index] = cltypes.make_float2(low, high)
+        return self._slabs[index]
 
