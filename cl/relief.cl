@@ -96,7 +96,7 @@ kernel void relief_warp_columns(global const float4* middle, int rows, int cols,
 /* The most cells a sample tests along each axis of the box of the warped points around it:
  * it spans more only across a depth edge, where those points belong to unrelated parts. */
 #define RELIEF_MAX_BOX 12
-/* How far, in cells, the sample's own line is searched each way from those points. */
+/* How far, in cells, before those points the walk along the sample's own line starts. */
 #define RELIEF_CORRIDOR 8.0f
 /* How far, in target texels, a sample whose warped texels are empty looks for one. */
 #define RELIEF_GAP_SEARCH 16
@@ -132,19 +132,21 @@ inline void relief_test_cell(int r, int c, global const int* cell_triangle, cons
     if (hit < *t) { *t = hit; *tri = first_triangle + first + 1; }
 }
 
-/* The ray parameter where the ray leaves the relief for good: the slab between the base plane's
- * parallels at its lowest and highest solid texel (heights, along f) or the box of its cells,
- * whichever it leaves first; the walk along the trace need not go past it. */
-inline float relief_leaves(float3 origin, float3 dir, float4 corner, float4 dual_a, float4 dual_b, float4 dual_f,
-                           float2 heights, int rows, int cols)
+/* The ray parameters where the ray enters and leaves the relief's bounds: the slab between the
+ * base plane's parallels at its lowest and highest solid texel (heights, along f) and the box of
+ * its cells; no hit lies outside them, so the walk along the trace need not either. */
+inline float2 relief_span(float3 origin, float3 dir, float4 corner, float4 dual_a, float4 dual_b, float4 dual_f,
+                          float2 heights, int rows, int cols)
 {
     float3 from_corner = origin - corner.xyz;
     float3 at = (float3)(dot(dual_a.xyz, from_corner), dot(dual_b.xyz, from_corner), dot(dual_f.xyz, from_corner));
     float3 rate = (float3)(dot(dual_a.xyz, dir), dot(dual_b.xyz, dir), dot(dual_f.xyz, dir));
-    /* Texel centres run from ½ to cols − ½ (rows − ½): the cells' box. */
+    /* Texel centres run from ½ to cols − ½ (rows − ½): the cells' box. A rate of 0 gives ±INFINITY
+     * (or NaN, which fmin and fmax pass over) for that axis. */
     float3 lo = (float3)(0.5f, 0.5f, heights.x), hi = (float3)((float)cols - 0.5f, (float)rows - 0.5f, heights.y);
-    float3 leave = fmax((lo - at) / rate, (hi - at) / rate);  /* rate 0: ±INFINITY, or NaN inside, ignored by fmin */
-    return fmin(fmin(leave.x, leave.y), leave.z);
+    float3 to_lo = (lo - at) / rate, to_hi = (hi - at) / rate;
+    float3 enter = fmin(to_lo, to_hi), leave = fmax(to_lo, to_hi);
+    return (float2)(fmax(fmax(enter.x, enter.y), enter.z), fmin(fmin(leave.x, leave.y), leave.z));
 }
 
 /* The first hit of a view sample's ray with the relief (INFINITY: none), and its triangle.
@@ -152,11 +154,12 @@ inline float relief_leaves(float3 origin, float3 dir, float4 corner, float4 dual
  * The ray meets the base plane at (u, v); the four warped texels around that point name the
  * source points seen through their centres. The ray is tested against the triangles of every
  * cell in the box of those points, widened by a cell, and of the cells that the ray's own
- * trace on the base plane (the line of its points' (u, v)) crosses within RELIEF_CORRIDOR cells
- * of them, where its true hit lies. The box alone is enough except at grazing views over a
- * ridge, where the two 1D passes may leave a warped point that lies on no ray's hit: a skin
- * stretched between two rows' entries. Depth and triangle are then those the triangles give
- * the ray. dual_a, dual_b, dual_f: the rows of the inverse of [a b f], so u = dual_a·(X − corner). */
+ * trace on the base plane (the line of its points' (u, v)) crosses from RELIEF_CORRIDOR cells
+ * before them up to the first hit, or without one to where the ray leaves the relief: its true
+ * hit lies on that trace. The box alone is enough except at grazing views, where the two 1D
+ * passes may leave a warped point that lies on no ray's hit (a skin stretched between two rows'
+ * entries, a ridge the ray passes over) or a gap where a cell is seen edge-on. Depth and
+ * triangle are then those the triangles give the ray. dual_a, dual_b, dual_f: the rows of the inverse of [a b f], so u = dual_a·(X − corner). */
 inline float relief_hit(float3 origin, float3 dir, float4 corner, float4 dual_a, float4 dual_b, float4 dual_f,
                         float u0, float v0, int target_rows, int target_cols, global const float4* warped,
                         int rows, int cols, global const int* cell_triangle, const relief_surface_t* surface,
@@ -207,7 +210,7 @@ inline float relief_hit(float3 origin, float3 dir, float4 corner, float4 dual_a,
      * it (the box is clipped to RELIEF_MAX_BOX across a depth edge, the walk is not). The cells
      * are prisms along f, crossed in the ray's order, so the first hit the walk meets is the
      * nearest: it stops a cell of slack past the box's hit or its own. Without a hit it goes on
-     * to where the ray leaves the relief (relief_leaves): a ray that grazes over a ridge the warp
+     * to where the ray leaves the relief (relief_span): a ray that grazes over a ridge the warp
      * put in its way, or that sees a cell edge-on where the warp left a gap, hits farther along
      * its trace than any fixed reach. */
     float2 start = (float2)(dot(dual_a.xyz, origin - corner.xyz), dot(dual_b.xyz, origin - corner.xyz)) - 0.5f;
@@ -218,14 +221,15 @@ inline float relief_hit(float3 origin, float3 dir, float4 corner, float4 dual_a,
     float2 box_lo = lo - 0.5f - start, box_hi = hi - 0.5f - start;
     float from_along = fmin(box_lo.x * unit.x, box_hi.x * unit.x) + fmin(box_lo.y * unit.y, box_hi.y * unit.y)
                        - RELIEF_CORRIDOR;
+    float2 span = relief_span(origin, dir, corner, dual_a, dual_b, dual_f, heights, rows, cols) * step_length;
+    from_along = fmax(from_along, span.x - 1.5f);
     float2 from = start + from_along * unit;
-    float leave = relief_leaves(origin, dir, corner, dual_a, dual_b, dual_f, heights, rows, cols);
     int2 cell = convert_int2(floor(from));
     int2 direction = (int2)(unit.x > 0.0f ? 1 : -1, unit.y > 0.0f ? 1 : -1);
     float2 delta = fabs(1.0f / unit);
     float2 next = (float2)((unit.x > 0.0f ? (float)cell.x + 1.0f - from.x : from.x - (float)cell.x) * delta.x,
                            (unit.y > 0.0f ? (float)cell.y + 1.0f - from.y : from.y - (float)cell.y) * delta.y);
-    for (float walked = 0.0f; walked <= fmin(t, leave) * step_length - from_along + 1.5f;) {
+    for (float walked = 0.0f; walked <= fmin(t * step_length, span.y) - from_along + 1.5f;) {
         if (cell.x >= 0 && cell.x <= cols - 2 && cell.y >= 0 && cell.y <= rows - 2)
             relief_test_cell(cell.y, cell.x, cell_triangle, surface, first_triangle, origin, dir, &t, tri);
         if (next.x < next.y) { walked = next.x; next.x += delta.x; cell.x += direction.x; }
