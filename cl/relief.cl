@@ -159,7 +159,8 @@ inline float2 relief_span(float3 origin, float3 dir, float4 corner, float4 dual_
  * hit lies on that trace. The box alone is enough except at grazing views, where the two 1D
  * passes may leave a warped point that lies on no ray's hit (a skin stretched between two rows'
  * entries, a ridge the ray passes over) or a gap where a cell is seen edge-on. Depth and
- * triangle are then those the triangles give the ray. dual_a, dual_b, dual_f: the rows of the inverse of [a b f], so u = dual_a·(X − corner). */
+ * triangle are then those the triangles give the ray. dual_a, dual_b, dual_f: the rows of the
+ * inverse of [a b f], so u = dual_a·(X − corner). */
 inline float relief_hit(float3 origin, float3 dir, float4 corner, float4 dual_a, float4 dual_b, float4 dual_f,
                         float u0, float v0, int target_rows, int target_cols, global const float4* warped,
                         int rows, int cols, global const int* cell_triangle, const relief_surface_t* surface,
@@ -207,7 +208,8 @@ inline float relief_hit(float3 origin, float3 dir, float4 corner, float4 dual_a,
             relief_test_cell(r, c, cell_triangle, surface, first_triangle, origin, dir, &t, tri);
     /* The ray's trace on the base plane, in cell coordinates (u_s − ½, v_s − ½), walked cell by
      * cell (Amanatides–Woo) from RELIEF_CORRIDOR before the box's corner nearest the viewer along
-     * it (the box is clipped to RELIEF_MAX_BOX across a depth edge, the walk is not). The cells
+     * it (the box is clipped to RELIEF_MAX_BOX across a depth edge, the walk is not), but from no
+     * earlier than where the ray enters the relief's bounds (relief_span, a cell of slack). The cells
      * are prisms along f, crossed in the ray's order, so the first hit the walk meets is the
      * nearest: it stops a cell of slack past the box's hit or its own. Without a hit it goes on
      * to where the ray leaves the relief (relief_span): a ray that grazes over a ridge the warp
