@@ -76,21 +76,43 @@ def _triangle_boxes(tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             np.maximum(np.maximum(tri[:, 0], tri[:, 1]), tri[:, 2]))
 
 
+def sorted_morton_keys(triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(keys, order) of n ≥ 2 (T, 3, 3) triangles: the 30-bit Morton codes of their box
+    centres on a 1024³ grid over the centres' box, each shifted up 32 bits above its sorted
+    position (Karras §4's tie-break: unique keys), sorted; order[k] is the triangle of key k.
+    The start of `bvh_topology`, shared with the device build (clrays.stages.bvh_build)."""
+    tri = np.asarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
+    n = len(tri)
+    # Coordinate-major copies, (3, T) rows: numpy's passes over a last axis of length 3
+    # cost several times those over rows of T (same values, so the same codes).
+    corners = tri.transpose(1, 2, 0)
+    tri_lo = np.minimum(np.minimum(corners[0], corners[1]), corners[2])
+    tri_hi = np.maximum(np.maximum(corners[0], corners[1]), corners[2])
+    centroid = tri_lo
+    centroid += tri_hi
+    centroid /= 2
+    lo, hi = centroid.min(axis=1, keepdims=True), centroid.max(axis=1, keepdims=True)
+    centroid -= lo
+    centroid /= np.maximum(hi - lo, 1e-300)
+    centroid *= 1023.0
+    cell = np.clip(centroid, 0, 1023, out=centroid).astype(np.uint64)
+    morton = (_spread_bits(cell[0]) << np.uint64(2)) | (_spread_bits(cell[1]) << np.uint64(1)) | _spread_bits(cell[2])
+    # Triangle index in the low bits, then one sort: the order of a stable sort of the
+    # codes, at a fraction of its cost; the sorted position then replaces the index.
+    keys = np.sort((morton << np.uint64(32)) | np.arange(n, dtype=np.uint64))
+    order = (keys & np.uint64(0xFFFFFFFF)).astype(np.int64)
+    keys &= ~np.uint64(0xFFFFFFFF)
+    keys |= np.arange(n, dtype=np.uint64)
+    return keys, order
+
+
 def bvh_topology(triangles: np.ndarray) -> BvhTopology:
     """The tree of (T, 3, 3) triangles, without boxes (module docstring)."""
     tri = np.asarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
     n = len(tri)
     if n <= 1:
         return BvhTopology(np.zeros((0, 2), np.int64), [], n)
-    tri_lo, tri_hi = _triangle_boxes(tri)
-    centroid = (tri_lo + tri_hi) / 2
-    lo, hi = centroid.min(axis=0), centroid.max(axis=0)
-    cell = np.clip((centroid - lo) / np.maximum(hi - lo, 1e-300) * 1023.0, 0, 1023).astype(np.uint64)
-    morton = (_spread_bits(cell[:, 0]) << np.uint64(2)) | (_spread_bits(cell[:, 1]) << np.uint64(1)) \
-        | _spread_bits(cell[:, 2])
-    order = np.argsort(morton, kind="stable")
-    # Sorted position in the low bits makes every key unique (Karras §4's tie-break).
-    keys = (morton[order] << np.uint64(32)) | np.arange(n, dtype=np.uint64)
+    keys, order = sorted_morton_keys(tri)
 
     # Two keys share more leading bits than keys i and k exactly when their XOR is below
     # the highest bit of keys[i] ^ keys[k] (its "bound"), so the searches below compare
