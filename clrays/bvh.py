@@ -214,11 +214,18 @@ def refit_bvh(topology: BvhTopology, triangles: np.ndarray) -> Bvh:
     node_lo, node_hi = boxes[:n - 1, :3].astype(np.float64), -boxes[:n - 1, 3:].astype(np.float64)
     tri_lo, tri_hi = tri_lo.astype(np.float64), tri_hi.astype(np.float64)
 
-    pad = BOX_PAD_REL * (np.max(tri_hi.max(axis=0) - tri_lo.min(axis=0)) + max(-tri_lo.min(), tri_hi.max()))
+    pad = box_pad(tri_lo.min(axis=0), tri_hi.max(axis=0))
     bounds = np.zeros((n - 1, 2, 4), dtype=np.float32)
     bounds[:, 0, :3] = np.nextafter((node_lo - pad).astype(np.float32), np.float32(-np.inf))
     bounds[:, 1, :3] = np.nextafter((node_hi + pad).astype(np.float32), np.float32(np.inf))
     return Bvh(bounds.reshape(-1, 4), children.astype(np.int32), n)
+
+
+def box_pad(scene_lo: np.ndarray, scene_hi: np.ndarray) -> float:
+    """How far every box grows on each side (float64): BOX_PAD_REL of the scene box's
+    largest extent plus its largest |coordinate|."""
+    scene_lo, scene_hi = np.asarray(scene_lo, np.float64), np.asarray(scene_hi, np.float64)
+    return float(BOX_PAD_REL * (np.max(scene_hi - scene_lo) + max(-scene_lo.min(), scene_hi.max())))
 
 
 def occluded_by_bvh(bvh: Bvh, triangles: np.ndarray, origin, target) -> bool:
