@@ -1,9 +1,9 @@
 /* bvh_build.cl — the visibility stage's BVH built on the device: Karras's radix tree over
  * sorted Morton keys, then its boxes refit bottom-up around the eye-space triangles.
  * Reads keys, order (host: clrays.bvh.sorted_morton_keys) and tri_vertices; writes
- * node_children, the parent links (leaf_parent by key, not triangle) and node_bounds in
- * the layout of clrays/bvh.py: the same tree, the same boxes or a rounding step wider
- * (docs/design.md §4.6). */
+ * node_children and node_bounds in the layout of clrays/bvh.py (the same tree; the same
+ * boxes or a rounding step wider: docs/design.md §4.6), and for the refit the tree by key
+ * (node_keys, leaves as -(key + 1)), the parent links and the leaves' boxes by key. */
 #include "common.h"
 
 /* Leading bits keys a and b share (keys are unique, so < 64); -1 for b outside [0, n). */
@@ -15,9 +15,10 @@ inline int common_prefix(global const ulong* keys, int n, int a, int b)
 
 /* One work-item per internal node i of n - 1 (Karras 2012, §4): the key range the node
  * covers, one end at i, and its split, as clrays.bvh.bvh_topology finds them. Leaves are
- * -(triangle + 1); node_parent[0] (the root) and nothing else is left to the host's -1. */
+ * -(triangle + 1) in node_children, -(key + 1) in node_keys; node_parent[0] (the root)
+ * and nothing else is left to the host's -1. */
 kernel void bvh_build_tree(global const ulong* keys, global const int* order, int n, global int2* node_children,
-                           global int* node_parent, global int* leaf_parent)
+                           global int2* node_keys, global int* node_parent, global int* leaf_parent)
 {
     int i = get_global_id(0);
     if (i >= n - 1) return;
@@ -40,65 +41,65 @@ kernel void bvh_build_tree(global const ulong* keys, global const int* order, in
         if (step <= 1) break;
     }
     int gamma = i + split * direction + min(direction, 0);
-    int first = min(i, j), last = max(i, j);
-    int left, right;
-    if (first == gamma) {
-        left = -(order[gamma] + 1);
-        leaf_parent[gamma] = i;
-    } else {
-        left = gamma;
-        node_parent[gamma] = i;
-    }
-    if (last == gamma + 1) {
-        right = -(order[gamma + 1] + 1);
-        leaf_parent[gamma + 1] = i;
-    } else {
-        right = gamma + 1;
-        node_parent[gamma + 1] = i;
-    }
-    node_children[i] = (int2)(left, right);
+    int left_is_leaf = min(i, j) == gamma, right_is_leaf = max(i, j) == gamma + 1;
+    node_keys[i] = (int2)(left_is_leaf ? -(gamma + 1) : gamma, right_is_leaf ? -(gamma + 2) : gamma + 1);
+    node_children[i] = (int2)(left_is_leaf ? -(order[gamma] + 1) : gamma,
+                              right_is_leaf ? -(order[gamma + 1] + 1) : gamma + 1);
+    if (left_is_leaf) leaf_parent[gamma] = i;
+    else node_parent[gamma] = i;
+    if (right_is_leaf) leaf_parent[gamma + 1] = i;
+    else node_parent[gamma + 1] = i;
 }
 
-/* A child's box, padded: a triangle's from its float32 vertices, each side moved out by
- * `pad` and rounded outwards once more; a node's as the refit wrote it. Padding and
- * rounding are monotone, so a node's box, the union of its padded children's, is its
- * unpadded box padded: the boxes of clrays.bvh.refit_bvh (its pad rounded up to float32). */
-inline void child_box(int child, global const float4* tri_vertices, float pad, volatile global float4* node_bounds,
-                      float4* lo, float4* hi)
+/* Each side moved out by `pad` and rounded outwards once more. Padding and rounding are
+ * monotone, so a node's box, the union of its padded children's, is its unpadded box
+ * padded: the boxes of clrays.bvh.refit_bvh (its pad rounded up to float32). */
+inline float4 padded_lo(float3 lo, float pad) { return (float4)(nextafter(lo - pad, (float3)(-INFINITY)), 0.0f); }
+inline float4 padded_hi(float3 hi, float pad) { return (float4)(nextafter(hi + pad, (float3)(INFINITY)), 0.0f); }
+
+/* One work-item per key: the padded box of its triangle. A pass of its own, without the
+ * refit's atomics, so that a CPU overlaps the scattered vertex reads. */
+kernel void bvh_build_leaves(global const float4* tri_vertices, global const int* order, int n, float pad,
+                             global float4* leaf_bounds)
 {
-    if (child < 0) {
-        int tri = -child - 1;
-        float3 a = tri_vertices[3 * tri].xyz, b = tri_vertices[3 * tri + 1].xyz, c = tri_vertices[3 * tri + 2].xyz;
-        *lo = (float4)(nextafter(fmin(fmin(a, b), c) - pad, (float3)(-INFINITY)), 0.0f);
-        *hi = (float4)(nextafter(fmax(fmax(a, b), c) + pad, (float3)(INFINITY)), 0.0f);
-    } else {
-        *lo = node_bounds[2 * child];
-        *hi = node_bounds[2 * child + 1];
-    }
+    int leaf = get_global_id(0);
+    if (leaf >= n) return;
+    int tri = order[leaf];
+    float3 a = tri_vertices[3 * tri].xyz, b = tri_vertices[3 * tri + 1].xyz, c = tri_vertices[3 * tri + 2].xyz;
+    leaf_bounds[2 * leaf] = padded_lo(fmin(fmin(a, b), c), pad);
+    leaf_bounds[2 * leaf + 1] = padded_hi(fmax(fmax(a, b), c), pad);
 }
 
-/* One work-item per leaf, in key order (neighbouring items share their nodes): up from
- * the leaf, the second of two siblings to arrive at a node (an atomic count per node,
- * zeroed by the host) boxes it and goes on; the first stops. Min and max are exact, so
- * the boxes are those of a refit in any order. */
-kernel void bvh_build_refit(global const float4* tri_vertices, global const int2* node_children,
-                            global const int* node_parent, global const int* leaf_parent, int n, float pad,
+/* One work-item per key: up from its leaf, the second of two siblings to arrive at a
+ * node (an atomic count per node, zeroed by the host) boxes it, from its own box and the
+ * sibling's, and goes on; the first stops. Min and max are exact, so the boxes are those
+ * of a refit in any order. */
+kernel void bvh_build_refit(global const int2* node_keys, global const int* node_parent,
+                            global const int* leaf_parent, global const float4* leaf_bounds, int n,
                             volatile global int* arrivals, volatile global float4* node_bounds)
 {
     int leaf = get_global_id(0);
     if (leaf >= n) return;
+    float4 lo = leaf_bounds[2 * leaf], hi = leaf_bounds[2 * leaf + 1];
+    int child = -(leaf + 1);
     int node = leaf_parent[leaf];
     while (node >= 0) {
         /* This work-item's box (written last time round) before its arrival is counted. */
         mem_fence(CLK_GLOBAL_MEM_FENCE);
         if (atomic_inc(&arrivals[node]) == 0) return;
         mem_fence(CLK_GLOBAL_MEM_FENCE);
-        int2 children = node_children[node];
-        float4 left_lo, left_hi, right_lo, right_hi;
-        child_box(children.x, tri_vertices, pad, node_bounds, &left_lo, &left_hi);
-        child_box(children.y, tri_vertices, pad, node_bounds, &right_lo, &right_hi);
-        node_bounds[2 * node] = fmin(left_lo, right_lo);
-        node_bounds[2 * node + 1] = fmax(left_hi, right_hi);
+        int2 children = node_keys[node];
+        int sibling = children.x == child ? children.y : children.x;
+        if (sibling < 0) {
+            lo = fmin(lo, leaf_bounds[2 * (-sibling - 1)]);
+            hi = fmax(hi, leaf_bounds[2 * (-sibling - 1) + 1]);
+        } else {
+            lo = fmin(lo, node_bounds[2 * sibling]);
+            hi = fmax(hi, node_bounds[2 * sibling + 1]);
+        }
+        node_bounds[2 * node] = lo;
+        node_bounds[2 * node + 1] = hi;
+        child = node;
         node = node_parent[node];
     }
 }

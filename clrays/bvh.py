@@ -83,12 +83,14 @@ def sorted_morton_keys(triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     The start of `bvh_topology`, shared with the device build (clrays.stages.bvh_build)."""
     tri = np.asarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
     n = len(tri)
-    # Coordinate-major copies, (3, T) rows: numpy's passes over a last axis of length 3
-    # cost several times those over rows of T (same values, so the same codes).
-    corners = tri.transpose(1, 2, 0)
-    tri_lo = np.minimum(np.minimum(corners[0], corners[1]), corners[2])
-    tri_hi = np.maximum(np.maximum(corners[0], corners[1]), corners[2])
-    centroid = tri_lo
+    # One copy into rows of T (corner-major, then coordinate): numpy's passes over a last
+    # axis of length 3, or down strided columns, cost several times those over
+    # contiguous rows (same values, so the same codes).
+    rows = tri.reshape(n, 9).T.copy(order="C")
+    centroid = np.minimum(rows[0:3], rows[3:6])
+    np.minimum(centroid, rows[6:9], out=centroid)
+    tri_hi = np.maximum(rows[0:3], rows[3:6])
+    np.maximum(tri_hi, rows[6:9], out=tri_hi)
     centroid += tri_hi
     centroid /= 2
     lo, hi = centroid.min(axis=1, keepdims=True), centroid.max(axis=1, keepdims=True)
