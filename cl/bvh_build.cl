@@ -73,7 +73,10 @@ kernel void bvh_build_leaves(global const float4* tri_vertices, global const int
 /* One work-item per key: up from its leaf, the second of two siblings to arrive at a
  * node (an atomic count per node, zeroed by the host) boxes it, from its own box and the
  * sibling's, and goes on; the first stops. Min and max are exact, so the boxes are those
- * of a refit in any order. */
+ * of a refit in any order. The sibling's box may come from another work-group: OpenCL
+ * 1.2 orders nothing between work-groups but atomics, so the box is written before a
+ * fence and the count, and read through a volatile pointer after it, as Karras's and
+ * Apetrei's builds do on GPUs (on a CPU device the caches are coherent anyway). */
 kernel void bvh_build_refit(global const int2* node_keys, global const int* node_parent,
                             global const int* leaf_parent, global const float4* leaf_bounds, int n,
                             volatile global int* arrivals, volatile global float4* node_bounds)
