@@ -76,11 +76,12 @@ def _triangle_boxes(tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             np.maximum(np.maximum(tri[:, 0], tri[:, 1]), tri[:, 2]))
 
 
-def sorted_morton_keys(triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(keys, order) of n ≥ 2 (T, 3, 3) triangles: the 30-bit Morton codes of their box
+def sorted_morton_keys(triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(keys, order, box) of n ≥ 2 (T, 3, 3) triangles: the 30-bit Morton codes of their box
     centres on a 1024³ grid over the centres' box, each shifted up 32 bits above its sorted
-    position (Karras §4's tie-break: unique keys), sorted; order[k] is the triangle of key k.
-    The start of `bvh_topology`, shared with the device build (clrays.stages.bvh_build)."""
+    position (Karras §4's tie-break: unique keys), sorted; order[k] is the triangle of key k;
+    box, (2, 3) float64, the lo and hi corners of every vertex. The start of `bvh_topology`,
+    shared with the device build (clrays.stages.bvh_build)."""
     tri = np.asarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
     n = len(tri)
     # One copy into rows of T (corner-major, then coordinate): numpy's passes over a last
@@ -91,6 +92,7 @@ def sorted_morton_keys(triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     np.minimum(centroid, rows[6:9], out=centroid)
     tri_hi = np.maximum(rows[0:3], rows[3:6])
     np.maximum(tri_hi, rows[6:9], out=tri_hi)
+    box = np.stack([centroid.min(axis=1), tri_hi.max(axis=1)])
     centroid += tri_hi
     centroid /= 2
     lo, hi = centroid.min(axis=1, keepdims=True), centroid.max(axis=1, keepdims=True)
@@ -105,7 +107,7 @@ def sorted_morton_keys(triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     order = (keys & np.uint64(0xFFFFFFFF)).astype(np.int64)
     keys &= ~np.uint64(0xFFFFFFFF)
     keys |= np.arange(n, dtype=np.uint64)
-    return keys, order
+    return keys, order, box
 
 
 def bvh_topology(triangles: np.ndarray) -> BvhTopology:
@@ -114,7 +116,7 @@ def bvh_topology(triangles: np.ndarray) -> BvhTopology:
     n = len(tri)
     if n <= 1:
         return BvhTopology(np.zeros((0, 2), np.int64), [], n)
-    keys, order = sorted_morton_keys(tri)
+    keys, order, _ = sorted_morton_keys(tri)
 
     # Two keys share more leading bits than keys i and k exactly when their XOR is below
     # the highest bit of keys[i] ^ keys[k] (its "bound"), so the searches below compare

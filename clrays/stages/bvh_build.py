@@ -31,18 +31,19 @@ class DeviceBvhTree:
     node_parent: object  # int per internal node, -1 at the root
     leaf_parent: object  # int per key (sorted leaf): the node holding it
     triangle_count: int  # ≥ 2
+    box_ws: np.ndarray  # (2, 3) float64: the lo and hi corners of every world-space vertex
 
 
 def bvh_build_tree(device: Device, triangles: np.ndarray, timer: StageTimer) -> DeviceBvhTree:
     """The tree of n ≥ 2 (T, 3, 3) world-space triangles: Morton keys sorted on the host
     (timed as host `bvh`), the radix tree on the device (`bvh` events)."""
     start = time.perf_counter()
-    keys, order = sorted_morton_keys(triangles)
+    keys, order, box_ws = sorted_morton_keys(triangles)
     n = len(keys)
     timer.add_host("bvh", (time.perf_counter() - start) * 1e3)
     tree = DeviceBvhTree(device.buffer(nbytes=8 * (n - 1)), device.buffer(nbytes=8 * (n - 1)),
                          device.buffer(order.astype(np.int32), writable=False), device.buffer(nbytes=4 * (n - 1)),
-                         device.buffer(nbytes=4 * n), n)
+                         device.buffer(nbytes=4 * n), n, box_ws)
     device.fill(tree.node_parent, np.int32(-1), 4 * (n - 1), timer, "bvh")  # the root's; the others are written
     timer.add("bvh", device.kernel("bvh_build", "bvh_build_tree")(
         device.queue, (n - 1,), None, device.buffer(keys, writable=False), tree.order, np.int32(n),
@@ -50,16 +51,18 @@ def bvh_build_tree(device: Device, triangles: np.ndarray, timer: StageTimer) -> 
     return tree
 
 
-def bvh_build_refit(device: Device, tree: DeviceBvhTree, vertices: np.ndarray, vertex_buffer, timer: StageTimer):
+def bvh_build_refit(device: Device, tree: DeviceBvhTree, eye_ws: np.ndarray, vertex_buffer, timer: StageTimer):
     """node_bounds (float4 lo, hi per internal node) of `tree` around the frame's eye-space
-    vertices (`vertices`, (3T, 4) float32, 3 per triangle in the tree's triangle order, and
-    `vertex_buffer`, the same on the device), padded as clrays.bvh.refit_bvh pads them: the
-    pad from the vertices' box on the host (timed as host `bvh`), the boxes on the device."""
+    vertices on the device (`vertex_buffer`: float32(v − eye_ws) as clrays.inputs makes
+    them, 3 per triangle in the tree's triangle order), padded as clrays.bvh.refit_bvh pads
+    them: the pad on the host (timed as host `bvh`), the boxes on the device."""
     start = time.perf_counter()
-    # Column by column (numpy reduces a (3T, 4) array down its first axis 20× slower); the
-    # pad rounded up to float32, so that every box holds refit_bvh's.
-    columns = [vertices[:, axis] for axis in range(3)]
-    pad = box_pad([column.min() for column in columns], [column.max() for column in columns])
+    # The vertices' box without reading them: float64 v − eye, then float32, is monotone in
+    # v, so the smallest vertex gives the smallest float32 coordinate (and the largest the
+    # largest), the box refit_bvh takes its pad from. The pad is rounded up to float32, so
+    # that every box holds refit_bvh's.
+    lo, hi = ((tree.box_ws - np.asarray(eye_ws, np.float64)).astype(np.float32))
+    pad = box_pad(lo, hi)
     pad32 = np.float32(pad)
     if pad32 < pad:
         pad32 = np.nextafter(pad32, np.float32(np.inf))

@@ -65,7 +65,7 @@ def upload_bvh(device: Device, buffers: FrameBuffers, topology: BvhTopology | De
     inputs = buffers.inputs
     if isinstance(topology, DeviceBvhTree):
         start = time.perf_counter()
-        node_bounds = bvh_build_refit(device, topology, inputs.tri_vertices, buffers.tri_vertices, timer)
+        node_bounds = bvh_build_refit(device, topology, inputs.eye_ws, buffers.tri_vertices, timer)
         return DeviceBvh(node_bounds, topology.node_children, 0, (time.perf_counter() - start) * 1e3)
     start = time.perf_counter()
     bvh: Bvh = (refit_frame_bvh(topology, inputs) if isinstance(topology, JoinedTopology)  # a relief's boxes kept

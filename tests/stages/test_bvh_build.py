@@ -39,7 +39,7 @@ def test_the_device_tree_and_boxes_are_the_hosts(device, name):
     vertices = eye_space_vertices(triangles, eye)
     timer = StageTimer()
     tree = bvh_build_tree(device, triangles, timer)
-    node_bounds = bvh_build_refit(device, tree, vertices, device.buffer(vertices, writable=False), timer)
+    node_bounds = bvh_build_refit(device, tree, eye, device.buffer(vertices, writable=False), timer)
     children = device.read(tree.node_children, (n - 1, 2), np.int32)
     bounds = device.read(node_bounds, (2 * (n - 1), 4), np.float32)
 
@@ -54,7 +54,8 @@ def test_the_device_tree_and_boxes_are_the_hosts(device, name):
 
 def test_sorted_morton_keys_are_unique_and_sorted():
     triangles = soups()["repeated"]
-    keys, order = sorted_morton_keys(triangles)
+    keys, order, box = sorted_morton_keys(triangles)
+    np.testing.assert_array_equal(box, [triangles.reshape(-1, 3).min(axis=0), triangles.reshape(-1, 3).max(axis=0)])
     assert (keys[1:] > keys[:-1]).all()
     assert sorted(order.tolist()) == list(range(len(triangles)))
     # Equal codes keep the triangles' order (a stable sort), as Karras's tie-break wants.
