@@ -76,21 +76,47 @@ def _triangle_boxes(tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             np.maximum(np.maximum(tri[:, 0], tri[:, 1]), tri[:, 2]))
 
 
+def sorted_morton_keys(triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(keys, order, box) of n ≥ 2 (T, 3, 3) triangles: the 30-bit Morton codes of their box
+    centres on a 1024³ grid over the centres' box, each shifted up 32 bits above its sorted
+    position (Karras §4's tie-break: unique keys), sorted; order[k] is the triangle of key k;
+    box, (2, 3) float64, the lo and hi corners of every vertex. The start of `bvh_topology`,
+    shared with the device build (clrays.stages.bvh_build)."""
+    tri = np.asarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
+    n = len(tri)
+    # One copy into rows of T (corner-major, then coordinate): numpy's passes over a last
+    # axis of length 3, or down strided columns, cost several times those over
+    # contiguous rows (same values, so the same codes).
+    rows = tri.reshape(n, 9).T.copy(order="C")
+    centroid = np.minimum(rows[0:3], rows[3:6])
+    np.minimum(centroid, rows[6:9], out=centroid)
+    tri_hi = np.maximum(rows[0:3], rows[3:6])
+    np.maximum(tri_hi, rows[6:9], out=tri_hi)
+    box = np.stack([centroid.min(axis=1), tri_hi.max(axis=1)])
+    centroid += tri_hi
+    centroid /= 2
+    lo, hi = centroid.min(axis=1, keepdims=True), centroid.max(axis=1, keepdims=True)
+    centroid -= lo
+    centroid /= np.maximum(hi - lo, 1e-300)
+    centroid *= 1023.0
+    cell = np.clip(centroid, 0, 1023, out=centroid).astype(np.uint64)
+    morton = (_spread_bits(cell[0]) << np.uint64(2)) | (_spread_bits(cell[1]) << np.uint64(1)) | _spread_bits(cell[2])
+    # Triangle index in the low bits, then one sort: the order of a stable sort of the
+    # codes, at a fraction of its cost; the sorted position then replaces the index.
+    keys = np.sort((morton << np.uint64(32)) | np.arange(n, dtype=np.uint64))
+    order = (keys & np.uint64(0xFFFFFFFF)).astype(np.int64)
+    keys &= ~np.uint64(0xFFFFFFFF)
+    keys |= np.arange(n, dtype=np.uint64)
+    return keys, order, box
+
+
 def bvh_topology(triangles: np.ndarray) -> BvhTopology:
     """The tree of (T, 3, 3) triangles, without boxes (module docstring)."""
     tri = np.asarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
     n = len(tri)
     if n <= 1:
         return BvhTopology(np.zeros((0, 2), np.int64), [], n)
-    tri_lo, tri_hi = _triangle_boxes(tri)
-    centroid = (tri_lo + tri_hi) / 2
-    lo, hi = centroid.min(axis=0), centroid.max(axis=0)
-    cell = np.clip((centroid - lo) / np.maximum(hi - lo, 1e-300) * 1023.0, 0, 1023).astype(np.uint64)
-    morton = (_spread_bits(cell[:, 0]) << np.uint64(2)) | (_spread_bits(cell[:, 1]) << np.uint64(1)) \
-        | _spread_bits(cell[:, 2])
-    order = np.argsort(morton, kind="stable")
-    # Sorted position in the low bits makes every key unique (Karras §4's tie-break).
-    keys = (morton[order] << np.uint64(32)) | np.arange(n, dtype=np.uint64)
+    keys, order, _ = sorted_morton_keys(tri)
 
     # Two keys share more leading bits than keys i and k exactly when their XOR is below
     # the highest bit of keys[i] ^ keys[k] (its "bound"), so the searches below compare
@@ -192,11 +218,18 @@ def refit_bvh(topology: BvhTopology, triangles: np.ndarray) -> Bvh:
     node_lo, node_hi = boxes[:n - 1, :3].astype(np.float64), -boxes[:n - 1, 3:].astype(np.float64)
     tri_lo, tri_hi = tri_lo.astype(np.float64), tri_hi.astype(np.float64)
 
-    pad = BOX_PAD_REL * (np.max(tri_hi.max(axis=0) - tri_lo.min(axis=0)) + max(-tri_lo.min(), tri_hi.max()))
+    pad = box_pad(tri_lo.min(axis=0), tri_hi.max(axis=0))
     bounds = np.zeros((n - 1, 2, 4), dtype=np.float32)
     bounds[:, 0, :3] = np.nextafter((node_lo - pad).astype(np.float32), np.float32(-np.inf))
     bounds[:, 1, :3] = np.nextafter((node_hi + pad).astype(np.float32), np.float32(np.inf))
     return Bvh(bounds.reshape(-1, 4), children.astype(np.int32), n)
+
+
+def box_pad(scene_lo: np.ndarray, scene_hi: np.ndarray) -> float:
+    """How far every box grows on each side (float64): BOX_PAD_REL of the scene box's
+    largest extent plus its largest |coordinate|."""
+    scene_lo, scene_hi = np.asarray(scene_lo, np.float64), np.asarray(scene_hi, np.float64)
+    return float(BOX_PAD_REL * (np.max(scene_hi - scene_lo) + max(-scene_lo.min(), scene_hi.max())))
 
 
 def occluded_by_bvh(bvh: Bvh, triangles: np.ndarray, origin, target) -> bool:

@@ -246,9 +246,9 @@ class Renderer:
         if scene.render.surface_shadows != "exact" or not scene.lights:
             return None
         topology = reuse.keep("bvh.topology", digest("bvh.topology", keys.geometry),
-                              lambda: bvh_topology_of(buffers.inputs, timer))
+                              lambda: bvh_topology_of(self.device, buffers.inputs, timer))
         return reuse.keep("bvh", digest("bvh", keys.geometry, buffers.inputs.eye_ws),
-                          lambda: upload_bvh(self.device, buffers.inputs, topology, timer))
+                          lambda: upload_bvh(self.device, buffers, topology, timer))
 
     def _visibility(self, buffers: FrameBuffers, rastered: RasterResult, keys: StageKeys, reuse: Reuse,
                     timer: StageTimer, bvh):

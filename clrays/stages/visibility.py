@@ -20,6 +20,7 @@ import numpy as np
 from .. import structs
 from ..bvh import Bvh, BvhTopology, bvh_topology, refit_bvh
 from ..relief_bvh import JoinedTopology, geometry_bvh_topology, refit_frame_bvh
+from .bvh_build import DeviceBvhTree, bvh_build_refit, bvh_build_tree
 from ..device import Device, StageTimer
 from ..inputs import FrameBuffers, FrameInputs, light_pass_inputs
 from .raster import RasterResult
@@ -39,22 +40,33 @@ class DeviceBvh:
     node_bounds: object
     node_children: object
     root: int
-    build_ms: float  # host refit time
+    build_ms: float  # host time of the refit (and upload), or of queuing it on the device
 
 
-def bvh_topology_of(inputs: FrameInputs, timer: StageTimer) -> BvhTopology:
-    """The BVH's tree over the world-space triangles (host, timed as `bvh`): it depends on
-    the geometry alone, so a session keeps it while the camera moves."""
+def bvh_topology_of(device: Device, inputs: FrameInputs, timer: StageTimer) -> BvhTopology | DeviceBvhTree:
+    """The BVH's tree over the world-space triangles (timed as `bvh`): it depends on the
+    geometry alone, so a session keeps it while the camera moves. Built on the device
+    (clrays.stages.bvh_build) but for a scene with reliefs, whose subtrees the host keeps
+    (clrays.relief_bvh), and one of fewer than two triangles (no internal node)."""
+    geometry = inputs.scene.geometry
+    if not geometry.reliefs and geometry.count >= 2:
+        return bvh_build_tree(device, geometry.triangles, timer)
     start = time.perf_counter()
-    geometry = inputs.scene.geometry  # a relief's subtree is kept with it (clrays.relief_bvh)
     topology = geometry_bvh_topology(geometry) if geometry.reliefs else bvh_topology(geometry.triangles)
     timer.add_host("bvh", (time.perf_counter() - start) * 1e3)
     return topology
 
 
-def upload_bvh(device: Device, inputs: FrameInputs, topology: BvhTopology, timer: StageTimer) -> DeviceBvh:
+def upload_bvh(device: Device, buffers: FrameBuffers, topology: BvhTopology | DeviceBvhTree,
+               timer: StageTimer) -> DeviceBvh:
     """Refit `topology` around the eye-space triangles the device intersects, so its boxes
-    hold exactly the float32 vertices the rays meet (host, timed as `bvh`), and upload it."""
+    hold exactly the float32 vertices the rays meet (timed as `bvh`): on the device for a
+    tree built there, else on the host, then uploaded."""
+    inputs = buffers.inputs
+    if isinstance(topology, DeviceBvhTree):
+        start = time.perf_counter()
+        node_bounds = bvh_build_refit(device, topology, inputs.eye_ws, buffers.tri_vertices, timer)
+        return DeviceBvh(node_bounds, topology.node_children, 0, (time.perf_counter() - start) * 1e3)
     start = time.perf_counter()
     bvh: Bvh = (refit_frame_bvh(topology, inputs) if isinstance(topology, JoinedTopology)  # a relief's boxes kept
                 else refit_bvh(topology, inputs.tri_vertices[:, :3].reshape(-1, 3, 3)))

@@ -218,8 +218,8 @@ def test_the_bvh_tree_outlives_a_moving_camera(device, monkeypatch):
             return function(*args, **kwargs)
         return wrapper
 
-    monkeypatch.setattr(stage, "bvh_topology", counted("tree", stage.bvh_topology))
-    monkeypatch.setattr(stage, "refit_bvh", counted("refit", stage.refit_bvh))
+    monkeypatch.setattr(stage, "bvh_build_tree", counted("tree", stage.bvh_build_tree))
+    monkeypatch.setattr(stage, "bvh_build_refit", counted("refit", stage.bvh_build_refit))
     session = Renderer(device)
     base = make_scene(_slats(), **SMALL)
     cameras = [base.camera, replace(base.camera, look_at=base.camera.look_at + v3(0.5, 0.2, 0)),
