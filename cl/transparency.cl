@@ -5,8 +5,9 @@
  * Σ_k α_k·T(z_k⁻)·(e^{-σt z_k}·S_k + L(0, z_k)).
  * Reads frame, views, offsets, camera_depth (the opaque depth), tri_vertices, translucent (the
  * translucent triangles' indices), and for the composite lights, shadow_depth, tri_normal,
- * tri_albedo, tri_opacity, light_textures, texels, film_scatter (L(0, z_k) per layer);
- * writes film_depth, film_tri ([slot][sample]), and transmittance, in_front (float4 per sample).
+ * tri_albedo, tri_opacity, light_textures, texels, film_scatter (L(0, z_k) per layer), and with
+ * MBOIT's one walk walked_fog (transparency_walk.cl); writes film_depth, film_tri
+ * ([slot][sample]), and transmittance, in_front (float4 per sample).
  *
  *   film buffers, slot-major:   | slot 0: sample 0 … S-1 | slot 1: sample 0 … S-1 | …
  *   so that one slot's depths are a camera-depth-shaped buffer the in-scatter stages read. */
