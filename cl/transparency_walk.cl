@@ -14,7 +14,7 @@
 #define TRANSPARENCY_WEIGHTED_WALK 1
 #endif
 #ifndef WALK_PIECES
-#define WALK_PIECES 8 /* measured on scenes/glass_row.yaml (bench/RESULTS.md, the camera side) */
+#define WALK_PIECES 4 /* measured on scenes/glass_row.yaml (bench/RESULTS.md, the camera side) */
 #endif
 #include "mboit.h"
 #include "walk.h"

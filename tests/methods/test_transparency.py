@@ -85,8 +85,10 @@ class CompositeSpy:
 def test_peeling_every_layer_is_the_sorted_composite(renderer, monkeypatch, method):
     """Black panes (albedo 0: S_k = 0) in fog, so each layer adds α_k·T(z_k⁻)·L(0, z_k): the
     layers MBOIT gathers in no order, sorted and composited in float64, against 8-layer peeling
-    (more layers than the scene has)."""
+    (more layers than the scene has). MBOIT's fog runs up to each film here, as peeling's, not
+    in its one walk, so that its films carry their L(0, z_k)."""
     spy = CompositeSpy(monkeypatch)
+    monkeypatch.setattr(renderer, "_weighted_walk", False)
     black = [f"objects.{i}.albedo=0" for i in range(2, 7)]
     renderer.render(small_row(*black, "render.transparency={type: moments}"), method, reuse=False)
     renderer.render(small_row(*black, "render.transparency={type: depth_peeling, layers: 8}"), method, reuse=False)
@@ -166,5 +168,5 @@ def test_moments_one_walk_is_the_per_film_composite(renderer, monkeypatch, metho
     np.testing.assert_array_equal(walk["transmittance"], runs["transmittance"])
     fog = runs["in_front"][films]
     error = np.sqrt(np.mean((walk["in_front"][films] - fog) ** 2)) / fog.mean()
-    assert error < 0.008, error  # measured 0.42 % (minmax and raymarch) at 8 pieces
+    assert error < 0.008, error  # measured 0.43 % (minmax, 4 pieces), 0.42 % (raymarch)
     assert image_error(walked.image, per_film.image).rmse < 0.001  # measured 0.016 %
