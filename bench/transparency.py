@@ -12,7 +12,8 @@ their sum per frame), and the error against 8-layer peeling: relative
 RMSE of luminance (`metrics.image_error`) and of RGB (every channel of every pixel, over
 the mean). `--images` writes each image and a heat map against 8-layer peeling
 (`compare.heat_map`: red brighter, blue darker). `--sweep` adds MBOIT's warp × moment_bias.
-`--per-film` adds MBOIT with the fog run up to each film, as peeling's (before the weighted walk).
+`--per-film` adds MBOIT with the fog run up to each film, as peeling's (before the weighted walk);
+`--pieces 1 2 4` adds MBOIT with its walk in that many pieces (`transparency_walk.WALK_PIECES`).
 """
 from __future__ import annotations
 
@@ -29,6 +30,7 @@ sys.path.insert(0, str(REPO))
 from clrays.reference import metrics  # noqa: E402
 from clrays.scene.load import load_scene  # noqa: E402
 from clrays.session import Renderer  # noqa: E402
+from clrays.stages import transparency_walk  # noqa: E402
 
 PEELING = (1, 2, 4, 8)
 REFERENCE = "peel 8"
@@ -37,12 +39,14 @@ REFERENCE = "peel 8"
 PER_FILM = "moments per film"  # MBOIT's composite with the fog run up to each film (Renderer._weighted_walk off)
 
 
-def configurations(sweep: bool, per_film: bool = False) -> dict[str, str]:
+def configurations(sweep: bool, per_film: bool = False, pieces: tuple[int, ...] = ()) -> dict[str, str]:
     """label → render.transparency override."""
     runs = {f"peel {k}": f"{{type: depth_peeling, layers: {k}}}" for k in PEELING}
     runs["moments"] = "{type: moments}"  # the defaults: log warp, the measured moment_bias
     if per_film:
         runs[PER_FILM] = "{type: moments}"
+    for count in pieces:
+        runs[f"moments {count} pieces"] = "{type: moments}"
     if sweep:
         for warp in ("none", "log"):
             for bias in (0.0, 5e-5, 5e-4, 5e-3, 2e-2, 5e-2):
@@ -62,6 +66,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--sweep", action="store_true", help="also MBOIT's warp × moment_bias (no images)")
     parser.add_argument("--per-film", action="store_true", help="also MBOIT with the fog up to each film")
+    parser.add_argument("--pieces", type=int, nargs="*", default=[], help="also MBOIT's walk in these many pieces")
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                         help="a scene override, as clrays render --set (repeatable)")
     parser.add_argument("--images", type=Path, default=REPO / "bench" / "results-transparency",
@@ -71,7 +76,7 @@ def main() -> None:
     if args.size:
         width, height = args.size.split("x")
         overrides += [f"image.width={width}", f"image.height={height}"]
-    runs = configurations(args.sweep, args.per_film)
+    runs = configurations(args.sweep, args.per_film, tuple(args.pieces))
     scene_path = REPO / "scenes" / f"{args.scene}.yaml"
     scenes = {label: load_scene(scene_path, overrides=overrides + [f"render.transparency={value}"])
               for label, value in runs.items()}
@@ -83,9 +88,11 @@ def main() -> None:
           "| RMSE luminance % | RMSE RGB % |")
     print("|---|---|---|---|---|---|---|---|---|")
     renderer = Renderer(reuse=False)
+    pieces = transparency_walk.WALK_PIECES
 
     def render(label, scene, method):
         renderer._weighted_walk = label != PER_FILM
+        transparency_walk.WALK_PIECES = int(label.split()[1]) if label.endswith(" pieces") else pieces
         return renderer.render(scene, method)
 
     for method in args.methods:
