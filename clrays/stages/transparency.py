@@ -166,8 +166,8 @@ def translucent_films(device: Device, buffers: FrameBuffers, rastered: RasterRes
 def films_to_walk(device: Device, counts, samples: int, timer: StageTimer) -> dict:
     """The Films fields of MBOIT's weighted walk: the samples whose count of hits is not 0, in
     order (a host compaction of one int per sample: the fog is walked for these only), and
-    their fog, zero until the walks add each light's. (The compaction is in the frame's wall
-    time only: a fraction of a millisecond at 320×180.)"""
+    their fog, zero until the walks add each light's. (The compaction counts in the frame's
+    wall time, not in a stage's device time.)"""
     listed = np.flatnonzero(device.read(counts, samples, np.int32)).astype(np.int32)
     walked = device.buffer(nbytes=16 * samples)
     device.fill(walked, np.float32(0), 16 * samples, timer, LABEL)
