@@ -7,10 +7,13 @@ objects: the camera side"):
 For each method: frames of every configuration interleaved (one warm-up each, then
 `--repeats` each, every stage computed), the median wall time, the device time of the
 frame and of the transparency stage (layers and composite; `transparency.fog`, the
-in-scattering up to each layer, apart), and the error against 8-layer peeling: relative
+in-scattering up to each layer, or MBOIT's one weighted walk, apart; and the median of
+their sum per frame), and the error against 8-layer peeling: relative
 RMSE of luminance (`metrics.image_error`) and of RGB (every channel of every pixel, over
 the mean). `--images` writes each image and a heat map against 8-layer peeling
 (`compare.heat_map`: red brighter, blue darker). `--sweep` adds MBOIT's warp × moment_bias.
+`--per-film` adds MBOIT with the fog run up to each film, as peeling's (before the weighted walk);
+`--pieces 1 2 4` adds MBOIT with its walk in that many pieces (`transparency_walk.WALK_PIECES`).
 """
 from __future__ import annotations
 
@@ -27,15 +30,23 @@ sys.path.insert(0, str(REPO))
 from clrays.reference import metrics  # noqa: E402
 from clrays.scene.load import load_scene  # noqa: E402
 from clrays.session import Renderer  # noqa: E402
+from clrays.stages import transparency_walk  # noqa: E402
 
 PEELING = (1, 2, 4, 8)
 REFERENCE = "peel 8"
 
 
-def configurations(sweep: bool) -> dict[str, str]:
+PER_FILM = "moments per film"  # MBOIT's composite with the fog run up to each film (Renderer._weighted_walk off)
+
+
+def configurations(sweep: bool, per_film: bool = False, pieces: tuple[int, ...] = ()) -> dict[str, str]:
     """label → render.transparency override."""
     runs = {f"peel {k}": f"{{type: depth_peeling, layers: {k}}}" for k in PEELING}
     runs["moments"] = "{type: moments}"  # the defaults: log warp, the measured moment_bias
+    if per_film:
+        runs[PER_FILM] = "{type: moments}"
+    for count in pieces:
+        runs[f"moments {count} pieces"] = "{type: moments}"
     if sweep:
         for warp in ("none", "log"):
             for bias in (0.0, 5e-5, 5e-4, 5e-3, 2e-2, 5e-2):
@@ -54,6 +65,8 @@ def main() -> None:
     parser.add_argument("--size", help="WxH (default: the scene's)")
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--sweep", action="store_true", help="also MBOIT's warp × moment_bias (no images)")
+    parser.add_argument("--per-film", action="store_true", help="also MBOIT with the fog up to each film")
+    parser.add_argument("--pieces", type=int, nargs="*", default=[], help="also MBOIT's walk in these many pieces")
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                         help="a scene override, as clrays render --set (repeatable)")
     parser.add_argument("--images", type=Path, default=REPO / "bench" / "results-transparency",
@@ -63,7 +76,7 @@ def main() -> None:
     if args.size:
         width, height = args.size.split("x")
         overrides += [f"image.width={width}", f"image.height={height}"]
-    runs = configurations(args.sweep)
+    runs = configurations(args.sweep, args.per_film, tuple(args.pieces))
     scene_path = REPO / "scenes" / f"{args.scene}.yaml"
     scenes = {label: load_scene(scene_path, overrides=overrides + [f"render.transparency={value}"])
               for label, value in runs.items()}
@@ -71,18 +84,25 @@ def main() -> None:
     print(f"{args.scene} {' '.join(args.overrides)}, {image.width}×{image.height}; times: median of {args.repeats} "
           f"frames, interleaved; "
           f"errors against {REFERENCE}, relative RMSE %\n")
-    print("| method | transparency | wall ms | device ms | transparency ms | transparency.fog ms "
+    print("| method | transparency | wall ms | device ms | transparency ms | transparency.fog ms | stage ms "
           "| RMSE luminance % | RMSE RGB % |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|")
     renderer = Renderer(reuse=False)
+    pieces = transparency_walk.WALK_PIECES
+
+    def render(label, scene, method):
+        renderer._weighted_walk = label != PER_FILM
+        transparency_walk.WALK_PIECES = int(label.split()[1]) if label.endswith(" pieces") else pieces
+        return renderer.render(scene, method)
+
     for method in args.methods:
         results = {label: [] for label in runs}
         images = {}
         for label, scene in scenes.items():  # warm-up: kernel builds
-            images[label] = renderer.render(scene, method).image
+            images[label] = render(label, scene, method).image
         for _ in range(args.repeats):
             for label, scene in scenes.items():
-                results[label].append(renderer.render(scene, method))
+                results[label].append(render(label, scene, method))
         reference = images[REFERENCE]
         for label in runs:
             frames = results[label]
@@ -91,8 +111,10 @@ def main() -> None:
             device = median([r.device_ms for r in frames])
             layers = median([r.stage_ms.get("transparency", 0.0) for r in frames])
             fog = median([r.stage_ms.get("transparency.fog", 0.0) for r in frames])
+            stage = median([r.stage_ms.get("transparency", 0.0) + r.stage_ms.get("transparency.fog", 0.0)
+                            for r in frames])
             error = metrics.image_error(images[label], reference)
-            print(f"| {method} | {label} | {wall:.0f} | {device:.0f} | {layers:.1f} | {fog:.1f} "
+            print(f"| {method} | {label} | {wall:.0f} | {device:.0f} | {layers:.1f} | {fog:.1f} | {stage:.1f} "
                   f"| {100 * error.rmse:.3f} | {100 * rgb_rmse(images[label], reference):.3f} |")
         if str(args.images) not in ("", ".") and not args.sweep:
             write_images(args.images, method, images, reference)

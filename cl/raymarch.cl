@@ -9,6 +9,18 @@
 #include "light_texture.h"
 #include "translucency.h"
 
+/* MBOIT's one march (transparency_walk.cl's, docs/design.md, the camera side): built with
+ * TRANSPARENCY_WEIGHTED_WALK, the kernel marches only the samples with translucent films, up
+ * to the farthest, each step weighted by T(t) − T(D) (mboit.h), into scatter. */
+#ifdef TRANSPARENCY_WEIGHTED_WALK
+#include "mboit.h"
+#define WEIGHTED_WALK_ARGS , global const int* walk_samples, int walk_count, int slots, global const uint* film_depth, \
+                           global const int* film_tri, global const float4* tri_opacity, float2 depth_range,       \
+                           float moment_bias
+#else
+#define WEIGHTED_WALK_ARGS
+#endif
+
 /* A per-ray number in [0, 1): jitter that is repeatable from run to run. */
 inline float hash_unit(uint a)
 {
@@ -28,15 +40,25 @@ kernel void raymarch(global const frame_t* frame, global const view_t* views,
                      global const light_t* lights, global const uint* shadow_depth,
                      global const uint* camera_depth, global const float2* offsets,
                      global const light_texture_t* light_textures, global const float4* texels,
-                     global float4* scatter TRANSLUCENCY_ARGS)
+                     global float4* scatter TRANSLUCENCY_ARGS WEIGHTED_WALK_ARGS)
 {
+#ifdef TRANSPARENCY_WEIGHTED_WALK
+    if ((int)get_global_id(0) >= walk_count) return;
+    int sample = walk_samples[get_global_id(0)];
+#else
     int sample = get_global_id(0);
+#endif
     int pixel = sample / frame->spp;
     if (pixel >= frame->width * frame->height) return;
     int x = pixel % frame->width, y = pixel / frame->width;
     float3 origin, dir;
     view_ray(views, view_screen(views, x, y, offsets[sample % frame->spp]), &origin, &dir);
     float distance = fmin(as_float(camera_depth[sample]), frame->far);
+#ifdef TRANSPARENCY_WEIGHTED_WALK /* behind the farthest film the fog's weight is 0 */
+    film_moments_t films = film_moments(slots, frame->width * frame->height * frame->spp, sample, film_depth,
+                                        film_tri, tri_opacity, depth_range);
+    distance = films.farthest;
+#endif
 
     float3 sigma_t = frame->sigma_t.xyz;
     float u = frame->jitter ? hash_unit((uint)sample * 0x9e3779b9u + 0x85ebca6bu) : 0.5f;
@@ -74,6 +96,9 @@ kernel void raymarch(global const frame_t* frame, global const view_t* views,
             float d_rate = directional ? 0.0f : -dot(to_light, dir);
             float path = t + d - (1.0f + d_rate) * u * dt;
             float3 weight = exp(-sigma_t * path) * step_integral(sigma_t * (1.0f + d_rate), dt);
+#ifdef TRANSPARENCY_WEIGHTED_WALK
+            weight *= fog_weight(&films, t, depth_range, moment_bias);
+#endif
             /* cos θ = (light → p)·(p → eye) = to_light·dir */
             radiance += incident * weight * (visible * phase_function(frame, dot(to_light, dir)));
         }

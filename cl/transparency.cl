@@ -5,28 +5,30 @@
  * Σ_k α_k·T(z_k⁻)·(e^{-σt z_k}·S_k + L(0, z_k)).
  * Reads frame, views, offsets, camera_depth (the opaque depth), tri_vertices, translucent (the
  * translucent triangles' indices), and for the composite lights, shadow_depth, tri_normal,
- * tri_albedo, tri_opacity, light_textures, texels, film_scatter (L(0, z_k) per layer);
- * writes film_depth, film_tri ([slot][sample]), and transmittance, in_front (float4 per sample).
+ * tri_albedo, tri_opacity, light_textures, texels, film_scatter (L(0, z_k) per layer), and with
+ * MBOIT's one walk walked_fog (transparency_walk.cl); writes film_depth, film_tri
+ * ([slot][sample]), and transmittance, in_front (float4 per sample).
  *
  *   film buffers, slot-major:   | slot 0: sample 0 … S-1 | slot 1: sample 0 … S-1 | …
  *   so that one slot's depths are a camera-depth-shaped buffer the in-scatter stages read. */
 #include "light_texture.h"
-#include "moments.h"
+#include "mboit.h"
 #include "translucency.h"
 
 #ifndef TRANSPARENCY_MOMENTS
 #define TRANSPARENCY_MOMENTS 0 /* 1: MBOIT's estimate of T(z_k⁻) instead of the ordered product */
 #endif
-#ifndef TRANSPARENCY_LOG_WARP
-#define TRANSPARENCY_LOG_WARP 0 /* MBOIT: moments of log depth instead of depth */
-#endif
-
 /* Hits closer than this (relative) are one surface: a ray through the edge two triangles of a
  * pane share meets both at the same depth, and the pane must count once. */
 #define SAME_SURFACE_REL 1e-5f
-/* Absorbance −ln(1 − α) is taken with α at most this: a channel with opacity 1 absorbs all but
- * e^{-13.8} ≈ 1e-6 (MBOIT needs a finite absorbance; the peeled product uses α itself). */
-#define OPACITY_MAX 0.999999f
+/* MBOIT's fog weighted in one walk per sample (transparency_walk.cl, docs/design.md): the
+ * composite adds walked_fog, ∫(T(s) − T(D)) dL(0, s), after its films' own light, and
+ * film_scatter carries only the lights no walk covers (the eye in a lamp), zero otherwise. */
+#ifdef TRANSPARENCY_WEIGHTED_WALK
+#define WALKED_FOG_ARG , global const float4* walked_fog
+#else
+#define WALKED_FOG_ARG
+#endif
 #define SURFACE_BIAS_TEXELS 1.5f /* as shade.cl's surface shadow test */
 
 /* Möller–Trumbore, two-sided, edges inclusive: the distance along the ray, +inf for a miss. */
@@ -168,39 +170,6 @@ inline float3 surface_radiance(global const frame_t* frame, global const view_t*
     return albedo * irradiance * M_1_PI_F;
 }
 
-/* MBOIT's depth coordinate in [0, 1] (docs/design.md, translucent surfaces: the camera side):
- * depth, or log depth, between the nearest and farthest distance of the translucent triangles
- * from the eye. */
-inline float warped_depth(float z, float2 range)
-{
-#if TRANSPARENCY_LOG_WARP
-    return clamp(log(z / range.x) / log(range.y / range.x), 0.0f, 1.0f);
-#else
-    return clamp((z - range.x) / (range.y - range.x), 0.0f, 1.0f);
-#endif
-}
-
-/* MBOIT's overestimation (Münstermann et al. 2018): on scenes/glass_row.yaml 0.25 cuts the error of the
- * lower bound alone from 1.45 % to 1.1 % (relative RMSE against 8-layer peeling; 0.5: 1.05 %, 0.1: 1.3 %). */
-#define OVERESTIMATION 0.25f
-/* The fraction of the absorbance in front of w: between the Hamburger lower bound (cl/moments.h,
- * the mass of the three-point support strictly in front) and the upper bound (with the mass at w
- * too), OVERESTIMATION of the way up, as MBOIT does. */
-inline float absorbance_in_front(float4 moments, float w, float moment_bias)
-{
-    float4 b = biased_moments(moments, moment_bias);
-    float w1, w2;
-    three_point_support(b, w, &w1, &w2);
-    float lower = clamp(three_point_shadow(b, w, w1, w2), 0.0f, 1.0f);
-    float at_w = clamp(three_point_weight(b, w, w1, w2), 0.0f, 1.0f);
-    return clamp(lower + OVERESTIMATION * at_w, 0.0f, 1.0f);
-}
-
-inline float3 absorbance(float3 alpha)
-{
-    return -log(1.0f - fmin(alpha, (float3)(OPACITY_MAX)));
-}
-
 /* Per sample: T(D) into transmittance, and the light of its layers in front, Σ_k α_k·T(z_k⁻)·C_k,
  * C_k = e^{-σt z_k}·S_k + L(0, z_k), into in_front. Depth peeling: T(z_k⁻) is the product of
  * the nearer layers' (1 − α). MBOIT: T(z_k⁻) = exp(−b0·F(z_k)), F the Hamburger bound on the
@@ -214,7 +183,7 @@ kernel void transparency_composite(global const frame_t* frame, global const vie
                                    global const float4* texels, int slots, global const uint* film_depth,
                                    global const int* film_tri, global const float4* film_scatter,
                                    float2 depth_range, float moment_bias, global float4* transmittance,
-                                   global float4* in_front TRANSLUCENCY_ARGS)
+                                   global float4* in_front TRANSLUCENCY_ARGS WALKED_FOG_ARG)
 {
     int sample = get_global_id(0);
     int samples = frame->width * frame->height * frame->spp;
@@ -227,20 +196,9 @@ kernel void transparency_composite(global const frame_t* frame, global const vie
 #if TRANSPARENCY_MOMENTS
     /* The moments of the absorbance over warped depth: b0 per channel, b1…b4 of the mean
      * absorbance, normalised (cl/moments.h takes the moments of a distribution). */
-    float3 b0 = (float3)(0.0f);
-    float4 b = (float4)(0.0f);
-    float total = 0.0f;
-    for (int k = 0; k < slots; ++k) {
-        int tri = film_tri[k * samples + sample];
-        if (tri < 0) break;
-        float3 a = absorbance(tri_opacity[tri].xyz);
-        float w = warped_depth(as_float(film_depth[k * samples + sample]), depth_range);
-        float mean = (a.x + a.y + a.z) / 3.0f;
-        b0 += a;
-        total += mean;
-        b += mean * (float4)(w, w * w, w * w * w, w * w * w * w);
-    }
-    if (total > 0.0f) b /= total;
+    film_moments_t moments = film_moments(slots, samples, sample, film_depth, film_tri, tri_opacity, depth_range);
+    float3 b0 = moments.b0;
+    float4 b = moments.b;
 #endif
     float3 through = (float3)(1.0f), light = (float3)(0.0f), weights = (float3)(0.0f);
     for (int k = 0; k < slots; ++k) {
@@ -264,6 +222,9 @@ kernel void transparency_composite(global const frame_t* frame, global const vie
 #if TRANSPARENCY_MOMENTS
     through = exp(-b0);
     light *= select((float3)(0.0f), (1.0f - through) / weights, isgreater(weights, (float3)(0.0f)));
+#endif
+#ifdef TRANSPARENCY_WEIGHTED_WALK
+    light += walked_fog[sample].xyz;
 #endif
     transmittance[sample] = (float4)(through, 0.0f);
     in_front[sample] = (float4)(light, 0.0f);

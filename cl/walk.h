@@ -27,19 +27,45 @@ typedef struct {
     global const uint2* layer_clear;
     global const int* layer_rows;
 #endif
+#ifdef TRANSPARENCY_WEIGHTED_WALK /* the fog's weight along the ray in pieces (transparency_walk.cl) */
+    float piece_gamma[WALK_PIECES + 2];
+    float4 piece_weight[WALK_PIECES + 1];
+#endif
 } row_texture_t;
 
 /* A lit run's radiance: the integrand tables' segment, times the light's texture along
  * this row when it has one. */
-inline float3 run_radiance(global const integrand_t* in, global const float* tables, global const frame_t* frame,
-                           const integrand_row_t* ray, const row_texture_t* texture, global const float* row_prefix,
-                           float gamma_step, float gamma0, float gamma1)
+inline float3 unweighted_run_radiance(global const integrand_t* in, global const float* tables,
+                                      global const frame_t* frame, const integrand_row_t* ray,
+                                      const row_texture_t* texture, global const float* row_prefix, float gamma_step,
+                                      float gamma0, float gamma1)
 {
     float3 untextured = segment_radiance(in, tables, frame, ray, gamma0, gamma1);
     if (!texture->textured->textured || !(gamma1 > gamma0)) return untextured;
     return textured_run_radiance(texture->textured, texture->basis, row_prefix, gamma_step, ray, untextured, gamma0,
                                  gamma1);
 }
+
+#ifdef TRANSPARENCY_WEIGHTED_WALK
+/* MBOIT's one walk (transparency_walk.cl): a run's radiance split at the pieces of the ray,
+ * each piece's part weighted by the fog's weight there, T(s) − T(D) (docs/design.md, the
+ * camera side). Piece j is [piece_gamma[j], piece_gamma[j + 1]). */
+inline float3 run_radiance(global const integrand_t* in, global const float* tables, global const frame_t* frame,
+                           const integrand_row_t* ray, const row_texture_t* texture, global const float* row_prefix,
+                           float gamma_step, float gamma0, float gamma1)
+{
+    float3 radiance = (float3)(0.0f);
+    for (int j = 0; j <= WALK_PIECES; ++j) {
+        float begin = fmax(gamma0, texture->piece_gamma[j]), end = fmin(gamma1, texture->piece_gamma[j + 1]);
+        if (end > begin)
+            radiance += texture->piece_weight[j].xyz
+                        * unweighted_run_radiance(in, tables, frame, ray, texture, row_prefix, gamma_step, begin, end);
+    }
+    return radiance;
+}
+#else
+#define run_radiance unweighted_run_radiance
+#endif
 
 /* A camera ray's part of the light's frame: its integrand row (β), its extent
  * [gamma_begin, gamma_end) and the chord inside the lamp [gamma_lamp0, gamma_lamp1),

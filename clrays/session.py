@@ -59,6 +59,7 @@ from .stages.translucency import (opaque_occluder_buffers, rectify_layers, refus
                                   surface_transmittance, translucency)
 from .stages.transparency import (Films, composite, opaque_camera_vertices, translucent_films, translucent_triangles,
                                   transparency_of)
+from .stages.transparency_walk import transparency_march, transparency_walk
 from .stages.volume_moments import volume_moments
 from .stages.visibility import bound_atlas, bvh_topology_of, upload_bvh, visibility, visibility_bound
 
@@ -109,6 +110,7 @@ class Renderer:
         self.cache = StageCache(cache_entries)
         self._skip_unshadowed = True  # tests switch it off to compare against the full path
         self._cull_faces = True  # the same: raster every cube face, also those the frame cannot read
+        self._weighted_walk = True  # the same: MBOIT's fog by the in-scatter runs per film instead of one walk
 
     @property
     def device(self) -> Device:
@@ -170,7 +172,9 @@ class Renderer:
         elif method == "raymarch":
             reuse.record.note("raymarch", COMPUTED)
             raymarch(device, buffers, rastered, scatter, timer, layers)  # raymarch: the brute-force reference
-            if films is not None:  # and up to each translucent film
+            if films is not None and films.walked is not None:  # MBOIT: one weighted march per sample with films
+                transparency_march(device, buffers, rastered, films, timer, layers)
+            elif films is not None:  # and up to each translucent film
                 films.add_in_scatter(device, timer, lambda r, s, t: raymarch(device, buffers, r, s, t, layers))
         else:
             for index, light in enumerate(scene.lights):
@@ -202,7 +206,9 @@ class Renderer:
                     samples = counts if samples is None else samples + counts
                 else:  # per camera sample; and a light that casts no shadow, whose 16 slices are too few to sample
                     traverse(device, buffers, rastered, epipolar, tables, scatter, timer, texture, rectified)
-                if films is not None:  # each translucent film's own rays walk the same trees
+                if films is not None and films.walked is not None:  # MBOIT: one weighted walk per sample with films
+                    transparency_walk(device, buffers, films, epipolar, tables, timer, texture, rectified)
+                elif films is not None:  # each translucent film's own rays walk the same trees
                     films.add_in_scatter(device, timer, lambda r, s, t, e=epipolar, i=tables, x=texture, y=rectified:
                                          traverse(device, buffers, r, e, i, s, t, x, y))
             reuse.record.note(VOLUME_STAGES[method][-1], COMPUTED)
@@ -225,7 +231,7 @@ class Renderer:
             reuse.skip("transparency")
             return None
         reuse.record.note("transparency", COMPUTED)
-        return translucent_films(self.device, buffers, rastered, timer)
+        return translucent_films(self.device, buffers, rastered, timer, self._weighted_walk)
 
     def _translucency(self, buffers: FrameBuffers, keys: StageKeys, reuse: Reuse, timer: StageTimer):
         """The translucency stage, kept while the shadow maps' inputs and the layer count
@@ -400,6 +406,8 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
         slots = settings.layers if settings.type == "depth_peeling" else min(len(translucent_triangles(scene)), 64)
         sizes += [("translucent films seen by the camera", 24 * slots * samples),
                   ("films' transmittance and light", 32 * samples)]
+        if settings.type == "moments":  # its weighted walk's sample list and fog (stages/transparency_walk.py)
+            sizes.append(("samples with films and their walked fog", 20 * samples))
     if scene.render.surface_shadows == "filtered":  # the moment maps and their blur's scratch (shadow_filter.py)
         sizes += [("moment maps", 16 * inputs.shadow_texels), ("moment maps' blur scratch", 16 * inputs.shadow_texels)]
     return sizes

@@ -313,7 +313,7 @@ RENDER = Section("render", (
           notes="translucent objects: how many translucent surfaces each light's map keeps per texel, nearest "
                 "the light first; along a light ray, those beyond that many let it through unattenuated "
                 "([docs/design.md](design.md#translucent-occluders-the-light-side))", read_by=("minmax", "raymarch")),
-    Field("transparency", "mapping or string", shown_default="`{type: depth_peeling, layers: 8}`",
+    Field("transparency", "mapping or string", shown_default="`{type: moments}`",
           notes="[render.transparency](#rendertransparency): how the camera composites "
                 "[translucent objects](#translucent-objects); a string is its `type`. Read only where an "
                 "object has `opacity` below 1", read_by=("minmax", "raymarch")),

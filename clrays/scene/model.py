@@ -144,9 +144,9 @@ class Transparency:
     """`render.transparency`: how the camera composites translucent surfaces (docs/design.md,
     translucent surfaces: the camera side)."""
 
-    # depth_peeling by default: exact up to `layers` films, and no slower than MBOIT on glass_row,
-    # where the fog up to each film, the same work for both, is most of the stage (bench/RESULTS.md).
-    type: str = "depth_peeling"  # one of TRANSPARENCY_TYPES
+    # moments by default: on glass_row within 1.1 % of 8-layer peeling and faster than it (its fog is
+    # one walk per pixel, peeling's one per film; bench/RESULTS.md, docs/design.md).
+    type: str = "moments"  # one of TRANSPARENCY_TYPES
     # The nearest layers composited; those behind them are dropped. Peeling stops where no sample
     # finds another layer, so a frame with fewer films pays for those only.
     layers: int = 8

@@ -4,6 +4,9 @@ surfaces: the camera side). Host side of `cl/transparency.cl`.
 
     layers (peel or gather) → in-scatter up to each layer (the method's own stage) → composite
 
+MBOIT (`moments`) replaces the in-scatter runs up to each layer by one walk of the fog per
+sample that meets films, weighted by its estimated transmittance (stages/transparency_walk.py).
+
 A scene whose objects are all opaque runs none of it: the session skips the stage, and the
 camera raster, which draws the opaque triangles only here, draws them all there.
 """
@@ -93,6 +96,10 @@ class Films:
     scatter: object  # float4[slots·samples]: L(0, z_k)
     samples: int
     rastered: RasterResult
+    # MBOIT's one weighted walk (stages/transparency_walk.py; None: the in-scatter runs per slot):
+    walked: object = None  # float4[samples]: ∫(T(s) − T(D)) dL(0, s), summed over the walked lights
+    walk_samples: object = None  # int[walk_count]: the samples that meet a film
+    walk_count: int = 0
 
     def add_in_scatter(self, device: Device, timer: StageTimer,
                        in_scatter: Callable[[RasterResult, object, StageTimer], None]) -> None:
@@ -117,9 +124,12 @@ def _layer_args(buffers: FrameBuffers, rastered: RasterResult, translucent, coun
             np.int32(count))
 
 
-def translucent_films(device: Device, buffers: FrameBuffers, rastered: RasterResult, timer: StageTimer) -> Films:
+def translucent_films(device: Device, buffers: FrameBuffers, rastered: RasterResult, timer: StageTimer,
+                      weighted_walk: bool = True) -> Films:
     """Each camera sample's translucent hits in front of its opaque depth: the `layers` nearest
-    in order (depth_peeling), or all of them in no order (moments)."""
+    in order (depth_peeling), or all of them in no order (moments). `weighted_walk` (moments):
+    list the samples with films for MBOIT's one walk of the fog; False: the in-scatter runs per
+    slot, as peeling's (the tests' reference)."""
     inputs = buffers.inputs
     settings = transparency_of(inputs.scene)
     samples = inputs.samples
@@ -127,6 +137,7 @@ def translucent_films(device: Device, buffers: FrameBuffers, rastered: RasterRes
     translucent = device.buffer(indices, writable=False)
     args = _layer_args(buffers, rastered, translucent, len(indices))
     used = device.buffer(np.zeros(1, np.int32))
+    walk = {}
     if settings.type == "depth_peeling":
         slots = settings.layers
         depth, tri = device.buffer(nbytes=4 * slots * samples), device.buffer(nbytes=4 * slots * samples)
@@ -142,12 +153,25 @@ def translucent_films(device: Device, buffers: FrameBuffers, rastered: RasterRes
         if slots:
             timer.add(LABEL, device.kernel("transparency", "transparency_gather")(
                 device.queue, (samples,), None, *args, counts, np.int32(slots), depth, tri))
+        if slots and weighted_walk:
+            walk = films_to_walk(device, counts, samples, timer)
     scatter = device.buffer(nbytes=16 * slots * samples)
     if slots:
         device.fill(scatter, np.float32(0), 16 * slots * samples, timer, LABEL)
     # The in-scatter stages read the layers' depths as the camera depth: the same shadow maps,
     # the same camera, a slot's depth instead of the opaque one.
-    return Films(slots, depth, tri, scatter, samples, rastered)
+    return Films(slots, depth, tri, scatter, samples, rastered, **walk)
+
+
+def films_to_walk(device: Device, counts, samples: int, timer: StageTimer) -> dict:
+    """The Films fields of MBOIT's weighted walk: the samples whose count of hits is not 0, in
+    order (a host compaction of one int per sample: the fog is walked for these only), and
+    their fog, zero until the walks add each light's. (The compaction counts in the frame's
+    wall time, not in a stage's device time.)"""
+    listed = np.flatnonzero(device.read(counts, samples, np.int32)).astype(np.int32)
+    walked = device.buffer(nbytes=16 * samples)
+    device.fill(walked, np.float32(0), 16 * samples, timer, LABEL)
+    return {"walked": walked, "walk_samples": device.buffer(listed, writable=False), "walk_count": len(listed)}
 
 
 def composite(device: Device, buffers: FrameBuffers, rastered: RasterResult, layers: Films,
@@ -167,6 +191,9 @@ def composite(device: Device, buffers: FrameBuffers, rastered: RasterResult, lay
     if light_layers is not None:
         defines.update(light_layers.defines())
         light_args = light_layers.args()
+    if layers.walked is not None:  # MBOIT's fog, walked once per sample (stages/transparency_walk.py)
+        defines["TRANSPARENCY_WEIGHTED_WALK"] = 1
+        light_args = (*light_args, layers.walked)
     transmittance, in_front = device.buffer(nbytes=16 * samples), device.buffer(nbytes=16 * samples)
     near, far = depth_range(inputs)
     timer.add(LABEL, device.kernel("transparency", "transparency_composite", defines)(

@@ -19,7 +19,7 @@ def transparency_of(*overrides):
 
 def test_keys_and_defaults():
     assert transparency_of() is None  # left out: Transparency()'s defaults
-    assert Transparency() == Transparency("depth_peeling", 8, "log", 5e-3)
+    assert Transparency() == Transparency("moments", 8, "log", 5e-3)
     assert transparency_of("render.transparency=moments") == Transparency(type="moments")
     assert transparency_of("render.transparency={type: depth_peeling, layers: 3}").layers == 3
     assert transparency_of("render.transparency={type: moments, warp: none, moment_bias: 0}") == \

@@ -1,0 +1,74 @@
+"""Stage transparency_walk: MBOIT's fog in front of the opaque depth in one walk per camera
+sample that meets translucent films, each stretch of fog weighted by the films' estimated
+transmittance in front of it less T(D) (docs/design.md, translucent surfaces: the camera side).
+Host side of `cl/transparency_walk.cl` (minmax: the min-max rows' walk) and of `cl/raymarch.cl`
+built with TRANSPARENCY_WEIGHTED_WALK (raymarch). Timed as transparency.fog, the work it
+replaces: the in-scatter stages run up to each film (Films.add_in_scatter)."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..device import Device, StageTimer
+from ..inputs import FrameBuffers
+from ..scene.model import TRAVERSALS
+from .integrand import DeviceIntegrand
+from .light_texture import TextureTables, untextured_tables
+from .raster import RasterResult
+from .rectify import Epipolar
+from .transparency import FOG_LABEL, Films, depth_range, transparency_of
+
+#: Pieces of the ray between a sample's nearest and farthest film, even in MBOIT's warp, over
+#: each of which the fog takes one weight (bench/RESULTS.md, the camera side: the error against
+#: 8-layer peeling by piece count).
+WALK_PIECES = 4
+
+
+def _walk_defines(buffers: FrameBuffers) -> dict:
+    settings = transparency_of(buffers.inputs.scene)
+    return {"TRANSPARENCY_WEIGHTED_WALK": 1, "TRANSPARENCY_LOG_WARP": int(settings.warp == "log"),
+            "WALK_PIECES": WALK_PIECES}
+
+
+def _film_args(device: Device, buffers: FrameBuffers, films: Films) -> tuple:
+    """walk_samples … moment_bias: the arguments both walks share."""
+    inputs = buffers.inputs
+    opacity = np.zeros((inputs.scene.geometry.count, 4), np.float32)
+    opacity[:, :3] = inputs.scene.geometry.opacity_or_ones()
+    return (films.walk_samples, np.int32(films.walk_count), np.int32(films.slots), films.depth, films.tri,
+            device.buffer(opacity, writable=False), np.array(depth_range(inputs), np.float32),
+            np.float32(transparency_of(inputs.scene).moment_bias))
+
+
+def transparency_walk(device: Device, buffers: FrameBuffers, films: Films, epipolar: Epipolar,
+                      integrand: DeviceIntegrand, timer: StageTimer, texture: TextureTables | None = None,
+                      layers=None) -> None:
+    """Add one light's weighted fog into `films.walked` for the samples with films, walking the
+    min-max rows as traverse does; `texture`, `layers` as for traverse."""
+    if not films.walk_count:
+        return
+    texture = texture if texture is not None else untextured_tables(device)
+    defines = {"TRAVERSAL": TRAVERSALS.index(buffers.inputs.scene.render.traversal), **_walk_defines(buffers)}
+    extra = ()
+    if layers is not None:
+        defines.update(layers.defines())
+        extra = layers.args()
+    timer.add(FOG_LABEL, device.kernel("transparency_walk", "transparency_walk", defines)(
+        device.queue, (films.walk_count,), None, buffers.params, buffers.views, buffers.lights, epipolar.buffer,
+        epipolar.tree, integrand.params, integrand.data, buffers.offsets, texture.params, texture.basis,
+        texture.prefix, *_film_args(device, buffers, films), films.walked, *extra))
+
+
+def transparency_march(device: Device, buffers: FrameBuffers, rastered: RasterResult, films: Films,
+                       timer: StageTimer, layers=None) -> None:
+    """Write every light's weighted fog into `films.walked` for the samples with films, marching
+    as raymarch does (`layers`: the translucency stage's, as for raymarch)."""
+    if not films.walk_count:
+        return
+    defines, extra = _walk_defines(buffers), ()
+    if layers is not None:
+        defines.update(layers.defines())
+        extra = layers.args()
+    timer.add(FOG_LABEL, device.kernel("raymarch", "raymarch", defines)(
+        device.queue, (films.walk_count,), None, buffers.params, buffers.views, buffers.lights,
+        rastered.shadow_depth, rastered.camera_depth, buffers.offsets, buffers.light_textures, buffers.texels,
+        films.walked, *extra, *_film_args(device, buffers, films)))
