@@ -340,7 +340,9 @@ TRANSPARENCY = Section("render.transparency", (
           notes="`depth_peeling`: the `layers` nearest translucent surfaces of each camera ray, composited in "
                 "order; `moments`: every one of them, composited with a transmittance reconstructed from 4 power "
                 "moments of the absorbance, in no order "
-                "(MBOIT; [docs/design.md](design.md#translucent-surfaces-the-camera-side))"),
+                "(MBOIT; [docs/design.md](design.md#translucent-surfaces-the-camera-side)). Left out, the keys "
+                "given name it (`layers`: depth_peeling; `warp`, `moment_bias`: moments); a key the type does "
+                "not read is an error"),
     Field("layers", "integer", Transparency.layers, 1, 64,
           notes="`depth_peeling`: layers composited; surfaces behind the last are left out"),
     Field("warp", "string", Transparency.warp, choices=TRANSPARENCY_WARPS,

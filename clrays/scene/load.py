@@ -245,7 +245,21 @@ def _transparency(node: Node | None) -> Transparency | None:
     if isinstance(node.value, str):
         return Transparency(type=choice(node, TRANSPARENCY["type"].choices))
     keys = mapping(node, optional=TRANSPARENCY.optional)
-    return Transparency(**{field.key: _read(field, keys.get(field.key)) for field in TRANSPARENCY.fields})
+    values = {field.key: _read(field, keys.get(field.key)) for field in TRANSPARENCY.fields}
+    # Each type reads keys of its own: they name the type when it is left out, and a key the
+    # named type would ignore is a mistake, not a setting.
+    readers = {"layers": "depth_peeling", "warp": "moments", "moment_bias": "moments"}
+    implied = {readers[key] for key in keys if key in readers}
+    if "type" not in keys:
+        if len(implied) > 1:
+            raise SceneError(f"{node.where}: {node.path}: layers is read by depth_peeling, warp and moment_bias "
+                             f"by moments: add type: depth_peeling or type: moments")
+        values["type"] = implied.pop() if implied else Transparency.type
+    for key in keys:
+        if readers.get(key, values["type"]) != values["type"]:
+            raise SceneError(f"{node.key_where.get(key, node.where)}: {node.child_path(key)}: only "
+                             f"{readers[key]} reads it, got type {values['type']}")
+    return Transparency(**values)
 
 
 # --------------------------------------------------------------------------- objects

@@ -54,3 +54,21 @@ def test_the_command_line_reports_one_line(tmp_path):
     code, out = run_cli("render", str(scene), "-o", str(tmp_path / "x.png"))
     assert code == 1 and "Traceback" not in out
     assert out.strip().splitlines()[-1].endswith("render.transparency.warp: expected one of 'none', 'log', got 'cubic'")
+
+
+def test_a_key_of_one_type_names_it_when_the_type_is_left_out():
+    assert transparency_of("render.transparency={layers: 4}") == Transparency("depth_peeling", 4)
+    assert transparency_of("render.transparency={warp: none}").type == "moments"
+
+
+@pytest.mark.parametrize("override, message", [
+    ("render.transparency={type: moments, layers: 4}",
+     r"render\.transparency\.layers: only depth_peeling reads it, got type moments"),
+    ("render.transparency={type: depth_peeling, moment_bias: 0.01}",
+     r"render\.transparency\.moment_bias: only moments reads it, got type depth_peeling"),
+    ("render.transparency={layers: 4, warp: log}",
+     r"render\.transparency: layers is read by depth_peeling, warp and moment_bias by moments: add type"),
+])
+def test_keys_of_the_other_type_are_one_line_errors(override, message):
+    with pytest.raises(SceneError, match=message):
+        parse_scene(SCENE, overrides=[override])
