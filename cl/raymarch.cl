@@ -1,13 +1,22 @@
 /* raymarch — the brute-force reference: in-scattered radiance per camera sample by
- * `steps` uniform (optionally jittered) samples per light from the eye to the surface
- * (for a spot light, over the part of the ray inside its cone), with a shadow-map
- * lookup per sample.
+ * `steps` samples per light from the eye to the surface (for a spot light, over the part
+ * of the ray inside its cone), equiangular about a point or spot light or uniform
+ * (STEP_SPACING, docs/design.md §4.8), optionally jittered, with a shadow-map lookup per
+ * sample.
  * Reads frame, views, lights, shadow_depth, camera_depth, offsets, light_textures,
  * texels (a light's texture multiplies it per sample, docs/light-textures.md), and with
  * translucent objects the translucency stage's layers (translucency.h); writes scatter
  * (one float4 per camera sample, rgb radiance). */
 #include "light_texture.h"
 #include "translucency.h"
+
+#ifndef STEP_SPACING
+#define STEP_SPACING STEP_SPACING_EQUIANGULAR
+#endif
+
+/* Below π/2 by one float ulp: tan stays finite and positive, however far the interval's
+ * end lies from the ray's closest point to the light (float(π/2) is above π/2). */
+#define THETA_MOST 1.5707962f
 
 /* A per-ray number in [0, 1): jitter that is repeatable from run to run. */
 inline float hash_unit(uint a)
@@ -50,8 +59,28 @@ kernel void raymarch(global const frame_t* frame, global const view_t* views,
         float dt = (end - begin) / (float)frame->steps;
         int directional = light->type == LIGHT_DIRECTIONAL;
         int unshadowed = eye_in_lamp(light, frame->lamp_radius);
+#if STEP_SPACING == STEP_SPACING_EQUIANGULAR
+        /* Equiangular steps (docs/design.md §4.8): with t0 the ray's closest point to the
+         * light and h its distance, t = t0 + h·tan θ at equal steps of θ over [begin, end],
+         * so a step is (h² + (t - t0)²)/h · Δθ = d²/h · Δθ long and the 1/d² peak of a ray
+         * passing near the light is spread over many steps. h is at least the lamp's
+         * radius: no medium lies closer, and a ray through the light stays finite. */
+        float3 to_light_ws = light->position.xyz - origin;
+        float t0 = dot(to_light_ws, dir);
+        float h = fmax(length(to_light_ws - t0 * dir), frame->lamp_radius);
+        int equiangular = !directional && h > 0.0f && end > begin;
+        float theta_begin = clamp(atan((begin - t0) / h), -THETA_MOST, THETA_MOST);
+        float theta_step = (clamp(atan((end - t0) / h), -THETA_MOST, THETA_MOST) - theta_begin) / (float)frame->steps;
+#endif
         for (int i = 0; i < frame->steps; ++i) {
             float t = begin + ((float)i + u) * dt;
+#if STEP_SPACING == STEP_SPACING_EQUIANGULAR
+            if (equiangular) {
+                float x = h * tan(theta_begin + ((float)i + u) * theta_step);
+                t = clamp(t0 + x, begin, end);
+                dt = (h * h + x * x) / h * theta_step;
+            }
+#endif
             float3 p = origin + t * dir;
             float d = directional ? 0.0f : length(p - light->position.xyz);
             if (!directional && d < frame->lamp_radius) continue; /* no medium in the lamp */
@@ -70,7 +99,9 @@ kernel void raymarch(global const frame_t* frame, global const view_t* views,
             /* The light's path e^{-σt·(s + d(s))}, d the distance to the light (0 for a
              * directional light), is linear in s across the step to first order, with slope
              * σt·(1 + d'), d' = -to_light·dir: integrated exactly over [start, start + dt],
-             * so a step longer than the mean free path (dense fog) still weighs right. */
+             * so a step longer than the mean free path (dense fog) still weighs right. An
+             * equiangular step is the same integral with the path taken as linear in θ
+             * across the step's Δθ (dt = d²/h · Δθ is the chain rule). */
             float d_rate = directional ? 0.0f : -dot(to_light, dir);
             float path = t + d - (1.0f + d_rate) * u * dt;
             float3 weight = exp(-sigma_t * path) * step_integral(sigma_t * (1.0f + d_rate), dt);
