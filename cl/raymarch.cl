@@ -25,6 +25,20 @@ inline float hash_unit(uint a)
     return (float)(a >> 8) * (1.0f / 16777216.0f);
 }
 
+/* tan θ from (sin θ, cos θ); past ±π/2 (cos ≤ 0, the rotation's drift) ±∞, which the
+ * caller clamps to the marched interval. */
+inline float tan_of(float sin_theta, float cos_theta)
+{
+    return cos_theta > 0.0f ? sin_theta / cos_theta : copysign(INFINITY, sin_theta);
+}
+
+/* s + d(s) at s = t0 + x on a ray passing at distance h from the light: the light's path
+ * from the eye through the medium (docs/design.md §1), d = √(h² + x²). */
+inline float light_path(float t0, float h, float x)
+{
+    return t0 + x + sqrt(h * h + x * x);
+}
+
 /* ∫ e^{-k·v} dv over a step of length dt, per channel: (1 - e^{-k·dt})/k, → dt as k → 0.
  * Below k·dt = 1e-6 the limit is exact to 5e-7 and avoids 0/0 where k·dt underflows. */
 inline float3 step_integral(float3 k, float dt)
@@ -61,24 +75,40 @@ kernel void raymarch(global const frame_t* frame, global const view_t* views,
         int unshadowed = eye_in_lamp(light, frame->lamp_radius);
 #if STEP_SPACING == STEP_SPACING_EQUIANGULAR
         /* Equiangular steps (docs/design.md §4.8): with t0 the ray's closest point to the
-         * light and h its distance, t = t0 + h·tan θ at equal steps of θ over [begin, end],
-         * so a step is (h² + (t - t0)²)/h · Δθ = d²/h · Δθ long and the 1/d² peak of a ray
-         * passing near the light is spread over many steps. h is at least the lamp's
-         * radius: no medium lies closer, and a ray through the light stays finite. */
+         * light and h its distance, t = t0 + h·tan θ at equal steps Δθ over [begin, end],
+         * so a step is d²/h · Δθ long (d² = h² + (t - t0)²): the 1/d² peak of a ray that
+         * passes near the light is spread over many steps, each carrying about as much
+         * light. h is at least the lamp's radius: no medium lies closer, and a ray through
+         * the light stays finite. */
         float3 to_light_ws = light->position.xyz - origin;
         float t0 = dot(to_light_ws, dir);
         float h = fmax(length(to_light_ws - t0 * dir), frame->lamp_radius);
-        int equiangular = !directional && h > 0.0f && end > begin;
         float theta_begin = clamp(atan((begin - t0) / h), -THETA_MOST, THETA_MOST);
         float theta_step = (clamp(atan((end - t0) / h), -THETA_MOST, THETA_MOST) - theta_begin) / (float)frame->steps;
+        /* (An interval too short for float θ to resolve is marched uniformly.) */
+        int equiangular = !directional && h > 0.0f && theta_step > 0.0f;
+        /* θ advances by rotating (cos θ, sin θ), not by a tan per step (a third of a step's
+         * cost on the CPU device); tan = sin/cos does not see the pair's norm drift, and its
+         * angle drifts by ~√steps float ulps. `edge_*`: the step's start; the sample lies
+         * u·Δθ past it. */
+        float step_cos, step_sin = sincos(theta_step, &step_cos);
+        float jitter_cos, jitter_sin = sincos(u * theta_step, &jitter_cos);
+        float edge_cos, edge_sin = sincos(theta_begin, &edge_cos);
+        float path_end = light_path(t0, h, begin - t0), path_begin;
 #endif
         for (int i = 0; i < frame->steps; ++i) {
             float t = begin + ((float)i + u) * dt;
 #if STEP_SPACING == STEP_SPACING_EQUIANGULAR
             if (equiangular) {
-                float x = h * tan(theta_begin + ((float)i + u) * theta_step);
-                t = clamp(t0 + x, begin, end);
-                dt = (h * h + x * x) / h * theta_step;
+                t = clamp(t0 + h * tan_of(edge_sin * jitter_cos + edge_cos * jitter_sin,
+                                          edge_cos * jitter_cos - edge_sin * jitter_sin), begin, end);
+                float next_cos = edge_cos * step_cos - edge_sin * step_sin;
+                edge_sin = edge_sin * step_cos + edge_cos * step_sin;
+                edge_cos = next_cos;
+                /* The step's light path s + d at both ends, the last step's end exactly `end`. */
+                path_begin = path_end;
+                path_end = light_path(t0, h, i + 1 == frame->steps ? end - t0
+                                                 : clamp(h * tan_of(edge_sin, edge_cos), begin - t0, end - t0));
             }
 #endif
             float3 p = origin + t * dir;
@@ -99,12 +129,23 @@ kernel void raymarch(global const frame_t* frame, global const view_t* views,
             /* The light's path e^{-σt·(s + d(s))}, d the distance to the light (0 for a
              * directional light), is linear in s across the step to first order, with slope
              * σt·(1 + d'), d' = -to_light·dir: integrated exactly over [start, start + dt],
-             * so a step longer than the mean free path (dense fog) still weighs right. An
-             * equiangular step is the same integral with the path taken as linear in θ
-             * across the step's Δθ (dt = d²/h · Δθ is the chain rule). */
-            float d_rate = directional ? 0.0f : -dot(to_light, dir);
-            float path = t + d - (1.0f + d_rate) * u * dt;
-            float3 weight = exp(-sigma_t * path) * step_integral(sigma_t * (1.0f + d_rate), dt);
+             * so a step longer than the mean free path (dense fog) still weighs right. */
+            float3 weight;
+#if STEP_SPACING == STEP_SPACING_EQUIANGULAR
+            /* An equiangular step: ∫ e^{-σt·(s + d)} ds over it is d²/h · ∫ e^{-σt·path(θ)} dθ,
+             * the path taken as linear in θ between its true values at the step's ends. Not
+             * the tangent at the sample, as below: near θ = ±π/2 a step's length changes
+             * many times across it, and the tangent's extrapolation would overflow. */
+            if (equiangular) {
+                weight = (d * d / h) * exp(-sigma_t * path_begin)
+                         * step_integral(sigma_t * ((path_end - path_begin) / theta_step), theta_step);
+            } else
+#endif
+            {
+                float d_rate = directional ? 0.0f : -dot(to_light, dir);
+                float path = t + d - (1.0f + d_rate) * u * dt;
+                weight = exp(-sigma_t * path) * step_integral(sigma_t * (1.0f + d_rate), dt);
+            }
             /* cos θ = (light → p)·(p → eye) = to_light·dir */
             radiance += incident * weight * (visible * phase_function(frame, dot(to_light, dir)));
         }
