@@ -94,7 +94,7 @@ kernel void raymarch(global const frame_t* frame, global const view_t* views,
         float step_cos, step_sin = sincos(theta_step, &step_cos);
         float jitter_cos, jitter_sin = sincos(u * theta_step, &jitter_cos);
         float edge_cos, edge_sin = sincos(theta_begin, &edge_cos);
-        float path_end = light_path(t0, h, begin - t0), path_begin;
+        float path_end = light_path(t0, h, begin - t0), path_begin, x;
 #endif
         for (int i = 0; i < frame->steps; ++i) {
             float t = begin + ((float)i + u) * dt;
@@ -102,6 +102,7 @@ kernel void raymarch(global const frame_t* frame, global const view_t* views,
             if (equiangular) {
                 t = clamp(t0 + h * tan_of(edge_sin * jitter_cos + edge_cos * jitter_sin,
                                           edge_cos * jitter_cos - edge_sin * jitter_sin), begin, end);
+                x = t - t0;
                 float next_cos = edge_cos * step_cos - edge_sin * step_sin;
                 edge_sin = edge_sin * step_cos + edge_cos * step_sin;
                 edge_cos = next_cos;
@@ -132,12 +133,13 @@ kernel void raymarch(global const frame_t* frame, global const view_t* views,
              * so a step longer than the mean free path (dense fog) still weighs right. */
             float3 weight;
 #if STEP_SPACING == STEP_SPACING_EQUIANGULAR
-            /* An equiangular step: ∫ e^{-σt·(s + d)} ds over it is d²/h · ∫ e^{-σt·path(θ)} dθ,
-             * the path taken as linear in θ between its true values at the step's ends. Not
-             * the tangent at the sample, as below: near θ = ±π/2 a step's length changes
-             * many times across it, and the tangent's extrapolation would overflow. */
+            /* An equiangular step: ∫ e^{-σt·(s + d)} ds over it is (h² + x²)/h · ∫ e^{-σt·path(θ)} dθ
+             * (ds/dθ; not d²/h, which differs where h was raised to the lamp's radius), the path
+             * taken as linear in θ between its true values at the step's ends. Not the tangent
+             * at the sample, as below: near θ = ±π/2 a step's length changes many times across
+             * it, and the tangent's extrapolation would overflow. */
             if (equiangular) {
-                weight = (d * d / h) * exp(-sigma_t * path_begin)
+                weight = ((h * h + x * x) / h) * exp(-sigma_t * path_begin)
                          * step_integral(sigma_t * ((path_end - path_begin) / theta_step), theta_step);
             } else
 #endif
