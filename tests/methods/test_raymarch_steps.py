@@ -101,3 +101,14 @@ def test_a_ray_through_the_light_stays_finite(renderer, kind, sigma_s):
                        & (np.arange(33)[None, :] == 16))
     print(kind, sigma_s, f"middle pixel {middle:+.3%}, the others: {rest}")
     assert abs(middle) < 0.03 and rest.mean < 0.002, (middle, str(rest))
+
+
+def test_an_unknown_step_spacing_is_named_in_one_line(tmp_path):
+    from clrays.errors import SceneError
+
+    path = tmp_path / "scene.yaml"
+    path.write_text((SCENES_DIR / "demo.yaml").read_text().replace(
+        "render: {method: minmax}", "render: {method: raymarch, step_spacing: sideways}"))
+    with pytest.raises(SceneError, match=r"scene.yaml:\d+:\d+: render.step_spacing: expected one of "
+                                         r"'equiangular', 'uniform', got 'sideways'"):
+        clrays.load_scene(path)
