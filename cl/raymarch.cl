@@ -14,10 +14,6 @@
 #define STEP_SPACING STEP_SPACING_EQUIANGULAR
 #endif
 
-/* Below π/2 by one float ulp: tan stays finite and positive, however far the interval's
- * end lies from the ray's closest point to the light (float(π/2) is above π/2). */
-#define THETA_MOST 1.5707962f
-
 /* A per-ray number in [0, 1): jitter that is repeatable from run to run. */
 inline float hash_unit(uint a)
 {
@@ -83,17 +79,20 @@ kernel void raymarch(global const frame_t* frame, global const view_t* views,
         float3 to_light_ws = light->position.xyz - origin;
         float t0 = dot(to_light_ws, dir);
         float h = fmax(length(to_light_ws - t0 * dir), frame->lamp_radius);
-        float theta_begin = clamp(atan((begin - t0) / h), -THETA_MOST, THETA_MOST);
-        float theta_step = (clamp(atan((end - t0) / h), -THETA_MOST, THETA_MOST) - theta_begin) / (float)frame->steps;
+        /* The angle the interval subtends at the light, from the cross and dot products of
+         * (h, begin - t0) and (h, end - t0): well conditioned where a difference of two atans
+         * near ±π/2 is not (a ray looking away from the light, h ≪ |s - t0|). */
+        float x_begin = begin - t0, x_end = end - t0;
+        float theta_step = atan2(h * (end - begin), h * h + x_begin * x_end) / (float)frame->steps;
         /* (An interval too short for float θ to resolve is marched uniformly.) */
         int equiangular = !directional && h > 0.0f && theta_step > 0.0f;
         /* θ advances by rotating (cos θ, sin θ), not by a tan per step (a third of a step's
-         * cost on the CPU device); tan = sin/cos does not see the pair's norm drift, and its
-         * angle drifts by ~√steps float ulps. `edge_*`: the step's start; the sample lies
-         * u·Δθ past it. */
+         * cost on the CPU device); tan = sin/cos does not see the pair's norm drift. `edge_*`:
+         * the step's start, from (h, begin - t0) itself; the sample lies u·Δθ past it. */
         float step_cos, step_sin = sincos(theta_step, &step_cos);
         float jitter_cos, jitter_sin = sincos(u * theta_step, &jitter_cos);
-        float edge_cos, edge_sin = sincos(theta_begin, &edge_cos);
+        float edge_norm = 1.0f / hypot(h, x_begin);
+        float edge_cos = h * edge_norm, edge_sin = x_begin * edge_norm;
         float path_end = light_path(t0, h, begin - t0), path_begin, x;
 #endif
         for (int i = 0; i < frame->steps; ++i) {
