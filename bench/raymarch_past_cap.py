@@ -16,11 +16,14 @@ from clrays.session import Renderer
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("scene")
     parser.add_argument("points", nargs="+", metavar="STEPS:SHADOW_MAP")
+    parser.add_argument("--volume-only", action="store_true", help="as `clrays bench --volume-only`")
     parser.add_argument("--cache", default=".cache/clrays", help="exact references (as `clrays bench --cache`)")
     args = parser.parse_args()
-    scene = load_scene("scenes/sun.yaml")
-    scene = volume_only(replace(scene, image=replace(scene.image, width=1280, height=720)))
+    scene = load_scene(args.scene)
+    scene = replace(scene, image=replace(scene.image, width=1280, height=720))
+    scene = volume_only(scene) if args.volume_only else scene
     pixels = error_pixels(1280, 720, 4000)  # the bench's seeded subset
     cache, renderer = ReferenceCache(args.cache), Renderer(reuse=False)
     for point in args.points:
@@ -30,7 +33,7 @@ def main() -> None:
         image = renderer.render(marched, "raymarch").image
         cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
         error = cache.error(marched, EXACT, image, pixels)
-        print(f"sun volume-only 1280x720 raymarch steps={steps} shadow_map={shadow_map}: rel. RMSE {error.rmse:.3%}, "
+        print(f"{args.scene}{' volume-only' if args.volume_only else ''} 1280x720 raymarch steps={steps} shadow_map={shadow_map}: rel. RMSE {error.rmse:.3%}, "
               f"p99 {error.p99:.3%}, cpu {cpu * 1e3:.0f} ms, wall {wall * 1e3:.0f} ms (one frame, kernel build "
               f"included)", flush=True)
 
