@@ -37,6 +37,9 @@ SHADOW_FILTER_MSM_HAUSDORFF = 4
 TRAVERSAL_TREE = 0  # cl/traverse.cl's TRAVERSAL option
 TRAVERSAL_SCAN = 1
 
+STEP_SPACING_EQUIANGULAR = 0  # cl/raymarch.cl's STEP_SPACING option (render.step_spacing)
+STEP_SPACING_UNIFORM = 1
+
 TEXTURE_WRAP_REPEAT = 0  # light_texture_t.wrap
 TEXTURE_WRAP_CLAMP = 1
 
@@ -72,7 +75,7 @@ RASTER_BIG_TRIANGLES = 1 << 16
 KERNEL_CONSTANTS = {
     name: value for name, value in dict(globals()).items()
     if name.startswith(("PROJECTION_", "LIGHT_", "PHASE_", "INTEGRAND_", "TRAVERSAL_", "RASTER_", "SURFACE_SHADOWS_",
-                         "TEXTURE_WRAP_", "SHADOW_FILTER_", "WRITER_"))
+                         "TEXTURE_WRAP_", "SHADOW_FILTER_", "WRITER_", "STEP_SPACING_"))
     or name in ("DEPTH_EMPTY", "SIN_BETA_MIN")
 }
 

@@ -14,9 +14,9 @@ from .animation import EASINGS
 from .limits import MAX_LIGHTS, MAX_MESH_BYTES, MAX_OBJECTS, MAX_SCENE_BYTES, MAX_TRIANGLES
 from .costs import (MAX_GAMMA_SAMPLES, MAX_LINE_SAMPLES, MAX_SHADOW_MAP, MAX_SLICES, MIN_GAMMA_SAMPLES,
                     MIN_LINE_SAMPLES, MIN_SHADOW_MAP, MIN_SLICES)
-from .model import (INTEGRAND_MODES, METHODS, NORMALS, RELIEF_MODES, SAMPLINGS, SHADOW_FILTERS, SURFACE_SHADOWS,
-                    TEXTURE_WRAPS, TRANSPARENCY_TYPES, TRANSPARENCY_WARPS, TRAVERSALS, Camera, DirectionalLight,
-                    Image, Render, ShadowFilter, Transparency)
+from .model import (INTEGRAND_MODES, METHODS, NORMALS, RELIEF_MODES, SAMPLINGS, SHADOW_FILTERS, STEP_SPACINGS,
+                    SURFACE_SHADOWS, TEXTURE_WRAPS, TRANSPARENCY_TYPES, TRANSPARENCY_WARPS, TRAVERSALS, Camera,
+                    DirectionalLight, Image, Render, ShadowFilter, Transparency)
 from .textures import MAX_TEXTURE_SIDE
 
 FORMAT_VERSION = 1
@@ -317,6 +317,11 @@ RENDER = Section("render", (
           notes="[render.transparency](#rendertransparency): how the camera composites "
                 "[translucent objects](#translucent-objects); a string is its `type`. Read only where an "
                 "object has `opacity` below 1", read_by=("minmax", "raymarch")),
+    Field("step_spacing", "string", Render.step_spacing, choices=STEP_SPACINGS,
+          notes="raymarch: where its `steps` lie along a ray, per point or spot light: `equiangular` at equal "
+                "angles seen from the light, dense where the ray passes it, so the 1/d² peak of a light in view "
+                "converges; `uniform` at equal distances (the marcher before equiangular steps). Directional "
+                "lights always take uniform steps ([docs/design.md](design.md) §4.8)", read_by=("raymarch",)),
 ))
 
 

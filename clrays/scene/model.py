@@ -28,6 +28,9 @@ INTEGRAND_MODES = ("table", "svd", "analytic")
 TRAVERSALS = ("tree", "scan")
 # min-max: in-scattering at samples along epipolar lines, interpolated; or walked for every camera sample.
 SAMPLINGS = ("epipolar", "pixel")
+# raymarch: steps at equal angles seen from a point or spot light (dense where the ray passes
+# it), or at equal distances along the ray. Directional lights always take uniform steps.
+STEP_SPACINGS = ("equiangular", "uniform")
 # Hard surface shadows: shadow rays where the map cannot decide, the map alone, or the map filtered.
 SURFACE_SHADOWS = ("exact", "map", "pcf", "filtered")  # filtered: `render.shadow_filter` decides
 TEXTURE_WRAPS = ("repeat", "clamp")  # a directional light's texture beyond its first tile
@@ -179,6 +182,7 @@ class Render:
     relief: str = "prewarp"  # one of RELIEF_MODES
     translucent_layers: int = 4  # translucent surfaces per light texel, nearest the light first
     transparency: Transparency | None = None  # translucent surfaces: None takes Transparency()'s defaults
+    step_spacing: str = "equiangular"  # raymarch: one of STEP_SPACINGS
 
 
 @dataclass(frozen=True)

@@ -1,9 +1,11 @@
-"""Reference raymarch: in-scattering by `render.steps` uniform samples per camera ray,
-a shadow-map lookup per sample. Host side of `cl/raymarch.cl`."""
+"""Reference raymarch: in-scattering by `render.steps` samples per camera ray and light,
+equiangular about a point or spot light or uniform (`render.step_spacing`), a shadow-map
+lookup per sample. Host side of `cl/raymarch.cl`."""
 from __future__ import annotations
 
 from ..device import Device, StageTimer
 from ..inputs import FrameBuffers
+from ..scene.model import STEP_SPACINGS
 from .raster import RasterResult
 
 
@@ -12,7 +14,11 @@ def raymarch(device: Device, buffers: FrameBuffers, rastered: RasterResult, scat
     """Write every camera sample's in-scattered radiance (float4, rgb) into `scatter`.
     `layers`: the translucency stage's, looked up per step (None: an opaque-only scene)."""
     samples = buffers.inputs.samples
-    defines, extra = (layers.defines(), layers.args()) if layers is not None else (None, ())
+    # STEP_SPACING 0: equiangular, 1: uniform (clrays.structs.STEP_SPACING_*)
+    defines = {"STEP_SPACING": STEP_SPACINGS.index(buffers.inputs.scene.render.step_spacing)}
+    extra = ()
+    if layers is not None:
+        defines, extra = {**defines, **layers.defines()}, layers.args()
     event = device.kernel("raymarch", "raymarch", defines)(
         device.queue, (samples,), None, buffers.params, buffers.views, buffers.lights,
         rastered.shadow_depth, rastered.camera_depth, buffers.offsets, buffers.light_textures, buffers.texels, scatter,
