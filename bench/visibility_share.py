@@ -47,8 +47,8 @@ class _Relabel:
 def _split_bound_map_time() -> None:
     """File the bound map's kernels under `visibility.bound` instead of `visibility`."""
     bound = session_module.visibility_bound
-    session_module.visibility_bound = lambda device, buffers, index, timer: bound(
-        device, buffers, index, _Relabel(timer, "visibility.bound"))
+    session_module.visibility_bound = lambda device, buffers, index, timer, *rest: bound(
+        device, buffers, index, _Relabel(timer, "visibility.bound"), *rest)
 
 
 def main() -> None:

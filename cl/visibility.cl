@@ -5,10 +5,16 @@
  * bound of the depth of every triangle that touches each texel, atomic min), writer (the
  * one triangle that touches each texel, or WRITER_MANY) and the list of triangles whose
  * rectangles the split pass takes (big_items, big_count).
- * visibility reads frame, views, lights, shadow_depth, bound, writer, camera_depth, tri_id,
- * tri_vertices, tri_normal, tri_vertex_normals, offsets, node_bounds, node_children; writes
- * visible (float per sample and light, [sample][light]; 0 where the surface turns away
- * from the light, which shade then weighs by zero). */
+ * visibility_prepare reads frame, views, lights, camera_depth, tri_id, tri_normal,
+ * tri_vertex_normals, offsets, view_rows; writes visible (1 no light reaches the sample, 0
+ * its surface turns away from the light, VISIBILITY_PENDING the map or a ray decides) and
+ * read_spans (per texel row of every view, the first and last texel a pending sample reads;
+ * the bound passes draw only there).
+ * visibility reads frame, views, lights, shadow_depth, bound, writer, view_rows, read_spans,
+ * camera_depth, tri_id, tri_vertices, tri_normal, tri_vertex_normals, offsets, node_bounds,
+ * node_children; writes visible where it is pending (float per sample and light,
+ * [sample][light]; 0 where the surface turns away from the light, which shade then weighs
+ * by zero). */
 #include "lighting.h"
 #include "bvh.h"
 
@@ -18,6 +24,9 @@
 #define SHADOW_RAY_OFFSET_REL 2e-6f
 /* Bounds are shrunk by this relative margin against float32 rounding of the bound itself. */
 #define BOUND_MARGIN_REL 1e-5f
+/* visible's value, between visibility_prepare and visibility, of a sample and light that
+ * the map or a ray decides (never left in it). */
+#define VISIBILITY_PENDING -1.0f
 
 /* Closest point of triangle abc to p (Ericson, Real-Time Collision Detection §5.1.5). */
 inline float3 closest_on_triangle(float3 p, float3 a, float3 b, float3 c)
@@ -188,10 +197,14 @@ inline void note_writer(global int* texel_writer, int tri)
  *     along the texel's cone, bounded by the cone's half-angle ρ: h / cos(max(φ - ρ, 0)));
  *   orthographic: max(nearest vertex, the plane's depth at the texel's nearest corner).
  * A triangle thinner than a texel, which the centre-sampled map may miss, is still here.
- * The same texels get the triangle in the writer map (note_writer). */
+ * The same texels get the triangle in the writer map (note_writer).
+ * With read_spans (span_row ≥ 0: the view's first row there), only the texels of each row
+ * between the first and last one a camera sample reads are drawn: no sample reads the
+ * others (visibility_prepare; visibility casts a ray for a texel outside them). */
 inline void bound_triangle(global const float4* tri_vertices, global const view_t* views, int first_view,
-                           int view_count, global uint* bound, global int* writer, int item, int row_first,
-                           int row_step, int small_rows, global int* big_items, volatile global int* big_count)
+                           int view_count, global uint* bound, global int* writer, global const int2* read_spans,
+                           int span_row, int item, int row_first, int row_step, int small_rows,
+                           global int* big_items, volatile global int* big_count)
 {
     int tri = item / view_count;
     global const view_t* view = views + first_view + item % view_count;
@@ -231,6 +244,14 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
     int x1 = min((int)floor(fmin(hi.x, (float)view->width + 2.0f)) + 1, view->width - 1);
     int y1 = min((int)floor(fmin(hi.y, (float)view->height + 2.0f)) + 1, view->height - 1);
     if (x0 > x1 || y0 + row_first > y1) return; /* outside the view, or no row for this item */
+    if (span_row >= 0 && small_rows > 0) { /* first pass: no sample reads the rectangle, nothing to draw */
+        int read = 0;
+        for (int ty = y0; ty <= y1 && !read; ++ty) {
+            int2 span = read_spans[span_row + ty];
+            read = span.x <= x1 && span.y >= x0;
+        }
+        if (!read) return;
+    }
     if (small_rows > 0 && y1 - y0 + 1 > small_rows) {
         big_items[atomic_inc(big_count)] = item; /* many rows: the split pass takes it */
         return;
@@ -271,6 +292,12 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
     int edges = polygon_edges(corner, corners, edge);
     for (int ty = y0 + row_first; ty <= y1; ty += row_step) {
         int first = x0, last = x1;
+        if (span_row >= 0) {
+            int2 span = read_spans[span_row + ty];
+            first = max(first, span.x);
+            last = min(last, span.y);
+            if (first > last) continue;
+        }
         if (!row_span(edge, edges, ty, &first, &last)) continue;
         float y_centre = (1.0f - (2.0f * (float)ty + 1.0f) * inverse_height) * view->scale_y;
         float row_dot = n_view.z + n_view.y * y_centre, row_length2 = 1.0f + y_centre * y_centre;
@@ -304,23 +331,25 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
  * up to `small_rows` rows at once, listing the others in big_items; visibility_bound_split
  * then spreads each listed rectangle's rows over the global size of its dimension 1. */
 kernel void visibility_bound(global const float4* tri_vertices, int count, global const view_t* views,
-                             int first_view, int view_count, global uint* bound, global int* writer, int small_rows,
-                             global int* big_items, volatile global int* big_count)
+                             int first_view, int view_count, global uint* bound, global int* writer,
+                             global const int2* read_spans, int span_row, int small_rows, global int* big_items,
+                             volatile global int* big_count)
 {
     int item = get_global_id(0);
     if (item >= count * view_count) return;
-    bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, item, 0, 1, small_rows, big_items,
-                   big_count);
+    bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, read_spans, span_row, item, 0, 1,
+                   small_rows, big_items, big_count);
 }
 
 kernel void visibility_bound_split(global const float4* tri_vertices, global const view_t* views, int first_view,
                                    int view_count, global uint* bound, global int* writer,
-                                   global const int* big_items, global const int* big_count)
+                                   global const int2* read_spans, int span_row, global const int* big_items,
+                                   global const int* big_count)
 {
     int index = get_global_id(0);
     if (index >= *big_count) return;
-    bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, big_items[index], get_global_id(1),
-                   get_global_size(1), 0, 0, 0);
+    bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, read_spans, span_row,
+                   big_items[index], get_global_id(1), get_global_size(1), 0, 0, 0);
 }
 
 /* How far the sample's own triangle (plane through p with unit normal n, largest distance
@@ -350,18 +379,23 @@ inline float own_surface_slack(global const light_t* light, global const view_t*
  * the sample's own depth, less what its own surface may have written there (at most the
  * map's bias); or the writer map says no triangle but the sample's own touches that texel.
  * Shadowed: every centre of the 3×3 texels around `lookup` holds a blocker nearer than
- * the bias. */
+ * the bias. A texel the bound passes did not draw (outside its row's read span: only
+ * float32 rounding could put it there) is left to a ray. */
 inline int map_decision(global const light_t* light, global const view_t* views, global const uint* shadow_depth,
-                        global const uint* bound, global const int* writer, float3 start, float3 lookup, float3 n,
+                        global const uint* bound, global const int* writer, global const int* view_rows,
+                        global const int2* read_spans, float3 start, float3 lookup, float3 n,
                         global const float4* tri_vertices, int tri)
 {
-    global const view_t* view = views + light_view_index(light, start);
+    int view_index = light_view_index(light, start);
+    global const view_t* view = views + view_index;
     float2 texel;
     float depth;
     if (!view_project(view, start, &texel, &depth)) return -1;
     if (texel.x < 0.0f || texel.y < 0.0f || texel.x >= (float)view->width || texel.y >= (float)view->height)
         return 1; /* outside the map: no occluder (a map covers every occluder) */
     int tx = (int)texel.x, ty = (int)texel.y;
+    int2 span = read_spans[view_rows[view_index] + ty];
+    if (tx < span.x || tx > span.y) return -1;
     float bound_depth = as_float(bound[view->depth_offset + ty * view->width + tx]);
     if (depth <= bound_depth || writer[view->depth_offset + ty * view->width + tx] == tri) return 1;
     /* Lit when depth ≤ bound + min(bias, slack), both ≥ 0: decided without the slack's
@@ -399,12 +433,57 @@ inline int turned_away(global const float4* tri_normal, global const float4* tri
     return 1;
 }
 
-kernel void visibility(global const frame_t* frame, global const view_t* views, global const light_t* lights,
-                       global const uint* shadow_depth, global const uint* bound, global const int* writer,
-                       global const uint* camera_depth, global const int* tri_id, global const float4* tri_vertices,
-                       global const float4* tri_normal, global const float4* tri_vertex_normals,
-                       global const float2* offsets, global const float4* node_bounds,
-                       global const int2* node_children, int root, global float* visible)
+/* The unit direction from p towards the light, as light_incident gives it. */
+inline float3 light_direction(global const light_t* light, float3 p)
+{
+    if (light->type == LIGHT_DIRECTIONAL) return -light->direction.xyz;
+    float3 w = p - light->position.xyz;
+    float d = sqrt(dot(w, w));
+    return d > 0.0f ? -w / d : (float3)(0.0f, 1.0f, 0.0f);
+}
+
+/* Whether light_incident is non-zero at p (any light arrives), and the direction to the
+ * light. Its three exp() only where they could decide it: a spot's cone and, inside it,
+ * some channel with power ≥ 1e-6, σt·d ≤ 30 and d² ≤ 1e10 is ≥ 1e-29 for sure, a normal
+ * float, so non-zero. */
+inline int light_reaches(global const light_t* light, float3 sigma_t, float3 p, float3* to_light)
+{
+    if (light->type != LIGHT_DIRECTIONAL) {
+        float3 w = p - light->position.xyz;
+        float d2 = dot(w, w);
+        float d = sqrt(d2);
+        float3 power = light->power.xyz, attenuation = sigma_t * d;
+        if (d2 <= 1e10f && ((power.x >= 1e-6f && attenuation.x <= 30.0f) || (power.y >= 1e-6f && attenuation.y <= 30.0f)
+                            || (power.z >= 1e-6f && attenuation.z <= 30.0f))) {
+            *to_light = light_direction(light, p);
+            return !(light->type == LIGHT_SPOT && dot(w, light->direction.xyz) < light->cos_cone * d);
+        }
+    }
+    float3 incident = light_incident(light, sigma_t, p, to_light);
+    return incident.x + incident.y + incident.z != 0.0f;
+}
+
+/* Where the shadow ray leaves: on the light's side of the surface, as the exact
+ * reference's does. */
+inline float3 shadow_ray_start(global const light_t* light, float3 p, float3 n, float3 to_light)
+{
+    float to_light_distance = light->type == LIGHT_DIRECTIONAL ? 0.0f : length(light->position.xyz - p);
+    float3 side = dot(n, to_light) >= 0.0f ? n : -n;
+    return p + side * (SHADOW_RAY_OFFSET_REL * (length(p) + to_light_distance));
+}
+
+/* The part of the decision that needs no bound map, before it is drawn: per sample and
+ * light, 1 where no light arrives (or the eye is in the lamp), 0 where the surface turns
+ * away from the light, else VISIBILITY_PENDING. The texel of the map that the decision
+ * reads for a sample not turned away joins its row's read span (atomic min of the first,
+ * max of the last; read_spans starts as (INT_MAX, -1) per row) whatever the light's power
+ * and the medium: the spans then follow the geometry, the camera and the light's place
+ * alone, which is what a kept bound map is keyed on (clrays/session.py). */
+kernel void visibility_prepare(global const frame_t* frame, global const view_t* views,
+                               global const light_t* lights, global const uint* camera_depth,
+                               global const int* tri_id, global const float4* tri_normal,
+                               global const float4* tri_vertex_normals, global const float2* offsets,
+                               global const int* view_rows, global int* read_spans, global float* visible)
 {
     int sample = get_global_id(0);
     if (sample >= frame->width * frame->height * frame->spp) return;
@@ -415,19 +494,57 @@ kernel void visibility(global const frame_t* frame, global const view_t* views, 
     int tri = tri_id[sample];
     for (int l = 0; l < frame->light_count; ++l) {
         global const light_t* light = lights + l;
-        float3 to_light;
-        float3 incident = light_incident(light, frame->sigma_t.xyz, p, &to_light);
-        if (incident.x + incident.y + incident.z == 0.0f || eye_in_lamp(light, frame->lamp_radius)) continue;
+        float3 to_light = light_direction(light, p);
         if (turned_away(tri_normal, tri_vertex_normals, tri, n, to_light)) {
-            out[l] = 0.0f; /* shade weighs this light by a cosine ≤ 0: no map test, no ray */
+            /* shade weighs this light by a cosine ≤ 0: no map test, no ray */
+            if (!eye_in_lamp(light, frame->lamp_radius) && light_reaches(light, frame->sigma_t.xyz, p, &to_light))
+                out[l] = 0.0f;
             continue;
         }
-        float to_light_distance = light->type == LIGHT_DIRECTIONAL ? 0.0f : length(light->position.xyz - p);
-        /* The ray leaves on the light's side of the surface, as the exact reference's does. */
-        float3 side = dot(n, to_light) >= 0.0f ? n : -n;
-        float3 start = p + side * (SHADOW_RAY_OFFSET_REL * (length(p) + to_light_distance));
+        float3 start = shadow_ray_start(light, p, n, to_light);
+        int view_index = light_view_index(light, start);
+        global const view_t* view = views + view_index;
+        float2 texel;
+        float depth;
+        if (view_project(view, start, &texel, &depth) && texel.x >= 0.0f && texel.y >= 0.0f
+            && texel.x < (float)view->width && texel.y < (float)view->height) { /* else no texel is read */
+            int tx = (int)texel.x;
+            global int* span = read_spans + 2 * (view_rows[view_index] + (int)texel.y);
+            if (tx < span[0]) atomic_min(span, tx); /* the reads spare most atomics */
+            if (tx > span[1]) atomic_max(span + 1, tx);
+        }
+        if (!eye_in_lamp(light, frame->lamp_radius) && light_reaches(light, frame->sigma_t.xyz, p, &to_light))
+            out[l] = VISIBILITY_PENDING;
+    }
+}
+
+/* The rest of the decision, for the pending samples and lights: the map's test on the
+ * bound, writer and shadow maps, else a shadow ray through the BVH. */
+kernel void visibility(global const frame_t* frame, global const view_t* views, global const light_t* lights,
+                       global const uint* shadow_depth, global const uint* bound, global const int* writer,
+                       global const int* view_rows, global const int2* read_spans,
+                       global const uint* camera_depth, global const int* tri_id, global const float4* tri_vertices,
+                       global const float4* tri_normal, global const float2* offsets,
+                       global const float4* node_bounds, global const int2* node_children, int root,
+                       global float* visible)
+{
+    int sample = get_global_id(0);
+    if (sample >= frame->width * frame->height * frame->spp) return;
+    global float* out = visible + sample * frame->light_count;
+    int pending = 0;
+    for (int l = 0; l < frame->light_count; ++l) pending |= out[l] == VISIBILITY_PENDING;
+    if (!pending) return;
+    float3 p, dir, n;
+    camera_surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p, &dir, &n);
+    int tri = tri_id[sample];
+    for (int l = 0; l < frame->light_count; ++l) {
+        if (out[l] != VISIBILITY_PENDING) continue;
+        global const light_t* light = lights + l;
+        float3 to_light = light_direction(light, p);
+        float3 start = shadow_ray_start(light, p, n, to_light);
         float3 lookup = p + n * shadow_texel_size(light, length(p - light->position.xyz));
-        int decided = map_decision(light, views, shadow_depth, bound, writer, start, lookup, n, tri_vertices, tri);
+        int decided = map_decision(light, views, shadow_depth, bound, writer, view_rows, read_spans, start, lookup, n,
+                                   tri_vertices, tri);
         if (decided >= 0) {
             out[l] = (float)decided;
             continue;

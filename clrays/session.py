@@ -60,7 +60,8 @@ from .stages.translucency import (opaque_occluder_buffers, rectify_layers, refus
 from .stages.transparency import (Films, composite, opaque_camera_vertices, translucent_films, translucent_triangles,
                                   transparency_of)
 from .stages.volume_moments import volume_moments
-from .stages.visibility import bound_atlas, bvh_topology_of, upload_bvh, visibility, visibility_bound
+from .stages.visibility import (bound_atlas, bvh_topology_of, upload_bvh, visibility, visibility_bound,
+                                visibility_prepare)
 
 #: The rectified texture of a light whose shadow map is empty (nothing casts a shadow)
 #: is π everywhere whatever its size, so it is built at this size (the minimum).
@@ -261,13 +262,17 @@ class Renderer:
         if scene.render.surface_shadows != "exact" or not scene.lights:
             return None
         device = self.device
-        bounds = [reuse.keep("visibility.bound", digest("bound", keys.shadow[index]),
-                             lambda index=index: visibility_bound(device, buffers, index, timer), per_light=True)
+        # The bound maps are drawn only where the camera's samples read them: kept while the
+        # light's shadow map and the camera samples are.
+        prepared = visibility_prepare(device, buffers, rastered, timer)
+        bounds = [reuse.keep("visibility.bound", digest("bound", keys.shadow[index], keys.camera),
+                             lambda index=index: visibility_bound(device, buffers, index, timer, prepared),
+                             per_light=True)
                   for index in range(len(scene.lights))]
-        atlas = reuse.keep("bound_atlas", digest("bound", tuple(keys.shadow)),
+        atlas = reuse.keep("bound_atlas", digest("bound", tuple(keys.shadow), keys.camera),
                            lambda: bound_atlas(device, buffers, bounds))
         reuse.record.note("visibility", COMPUTED)
-        return visibility(device, buffers, rastered, atlas, bvh, timer)
+        return visibility(device, buffers, rastered, prepared, atlas, bvh, timer)
 
     def _shadow_filter(self, buffers: FrameBuffers, rastered: RasterResult, keys: StageKeys, reuse: Reuse,
                        timer: StageTimer):

@@ -65,6 +65,37 @@ def upload_bvh(device: Device, inputs: FrameInputs, topology: BvhTopology, timer
 
 
 @dataclass
+class Prepared:
+    """visibility_prepare's answers: each sample's and light's visibility where it needs no
+    map (the others pending), and per texel row of every shadow-map view, the first and
+    last texel that the pending samples read (the bound passes draw only those)."""
+
+    visible: object  # float[samples × lights]: 1, 0 or pending (cl/visibility.cl VISIBILITY_PENDING)
+    read_spans: object  # int2 per texel row of the frame's views 1..: (first, last), (INT_MAX, -1) when none
+    view_rows: object  # int per view: its first row in read_spans (-1: the camera)
+    first_row: np.ndarray  # the same, on the host
+
+
+def visibility_prepare(device: Device, buffers: FrameBuffers, rastered: RasterResult, timer: StageTimer) -> Prepared:
+    """The part of the decision that needs no bound map: no light, turned away or pending,
+    and the texels that the pending samples will read, as row spans."""
+    inputs = buffers.inputs
+    heights = inputs.views["height"].astype(np.int64)
+    first_row = np.concatenate([[-1, 0], np.cumsum(heights[1:])[:-1]]).astype(np.int32)
+    rows = max(int(heights[1:].sum()), 1)
+    read_spans = device.buffer(nbytes=8 * rows)
+    device.fill(read_spans, np.array([np.iinfo(np.int32).max, -1], np.int32), 8 * rows, timer, "visibility")
+    view_rows = device.buffer(first_row, writable=False)
+    lights = max(len(inputs.scene.lights), 1)
+    visible = device.buffer(nbytes=4 * inputs.samples * lights)
+    timer.add("visibility", device.kernel("visibility", "visibility_prepare")(
+        device.queue, (inputs.samples,), None, buffers.params, buffers.views, buffers.lights, rastered.camera_depth,
+        rastered.tri_id, buffers.tri_normal, buffers.tri_vertex_normals, buffers.offsets, view_rows, read_spans,
+        visible))
+    return Prepared(visible, read_spans, view_rows, first_row)
+
+
+@dataclass
 class BoundMap:
     """A light's (or every light's, back to back) bound and writer maps, texel for texel
     the layout of its shadow map."""
@@ -74,9 +105,12 @@ class BoundMap:
     texels: int
 
 
-def visibility_bound(device: Device, buffers: FrameBuffers, light_index: int, timer: StageTimer) -> BoundMap:
+def visibility_bound(device: Device, buffers: FrameBuffers, light_index: int, timer: StageTimer,
+                     prepared: Prepared | None = None) -> BoundMap:
     """One light's bound and writer maps, in the light-anchored space of its shadow map
-    (clrays.inputs.light_pass_inputs), so the depths match."""
+    (clrays.inputs.light_pass_inputs), so the depths match. With `prepared`, only the
+    texels in its read spans are drawn (the others hold no value); without, every texel."""
+    first_view = buffers.inputs.light_views[light_index][0]
     inputs = light_pass_inputs(buffers.inputs, light_index)
     texels = max(inputs.shadow_texels, 1)
     bound = device.buffer(nbytes=4 * texels)
@@ -89,21 +123,24 @@ def visibility_bound(device: Device, buffers: FrameBuffers, light_index: int, ti
         views = device.buffer(inputs.views, writable=False)
         big_items = device.buffer(nbytes=4 * count)
         big_count = device.buffer(nbytes=4)
+        read_spans = prepared.read_spans if prepared is not None else device.buffer(nbytes=8)
         first_pass = device.kernel("visibility", "visibility_bound")
         split_pass = device.kernel("visibility", "visibility_bound_split")
         # Only the cube faces the frame can read (`view_needed`, as raster.shadow does): no
         # sample projects into the others, so their texels are never asked for.
         for view in np.flatnonzero(inputs.view_needed[1:]) + 1:
+            # its first row in the read spans (the frame's view first_view + view - 1), or -1: all
+            span_row = np.int32(prepared.first_row[first_view + view - 1] if prepared is not None else -1)
             device.fill(big_count, np.int32(0), 4, timer, "visibility")
             timer.add("visibility", first_pass(
                 device.queue, (count,), None, vertices, np.int32(count), views, np.int32(view), np.int32(1), bound,
-                writer, np.int32(BOUND_SMALL_ROWS), big_items, big_count))
+                writer, read_spans, span_row, np.int32(BOUND_SMALL_ROWS), big_items, big_count))
             listed = int(device.read(big_count, 1, np.int32)[0])
             if listed:
                 nearest_first(device, big_items, listed, inputs, view)
                 timer.add("visibility", split_pass(
                     device.queue, (listed, BOUND_ROW_SPLIT), None, vertices, views, np.int32(view), np.int32(1),
-                    bound, writer, big_items, big_count))
+                    bound, writer, read_spans, span_row, big_items, big_count))
     return BoundMap(bound, writer, inputs.shadow_texels)
 
 
@@ -135,16 +172,15 @@ def bound_atlas(device: Device, buffers: FrameBuffers, bounds: list[BoundMap]) -
     return atlas
 
 
-def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, bound: BoundMap, bvh: DeviceBvh,
-               timer: StageTimer):
-    """float[samples × lights]: 1 where the sample sees the light, 0 where it does not."""
+def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, prepared: Prepared, bound: BoundMap,
+               bvh: DeviceBvh, timer: StageTimer):
+    """float[samples × lights]: 1 where the sample sees the light, 0 where it does not
+    (`prepared.visible`, its pending entries decided)."""
     inputs = buffers.inputs
-    lights = max(len(inputs.scene.lights), 1)
-    visible = device.buffer(nbytes=4 * inputs.samples * lights)
     event = device.kernel("visibility", "visibility")(
         device.queue, (inputs.samples,), None, buffers.params, buffers.views, buffers.lights,
-        rastered.shadow_depth, bound.bound, bound.writer, rastered.camera_depth, rastered.tri_id,
-        buffers.tri_vertices, buffers.tri_normal, buffers.tri_vertex_normals, buffers.offsets, bvh.node_bounds,
-        bvh.node_children, np.int32(bvh.root), visible)
+        rastered.shadow_depth, bound.bound, bound.writer, prepared.view_rows, prepared.read_spans,
+        rastered.camera_depth, rastered.tri_id, buffers.tri_vertices, buffers.tri_normal, buffers.offsets,
+        bvh.node_bounds, bvh.node_children, np.int32(bvh.root), prepared.visible)
     timer.add("visibility", event)
-    return visible
+    return prepared.visible
