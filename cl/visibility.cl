@@ -5,16 +5,16 @@
  * bound of the depth of every triangle that touches each texel, atomic min), writer (the
  * one triangle that touches each texel, or WRITER_MANY) and the list of triangles whose
  * rectangles the split pass takes (big_items, big_count).
- * visibility_prepare reads frame, views, lights, camera_depth, tri_id, tri_normal,
- * tri_vertex_normals, offsets, view_rows; writes visible (1 no light reaches the sample, 0
- * its surface turns away from the light, VISIBILITY_PENDING the map or a ray decides) and
- * read_spans (per texel row of every view, the first and last texel a pending sample reads;
- * the bound passes draw only there).
- * visibility reads frame, views, lights, shadow_depth, bound, writer, view_rows, read_spans,
- * camera_depth, tri_id, tri_vertices, tri_normal, tri_vertex_normals, offsets, node_bounds,
- * node_children; writes visible where it is pending (float per sample and light,
- * [sample][light]; 0 where the surface turns away from the light, which shade then weighs
- * by zero). */
+ * visibility_prepare reads frame, views, lights, shadow_depth, camera_depth, tri_id,
+ * tri_normal, tri_vertex_normals, offsets, view_rows; writes visible (1 no light reaches the
+ * sample, 0 its surface turns away from the light, else pending: the maps or a ray
+ * decide), map_read (per pending sample and light, the bound map's texel its lit test
+ * reads and its depth there) and read_spans (per texel row of every view, the first and
+ * last texel read: the bound passes draw only there).
+ * visibility reads frame, views, lights, bound, writer, map_read, camera_depth, tri_id,
+ * tri_vertices, tri_normal, offsets, node_bounds, node_children; writes visible where it
+ * is pending (float per sample and light, [sample][light]; 0 where the surface turns away
+ * from the light, which shade then weighs by zero). */
 #include "lighting.h"
 #include "bvh.h"
 
@@ -24,9 +24,15 @@
 #define SHADOW_RAY_OFFSET_REL 2e-6f
 /* Bounds are shrunk by this relative margin against float32 rounding of the bound itself. */
 #define BOUND_MARGIN_REL 1e-5f
-/* visible's value, between visibility_prepare and visibility, of a sample and light that
- * the map or a ray decides (never left in it). */
+/* visible's values, between visibility_prepare and visibility, of a sample and light that
+ * the map or a ray decides (never left in it): the 3 × 3 test around the lookup point
+ * says it is shadowed (PENDING_DARK) or cannot say (PENDING). */
 #define VISIBILITY_PENDING -1.0f
+#define VISIBILITY_PENDING_DARK -2.0f
+/* map_read's texel, between the two: the address of the texel of the bound and writer
+ * maps that decides the lit test, or one of these. */
+#define MAP_TEXEL_OUTSIDE -1 /* the point projects outside the map: lit (a map covers every occluder) */
+#define MAP_TEXEL_NONE -2    /* behind a perspective view: a ray decides */
 
 /* Closest point of triangle abc to p (Ericson, Real-Time Collision Detection §5.1.5). */
 inline float3 closest_on_triangle(float3 p, float3 a, float3 b, float3 c)
@@ -374,46 +380,22 @@ inline float own_surface_slack(global const light_t* light, global const view_t*
     return depth - nearest + margin;
 }
 
-/* How the map decides one sample: 1 lit, 0 shadowed, -1 undecided (cast a ray).
- * Lit: the bound map says no triangle in the texel of `start` comes nearer the light than
- * the sample's own depth, less what its own surface may have written there (at most the
- * map's bias); or the writer map says no triangle but the sample's own touches that texel.
- * Shadowed: every centre of the 3×3 texels around `lookup` holds a blocker nearer than
- * the bias. A texel the bound passes did not draw (outside its row's read span: only
- * float32 rounding could put it there) is left to a ray. */
-inline int map_decision(global const light_t* light, global const view_t* views, global const uint* shadow_depth,
-                        global const uint* bound, global const int* writer, global const int* view_rows,
-                        global const int2* read_spans, float3 start, float3 lookup, float3 n,
-                        global const float4* tri_vertices, int tri)
+/* Whether the map says the sample is shadowed: every centre of the 3×3 texels around
+ * `lookup` holds a blocker nearer than the bias (a hole smaller than a texel in an
+ * occluder is missed here, the map's one approximation). */
+inline int blocked_all_around(global const light_t* light, global const view_t* views,
+                              global const uint* shadow_depth, float3 lookup)
 {
-    int view_index = light_view_index(light, start);
-    global const view_t* view = views + view_index;
+    global const view_t* view = views + light_view_index(light, lookup);
     float2 texel;
     float depth;
-    if (!view_project(view, start, &texel, &depth)) return -1;
-    if (texel.x < 0.0f || texel.y < 0.0f || texel.x >= (float)view->width || texel.y >= (float)view->height)
-        return 1; /* outside the map: no occluder (a map covers every occluder) */
-    int tx = (int)texel.x, ty = (int)texel.y;
-    int2 span = read_spans[view_rows[view_index] + ty];
-    if (tx < span.x || tx > span.y) return -1;
-    float bound_depth = as_float(bound[view->depth_offset + ty * view->width + tx]);
-    if (depth <= bound_depth || writer[view->depth_offset + ty * view->width + tx] == tri) return 1;
-    /* Lit when depth ≤ bound + min(bias, slack), both ≥ 0: decided without the slack's
-     * trigonometry at either end (same answer as computing it first). */
-    if (depth <= bound_depth + SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth)) {
-        float reach = 0.0f; /* of the sample's triangle from the view's origin */
-        for (int k = 0; k < 3; ++k) reach = fmax(reach, length(tri_vertices[3 * tri + k].xyz - view->origin.xyz));
-        if (depth <= bound_depth + own_surface_slack(light, view, start, n, depth, reach)) return 1;
-    }
-    view = views + light_view_index(light, lookup);
-    if (!view_project(view, lookup, &texel, &depth)) return -1;
+    if (!view_project(view, lookup, &texel, &depth)) return 0;
     float tolerance = SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth);
-    tx = (int)texel.x;
-    ty = (int)texel.y;
+    int tx = (int)texel.x, ty = (int)texel.y;
     for (int j = -1; j <= 1; ++j)
         for (int i = -1; i <= 1; ++i)
-            if (depth <= shadow_texel(view, shadow_depth, tx + i, ty + j) + tolerance) return -1;
-    return 0;
+            if (depth <= shadow_texel(view, shadow_depth, tx + i, ty + j) + tolerance) return 0;
+    return 1;
 }
 
 /* Whether shade's cosine for this light is ≤ 0 wherever the sample lies on its triangle,
@@ -473,17 +455,21 @@ inline float3 shadow_ray_start(global const light_t* light, float3 p, float3 n, 
 }
 
 /* The part of the decision that needs no bound map, before it is drawn: per sample and
- * light, 1 where no light arrives (or the eye is in the lamp), 0 where the surface turns
- * away from the light, else VISIBILITY_PENDING. The texel of the map that the decision
- * reads for a sample not turned away joins its row's read span (atomic min of the first,
- * max of the last; read_spans starts as (INT_MAX, -1) per row) whatever the light's power
- * and the medium: the spans then follow the geometry, the camera and the light's place
- * alone, which is what a kept bound map is keyed on (clrays/session.py). */
+ * light, visible gets 1 where no light arrives (or the eye is in the lamp), 0 where the
+ * surface turns away from the light, else VISIBILITY_PENDING or _PENDING_DARK (the 3 × 3
+ * test); map_read gets the texel of the bound and writer maps that the lit test reads
+ * (the point the shadow ray leaves from, projected: MAP_TEXEL_* or its address) and the
+ * point's depth there. That texel joins its row's read span (atomic min of the first, max
+ * of the last; read_spans starts as (INT_MAX, -1) per row) for every sample not turned
+ * away, whatever the light's power and the medium: the spans then follow the geometry,
+ * the camera and the light's place alone, which is what a kept bound map is keyed on
+ * (clrays/session.py). */
 kernel void visibility_prepare(global const frame_t* frame, global const view_t* views,
-                               global const light_t* lights, global const uint* camera_depth,
-                               global const int* tri_id, global const float4* tri_normal,
-                               global const float4* tri_vertex_normals, global const float2* offsets,
-                               global const int* view_rows, global int* read_spans, global float* visible)
+                               global const light_t* lights, global const uint* shadow_depth,
+                               global const uint* camera_depth, global const int* tri_id,
+                               global const float4* tri_normal, global const float4* tri_vertex_normals,
+                               global const float2* offsets, global const int* view_rows, global int* read_spans,
+                               global float* visible, global int2* map_read)
 {
     int sample = get_global_id(0);
     if (sample >= frame->width * frame->height * frame->spp) return;
@@ -495,34 +481,42 @@ kernel void visibility_prepare(global const frame_t* frame, global const view_t*
     for (int l = 0; l < frame->light_count; ++l) {
         global const light_t* light = lights + l;
         float3 to_light = light_direction(light, p);
+        int reaches = !eye_in_lamp(light, frame->lamp_radius) && light_reaches(light, frame->sigma_t.xyz, p, &to_light);
         if (turned_away(tri_normal, tri_vertex_normals, tri, n, to_light)) {
-            /* shade weighs this light by a cosine ≤ 0: no map test, no ray */
-            if (!eye_in_lamp(light, frame->lamp_radius) && light_reaches(light, frame->sigma_t.xyz, p, &to_light))
-                out[l] = 0.0f;
+            if (reaches) out[l] = 0.0f; /* shade weighs this light by a cosine ≤ 0: no map test, no ray */
             continue;
         }
         float3 start = shadow_ray_start(light, p, n, to_light);
         int view_index = light_view_index(light, start);
         global const view_t* view = views + view_index;
         float2 texel;
-        float depth;
-        if (view_project(view, start, &texel, &depth) && texel.x >= 0.0f && texel.y >= 0.0f
-            && texel.x < (float)view->width && texel.y < (float)view->height) { /* else no texel is read */
-            int tx = (int)texel.x;
-            global int* span = read_spans + 2 * (view_rows[view_index] + (int)texel.y);
-            if (tx < span[0]) atomic_min(span, tx); /* the reads spare most atomics */
-            if (tx > span[1]) atomic_max(span + 1, tx);
+        float depth = 0.0f;
+        int address = MAP_TEXEL_NONE;
+        if (view_project(view, start, &texel, &depth)) {
+            address = MAP_TEXEL_OUTSIDE;
+            if (texel.x >= 0.0f && texel.y >= 0.0f && texel.x < (float)view->width && texel.y < (float)view->height) {
+                int tx = (int)texel.x, ty = (int)texel.y;
+                address = view->depth_offset + ty * view->width + tx;
+                global int* span = read_spans + 2 * (view_rows[view_index] + ty);
+                if (tx < span[0]) atomic_min(span, tx); /* the reads spare most atomics */
+                if (tx > span[1]) atomic_max(span + 1, tx);
+            }
         }
-        if (!eye_in_lamp(light, frame->lamp_radius) && light_reaches(light, frame->sigma_t.xyz, p, &to_light))
-            out[l] = VISIBILITY_PENDING;
+        if (!reaches) continue;
+        map_read[sample * frame->light_count + l] = (int2)(address, as_int(depth));
+        float3 lookup = p + n * shadow_texel_size(light, length(p - light->position.xyz));
+        out[l] = address >= 0 && blocked_all_around(light, views, shadow_depth, lookup) ? VISIBILITY_PENDING_DARK
+                                                                                       : VISIBILITY_PENDING;
     }
 }
 
-/* The rest of the decision, for the pending samples and lights: the map's test on the
- * bound, writer and shadow maps, else a shadow ray through the BVH. */
+/* The rest of the decision, for the pending samples and lights. Lit: the bound map says no
+ * triangle in the texel comes nearer the light than the sample's own depth, less what its
+ * own surface may have written there (at most the map's bias); or the writer map says no
+ * triangle but the sample's own touches that texel. Shadowed: the 3 × 3 test (pending
+ * dark). Otherwise a shadow ray through the BVH. */
 kernel void visibility(global const frame_t* frame, global const view_t* views, global const light_t* lights,
-                       global const uint* shadow_depth, global const uint* bound, global const int* writer,
-                       global const int* view_rows, global const int2* read_spans,
+                       global const uint* bound, global const int* writer, global const int2* map_read,
                        global const uint* camera_depth, global const int* tri_id, global const float4* tri_vertices,
                        global const float4* tri_normal, global const float2* offsets,
                        global const float4* node_bounds, global const int2* node_children, int root,
@@ -531,24 +525,41 @@ kernel void visibility(global const frame_t* frame, global const view_t* views, 
     int sample = get_global_id(0);
     if (sample >= frame->width * frame->height * frame->spp) return;
     global float* out = visible + sample * frame->light_count;
-    int pending = 0;
-    for (int l = 0; l < frame->light_count; ++l) pending |= out[l] == VISIBILITY_PENDING;
-    if (!pending) return;
-    float3 p, dir, n;
-    camera_surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p, &dir, &n);
     int tri = tri_id[sample];
+    float3 p, dir, n;
+    int surface = 0; /* p and n worked out: only for the own surface's slack and for rays */
     for (int l = 0; l < frame->light_count; ++l) {
-        if (out[l] != VISIBILITY_PENDING) continue;
+        if (out[l] >= 0.0f) continue; /* decided before the maps */
         global const light_t* light = lights + l;
-        float3 to_light = light_direction(light, p);
-        float3 start = shadow_ray_start(light, p, n, to_light);
-        float3 lookup = p + n * shadow_texel_size(light, length(p - light->position.xyz));
-        int decided = map_decision(light, views, shadow_depth, bound, writer, view_rows, read_spans, start, lookup, n,
-                                   tri_vertices, tri);
+        int2 read = map_read[sample * frame->light_count + l];
+        int decided = read.x == MAP_TEXEL_OUTSIDE ? 1 : -1;
+        if (read.x >= 0) {
+            float depth = as_float(read.y), bound_depth = as_float(bound[read.x]);
+            if (depth <= bound_depth || writer[read.x] == tri) {
+                decided = 1;
+            } else if (depth <= bound_depth + SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth)) {
+                /* Lit when depth ≤ bound + min(bias, slack), both ≥ 0: the slack's
+                 * trigonometry only here (same answer as computing it first). */
+                if (!surface)
+                    surface = camera_surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p,
+                                                   &dir, &n);
+                float3 start = shadow_ray_start(light, p, n, light_direction(light, p));
+                global const view_t* view = views + light_view_index(light, start);
+                float reach = 0.0f; /* of the sample's triangle from the view's origin */
+                for (int k = 0; k < 3; ++k)
+                    reach = fmax(reach, length(tri_vertices[3 * tri + k].xyz - view->origin.xyz));
+                if (depth <= bound_depth + own_surface_slack(light, view, start, n, depth, reach)) decided = 1;
+            }
+            if (decided < 0 && out[l] == VISIBILITY_PENDING_DARK) decided = 0;
+        }
         if (decided >= 0) {
             out[l] = (float)decided;
             continue;
         }
+        if (!surface)
+            surface = camera_surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p, &dir, &n);
+        float3 to_light = light_direction(light, p);
+        float3 start = shadow_ray_start(light, p, n, to_light);
         float3 ray = light->type == LIGHT_DIRECTIONAL ? to_light : light->position.xyz - start;
         float t_max = light->type == LIGHT_DIRECTIONAL ? INFINITY : 1.0f;
         out[l] = bvh_occluded(node_bounds, node_children, root, tri_vertices, start, ray, 0.0f, t_max, tri)

@@ -66,33 +66,35 @@ def upload_bvh(device: Device, inputs: FrameInputs, topology: BvhTopology, timer
 
 @dataclass
 class Prepared:
-    """visibility_prepare's answers: each sample's and light's visibility where it needs no
-    map (the others pending), and per texel row of every shadow-map view, the first and
-    last texel that the pending samples read (the bound passes draw only those)."""
+    """visibility_prepare's answers, before the bound maps: each sample's and light's
+    visibility where it needs no map (1 no light, 0 turned away, else pending), the
+    texel of the bound and writer maps that a pending one's lit test reads, and per
+    texel row of every shadow-map view the first and last texel read (the bound passes
+    draw only those)."""
 
-    visible: object  # float[samples × lights]: 1, 0 or pending (cl/visibility.cl VISIBILITY_PENDING)
+    visible: object  # float[samples × lights]: 1, 0 or pending (cl/visibility.cl VISIBILITY_PENDING*)
+    map_read: object  # int2[samples × lights]: texel address (or MAP_TEXEL_*), as_int(depth)
     read_spans: object  # int2 per texel row of the frame's views 1..: (first, last), (INT_MAX, -1) when none
-    view_rows: object  # int per view: its first row in read_spans (-1: the camera)
-    first_row: np.ndarray  # the same, on the host
+    first_row: np.ndarray  # int per view: its first row in read_spans (-1: the camera)
 
 
 def visibility_prepare(device: Device, buffers: FrameBuffers, rastered: RasterResult, timer: StageTimer) -> Prepared:
-    """The part of the decision that needs no bound map: no light, turned away or pending,
-    and the texels that the pending samples will read, as row spans."""
+    """The part of the decision that needs no bound map: no light, turned away, or pending
+    with the 3 × 3 test's answer, and the texels that the pending samples will read."""
     inputs = buffers.inputs
     heights = inputs.views["height"].astype(np.int64)
     first_row = np.concatenate([[-1, 0], np.cumsum(heights[1:])[:-1]]).astype(np.int32)
     rows = max(int(heights[1:].sum()), 1)
     read_spans = device.buffer(nbytes=8 * rows)
     device.fill(read_spans, np.array([np.iinfo(np.int32).max, -1], np.int32), 8 * rows, timer, "visibility")
-    view_rows = device.buffer(first_row, writable=False)
     lights = max(len(inputs.scene.lights), 1)
     visible = device.buffer(nbytes=4 * inputs.samples * lights)
+    map_read = device.buffer(nbytes=8 * inputs.samples * lights)
     timer.add("visibility", device.kernel("visibility", "visibility_prepare")(
-        device.queue, (inputs.samples,), None, buffers.params, buffers.views, buffers.lights, rastered.camera_depth,
-        rastered.tri_id, buffers.tri_normal, buffers.tri_vertex_normals, buffers.offsets, view_rows, read_spans,
-        visible))
-    return Prepared(visible, read_spans, view_rows, first_row)
+        device.queue, (inputs.samples,), None, buffers.params, buffers.views, buffers.lights, rastered.shadow_depth,
+        rastered.camera_depth, rastered.tri_id, buffers.tri_normal, buffers.tri_vertex_normals, buffers.offsets,
+        device.buffer(first_row, writable=False), read_spans, visible, map_read))
+    return Prepared(visible, map_read, read_spans, first_row)
 
 
 @dataclass
@@ -178,9 +180,8 @@ def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, pr
     (`prepared.visible`, its pending entries decided)."""
     inputs = buffers.inputs
     event = device.kernel("visibility", "visibility")(
-        device.queue, (inputs.samples,), None, buffers.params, buffers.views, buffers.lights,
-        rastered.shadow_depth, bound.bound, bound.writer, prepared.view_rows, prepared.read_spans,
-        rastered.camera_depth, rastered.tri_id, buffers.tri_vertices, buffers.tri_normal, buffers.offsets,
-        bvh.node_bounds, bvh.node_children, np.int32(bvh.root), prepared.visible)
+        device.queue, (inputs.samples,), None, buffers.params, buffers.views, buffers.lights, bound.bound,
+        bound.writer, prepared.map_read, rastered.camera_depth, rastered.tri_id, buffers.tri_vertices,
+        buffers.tri_normal, buffers.offsets, bvh.node_bounds, bvh.node_children, np.int32(bvh.root), prepared.visible)
     timer.add("visibility", event)
     return prepared.visible
