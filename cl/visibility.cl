@@ -9,8 +9,8 @@
  * tri_normal, tri_vertex_normals, offsets, view_rows; writes visible (1 no light reaches the
  * sample, 0 its surface turns away from the light, else pending: the maps or a ray
  * decide), map_read (per pending sample and light, the bound map's texel its lit test
- * reads and its depth there) and read_spans (per texel row of every view, the first and
- * last texel read: the bound passes draw only there).
+ * reads and its depth there), read_spans (per texel row of every view, the first and last
+ * texel read) and read_mask (a bit per texel read): the bound passes draw only those.
  * visibility reads frame, views, lights, bound, writer, map_read, camera_depth, tri_id,
  * tri_vertices, tri_normal, offsets, node_bounds, node_children; writes visible where it
  * is pending (float per sample and light, [sample][light]; 0 where the surface turns away
@@ -196,6 +196,12 @@ inline void note_writer(global int* texel_writer, int tri)
     if (before != WRITER_NONE && before != tri) atomic_xchg(texel_writer, WRITER_MANY);
 }
 
+/* Whether a camera sample's lit test reads the texel at this address (its bit in read_mask). */
+inline int texel_read(global const uint* read_mask, int address)
+{
+    return (read_mask[address >> 5] >> (address & 31)) & 1u;
+}
+
 /* The conservative bound map: every texel a triangle may touch (per row, the span whose
  * squares, grown by COVER_GROWTH, meet the projection of its part inside the frustum)
  * gets a depth no larger than the triangle's nearest point inside that texel's footprint:
@@ -204,13 +210,14 @@ inline void note_writer(global int* texel_writer, int tri)
  *   orthographic: max(nearest vertex, the plane's depth at the texel's nearest corner).
  * A triangle thinner than a texel, which the centre-sampled map may miss, is still here.
  * The same texels get the triangle in the writer map (note_writer).
- * With read_spans (span_row ≥ 0: the view's first row there), only the texels of each row
- * between the first and last one a camera sample reads are drawn: no sample reads the
- * others (visibility_prepare; visibility casts a ray for a texel outside them). */
+ * With read_spans (span_row ≥ 0: the view's first row there), only the texels that a
+ * camera sample's lit test reads are drawn (visibility_prepare): each row between its
+ * spans's first and last, and there those whose bit read_mask has (at the texel's address
+ * + mask_offset, the frame's address of this view's texel). No sample reads the others. */
 inline void bound_triangle(global const float4* tri_vertices, global const view_t* views, int first_view,
                            int view_count, global uint* bound, global int* writer, global const int2* read_spans,
-                           int span_row, int item, int row_first, int row_step, int small_rows,
-                           global int* big_items, volatile global int* big_count)
+                           int span_row, global const uint* read_mask, int mask_offset, int item, int row_first,
+                           int row_step, int small_rows, global int* big_items, volatile global int* big_count)
 {
     int tri = item / view_count;
     global const view_t* view = views + first_view + item % view_count;
@@ -251,10 +258,13 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
     int y1 = min((int)floor(fmin(hi.y, (float)view->height + 2.0f)) + 1, view->height - 1);
     if (x0 > x1 || y0 + row_first > y1) return; /* outside the view, or no row for this item */
     if (span_row >= 0 && small_rows > 0) { /* first pass: no sample reads the rectangle, nothing to draw */
+        int small = y1 - y0 + 1 <= small_rows; /* its texels' bits; a taller one, the spans only */
         int read = 0;
         for (int ty = y0; ty <= y1 && !read; ++ty) {
             int2 span = read_spans[span_row + ty];
-            read = span.x <= x1 && span.y >= x0;
+            int row = mask_offset + view->depth_offset + ty * view->width;
+            for (int tx = max(x0, span.x); tx <= min(x1, span.y) && !read; ++tx)
+                read = !small || texel_read(read_mask, row + tx);
         }
         if (!read) return;
     }
@@ -310,6 +320,8 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
         float y_corner = (1.0f - 2.0f * (float)(ty + corner_y) * inverse_height) * view->scale_y;
         float row_plane = plane - n_view.y * y_corner;
         for (int tx = first; tx <= last; ++tx) {
+            if (span_row >= 0 && !texel_read(read_mask, mask_offset + view->depth_offset + ty * view->width + tx))
+                continue;
             note_writer(writer + view->depth_offset + ty * view->width + tx, tri);
             if (bound[view->depth_offset + ty * view->width + tx] <= floor_bits) continue;
             float depth = nearest;
@@ -338,24 +350,24 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
  * then spreads each listed rectangle's rows over the global size of its dimension 1. */
 kernel void visibility_bound(global const float4* tri_vertices, int count, global const view_t* views,
                              int first_view, int view_count, global uint* bound, global int* writer,
-                             global const int2* read_spans, int span_row, int small_rows, global int* big_items,
-                             volatile global int* big_count)
+                             global const int2* read_spans, int span_row, global const uint* read_mask,
+                             int mask_offset, int small_rows, global int* big_items, volatile global int* big_count)
 {
     int item = get_global_id(0);
     if (item >= count * view_count) return;
-    bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, read_spans, span_row, item, 0, 1,
-                   small_rows, big_items, big_count);
+    bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, read_spans, span_row, read_mask,
+                   mask_offset, item, 0, 1, small_rows, big_items, big_count);
 }
 
 kernel void visibility_bound_split(global const float4* tri_vertices, global const view_t* views, int first_view,
                                    int view_count, global uint* bound, global int* writer,
-                                   global const int2* read_spans, int span_row, global const int* big_items,
-                                   global const int* big_count)
+                                   global const int2* read_spans, int span_row, global const uint* read_mask,
+                                   int mask_offset, global const int* big_items, global const int* big_count)
 {
     int index = get_global_id(0);
     if (index >= *big_count) return;
-    bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, read_spans, span_row,
-                   big_items[index], get_global_id(1), get_global_size(1), 0, 0, 0);
+    bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, read_spans, span_row, read_mask,
+                   mask_offset, big_items[index], get_global_id(1), get_global_size(1), 0, 0, 0);
 }
 
 /* How far the sample's own triangle (plane through p with unit normal n, largest distance
@@ -460,7 +472,8 @@ inline float3 shadow_ray_start(global const light_t* light, float3 p, float3 n, 
  * test); map_read gets the texel of the bound and writer maps that the lit test reads
  * (the point the shadow ray leaves from, projected: MAP_TEXEL_* or its address) and the
  * point's depth there. That texel joins its row's read span (atomic min of the first, max
- * of the last; read_spans starts as (INT_MAX, -1) per row) for every sample not turned
+ * of the last; read_spans starts as (INT_MAX, -1) per row) and gets its bit in read_mask
+ * (atomic or; 32 texels a word, by address; starts at 0) for every sample not turned
  * away, whatever the light's power and the medium: the spans then follow the geometry,
  * the camera and the light's place alone, which is what a kept bound map is keyed on
  * (clrays/session.py). */
@@ -469,7 +482,7 @@ kernel void visibility_prepare(global const frame_t* frame, global const view_t*
                                global const uint* camera_depth, global const int* tri_id,
                                global const float4* tri_normal, global const float4* tri_vertex_normals,
                                global const float2* offsets, global const int* view_rows, global int* read_spans,
-                               global float* visible, global int2* map_read)
+                               global uint* read_mask, global float* visible, global int2* map_read)
 {
     int sample = get_global_id(0);
     if (sample >= frame->width * frame->height * frame->spp) return;
@@ -500,6 +513,9 @@ kernel void visibility_prepare(global const frame_t* frame, global const view_t*
                 global int* span = read_spans + 2 * (view_rows[view_index] + ty);
                 if (tx < span[0]) atomic_min(span, tx); /* the reads spare most atomics */
                 if (tx > span[1]) atomic_max(span + 1, tx);
+                global uint* word = read_mask + (address >> 5);
+                uint bit = 1u << (address & 31);
+                if (!(*word & bit)) atomic_or(word, bit);
             }
         }
         if (!reaches) continue;
