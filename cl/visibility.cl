@@ -6,11 +6,11 @@
  * one triangle that touches each texel, or WRITER_MANY) and the list of triangles whose
  * rectangles the split pass takes (big_items, big_count).
  * visibility_prepare reads frame, views, lights, shadow_depth, camera_depth, tri_id,
- * tri_normal, tri_vertex_normals, offsets, view_rows; writes visible (1 no light reaches the
- * sample, 0 its surface turns away from the light, else pending: the maps or a ray
- * decide), map_read (per pending sample and light, the bound map's texel its lit test
- * reads and its depth there), read_spans (per texel row of every view, the first and last
- * texel read) and read_mask (a bit per texel read): the bound passes draw only those.
+ * tri_normal, tri_vertex_normals, offsets; writes visible (1 no light reaches the sample,
+ * 0 its surface turns away from the light, else pending: the maps or a ray decide) and
+ * map_read (per sample and light, the bound map's texel its lit test reads and its depth
+ * there); visibility_mark reads map_read, writes read_mask (a bit per texel read): the
+ * bound passes draw only those.
  * visibility reads frame, views, lights, bound, writer, map_read, camera_depth, tri_id,
  * tri_vertices, tri_normal, offsets, node_bounds, node_children; writes visible where it
  * is pending (float per sample and light, [sample][light]; 0 where the surface turns away
@@ -196,12 +196,6 @@ inline void note_writer(global int* texel_writer, int tri)
     if (before != WRITER_NONE && before != tri) atomic_xchg(texel_writer, WRITER_MANY);
 }
 
-/* Whether a camera sample's lit test reads the texel at this address (its bit in read_mask). */
-inline int texel_read(global const uint* read_mask, int address)
-{
-    return (read_mask[address >> 5] >> (address & 31)) & 1u;
-}
-
 /* The conservative bound map: every texel a triangle may touch (per row, the span whose
  * squares, grown by COVER_GROWTH, meet the projection of its part inside the frustum)
  * gets a depth no larger than the triangle's nearest point inside that texel's footprint:
@@ -210,14 +204,13 @@ inline int texel_read(global const uint* read_mask, int address)
  *   orthographic: max(nearest vertex, the plane's depth at the texel's nearest corner).
  * A triangle thinner than a texel, which the centre-sampled map may miss, is still here.
  * The same texels get the triangle in the writer map (note_writer).
- * With read_spans (span_row ≥ 0: the view's first row there), only the texels that a
- * camera sample's lit test reads are drawn (visibility_prepare): each row between its
- * spans's first and last, and there those whose bit read_mask has (at the texel's address
- * + mask_offset, the frame's address of this view's texel). No sample reads the others. */
+ * With a read_mask (masked ≠ 0), only the texels that a camera sample's lit test reads are
+ * drawn (visibility_mark): those whose bit it has, at the texel's address + mask_offset
+ * (the frame's address of this view's texel). No sample reads the others. */
 inline void bound_triangle(global const float4* tri_vertices, global const view_t* views, int first_view,
-                           int view_count, global uint* bound, global int* writer, global const int2* read_spans,
-                           int span_row, global const uint* read_mask, int mask_offset, int item, int row_first,
-                           int row_step, int small_rows, global int* big_items, volatile global int* big_count)
+                           int view_count, global uint* bound, global int* writer, int masked,
+                           global const uint* read_mask, int mask_offset, int item, int row_first, int row_step,
+                           int small_rows, global int* big_items, volatile global int* big_count)
 {
     int tri = item / view_count;
     global const view_t* view = views + first_view + item % view_count;
@@ -257,15 +250,12 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
     int x1 = min((int)floor(fmin(hi.x, (float)view->width + 2.0f)) + 1, view->width - 1);
     int y1 = min((int)floor(fmin(hi.y, (float)view->height + 2.0f)) + 1, view->height - 1);
     if (x0 > x1 || y0 + row_first > y1) return; /* outside the view, or no row for this item */
-    if (span_row >= 0 && small_rows > 0) { /* first pass: no sample reads the rectangle, nothing to draw */
-        int small = y1 - y0 + 1 <= small_rows; /* its texels' bits; a taller one, the spans only */
+    if (masked && small_rows > 0 && y1 - y0 + 1 <= small_rows) { /* no sample reads its rectangle: nothing to draw */
         int read = 0;
-        for (int ty = y0; ty <= y1 && !read; ++ty) {
-            int2 span = read_spans[span_row + ty];
-            int row = mask_offset + view->depth_offset + ty * view->width;
-            for (int tx = max(x0, span.x); tx <= min(x1, span.y) && !read; ++tx)
-                read = !small || texel_read(read_mask, row + tx);
-        }
+        for (int ty = y0; ty <= y1 && !read; ++ty)
+            for (int tx = x0; tx <= x1 && !read; ++tx)
+                read = (read_mask[(mask_offset + view->depth_offset + ty * view->width + tx) >> 5]
+                        >> ((mask_offset + view->depth_offset + ty * view->width + tx) & 31)) & 1u;
         if (!read) return;
     }
     if (small_rows > 0 && y1 - y0 + 1 > small_rows) {
@@ -308,20 +298,18 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
     int edges = polygon_edges(corner, corners, edge);
     for (int ty = y0 + row_first; ty <= y1; ty += row_step) {
         int first = x0, last = x1;
-        if (span_row >= 0) {
-            int2 span = read_spans[span_row + ty];
-            first = max(first, span.x);
-            last = min(last, span.y);
-            if (first > last) continue;
-        }
         if (!row_span(edge, edges, ty, &first, &last)) continue;
         float y_centre = (1.0f - (2.0f * (float)ty + 1.0f) * inverse_height) * view->scale_y;
         float row_dot = n_view.z + n_view.y * y_centre, row_length2 = 1.0f + y_centre * y_centre;
         float y_corner = (1.0f - 2.0f * (float)(ty + corner_y) * inverse_height) * view->scale_y;
         float row_plane = plane - n_view.y * y_corner;
         for (int tx = first; tx <= last; ++tx) {
-            if (span_row >= 0 && !texel_read(read_mask, mask_offset + view->depth_offset + ty * view->width + tx))
-                continue;
+            if (masked) {
+                int at = mask_offset + view->depth_offset + ty * view->width + tx;
+                uint bits = read_mask[at >> 5] >> (at & 31); /* this texel's and the next ones in its word */
+                if (bits == 0u) tx += 31 - (at & 31); /* none read to the word's end */
+                if (!(bits & 1u)) continue;
+            }
             note_writer(writer + view->depth_offset + ty * view->width + tx, tri);
             if (bound[view->depth_offset + ty * view->width + tx] <= floor_bits) continue;
             float depth = nearest;
@@ -350,24 +338,24 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
  * then spreads each listed rectangle's rows over the global size of its dimension 1. */
 kernel void visibility_bound(global const float4* tri_vertices, int count, global const view_t* views,
                              int first_view, int view_count, global uint* bound, global int* writer,
-                             global const int2* read_spans, int span_row, global const uint* read_mask,
-                             int mask_offset, int small_rows, global int* big_items, volatile global int* big_count)
+                             int masked, global const uint* read_mask, int mask_offset, int small_rows,
+                             global int* big_items, volatile global int* big_count)
 {
     int item = get_global_id(0);
     if (item >= count * view_count) return;
-    bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, read_spans, span_row, read_mask,
-                   mask_offset, item, 0, 1, small_rows, big_items, big_count);
+    bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, masked, read_mask, mask_offset, item,
+                   0, 1, small_rows, big_items, big_count);
 }
 
 kernel void visibility_bound_split(global const float4* tri_vertices, global const view_t* views, int first_view,
                                    int view_count, global uint* bound, global int* writer,
-                                   global const int2* read_spans, int span_row, global const uint* read_mask,
-                                   int mask_offset, global const int* big_items, global const int* big_count)
+                                   int masked, global const uint* read_mask, int mask_offset,
+                                   global const int* big_items, global const int* big_count)
 {
     int index = get_global_id(0);
     if (index >= *big_count) return;
-    bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, read_spans, span_row, read_mask,
-                   mask_offset, big_items[index], get_global_id(1), get_global_size(1), 0, 0, 0);
+    bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, masked, read_mask, mask_offset,
+                   big_items[index], get_global_id(1), get_global_size(1), 0, 0, 0);
 }
 
 /* How far the sample's own triangle (plane through p with unit normal n, largest distance
@@ -466,64 +454,65 @@ inline float3 shadow_ray_start(global const light_t* light, float3 p, float3 n, 
     return p + side * (SHADOW_RAY_OFFSET_REL * (length(p) + to_light_distance));
 }
 
-/* The part of the decision that needs no bound map, before it is drawn: per sample and
- * light, visible gets 1 where no light arrives (or the eye is in the lamp), 0 where the
- * surface turns away from the light, else VISIBILITY_PENDING or _PENDING_DARK (the 3 × 3
- * test); map_read gets the texel of the bound and writer maps that the lit test reads
- * (the point the shadow ray leaves from, projected: MAP_TEXEL_* or its address) and the
- * point's depth there. That texel joins its row's read span (atomic min of the first, max
- * of the last; read_spans starts as (INT_MAX, -1) per row) and gets its bit in read_mask
- * (atomic or; 32 texels a word, by address; starts at 0) for every sample not turned
- * away, whatever the light's power and the medium: the spans then follow the geometry,
- * the camera and the light's place alone, which is what a kept bound map is keyed on
- * (clrays/session.py). */
+/* The part of the decision that needs no bound map, before it is drawn, one work-item per
+ * sample and light (no loop, no atomics: straight-line code, which the CPU device can run
+ * several work-items at once in vector lanes): visible gets 1 where no light arrives (or
+ * the eye is in the lamp), 0 where the surface turns away from the light, else
+ * VISIBILITY_PENDING or _PENDING_DARK (the 3 × 3 test); map_read gets the texel of the
+ * bound and writer maps that the lit test reads (the point the shadow ray leaves from,
+ * projected: its address, or MAP_TEXEL_*) and the point's depth there. The texel is
+ * given for every sample not turned away, whatever the light's power and the medium, so
+ * the texels read (visibility_mark) follow the geometry, the camera and the light's place
+ * alone, which is what a kept bound map is keyed on (clrays/session.py). */
 kernel void visibility_prepare(global const frame_t* frame, global const view_t* views,
                                global const light_t* lights, global const uint* shadow_depth,
                                global const uint* camera_depth, global const int* tri_id,
                                global const float4* tri_normal, global const float4* tri_vertex_normals,
-                               global const float2* offsets, global const int* view_rows, global int* read_spans,
-                               global uint* read_mask, global float* visible, global int2* map_read)
+                               global const float2* offsets, global float* visible, global int2* map_read)
 {
-    int sample = get_global_id(0);
+    int sample = get_global_id(0), l = get_global_id(1);
     if (sample >= frame->width * frame->height * frame->spp) return;
-    global float* out = visible + sample * frame->light_count;
-    for (int l = 0; l < frame->light_count; ++l) out[l] = 1.0f;
+    int entry = sample * frame->light_count + l;
+    visible[entry] = 1.0f;
+    map_read[entry] = (int2)(MAP_TEXEL_NONE, 0);
     float3 p, dir, n;
     if (!camera_surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p, &dir, &n)) return;
     int tri = tri_id[sample];
-    for (int l = 0; l < frame->light_count; ++l) {
-        global const light_t* light = lights + l;
-        float3 to_light = light_direction(light, p);
-        int reaches = !eye_in_lamp(light, frame->lamp_radius) && light_reaches(light, frame->sigma_t.xyz, p, &to_light);
-        if (turned_away(tri_normal, tri_vertex_normals, tri, n, to_light)) {
-            if (reaches) out[l] = 0.0f; /* shade weighs this light by a cosine ≤ 0: no map test, no ray */
-            continue;
-        }
-        float3 start = shadow_ray_start(light, p, n, to_light);
-        int view_index = light_view_index(light, start);
-        global const view_t* view = views + view_index;
-        float2 texel;
-        float depth = 0.0f;
-        int address = MAP_TEXEL_NONE;
-        if (view_project(view, start, &texel, &depth)) {
-            address = MAP_TEXEL_OUTSIDE;
-            if (texel.x >= 0.0f && texel.y >= 0.0f && texel.x < (float)view->width && texel.y < (float)view->height) {
-                int tx = (int)texel.x, ty = (int)texel.y;
-                address = view->depth_offset + ty * view->width + tx;
-                global int* span = read_spans + 2 * (view_rows[view_index] + ty);
-                if (tx < span[0]) atomic_min(span, tx); /* the reads spare most atomics */
-                if (tx > span[1]) atomic_max(span + 1, tx);
-                global uint* word = read_mask + (address >> 5);
-                uint bit = 1u << (address & 31);
-                if (!(*word & bit)) atomic_or(word, bit);
-            }
-        }
-        if (!reaches) continue;
-        map_read[sample * frame->light_count + l] = (int2)(address, as_int(depth));
-        float3 lookup = p + n * shadow_texel_size(light, length(p - light->position.xyz));
-        out[l] = address >= 0 && blocked_all_around(light, views, shadow_depth, lookup) ? VISIBILITY_PENDING_DARK
-                                                                                       : VISIBILITY_PENDING;
+    global const light_t* light = lights + l;
+    float3 to_light = light_direction(light, p);
+    int reaches = !eye_in_lamp(light, frame->lamp_radius) && light_reaches(light, frame->sigma_t.xyz, p, &to_light);
+    if (turned_away(tri_normal, tri_vertex_normals, tri, n, to_light)) {
+        if (reaches) visible[entry] = 0.0f; /* shade weighs this light by a cosine ≤ 0: no map test, no ray */
+        return;
     }
+    float3 start = shadow_ray_start(light, p, n, to_light);
+    global const view_t* view = views + light_view_index(light, start);
+    float2 texel;
+    float depth = 0.0f;
+    int address = MAP_TEXEL_NONE;
+    if (view_project(view, start, &texel, &depth)) {
+        address = MAP_TEXEL_OUTSIDE;
+        if (texel.x >= 0.0f && texel.y >= 0.0f && texel.x < (float)view->width && texel.y < (float)view->height)
+            address = view->depth_offset + (int)texel.y * view->width + (int)texel.x;
+    }
+    map_read[entry] = (int2)(address, as_int(depth));
+    if (!reaches) return;
+    float3 lookup = p + n * shadow_texel_size(light, length(p - light->position.xyz));
+    visible[entry] = address >= 0 && blocked_all_around(light, views, shadow_depth, lookup) ? VISIBILITY_PENDING_DARK
+                                                                                          : VISIBILITY_PENDING;
+}
+
+/* The texels that the lit tests read: map_read's addresses get their bit in read_mask
+ * (32 texels a word, by address; starts at 0). */
+kernel void visibility_mark(global const int2* map_read, int entries, global uint* read_mask)
+{
+    int entry = get_global_id(0);
+    if (entry >= entries) return;
+    int address = map_read[entry].x;
+    if (address < 0) return;
+    global uint* word = read_mask + (address >> 5);
+    uint bit = 1u << (address & 31);
+    if (!(*word & bit)) atomic_or(word, bit); /* the read spares most atomics */
 }
 
 /* The rest of the decision, for the pending samples and lights. Lit: the bound map says no

@@ -68,37 +68,32 @@ def upload_bvh(device: Device, inputs: FrameInputs, topology: BvhTopology, timer
 class Prepared:
     """visibility_prepare's answers, before the bound maps: each sample's and light's
     visibility where it needs no map (1 no light, 0 turned away, else pending), the
-    texel of the bound and writer maps that a pending one's lit test reads, and per
-    texel row of every shadow-map view the first and last texel read (the bound passes
-    draw only those)."""
+    texel of the bound and writer maps that a pending one's lit test reads, and a bit
+    per texel read (the bound passes draw only those)."""
 
     visible: object  # float[samples × lights]: 1, 0 or pending (cl/visibility.cl VISIBILITY_PENDING*)
     map_read: object  # int2[samples × lights]: texel address (or MAP_TEXEL_*), as_int(depth)
-    read_spans: object  # int2 per texel row of the frame's views 1..: (first, last), (INT_MAX, -1) when none
     read_mask: object  # uint per 32 texels of the frame's shadow maps, by address: a bit per texel read
-    first_row: np.ndarray  # int per view: its first row in read_spans (-1: the camera)
 
 
 def visibility_prepare(device: Device, buffers: FrameBuffers, rastered: RasterResult, timer: StageTimer) -> Prepared:
-    """The part of the decision that needs no bound map: no light, turned away, or pending
-    with the 3 × 3 test's answer, and the texels that the pending samples will read."""
+    """The part of the decision that needs no bound map (no light, turned away, or pending
+    with the 3 × 3 test's answer), and the texels that the pending samples will read."""
     inputs = buffers.inputs
-    heights = inputs.views["height"].astype(np.int64)
-    first_row = np.concatenate([[-1, 0], np.cumsum(heights[1:])[:-1]]).astype(np.int32)
-    rows = max(int(heights[1:].sum()), 1)
-    read_spans = device.buffer(nbytes=8 * rows)
-    device.fill(read_spans, np.array([np.iinfo(np.int32).max, -1], np.int32), 8 * rows, timer, "visibility")
     lights = max(len(inputs.scene.lights), 1)
-    visible = device.buffer(nbytes=4 * inputs.samples * lights)
-    map_read = device.buffer(nbytes=8 * inputs.samples * lights)
+    entries = inputs.samples * lights
+    visible = device.buffer(nbytes=4 * entries)
+    map_read = device.buffer(nbytes=8 * entries)
+    timer.add("visibility", device.kernel("visibility", "visibility_prepare")(
+        device.queue, (inputs.samples, lights), None, buffers.params, buffers.views, buffers.lights,
+        rastered.shadow_depth, rastered.camera_depth, rastered.tri_id, buffers.tri_normal,
+        buffers.tri_vertex_normals, buffers.offsets, visible, map_read))
     words = max((inputs.shadow_texels + 31) // 32, 1)
     read_mask = device.buffer(nbytes=4 * words)
     device.fill(read_mask, np.uint32(0), 4 * words, timer, "visibility")
-    timer.add("visibility", device.kernel("visibility", "visibility_prepare")(
-        device.queue, (inputs.samples,), None, buffers.params, buffers.views, buffers.lights, rastered.shadow_depth,
-        rastered.camera_depth, rastered.tri_id, buffers.tri_normal, buffers.tri_vertex_normals, buffers.offsets,
-        device.buffer(first_row, writable=False), read_spans, read_mask, visible, map_read))
-    return Prepared(visible, map_read, read_spans, read_mask, first_row)
+    timer.add("visibility", device.kernel("visibility", "visibility_mark")(
+        device.queue, (entries,), None, map_read, np.int32(entries), read_mask))
+    return Prepared(visible, map_read, read_mask)
 
 
 @dataclass
@@ -115,7 +110,8 @@ def visibility_bound(device: Device, buffers: FrameBuffers, light_index: int, ti
                      prepared: Prepared | None = None) -> BoundMap:
     """One light's bound and writer maps, in the light-anchored space of its shadow map
     (clrays.inputs.light_pass_inputs), so the depths match. With `prepared`, only the
-    texels in its read spans are drawn (the others hold no value); without, every texel."""
+    texels whose bit its read_mask has are drawn (the others hold no value); without,
+    every texel."""
     first_view = buffers.inputs.light_views[light_index][0]
     inputs = light_pass_inputs(buffers.inputs, light_index)
     texels = max(inputs.shadow_texels, 1)
@@ -129,27 +125,26 @@ def visibility_bound(device: Device, buffers: FrameBuffers, light_index: int, ti
         views = device.buffer(inputs.views, writable=False)
         big_items = device.buffer(nbytes=4 * count)
         big_count = device.buffer(nbytes=4)
-        read_spans = prepared.read_spans if prepared is not None else device.buffer(nbytes=8)
+        masked = np.int32(prepared is not None)
         read_mask = prepared.read_mask if prepared is not None else device.buffer(nbytes=4)
         first_pass = device.kernel("visibility", "visibility_bound")
         split_pass = device.kernel("visibility", "visibility_bound_split")
         # Only the cube faces the frame can read (`view_needed`, as raster.shadow does): no
         # sample projects into the others, so their texels are never asked for.
         for view in np.flatnonzero(inputs.view_needed[1:]) + 1:
-            # its first row in the read spans (the frame's view first_view + view - 1), or -1: all
+            # the frame's address of this view's texel 0, less the light pass's (read_mask is by the former)
             frame_view = buffers.inputs.views[first_view + view - 1]
-            span_row = np.int32(prepared.first_row[first_view + view - 1] if prepared is not None else -1)
             mask_offset = np.int32(int(frame_view["depth_offset"]) - int(inputs.views[view]["depth_offset"]))
             device.fill(big_count, np.int32(0), 4, timer, "visibility")
             timer.add("visibility", first_pass(
                 device.queue, (count,), None, vertices, np.int32(count), views, np.int32(view), np.int32(1), bound,
-                writer, read_spans, span_row, read_mask, mask_offset, np.int32(BOUND_SMALL_ROWS), big_items, big_count))
+                writer, masked, read_mask, mask_offset, np.int32(BOUND_SMALL_ROWS), big_items, big_count))
             listed = int(device.read(big_count, 1, np.int32)[0])
             if listed:
                 nearest_first(device, big_items, listed, inputs, view)
                 timer.add("visibility", split_pass(
                     device.queue, (listed, BOUND_ROW_SPLIT), None, vertices, views, np.int32(view), np.int32(1),
-                    bound, writer, read_spans, span_row, read_mask, mask_offset, big_items, big_count))
+                    bound, writer, masked, read_mask, mask_offset, big_items, big_count))
     return BoundMap(bound, writer, inputs.shadow_texels)
 
 
