@@ -5,13 +5,13 @@
  * bound of the depth of every triangle that touches each texel, atomic min), writer (the
  * one triangle that touches each texel, or WRITER_MANY) and the list of triangles whose
  * rectangles the split pass takes (big_items, big_count).
- * visibility_prepare reads frame, views, lights, shadow_depth, camera_depth, tri_id,
+ * visibility_prepare reads frame, views, lights, camera_depth, tri_id,
  * tri_normal, tri_vertex_normals, offsets; writes visible (1 no light reaches the sample,
  * 0 its surface turns away from the light, else pending: the maps or a ray decide) and
  * map_read (per sample and light, the bound map's texel its lit test reads and its depth
  * there); visibility_mark reads map_read, writes read_mask (a bit per texel read): the
  * bound passes draw only those.
- * visibility reads frame, views, lights, bound, writer, map_read, camera_depth, tri_id,
+ * visibility reads frame, views, lights, shadow_depth, bound, writer, map_read, camera_depth, tri_id,
  * tri_vertices, tri_normal, offsets, node_bounds, node_children; writes visible where it
  * is pending (float per sample and light, [sample][light]; 0 where the surface turns away
  * from the light, which shade then weighs by zero). */
@@ -24,11 +24,9 @@
 #define SHADOW_RAY_OFFSET_REL 2e-6f
 /* Bounds are shrunk by this relative margin against float32 rounding of the bound itself. */
 #define BOUND_MARGIN_REL 1e-5f
-/* visible's values, between visibility_prepare and visibility, of a sample and light that
- * the map or a ray decides (never left in it): the 3 × 3 test around the lookup point
- * says it is shadowed (PENDING_DARK) or cannot say (PENDING). */
+/* visible's value, between visibility_prepare and visibility, of a sample and light that
+ * the maps or a ray decide (never left in it). */
 #define VISIBILITY_PENDING -1.0f
-#define VISIBILITY_PENDING_DARK -2.0f
 /* map_read's texel, between the two: the address of the texel of the bound and writer
  * maps that decides the lit test, or one of these. */
 #define MAP_TEXEL_OUTSIDE -1 /* the point projects outside the map: lit (a map covers every occluder) */
@@ -415,31 +413,22 @@ inline int turned_away(global const float4* tri_normal, global const float4* tri
     return 1;
 }
 
-/* The unit direction from p towards the light, as light_incident gives it. */
-inline float3 light_direction(global const light_t* light, float3 p)
-{
-    if (light->type == LIGHT_DIRECTIONAL) return -light->direction.xyz;
-    float3 w = p - light->position.xyz;
-    float d = sqrt(dot(w, w));
-    return d > 0.0f ? -w / d : (float3)(0.0f, 1.0f, 0.0f);
-}
-
-/* Whether light_incident is non-zero at p (any light arrives), and the direction to the
- * light. Its three exp() only where they could decide it: a spot's cone and, inside it,
- * some channel with power ≥ 1e-6, σt·d ≤ 30 and d² ≤ 1e10 is ≥ 1e-29 for sure, a normal
- * float, so non-zero. */
+/* Whether light_incident is non-zero at p (any light arrives), and as it, the unit
+ * direction from p towards the light. Its three exp() only where they could decide it:
+ * inside a spot's cone, some channel with power ≥ 1e-6, σt·d ≤ 30 and d² ≤ 1e10 is
+ * ≥ 1e-29 for sure, a normal float, so non-zero. */
 inline int light_reaches(global const light_t* light, float3 sigma_t, float3 p, float3* to_light)
 {
     if (light->type != LIGHT_DIRECTIONAL) {
         float3 w = p - light->position.xyz;
         float d2 = dot(w, w);
         float d = sqrt(d2);
+        *to_light = d > 0.0f ? -w / d : (float3)(0.0f, 1.0f, 0.0f);
+        if (light->type == LIGHT_SPOT && dot(w, light->direction.xyz) < light->cos_cone * d) return 0;
         float3 power = light->power.xyz, attenuation = sigma_t * d;
         if (d2 <= 1e10f && ((power.x >= 1e-6f && attenuation.x <= 30.0f) || (power.y >= 1e-6f && attenuation.y <= 30.0f)
-                            || (power.z >= 1e-6f && attenuation.z <= 30.0f))) {
-            *to_light = light_direction(light, p);
-            return !(light->type == LIGHT_SPOT && dot(w, light->direction.xyz) < light->cos_cone * d);
-        }
+                            || (power.z >= 1e-6f && attenuation.z <= 30.0f)))
+            return 1;
     }
     float3 incident = light_incident(light, sigma_t, p, to_light);
     return incident.x + incident.y + incident.z != 0.0f;
@@ -458,15 +447,14 @@ inline float3 shadow_ray_start(global const light_t* light, float3 p, float3 n, 
  * sample and light (no loop, no atomics: straight-line code, which the CPU device can run
  * several work-items at once in vector lanes): visible gets 1 where no light arrives (or
  * the eye is in the lamp), 0 where the surface turns away from the light, else
- * VISIBILITY_PENDING or _PENDING_DARK (the 3 × 3 test); map_read gets the texel of the
+ * VISIBILITY_PENDING; map_read gets the texel of the
  * bound and writer maps that the lit test reads (the point the shadow ray leaves from,
  * projected: its address, or MAP_TEXEL_*) and the point's depth there. The texel is
  * given for every sample not turned away, whatever the light's power and the medium, so
  * the texels read (visibility_mark) follow the geometry, the camera and the light's place
  * alone, which is what a kept bound map is keyed on (clrays/session.py). */
 kernel void visibility_prepare(global const frame_t* frame, global const view_t* views,
-                               global const light_t* lights, global const uint* shadow_depth,
-                               global const uint* camera_depth, global const int* tri_id,
+                               global const light_t* lights, global const uint* camera_depth, global const int* tri_id,
                                global const float4* tri_normal, global const float4* tri_vertex_normals,
                                global const float2* offsets, global float* visible, global int2* map_read)
 {
@@ -479,8 +467,8 @@ kernel void visibility_prepare(global const frame_t* frame, global const view_t*
     if (!camera_surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p, &dir, &n)) return;
     int tri = tri_id[sample];
     global const light_t* light = lights + l;
-    float3 to_light = light_direction(light, p);
-    int reaches = !eye_in_lamp(light, frame->lamp_radius) && light_reaches(light, frame->sigma_t.xyz, p, &to_light);
+    float3 to_light;
+    int reaches = light_reaches(light, frame->sigma_t.xyz, p, &to_light) && !eye_in_lamp(light, frame->lamp_radius);
     if (turned_away(tri_normal, tri_vertex_normals, tri, n, to_light)) {
         if (reaches) visible[entry] = 0.0f; /* shade weighs this light by a cosine ≤ 0: no map test, no ray */
         return;
@@ -496,10 +484,7 @@ kernel void visibility_prepare(global const frame_t* frame, global const view_t*
             address = view->depth_offset + (int)texel.y * view->width + (int)texel.x;
     }
     map_read[entry] = (int2)(address, as_int(depth));
-    if (!reaches) return;
-    float3 lookup = p + n * shadow_texel_size(light, length(p - light->position.xyz));
-    visible[entry] = address >= 0 && blocked_all_around(light, views, shadow_depth, lookup) ? VISIBILITY_PENDING_DARK
-                                                                                          : VISIBILITY_PENDING;
+    if (reaches) visible[entry] = VISIBILITY_PENDING;
 }
 
 /* The texels that the lit tests read: map_read's addresses get their bit in read_mask
@@ -518,53 +503,58 @@ kernel void visibility_mark(global const int2* map_read, int entries, global uin
 /* The rest of the decision, for the pending samples and lights. Lit: the bound map says no
  * triangle in the texel comes nearer the light than the sample's own depth, less what its
  * own surface may have written there (at most the map's bias); or the writer map says no
- * triangle but the sample's own touches that texel. Shadowed: the 3 × 3 test (pending
- * dark). Otherwise a shadow ray through the BVH. */
+ * triangle but the sample's own touches that texel. Shadowed: the 3 × 3 test. Otherwise a
+ * shadow ray through the BVH. */
 kernel void visibility(global const frame_t* frame, global const view_t* views, global const light_t* lights,
-                       global const uint* bound, global const int* writer, global const int2* map_read,
-                       global const uint* camera_depth, global const int* tri_id, global const float4* tri_vertices,
-                       global const float4* tri_normal, global const float2* offsets,
-                       global const float4* node_bounds, global const int2* node_children, int root,
-                       global float* visible)
+                       global const uint* shadow_depth, global const uint* bound, global const int* writer,
+                       global const int2* map_read, global const uint* camera_depth, global const int* tri_id,
+                       global const float4* tri_vertices, global const float4* tri_normal,
+                       global const float2* offsets, global const float4* node_bounds,
+                       global const int2* node_children, int root, global float* visible)
 {
     int sample = get_global_id(0);
     if (sample >= frame->width * frame->height * frame->spp) return;
     global float* out = visible + sample * frame->light_count;
     int tri = tri_id[sample];
     float3 p, dir, n;
-    int surface = 0; /* p and n worked out: only for the own surface's slack and for rays */
+    int surface = 0; /* p and n worked out: only for samples the lit test leaves */
     for (int l = 0; l < frame->light_count; ++l) {
-        if (out[l] >= 0.0f) continue; /* decided before the maps */
+        if (out[l] != VISIBILITY_PENDING) continue;
         global const light_t* light = lights + l;
         int2 read = map_read[sample * frame->light_count + l];
-        int decided = read.x == MAP_TEXEL_OUTSIDE ? 1 : -1;
-        if (read.x >= 0) {
-            float depth = as_float(read.y), bound_depth = as_float(bound[read.x]);
-            if (depth <= bound_depth || writer[read.x] == tri) {
-                decided = 1;
-            } else if (depth <= bound_depth + SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth)) {
-                /* Lit when depth ≤ bound + min(bias, slack), both ≥ 0: the slack's
-                 * trigonometry only here (same answer as computing it first). */
-                if (!surface)
-                    surface = camera_surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p,
-                                                   &dir, &n);
-                float3 start = shadow_ray_start(light, p, n, light_direction(light, p));
-                global const view_t* view = views + light_view_index(light, start);
-                float reach = 0.0f; /* of the sample's triangle from the view's origin */
-                for (int k = 0; k < 3; ++k)
-                    reach = fmax(reach, length(tri_vertices[3 * tri + k].xyz - view->origin.xyz));
-                if (depth <= bound_depth + own_surface_slack(light, view, start, n, depth, reach)) decided = 1;
-            }
-            if (decided < 0 && out[l] == VISIBILITY_PENDING_DARK) decided = 0;
+        if (read.x == MAP_TEXEL_OUTSIDE) {
+            out[l] = 1.0f;
+            continue;
         }
-        if (decided >= 0) {
-            out[l] = (float)decided;
+        float depth = as_float(read.y), bound_depth = read.x >= 0 ? as_float(bound[read.x]) : 0.0f;
+        if (read.x >= 0 && (depth <= bound_depth || writer[read.x] == tri)) {
+            out[l] = 1.0f;
             continue;
         }
         if (!surface)
             surface = camera_surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p, &dir, &n);
-        float3 to_light = light_direction(light, p);
+        float3 to_light;
+        light_reaches(light, frame->sigma_t.xyz, p, &to_light);
         float3 start = shadow_ray_start(light, p, n, to_light);
+        if (read.x >= 0) {
+            /* Lit when depth ≤ bound + min(bias, slack), both ≥ 0: the slack's trigonometry
+             * only within the bias (same answer as computing it first). */
+            if (depth <= bound_depth + SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth)) {
+                global const view_t* view = views + light_view_index(light, start);
+                float reach = 0.0f; /* of the sample's triangle from the view's origin */
+                for (int k = 0; k < 3; ++k)
+                    reach = fmax(reach, length(tri_vertices[3 * tri + k].xyz - view->origin.xyz));
+                if (depth <= bound_depth + own_surface_slack(light, view, start, n, depth, reach)) {
+                    out[l] = 1.0f;
+                    continue;
+                }
+            }
+            float3 lookup = p + n * shadow_texel_size(light, length(p - light->position.xyz));
+            if (blocked_all_around(light, views, shadow_depth, lookup)) {
+                out[l] = 0.0f;
+                continue;
+            }
+        }
         float3 ray = light->type == LIGHT_DIRECTIONAL ? to_light : light->position.xyz - start;
         float t_max = light->type == LIGHT_DIRECTIONAL ? INFINITY : 1.0f;
         out[l] = bvh_occluded(node_bounds, node_children, root, tri_vertices, start, ray, 0.0f, t_max, tri)

@@ -77,8 +77,8 @@ class Prepared:
 
 
 def visibility_prepare(device: Device, buffers: FrameBuffers, rastered: RasterResult, timer: StageTimer) -> Prepared:
-    """The part of the decision that needs no bound map (no light, turned away, or pending
-    with the 3 × 3 test's answer), and the texels that the pending samples will read."""
+    """The part of the decision that needs no bound map (no light, turned away, or pending),
+    and the texels that the pending samples will read."""
     inputs = buffers.inputs
     lights = max(len(inputs.scene.lights), 1)
     entries = inputs.samples * lights
@@ -86,7 +86,7 @@ def visibility_prepare(device: Device, buffers: FrameBuffers, rastered: RasterRe
     map_read = device.buffer(nbytes=8 * entries)
     timer.add("visibility", device.kernel("visibility", "visibility_prepare")(
         device.queue, (inputs.samples, lights), None, buffers.params, buffers.views, buffers.lights,
-        rastered.shadow_depth, rastered.camera_depth, rastered.tri_id, buffers.tri_normal,
+        rastered.camera_depth, rastered.tri_id, buffers.tri_normal,
         buffers.tri_vertex_normals, buffers.offsets, visible, map_read))
     words = max((inputs.shadow_texels + 31) // 32, 1)
     read_mask = device.buffer(nbytes=4 * words)
@@ -182,8 +182,8 @@ def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, pr
     (`prepared.visible`, its pending entries decided)."""
     inputs = buffers.inputs
     event = device.kernel("visibility", "visibility")(
-        device.queue, (inputs.samples,), None, buffers.params, buffers.views, buffers.lights, bound.bound,
-        bound.writer, prepared.map_read, rastered.camera_depth, rastered.tri_id, buffers.tri_vertices,
+        device.queue, (inputs.samples,), None, buffers.params, buffers.views, buffers.lights,
+        rastered.shadow_depth, bound.bound, bound.writer, prepared.map_read, rastered.camera_depth, rastered.tri_id, buffers.tri_vertices,
         buffers.tri_normal, buffers.offsets, bvh.node_bounds, bvh.node_children, np.int32(bvh.root), prepared.visible)
     timer.add("visibility", event)
     return prepared.visible
