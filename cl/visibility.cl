@@ -204,7 +204,8 @@ inline void note_writer(global int* texel_writer, int tri)
  * The same texels get the triangle in the writer map (note_writer).
  * With a read_mask (masked ≠ 0), only the texels that a camera sample's lit test reads are
  * drawn (visibility_mark): those whose bit it has, at the texel's address + mask_offset
- * (the frame's address of this view's texel). No sample reads the others. */
+ * (the frame's address of the light's texel 0). No sample reads the others, and only they
+ * hold starting values (visibility_clear). */
 inline void bound_triangle(global const float4* tri_vertices, global const view_t* views, int first_view,
                            int view_count, global uint* bound, global int* writer, int masked,
                            global const uint* read_mask, int mask_offset, int item, int row_first, int row_step,
@@ -326,6 +327,25 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
             depth = fmax(depth - BOUND_MARGIN_REL * fabs(depth) - BOUND_MARGIN_REL * extent, 0.0f);
             global uint* texel = bound + view->depth_offset + ty * view->width + tx;
             if (as_uint(depth) < *texel) atomic_min(texel, as_uint(depth)); /* the read spares most atomics */
+        }
+    }
+}
+
+/* Before the bound passes, with a read_mask: only the texels read get their starting
+ * values (bound DEPTH_EMPTY, writer WRITER_NONE), as only they are drawn and read; one
+ * work-item per word of the mask over the light's texels [first, first + texels) (frame
+ * addresses; the light's own maps are at address - first). */
+kernel void visibility_clear(global const uint* read_mask, int first, int texels, global uint* bound,
+                             global int* writer)
+{
+    int word = (first >> 5) + get_global_id(0);
+    uint bits = read_mask[word];
+    if (bits == 0u) return;
+    for (int bit = 0; bit < 32; ++bit) {
+        int at = 32 * word + bit;
+        if (((bits >> bit) & 1u) && at >= first && at < first + texels) {
+            bound[at - first] = DEPTH_EMPTY;
+            writer[at - first] = WRITER_NONE;
         }
     }
 }

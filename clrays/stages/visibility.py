@@ -112,13 +112,23 @@ def visibility_bound(device: Device, buffers: FrameBuffers, light_index: int, ti
     (clrays.inputs.light_pass_inputs), so the depths match. With `prepared`, only the
     texels whose bit its read_mask has are drawn (the others hold no value); without,
     every texel."""
-    first_view = buffers.inputs.light_views[light_index][0]
     inputs = light_pass_inputs(buffers.inputs, light_index)
+    # the frame's address of this light's texel 0 (read_mask is by frame addresses)
+    first = int(buffers.inputs.views[buffers.inputs.light_views[light_index][0]]["depth_offset"])
     texels = max(inputs.shadow_texels, 1)
     bound = device.buffer(nbytes=4 * texels)
-    device.fill(bound, structs.DEPTH_EMPTY, 4 * texels, timer, "visibility")
     writer = device.buffer(nbytes=4 * texels)
-    device.fill(writer, np.int32(structs.WRITER_NONE), 4 * texels, timer, "visibility")
+    if prepared is None:
+        device.fill(bound, structs.DEPTH_EMPTY, 4 * texels, timer, "visibility")
+        device.fill(writer, np.int32(structs.WRITER_NONE), 4 * texels, timer, "visibility")
+    elif inputs.shadow_texels:
+        # Only the texels read: the others are never drawn nor read, and their memory never
+        # touched (on a CPU device, filling a fresh 1024² cube's two maps costs more than
+        # drawing them).
+        words = (first + inputs.shadow_texels - 1) // 32 - first // 32 + 1
+        timer.add("visibility", device.kernel("visibility", "visibility_clear")(
+            device.queue, (words,), None, prepared.read_mask, np.int32(first), np.int32(inputs.shadow_texels), bound,
+            writer))
     count = inputs.tri_vertices.shape[0] // 3
     if count:
         vertices = device.buffer(inputs.tri_vertices, writable=False)
@@ -132,19 +142,16 @@ def visibility_bound(device: Device, buffers: FrameBuffers, light_index: int, ti
         # Only the cube faces the frame can read (`view_needed`, as raster.shadow does): no
         # sample projects into the others, so their texels are never asked for.
         for view in np.flatnonzero(inputs.view_needed[1:]) + 1:
-            # the frame's address of this view's texel 0, less the light pass's (read_mask is by the former)
-            frame_view = buffers.inputs.views[first_view + view - 1]
-            mask_offset = np.int32(int(frame_view["depth_offset"]) - int(inputs.views[view]["depth_offset"]))
             device.fill(big_count, np.int32(0), 4, timer, "visibility")
             timer.add("visibility", first_pass(
                 device.queue, (count,), None, vertices, np.int32(count), views, np.int32(view), np.int32(1), bound,
-                writer, masked, read_mask, mask_offset, np.int32(BOUND_SMALL_ROWS), big_items, big_count))
+                writer, masked, read_mask, np.int32(first), np.int32(BOUND_SMALL_ROWS), big_items, big_count))
             listed = int(device.read(big_count, 1, np.int32)[0])
             if listed:
                 nearest_first(device, big_items, listed, inputs, view)
                 timer.add("visibility", split_pass(
                     device.queue, (listed, BOUND_ROW_SPLIT), None, vertices, views, np.int32(view), np.int32(1),
-                    bound, writer, masked, read_mask, mask_offset, big_items, big_count))
+                    bound, writer, masked, read_mask, np.int32(first), big_items, big_count))
     return BoundMap(bound, writer, inputs.shadow_texels)
 
 
