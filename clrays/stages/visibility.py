@@ -9,6 +9,10 @@ one touching its texel; shadowed where every texel centre around it holds a bloc
 rest, the samples on shadow edges, ask the BVH whether the segment to the light is
 blocked, so a shadow edge lands where the `exact` reference puts it. A sample whose
 surface turns away from the light needs neither: shade weighs it by zero.
+
+In order: `visibility_prepare` decides what needs no map and notes the texel each other
+sample's lit test reads, `visibility_bound` draws each light's maps at those texels only,
+`visibility` decides the rest (docs/design.md §4.6).
 """
 from __future__ import annotations
 
