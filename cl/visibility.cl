@@ -552,7 +552,8 @@ kernel void visibility(global const frame_t* frame, global const view_t* views, 
             continue;
         }
         if (!surface)
-            surface = camera_surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p, &dir, &n);
+            surface = camera_surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p, &dir,
+                                           &n);
         float3 to_light;
         light_reaches(light, frame->sigma_t.xyz, p, &to_light);
         float3 start = shadow_ray_start(light, p, n, to_light);

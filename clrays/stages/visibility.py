@@ -194,7 +194,8 @@ def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, pr
     inputs = buffers.inputs
     event = device.kernel("visibility", "visibility")(
         device.queue, (inputs.samples,), None, buffers.params, buffers.views, buffers.lights,
-        rastered.shadow_depth, bound.bound, bound.writer, prepared.map_read, rastered.camera_depth, rastered.tri_id, buffers.tri_vertices,
-        buffers.tri_normal, buffers.offsets, bvh.node_bounds, bvh.node_children, np.int32(bvh.root), prepared.visible)
+        rastered.shadow_depth, bound.bound, bound.writer, prepared.map_read, rastered.camera_depth, rastered.tri_id,
+        buffers.tri_vertices, buffers.tri_normal, buffers.offsets, bvh.node_bounds, bvh.node_children,
+        np.int32(bvh.root), prepared.visible)
     timer.add("visibility", event)
     return prepared.visible
