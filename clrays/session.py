@@ -390,6 +390,8 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
             sizes.append(("moment prefix sums of one light", prefix))
     if scene.render.surface_shadows == "exact" and scene.lights:  # visibility's bound and writer maps, every light's
         sizes.append(("bound and writer maps", 8 * inputs.shadow_texels))
+        # and per sample and light the texel its lit test reads (address, depth), a bit per texel read
+        sizes.append(("texels the visibility stage reads", 8 * samples * len(scene.lights) + inputs.shadow_texels // 8))
     if scene.geometry.translucent and scene.lights:  # the translucency stage's layers (translucency.py)
         layers = scene.render.translucent_layers
         sizes.append(("translucent layers", 12 * layers * inputs.shadow_texels))
