@@ -1,7 +1,7 @@
 """The visibility stage's share of the frame at one image size, with the stage split into
-its bound-map and shadow-ray kernels (`clrays render --stats` shows them together as
-`visibility`): median of a few frames rendered from scratch after a warm-up one
-(bench/RESULTS.md, "The visibility stage at 1280×720").
+its bound-map kernels and the rest (prepare, mark, classify and shadow rays; `clrays
+render --stats` shows them together as `visibility`): median of a few frames rendered
+from scratch after a warm-up one (bench/RESULTS.md, "The visibility stage at 1280×720").
 
     .venv/bin/python bench/visibility_share.py                      # the bench four, 1280×720
     .venv/bin/python bench/visibility_share.py demo --frames 5 --save /tmp/after   # and the images
@@ -47,8 +47,8 @@ class _Relabel:
 def _split_bound_map_time() -> None:
     """File the bound map's kernels under `visibility.bound` instead of `visibility`."""
     bound = session_module.visibility_bound
-    session_module.visibility_bound = lambda device, buffers, index, timer: bound(
-        device, buffers, index, _Relabel(timer, "visibility.bound"))
+    session_module.visibility_bound = lambda device, buffers, index, timer, *rest: bound(
+        device, buffers, index, _Relabel(timer, "visibility.bound"), *rest)
 
 
 def main() -> None:
@@ -61,7 +61,7 @@ def main() -> None:
     width, height = (int(v) for v in args.size.split("x"))
     _split_bound_map_time()
     print(f"{width}×{height}, median of {args.frames} frames, ms; load average {os.getloadavg()[0]:.1f} at start\n")
-    print("| scene | bound map | shadow rays (classify + rays) | bvh (host) | frame | visibility / frame "
+    print("| scene | bound map | rest (prepare, classify + rays) | bvh (host) | frame | visibility / frame "
           "| (visibility + bvh) / frame |")
     print("|---|---|---|---|---|---|---|")
     for name in args.scenes:

@@ -5,9 +5,15 @@
  * bound of the depth of every triangle that touches each texel, atomic min), writer (the
  * one triangle that touches each texel, or WRITER_MANY) and the list of triangles whose
  * rectangles the split pass takes (big_items, big_count).
- * visibility reads frame, views, lights, shadow_depth, bound, writer, camera_depth, tri_id,
- * tri_vertices, tri_normal, tri_vertex_normals, offsets, node_bounds, node_children; writes
- * visible (float per sample and light, [sample][light]; 0 where the surface turns away
+ * visibility_prepare reads frame, views, lights, camera_depth, tri_id,
+ * tri_normal, tri_vertex_normals, offsets; writes visible (1 no light reaches the sample,
+ * 0 its surface turns away from the light, else pending: the maps or a ray decide) and
+ * map_read (per sample and light, the bound map's texel its lit test reads and its depth
+ * there); visibility_mark reads map_read, writes read_mask (a bit per texel read): the
+ * bound passes draw only those.
+ * visibility reads frame, views, lights, shadow_depth, bound, writer, map_read, camera_depth, tri_id,
+ * tri_vertices, tri_normal, offsets, node_bounds, node_children; writes visible where it
+ * is pending (float per sample and light, [sample][light]; 0 where the surface turns away
  * from the light, which shade then weighs by zero). */
 #include "lighting.h"
 #include "bvh.h"
@@ -18,6 +24,13 @@
 #define SHADOW_RAY_OFFSET_REL 2e-6f
 /* Bounds are shrunk by this relative margin against float32 rounding of the bound itself. */
 #define BOUND_MARGIN_REL 1e-5f
+/* visible's value, between visibility_prepare and visibility, of a sample and light that
+ * the maps or a ray decide (never left in it). */
+#define VISIBILITY_PENDING -1.0f
+/* map_read's texel, between the two: the address of the texel of the bound and writer
+ * maps that decides the lit test, or one of these. */
+#define MAP_TEXEL_OUTSIDE -1 /* the point projects outside the map: lit (a map covers every occluder) */
+#define MAP_TEXEL_NONE -2    /* behind a perspective view: a ray decides */
 
 /* Closest point of triangle abc to p (Ericson, Real-Time Collision Detection §5.1.5). */
 inline float3 closest_on_triangle(float3 p, float3 a, float3 b, float3 c)
@@ -188,10 +201,15 @@ inline void note_writer(global int* texel_writer, int tri)
  *     along the texel's cone, bounded by the cone's half-angle ρ: h / cos(max(φ - ρ, 0)));
  *   orthographic: max(nearest vertex, the plane's depth at the texel's nearest corner).
  * A triangle thinner than a texel, which the centre-sampled map may miss, is still here.
- * The same texels get the triangle in the writer map (note_writer). */
+ * The same texels get the triangle in the writer map (note_writer).
+ * With a read_mask (masked ≠ 0), only the texels that a camera sample's lit test reads are
+ * drawn (visibility_mark): those whose bit it has, at the texel's address + mask_offset
+ * (the frame's address of the light's texel 0). No sample reads the others, and only they
+ * hold starting values (visibility_clear). */
 inline void bound_triangle(global const float4* tri_vertices, global const view_t* views, int first_view,
-                           int view_count, global uint* bound, global int* writer, int item, int row_first,
-                           int row_step, int small_rows, global int* big_items, volatile global int* big_count)
+                           int view_count, global uint* bound, global int* writer, int masked,
+                           global const uint* read_mask, int mask_offset, int item, int row_first, int row_step,
+                           int small_rows, global int* big_items, volatile global int* big_count)
 {
     int tri = item / view_count;
     global const view_t* view = views + first_view + item % view_count;
@@ -231,6 +249,14 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
     int x1 = min((int)floor(fmin(hi.x, (float)view->width + 2.0f)) + 1, view->width - 1);
     int y1 = min((int)floor(fmin(hi.y, (float)view->height + 2.0f)) + 1, view->height - 1);
     if (x0 > x1 || y0 + row_first > y1) return; /* outside the view, or no row for this item */
+    if (masked && small_rows > 0 && y1 - y0 + 1 <= small_rows) { /* no sample reads its rectangle: nothing to draw */
+        int read = 0;
+        for (int ty = y0; ty <= y1 && !read; ++ty)
+            for (int tx = x0; tx <= x1 && !read; ++tx)
+                read = (read_mask[(mask_offset + view->depth_offset + ty * view->width + tx) >> 5]
+                        >> ((mask_offset + view->depth_offset + ty * view->width + tx) & 31)) & 1u;
+        if (!read) return;
+    }
     if (small_rows > 0 && y1 - y0 + 1 > small_rows) {
         big_items[atomic_inc(big_count)] = item; /* many rows: the split pass takes it */
         return;
@@ -277,6 +303,12 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
         float y_corner = (1.0f - 2.0f * (float)(ty + corner_y) * inverse_height) * view->scale_y;
         float row_plane = plane - n_view.y * y_corner;
         for (int tx = first; tx <= last; ++tx) {
+            if (masked) {
+                int at = mask_offset + view->depth_offset + ty * view->width + tx;
+                uint bits = read_mask[at >> 5] >> (at & 31); /* this texel's and the next ones in its word */
+                if (bits == 0u) tx += 31 - (at & 31); /* none read to the word's end */
+                if (!(bits & 1u)) continue;
+            }
             note_writer(writer + view->depth_offset + ty * view->width + tx, tri);
             if (bound[view->depth_offset + ty * view->width + tx] <= floor_bits) continue;
             float depth = nearest;
@@ -299,28 +331,49 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
     }
 }
 
+/* Before the bound passes, with a read_mask: only the texels read get their starting
+ * values (bound DEPTH_EMPTY, writer WRITER_NONE), as only they are drawn and read; one
+ * work-item per word of the mask over the light's texels [first, first + texels) (frame
+ * addresses; the light's own maps are at address - first). */
+kernel void visibility_clear(global const uint* read_mask, int first, int texels, global uint* bound,
+                             global int* writer)
+{
+    int word = (first >> 5) + get_global_id(0);
+    uint bits = read_mask[word];
+    if (bits == 0u) return;
+    for (int bit = 0; bit < 32; ++bit) {
+        int at = 32 * word + bit;
+        if (((bits >> bit) & 1u) && at >= first && at < first + texels) {
+            bound[at - first] = DEPTH_EMPTY;
+            writer[at - first] = WRITER_NONE;
+        }
+    }
+}
+
 /* Two passes, because a triangle's rectangle may hold a few texels or a whole face:
  * visibility_bound takes one work-item per triangle and view and does the rectangles of
  * up to `small_rows` rows at once, listing the others in big_items; visibility_bound_split
  * then spreads each listed rectangle's rows over the global size of its dimension 1. */
 kernel void visibility_bound(global const float4* tri_vertices, int count, global const view_t* views,
-                             int first_view, int view_count, global uint* bound, global int* writer, int small_rows,
+                             int first_view, int view_count, global uint* bound, global int* writer,
+                             int masked, global const uint* read_mask, int mask_offset, int small_rows,
                              global int* big_items, volatile global int* big_count)
 {
     int item = get_global_id(0);
     if (item >= count * view_count) return;
-    bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, item, 0, 1, small_rows, big_items,
-                   big_count);
+    bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, masked, read_mask, mask_offset, item,
+                   0, 1, small_rows, big_items, big_count);
 }
 
 kernel void visibility_bound_split(global const float4* tri_vertices, global const view_t* views, int first_view,
                                    int view_count, global uint* bound, global int* writer,
+                                   int masked, global const uint* read_mask, int mask_offset,
                                    global const int* big_items, global const int* big_count)
 {
     int index = get_global_id(0);
     if (index >= *big_count) return;
-    bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, big_items[index], get_global_id(1),
-                   get_global_size(1), 0, 0, 0);
+    bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, masked, read_mask, mask_offset,
+                   big_items[index], get_global_id(1), get_global_size(1), 0, 0, 0);
 }
 
 /* How far the sample's own triangle (plane through p with unit normal n, largest distance
@@ -345,41 +398,22 @@ inline float own_surface_slack(global const light_t* light, global const view_t*
     return depth - nearest + margin;
 }
 
-/* How the map decides one sample: 1 lit, 0 shadowed, -1 undecided (cast a ray).
- * Lit: the bound map says no triangle in the texel of `start` comes nearer the light than
- * the sample's own depth, less what its own surface may have written there (at most the
- * map's bias); or the writer map says no triangle but the sample's own touches that texel.
- * Shadowed: every centre of the 3×3 texels around `lookup` holds a blocker nearer than
- * the bias. */
-inline int map_decision(global const light_t* light, global const view_t* views, global const uint* shadow_depth,
-                        global const uint* bound, global const int* writer, float3 start, float3 lookup, float3 n,
-                        global const float4* tri_vertices, int tri)
+/* Whether the map says the sample is shadowed: every centre of the 3×3 texels around
+ * `lookup` holds a blocker nearer than the bias (a hole smaller than a texel in an
+ * occluder is missed here, the map's one approximation). */
+inline int blocked_all_around(global const light_t* light, global const view_t* views,
+                              global const uint* shadow_depth, float3 lookup)
 {
-    global const view_t* view = views + light_view_index(light, start);
+    global const view_t* view = views + light_view_index(light, lookup);
     float2 texel;
     float depth;
-    if (!view_project(view, start, &texel, &depth)) return -1;
-    if (texel.x < 0.0f || texel.y < 0.0f || texel.x >= (float)view->width || texel.y >= (float)view->height)
-        return 1; /* outside the map: no occluder (a map covers every occluder) */
-    int tx = (int)texel.x, ty = (int)texel.y;
-    float bound_depth = as_float(bound[view->depth_offset + ty * view->width + tx]);
-    if (depth <= bound_depth || writer[view->depth_offset + ty * view->width + tx] == tri) return 1;
-    /* Lit when depth ≤ bound + min(bias, slack), both ≥ 0: decided without the slack's
-     * trigonometry at either end (same answer as computing it first). */
-    if (depth <= bound_depth + SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth)) {
-        float reach = 0.0f; /* of the sample's triangle from the view's origin */
-        for (int k = 0; k < 3; ++k) reach = fmax(reach, length(tri_vertices[3 * tri + k].xyz - view->origin.xyz));
-        if (depth <= bound_depth + own_surface_slack(light, view, start, n, depth, reach)) return 1;
-    }
-    view = views + light_view_index(light, lookup);
-    if (!view_project(view, lookup, &texel, &depth)) return -1;
+    if (!view_project(view, lookup, &texel, &depth)) return 0;
     float tolerance = SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth);
-    tx = (int)texel.x;
-    ty = (int)texel.y;
+    int tx = (int)texel.x, ty = (int)texel.y;
     for (int j = -1; j <= 1; ++j)
         for (int i = -1; i <= 1; ++i)
-            if (depth <= shadow_texel(view, shadow_depth, tx + i, ty + j) + tolerance) return -1;
-    return 0;
+            if (depth <= shadow_texel(view, shadow_depth, tx + i, ty + j) + tolerance) return 0;
+    return 1;
 }
 
 /* Whether shade's cosine for this light is ≤ 0 wherever the sample lies on its triangle,
@@ -399,38 +433,148 @@ inline int turned_away(global const float4* tri_normal, global const float4* tri
     return 1;
 }
 
+/* Whether light_incident is non-zero at p (any light arrives), and as it, the unit
+ * direction from p towards the light. Its three exp() only where they could decide it:
+ * inside a spot's cone, some channel with power ≥ 1e-6, σt·d ≤ 30 and d² ≤ 1e10 is
+ * ≥ 1e-29 for sure, a normal float, so non-zero. */
+inline int light_reaches(global const light_t* light, float3 sigma_t, float3 p, float3* to_light)
+{
+    if (light->type != LIGHT_DIRECTIONAL) {
+        float3 w = p - light->position.xyz;
+        float d2 = dot(w, w);
+        float d = sqrt(d2);
+        *to_light = d > 0.0f ? -w / d : (float3)(0.0f, 1.0f, 0.0f);
+        if (light->type == LIGHT_SPOT && dot(w, light->direction.xyz) < light->cos_cone * d) return 0;
+        float3 power = light->power.xyz, attenuation = sigma_t * d;
+        if (d2 <= 1e10f && ((power.x >= 1e-6f && attenuation.x <= 30.0f) || (power.y >= 1e-6f && attenuation.y <= 30.0f)
+                            || (power.z >= 1e-6f && attenuation.z <= 30.0f)))
+            return 1;
+    }
+    float3 incident = light_incident(light, sigma_t, p, to_light);
+    return incident.x + incident.y + incident.z != 0.0f;
+}
+
+/* Where the shadow ray leaves: on the light's side of the surface, as the exact
+ * reference's does. */
+inline float3 shadow_ray_start(global const light_t* light, float3 p, float3 n, float3 to_light)
+{
+    float to_light_distance = light->type == LIGHT_DIRECTIONAL ? 0.0f : length(light->position.xyz - p);
+    float3 side = dot(n, to_light) >= 0.0f ? n : -n;
+    return p + side * (SHADOW_RAY_OFFSET_REL * (length(p) + to_light_distance));
+}
+
+/* The part of the decision that needs no bound map, before it is drawn, one work-item per
+ * sample and light (no loop, no atomics: straight-line code, which the CPU device can run
+ * several work-items at once in vector lanes): visible gets 1 where no light arrives (or
+ * the eye is in the lamp), 0 where the surface turns away from the light, else
+ * VISIBILITY_PENDING; map_read gets the texel of the
+ * bound and writer maps that the lit test reads (the point the shadow ray leaves from,
+ * projected: its address, or MAP_TEXEL_*) and the point's depth there. The texel is
+ * given for every sample not turned away, whatever the light's power and the medium, so
+ * the texels read (visibility_mark) follow the geometry, the camera and the light's place
+ * alone, which is what a kept bound map is keyed on (clrays/session.py). */
+kernel void visibility_prepare(global const frame_t* frame, global const view_t* views,
+                               global const light_t* lights, global const uint* camera_depth, global const int* tri_id,
+                               global const float4* tri_normal, global const float4* tri_vertex_normals,
+                               global const float2* offsets, global float* visible, global int2* map_read)
+{
+    int sample = get_global_id(0), l = get_global_id(1);
+    if (sample >= frame->width * frame->height * frame->spp) return;
+    int entry = sample * frame->light_count + l;
+    visible[entry] = 1.0f;
+    map_read[entry] = (int2)(MAP_TEXEL_NONE, 0);
+    float3 p, dir, n;
+    if (!camera_surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p, &dir, &n)) return;
+    int tri = tri_id[sample];
+    global const light_t* light = lights + l;
+    float3 to_light;
+    int reaches = light_reaches(light, frame->sigma_t.xyz, p, &to_light) && !eye_in_lamp(light, frame->lamp_radius);
+    if (turned_away(tri_normal, tri_vertex_normals, tri, n, to_light)) {
+        if (reaches) visible[entry] = 0.0f; /* shade weighs this light by a cosine ≤ 0: no map test, no ray */
+        return;
+    }
+    float3 start = shadow_ray_start(light, p, n, to_light);
+    global const view_t* view = views + light_view_index(light, start);
+    float2 texel;
+    float depth = 0.0f;
+    int address = MAP_TEXEL_NONE;
+    if (view_project(view, start, &texel, &depth)) {
+        address = MAP_TEXEL_OUTSIDE;
+        if (texel.x >= 0.0f && texel.y >= 0.0f && texel.x < (float)view->width && texel.y < (float)view->height)
+            address = view->depth_offset + (int)texel.y * view->width + (int)texel.x;
+    }
+    map_read[entry] = (int2)(address, as_int(depth));
+    if (reaches) visible[entry] = VISIBILITY_PENDING;
+}
+
+/* The texels that the lit tests read: map_read's addresses get their bit in read_mask
+ * (32 texels a word, by address; starts at 0). */
+kernel void visibility_mark(global const int2* map_read, int entries, global uint* read_mask)
+{
+    int entry = get_global_id(0);
+    if (entry >= entries) return;
+    int address = map_read[entry].x;
+    if (address < 0) return;
+    global uint* word = read_mask + (address >> 5);
+    uint bit = 1u << (address & 31);
+    if (!(*word & bit)) atomic_or(word, bit); /* the read spares most atomics */
+}
+
+/* The rest of the decision, for the pending samples and lights. Lit: the bound map says no
+ * triangle in the texel comes nearer the light than the sample's own depth, less what its
+ * own surface may have written there (at most the map's bias); or the writer map says no
+ * triangle but the sample's own touches that texel. Shadowed: the 3 × 3 test. Otherwise a
+ * shadow ray through the BVH. */
 kernel void visibility(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                        global const uint* shadow_depth, global const uint* bound, global const int* writer,
-                       global const uint* camera_depth, global const int* tri_id, global const float4* tri_vertices,
-                       global const float4* tri_normal, global const float4* tri_vertex_normals,
+                       global const int2* map_read, global const uint* camera_depth, global const int* tri_id,
+                       global const float4* tri_vertices, global const float4* tri_normal,
                        global const float2* offsets, global const float4* node_bounds,
                        global const int2* node_children, int root, global float* visible)
 {
     int sample = get_global_id(0);
     if (sample >= frame->width * frame->height * frame->spp) return;
     global float* out = visible + sample * frame->light_count;
-    for (int l = 0; l < frame->light_count; ++l) out[l] = 1.0f;
-    float3 p, dir, n;
-    if (!camera_surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p, &dir, &n)) return;
     int tri = tri_id[sample];
+    float3 p, dir, n;
+    int surface = 0; /* p and n worked out: only for samples the lit test leaves */
     for (int l = 0; l < frame->light_count; ++l) {
+        if (out[l] != VISIBILITY_PENDING) continue;
         global const light_t* light = lights + l;
-        float3 to_light;
-        float3 incident = light_incident(light, frame->sigma_t.xyz, p, &to_light);
-        if (incident.x + incident.y + incident.z == 0.0f || eye_in_lamp(light, frame->lamp_radius)) continue;
-        if (turned_away(tri_normal, tri_vertex_normals, tri, n, to_light)) {
-            out[l] = 0.0f; /* shade weighs this light by a cosine ≤ 0: no map test, no ray */
+        int2 read = map_read[sample * frame->light_count + l];
+        if (read.x == MAP_TEXEL_OUTSIDE) {
+            out[l] = 1.0f;
             continue;
         }
-        float to_light_distance = light->type == LIGHT_DIRECTIONAL ? 0.0f : length(light->position.xyz - p);
-        /* The ray leaves on the light's side of the surface, as the exact reference's does. */
-        float3 side = dot(n, to_light) >= 0.0f ? n : -n;
-        float3 start = p + side * (SHADOW_RAY_OFFSET_REL * (length(p) + to_light_distance));
-        float3 lookup = p + n * shadow_texel_size(light, length(p - light->position.xyz));
-        int decided = map_decision(light, views, shadow_depth, bound, writer, start, lookup, n, tri_vertices, tri);
-        if (decided >= 0) {
-            out[l] = (float)decided;
+        float depth = as_float(read.y), bound_depth = read.x >= 0 ? as_float(bound[read.x]) : 0.0f;
+        if (read.x >= 0 && (depth <= bound_depth || writer[read.x] == tri)) {
+            out[l] = 1.0f;
             continue;
+        }
+        if (!surface)
+            surface = camera_surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p, &dir,
+                                           &n);
+        float3 to_light;
+        light_reaches(light, frame->sigma_t.xyz, p, &to_light);
+        float3 start = shadow_ray_start(light, p, n, to_light);
+        if (read.x >= 0) {
+            /* Lit when depth ≤ bound + min(bias, slack), both ≥ 0: the slack's trigonometry
+             * only within the bias (same answer as computing it first). */
+            if (depth <= bound_depth + SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth)) {
+                global const view_t* view = views + light_view_index(light, start);
+                float reach = 0.0f; /* of the sample's triangle from the view's origin */
+                for (int k = 0; k < 3; ++k)
+                    reach = fmax(reach, length(tri_vertices[3 * tri + k].xyz - view->origin.xyz));
+                if (depth <= bound_depth + own_surface_slack(light, view, start, n, depth, reach)) {
+                    out[l] = 1.0f;
+                    continue;
+                }
+            }
+            float3 lookup = p + n * shadow_texel_size(light, length(p - light->position.xyz));
+            if (blocked_all_around(light, views, shadow_depth, lookup)) {
+                out[l] = 0.0f;
+                continue;
+            }
         }
         float3 ray = light->type == LIGHT_DIRECTIONAL ? to_light : light->position.xyz - start;
         float t_max = light->type == LIGHT_DIRECTIONAL ? INFINITY : 1.0f;

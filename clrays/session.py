@@ -61,7 +61,8 @@ from .stages.transparency import (Films, composite, opaque_camera_vertices, tran
                                   transparency_of)
 from .stages.transparency_walk import transparency_march, transparency_walk
 from .stages.volume_moments import volume_moments
-from .stages.visibility import bound_atlas, bvh_topology_of, upload_bvh, visibility, visibility_bound
+from .stages.visibility import (bound_atlas, bvh_topology_of, upload_bvh, visibility, visibility_bound,
+                                visibility_prepare)
 
 #: The rectified texture of a light whose shadow map is empty (nothing casts a shadow)
 #: is π everywhere whatever its size, so it is built at this size (the minimum).
@@ -267,13 +268,17 @@ class Renderer:
         if scene.render.surface_shadows != "exact" or not scene.lights:
             return None
         device = self.device
-        bounds = [reuse.keep("visibility.bound", digest("bound", keys.shadow[index]),
-                             lambda index=index: visibility_bound(device, buffers, index, timer), per_light=True)
+        # The bound maps are drawn only where the camera's samples read them: kept while the
+        # light's shadow map and the camera samples are.
+        prepared = visibility_prepare(device, buffers, rastered, timer)
+        bounds = [reuse.keep("visibility.bound", digest("bound", keys.shadow[index], keys.camera),
+                             lambda index=index: visibility_bound(device, buffers, index, timer, prepared),
+                             per_light=True)
                   for index in range(len(scene.lights))]
-        atlas = reuse.keep("bound_atlas", digest("bound", tuple(keys.shadow)),
+        atlas = reuse.keep("bound_atlas", digest("bound", tuple(keys.shadow), keys.camera),
                            lambda: bound_atlas(device, buffers, bounds))
         reuse.record.note("visibility", COMPUTED)
-        return visibility(device, buffers, rastered, atlas, bvh, timer)
+        return visibility(device, buffers, rastered, prepared, atlas, bvh, timer)
 
     def _shadow_filter(self, buffers: FrameBuffers, rastered: RasterResult, keys: StageKeys, reuse: Reuse,
                        timer: StageTimer):
@@ -391,6 +396,8 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
             sizes.append(("moment prefix sums of one light", prefix))
     if scene.render.surface_shadows == "exact" and scene.lights:  # visibility's bound and writer maps, every light's
         sizes.append(("bound and writer maps", 8 * inputs.shadow_texels))
+        # and per sample and light the texel its lit test reads (address, depth), a bit per texel read
+        sizes.append(("texels the visibility stage reads", 8 * samples * len(scene.lights) + inputs.shadow_texels // 8))
     if scene.geometry.translucent and scene.lights:  # the translucency stage's layers (translucency.py)
         layers = scene.render.translucent_layers
         sizes.append(("translucent layers", 12 * layers * inputs.shadow_texels))

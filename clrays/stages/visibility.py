@@ -9,6 +9,10 @@ one touching its texel; shadowed where every texel centre around it holds a bloc
 rest, the samples on shadow edges, ask the BVH whether the segment to the light is
 blocked, so a shadow edge lands where the `exact` reference puts it. A sample whose
 surface turns away from the light needs neither: shade weighs it by zero.
+
+In order: `visibility_prepare` decides what needs no map and notes the texel each other
+sample's lit test reads, `visibility_bound` draws each light's maps at those texels only,
+`visibility` decides the rest (docs/design.md §4.6).
 """
 from __future__ import annotations
 
@@ -77,6 +81,38 @@ def upload_bvh(device: Device, buffers: FrameBuffers, topology: BvhTopology | De
 
 
 @dataclass
+class Prepared:
+    """visibility_prepare's answers, before the bound maps: each sample's and light's
+    visibility where it needs no map (1 no light, 0 turned away, else pending), the
+    texel of the bound and writer maps that a pending one's lit test reads, and a bit
+    per texel read (the bound passes draw only those)."""
+
+    visible: object  # float[samples × lights]: 1, 0 or pending (cl/visibility.cl VISIBILITY_PENDING*)
+    map_read: object  # int2[samples × lights]: texel address (or MAP_TEXEL_*), as_int(depth)
+    read_mask: object  # uint per 32 texels of the frame's shadow maps, by address: a bit per texel read
+
+
+def visibility_prepare(device: Device, buffers: FrameBuffers, rastered: RasterResult, timer: StageTimer) -> Prepared:
+    """The part of the decision that needs no bound map (no light, turned away, or pending),
+    and the texels that the pending samples will read."""
+    inputs = buffers.inputs
+    lights = max(len(inputs.scene.lights), 1)
+    entries = inputs.samples * lights
+    visible = device.buffer(nbytes=4 * entries)
+    map_read = device.buffer(nbytes=8 * entries)
+    timer.add("visibility", device.kernel("visibility", "visibility_prepare")(
+        device.queue, (inputs.samples, lights), None, buffers.params, buffers.views, buffers.lights,
+        rastered.camera_depth, rastered.tri_id, buffers.tri_normal,
+        buffers.tri_vertex_normals, buffers.offsets, visible, map_read))
+    words = max((inputs.shadow_texels + 31) // 32, 1)
+    read_mask = device.buffer(nbytes=4 * words)
+    device.fill(read_mask, np.uint32(0), 4 * words, timer, "visibility")
+    timer.add("visibility", device.kernel("visibility", "visibility_mark")(
+        device.queue, (entries,), None, map_read, np.int32(entries), read_mask))
+    return Prepared(visible, map_read, read_mask)
+
+
+@dataclass
 class BoundMap:
     """A light's (or every light's, back to back) bound and writer maps, texel for texel
     the layout of its shadow map."""
@@ -86,21 +122,37 @@ class BoundMap:
     texels: int
 
 
-def visibility_bound(device: Device, buffers: FrameBuffers, light_index: int, timer: StageTimer) -> BoundMap:
+def visibility_bound(device: Device, buffers: FrameBuffers, light_index: int, timer: StageTimer,
+                     prepared: Prepared | None = None) -> BoundMap:
     """One light's bound and writer maps, in the light-anchored space of its shadow map
-    (clrays.inputs.light_pass_inputs), so the depths match."""
+    (clrays.inputs.light_pass_inputs), so the depths match. With `prepared`, only the
+    texels whose bit its read_mask has are drawn (the others hold no value); without,
+    every texel."""
     inputs = light_pass_inputs(buffers.inputs, light_index)
+    # the frame's address of this light's texel 0 (read_mask is by frame addresses)
+    first = int(buffers.inputs.views[buffers.inputs.light_views[light_index][0]]["depth_offset"])
     texels = max(inputs.shadow_texels, 1)
     bound = device.buffer(nbytes=4 * texels)
-    device.fill(bound, structs.DEPTH_EMPTY, 4 * texels, timer, "visibility")
     writer = device.buffer(nbytes=4 * texels)
-    device.fill(writer, np.int32(structs.WRITER_NONE), 4 * texels, timer, "visibility")
+    if prepared is None:
+        device.fill(bound, structs.DEPTH_EMPTY, 4 * texels, timer, "visibility")
+        device.fill(writer, np.int32(structs.WRITER_NONE), 4 * texels, timer, "visibility")
+    elif inputs.shadow_texels:
+        # Only the texels read: the others are never drawn nor read, and their memory never
+        # touched (on a CPU device, filling a fresh 1024² cube's two maps costs more than
+        # drawing them).
+        words = (first + inputs.shadow_texels - 1) // 32 - first // 32 + 1
+        timer.add("visibility", device.kernel("visibility", "visibility_clear")(
+            device.queue, (words,), None, prepared.read_mask, np.int32(first), np.int32(inputs.shadow_texels), bound,
+            writer))
     count = inputs.tri_vertices.shape[0] // 3
     if count:
         vertices = device.buffer(inputs.tri_vertices, writable=False)
         views = device.buffer(inputs.views, writable=False)
         big_items = device.buffer(nbytes=4 * count)
         big_count = device.buffer(nbytes=4)
+        masked = np.int32(prepared is not None)
+        read_mask = prepared.read_mask if prepared is not None else device.buffer(nbytes=4)
         first_pass = device.kernel("visibility", "visibility_bound")
         split_pass = device.kernel("visibility", "visibility_bound_split")
         # Only the cube faces the frame can read (`view_needed`, as raster.shadow does): no
@@ -109,13 +161,13 @@ def visibility_bound(device: Device, buffers: FrameBuffers, light_index: int, ti
             device.fill(big_count, np.int32(0), 4, timer, "visibility")
             timer.add("visibility", first_pass(
                 device.queue, (count,), None, vertices, np.int32(count), views, np.int32(view), np.int32(1), bound,
-                writer, np.int32(BOUND_SMALL_ROWS), big_items, big_count))
+                writer, masked, read_mask, np.int32(first), np.int32(BOUND_SMALL_ROWS), big_items, big_count))
             listed = int(device.read(big_count, 1, np.int32)[0])
             if listed:
                 nearest_first(device, big_items, listed, inputs, view)
                 timer.add("visibility", split_pass(
                     device.queue, (listed, BOUND_ROW_SPLIT), None, vertices, views, np.int32(view), np.int32(1),
-                    bound, writer, big_items, big_count))
+                    bound, writer, masked, read_mask, np.int32(first), big_items, big_count))
     return BoundMap(bound, writer, inputs.shadow_texels)
 
 
@@ -147,16 +199,15 @@ def bound_atlas(device: Device, buffers: FrameBuffers, bounds: list[BoundMap]) -
     return atlas
 
 
-def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, bound: BoundMap, bvh: DeviceBvh,
-               timer: StageTimer):
-    """float[samples × lights]: 1 where the sample sees the light, 0 where it does not."""
+def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, prepared: Prepared, bound: BoundMap,
+               bvh: DeviceBvh, timer: StageTimer):
+    """float[samples × lights]: 1 where the sample sees the light, 0 where it does not
+    (`prepared.visible`, its pending entries decided)."""
     inputs = buffers.inputs
-    lights = max(len(inputs.scene.lights), 1)
-    visible = device.buffer(nbytes=4 * inputs.samples * lights)
     event = device.kernel("visibility", "visibility")(
         device.queue, (inputs.samples,), None, buffers.params, buffers.views, buffers.lights,
-        rastered.shadow_depth, bound.bound, bound.writer, rastered.camera_depth, rastered.tri_id,
-        buffers.tri_vertices, buffers.tri_normal, buffers.tri_vertex_normals, buffers.offsets, bvh.node_bounds,
-        bvh.node_children, np.int32(bvh.root), visible)
+        rastered.shadow_depth, bound.bound, bound.writer, prepared.map_read, rastered.camera_depth, rastered.tri_id,
+        buffers.tri_vertices, buffers.tri_normal, buffers.offsets, bvh.node_bounds, bvh.node_children,
+        np.int32(bvh.root), prepared.visible)
     timer.add("visibility", event)
-    return visible
+    return prepared.visible
