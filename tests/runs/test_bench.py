@@ -57,9 +57,9 @@ def _ladder(error_at, ms_per_step=1.0):
 
 def test_raymarch_ladder_doubles_until_the_lowest_target_then_refines_each_crossing():
     asked = _ladder(lambda steps, shadow_map: 1.0 / steps)  # 1 % at 100 steps, 0.5 % at 200
-    assert asked[:4] == [(32, 1024), (64, 1024), (128, 1024), (256, 1024)]
+    assert asked[:6] == [(8, 1024), (16, 1024), (32, 1024), (64, 1024), (128, 1024), (256, 1024)]
     # 1 %: between 64 and 128 → 88 (fails); 0.5 %: between 128 and 256 → 184 (fails)
-    assert asked[4:] == [(88, 1024), (184, 1024)]
+    assert asked[6:] == [(88, 1024), (184, 1024)]
 
 
 def test_raymarch_ladder_goes_to_twice_the_map_where_the_map_stops_it():
@@ -73,10 +73,11 @@ def test_raymarch_ladder_goes_to_twice_the_map_where_the_map_stops_it():
 
 def test_raymarch_ladder_stops_at_the_most_steps_or_after_a_long_frame():
     # Far from the target, the map is not what stops it: no larger map.
-    assert _ladder(lambda steps, shadow_map: 0.5) == [(steps, 1024) for steps in (32, 64, 128, 256, 512, 1024, 2048)]
-    # 1024 steps take 20.5 s of CPU time, past RAYMARCH_MOST_FRAME_CPU_MS: the last rung.
-    assert _ladder(lambda steps, shadow_map: 0.5, ms_per_step=20) == [(steps, 1024) for steps in (32, 64, 128, 256,
-                                                                                                   512, 1024)]
+    assert _ladder(lambda steps, shadow_map: 0.5) == [(steps, 1024) for steps in (8, 16, 32, 64, 128, 256, 512, 1024,
+                                                                                   2048)]
+    # 1024 steps take 30.7 s of CPU time, past RAYMARCH_MOST_FRAME_CPU_MS: the last rung.
+    assert _ladder(lambda steps, shadow_map: 0.5, ms_per_step=30) == [(steps, 1024) for steps in (8, 16, 32, 64, 128,
+                                                                                                   256, 512, 1024)]
 
 
 def test_error_pixels_are_fixed_and_distinct():
