@@ -31,11 +31,27 @@ SCENES = ("demo", "bunny", "behind", "sun")
 STAGES = ("raster", "rectify", "minmax", "integrand", "traverse", "visibility", "bvh", "shade")
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def frame_arguments(description: str, size: str, frames: int) -> argparse.ArgumentParser:
+    """The arguments every per-frame timing script takes: scenes, image size, frame count."""
+    parser = argparse.ArgumentParser(description=description)
     parser.add_argument("scenes", nargs="*", default=SCENES, help="scene names in scenes/ (default: the bench four)")
-    parser.add_argument("--size", default="16x9", help="WxH (default 16x9)")
-    parser.add_argument("--frames", type=int, default=7, help="timed frames per scene after the warm-up (default 7)")
+    parser.add_argument("--size", default=size, help=f"WxH (default {size})")
+    parser.add_argument("--frames", type=int, default=frames, help=f"timed frames per scene after the warm-up "
+                                                                   f"(default {frames})")
+    return parser
+
+
+def timed_frames(name: str, width: int, height: int, frames: int) -> tuple[object, list]:
+    """(scene, results): scenes/<name>.yaml at width×height rendered from scratch (no reuse)
+    once to build the kernels, then `frames` times."""
+    scene = load_scene(REPO / "scenes" / f"{name}.yaml", overrides=[f"image.width={width}", f"image.height={height}"])
+    renderer = Renderer(reuse=False)
+    renderer.render(scene)
+    return scene, [renderer.render(scene) for _ in range(frames)]
+
+
+def main() -> None:
+    parser = frame_arguments(__doc__.splitlines()[0], "16x9", 7)
     parser.add_argument("--error", action="store_true", help="also the error against exact at this size")
     args = parser.parse_args()
     width, height = (int(v) for v in args.size.split("x"))
@@ -44,10 +60,7 @@ def main() -> None:
     print("| scene | " + " | ".join(STAGES) + " | total (min–max) | sizes" + error_header + " |")
     print("|---|" + "---|" * (len(STAGES) + 2 + args.error))
     for name in args.scenes:
-        scene = load_scene(REPO / "scenes" / f"{name}.yaml", overrides=[f"image.width={width}", f"image.height={height}"])
-        renderer = Renderer(reuse=False)
-        renderer.render(scene)
-        runs = [renderer.render(scene) for _ in range(args.frames)]
+        scene, runs = timed_frames(name, width, height, args.frames)
         totals = [sum(run.stage_ms.values()) for run in runs]
         cells = [f"{statistics.median(run.stage_ms.get(stage, 0.0) for run in runs):.1f}" for stage in STAGES]
         render = getattr(runs[0], "render", None)  # None: a checkout from before the sizes followed the image

@@ -13,7 +13,6 @@ position in a session).
 """
 from __future__ import annotations
 
-import argparse
 import os
 import statistics
 import sys
@@ -25,10 +24,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from clrays import session as session_module  # noqa: E402
-from clrays.scene.load import load_scene  # noqa: E402
-from clrays.session import Renderer  # noqa: E402
-
-SCENES = ("demo", "bunny", "behind", "sun")
+from stage_times import frame_arguments, timed_frames  # noqa: E402  (bench/, beside this script)
 
 
 class _Relabel:
@@ -52,10 +48,7 @@ def _split_bound_map_time() -> None:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("scenes", nargs="*", default=SCENES, help="scene names in scenes/ (default: the bench four)")
-    parser.add_argument("--size", default="1280x720", help="WxH (default 1280x720)")
-    parser.add_argument("--frames", type=int, default=3, help="timed frames per scene after the warm-up (default 3)")
+    parser = frame_arguments(__doc__.splitlines()[0], "1280x720", 3)
     parser.add_argument("--save", metavar="DIR", help="also write each scene's last image to DIR/<scene>.npy")
     args = parser.parse_args()
     width, height = (int(v) for v in args.size.split("x"))
@@ -65,11 +58,7 @@ def main() -> None:
           "| (visibility + bvh) / frame |")
     print("|---|---|---|---|---|---|---|")
     for name in args.scenes:
-        size = [f"image.width={width}", f"image.height={height}"]
-        scene = load_scene(REPO / "scenes" / f"{name}.yaml", overrides=size)
-        renderer = Renderer(reuse=False)
-        renderer.render(scene)
-        runs = [renderer.render(scene) for _ in range(args.frames)]
+        _, runs = timed_frames(name, width, height, args.frames)
 
         def median(stage):
             return statistics.median(run.stage_ms.get(stage, 0.0) for run in runs)
