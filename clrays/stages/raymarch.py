@@ -10,17 +10,22 @@ from .raster import RasterResult
 
 
 def raymarch(device: Device, buffers: FrameBuffers, rastered: RasterResult, scatter, timer: StageTimer,
-             layers=None) -> None:
+             layers=None, walk=None) -> None:
     """Write every camera sample's in-scattered radiance (float4, rgb) into `scatter`.
-    `layers`: the translucency stage's, looked up per step (None: an opaque-only scene)."""
-    samples = buffers.inputs.samples
+    `layers`: the translucency stage's, looked up per step (None: an opaque-only scene).
+    `walk`: (work items, defines, arguments, label) of MBOIT's weighted fog march
+    (clrays.stages.transparency_walk), which marches only the samples with films."""
+    work_items, label = buffers.inputs.samples, "raymarch"
     # STEP_SPACING 0: equiangular, 1: uniform (clrays.structs.STEP_SPACING_*)
     defines = {"STEP_SPACING": STEP_SPACINGS.index(buffers.inputs.scene.render.step_spacing)}
     extra = ()
     if layers is not None:
         defines, extra = {**defines, **layers.defines()}, layers.args()
+    if walk is not None:
+        work_items, walk_defines, walk_args, label = walk
+        defines, extra = {**defines, **walk_defines}, (*extra, *walk_args)
     event = device.kernel("raymarch", "raymarch", defines)(
-        device.queue, (samples,), None, buffers.params, buffers.views, buffers.lights,
+        device.queue, (work_items,), None, buffers.params, buffers.views, buffers.lights,
         rastered.shadow_depth, rastered.camera_depth, buffers.offsets, buffers.light_textures, buffers.texels, scatter,
         *extra)
-    timer.add("raymarch", event)
+    timer.add(label, event)

@@ -96,6 +96,7 @@ class Films:
     scatter: object  # float4[slots·samples]: L(0, z_k)
     samples: int
     rastered: RasterResult
+    opacity: object  # float4[triangles]: every triangle's opacity (rgb), 1 for an opaque one
     # MBOIT's one weighted walk (stages/transparency_walk.py; None: the in-scatter runs per slot):
     walked: object = None  # float4[samples]: ∫(T(s) − T(D)) dL(0, s), summed over the walked lights
     walk_samples: object = None  # int[walk_count]: the samples that meet a film
@@ -160,7 +161,9 @@ def translucent_films(device: Device, buffers: FrameBuffers, rastered: RasterRes
         device.fill(scatter, np.float32(0), 16 * slots * samples, timer, LABEL)
     # The in-scatter stages read the layers' depths as the camera depth: the same shadow maps,
     # the same camera, a slot's depth instead of the opaque one.
-    return Films(slots, depth, tri, scatter, samples, rastered, **walk)
+    opacity = np.zeros((inputs.scene.geometry.count, 4), np.float32)
+    opacity[:, :3] = inputs.scene.geometry.opacity_or_ones()
+    return Films(slots, depth, tri, scatter, samples, rastered, device.buffer(opacity, writable=False), **walk)
 
 
 def films_to_walk(device: Device, counts, samples: int, timer: StageTimer) -> dict:
@@ -183,8 +186,6 @@ def composite(device: Device, buffers: FrameBuffers, rastered: RasterResult, lay
     inputs = buffers.inputs
     settings = transparency_of(inputs.scene)
     samples = inputs.samples
-    opacity = np.zeros((inputs.scene.geometry.count, 4), np.float32)
-    opacity[:, :3] = inputs.scene.geometry.opacity_or_ones()
     defines = {"TRANSPARENCY_MOMENTS": int(settings.type == "moments"),
                "TRANSPARENCY_LOG_WARP": int(settings.warp == "log")}
     light_args = ()
@@ -199,7 +200,7 @@ def composite(device: Device, buffers: FrameBuffers, rastered: RasterResult, lay
     timer.add(LABEL, device.kernel("transparency", "transparency_composite", defines)(
         device.queue, (samples,), None, buffers.params, buffers.views, buffers.offsets, buffers.lights,
         rastered.shadow_depth, buffers.tri_vertices, buffers.tri_normal, buffers.tri_albedo,
-        device.buffer(opacity, writable=False), buffers.light_textures, buffers.texels, np.int32(layers.slots),
+        layers.opacity, buffers.light_textures, buffers.texels, np.int32(layers.slots),
         layers.depth, layers.tri, layers.scatter, np.array([near, far], np.float32),
         np.float32(settings.moment_bias), transmittance, in_front, *light_args))
     return transmittance, in_front

@@ -14,6 +14,7 @@ from ..scene.model import TRAVERSALS
 from .integrand import DeviceIntegrand
 from .light_texture import TextureTables, untextured_tables
 from .raster import RasterResult
+from .raymarch import raymarch
 from .rectify import Epipolar
 from .transparency import FOG_LABEL, Films, depth_range, transparency_of
 
@@ -29,13 +30,11 @@ def _walk_defines(buffers: FrameBuffers) -> dict:
             "WALK_PIECES": WALK_PIECES}
 
 
-def _film_args(device: Device, buffers: FrameBuffers, films: Films) -> tuple:
+def _film_args(buffers: FrameBuffers, films: Films) -> tuple:
     """walk_samples … moment_bias: the arguments both walks share."""
     inputs = buffers.inputs
-    opacity = np.zeros((inputs.scene.geometry.count, 4), np.float32)
-    opacity[:, :3] = inputs.scene.geometry.opacity_or_ones()
     return (films.walk_samples, np.int32(films.walk_count), np.int32(films.slots), films.depth, films.tri,
-            device.buffer(opacity, writable=False), np.array(depth_range(inputs), np.float32),
+            films.opacity, np.array(depth_range(inputs), np.float32),
             np.float32(transparency_of(inputs.scene).moment_bias))
 
 
@@ -55,20 +54,14 @@ def transparency_walk(device: Device, buffers: FrameBuffers, films: Films, epipo
     timer.add(FOG_LABEL, device.kernel("transparency_walk", "transparency_walk", defines)(
         device.queue, (films.walk_count,), None, buffers.params, buffers.views, buffers.lights, epipolar.buffer,
         epipolar.tree, integrand.params, integrand.data, buffers.offsets, texture.params, texture.basis,
-        texture.prefix, *_film_args(device, buffers, films), films.walked, *extra))
+        texture.prefix, *_film_args(buffers, films), films.walked, *extra))
 
 
 def transparency_march(device: Device, buffers: FrameBuffers, rastered: RasterResult, films: Films,
                        timer: StageTimer, layers=None) -> None:
     """Write every light's weighted fog into `films.walked` for the samples with films, marching
-    as raymarch does (`layers`: the translucency stage's, as for raymarch)."""
+    as raymarch does, with its step spacing (`layers`: the translucency stage's, as for raymarch)."""
     if not films.walk_count:
         return
-    defines, extra = _walk_defines(buffers), ()
-    if layers is not None:
-        defines.update(layers.defines())
-        extra = layers.args()
-    timer.add(FOG_LABEL, device.kernel("raymarch", "raymarch", defines)(
-        device.queue, (films.walk_count,), None, buffers.params, buffers.views, buffers.lights,
-        rastered.shadow_depth, rastered.camera_depth, buffers.offsets, buffers.light_textures, buffers.texels,
-        films.walked, *extra, *_film_args(device, buffers, films)))
+    raymarch(device, buffers, rastered, films.walked, timer, layers,
+             walk=(films.walk_count, _walk_defines(buffers), _film_args(buffers, films), FOG_LABEL))

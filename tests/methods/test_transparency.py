@@ -170,3 +170,20 @@ def test_moments_one_walk_is_the_per_film_composite(renderer, monkeypatch, metho
     error = np.sqrt(np.mean((walk["in_front"][films] - fog) ** 2)) / fog.mean()
     assert error < 0.008, error  # measured 0.43 % (minmax, 4 pieces), 0.42 % (raymarch)
     assert image_error(walked.image, per_film.image).rmse < 0.001  # measured 0.016 %
+
+
+def test_moments_fog_march_takes_the_scene_step_spacing(renderer, monkeypatch):
+    """raymarch's weighted fog march is the raymarch kernel with the scene's `step_spacing`:
+    with black panes the films' light in front is that march alone, so at a few steps the two
+    spacings must give different fog (the march had once ignored the key and always taken
+    equiangular steps)."""
+    spy = CompositeSpy(monkeypatch)
+    black = [f"objects.{i}.albedo=0" for i in range(2, 7)]
+    for spacing in ("equiangular", "uniform"):
+        renderer.render(small_row(*black, "render.transparency={type: moments}", "render.steps=4",
+                                  f"render.step_spacing={spacing}"), "raymarch", reuse=False)
+    equiangular, uniform = spy.frames
+    films = equiangular["in_front"][..., :3].any(axis=-1)
+    assert films.sum() > 300
+    difference = np.abs(equiangular["in_front"][films] - uniform["in_front"][films]).mean()
+    assert difference > 0.01 * equiangular["in_front"][films].mean(), difference  # measured 2.9 % of the mean
