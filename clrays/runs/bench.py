@@ -61,7 +61,7 @@ RAYMARCH_MOST_STEPS = 2048
 #: CPU time, not wall time: on a shared machine the wall time of the same frame varied 3×
 #: with the load (bench/RESULTS.md, the re-run), its CPU time by a few per cent.
 #: 30 s, not 20: equiangular raymarch reaches 0.5 % on the demo at 1280×720 at 184 steps,
-#: a 24 s frame (bench/RESULTS.md), one rung past a 20 s cap.
+#: a 23 s frame (bench/RESULTS.md), one rung past a 20 s cap.
 RAYMARCH_MOST_FRAME_CPU_MS = 30_000
 #: The largest shadow map the ladder and the minmax points go up to.
 MOST_SHADOW_MAP = 2048

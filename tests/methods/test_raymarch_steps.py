@@ -33,8 +33,7 @@ def test_equiangular_steps_converge_with_a_point_light_in_view(renderer):
     rmse = [error.rmse for error in errors.values()]
     # Measured: 1.78, 0.88, 0.41, 0.21 % (halving per doubling of the steps); uniform steps
     # at 128: 111 %, from the pixels whose rays pass next to the light.
-    assert all(coarse > 1.5 * fine for coarse, fine in zip(rmse[:3], rmse[1:3])), [str(e) for e in errors.values()]
-    assert rmse[2] > rmse[3], [str(e) for e in errors.values()]
+    assert all(coarse > 1.5 * fine for coarse, fine in zip(rmse, rmse[1:])), [str(e) for e in errors.values()]
     assert rmse[3] <= 0.005 / 1.5, str(errors[256])
     assert uniform.rmse > 20 * rmse[2], str(uniform)
 
@@ -65,10 +64,14 @@ def test_equiangular_steps_converge_with_a_spot_light_in_view(renderer):
     assert uniform.rmse > 2 * rmse[2], str(uniform)
 
 
-def test_uniform_steps_are_the_marcher_before_equiangular_steps(renderer):
+def test_uniform_steps_are_the_marcher_before_equiangular_steps(renderer, device):
     """tests/golden/data/point_box_raymarch.npy was rendered before equiangular steps existed
-    (and is the golden of `step_spacing: uniform` since): the same bits."""
+    (and is the golden of `step_spacing: uniform` since): the same bits, on the device that
+    rendered it."""
     import sys
+
+    if "Portable Computing Language" not in device.device.platform.name:
+        pytest.skip(f"the golden images are PoCL renders; this session runs on {device.name}")
 
     sys.path.insert(0, str(GOLDEN_DATA.parent))
     from test_golden import GOLDEN
@@ -100,6 +103,8 @@ def test_a_ray_through_the_light_stays_finite(renderer, kind, sigma_s):
     rest = image_error(image, reference, depth_edges(depth_map(scene())) | (np.arange(33)[:, None] == 16)
                        & (np.arange(33)[None, :] == 16))
     print(kind, sigma_s, f"middle pixel {middle:+.3%}, the others: {rest}")
+    # Measured: the middle pixel 1.1–1.9 % low (the lamp's edge falls inside a step), the
+    # others within 0.004 % on average.
     assert abs(middle) < 0.03 and rest.mean < 0.002, (middle, str(rest))
 
 
