@@ -471,8 +471,9 @@ inline float3 shadow_ray_start(global const light_t* light, float3 p, float3 n, 
  * bound and writer maps that the lit test reads (the point the shadow ray leaves from,
  * projected: its address, or MAP_TEXEL_*) and the point's depth there. The texel is
  * given for every sample not turned away, whatever the light's power and the medium, so
- * the texels read (visibility_mark) follow the geometry, the camera and the light's place
- * alone, which is what a kept bound map is keyed on (clrays/session.py). */
+ * the texels read (visibility_mark) follow the geometry with its shading normals (which
+ * turn a surface away and offset the ray's start), the camera and the light's place alone,
+ * which is what a kept bound map is keyed on (clrays/session.py). */
 kernel void visibility_prepare(global const frame_t* frame, global const view_t* views,
                                global const light_t* lights, global const uint* camera_depth, global const int* tri_id,
                                global const float4* tri_normal, global const float4* tri_vertex_normals,

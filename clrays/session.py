@@ -269,13 +269,13 @@ class Renderer:
             return None
         device = self.device
         # The bound maps are drawn only where the camera's samples read them: kept while the
-        # light's shadow map and the camera samples are.
+        # light's shadow map, the camera samples and the surfaces' normals are.
         prepared = visibility_prepare(device, buffers, rastered, timer)
-        bounds = [reuse.keep("visibility.bound", digest("bound", keys.shadow[index], keys.camera),
+        bounds = [reuse.keep("visibility.bound", digest("bound", keys.shadow[index], keys.camera, keys.surfaces),
                              lambda index=index: visibility_bound(device, buffers, index, timer, prepared),
                              per_light=True)
                   for index in range(len(scene.lights))]
-        atlas = reuse.keep("bound_atlas", digest("bound", tuple(keys.shadow), keys.camera),
+        atlas = reuse.keep("bound_atlas", digest("bound", tuple(keys.shadow), keys.camera, keys.surfaces),
                            lambda: bound_atlas(device, buffers, bounds))
         reuse.record.note("visibility", COMPUTED)
         return visibility(device, buffers, rastered, prepared, atlas, bvh, timer)
@@ -454,6 +454,9 @@ class StageKeys:
                                len(inputs.tri_vertices))
         if scene.geometry.translucent:  # which triangles are opaque occluders, and what the others let through
             self.geometry = digest(self.geometry, scene.geometry.opacity)
+        # visibility's bound maps: the triangles with their shading normals, which decide the
+        # texels the camera's samples read (cl/visibility.cl visibility_prepare).
+        self.surfaces = digest("surfaces", *geometry_parts(scene.geometry))
         # raster.camera: the eye-space triangles (geometry and eye), the camera view, the sample offsets.
         self.camera = digest("camera", self.geometry, inputs.eye_ws, inputs.views[:1], inputs.offsets)
         # raster.shadow: the geometry, the light's views relative to its anchor and which of

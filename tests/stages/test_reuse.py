@@ -230,3 +230,29 @@ def test_the_bvh_tree_outlives_a_moving_camera(device, monkeypatch):
         np.testing.assert_array_equal(kept.image, Renderer(device, reuse=False).render(scene).image)
     # The scratch renders above count too: 3 trees and 3 refits of their own.
     assert calls == {"tree": 1 + 3, "refit": 2 + 3}
+
+
+def test_shading_normals_are_part_of_a_kept_bound_map(device, monkeypatch):
+    """The texels the visibility stage reads follow the shading normals (they turn a surface
+    away from the light and offset the shadow ray's start), so the bunny drawn flat and then
+    smooth in one session must not reuse the flat frame's bound maps: it renders as it does
+    alone. (Measured before the normals were in the key: 25 of the smooth frame's texels
+    were never drawn.)"""
+    from pathlib import Path
+
+    from clrays.scene.load import load_scene
+
+    path = Path(__file__).resolve().parents[2] / "scenes" / "bunny.yaml"
+    size = ["image.width=160", "image.height=90"]
+    flat, smooth = (load_scene(path, size + [f"objects.1.normals={normals}"]) for normals in ("flat", "smooth"))
+    import clrays.session
+
+    drawn = []
+    draw = clrays.session.visibility_bound
+    monkeypatch.setattr(clrays.session, "visibility_bound", lambda *args: drawn.append(1) or draw(*args))
+    session = Renderer(device)
+    session.render(flat)
+    kept = session.render(smooth)
+    assert len(drawn) == 2  # the smooth frame draws its own bound map
+    alone = Renderer(device, reuse=False).render(smooth)
+    assert np.array_equal(kept.image, alone.image)
