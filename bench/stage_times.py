@@ -31,12 +31,27 @@ SCENES = ("demo", "bunny", "behind", "sun")
 STAGES = ("raster", "rectify", "minmax", "integrand", "traverse", "visibility", "bvh", "shade")
 
 
+def image_size(text: str) -> str:
+    """`--size`: WxH, both positive integers (argparse prints the error in one line)."""
+    parts = text.split("x")
+    if len(parts) != 2 or not all(part.isdigit() and int(part) > 0 for part in parts):
+        raise argparse.ArgumentTypeError(f"expected WxH, e.g. 1280x720, got {text!r}")
+    return text
+
+
+def frame_count(text: str) -> int:
+    """`--frames`: a positive integer."""
+    if not text.isdigit() or int(text) < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return int(text)
+
+
 def frame_arguments(description: str, size: str, frames: int) -> argparse.ArgumentParser:
     """The arguments every per-frame timing script takes: scenes, image size, frame count."""
     parser = argparse.ArgumentParser(description=description)
     parser.add_argument("scenes", nargs="*", default=SCENES, help="scene names in scenes/ (default: the bench four)")
-    parser.add_argument("--size", default=size, help=f"WxH (default {size})")
-    parser.add_argument("--frames", type=int, default=frames, help=f"timed frames per scene after the warm-up "
+    parser.add_argument("--size", type=image_size, default=size, help=f"WxH (default {size})")
+    parser.add_argument("--frames", type=frame_count, default=frames, help=f"timed frames per scene after the warm-up "
                                                                    f"(default {frames})")
     return parser
 

@@ -54,7 +54,7 @@ def main() -> None:
     width, height = (int(v) for v in args.size.split("x"))
     _split_bound_map_time()
     print(f"{width}×{height}, median of {args.frames} frames, ms; load average {os.getloadavg()[0]:.1f} at start\n")
-    print("| scene | bound map | rest (prepare, classify + rays) | bvh (host) | frame | visibility / frame "
+    print("| scene | bound map | rest (prepare, classify + rays) | bvh | frame | visibility / frame "
           "| (visibility + bvh) / frame |")
     print("|---|---|---|---|---|---|---|")
     for name in args.scenes:

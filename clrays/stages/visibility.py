@@ -44,7 +44,6 @@ class DeviceBvh:
     node_bounds: object
     node_children: object
     root: int
-    build_ms: float  # host time of the refit (and upload), or of queuing it on the device
 
 
 def bvh_topology_of(device: Device, inputs: FrameInputs, timer: StageTimer) -> BvhTopology | DeviceBvhTree:
@@ -68,16 +67,14 @@ def upload_bvh(device: Device, buffers: FrameBuffers, topology: BvhTopology | De
     tree built there, else on the host, then uploaded."""
     inputs = buffers.inputs
     if isinstance(topology, DeviceBvhTree):
-        start = time.perf_counter()
         node_bounds = bvh_build_refit(device, topology, inputs.eye_ws, buffers.tri_vertices, timer)
-        return DeviceBvh(node_bounds, topology.node_children, 0, (time.perf_counter() - start) * 1e3)
+        return DeviceBvh(node_bounds, topology.node_children, 0)
     start = time.perf_counter()
     bvh: Bvh = (refit_frame_bvh(topology, inputs) if isinstance(topology, JoinedTopology)  # a relief's boxes kept
                 else refit_bvh(topology, inputs.tri_vertices[:, :3].reshape(-1, 3, 3)))
-    milliseconds = (time.perf_counter() - start) * 1e3
-    timer.add_host("bvh", milliseconds)
+    timer.add_host("bvh", (time.perf_counter() - start) * 1e3)
     return DeviceBvh(device.buffer(bvh.node_bounds, writable=False),
-                     device.buffer(bvh.node_children, writable=False), bvh.root, milliseconds)
+                     device.buffer(bvh.node_children, writable=False), bvh.root)
 
 
 @dataclass
