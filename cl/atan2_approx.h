@@ -2,15 +2,17 @@
 #ifndef CLRAYS_ATAN2_APPROX_H
 #define CLRAYS_ATAN2_APPROX_H
 
+#include "inline_math.h"
+
 /* atan2 within 3 ulp (a minimax polynomial after reducing to [0, tan π/8]): PoCL's
  * atan2 costs as much as the rest of a camera sample's interpolation (sampling.cl) or
  * of a rectified texel (rectify.cl). rectify's S, which the walk compares with a β from
  * atan2, moves by at most 3 ulp (≈ 1e-6 rad; tests/stages/test_rectify.py holds it to the
  * float64 angle within BETA_TOLERANCE). */
-inline float atan2_approx(float y, float x)
+ALWAYS_INLINE float atan2_approx(float y, float x)
 {
-    float ax = fabs(x), ay = fabs(y);
-    float big = fmax(ax, ay), small = fmin(ax, ay);
+    float ax = inline_fabs(x), ay = inline_fabs(y);
+    float big = inline_fmax(ax, ay), small = inline_fmin(ax, ay);
     float t = big > 0.0f ? small / big : 0.0f;
     int reduced = t > 0.41421356f;
     float r = reduced ? (t - 1.0f) / (t + 1.0f) : t;
@@ -20,7 +22,7 @@ inline float atan2_approx(float y, float x)
     a = reduced ? a + M_PI_4_F : a;
     a = ay > ax ? M_PI_2_F - a : a;
     a = x < 0.0f ? M_PI_F - a : a;
-    return copysign(a, y);
+    return inline_copysign(a, y);
 }
 
 #endif

@@ -29,16 +29,24 @@
 #include "walk.h"
 #include "atan2_approx.h"
 
-/* The counters of clrays.stages.sampling.SampleCounts: line samples that walked their
- * row, camera samples that walked at least one row themselves (the fix-ups). Both are
- * rare next to the camera samples, so plain global atomics do. */
+/* The light's type (LIGHT_*): gather computes a camera sample's unshadowed weight for a
+ * spot light only, and its work-items run as one vector loop for the others. */
+#ifndef SAMPLING_LIGHT
+#define SAMPLING_LIGHT LIGHT_POINT
+#endif
+
+/* Camera samples per block of the fix-up list (fixup_count, fixup_list). */
+#define FIXUP_BLOCK 1024
+
+/* The counter of clrays.stages.sampling.SampleCounts that the kernels keep: line samples
+ * that walked their row. Rare next to the camera samples, so a plain global atomic does;
+ * gather flags its fix-ups instead (fixup_count, fixup_list). */
 #define COUNT_COMPUTED 0
-#define COUNT_FIXED_UP 1
 
 /* Line samples are spaced evenly in q = tan(β/2) for β ≤ π/2 and 2 - cot(β/2) above: q
  * rises with β at between 1/2 and 1 times its rate, and needs no arc tangent from cos β
  * and sin β, nor any trigonometry back (clrays/stages/sampling.py pseudo_beta). */
-inline float pseudo_beta(float cos_beta, float sin_beta)
+ALWAYS_INLINE float pseudo_beta(float cos_beta, float sin_beta)
 {
     return cos_beta >= 0.0f ? sin_beta / (1.0f + cos_beta) : 2.0f - sin_beta / (1.0f - cos_beta);
 }
@@ -97,9 +105,9 @@ inline float unshadowed_weight(global const epipolar_t* ep, global const light_t
 /* The factor radiance is stored and interpolated under: sin β for a point or spot light,
  * whose in-scattering grows as 1/sin β near the epipole, faster than a straight line
  * between samples follows; 1 for a directional light. */
-inline float radiance_scale(global const light_t* light, float sin_beta)
+ALWAYS_INLINE float radiance_scale(global const light_t* light, float sin_beta)
 {
-    return light->type == LIGHT_DIRECTIONAL ? 1.0f : fmax(sin_beta, SIN_BETA_MIN);
+    return light->type == LIGHT_DIRECTIONAL ? 1.0f : inline_fmax(sin_beta, SIN_BETA_MIN);
 }
 
 /* Per line sample: (distance, unshadowed weight): where it lands, and what it would
@@ -124,22 +132,22 @@ kernel void line_samples(global const frame_t* frame, global const view_t* views
 /* Two neighbouring line samples are not interpolated across when their distances differ
  * by more than `threshold` relatively (an edge), or their unshadowed weights (a spot
  * light's cone, or the epipole, where 1/sin β grows faster than samples follow). */
-inline int distance_breaks(float2 a, float2 b, float threshold)
+ALWAYS_INLINE int distance_breaks(float2 a, float2 b, float threshold)
 {
-    return fabs(a.x - b.x) > threshold * fmin(a.x, b.x);
+    return inline_fabs(a.x - b.x) > threshold * inline_fmin(a.x, b.x);
 }
 
-inline int weight_breaks(float2 a, float2 b, float threshold)
+ALWAYS_INLINE int weight_breaks(float2 a, float2 b, float threshold)
 {
-    return fabs(a.y - b.y) > threshold * fmax(fabs(a.y), fabs(b.y));
+    return inline_fabs(a.y - b.y) > threshold * inline_fmax(inline_fabs(a.y), inline_fabs(b.y));
 }
 
 /* A line value (interpolated or not) stands for a camera sample's own when both are
  * within `threshold` of it, relatively. */
-inline int line_matches(float2 value, float2 own, float threshold)
+ALWAYS_INLINE int line_matches(float2 value, float2 own, float threshold)
 {
-    return fabs(value.x - own.x) <= threshold * own.x
-           && fabs(value.y - own.y) <= threshold * fmax(fabs(value.y), fabs(own.y));
+    return inline_fabs(value.x - own.x) <= threshold * own.x
+           && inline_fabs(value.y - own.y) <= threshold * inline_fmax(inline_fabs(value.y), inline_fabs(own.y));
 }
 
 /* Every `step`-th sample, the ends, and both sides of a break. */
@@ -170,15 +178,15 @@ inline float3 line_sample_radiance(global const frame_t* frame, global const lig
     return radiance_scale(light, sin_beta) * row_radiance(ep, tree, i, &span, integrand, tables, frame, texture);
 }
 
-inline float luminance(float3 c) { return dot(c, (float3)(0.2126f, 0.7152f, 0.0722f)); }
+ALWAYS_INLINE float luminance(float3 c) { return inline_dot(c, (float3)(0.2126f, 0.7152f, 0.0722f)); }
 
 /* Two radiances differ by more than `threshold` of the larger (in luminance): a shadow's
  * edge lies between them, which neither their distances nor their unshadowed weights
  * show. */
-inline int radiance_breaks(float3 a, float3 b, float threshold)
+ALWAYS_INLINE int radiance_breaks(float3 a, float3 b, float threshold)
 {
     float la = luminance(a), lb = luminance(b);
-    return fabs(la - lb) > threshold * fmax(la, lb);
+    return inline_fabs(la - lb) > threshold * inline_fmax(la, lb);
 }
 
 /* Per line sample: its radiance times radiance_scale (w = 1) where it is needed, else w = 0. */
@@ -252,36 +260,53 @@ kernel void line_fill(global const epipolar_t* ep, int n, global float4* radianc
     samples[j] = (float4)(mix(samples[left].xyz, samples[right].xyz, t), 0.0f);
 }
 
-/* Whether slice i interpolates at a camera sample (own line value `own`, pseudo-angle q,
- * sin β): the two line samples either side of its q match it (distance, and for a spot
- * light, whose cone's silhouette runs along the slices and so can pass between a camera
- * sample and its lines, the unshadowed weight), their weights do not break, and their
- * radiances agree; then *value is the straight line between them. Otherwise (an edge lies
- * between them, the camera sample is off both lines' surfaces, a shadow's edge crosses
- * the line, the light's own radiance jumps: its cone, the epipole) the fix-up walks the
- * row for the camera sample. Taking the one sample on its side of an edge instead was
- * tried: it ignores the change in β between them, and failed the opaque-fog closed form
- * of tests/methods/test_stability.py (0.83 % against its 0.1 %). */
-inline int slice_interpolates(global const light_t* light, global const float2* ranges, global const float2* line,
-                              global const float4* radiance, int n, float threshold, int i, float q,
-                              float sin_beta, float2 own, float3* value)
+/* Whether slice i interpolates at a camera sample (own line value (own_distance,
+ * own_weight), pseudo-angle q, sin β): the two line samples either side of its q match
+ * it (distance, and for a spot light, whose cone's silhouette runs along the slices and
+ * so can pass between a camera sample and its lines, the unshadowed weight), their
+ * weights do not break, and their radiances agree; then value is the straight line
+ * between them, else 0. Otherwise (an edge lies between them, the camera sample is off
+ * both lines' surfaces, a shadow's edge crosses the line, the light's own radiance jumps:
+ * its cone, the epipole) the fix-up walks the row for the camera sample. Taking the one
+ * sample on its side of an edge instead was tried: it ignores the change in β between
+ * them, and failed the opaque-fog closed form of tests/methods/test_stability.py (0.83 %
+ * against its 0.1 %).
+ *
+ * In scalars, every load unconditional and every test a select: so PoCL runs gather's
+ * work-items eight at a time (inline_math.h). */
+ALWAYS_INLINE int slice_interpolates(global const float* ranges, global const float* line,
+                                     global const float* radiance, int n, float threshold, int i, float q,
+                                     float scale, float own_distance, float own_weight, float* value_x,
+                                     float* value_y, float* value_z)
 {
-    float lo = ranges[i].x, hi = ranges[i].y;
-    float f = hi > lo ? clamp((q - lo) / (hi - lo), 0.0f, 1.0f) * (float)(n - 1) : 0.0f;
-    int j = min((int)f, n - 2);
+    float lo = ranges[2 * i], hi = ranges[2 * i + 1];
+    float f = hi > lo ? inline_clamp((q - lo) / (hi - lo), 0.0f, 1.0f) * (float)(n - 1) : 0.0f;
+    int j = inline_min((int)f, n - 2);
     float s = f - (float)j;
-    float2 a = line[i * n + j], b = line[i * n + j + 1];
-    if (a.x < 0.0f || weight_breaks(a, b, threshold)) return 0; /* a.x < 0: the slice misses the screen */
-    float2 between = mix(a, b, s);
-    if (own.y < 0.0f) between.y = own.y; /* not a spot light: the weight is not compared */
-    float4 va = radiance[i * n + j], vb = radiance[i * n + j + 1];
-    if (!line_matches(between, own, threshold) || radiance_breaks(va.xyz, vb.xyz, threshold)) return 0;
-    *value = mix(va.xyz, vb.xyz, s) / radiance_scale(light, sin_beta);
-    return 1;
+    global const float* a = line + 2 * (i * n + j); /* a[2], b[3]: distance, weight */
+    global const float* va = radiance + 4 * (i * n + j); /* va[4], vb[5], vb[6] */
+    float a_distance = a[0], a_weight = a[1], b_distance = a[2], b_weight = a[3];
+    float ra = va[0], ga = va[1], ba = va[2], rb = va[4], gb = va[5], bb = va[6];
+    float between_distance = inline_mix(a_distance, b_distance, s);
+    /* not a spot light (own_weight < 0): the weight is not compared */
+    float between_weight = own_weight < 0.0f ? own_weight : inline_mix(a_weight, b_weight, s);
+    float luminance_a = inline_dot_xyz(ra, ga, ba, 0.2126f, 0.7152f, 0.0722f);
+    float luminance_b = inline_dot_xyz(rb, gb, bb, 0.2126f, 0.7152f, 0.0722f);
+    int interpolates =
+        !(a_distance < 0.0f) /* the slice misses the screen */
+        & !(inline_fabs(a_weight - b_weight) > threshold * inline_fmax(inline_fabs(a_weight), inline_fabs(b_weight)))
+        & (inline_fabs(between_distance - own_distance) <= threshold * own_distance)
+        & (inline_fabs(between_weight - own_weight)
+           <= threshold * inline_fmax(inline_fabs(between_weight), inline_fabs(own_weight)))
+        & !(inline_fabs(luminance_a - luminance_b) > threshold * inline_fmax(luminance_a, luminance_b));
+    *value_x = interpolates ? inline_mix(ra, rb, s) / scale : 0.0f;
+    *value_y = interpolates ? inline_mix(ga, gb, s) / scale : 0.0f;
+    *value_z = interpolates ? inline_mix(ba, bb, s) / scale : 0.0f;
+    return interpolates;
 }
 
-/* A camera sample's direction, distance, two nearest slices and their weight, as gather
- * and fix_up both take them. */
+/* A camera sample's direction, distance, two nearest slices and their weight, as fix_up
+ * takes them (gather has them in scalars). */
 inline float3 gather_ray(global const frame_t* frame, global const view_t* views, global const float2* offsets,
                          global const uint* camera_depth, global const epipolar_t* ep, int sample, float* distance,
                          int* i0, int* i1, float* t)
@@ -293,27 +318,83 @@ inline float3 gather_ray(global const frame_t* frame, global const view_t* views
 }
 
 /* Per camera sample: add each of its two slices' interpolated radiance, weighted as
- * traverse blends them; list the sample in `fixups` (index·4 + a bit per slice) for
- * fix_up when a slice cannot interpolate. No walk here, so the kernel stays branch-light. */
+ * traverse blends them; flag the sample in `fixup_flags` (a bit per slice) for fix_up
+ * where a slice cannot interpolate. No walk and no atomic here, and all in scalars, so
+ * that the work-items run as one vector loop: gather_ray's and slice_interpolates' float3
+ * arithmetic spelled out on the components, in the same order (inline_math.h). */
 kernel void gather(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                    global const epipolar_t* ep, global const uint* camera_depth, global const float2* offsets,
                    global const float2* ranges, global const float2* line, global const float4* radiance, int n,
-                   float threshold, global float4* scatter, global uint* fixups, global uint* counts)
+                   float threshold, global float4* scatter, global uchar* fixup_flags)
 {
+    /* One work-item per camera sample, none beyond: no early return, so that the loads
+     * of the frame's constants are unconditional and move out of the work-item loop. */
     int sample = get_global_id(0);
-    if (sample >= frame->width * frame->height * frame->spp) return;
-    float distance, t;
+    /* camera_ray (walk.h), a perspective and an orthographic view alike */
+    int pixel = sample / frame->spp;
+    global const float* offset = (global const float*)(offsets + sample % frame->spp);
+    float sx = 2.0f * ((float)(pixel % frame->width) + offset[0]) / (float)views->width - 1.0f;
+    float sy = 1.0f - 2.0f * ((float)(pixel / frame->width) + offset[1]) / (float)views->height;
+    float3 forward = views->forward.xyz, right = views->right.xyz, up = views->up.xyz;
+    int perspective = views->projection == PROJECTION_PERSPECTIVE;
+    float along_right = sx * views->scale_x, along_up = sy * views->scale_y;
+    float rx = right.x * along_right, ry = right.y * along_right, rz = right.z * along_right;
+    float ux = up.x * along_up, uy = up.y * along_up, uz = up.z * along_up;
+    float px = forward.x + rx + ux, py = forward.y + ry + uy, pz = forward.z + rz + uz;
+    float inverse = inline_inverse_length_xyz(px, py, pz);
+    float dx = perspective ? px * inverse : forward.x;
+    float dy = perspective ? py * inverse : forward.y;
+    float dz = perspective ? pz * inverse : forward.z;
+    float distance = inline_fmin(as_float(camera_depth[sample]), frame->far);
+    float ax = ep->axis.x, ay = ep->axis.y, az = ep->axis.z;
+    float alpha = atan2_approx(inline_dot_xyz(dx, dy, dz, ep->w.x, ep->w.y, ep->w.z),
+                               inline_dot_xyz(dx, dy, dz, ep->u.x, ep->u.y, ep->u.z));
     int i0, i1;
-    float3 dir = gather_ray(frame, views, offsets, camera_depth, ep, sample, &distance, &i0, &i1, &t);
-    float cos_beta = dot(dir, ep->axis.xyz), sin_beta = length(cross(dir, ep->axis.xyz));
+    float t;
+    slices_around(ep, alpha, &i0, &i1, &t);
+    float cos_beta = inline_dot_xyz(dx, dy, dz, ax, ay, az), sin_beta = inline_cross_length_xyz(dx, dy, dz, ax, ay, az);
     float q = pseudo_beta(cos_beta, sin_beta);
     global const light_t* light = lights + ep->light_index;
-    float2 own = (float2)(distance, light->type == LIGHT_SPOT ? unshadowed_weight(ep, light, dir, distance) : -1.0f);
-    float3 near0 = (float3)(0.0f), near1 = (float3)(0.0f);
-    int from0 = slice_interpolates(light, ranges, line, radiance, n, threshold, i0, q, sin_beta, own, &near0);
-    int from1 = slice_interpolates(light, ranges, line, radiance, n, threshold, i1, q, sin_beta, own, &near1);
-    scatter[sample] += (float4)((1.0f - t) * near0 + t * near1, 0.0f);
-    if (!(from0 && from1)) fixups[atomic_inc(counts + COUNT_FIXED_UP)] = (uint)sample << 2 | !from0 | !from1 << 1;
+    float own_weight = -1.0f;
+#if SAMPLING_LIGHT == LIGHT_SPOT
+    own_weight = unshadowed_weight(ep, light, (float3)(dx, dy, dz), distance);
+#endif
+    float scale = radiance_scale(light, sin_beta);
+    float r0, g0, b0, r1, g1, b1;
+    int from0 = slice_interpolates((global const float*)ranges, (global const float*)line,
+                                   (global const float*)radiance, n, threshold, i0, q, scale, distance, own_weight,
+                                   &r0, &g0, &b0);
+    int from1 = slice_interpolates((global const float*)ranges, (global const float*)line,
+                                   (global const float*)radiance, n, threshold, i1, q, scale, distance, own_weight,
+                                   &r1, &g1, &b1);
+    global float* out = (global float*)(scatter + sample);
+    out[0] += (1.0f - t) * r0 + t * r1;
+    out[1] += (1.0f - t) * g0 + t * g1;
+    out[2] += (1.0f - t) * b0 + t * b1;
+    out[3] += 0.0f;
+    fixup_flags[sample] = (uchar)(!from0 | !from1 << 1);
+}
+
+/* Per block of FIXUP_BLOCK camera samples: how many gather flagged for fix_up. */
+kernel void fixup_count(int samples, global const uchar* fixup_flags, global uint* block_counts)
+{
+    int block = get_global_id(0);
+    int begin = block * FIXUP_BLOCK, end = inline_min(begin + FIXUP_BLOCK, samples);
+    uint count = 0;
+    for (int sample = begin; sample < end; ++sample) count += fixup_flags[sample] != 0;
+    block_counts[block] = count;
+}
+
+/* Per block: list its flagged camera samples (index·4 + a bit per slice) from its offset
+ * in `fixups` on (the block counts' prefix sums, taken on the host). */
+kernel void fixup_list(int samples, global const uchar* fixup_flags, global const uint* block_offsets,
+                       global uint* fixups)
+{
+    int block = get_global_id(0);
+    int begin = block * FIXUP_BLOCK, end = inline_min(begin + FIXUP_BLOCK, samples);
+    uint at = block_offsets[block];
+    for (int sample = begin; sample < end; ++sample)
+        if (fixup_flags[sample]) fixups[at++] = (uint)sample << 2 | fixup_flags[sample];
 }
 
 /* Per listed camera sample: walk the rows of the slices it could not interpolate, as

@@ -9,6 +9,7 @@
 #include "integrand.h"
 #include "light_texture.h"
 #include "minmax.h"
+#include "inline_math.h"
 
 /* TRAVERSAL_TREE and TRAVERSAL_SCAN come from clrays/structs.py (-D). */
 #ifndef TRAVERSAL
@@ -78,15 +79,18 @@ typedef struct {
     float gamma_lamp1;
 } ray_span_t;
 
-/* The unit direction of camera sample `sample` (its pixel's ray through its offset). */
-inline float3 camera_ray(global const frame_t* frame, global const view_t* views, global const float2* offsets,
-                         int sample)
+/* The unit direction of camera sample `sample` (its pixel's ray through its offset):
+ * view_ray's (lighting.h) with its built-ins inlined (inline_math.h), so that gather's
+ * work-items run several at a time. */
+ALWAYS_INLINE float3 camera_ray(global const frame_t* frame, global const view_t* views,
+                                global const float2* offsets, int sample)
 {
     int pixel = sample / frame->spp;
-    float3 origin, dir;
-    view_ray(views, view_screen(views, pixel % frame->width, pixel / frame->width, offsets[sample % frame->spp]),
-             &origin, &dir);
-    return dir;
+    float2 s = view_screen(views, pixel % frame->width, pixel / frame->width, offsets[sample % frame->spp]);
+    if (views->projection != PROJECTION_PERSPECTIVE) return views->forward.xyz;
+    float3 right = views->right.xyz * (s.x * views->scale_x);
+    float3 up = views->up.xyz * (s.y * views->scale_y);
+    return inline_normalize(views->forward.xyz + right + up);
 }
 
 /* β of a unit direction, with sin β and cos β. Clamped, not tested: a ray through a
@@ -132,15 +136,15 @@ inline int ray_span(global const epipolar_t* ep, global const light_t* light, gl
 
 /* The two slices whose centres bracket the angle α, and the weight t of the second. The
  * slices wrap around when they close the circle, and clamp at the ends of a partial fan. */
-inline void slices_around(global const epipolar_t* ep, float alpha, int* i0, int* i1, float* t)
+ALWAYS_INLINE void slices_around(global const epipolar_t* ep, float alpha, int* i0, int* i1, float* t)
 {
     float offset = alpha - ep->alpha_min;
-    offset -= 2.0f * M_PI_F * floor(offset / (2.0f * M_PI_F));
+    offset -= 2.0f * M_PI_F * inline_floor(offset / (2.0f * M_PI_F));
     /* A partial fan: angles in the gap before alpha_min count as negative offsets. */
     if (!ep->full_circle && offset > M_PI_F + 0.5f * ep->alpha_step * (float)ep->slices)
         offset -= 2.0f * M_PI_F;
     float f = offset / ep->alpha_step - 0.5f;
-    *i0 = (int)floor(f);
+    *i0 = (int)inline_floor(f);
     *t = f - (float)*i0;
     *i1 = *i0 + 1;
     if (ep->full_circle) {
@@ -149,8 +153,8 @@ inline void slices_around(global const epipolar_t* ep, float alpha, int* i0, int
         *i0 = *i0 < 0 ? *i0 + ep->slices : *i0;
         *i1 = *i1 >= ep->slices ? *i1 - ep->slices : *i1;
     } else {
-        *i0 = clamp(*i0, 0, ep->slices - 1);
-        *i1 = clamp(*i1, 0, ep->slices - 1);
+        *i0 = inline_clamp_int(*i0, 0, ep->slices - 1);
+        *i1 = inline_clamp_int(*i1, 0, ep->slices - 1);
     }
 }
 

@@ -15,9 +15,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import structs
 from ..device import Device, StageTimer
 from ..inputs import FrameBuffers
-from ..scene.model import TRAVERSALS
+from ..scene.model import TRAVERSALS, SpotLight
 from ..scene.camera import camera_basis
 from .integrand import DeviceIntegrand
 from .light_texture import TextureTables, untextured_tables
@@ -124,7 +125,9 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
     radiance = device.buffer(nbytes=16 * slices * n)
     counts = device.buffer(np.zeros(2, dtype=np.uint32))
     samples, n32 = inputs.samples, np.int32(n)
-    traversal = {"TRAVERSAL": TRAVERSALS.index(render.traversal)}
+    light = inputs.scene.lights[int(epipolar.params["light_index"])]
+    traversal = {"TRAVERSAL": TRAVERSALS.index(render.traversal),
+                 "SAMPLING_LIGHT": structs.LIGHT_SPOT if isinstance(light, SpotLight) else structs.LIGHT_POINT}
     walked = ()  # the walking kernels' trailing arguments
     if layers is not None:
         traversal, walked = {**traversal, **layers.defines()}, layers.args()
@@ -144,13 +147,31 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
         n32, threshold, radiance, refined, counts, *walked)
     radiance = refined
     run("line_fill", (n, slices), None, epipolar.buffer, n32, radiance)
-    fixups = device.buffer(nbytes=4 * samples)  # camera samples listed for fix_up
+    fixup_flags = device.buffer(nbytes=samples)  # per camera sample: a bit per slice fix_up walks
     run("gather", (samples,), None, buffers.params, buffers.views, buffers.lights, epipolar.buffer,
-        rastered.camera_depth, buffers.offsets, ranges_buffer, line, radiance, n32, threshold, scatter, fixups,
-        counts)
-    computed, fixed_up = (int(count) for count in device.read(counts, 2, np.uint32))
+        rastered.camera_depth, buffers.offsets, ranges_buffer, line, radiance, n32, threshold, scatter, fixup_flags)
+    fixups, fixed_up = fixup_list(device, fixup_flags, samples, run)
+    computed = int(device.read(counts, 2, np.uint32)[0])
     if fixed_up:
         run("fix_up", (fixed_up,), None, buffers.params, buffers.views, buffers.lights, epipolar.buffer,
             epipolar.tree, integrand.params, integrand.data, rastered.camera_depth, buffers.offsets, texture.params,
             texture.basis, texture.prefix, fixups, np.int32(fixed_up), scatter, *walked)
     return SampleCounts(computed, samples - fixed_up, fixed_up)
+
+
+FIXUP_BLOCK = 1024  # camera samples per block of the fix-up list (cl/sampling.cl FIXUP_BLOCK)
+
+
+def fixup_list(device: Device, fixup_flags, samples: int, run) -> tuple[object, int]:
+    """(the fix-up list, its length) from gather's flags: each block of FIXUP_BLOCK camera
+    samples counts its flagged ones, and lists them from the prefix sum of the counts
+    before it. gather flags instead of appending with an atomic, which would keep PoCL
+    from running its work-items as one vector loop."""
+    blocks, samples32 = -(-samples // FIXUP_BLOCK), np.int32(samples)
+    block_counts = device.buffer(nbytes=4 * blocks)
+    run("fixup_count", (blocks,), None, samples32, fixup_flags, block_counts)
+    counts = device.read(block_counts, blocks, np.uint32).astype(np.int64)
+    offsets = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.uint32)
+    fixups = device.buffer(nbytes=4 * max(int(counts.sum()), 1))  # camera samples listed for fix_up
+    run("fixup_list", (blocks,), None, samples32, fixup_flags, device.buffer(offsets, writable=False), fixups)
+    return fixups, int(counts.sum())
