@@ -4,6 +4,7 @@
 #ifndef CLRAYS_LIGHTING_H
 #define CLRAYS_LIGHTING_H
 #include "common.h"
+#include "inline_math.h"
 
 #define INV_FOUR_PI 0.0795774715459476679f
 
@@ -65,14 +66,14 @@ inline int camera_surface_point(global const frame_t* frame, global const view_t
 /* Project p into a view: continuous texel coordinates and depth (distance from the
  * origin for perspective views, along forward for orthographic ones). Returns 0
  * when p is behind a perspective view. */
-inline int view_project(global const view_t* view, float3 p, float2* texel, float* depth)
+ALWAYS_INLINE int view_project(global const view_t* view, float3 p, float2* texel, float* depth)
 {
     float3 q = p - view->origin.xyz;
-    float x = dot(q, view->right.xyz), y = dot(q, view->up.xyz), z = dot(q, view->forward.xyz);
+    float x = inline_dot(q, view->right.xyz), y = inline_dot(q, view->up.xyz), z = inline_dot(q, view->forward.xyz);
     float sx, sy;
     if (view->projection == PROJECTION_PERSPECTIVE) {
         if (z <= 0.0f) return 0;
-        *depth = length(q);
+        *depth = inline_length(q);
         sx = x / (z * view->scale_x);
         sy = y / (z * view->scale_y);
     } else {
@@ -117,25 +118,25 @@ inline float3 light_incident(global const light_t* light, float3 sigma_t, float3
  * is convex, so this is one interval; returns 0 when the ray misses it. The candidate
  * ends are the roots of (w·k)² = cos²·|w|² (w = p - l), the apex plane and the ray's
  * ends; the pieces between them are tested at their midpoints. */
-inline int spot_interval(global const light_t* light, float3 dir, float far, float* s0, float* s1)
+ALWAYS_INLINE int spot_interval(global const light_t* light, float3 dir, float far, float* s0, float* s1)
 {
     float3 l = light->position.xyz, k = light->direction.xyz;
     float c2 = light->cos_cone * light->cos_cone;
-    float a1 = dot(dir, k), a0 = -dot(l, k), vl = dot(dir, l);
-    float qa = a1 * a1 - c2, qb = 2.0f * (a1 * a0 + c2 * vl), qc = a0 * a0 - c2 * dot(l, l);
+    float a1 = inline_dot(dir, k), a0 = -inline_dot(l, k), vl = inline_dot(dir, l);
+    float qa = a1 * a1 - c2, qb = 2.0f * (a1 * a0 + c2 * vl), qc = a0 * a0 - c2 * inline_dot(l, l);
     float cut[5] = {0.0f, far, 0.0f, 0.0f, 0.0f};
     int count = 2;
     float disc = qb * qb - 4.0f * qa * qc;
     if (disc >= 0.0f && qa != 0.0f) {
         /* numerically stable pair of roots */
-        float q = -0.5f * (qb + copysign(sqrt(disc), qb));
+        float q = -0.5f * (qb + inline_copysign(inline_sqrt(disc), qb));
         cut[count++] = q / qa;
         if (q != 0.0f) cut[count++] = qc / q;
     } else if (qa == 0.0f && qb != 0.0f) {
         cut[count++] = -qc / qb;
     }
     if (a1 != 0.0f) cut[count++] = -a0 / a1;
-    for (int i = 0; i < count; ++i) cut[i] = clamp(cut[i], 0.0f, far);
+    for (int i = 0; i < count; ++i) cut[i] = inline_clamp(cut[i], 0.0f, far);
     for (int i = 1; i < count; ++i) /* insertion sort of at most 5 values */
         for (int j = i; j > 0 && cut[j] < cut[j - 1]; --j) {
             float t = cut[j]; cut[j] = cut[j - 1]; cut[j - 1] = t;
@@ -144,7 +145,7 @@ inline int spot_interval(global const light_t* light, float3 dir, float far, flo
     for (int i = 0; i + 1 < count; ++i) {
         if (!(cut[i + 1] > cut[i])) continue;
         float3 w = 0.5f * (cut[i] + cut[i + 1]) * dir - l;
-        if (dot(w, k) >= light->cos_cone * length(w)) {
+        if (inline_dot(w, k) >= light->cos_cone * inline_length(w)) {
             if (!found) *s0 = cut[i];
             *s1 = cut[i + 1];
             found = 1;

@@ -52,35 +52,36 @@ ALWAYS_INLINE float pseudo_beta(float cos_beta, float sin_beta)
 }
 
 /* q of line sample j of slice i; 0 when the slice does not cross the screen. */
-inline int line_q(global const float2* ranges, int i, int j, int n, float* q)
+ALWAYS_INLINE int line_q(global const float2* ranges, int i, int j, int n, float* q)
 {
     float2 range = ranges[i];
     if (!(range.x <= range.y)) return 0;
-    *q = mix(range.x, range.y, (float)j / (float)(n - 1));
+    *q = inline_mix(range.x, range.y, (float)j / (float)(n - 1));
     return 1;
 }
 
 /* The direction at pseudo-angle q in the half-plane of slice i's centre (sides[i]). */
-inline float3 line_direction(global const epipolar_t* ep, global const float4* sides, int i, float q,
+ALWAYS_INLINE float3 line_direction(global const epipolar_t* ep, global const float4* sides, int i, float q,
                              float* sin_beta)
 {
     float k = q <= 1.0f ? q : 2.0f - q; /* tan(β/2), or cot(β/2) */
     float across = 2.0f * k / (1.0f + k * k), along = (1.0f - k * k) / (1.0f + k * k);
     along = q <= 1.0f ? along : -along;
     *sin_beta = across;
-    return normalize(along * ep->axis.xyz + across * sides[i].xyz);
+    return inline_normalize(along * ep->axis.xyz + across * sides[i].xyz);
 }
 
 /* The camera distance where a direction lands: the depth of the pixel it points into
  * (its first camera sample), clamped to the screen and to far. */
-inline float landing_distance(global const frame_t* frame, global const view_t* views,
+ALWAYS_INLINE float landing_distance(global const frame_t* frame, global const view_t* views,
                               global const uint* camera_depth, float3 dir)
 {
     float2 texel;
     float unused;
     if (!view_project(views, views->origin.xyz + dir, &texel, &unused)) return frame->far;
-    int x = clamp((int)floor(texel.x), 0, frame->width - 1), y = clamp((int)floor(texel.y), 0, frame->height - 1);
-    return fmin(as_float(camera_depth[(y * frame->width + x) * frame->spp]), frame->far);
+    int x = inline_clamp_int((int)inline_floor(texel.x), 0, frame->width - 1);
+    int y = inline_clamp_int((int)inline_floor(texel.y), 0, frame->height - 1);
+    return inline_fmin(as_float(camera_depth[(y * frame->width + x) * frame->spp]), frame->far);
 }
 
 /* What the ray along dir up to distance would gather if nothing cast a shadow, without
@@ -89,14 +90,14 @@ inline float landing_distance(global const frame_t* frame, global const view_t* 
  * divided by d_el, for a point or spot light (only the part inside a spot light's cone),
  * the lit length for a directional light. It breaks where the in-scattering breaks: at
  * the ray's end (an edge) and at a spot light's cone. */
-inline float unshadowed_weight(global const epipolar_t* ep, global const light_t* light, float3 dir,
+ALWAYS_INLINE float unshadowed_weight(global const epipolar_t* ep, global const light_t* light, float3 dir,
                                float distance)
 {
     float begin = 0.0f, end = distance;
     if (light->type == LIGHT_SPOT && !spot_interval(light, dir, distance, &begin, &end)) return 0.0f;
     if (light->type == LIGHT_DIRECTIONAL) return end - begin;
-    float cos_beta = dot(dir, ep->axis.xyz);
-    float sin_beta = fmax(length(cross(dir, ep->axis.xyz)), SIN_BETA_MIN);
+    float cos_beta = inline_dot(dir, ep->axis.xyz);
+    float sin_beta = inline_fmax(inline_length(inline_cross(dir, ep->axis.xyz)), SIN_BETA_MIN);
     float gamma_begin = begin > 0.0f ? atan2_approx(begin * sin_beta, ep->d_el - begin * cos_beta) : 0.0f;
     float gamma_end = atan2_approx(end * sin_beta, ep->d_el - end * cos_beta);
     return (gamma_end - gamma_begin) / ep->d_el;
@@ -151,7 +152,7 @@ ALWAYS_INLINE int line_matches(float2 value, float2 own, float threshold)
 }
 
 /* Every `step`-th sample, the ends, and both sides of a break. */
-inline int line_sample_needed(global const float2* line, int j, int n, int step, float threshold)
+ALWAYS_INLINE int line_sample_needed(global const float2* line, int j, int n, int step, float threshold)
 {
     if (j % step == 0 || j == n - 1) return 1;
     float2 before = line[j - 1], here = line[j], after = line[j + 1];
@@ -312,8 +313,8 @@ inline float3 gather_ray(global const frame_t* frame, global const view_t* views
                          int* i0, int* i1, float* t)
 {
     float3 dir = camera_ray(frame, views, offsets, sample);
-    *distance = fmin(as_float(camera_depth[sample]), frame->far);
-    slices_around(ep, atan2_approx(dot(dir, ep->w.xyz), dot(dir, ep->u.xyz)), i0, i1, t);
+    *distance = inline_fmin(as_float(camera_depth[sample]), frame->far);
+    slices_around(ep, atan2_approx(inline_dot(dir, ep->w.xyz), inline_dot(dir, ep->u.xyz)), i0, i1, t);
     return dir;
 }
 

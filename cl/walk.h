@@ -98,11 +98,11 @@ ALWAYS_INLINE float3 camera_ray(global const frame_t* frame, global const view_t
  * the clamp gives it a γ extent of SIN_BETA_MIN·s that the row coordinates resolve. β
  * stays below float32(π), the S of an unblocked light ray, so that the ray away from the
  * light sees those as lit. */
-inline float ray_beta(global const epipolar_t* ep, float3 dir, float* sin_beta, float* cos_beta)
+ALWAYS_INLINE float ray_beta(global const epipolar_t* ep, float3 dir, float* sin_beta, float* cos_beta)
 {
-    *cos_beta = dot(dir, ep->axis.xyz);
-    *sin_beta = fmax(length(cross(dir, ep->axis.xyz)), SIN_BETA_MIN);
-    return fmin(atan2(*sin_beta, *cos_beta), nextafter(M_PI_F, 0.0f));
+    *cos_beta = inline_dot(dir, ep->axis.xyz);
+    *sin_beta = inline_fmax(inline_length(inline_cross(dir, ep->axis.xyz)), SIN_BETA_MIN);
+    return inline_fmin(atan2(*sin_beta, *cos_beta), nextafter(M_PI_F, 0.0f));
 }
 
 /* The γ extent of the ray along dir up to distance; 0 when it has none (it misses a
@@ -125,8 +125,8 @@ inline int ray_span(global const epipolar_t* ep, global const light_t* light, gl
     span->gamma_lamp0 = span->gamma_lamp1 = span->gamma_end;
     float radius = frame->lamp_radius, miss = ep->d_el * sin_beta;
     if (!directional && miss < radius) {
-        float closest = ep->d_el * cos_beta, half_chord = sqrt(radius * radius - miss * miss);
-        float s0 = clamp(closest - half_chord, begin, end), s1 = clamp(closest + half_chord, begin, end);
+        float closest = ep->d_el * cos_beta, half_chord = inline_sqrt(radius * radius - miss * miss);
+        float s0 = inline_clamp(closest - half_chord, begin, end), s1 = inline_clamp(closest + half_chord, begin, end);
         span->gamma_lamp0 = atan2(s0 * sin_beta, ep->d_el - s0 * cos_beta);
         span->gamma_lamp1 = atan2(s1 * sin_beta, ep->d_el - s1 * cos_beta);
     }
@@ -177,16 +177,16 @@ inline float3 walk_row(global const epipolar_t* ep, global const float2* row, co
 {
     float beta = ray->beta;
     int n = ep->gamma_samples;
-    int end = min(n, (int)ceil(gamma_end / ep->gamma_step));
+    int end = inline_min(n, (int)-inline_floor(-(gamma_end / ep->gamma_step))); /* ceil */
     float3 radiance = (float3)(0.0f);
     int run_start = -1, run_end = 0;
-    int position = clamp((int)floor(gamma_begin / ep->gamma_step), 0, n);
+    int position = inline_clamp_int((int)inline_floor(gamma_begin / ep->gamma_step), 0, n);
     while (position < end) {
         int size;
         int lit;
 #if TRAVERSAL == TRAVERSAL_TREE
         /* The largest node starting at position: climb while the index is even. */
-        int level = position == 0 ? ep->levels : min(ep->levels, 31 - clz(position & -position));
+        int level = position == 0 ? ep->levels : inline_min(ep->levels, 31 - __builtin_clz(position & -position));
         for (;;) {
             float2 node = row[level_offset(n, level) + (position >> level)];
             if (node.x > beta) { lit = 1; break; }
@@ -203,15 +203,16 @@ inline float3 walk_row(global const epipolar_t* ep, global const float2* row, co
             run_end = position + size;
         } else if (run_start >= 0) {
             radiance += run_radiance(in, tables, frame, ray, texture, row_prefix, ep->gamma_step,
-                                     fmax(run_start * ep->gamma_step, gamma_begin),
-                                     fmin(run_end * ep->gamma_step, gamma_end));
+                                     inline_fmax(run_start * ep->gamma_step, gamma_begin),
+                                     inline_fmin(run_end * ep->gamma_step, gamma_end));
             run_start = -1;
         }
         position += size;
     }
     if (run_start >= 0)
         radiance += run_radiance(in, tables, frame, ray, texture, row_prefix, ep->gamma_step,
-                                 fmax(run_start * ep->gamma_step, gamma_begin), fmin(run_end * ep->gamma_step, gamma_end));
+                                 inline_fmax(run_start * ep->gamma_step, gamma_begin),
+                                 inline_fmin(run_end * ep->gamma_step, gamma_end));
     return radiance;
 }
 
