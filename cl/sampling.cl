@@ -261,48 +261,157 @@ kernel void line_fill(global const epipolar_t* ep, int n, global float4* radianc
     samples[j] = (float4)(mix(samples[left].xyz, samples[right].xyz, t), 0.0f);
 }
 
-/* Whether slice i interpolates at a camera sample (own line value (own_distance,
- * own_weight), pseudo-angle q, sin β): the two line samples either side of its q match
- * it (distance, and for a spot light, whose cone's silhouette runs along the slices and
- * so can pass between a camera sample and its lines, the unshadowed weight), their
- * weights do not break, and their radiances agree; then value is the straight line
- * between them, else 0. Otherwise (an edge lies between them, the camera sample is off
- * both lines' surfaces, a shadow's edge crosses the line, the light's own radiance jumps:
- * its cone, the epipole) the fix-up walks the row for the camera sample. Taking the one
- * sample on its side of an edge instead was tried: it ignores the change in β between
- * them, and failed the opaque-fog closed form of tests/methods/test_stability.py (0.83 %
- * against its 0.1 %).
- *
- * In scalars, every load unconditional and every test a select: so PoCL runs gather's
- * work-items eight at a time (inline_math.h). */
-ALWAYS_INLINE int slice_interpolates(global const float* ranges, global const float* line,
-                                     global const float* radiance, int n, float threshold, int i, float q,
-                                     float scale, float own_distance, float own_weight, float* value_x,
-                                     float* value_y, float* value_z)
+/* gather runs GATHER_LANES camera samples per work-item as one vector of each quantity:
+ * PoCL runs a work-group's work-items one at a time, as a loop its vectorizer does not
+ * take when the kernel has float3 arithmetic or calls (inline_math.h), so gather spells
+ * the vectors out. Each lane does the operations of the scalar path (camera_ray,
+ * slices_around, atan2_approx, pseudo_beta), in the same order: the results are the
+ * same bit for bit. */
+#define GATHER_LANES 8
+typedef float8 float_lanes;
+typedef int8 int_lanes;
+
+/* A vector of pointer[index] for each lane's index. */
+#define LOAD_LANES(pointer, index)                                                                         \
+    ((float_lanes)((pointer)[(index).s0], (pointer)[(index).s1], (pointer)[(index).s2], (pointer)[(index).s3], \
+                   (pointer)[(index).s4], (pointer)[(index).s5], (pointer)[(index).s6], (pointer)[(index).s7]))
+
+ALWAYS_INLINE float_lanes float_of_lanes(int_lanes x) { return __builtin_convertvector(x, float_lanes); }
+ALWAYS_INLINE int_lanes int_of_lanes(float_lanes x) { return __builtin_convertvector(x, int_lanes); }
+ALWAYS_INLINE float_lanes fabs_lanes(float_lanes x) { return as_float8(as_uint8(x) & 0x7fffffffu); }
+ALWAYS_INLINE float_lanes copysign_lanes(float_lanes x, float_lanes sign)
 {
-    float lo = ranges[2 * i], hi = ranges[2 * i + 1];
-    float f = hi > lo ? inline_clamp((q - lo) / (hi - lo), 0.0f, 1.0f) * (float)(n - 1) : 0.0f;
-    int j = inline_min((int)f, n - 2);
-    float s = f - (float)j;
-    global const float* a = line + 2 * (i * n + j); /* a[2], b[3]: distance, weight */
-    global const float* va = radiance + 4 * (i * n + j); /* va[4], vb[5], vb[6] */
-    float a_distance = a[0], a_weight = a[1], b_distance = a[2], b_weight = a[3];
-    float ra = va[0], ga = va[1], ba = va[2], rb = va[4], gb = va[5], bb = va[6];
-    float between_distance = inline_mix(a_distance, b_distance, s);
+    return as_float8((as_uint8(x) & 0x7fffffffu) | (as_uint8(sign) & 0x80000000u));
+}
+ALWAYS_INLINE float_lanes fmax_lanes(float_lanes a, float_lanes b) { return ((b != b) | (a > b)) ? a : b; }
+ALWAYS_INLINE float_lanes fmin_lanes(float_lanes a, float_lanes b) { return ((b != b) | (a < b)) ? a : b; }
+ALWAYS_INLINE int_lanes min_lanes(int_lanes a, int_lanes b) { return a > b ? b : a; }
+ALWAYS_INLINE int_lanes max_lanes(int_lanes a, int_lanes b) { return a < b ? b : a; }
+
+/* inline_floor's operations on each lane. */
+ALWAYS_INLINE float_lanes floor_lanes(float_lanes x)
+{
+    float_lanes fraction = x - float_of_lanes(int_of_lanes(x));
+    fraction = fraction < 0.0f ? fraction + 1.0f : fraction;
+    float_lanes floored = copysign_lanes(x - fraction, x);
+    return fabs_lanes(x) < 8388608.0f ? floored : x;
+}
+
+ALWAYS_INLINE float_lanes sqrt_lanes(float_lanes x)
+{
+    return (float_lanes)(__builtin_sqrtf(x.s0), __builtin_sqrtf(x.s1), __builtin_sqrtf(x.s2), __builtin_sqrtf(x.s3),
+                         __builtin_sqrtf(x.s4), __builtin_sqrtf(x.s5), __builtin_sqrtf(x.s6), __builtin_sqrtf(x.s7));
+}
+
+#pragma OPENCL FP_CONTRACT OFF /* as the library's dot, cross and mix (inline_math.h) */
+ALWAYS_INLINE float_lanes dot_lanes(float_lanes ax, float_lanes ay, float_lanes az, float bx, float by, float bz)
+{
+    float_lanes x = ax * bx, y = ay * by, z = az * bz;
+    return z + (x + y);
+}
+
+ALWAYS_INLINE float_lanes squared_length_lanes(float_lanes ax, float_lanes ay, float_lanes az)
+{
+    float_lanes x = ax * ax, y = ay * ay, z = az * az;
+    return z + (x + y);
+}
+
+ALWAYS_INLINE float_lanes cross_length_lanes(float_lanes ax, float_lanes ay, float_lanes az, float bx, float by,
+                                             float bz)
+{
+    float_lanes cx = ay * bz - az * by, cy = az * bx - ax * bz, cz = ax * by - ay * bx;
+    float_lanes squared = squared_length_lanes(cx, cy, cz);
+    return squared >= 1.17549435e-38f ? sqrt_lanes(squared) : 0.0f;
+}
+
+ALWAYS_INLINE float_lanes mix_lanes(float_lanes a, float_lanes b, float_lanes t) { return (b - a) * t + a; }
+
+ALWAYS_INLINE float_lanes luminance_lanes(float_lanes r, float_lanes g, float_lanes b)
+{
+    float_lanes x = r * 0.2126f, y = g * 0.7152f, z = b * 0.0722f;
+    return z + (x + y);
+}
+#pragma OPENCL FP_CONTRACT ON
+
+/* atan2_approx (atan2_approx.h) on each lane. */
+ALWAYS_INLINE float_lanes atan2_approx_lanes(float_lanes y, float_lanes x)
+{
+    float_lanes ax = fabs_lanes(x), ay = fabs_lanes(y);
+    float_lanes big = fmax_lanes(ax, ay), small = fmin_lanes(ax, ay);
+    float_lanes t = big > 0.0f ? small / big : 0.0f;
+    int_lanes reduced = t > 0.41421356f;
+    float_lanes r = reduced ? (t - 1.0f) / (t + 1.0f) : t;
+    float_lanes z = r * r;
+    float_lanes a = (((8.05374449538e-2f * z - 1.38776856032e-1f) * z + 1.99777106478e-1f) * z - 3.33329491539e-1f) * z * r
+                    + r;
+    a = reduced ? a + M_PI_4_F : a;
+    a = ay > ax ? M_PI_2_F - a : a;
+    a = x < 0.0f ? M_PI_F - a : a;
+    return copysign_lanes(a, y);
+}
+
+/* slices_around (walk.h) on each lane. */
+ALWAYS_INLINE void slices_around_lanes(global const epipolar_t* ep, float_lanes alpha, int_lanes* i0, int_lanes* i1,
+                                       float_lanes* t)
+{
+    float_lanes offset = alpha - ep->alpha_min;
+    offset -= 2.0f * M_PI_F * floor_lanes(offset / (2.0f * M_PI_F));
+    float gap = M_PI_F + 0.5f * ep->alpha_step * (float)ep->slices;
+    if (!ep->full_circle) offset = offset > gap ? offset - 2.0f * M_PI_F : offset;
+    float_lanes f = offset / ep->alpha_step - 0.5f;
+    *i0 = int_of_lanes(floor_lanes(f));
+    *t = f - float_of_lanes(*i0);
+    *i1 = *i0 + 1;
+    if (ep->full_circle) {
+        *i0 = *i0 < 0 ? *i0 + ep->slices : *i0;
+        *i1 = *i1 >= ep->slices ? *i1 - ep->slices : *i1;
+    } else {
+        *i0 = min_lanes(max_lanes(*i0, (int_lanes)(0)), (int_lanes)(ep->slices - 1));
+        *i1 = min_lanes(max_lanes(*i1, (int_lanes)(0)), (int_lanes)(ep->slices - 1));
+    }
+}
+
+/* Whether slice i interpolates at a camera sample (own line value (own_distance,
+ * own_weight), pseudo-angle q), per lane (-1: it does): the two line samples either side
+ * of its q match it (distance, and for a spot light, whose cone's silhouette runs along
+ * the slices and so can pass between a camera sample and its lines, the unshadowed
+ * weight), their weights do not break, and their radiances agree; then (r, g, b) is the
+ * straight line between them over `scale` (radiance_scale), else 0. Otherwise (an edge
+ * lies between them, the camera sample is off both lines' surfaces, a shadow's edge
+ * crosses the line, the light's own radiance jumps: its cone, the epipole) the fix-up
+ * walks the row for the camera sample. Taking the one sample on its side of an edge
+ * instead was tried: it ignores the change in β between them, and failed the opaque-fog
+ * closed form of tests/methods/test_stability.py (0.83 % against its 0.1 %). */
+ALWAYS_INLINE int_lanes slice_interpolates(global const float* ranges, global const float* line,
+                                           global const float* radiance, int n, float threshold, int_lanes i,
+                                           float_lanes q, float_lanes scale, float_lanes own_distance,
+                                           float_lanes own_weight, float_lanes* r, float_lanes* g, float_lanes* b)
+{
+    float_lanes lo = LOAD_LANES(ranges, 2 * i), hi = LOAD_LANES(ranges, 2 * i + 1);
+    float_lanes clamped = fmin_lanes(fmax_lanes((q - lo) / (hi - lo), (float_lanes)(0.0f)), (float_lanes)(1.0f));
+    float_lanes f = hi > lo ? clamped * (float)(n - 1) : 0.0f;
+    int_lanes j = min_lanes(int_of_lanes(f), (int_lanes)(n - 2));
+    float_lanes s = f - float_of_lanes(j);
+    int_lanes at = i * n + j; /* line: (distance, weight) at 2·at, the next at 2·at + 2; radiance: 4·at, 4·at + 4 */
+    float_lanes a_distance = LOAD_LANES(line, 2 * at), a_weight = LOAD_LANES(line, 2 * at + 1);
+    float_lanes b_distance = LOAD_LANES(line, 2 * at + 2), b_weight = LOAD_LANES(line, 2 * at + 3);
+    float_lanes ra = LOAD_LANES(radiance, 4 * at), ga = LOAD_LANES(radiance, 4 * at + 1);
+    float_lanes ba = LOAD_LANES(radiance, 4 * at + 2), rb = LOAD_LANES(radiance, 4 * at + 4);
+    float_lanes gb = LOAD_LANES(radiance, 4 * at + 5), bb = LOAD_LANES(radiance, 4 * at + 6);
+    float_lanes between_distance = mix_lanes(a_distance, b_distance, s);
     /* not a spot light (own_weight < 0): the weight is not compared */
-    float between_weight = own_weight < 0.0f ? own_weight : inline_mix(a_weight, b_weight, s);
-    float luminance_a = inline_dot_xyz(ra, ga, ba, 0.2126f, 0.7152f, 0.0722f);
-    float luminance_b = inline_dot_xyz(rb, gb, bb, 0.2126f, 0.7152f, 0.0722f);
-    int interpolates =
+    float_lanes between_weight = own_weight < 0.0f ? own_weight : mix_lanes(a_weight, b_weight, s);
+    float_lanes luminance_a = luminance_lanes(ra, ga, ba), luminance_b = luminance_lanes(rb, gb, bb);
+    int_lanes interpolates =
         !(a_distance < 0.0f) /* the slice misses the screen */
-        & !(inline_fabs(a_weight - b_weight) > threshold * inline_fmax(inline_fabs(a_weight), inline_fabs(b_weight)))
-        & (inline_fabs(between_distance - own_distance) <= threshold * own_distance)
-        & (inline_fabs(between_weight - own_weight)
-           <= threshold * inline_fmax(inline_fabs(between_weight), inline_fabs(own_weight)))
-        & !(inline_fabs(luminance_a - luminance_b) > threshold * inline_fmax(luminance_a, luminance_b));
-    *value_x = interpolates ? inline_mix(ra, rb, s) / scale : 0.0f;
-    *value_y = interpolates ? inline_mix(ga, gb, s) / scale : 0.0f;
-    *value_z = interpolates ? inline_mix(ba, bb, s) / scale : 0.0f;
+        & !(fabs_lanes(a_weight - b_weight) > threshold * fmax_lanes(fabs_lanes(a_weight), fabs_lanes(b_weight)))
+        & (fabs_lanes(between_distance - own_distance) <= threshold * own_distance)
+        & (fabs_lanes(between_weight - own_weight)
+           <= threshold * fmax_lanes(fabs_lanes(between_weight), fabs_lanes(own_weight)))
+        & !(fabs_lanes(luminance_a - luminance_b) > threshold * fmax_lanes(luminance_a, luminance_b));
+    *r = interpolates ? mix_lanes(ra, rb, s) / scale : 0.0f;
+    *g = interpolates ? mix_lanes(ga, gb, s) / scale : 0.0f;
+    *b = interpolates ? mix_lanes(ba, bb, s) / scale : 0.0f;
     return interpolates;
 }
 
@@ -318,62 +427,69 @@ inline float3 gather_ray(global const frame_t* frame, global const view_t* views
     return dir;
 }
 
-/* Per camera sample: add each of its two slices' interpolated radiance, weighted as
- * traverse blends them; flag the sample in `fixup_flags` (a bit per slice) for fix_up
- * where a slice cannot interpolate. No walk and no atomic here, and all in scalars, so
- * that the work-items run as one vector loop: gather_ray's and slice_interpolates' float3
- * arithmetic spelled out on the components, in the same order (inline_math.h). */
+/* Per GATHER_LANES camera samples: add each of its two slices' interpolated radiance,
+ * weighted as traverse blends them; flag the sample in `fixup_flags` (a bit per slice)
+ * for fix_up where a slice cannot interpolate. No walk and no atomic here: vector
+ * arithmetic, a load per lane where the lanes read different slices. */
 kernel void gather(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                    global const epipolar_t* ep, global const uint* camera_depth, global const float2* offsets,
                    global const float2* ranges, global const float2* line, global const float4* radiance, int n,
-                   float threshold, global float4* scatter, global uchar* fixup_flags)
+                   float threshold, int samples, global float4* scatter, global uchar* fixup_flags)
 {
-    /* One work-item per camera sample, none beyond: no early return, so that the loads
-     * of the frame's constants are unconditional and move out of the work-item loop. */
-    int sample = get_global_id(0);
+    int first = get_global_id(0) * GATHER_LANES;
+    /* lanes past the last sample compute the last one again, and store nothing */
+    int_lanes sample = min_lanes(first + (int_lanes)(0, 1, 2, 3, 4, 5, 6, 7), (int_lanes)(samples - 1));
     /* camera_ray (walk.h), a perspective and an orthographic view alike */
-    int pixel = sample / frame->spp;
-    global const float* offset = (global const float*)(offsets + sample % frame->spp);
-    float sx = 2.0f * ((float)(pixel % frame->width) + offset[0]) / (float)views->width - 1.0f;
-    float sy = 1.0f - 2.0f * ((float)(pixel / frame->width) + offset[1]) / (float)views->height;
+    int_lanes pixel = sample / frame->spp;
+    int_lanes sub = sample % frame->spp;
+    global const float* offset = (global const float*)offsets;
+    float_lanes sx = 2.0f * (float_of_lanes(pixel % frame->width) + LOAD_LANES(offset, 2 * sub)) / (float)views->width
+                     - 1.0f;
+    float_lanes sy = 1.0f - 2.0f * (float_of_lanes(pixel / frame->width) + LOAD_LANES(offset, 2 * sub + 1))
+                                / (float)views->height;
     float3 forward = views->forward.xyz, right = views->right.xyz, up = views->up.xyz;
-    int perspective = views->projection == PROJECTION_PERSPECTIVE;
-    float along_right = sx * views->scale_x, along_up = sy * views->scale_y;
-    float rx = right.x * along_right, ry = right.y * along_right, rz = right.z * along_right;
-    float ux = up.x * along_up, uy = up.y * along_up, uz = up.z * along_up;
-    float px = forward.x + rx + ux, py = forward.y + ry + uy, pz = forward.z + rz + uz;
-    float inverse = inline_inverse_length_xyz(px, py, pz);
-    float dx = perspective ? px * inverse : forward.x;
-    float dy = perspective ? py * inverse : forward.y;
-    float dz = perspective ? pz * inverse : forward.z;
-    float distance = inline_fmin(as_float(camera_depth[sample]), frame->far);
-    float ax = ep->axis.x, ay = ep->axis.y, az = ep->axis.z;
-    float alpha = atan2_approx(inline_dot_xyz(dx, dy, dz, ep->w.x, ep->w.y, ep->w.z),
-                               inline_dot_xyz(dx, dy, dz, ep->u.x, ep->u.y, ep->u.z));
-    int i0, i1;
-    float t;
-    slices_around(ep, alpha, &i0, &i1, &t);
-    float cos_beta = inline_dot_xyz(dx, dy, dz, ax, ay, az), sin_beta = inline_cross_length_xyz(dx, dy, dz, ax, ay, az);
-    float q = pseudo_beta(cos_beta, sin_beta);
+    float_lanes dx = forward.x, dy = forward.y, dz = forward.z;
+    if (views->projection == PROJECTION_PERSPECTIVE) {
+        float_lanes along_right = sx * views->scale_x, along_up = sy * views->scale_y;
+        float_lanes rx = right.x * along_right, ry = right.y * along_right, rz = right.z * along_right;
+        float_lanes ux = up.x * along_up, uy = up.y * along_up, uz = up.z * along_up;
+        dx = dx + rx + ux;
+        dy = dy + ry + uy;
+        dz = dz + rz + uz;
+        float_lanes inverse = 1.0f / sqrt_lanes(squared_length_lanes(dx, dy, dz));
+        dx *= inverse;
+        dy *= inverse;
+        dz *= inverse;
+    }
+    float_lanes distance = fmin_lanes(LOAD_LANES((global const float*)camera_depth, sample), (float_lanes)(frame->far));
+    float3 axis = ep->axis.xyz, u = ep->u.xyz, w = ep->w.xyz;
+    float_lanes alpha = atan2_approx_lanes(dot_lanes(dx, dy, dz, w.x, w.y, w.z), dot_lanes(dx, dy, dz, u.x, u.y, u.z));
+    int_lanes i0, i1;
+    float_lanes t;
+    slices_around_lanes(ep, alpha, &i0, &i1, &t);
+    float_lanes cos_beta = dot_lanes(dx, dy, dz, axis.x, axis.y, axis.z);
+    float_lanes sin_beta = cross_length_lanes(dx, dy, dz, axis.x, axis.y, axis.z);
+    float_lanes q = cos_beta >= 0.0f ? sin_beta / (1.0f + cos_beta) : 2.0f - sin_beta / (1.0f - cos_beta); /* pseudo_beta */
     global const light_t* light = lights + ep->light_index;
-    float own_weight = -1.0f;
+    float_lanes own_weight = -1.0f;
 #if SAMPLING_LIGHT == LIGHT_SPOT
-    own_weight = unshadowed_weight(ep, light, (float3)(dx, dy, dz), distance);
+    for (int k = 0; k < GATHER_LANES; ++k)
+        own_weight[k] = unshadowed_weight(ep, light, (float3)(dx[k], dy[k], dz[k]), distance[k]);
 #endif
-    float scale = radiance_scale(light, sin_beta);
-    float r0, g0, b0, r1, g1, b1;
-    int from0 = slice_interpolates((global const float*)ranges, (global const float*)line,
-                                   (global const float*)radiance, n, threshold, i0, q, scale, distance, own_weight,
-                                   &r0, &g0, &b0);
-    int from1 = slice_interpolates((global const float*)ranges, (global const float*)line,
-                                   (global const float*)radiance, n, threshold, i1, q, scale, distance, own_weight,
-                                   &r1, &g1, &b1);
-    global float* out = (global float*)(scatter + sample);
-    out[0] += (1.0f - t) * r0 + t * r1;
-    out[1] += (1.0f - t) * g0 + t * g1;
-    out[2] += (1.0f - t) * b0 + t * b1;
-    out[3] += 0.0f;
-    fixup_flags[sample] = (uchar)(!from0 | !from1 << 1);
+    float_lanes scale = light->type == LIGHT_DIRECTIONAL ? (float_lanes)(1.0f) : fmax_lanes(sin_beta, (float_lanes)(SIN_BETA_MIN));
+    float_lanes r0, g0, b0, r1, g1, b1;
+    int_lanes from0 = slice_interpolates((global const float*)ranges, (global const float*)line,
+                                         (global const float*)radiance, n, threshold, i0, q, scale, distance,
+                                         own_weight, &r0, &g0, &b0);
+    int_lanes from1 = slice_interpolates((global const float*)ranges, (global const float*)line,
+                                         (global const float*)radiance, n, threshold, i1, q, scale, distance,
+                                         own_weight, &r1, &g1, &b1);
+    float_lanes red = (1.0f - t) * r0 + t * r1, green = (1.0f - t) * g0 + t * g1, blue = (1.0f - t) * b0 + t * b1;
+    int_lanes flags = (from0 ? 0 : 1) | (from1 ? 0 : 2);
+    for (int k = 0; k < GATHER_LANES && first + k < samples; ++k) {
+        scatter[first + k] += (float4)(red[k], green[k], blue[k], 0.0f);
+        fixup_flags[first + k] = (uchar)flags[k];
+    }
 }
 
 /* Per block of FIXUP_BLOCK camera samples: how many gather flagged for fix_up. */

@@ -148,8 +148,9 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
     radiance = refined
     run("line_fill", (n, slices), None, epipolar.buffer, n32, radiance)
     fixup_flags = device.buffer(nbytes=samples)  # per camera sample: a bit per slice fix_up walks
-    run("gather", (samples,), None, buffers.params, buffers.views, buffers.lights, epipolar.buffer,
-        rastered.camera_depth, buffers.offsets, ranges_buffer, line, radiance, n32, threshold, scatter, fixup_flags)
+    run("gather", (-(-samples // GATHER_LANES),), None, buffers.params, buffers.views, buffers.lights,
+        epipolar.buffer, rastered.camera_depth, buffers.offsets, ranges_buffer, line, radiance, n32, threshold,
+        np.int32(samples), scatter, fixup_flags)
     fixups, fixed_up = fixup_list(device, fixup_flags, samples, run)
     computed = int(device.read(counts, 2, np.uint32)[0])
     if fixed_up:
@@ -159,6 +160,7 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
     return SampleCounts(computed, samples - fixed_up, fixed_up)
 
 
+GATHER_LANES = 8  # camera samples per work-item of gather (cl/sampling.cl GATHER_LANES)
 FIXUP_BLOCK = 1024  # camera samples per block of the fix-up list (cl/sampling.cl FIXUP_BLOCK)
 
 
