@@ -28,6 +28,7 @@
  * varies slowly even next to the light, where the brightest pixels are. */
 #include "walk.h"
 #include "atan2_approx.h"
+#include "lanes.h"
 
 /* The light's type (LIGHT_*): gather computes a camera sample's unshadowed weight for a
  * spot light only, and its work-items run as one vector loop for the others. */
@@ -111,23 +112,76 @@ ALWAYS_INLINE float radiance_scale(global const light_t* light, float sin_beta)
     return light->type == LIGHT_DIRECTIONAL ? 1.0f : inline_fmax(sin_beta, SIN_BETA_MIN);
 }
 
-/* Per line sample: (distance, unshadowed weight): where it lands, and what it would
- * gather unshadowed. Distance -1 where the slice has no camera sample beside it. */
+/* Per LANES line samples of a slice: (distance, unshadowed weight): where each lands, and
+ * what it would gather unshadowed; distance -1 where the slice has no camera sample beside
+ * it. Each lane does the operations of the scalar line_q, line_direction,
+ * landing_distance (view_project) and unshadowed_weight, in the same order (lanes.h). */
 kernel void line_samples(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                          global const epipolar_t* ep, global const uint* camera_depth, global const float2* ranges,
                          global const float4* sides, int n, global float2* line)
 {
-    int j = get_global_id(0), i = get_global_id(1);
-    if (j >= n || i >= ep->slices) return;
-    float q;
-    if (!line_q(ranges, i, j, n, &q)) {
-        line[i * n + j] = (float2)(-1.0f, 0.0f);
+    int first = get_global_id(0) * LANES, i = get_global_id(1);
+    if (first >= n || i >= ep->slices) return;
+    int count = min(LANES, n - first); /* the lanes that store */
+    global float2* out = line + i * n + first;
+    float2 range = ranges[i];
+    if (!(range.x <= range.y)) { /* the slice does not cross the screen */
+        for (int k = 0; k < count; ++k) out[k] = (float2)(-1.0f, 0.0f);
         return;
     }
-    float sin_beta;
-    float3 dir = line_direction(ep, sides, i, q, &sin_beta);
-    float distance = landing_distance(frame, views, camera_depth, dir);
-    line[i * n + j] = (float2)(distance, unshadowed_weight(ep, lights + ep->light_index, dir, distance));
+    /* line_q */
+    int_lanes j = first + (int_lanes)(0, 1, 2, 3, 4, 5, 6, 7);
+    float_lanes q = mix_lanes((float_lanes)(range.x), (float_lanes)(range.y), float_of_lanes(j) / (float)(n - 1));
+    /* line_direction */
+    float_lanes k = q <= 1.0f ? q : 2.0f - q; /* tan(β/2), or cot(β/2) */
+    float_lanes across = 2.0f * k / (1.0f + k * k), along = (1.0f - k * k) / (1.0f + k * k);
+    along = q <= 1.0f ? along : -along;
+    float3 axis = ep->axis.xyz, side = sides[i].xyz;
+    float_lanes dx = along * axis.x + across * side.x, dy = along * axis.y + across * side.y;
+    float_lanes dz = along * axis.z + across * side.z;
+    float_lanes inverse = 1.0f / sqrt_lanes(squared_length_lanes(dx, dy, dz));
+    dx *= inverse;
+    dy *= inverse;
+    dz *= inverse;
+    /* landing_distance: view_project of origin + dir */
+    float3 origin = views->origin.xyz;
+    float_lanes px = (origin.x + dx) - origin.x, py = (origin.y + dy) - origin.y, pz = (origin.z + dz) - origin.z;
+    float3 right = views->right.xyz, up = views->up.xyz, forward = views->forward.xyz;
+    float_lanes x = dot_lanes(px, py, pz, right.x, right.y, right.z), y = dot_lanes(px, py, pz, up.x, up.y, up.z);
+    float_lanes z = dot_lanes(px, py, pz, forward.x, forward.y, forward.z);
+    float_lanes sx, sy;
+    int_lanes in_front = z > 0.0f;
+    if (views->projection == PROJECTION_PERSPECTIVE) {
+        sx = x / (z * views->scale_x);
+        sy = y / (z * views->scale_y);
+    } else {
+        in_front = (int_lanes)(-1);
+        sx = x / views->scale_x;
+        sy = y / views->scale_y;
+    }
+    float_lanes texel_x = (sx + 1.0f) * 0.5f * (float)views->width, texel_y = (1.0f - sy) * 0.5f * (float)views->height;
+    int_lanes column = min_lanes(max_lanes(int_of_lanes(floor_lanes(texel_x)), (int_lanes)(0)), (int_lanes)(frame->width - 1));
+    int_lanes row = min_lanes(max_lanes(int_of_lanes(floor_lanes(texel_y)), (int_lanes)(0)), (int_lanes)(frame->height - 1));
+    float_lanes depth = LOAD_LANES((global const float*)camera_depth, (row * frame->width + column) * frame->spp);
+    float_lanes distance = in_front ? fmin_lanes(depth, (float_lanes)(frame->far)) : (float_lanes)(frame->far);
+    /* unshadowed_weight */
+    global const light_t* light = lights + ep->light_index;
+    float_lanes weight;
+#if SAMPLING_LIGHT == LIGHT_SPOT
+    for (int lane = 0; lane < LANES; ++lane)
+        weight[lane] = unshadowed_weight(ep, light, (float3)(dx[lane], dy[lane], dz[lane]), distance[lane]);
+#else
+    if (light->type == LIGHT_DIRECTIONAL) {
+        weight = distance - 0.0f;
+    } else {
+        float_lanes cos_beta = dot_lanes(dx, dy, dz, axis.x, axis.y, axis.z);
+        float_lanes sin_beta = fmax_lanes(cross_length_lanes(dx, dy, dz, axis.x, axis.y, axis.z),
+                                          (float_lanes)(SIN_BETA_MIN));
+        float_lanes gamma_end = atan2_approx_lanes(distance * sin_beta, ep->d_el - distance * cos_beta);
+        weight = (gamma_end - 0.0f) / ep->d_el;
+    }
+#endif
+    for (int lane = 0; lane < count; ++lane) out[lane] = (float2)(distance[lane], weight[lane]);
 }
 
 /* Two neighbouring line samples are not interpolated across when their distances differ
@@ -261,94 +315,13 @@ kernel void line_fill(global const epipolar_t* ep, int n, global float4* radianc
     samples[j] = (float4)(mix(samples[left].xyz, samples[right].xyz, t), 0.0f);
 }
 
-/* gather runs GATHER_LANES camera samples per work-item as one vector of each quantity:
- * PoCL runs a work-group's work-items one at a time, as a loop its vectorizer does not
- * take when the kernel has float3 arithmetic or calls (inline_math.h), so gather spells
- * the vectors out. Each lane does the operations of the scalar path (camera_ray,
- * slices_around, atan2_approx, pseudo_beta), in the same order: the results are the
- * same bit for bit. */
-#define GATHER_LANES 8
-typedef float8 float_lanes;
-typedef int8 int_lanes;
-
-/* A vector of pointer[index] for each lane's index. */
-#define LOAD_LANES(pointer, index)                                                                         \
-    ((float_lanes)((pointer)[(index).s0], (pointer)[(index).s1], (pointer)[(index).s2], (pointer)[(index).s3], \
-                   (pointer)[(index).s4], (pointer)[(index).s5], (pointer)[(index).s6], (pointer)[(index).s7]))
-
-ALWAYS_INLINE float_lanes float_of_lanes(int_lanes x) { return __builtin_convertvector(x, float_lanes); }
-ALWAYS_INLINE int_lanes int_of_lanes(float_lanes x) { return __builtin_convertvector(x, int_lanes); }
-ALWAYS_INLINE float_lanes fabs_lanes(float_lanes x) { return as_float8(as_uint8(x) & 0x7fffffffu); }
-ALWAYS_INLINE float_lanes copysign_lanes(float_lanes x, float_lanes sign)
-{
-    return as_float8((as_uint8(x) & 0x7fffffffu) | (as_uint8(sign) & 0x80000000u));
-}
-ALWAYS_INLINE float_lanes fmax_lanes(float_lanes a, float_lanes b) { return ((b != b) | (a > b)) ? a : b; }
-ALWAYS_INLINE float_lanes fmin_lanes(float_lanes a, float_lanes b) { return ((b != b) | (a < b)) ? a : b; }
-ALWAYS_INLINE int_lanes min_lanes(int_lanes a, int_lanes b) { return a > b ? b : a; }
-ALWAYS_INLINE int_lanes max_lanes(int_lanes a, int_lanes b) { return a < b ? b : a; }
-
-/* inline_floor's operations on each lane. */
-ALWAYS_INLINE float_lanes floor_lanes(float_lanes x)
-{
-    float_lanes fraction = x - float_of_lanes(int_of_lanes(x));
-    fraction = fraction < 0.0f ? fraction + 1.0f : fraction;
-    float_lanes floored = copysign_lanes(x - fraction, x);
-    return fabs_lanes(x) < 8388608.0f ? floored : x;
-}
-
-ALWAYS_INLINE float_lanes sqrt_lanes(float_lanes x)
-{
-    return (float_lanes)(__builtin_sqrtf(x.s0), __builtin_sqrtf(x.s1), __builtin_sqrtf(x.s2), __builtin_sqrtf(x.s3),
-                         __builtin_sqrtf(x.s4), __builtin_sqrtf(x.s5), __builtin_sqrtf(x.s6), __builtin_sqrtf(x.s7));
-}
-
-#pragma OPENCL FP_CONTRACT OFF /* as the library's dot, cross and mix (inline_math.h) */
-ALWAYS_INLINE float_lanes dot_lanes(float_lanes ax, float_lanes ay, float_lanes az, float bx, float by, float bz)
-{
-    float_lanes x = ax * bx, y = ay * by, z = az * bz;
-    return z + (x + y);
-}
-
-ALWAYS_INLINE float_lanes squared_length_lanes(float_lanes ax, float_lanes ay, float_lanes az)
-{
-    float_lanes x = ax * ax, y = ay * ay, z = az * az;
-    return z + (x + y);
-}
-
-ALWAYS_INLINE float_lanes cross_length_lanes(float_lanes ax, float_lanes ay, float_lanes az, float bx, float by,
-                                             float bz)
-{
-    float_lanes cx = ay * bz - az * by, cy = az * bx - ax * bz, cz = ax * by - ay * bx;
-    float_lanes squared = squared_length_lanes(cx, cy, cz);
-    return squared >= 1.17549435e-38f ? sqrt_lanes(squared) : 0.0f;
-}
-
-ALWAYS_INLINE float_lanes mix_lanes(float_lanes a, float_lanes b, float_lanes t) { return (b - a) * t + a; }
-
+#pragma OPENCL FP_CONTRACT OFF /* as luminance's dot (inline_math.h) */
 ALWAYS_INLINE float_lanes luminance_lanes(float_lanes r, float_lanes g, float_lanes b)
 {
     float_lanes x = r * 0.2126f, y = g * 0.7152f, z = b * 0.0722f;
     return z + (x + y);
 }
 #pragma OPENCL FP_CONTRACT ON
-
-/* atan2_approx (atan2_approx.h) on each lane. */
-ALWAYS_INLINE float_lanes atan2_approx_lanes(float_lanes y, float_lanes x)
-{
-    float_lanes ax = fabs_lanes(x), ay = fabs_lanes(y);
-    float_lanes big = fmax_lanes(ax, ay), small = fmin_lanes(ax, ay);
-    float_lanes t = big > 0.0f ? small / big : 0.0f;
-    int_lanes reduced = t > 0.41421356f;
-    float_lanes r = reduced ? (t - 1.0f) / (t + 1.0f) : t;
-    float_lanes z = r * r;
-    float_lanes a = (((8.05374449538e-2f * z - 1.38776856032e-1f) * z + 1.99777106478e-1f) * z - 3.33329491539e-1f) * z * r
-                    + r;
-    a = reduced ? a + M_PI_4_F : a;
-    a = ay > ax ? M_PI_2_F - a : a;
-    a = x < 0.0f ? M_PI_F - a : a;
-    return copysign_lanes(a, y);
-}
 
 /* slices_around (walk.h) on each lane. */
 ALWAYS_INLINE void slices_around_lanes(global const epipolar_t* ep, float_lanes alpha, int_lanes* i0, int_lanes* i1,
@@ -427,7 +400,7 @@ inline float3 gather_ray(global const frame_t* frame, global const view_t* views
     return dir;
 }
 
-/* Per GATHER_LANES camera samples: add each of its two slices' interpolated radiance,
+/* Per LANES camera samples: add each of its two slices' interpolated radiance,
  * weighted as traverse blends them; flag the sample in `fixup_flags` (a bit per slice)
  * for fix_up where a slice cannot interpolate. No walk and no atomic here: vector
  * arithmetic, a load per lane where the lanes read different slices. */
@@ -436,7 +409,7 @@ kernel void gather(global const frame_t* frame, global const view_t* views, glob
                    global const float2* ranges, global const float2* line, global const float4* radiance, int n,
                    float threshold, int samples, global float4* scatter, global uchar* fixup_flags)
 {
-    int first = get_global_id(0) * GATHER_LANES;
+    int first = get_global_id(0) * LANES;
     /* lanes past the last sample compute the last one again, and store nothing */
     int_lanes sample = min_lanes(first + (int_lanes)(0, 1, 2, 3, 4, 5, 6, 7), (int_lanes)(samples - 1));
     /* camera_ray (walk.h), a perspective and an orthographic view alike */
@@ -473,7 +446,7 @@ kernel void gather(global const frame_t* frame, global const view_t* views, glob
     global const light_t* light = lights + ep->light_index;
     float_lanes own_weight = -1.0f;
 #if SAMPLING_LIGHT == LIGHT_SPOT
-    for (int k = 0; k < GATHER_LANES; ++k)
+    for (int k = 0; k < LANES; ++k)
         own_weight[k] = unshadowed_weight(ep, light, (float3)(dx[k], dy[k], dz[k]), distance[k]);
 #endif
     float_lanes scale = light->type == LIGHT_DIRECTIONAL ? (float_lanes)(1.0f) : fmax_lanes(sin_beta, (float_lanes)(SIN_BETA_MIN));
@@ -486,7 +459,7 @@ kernel void gather(global const frame_t* frame, global const view_t* views, glob
                                          own_weight, &r1, &g1, &b1);
     float_lanes red = (1.0f - t) * r0 + t * r1, green = (1.0f - t) * g0 + t * g1, blue = (1.0f - t) * b0 + t * b1;
     int_lanes flags = (from0 ? 0 : 1) | (from1 ? 0 : 2);
-    for (int k = 0; k < GATHER_LANES && first + k < samples; ++k) {
+    for (int k = 0; k < LANES && first + k < samples; ++k) {
         scatter[first + k] += (float4)(red[k], green[k], blue[k], 0.0f);
         fixup_flags[first + k] = (uchar)flags[k];
     }

@@ -136,7 +136,7 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
         event = device.kernel("sampling", name, traversal)(device.queue, global_size, local_size, *args)
         timer.add("traverse", event)  # the traverse stage, sampled
 
-    run("line_samples", (n, slices), None, buffers.params, buffers.views, buffers.lights, epipolar.buffer,
+    run("line_samples", (-(-n // LANES), slices), None, buffers.params, buffers.views, buffers.lights, epipolar.buffer,
         rastered.camera_depth, ranges_buffer, sides, n32, line)
     run("line_scatter", (n, slices), None, buffers.params, buffers.views, buffers.lights,
         epipolar.buffer, epipolar.tree, integrand.params, integrand.data, texture.params, texture.basis,
@@ -148,7 +148,7 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
     radiance = refined
     run("line_fill", (n, slices), None, epipolar.buffer, n32, radiance)
     fixup_flags = device.buffer(nbytes=samples)  # per camera sample: a bit per slice fix_up walks
-    run("gather", (-(-samples // GATHER_LANES),), None, buffers.params, buffers.views, buffers.lights,
+    run("gather", (-(-samples // LANES),), None, buffers.params, buffers.views, buffers.lights,
         epipolar.buffer, rastered.camera_depth, buffers.offsets, ranges_buffer, line, radiance, n32, threshold,
         np.int32(samples), scatter, fixup_flags)
     fixups, fixed_up = fixup_list(device, fixup_flags, samples, run)
@@ -160,7 +160,7 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
     return SampleCounts(computed, samples - fixed_up, fixed_up)
 
 
-GATHER_LANES = 8  # camera samples per work-item of gather (cl/sampling.cl GATHER_LANES)
+LANES = 8  # camera or line samples per work-item of gather and line_samples (cl/lanes.h LANES)
 FIXUP_BLOCK = 1024  # camera samples per block of the fix-up list (cl/sampling.cl FIXUP_BLOCK)
 
 

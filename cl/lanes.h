@@ -1,0 +1,94 @@
+/* lanes.h — LANES samples per work-item as one float8 of each quantity, for the kernels
+ * where PoCL would otherwise run one sample at a time (docs/design.md §4.5 "Epipolar
+ * sampling", "Cost").
+ *
+ * PoCL runs a work-group's work-items as a loop, which its vectorizer takes only when the
+ * kernel has neither calls nor float3 arithmetic (inline_math.h); sampling.cl's kernels
+ * have both, so they spell the vectors out instead. Each function here does, on every
+ * lane, the operations of its scalar namesake in inline_math.h or atan2_approx.h in the
+ * same order: the results are the same bit for bit. */
+#ifndef CLRAYS_LANES_H
+#define CLRAYS_LANES_H
+
+#include "inline_math.h"
+
+#define LANES 8
+typedef float8 float_lanes;
+typedef int8 int_lanes;
+
+/* A vector of pointer[index] for each lane's index. */
+#define LOAD_LANES(pointer, index)                                                                         \
+    ((float_lanes)((pointer)[(index).s0], (pointer)[(index).s1], (pointer)[(index).s2], (pointer)[(index).s3], \
+                   (pointer)[(index).s4], (pointer)[(index).s5], (pointer)[(index).s6], (pointer)[(index).s7]))
+
+ALWAYS_INLINE float_lanes float_of_lanes(int_lanes x) { return __builtin_convertvector(x, float_lanes); }
+ALWAYS_INLINE int_lanes int_of_lanes(float_lanes x) { return __builtin_convertvector(x, int_lanes); }
+ALWAYS_INLINE float_lanes fabs_lanes(float_lanes x) { return as_float8(as_uint8(x) & 0x7fffffffu); }
+ALWAYS_INLINE float_lanes copysign_lanes(float_lanes x, float_lanes sign)
+{
+    return as_float8((as_uint8(x) & 0x7fffffffu) | (as_uint8(sign) & 0x80000000u));
+}
+ALWAYS_INLINE float_lanes fmax_lanes(float_lanes a, float_lanes b) { return ((b != b) | (a > b)) ? a : b; }
+ALWAYS_INLINE float_lanes fmin_lanes(float_lanes a, float_lanes b) { return ((b != b) | (a < b)) ? a : b; }
+ALWAYS_INLINE int_lanes min_lanes(int_lanes a, int_lanes b) { return a > b ? b : a; }
+ALWAYS_INLINE int_lanes max_lanes(int_lanes a, int_lanes b) { return a < b ? b : a; }
+
+/* inline_floor's operations on each lane. */
+ALWAYS_INLINE float_lanes floor_lanes(float_lanes x)
+{
+    float_lanes fraction = x - float_of_lanes(int_of_lanes(x));
+    fraction = fraction < 0.0f ? fraction + 1.0f : fraction;
+    float_lanes floored = copysign_lanes(x - fraction, x);
+    return fabs_lanes(x) < 8388608.0f ? floored : x;
+}
+
+ALWAYS_INLINE float_lanes sqrt_lanes(float_lanes x)
+{
+    return (float_lanes)(__builtin_sqrtf(x.s0), __builtin_sqrtf(x.s1), __builtin_sqrtf(x.s2), __builtin_sqrtf(x.s3),
+                         __builtin_sqrtf(x.s4), __builtin_sqrtf(x.s5), __builtin_sqrtf(x.s6), __builtin_sqrtf(x.s7));
+}
+
+#pragma OPENCL FP_CONTRACT OFF /* as the library's dot, cross and mix (inline_math.h) */
+ALWAYS_INLINE float_lanes dot_lanes(float_lanes ax, float_lanes ay, float_lanes az, float bx, float by, float bz)
+{
+    float_lanes x = ax * bx, y = ay * by, z = az * bz;
+    return z + (x + y);
+}
+
+ALWAYS_INLINE float_lanes squared_length_lanes(float_lanes ax, float_lanes ay, float_lanes az)
+{
+    float_lanes x = ax * ax, y = ay * ay, z = az * az;
+    return z + (x + y);
+}
+
+ALWAYS_INLINE float_lanes cross_length_lanes(float_lanes ax, float_lanes ay, float_lanes az, float bx, float by,
+                                             float bz)
+{
+    float_lanes cx = ay * bz - az * by, cy = az * bx - ax * bz, cz = ax * by - ay * bx;
+    float_lanes squared = squared_length_lanes(cx, cy, cz);
+    return squared >= 1.17549435e-38f ? sqrt_lanes(squared) : 0.0f;
+}
+
+ALWAYS_INLINE float_lanes mix_lanes(float_lanes a, float_lanes b, float_lanes t) { return (b - a) * t + a; }
+
+#pragma OPENCL FP_CONTRACT ON
+
+/* atan2_approx (atan2_approx.h) on each lane. */
+ALWAYS_INLINE float_lanes atan2_approx_lanes(float_lanes y, float_lanes x)
+{
+    float_lanes ax = fabs_lanes(x), ay = fabs_lanes(y);
+    float_lanes big = fmax_lanes(ax, ay), small = fmin_lanes(ax, ay);
+    float_lanes t = big > 0.0f ? small / big : 0.0f;
+    int_lanes reduced = t > 0.41421356f;
+    float_lanes r = reduced ? (t - 1.0f) / (t + 1.0f) : t;
+    float_lanes z = r * r;
+    float_lanes a = (((8.05374449538e-2f * z - 1.38776856032e-1f) * z + 1.99777106478e-1f) * z - 3.33329491539e-1f) * z * r
+                    + r;
+    a = reduced ? a + M_PI_4_F : a;
+    a = ay > ax ? M_PI_2_F - a : a;
+    a = x < 0.0f ? M_PI_F - a : a;
+    return copysign_lanes(a, y);
+}
+
+
+#endif
