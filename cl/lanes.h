@@ -61,12 +61,18 @@ ALWAYS_INLINE float_lanes squared_length_lanes(float_lanes ax, float_lanes ay, f
     return z + (x + y);
 }
 
+/* inline_length on each lane. */
+ALWAYS_INLINE float_lanes length_lanes(float_lanes x, float_lanes y, float_lanes z)
+{
+    float_lanes squared = squared_length_lanes(x, y, z);
+    return squared >= 1.17549435e-38f ? sqrt_lanes(squared) : 0.0f;
+}
+
 ALWAYS_INLINE float_lanes cross_length_lanes(float_lanes ax, float_lanes ay, float_lanes az, float bx, float by,
                                              float bz)
 {
     float_lanes cx = ay * bz - az * by, cy = az * bx - ax * bz, cz = ax * by - ay * bx;
-    float_lanes squared = squared_length_lanes(cx, cy, cz);
-    return squared >= 1.17549435e-38f ? sqrt_lanes(squared) : 0.0f;
+    return length_lanes(cx, cy, cz);
 }
 
 ALWAYS_INLINE float_lanes mix_lanes(float_lanes a, float_lanes b, float_lanes t) { return (b - a) * t + a; }

@@ -112,6 +112,64 @@ ALWAYS_INLINE float radiance_scale(global const light_t* light, float sin_beta)
     return light->type == LIGHT_DIRECTIONAL ? 1.0f : inline_fmax(sin_beta, SIN_BETA_MIN);
 }
 
+/* A 2-sort of each lane: (a, b) into (smaller, larger). */
+ALWAYS_INLINE void sort_pair_lanes(float_lanes* a, float_lanes* b)
+{
+    float_lanes smaller = *a < *b ? *a : *b, larger = *a < *b ? *b : *a;
+    *a = smaller;
+    *b = larger;
+}
+
+/* unshadowed_weight on each lane, spot_interval's (lighting.h) cone included. spot_interval
+ * sorts its cuts 0, far and up to three roots, clamped to [0, far], and tests the pieces
+ * between neighbours; here an absent root is far, which adds only empty pieces (far, far)
+ * that the test skips, and the three roots are sorted by a network: the same pieces, so the
+ * same interval. */
+ALWAYS_INLINE float_lanes unshadowed_weight_lanes(global const epipolar_t* ep, global const light_t* light,
+                                                  float_lanes dx, float_lanes dy, float_lanes dz, float_lanes distance)
+{
+    if (light->type == LIGHT_DIRECTIONAL) return distance - 0.0f;
+    float_lanes begin = 0.0f, end = distance;
+    int_lanes lit = (int_lanes)(-1);
+    if (light->type == LIGHT_SPOT) {
+        float3 l = light->position.xyz, k = light->direction.xyz;
+        float c2 = light->cos_cone * light->cos_cone;
+        float_lanes a1 = dot_lanes(dx, dy, dz, k.x, k.y, k.z), vl = dot_lanes(dx, dy, dz, l.x, l.y, l.z);
+        float a0 = -inline_dot(l, k);
+        float_lanes qa = a1 * a1 - c2, qb = 2.0f * (a1 * a0 + c2 * vl);
+        float qc = a0 * a0 - c2 * inline_dot(l, l);
+        float_lanes disc = qb * qb - 4.0f * qa * qc;
+        int_lanes two_roots = (disc >= 0.0f) & (qa != 0.0f), one_root = !two_roots & (qa == 0.0f) & (qb != 0.0f);
+        float_lanes q = -0.5f * (qb + copysign_lanes(sqrt_lanes(disc), qb)); /* numerically stable pair of roots */
+        float_lanes cut1 = two_roots ? q / qa : (one_root ? -qc / qb : distance);
+        float_lanes cut2 = (two_roots & (q != 0.0f)) ? qc / q : distance;
+        float_lanes cut3 = a1 != 0.0f ? -a0 / a1 : distance;
+        cut1 = fmin_lanes(fmax_lanes(cut1, (float_lanes)(0.0f)), distance);
+        cut2 = fmin_lanes(fmax_lanes(cut2, (float_lanes)(0.0f)), distance);
+        cut3 = fmin_lanes(fmax_lanes(cut3, (float_lanes)(0.0f)), distance);
+        sort_pair_lanes(&cut1, &cut2);
+        sort_pair_lanes(&cut2, &cut3);
+        sort_pair_lanes(&cut1, &cut2);
+        float_lanes cuts[5] = {0.0f, cut1, cut2, cut3, distance};
+        lit = (int_lanes)(0);
+        for (int i = 0; i < 4; ++i) {
+            float_lanes mid = 0.5f * (cuts[i] + cuts[i + 1]);
+            float_lanes wx = mid * dx - l.x, wy = mid * dy - l.y, wz = mid * dz - l.z;
+            int_lanes inside = (cuts[i + 1] > cuts[i])
+                               & (dot_lanes(wx, wy, wz, k.x, k.y, k.z) >= light->cos_cone * length_lanes(wx, wy, wz));
+            begin = (inside & !lit) ? cuts[i] : begin;
+            end = inside ? cuts[i + 1] : end;
+            lit |= inside;
+        }
+    }
+    float3 axis = ep->axis.xyz;
+    float_lanes cos_beta = dot_lanes(dx, dy, dz, axis.x, axis.y, axis.z);
+    float_lanes sin_beta = fmax_lanes(cross_length_lanes(dx, dy, dz, axis.x, axis.y, axis.z), (float_lanes)(SIN_BETA_MIN));
+    float_lanes gamma_begin = begin > 0.0f ? atan2_approx_lanes(begin * sin_beta, ep->d_el - begin * cos_beta) : 0.0f;
+    float_lanes gamma_end = atan2_approx_lanes(end * sin_beta, ep->d_el - end * cos_beta);
+    return lit ? (gamma_end - gamma_begin) / ep->d_el : 0.0f;
+}
+
 /* Per LANES line samples of a slice: (distance, unshadowed weight): where each lands, and
  * what it would gather unshadowed; distance -1 where the slice has no camera sample beside
  * it. Each lane does the operations of the scalar line_q, line_direction,
@@ -164,23 +222,7 @@ kernel void line_samples(global const frame_t* frame, global const view_t* views
     int_lanes row = min_lanes(max_lanes(int_of_lanes(floor_lanes(texel_y)), (int_lanes)(0)), (int_lanes)(frame->height - 1));
     float_lanes depth = LOAD_LANES((global const float*)camera_depth, (row * frame->width + column) * frame->spp);
     float_lanes distance = in_front ? fmin_lanes(depth, (float_lanes)(frame->far)) : (float_lanes)(frame->far);
-    /* unshadowed_weight */
-    global const light_t* light = lights + ep->light_index;
-    float_lanes weight;
-#if SAMPLING_LIGHT == LIGHT_SPOT
-    for (int lane = 0; lane < LANES; ++lane)
-        weight[lane] = unshadowed_weight(ep, light, (float3)(dx[lane], dy[lane], dz[lane]), distance[lane]);
-#else
-    if (light->type == LIGHT_DIRECTIONAL) {
-        weight = distance - 0.0f;
-    } else {
-        float_lanes cos_beta = dot_lanes(dx, dy, dz, axis.x, axis.y, axis.z);
-        float_lanes sin_beta = fmax_lanes(cross_length_lanes(dx, dy, dz, axis.x, axis.y, axis.z),
-                                          (float_lanes)(SIN_BETA_MIN));
-        float_lanes gamma_end = atan2_approx_lanes(distance * sin_beta, ep->d_el - distance * cos_beta);
-        weight = (gamma_end - 0.0f) / ep->d_el;
-    }
-#endif
+    float_lanes weight = unshadowed_weight_lanes(ep, lights + ep->light_index, dx, dy, dz, distance);
     for (int lane = 0; lane < count; ++lane) out[lane] = (float2)(distance[lane], weight[lane]);
 }
 
@@ -446,8 +488,7 @@ kernel void gather(global const frame_t* frame, global const view_t* views, glob
     global const light_t* light = lights + ep->light_index;
     float_lanes own_weight = -1.0f;
 #if SAMPLING_LIGHT == LIGHT_SPOT
-    for (int k = 0; k < LANES; ++k)
-        own_weight[k] = unshadowed_weight(ep, light, (float3)(dx[k], dy[k], dz[k]), distance[k]);
+    own_weight = unshadowed_weight_lanes(ep, light, dx, dy, dz, distance);
 #endif
     float_lanes scale = light->type == LIGHT_DIRECTIONAL ? (float_lanes)(1.0f) : fmax_lanes(sin_beta, (float_lanes)(SIN_BETA_MIN));
     float_lanes r0, g0, b0, r1, g1, b1;
