@@ -116,7 +116,10 @@ inline int ray_span(global const epipolar_t* ep, global const light_t* light, gl
     if (light->type == LIGHT_SPOT && !spot_interval(light, dir, distance, &begin, &end))
         return 0; /* the ray never enters the cone */
     int directional = light->type == LIGHT_DIRECTIONAL;
-    span->gamma_begin = directional ? begin * sin_beta : atan2(begin * sin_beta, ep->d_el - begin * cos_beta);
+    /* A ray from the eye (begin 0, all but a spot light's) starts at γ = atan2(+0, d_el) = +0:
+     * no arc tangent for it, the same value. */
+    span->gamma_begin = directional ? begin * sin_beta
+                                    : (begin > 0.0f ? atan2(begin * sin_beta, ep->d_el - begin * cos_beta) : 0.0f);
     span->gamma_end = directional ? end * sin_beta : atan2(end * sin_beta, ep->d_el - end * cos_beta);
     if (!(span->gamma_end > span->gamma_begin)) return 0;
     /* The lamp (lighting.h): a ray that passes within its radius of a point or spot light
