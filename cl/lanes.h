@@ -32,6 +32,10 @@ ALWAYS_INLINE float_lanes fmax_lanes(float_lanes a, float_lanes b) { return ((b 
 ALWAYS_INLINE float_lanes fmin_lanes(float_lanes a, float_lanes b) { return ((b != b) | (a < b)) ? a : b; }
 ALWAYS_INLINE int_lanes min_lanes(int_lanes a, int_lanes b) { return a > b ? b : a; }
 ALWAYS_INLINE int_lanes max_lanes(int_lanes a, int_lanes b) { return a < b ? b : a; }
+ALWAYS_INLINE int_lanes clamp_int_lanes(int_lanes x, int lo, int hi)
+{
+    return min_lanes(max_lanes(x, (int_lanes)(lo)), (int_lanes)(hi));
+}
 
 /* inline_floor's operations on each lane. */
 ALWAYS_INLINE float_lanes floor_lanes(float_lanes x)
@@ -88,8 +92,8 @@ ALWAYS_INLINE float_lanes atan2_approx_lanes(float_lanes y, float_lanes x)
     int_lanes reduced = t > 0.41421356f;
     float_lanes r = reduced ? (t - 1.0f) / (t + 1.0f) : t;
     float_lanes z = r * r;
-    float_lanes a = (((8.05374449538e-2f * z - 1.38776856032e-1f) * z + 1.99777106478e-1f) * z - 3.33329491539e-1f) * z * r
-                    + r;
+    float_lanes a =
+        (((8.05374449538e-2f * z - 1.38776856032e-1f) * z + 1.99777106478e-1f) * z - 3.33329491539e-1f) * z * r + r;
     a = reduced ? a + M_PI_4_F : a;
     a = ay > ax ? M_PI_2_F - a : a;
     a = x < 0.0f ? M_PI_F - a : a;

@@ -63,7 +63,7 @@ ALWAYS_INLINE int line_q(global const float2* ranges, int i, int j, int n, float
 
 /* The direction at pseudo-angle q in the half-plane of slice i's centre (sides[i]). */
 ALWAYS_INLINE float3 line_direction(global const epipolar_t* ep, global const float4* sides, int i, float q,
-                             float* sin_beta)
+                                    float* sin_beta)
 {
     float k = q <= 1.0f ? q : 2.0f - q; /* tan(β/2), or cot(β/2) */
     float across = 2.0f * k / (1.0f + k * k), along = (1.0f - k * k) / (1.0f + k * k);
@@ -75,7 +75,7 @@ ALWAYS_INLINE float3 line_direction(global const epipolar_t* ep, global const fl
 /* The camera distance where a direction lands: the depth of the pixel it points into
  * (its first camera sample), clamped to the screen and to far. */
 ALWAYS_INLINE float landing_distance(global const frame_t* frame, global const view_t* views,
-                              global const uint* camera_depth, float3 dir)
+                                     global const uint* camera_depth, float3 dir)
 {
     float2 texel;
     float unused;
@@ -92,7 +92,7 @@ ALWAYS_INLINE float landing_distance(global const frame_t* frame, global const v
  * the lit length for a directional light. It breaks where the in-scattering breaks: at
  * the ray's end (an edge) and at a spot light's cone. */
 ALWAYS_INLINE float unshadowed_weight(global const epipolar_t* ep, global const light_t* light, float3 dir,
-                               float distance)
+                                      float distance)
 {
     float begin = 0.0f, end = distance;
     if (light->type == LIGHT_SPOT && !spot_interval(light, dir, distance, &begin, &end)) return 0.0f;
@@ -126,7 +126,8 @@ ALWAYS_INLINE void sort_pair_lanes(float_lanes* a, float_lanes* b)
  * that the test skips, and the three roots are sorted by a network: the same pieces, so the
  * same interval. */
 ALWAYS_INLINE float_lanes unshadowed_weight_lanes(global const epipolar_t* ep, global const light_t* light,
-                                                  float_lanes dx, float_lanes dy, float_lanes dz, float_lanes distance)
+                                                  float_lanes dx, float_lanes dy, float_lanes dz,
+                                                  float_lanes distance)
 {
     if (light->type == LIGHT_DIRECTIONAL) return distance - 0.0f;
     float_lanes begin = 0.0f, end = distance;
@@ -164,7 +165,8 @@ ALWAYS_INLINE float_lanes unshadowed_weight_lanes(global const epipolar_t* ep, g
     }
     float3 axis = ep->axis.xyz;
     float_lanes cos_beta = dot_lanes(dx, dy, dz, axis.x, axis.y, axis.z);
-    float_lanes sin_beta = fmax_lanes(cross_length_lanes(dx, dy, dz, axis.x, axis.y, axis.z), (float_lanes)(SIN_BETA_MIN));
+    float_lanes sin_beta =
+        fmax_lanes(cross_length_lanes(dx, dy, dz, axis.x, axis.y, axis.z), (float_lanes)(SIN_BETA_MIN));
     float_lanes gamma_begin = begin > 0.0f ? atan2_approx_lanes(begin * sin_beta, ep->d_el - begin * cos_beta) : 0.0f;
     float_lanes gamma_end = atan2_approx_lanes(end * sin_beta, ep->d_el - end * cos_beta);
     return lit ? (gamma_end - gamma_begin) / ep->d_el : 0.0f;
@@ -218,8 +220,8 @@ kernel void line_samples(global const frame_t* frame, global const view_t* views
         sy = y / views->scale_y;
     }
     float_lanes texel_x = (sx + 1.0f) * 0.5f * (float)views->width, texel_y = (1.0f - sy) * 0.5f * (float)views->height;
-    int_lanes column = min_lanes(max_lanes(int_of_lanes(floor_lanes(texel_x)), (int_lanes)(0)), (int_lanes)(frame->width - 1));
-    int_lanes row = min_lanes(max_lanes(int_of_lanes(floor_lanes(texel_y)), (int_lanes)(0)), (int_lanes)(frame->height - 1));
+    int_lanes column = clamp_int_lanes(int_of_lanes(floor_lanes(texel_x)), 0, frame->width - 1);
+    int_lanes row = clamp_int_lanes(int_of_lanes(floor_lanes(texel_y)), 0, frame->height - 1);
     float_lanes depth = LOAD_LANES((global const float*)camera_depth, (row * frame->width + column) * frame->spp);
     float_lanes distance = in_front ? fmin_lanes(depth, (float_lanes)(frame->far)) : (float_lanes)(frame->far);
     float_lanes weight = unshadowed_weight_lanes(ep, lights + ep->light_index, dx, dy, dz, distance);
@@ -366,8 +368,8 @@ ALWAYS_INLINE float_lanes luminance_lanes(float_lanes r, float_lanes g, float_la
 #pragma OPENCL FP_CONTRACT ON
 
 /* slices_around (walk.h) on each lane. */
-ALWAYS_INLINE void slices_around_lanes(global const epipolar_t* ep, float_lanes alpha, int_lanes* i0, int_lanes* i1,
-                                       float_lanes* t)
+ALWAYS_INLINE void slices_around_lanes(global const epipolar_t* ep, float_lanes alpha, int_lanes* i0,
+                                       int_lanes* i1, float_lanes* t)
 {
     float_lanes offset = alpha - ep->alpha_min;
     offset -= 2.0f * M_PI_F * floor_lanes(offset / (2.0f * M_PI_F));
@@ -381,8 +383,8 @@ ALWAYS_INLINE void slices_around_lanes(global const epipolar_t* ep, float_lanes 
         *i0 = *i0 < 0 ? *i0 + ep->slices : *i0;
         *i1 = *i1 >= ep->slices ? *i1 - ep->slices : *i1;
     } else {
-        *i0 = min_lanes(max_lanes(*i0, (int_lanes)(0)), (int_lanes)(ep->slices - 1));
-        *i1 = min_lanes(max_lanes(*i1, (int_lanes)(0)), (int_lanes)(ep->slices - 1));
+        *i0 = clamp_int_lanes(*i0, 0, ep->slices - 1);
+        *i1 = clamp_int_lanes(*i1, 0, ep->slices - 1);
     }
 }
 
@@ -484,13 +486,15 @@ kernel void gather(global const frame_t* frame, global const view_t* views, glob
     slices_around_lanes(ep, alpha, &i0, &i1, &t);
     float_lanes cos_beta = dot_lanes(dx, dy, dz, axis.x, axis.y, axis.z);
     float_lanes sin_beta = cross_length_lanes(dx, dy, dz, axis.x, axis.y, axis.z);
-    float_lanes q = cos_beta >= 0.0f ? sin_beta / (1.0f + cos_beta) : 2.0f - sin_beta / (1.0f - cos_beta); /* pseudo_beta */
+    /* pseudo_beta */
+    float_lanes q = cos_beta >= 0.0f ? sin_beta / (1.0f + cos_beta) : 2.0f - sin_beta / (1.0f - cos_beta);
     global const light_t* light = lights + ep->light_index;
     float_lanes own_weight = -1.0f;
 #if SAMPLING_LIGHT == LIGHT_SPOT
     own_weight = unshadowed_weight_lanes(ep, light, dx, dy, dz, distance);
 #endif
-    float_lanes scale = light->type == LIGHT_DIRECTIONAL ? (float_lanes)(1.0f) : fmax_lanes(sin_beta, (float_lanes)(SIN_BETA_MIN));
+    float_lanes scale = /* radiance_scale */
+        light->type == LIGHT_DIRECTIONAL ? (float_lanes)(1.0f) : fmax_lanes(sin_beta, (float_lanes)(SIN_BETA_MIN));
     float_lanes r0, g0, b0, r1, g1, b1;
     int_lanes from0 = slice_interpolates((global const float*)ranges, (global const float*)line,
                                          (global const float*)radiance, n, threshold, i0, q, scale, distance,
