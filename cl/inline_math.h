@@ -1,5 +1,5 @@
 /* inline_math.h — OpenCL built-ins written out, for the kernels whose work-items PoCL should
- * run several at a time (docs/design.md §4.5 "Epipolar sampling", "Cost").
+ * run several at a time (docs/design.md §4.5, "Cost on PoCL").
  *
  * PoCL's CPU driver links its built-ins from a library built for a generic x86-64, and
  * LLVM does not inline a function across different target features: every dot, fmax or

@@ -1,6 +1,6 @@
 /* lanes.h — LANES samples per work-item as one float8 of each quantity, for the kernels
- * where PoCL would otherwise run one sample at a time (docs/design.md §4.5 "Epipolar
- * sampling", "Cost").
+ * where PoCL would otherwise run one sample at a time (docs/design.md §4.5, "Cost on
+ * PoCL").
  *
  * PoCL runs a work-group's work-items as a loop, which its vectorizer takes only when the
  * kernel has neither calls nor float3 arithmetic (inline_math.h); sampling.cl's kernels

@@ -14,9 +14,14 @@
  *                 samples either side (no break lies between them)
  *   gather        per camera sample: interpolate each of its two slices at its β when
  *                 the samples there match its distance and unshadowed weight and each
- *                 other's radiance, blending the two slices as traverse does; list it
+ *                 other's radiance, blending the two slices as traverse does; flag it
  *                 for fix_up where a slice cannot
+ *   fixup_count,  per block of camera samples: count the flagged ones, then list them
+ *   fixup_list    (offsets: the counts' prefix sums, from the host)
  *   fix_up        per listed camera sample: walk those rows for the sample itself
+ *
+ * line_samples and gather take LANES samples per work-item as float8 vectors (lanes.h):
+ * PoCL would run them one at a time (docs/design.md §4.5, "Cost on PoCL").
  *
  * Line sample j of slice i lies in the half-plane of the slice's centre at the
  * pseudo-angle q = lo_i + (hi_i - lo_i)·j/(n - 1) (pseudo_beta, a monotonic stand-in for
