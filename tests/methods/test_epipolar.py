@@ -160,3 +160,27 @@ def test_a_textured_light_keeps_its_pattern(renderer):
     detail_epipolar, detail_pixel = (np.abs(np.diff(image.sum(-1), axis=1)).mean()
                                      for image in (epipolar.image, pixel.image))
     assert detail_epipolar > 0.97 * detail_pixel
+
+
+#: A spot light whose cone reaches the image's last row (tilted towards the camera).
+SPOT_TOWARDS_CAMERA = SpotLight(v3(0.3, 5.0, -0.5), np.array([0.3, -1.0, 0.9]) / np.linalg.norm([0.3, -1.0, 0.9]),
+                                50.0, np.full(3, 80.0))
+
+
+@pytest.mark.parametrize("light", ["point", "spot"])
+def test_a_partial_last_vector_of_camera_samples(renderer, light):
+    """gather and line_samples take 8 samples per work-item (cl/lanes.h); here neither the
+    camera samples (97×61 pixels × 3 samples) nor the line samples (61) fill their last
+    vector, and the samples there are interpolated or fixed up like the rest: the last row
+    follows the walked one to its last pixel, and every camera sample is counted once."""
+    scene = _shafts({"point": POINT, "spot": SPOT_TOWARDS_CAMERA}[light], width=97, height=61, spp=3,
+                    line_samples=61)
+    assert (97 * 61 * 3) % 8 and 61 % 8  # the last vectors are partial
+    error, epipolar = _error(renderer, scene)
+    pixel = renderer.render(_sampled(scene, "pixel"), "minmax", reuse=False)
+    assert epipolar.samples.interpolated + epipolar.samples.fixed_up == 97 * 61 * 3
+    assert error.rmse < RMSE_TOLERANCE and error.p99 < P99_TOLERANCE, error  # measured 0.05–0.08 %, 0.16–0.86 %
+    last_e, last_p = epipolar.image[-1].sum(-1), pixel.image[-1].sum(-1)
+    assert np.all(last_p > 0.0)  # the light reaches the last row
+    # measured 0.10 % (point), 0.21 % (spot); a last vector left out is 100 % off
+    assert np.max(np.abs(last_e - last_p) / last_p) < 0.01
