@@ -12,7 +12,13 @@
 
 #include "inline_math.h"
 
+/* LANES comes from clrays/stages/sampling.py (-D); the vectors below are float8. */
+#ifndef LANES
 #define LANES 8
+#endif
+#if LANES != 8
+#error "lanes.h spells its vectors as float8: LANES must be 8"
+#endif
 typedef float8 float_lanes;
 typedef int8 int_lanes;
 

@@ -41,8 +41,11 @@
 #define SAMPLING_LIGHT LIGHT_POINT
 #endif
 
-/* Camera samples per block of the fix-up list (fixup_count, fixup_list). */
+/* Camera samples per block of the fix-up list (fixup_count, fixup_list); from
+ * clrays/stages/sampling.py (-D). */
+#ifndef FIXUP_BLOCK
 #define FIXUP_BLOCK 1024
+#endif
 
 /* The counter of clrays.stages.sampling.SampleCounts that the kernels keep: line samples
  * that walked their row. Rare next to the camera samples, so a plain global atomic does;

@@ -107,6 +107,12 @@ def pseudo_beta(beta: np.ndarray) -> np.ndarray:
         return np.where(half <= np.pi / 4, np.tan(half), 2.0 - 1.0 / np.tan(half))
 
 
+#: Camera or line samples per work-item of gather and line_samples: cl/lanes.h's float8.
+LANES = 8
+#: Camera samples per block of the fix-up list (fixup_count, fixup_list).
+FIXUP_BLOCK = 1024
+
+
 def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterResult, epipolar: Epipolar,
                       integrand: DeviceIntegrand, scatter, timer: StageTimer,
                       texture: TextureTables | None = None, layers=None) -> SampleCounts:
@@ -126,7 +132,7 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
     counts = device.buffer(np.zeros(2, dtype=np.uint32))
     samples, n32 = inputs.samples, np.int32(n)
     light = inputs.scene.lights[int(epipolar.params["light_index"])]
-    traversal = {"TRAVERSAL": TRAVERSALS.index(render.traversal),
+    traversal = {"TRAVERSAL": TRAVERSALS.index(render.traversal), "LANES": LANES, "FIXUP_BLOCK": FIXUP_BLOCK,
                  "SAMPLING_LIGHT": structs.LIGHT_SPOT if isinstance(light, SpotLight) else structs.LIGHT_POINT}
     walked = ()  # the walking kernels' trailing arguments
     if layers is not None:
@@ -160,15 +166,12 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
     return SampleCounts(computed, samples - fixed_up, fixed_up)
 
 
-LANES = 8  # camera or line samples per work-item of gather and line_samples (cl/lanes.h LANES)
-FIXUP_BLOCK = 1024  # camera samples per block of the fix-up list (cl/sampling.cl FIXUP_BLOCK)
-
 
 def fixup_list(device: Device, fixup_flags, samples: int, run) -> tuple[object, int]:
     """(the fix-up list, its length) from gather's flags: each block of FIXUP_BLOCK camera
     samples counts its flagged ones, and lists them from the prefix sum of the counts
-    before it. gather flags instead of appending with an atomic, which would keep PoCL
-    from running its work-items as one vector loop."""
+    before it. An atomic append in gather costs about as much (measured); the flags keep
+    the list in sample order, the same from run to run."""
     blocks, samples32 = -(-samples // FIXUP_BLOCK), np.int32(samples)
     block_counts = device.buffer(nbytes=4 * blocks)
     run("fixup_count", (blocks,), None, samples32, fixup_flags, block_counts)
