@@ -52,13 +52,10 @@
  * gather flags its fix-ups instead (fixup_count, fixup_list). */
 #define COUNT_COMPUTED 0
 
-/* Line samples are spaced evenly in q = tan(β/2) for β ≤ π/2 and 2 - cot(β/2) above: q
- * rises with β at between 1/2 and 1 times its rate, and needs no arc tangent from cos β
- * and sin β, nor any trigonometry back (clrays/stages/sampling.py pseudo_beta). */
-ALWAYS_INLINE float pseudo_beta(float cos_beta, float sin_beta)
-{
-    return cos_beta >= 0.0f ? sin_beta / (1.0f + cos_beta) : 2.0f - sin_beta / (1.0f - cos_beta);
-}
+/* Line samples are spaced evenly in q = tan(β/2) for β ≤ π/2 and 2 - cot(β/2) above
+ * (pseudo_beta: sin β / (1 + cos β), or 2 - sin β / (1 - cos β)): q rises with β at
+ * between 1/2 and 1 times its rate, and needs no arc tangent from cos β and sin β, nor any
+ * trigonometry back (clrays/stages/sampling.py pseudo_beta). */
 
 /* q of line sample j of slice i; 0 when the slice does not cross the screen. */
 ALWAYS_INLINE int line_q(global const float2* ranges, int i, int j, int n, float* q)
@@ -80,38 +77,6 @@ ALWAYS_INLINE float3 line_direction(global const epipolar_t* ep, global const fl
     return inline_normalize(along * ep->axis.xyz + across * sides[i].xyz);
 }
 
-/* The camera distance where a direction lands: the depth of the pixel it points into
- * (its first camera sample), clamped to the screen and to far. */
-ALWAYS_INLINE float landing_distance(global const frame_t* frame, global const view_t* views,
-                                     global const uint* camera_depth, float3 dir)
-{
-    float2 texel;
-    float unused;
-    if (!view_project(views, views->origin.xyz + dir, &texel, &unused)) return frame->far;
-    int x = inline_clamp_int((int)inline_floor(texel.x), 0, frame->width - 1);
-    int y = inline_clamp_int((int)inline_floor(texel.y), 0, frame->height - 1);
-    return inline_fmin(as_float(camera_depth[(y * frame->width + x) * frame->spp]), frame->far);
-}
-
-/* What the ray along dir up to distance would gather if nothing cast a shadow, without
- * the medium's attenuation and phase, and without the factor 1/sin β of a point or spot
- * light (which `radiance_scale` takes out of the radiance exactly): the γ it sweeps,
- * divided by d_el, for a point or spot light (only the part inside a spot light's cone),
- * the lit length for a directional light. It breaks where the in-scattering breaks: at
- * the ray's end (an edge) and at a spot light's cone. */
-ALWAYS_INLINE float unshadowed_weight(global const epipolar_t* ep, global const light_t* light, float3 dir,
-                                      float distance)
-{
-    float begin = 0.0f, end = distance;
-    if (light->type == LIGHT_SPOT && !spot_interval(light, dir, distance, &begin, &end)) return 0.0f;
-    if (light->type == LIGHT_DIRECTIONAL) return end - begin;
-    float cos_beta = inline_dot(dir, ep->axis.xyz);
-    float sin_beta = inline_fmax(inline_length(inline_cross(dir, ep->axis.xyz)), SIN_BETA_MIN);
-    float gamma_begin = begin > 0.0f ? atan2_approx(begin * sin_beta, ep->d_el - begin * cos_beta) : 0.0f;
-    float gamma_end = atan2_approx(end * sin_beta, ep->d_el - end * cos_beta);
-    return (gamma_end - gamma_begin) / ep->d_el;
-}
-
 /* The factor radiance is stored and interpolated under: sin β for a point or spot light,
  * whose in-scattering grows as 1/sin β near the epipole, faster than a straight line
  * between samples follows; 1 for a directional light. */
@@ -128,11 +93,18 @@ ALWAYS_INLINE void sort_pair_lanes(float_lanes* a, float_lanes* b)
     *b = larger;
 }
 
-/* unshadowed_weight on each lane, spot_interval's (lighting.h) cone included. spot_interval
- * sorts its cuts 0, far and up to three roots, clamped to [0, far], and tests the pieces
- * between neighbours; here an absent root is far, which adds only empty pieces (far, far)
- * that the test skips, and the three roots are sorted by a network: the same pieces, so the
- * same interval. */
+/* The unshadowed weight of each lane's ray along d up to distance: what it would gather
+ * if nothing cast a shadow, without the medium's attenuation and phase, and without the
+ * factor 1/sin β of a point or spot light (which `radiance_scale` takes out of the
+ * radiance exactly): the γ it sweeps, divided by d_el, for a point or spot light (only the
+ * part inside a spot light's cone), the lit length for a directional light. It breaks
+ * where the in-scattering breaks: at the ray's end (an edge) and at a spot light's cone.
+ *
+ * The cone is spot_interval's (lighting.h), lane by lane: spot_interval sorts its cuts 0,
+ * far and up to three roots, clamped to [0, far], and tests the pieces between
+ * neighbours; here an absent root is far, which adds only empty pieces (far, far) that the
+ * test skips, and the three roots are sorted by a network: the same pieces, so the same
+ * interval, the same bits. */
 ALWAYS_INLINE float_lanes unshadowed_weight_lanes(global const epipolar_t* ep, global const light_t* light,
                                                   float_lanes dx, float_lanes dy, float_lanes dz,
                                                   float_lanes distance)
@@ -180,10 +152,11 @@ ALWAYS_INLINE float_lanes unshadowed_weight_lanes(global const epipolar_t* ep, g
     return lit ? (gamma_end - gamma_begin) / ep->d_el : 0.0f;
 }
 
-/* Per LANES line samples of a slice: (distance, unshadowed weight): where each lands, and
- * what it would gather unshadowed; distance -1 where the slice has no camera sample beside
- * it. Each lane does the operations of the scalar line_q, line_direction,
- * landing_distance (view_project) and unshadowed_weight, in the same order (lanes.h). */
+/* Per LANES line samples of a slice: (distance, unshadowed weight): where each lands (the
+ * depth of the pixel it points into, its first camera sample, clamped to the screen and
+ * to far), and what it would gather unshadowed; distance -1 where the slice has no camera
+ * sample beside it. Each lane does the operations of the scalar line_q, line_direction
+ * and view_project (lighting.h), in the same order (lanes.h). */
 kernel void line_samples(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                          global const epipolar_t* ep, global const uint* camera_depth, global const float2* ranges,
                          global const float4* sides, int n, global float2* line)
@@ -211,7 +184,7 @@ kernel void line_samples(global const frame_t* frame, global const view_t* views
     dx *= inverse;
     dy *= inverse;
     dz *= inverse;
-    /* landing_distance: view_project of origin + dir */
+    /* where it lands: view_project of origin + dir, then the pixel it points into */
     float3 origin = views->origin.xyz;
     float_lanes px = (origin.x + dx) - origin.x, py = (origin.y + dy) - origin.y, pz = (origin.z + dz) - origin.z;
     float3 right = views->right.xyz, up = views->up.xyz, forward = views->forward.xyz;
@@ -247,14 +220,6 @@ ALWAYS_INLINE int distance_breaks(float2 a, float2 b, float threshold)
 ALWAYS_INLINE int weight_breaks(float2 a, float2 b, float threshold)
 {
     return inline_fabs(a.y - b.y) > threshold * inline_fmax(inline_fabs(a.y), inline_fabs(b.y));
-}
-
-/* A line value (interpolated or not) stands for a camera sample's own when both are
- * within `threshold` of it, relatively. */
-ALWAYS_INLINE int line_matches(float2 value, float2 own, float threshold)
-{
-    return inline_fabs(value.x - own.x) <= threshold * own.x
-           && inline_fabs(value.y - own.y) <= threshold * inline_fmax(inline_fabs(value.y), inline_fabs(own.y));
 }
 
 /* Every `step`-th sample, the ends, and both sides of a break. */

@@ -101,7 +101,7 @@ def line_ranges(scene, params: np.ndarray) -> np.ndarray:
 
 def pseudo_beta(beta: np.ndarray) -> np.ndarray:
     """q(β), the monotonic stand-in for β that line samples are spaced evenly in:
-    tan(β/2) up to π/2, 2 - cot(β/2) above (cl/sampling.cl pseudo_beta)."""
+    tan(β/2) up to π/2, 2 - cot(β/2) above (cl/sampling.cl, line_samples and gather)."""
     half = np.asarray(beta, dtype=float) / 2
     with np.errstate(divide="ignore"):
         return np.where(half <= np.pi / 4, np.tan(half), 2.0 - 1.0 / np.tan(half))
