@@ -248,8 +248,9 @@ def _point_angles(delta, centres, offsets) -> tuple[np.ndarray, np.ndarray]:
     (flattened) for each row's δ = π-β, from sin and cos of centres·δ and offsets·δ:
     sin(a+b) = sin a·cos b + cos a·sin b, and (1-x)·δ = δ - x·δ likewise."""
     rows = len(delta)
-    a, b = centres[None, :] * delta, offsets[None, :] * delta
-    sin_a, cos_a = np.sin(a)[:, :, None], np.cos(a)[:, :, None]
+    sin_a, cos_a = _progression_sin_cos(delta, centres)
+    sin_a, cos_a = sin_a[:, :, None], cos_a[:, :, None]
+    b = offsets[None, :] * delta
     sin_b, cos_b = np.sin(b)[:, None, :], np.cos(b)[:, None, :]
     sin_x = (sin_a * cos_b + cos_a * sin_b).reshape(rows, -1)  # sin(x·δ) = sin γ
     cos_x = (cos_a * cos_b - sin_a * sin_b).reshape(rows, -1)
@@ -260,6 +261,20 @@ def _point_angles(delta, centres, offsets) -> tuple[np.ndarray, np.ndarray]:
     sin_x += sin_delta
     sin_x /= sin_angle
     return sin_x, cos_x
+
+
+def _progression_sin_cos(delta, centres, block=32) -> tuple[np.ndarray, np.ndarray]:
+    """sin and cos of centres·δ, (rows, cells), for centres evenly spaced (the cells of a row):
+    by angle sums from the first centre of each block of `block` cells and the offsets within a
+    block, so that the sines and cosines are taken of 2·cells/block angles per row, not cells."""
+    block = min(block, len(centres))
+    a = centres[None, ::block] * delta  # each block's first centre
+    b = (centres[:block] - centres[0])[None, :] * delta  # the offsets within a block
+    sin_a, cos_a = np.sin(a)[:, :, None], np.cos(a)[:, :, None]
+    sin_b, cos_b = np.sin(b)[:, None, :], np.cos(b)[:, None, :]
+    sines = (sin_a * cos_b + cos_a * sin_b).reshape(len(delta), -1)[:, :len(centres)]
+    cosines = (cos_a * cos_b - sin_a * sin_b).reshape(len(delta), -1)[:, :len(centres)]
+    return sines, cosines
 
 
 def _hg_phase_in_place(cos_theta: np.ndarray, g: float) -> np.ndarray:
