@@ -70,8 +70,9 @@ SVD_RELATIVE_CUTOFF = 1e-13
 # scale (the one exception, the last cell of a point row, gets halving panels): 4 nodes
 # agree with 16 to 4e-10 of a row's total.
 QUAD_NODES = 4
-# Integrand values per chunk of rows: chunks that fit the CPU's L2 cache build a 128 × 512
-# table in 0.6× the time of one 400 000-value chunk (bench/RESULTS.md, host stages).
+# Integrand values per chunk of rows: chunks that stay in the CPU's L2 cache build a 128 × 512
+# table in 0.6× the time of one 400 000-value chunk in a plain Python process (in the
+# renderer's, where PoCL is loaded, about the same time; bench/RESULTS.md, host stages).
 ROW_CHUNK_VALUES = 32768
 # Directional rows end at this optical depth (of the least attenuating channel) when
 # no s_max is given: the light beyond carries e^{-20} ≈ 2e-9 of the ray's radiance.
