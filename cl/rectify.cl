@@ -38,11 +38,21 @@ kernel void rectify_bounds(global const frame_t* frame, global const view_t* vie
     if (first >= samples) return;
     int directional = lights[epipolar->light_index].type == LIGHT_DIRECTIONAL;
     float q_beta_min = INFINITY, q_beta_max = 0.0f, gamma_max = 0.0f;
+    /* The chunk's pixel (x, y) and sample within it advance by counting: three integer divisions
+     * per sample cost PoCL 6 % of the kernel (bench/RESULTS.md, host stages). */
+    int spp = frame->spp, width = frame->width;
+    int pixel = first / spp, sub = first - pixel * spp;
+    int x = pixel % width, y = pixel / width;
     for (int sample = first; sample < last; ++sample) {
-        int pixel = sample / frame->spp;
         float3 origin, dir;
-        view_ray(views, view_screen(views, pixel % frame->width, pixel / frame->width, offsets[sample % frame->spp]),
-                 &origin, &dir);
+        view_ray(views, view_screen(views, x, y, offsets[sub]), &origin, &dir);
+        if (++sub == spp) {
+            sub = 0;
+            if (++x == width) {
+                x = 0;
+                ++y;
+            }
+        }
         float s = fmin(as_float(camera_depth[sample]), frame->far);
         float cos_beta = dot(dir, epipolar->axis.xyz), sin_beta = length(cross(dir, epipolar->axis.xyz));
         float q_beta = pseudo_angle(cos_beta, sin_beta);

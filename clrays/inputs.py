@@ -260,8 +260,19 @@ def light_pass_inputs(inputs: FrameInputs, light_index: int, triangles: int | No
     render session keep a static light's map while the camera moves (docs/design.md §7). The
     camera view stays in views[0]; the light's views follow from views[1], with depth
     offsets from 0, and `shadow_texels` counts this light's texels only. `triangles`: how
-    many of the frame's triangles the pass reads (None: all it carries).
+    many of the frame's triangles the pass reads (None: all it carries). Kept on `inputs`
+    per light and count: the raster and visibility stages both ask, and translating a
+    scanned mesh costs milliseconds (the result is not to be changed).
     """
+    carried = len(inputs.tri_vertices) // 3
+    key = (light_index, carried if triangles is None else triangles)
+    passes = inputs.__dict__.setdefault("_light_passes", {})  # not a field: `replace` starts afresh
+    if key not in passes:
+        passes[key] = _light_pass_inputs(inputs, light_index, key[1])
+    return passes[key]
+
+
+def _light_pass_inputs(inputs: FrameInputs, light_index: int, triangles: int) -> FrameInputs:
     first, count = inputs.light_views[light_index]
     anchor = inputs.light_anchor_ws[light_index]
     views = inputs.views[first:first + count].copy()
@@ -272,8 +283,7 @@ def light_pass_inputs(inputs: FrameInputs, light_index: int, triangles: int | No
     light["first_view"] = 1
     if light["type"][0] != structs.LIGHT_DIRECTIONAL:
         light["position"] = 0.0
-    carried = len(inputs.tri_vertices) // 3
-    triangles = inputs.scene.geometry.triangles[:carried if triangles is None else triangles] - anchor
+    triangles = inputs.scene.geometry.triangles[:triangles] - anchor
     vertices = triangles.reshape(-1, 3)
     return replace(
         inputs,

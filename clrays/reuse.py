@@ -152,26 +152,31 @@ class Reuse:
     def __init__(self, cache: StageCache | None, record: StageRecord, lights: int = 1):
         self.cache, self.record, self.lights = cache, record, max(lights, 1)
 
-    def stage(self, stage: str | tuple[str, ...], key: bytes, compute: Callable[[], Any], *,
+    def stage(self, stage: str | tuple[str, ...], key: bytes | Callable[[], bytes], compute: Callable[[], Any], *,
               per_light: bool = False) -> Any:
-        """The stage's result for `key`: the kept one, or `compute()` (then kept). A tuple
-        of stage labels records one outcome for stages kept together (rectify + minmax)."""
+        """The stage's result for `key` (a digest, or a function that makes it, called only
+        when a cache is kept): the kept one, or `compute()` (then kept). A tuple of stage
+        labels records one outcome for stages kept together (rectify + minmax)."""
         labels = (stage,) if isinstance(stage, str) else stage
         found, value = self._get_or_compute(labels[0], key, compute, per_light)
         for label in labels:
             self.record.note(label, REUSED if found else COMPUTED)
         return value
 
-    def keep(self, name: str, key: bytes, compute: Callable[[], Any], *, per_light: bool = False) -> Any:
+    def keep(self, name: str, key: bytes | Callable[[], bytes], compute: Callable[[], Any], *,
+             per_light: bool = False) -> Any:
         """Like `stage`, for intermediate results that are no stage of their own (not recorded)."""
         return self._get_or_compute(name, key, compute, per_light)[1]
 
-    def _get_or_compute(self, name: str, key: bytes, compute: Callable[[], Any], per_light: bool) -> tuple[bool, Any]:
-        found, value = self.cache.get(name, key) if self.cache is not None else (False, None)
+    def _get_or_compute(self, name: str, key: bytes | Callable[[], bytes], compute: Callable[[], Any],
+                        per_light: bool) -> tuple[bool, Any]:
+        if self.cache is None:  # nothing kept: no key needed (digesting a mesh costs milliseconds)
+            return False, compute()
+        key = key() if callable(key) else key
+        found, value = self.cache.get(name, key)
         if not found:
             value = compute()
-            if self.cache is not None:
-                self.cache.put(name, key, value, self.lights if per_light else 1)
+            self.cache.put(name, key, value, self.lights if per_light else 1)
         return found, value
 
     def skip(self, *stages: str) -> None:

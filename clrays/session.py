@@ -33,6 +33,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -139,7 +140,7 @@ class Renderer:
         if self._device is not None:
             self._device.allocated_bytes = 0
         # A frame identical to a kept one: its image, and every stage counts as reused.
-        image, stages, textures, samples = reuse.keep("frame", digest("frame", scene_digest(scene)),
+        image, stages, textures, samples = reuse.keep("frame", lambda: digest("frame", scene_digest(scene)),
                                                       lambda: self._frame(scene, method, reuse, timer, progress))
         status = record.status() or {stage: REUSED for stage in stages}
         device_bytes = self._device.allocated_bytes if self._device is not None else 0
@@ -191,12 +192,12 @@ class Renderer:
                 textures.append((int(epipolar.params["slices"]), int(epipolar.params["gamma_samples"])))
                 if method == "minmax":
                     self._minmax(epipolar, reuse, timer)  # minmax: the 1D min-max mipmap of every row
-                tables = reuse.stage("integrand", keys.integrand(index, epipolar),  # integrand: lit run → radiance
+                tables = reuse.stage("integrand", lambda: keys.integrand(index, epipolar),  # integrand: lit run → radiance
                                      lambda: integrand(device, scene, light, epipolar, timer), per_light=True)
                 if method == "moments":  # volume_moments: prefix sums of moments, one reconstruction per ray
                     volume_moments(device, buffers, rastered, epipolar, tables, scatter, timer)
                     continue
-                texture = reuse.stage("light_texture", keys.light_texture(index, epipolar),  # texture: T·Γ_i prefix sums
+                texture = reuse.stage("light_texture", lambda: keys.light_texture(index, epipolar),  # texture: T·Γ_i prefix sums
                                       lambda: light_texture(device, buffers, index, epipolar, tables, timer),
                                       per_light=True) if textured(light) else None
                 rectified = None if layers is None else \
@@ -241,7 +242,8 @@ class Renderer:
         if not scene.geometry.translucent or not scene.lights:
             reuse.skip("translucency")
             return None
-        return reuse.stage("translucency", digest("translucency", tuple(keys.shadow), scene.render.translucent_layers),
+        return reuse.stage("translucency",
+                           lambda: digest("translucency", tuple(keys.shadow), scene.render.translucent_layers),
                            lambda: translucency(self.device, buffers, timer))
 
     def _bvh(self, buffers: FrameBuffers, keys: StageKeys, reuse: Reuse, timer: StageTimer):
@@ -252,9 +254,9 @@ class Renderer:
         scene = buffers.inputs.scene
         if scene.render.surface_shadows != "exact" or not scene.lights:
             return None
-        topology = reuse.keep("bvh.topology", digest("bvh.topology", keys.geometry),
+        topology = reuse.keep("bvh.topology", lambda: digest("bvh.topology", keys.geometry),
                               lambda: bvh_topology_of(self.device, buffers.inputs, timer))
-        return reuse.keep("bvh", digest("bvh", keys.geometry, buffers.inputs.eye_ws),
+        return reuse.keep("bvh", lambda: digest("bvh", keys.geometry, buffers.inputs.eye_ws),
                           lambda: upload_bvh(self.device, buffers, topology, timer))
 
     def _visibility(self, buffers: FrameBuffers, rastered: RasterResult, keys: StageKeys, reuse: Reuse,
@@ -271,11 +273,12 @@ class Renderer:
         # The bound maps are drawn only where the camera's samples read them: kept while the
         # light's shadow map, the camera samples and the surfaces' normals are.
         prepared = visibility_prepare(device, buffers, rastered, timer)
-        bounds = [reuse.keep("visibility.bound", digest("bound", keys.shadow[index], keys.camera, keys.surfaces),
+        bounds = [reuse.keep("visibility.bound",
+                             lambda index=index: digest("bound", keys.shadow[index], keys.camera, keys.surfaces),
                              lambda index=index: visibility_bound(device, buffers, index, timer, prepared),
                              per_light=True)
                   for index in range(len(scene.lights))]
-        atlas = reuse.keep("bound_atlas", digest("bound", tuple(keys.shadow), keys.camera, keys.surfaces),
+        atlas = reuse.keep("bound_atlas", lambda: digest("bound", tuple(keys.shadow), keys.camera, keys.surfaces),
                            lambda: bound_atlas(device, buffers, bounds))
         reuse.record.note("visibility", COMPUTED)
         return visibility(device, buffers, rastered, prepared, atlas, bvh, timer)
@@ -285,7 +288,7 @@ class Renderer:
         """The shadow_filter stage: the blurred moment maps kept while the shadow maps and the
         filter's type and radius are, then the visibility of every camera sample."""
         device, chosen = self.device, frame_filter(buffers.inputs)
-        key = digest("moments", tuple(keys.shadow), chosen.type, chosen.radius, depth_ranges(buffers.inputs))
+        key = lambda: digest("moments", tuple(keys.shadow), chosen.type, chosen.radius, depth_ranges(buffers.inputs))
         maps = reuse.keep("shadow_filter.moments", key, lambda: shadow_filter_moments(device, buffers, rastered, timer))
         reuse.record.note("shadow_filter", COMPUTED)
         return shadow_filter(device, buffers, rastered, maps, timer)
@@ -305,10 +308,10 @@ class Renderer:
         triangle ids, and each light's shadow map (anchored at the light, so a moving
         camera keeps it). Returns the frame's RasterResult and the per-light maps."""
         device = self.device
-        camera_buffers, camera_key = buffers, keys.camera
+        camera_buffers, camera_key = buffers, lambda: keys.camera
         if buffers.inputs.scene.geometry.translucent:  # the camera depth is the opaque one (stages/transparency.py)
             camera_buffers = replace(buffers, tri_vertices=None)
-            camera_key = digest(keys.camera, "opaque", translucent_triangles(buffers.inputs.scene))
+            camera_key = lambda: digest(keys.camera, "opaque", translucent_triangles(buffers.inputs.scene))
 
         def camera():
             if camera_buffers.tri_vertices is None:
@@ -317,10 +320,11 @@ class Renderer:
             return raster_camera(device, camera_buffers, timer)
 
         camera_depth, tri_id = reuse.stage("raster.camera", camera_key, camera)
-        maps = [reuse.stage("raster.shadow", keys.shadow[index],
+        maps = [reuse.stage("raster.shadow", lambda index=index: keys.shadow[index],
                             lambda index=index: raster_shadow_map(device, buffers, index, timer), per_light=True)
                 for index in range(len(buffers.inputs.scene.lights))]
-        atlas = reuse.keep("shadow_atlas", digest(tuple(keys.shadow)), lambda: shadow_atlas(device, buffers, maps))
+        atlas = reuse.keep("shadow_atlas", lambda: digest(tuple(keys.shadow)),
+                           lambda: shadow_atlas(device, buffers, maps))
         return RasterResult(camera_depth, tri_id, atlas), maps
 
     def _rectify(self, buffers: FrameBuffers, rastered: RasterResult, maps: list[ShadowMap], keys: StageKeys,
@@ -329,7 +333,7 @@ class Renderer:
         map is empty casts no shadow anywhere: its texture is π everywhere and the tree walk
         finds one lit run at any texture size, so a minimal texture gives the same radiance
         (up to float32 rounding where the run is clipped) without rectifying the full one."""
-        device, key = self.device, keys.trees(index)
+        device, key = self.device, lambda: keys.trees(index)
         # A textured light keeps its full texture size: the texture is rectified on its rows.
         # So does a light with translucent layers: its texture carries their transmittance.
         if self._skip_unshadowed and not textured(buffers.inputs.scene.lights[index]) \
@@ -339,7 +343,7 @@ class Renderer:
                                                                    gamma_samples=UNSHADOWED_SIZE))
             small_buffers = replace(buffers, inputs=replace(buffers.inputs, scene=small))
             reuse.skip("rectify", "minmax")
-            return reuse.keep("unshadowed", digest("unshadowed", key),
+            return reuse.keep("unshadowed", lambda: digest("unshadowed", key()),
                               lambda: self._unshadowed_trees(small_buffers, rastered, index, timer), per_light=True)
         return reuse.stage("rectify", key, lambda: rectify(device, buffers, rastered, index, timer), per_light=True)
 
@@ -443,30 +447,46 @@ def check_device_memory(device: Device, inputs: FrameInputs) -> None:
 
 
 class StageKeys:
-    """Digests of exactly what each stage of one frame reads."""
+    """Digests of exactly what each stage of one frame reads, each made when first asked
+    for: a frame that keeps nothing (`reuse=False`) asks for none."""
 
     def __init__(self, inputs: FrameInputs):
-        scene = inputs.scene
         self.inputs = inputs
-        # The triangles (a relief's by its texels and placement, clrays.reuse.geometry_parts),
-        # which are pre-warped, and how many the device buffers carry.
-        self.geometry = digest(*geometry_parts(scene.geometry, triangles_only=True), inputs.raster_triangles,
-                               len(inputs.tri_vertices))
+
+    @cached_property
+    def geometry(self) -> bytes:
+        """The triangles (a relief's by its texels and placement, clrays.reuse.geometry_parts),
+        which are pre-warped, and how many the device buffers carry."""
+        inputs, scene = self.inputs, self.inputs.scene
+        geometry = digest(*geometry_parts(scene.geometry, triangles_only=True), inputs.raster_triangles,
+                          len(inputs.tri_vertices))
         if scene.geometry.translucent:  # which triangles are opaque occluders, and what the others let through
-            self.geometry = digest(self.geometry, scene.geometry.opacity)
-        # visibility's bound maps: the triangles with their shading normals, which decide the
-        # texels the camera's samples read (cl/visibility.cl visibility_prepare).
-        self.surfaces = digest("surfaces", *geometry_parts(scene.geometry))
-        # raster.camera: the eye-space triangles (geometry and eye), the camera view, the sample offsets.
-        self.camera = digest("camera", self.geometry, inputs.eye_ws, inputs.views[:1], inputs.offsets)
-        # raster.shadow: the geometry, the light's views relative to its anchor and which of
-        # them the frame reads (cube faces outside the camera's view are left empty).
-        self.shadow = []
+            geometry = digest(geometry, scene.geometry.opacity)
+        return geometry
+
+    @cached_property
+    def surfaces(self) -> bytes:
+        """visibility's bound maps: the triangles with their shading normals, which decide the
+        texels the camera's samples read (cl/visibility.cl visibility_prepare)."""
+        return digest("surfaces", *geometry_parts(self.inputs.scene.geometry))
+
+    @cached_property
+    def camera(self) -> bytes:
+        """raster.camera: the eye-space triangles (geometry and eye), the camera view, the sample offsets."""
+        inputs = self.inputs
+        return digest("camera", self.geometry, inputs.eye_ws, inputs.views[:1], inputs.offsets)
+
+    @cached_property
+    def shadow(self) -> list[bytes]:
+        """raster.shadow, per light: the geometry, the light's views relative to its anchor and
+        which of them the frame reads (cube faces outside the camera's view are left empty)."""
+        inputs, shadow = self.inputs, []
         for index, (first, count) in enumerate(inputs.light_views):
             views = inputs.views[first:first + count].copy()
             views["origin"], views["depth_offset"] = 0.0, 0
-            self.shadow.append(digest("shadow", self.geometry, inputs.light_anchor_ws[index], views,
-                                      inputs.lights[index]["type"], inputs.view_needed[first:first + count]))
+            shadow.append(digest("shadow", self.geometry, inputs.light_anchor_ws[index], views,
+                                 inputs.lights[index]["type"], inputs.view_needed[first:first + count]))
+        return shadow
 
     def trees(self, index: int) -> bytes:
         """rectify + minmax of one light: the camera depth, the light's map, the epipolar

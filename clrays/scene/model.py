@@ -222,9 +222,27 @@ class Geometry:
         """(T, 3) per-channel opacity, ones for an opaque-only scene."""
         return np.ones((self.count, 3)) if self.opacity is None else self.opacity
 
+    def _memo(self) -> dict:
+        """Per-instance results of the passes over every vertex below: a frame asks for them
+        several times (frame inputs, scene size, far, the lamp), and a mesh's vertices cost
+        milliseconds a pass. The arrays are not changed after construction (`replace` makes
+        a new Geometry, with an empty memo)."""
+        memo = self.__dict__.get("_vertex_memo")
+        if memo is None:
+            memo = {}
+            object.__setattr__(self, "_vertex_memo", memo)
+        return memo
+
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Axis-aligned bounds (lo, hi); a unit box at the origin when there are no triangles.
         A relief's part comes from its texels (clrays.scene.relief_frame), not its triangles."""
+        memo = self._memo()
+        if "bounds" not in memo:
+            memo["bounds"] = self._bounds()
+        lo, hi = memo["bounds"]
+        return lo.copy(), hi.copy()
+
+    def _bounds(self) -> tuple[np.ndarray, np.ndarray]:
         if self.count == 0:
             return np.full(3, -1.0), np.full(3, 1.0)
         if not self.reliefs:
@@ -239,8 +257,15 @@ class Geometry:
 
     def farthest_from(self, point) -> float:
         """Distance from `point` to the farthest triangle vertex (0 without triangles); a
-        relief's part from its texels, as `bounds`."""
+        relief's part from its texels, as `bounds`. Kept for the last point asked (the eye)."""
         point = np.asarray(point, dtype=np.float64)
+        memo, key = self._memo(), point.tobytes()
+        if memo.get("farthest_from") != key:
+            memo["farthest"] = self._farthest_from(point)
+            memo["farthest_from"] = key
+        return memo["farthest"]
+
+    def _farthest_from(self, point: np.ndarray) -> float:
         if not self.reliefs:
             squared = ((self.triangles.reshape(-1, 3) - point) ** 2).sum(axis=1)
             return float(np.sqrt(squared.max())) if len(squared) else 0.0

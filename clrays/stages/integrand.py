@@ -70,6 +70,10 @@ SVD_RELATIVE_CUTOFF = 1e-13
 # scale (the one exception, the last cell of a point row, gets halving panels): 4 nodes
 # agree with 16 to 4e-10 of a row's total.
 QUAD_NODES = 4
+# Integrand values per chunk of rows: chunks that stay in the CPU's L2 cache build a 128 × 512
+# table in 0.6× the time of one 400 000-value chunk in a plain Python process (in the
+# renderer's, where PoCL is loaded, about the same time; bench/RESULTS.md, host stages).
+ROW_CHUNK_VALUES = 32768
 # Directional rows end at this optical depth (of the least attenuating channel) when
 # no s_max is given: the light beyond carries e^{-20} ≈ 2e-9 of the ray's radiance.
 DIRECTIONAL_OPTICAL_DEPTH = 20.0
@@ -201,10 +205,17 @@ def integrand_exact(light_kind, sigma_s, sigma_t, phase, power, d_el, beta, gamm
     return np.where(on_ray, value, 0.0)
 
 
-def _row_integrand(kind, consts, beta, x) -> np.ndarray:
+def _row_integrand(kind, consts, beta, x, cells=None) -> np.ndarray:
     """K(β, x) of the module docstring, shape (3, len(beta), x.shape[-1]) for 1-D beta and
-    x of shape (m,) or (len(beta), m). x must lie in [0, 1) (the nodes used are interior)."""
-    amplitude, sigma_t = consts[:, C_AMPLITUDE, None, None], consts[:, C_SIGMA_T, None, None]
+    x of shape (m,) or (len(beta), m). x must lie in [0, 1) (the nodes used are interior).
+
+    The point rows are the table build's whole cost: each step runs in place on one
+    (rows, m) buffer. `cells` = (centres, offsets), with x the flattened centres[:, None] +
+    offsets[None, :], takes the sines and cosines of x·δ and (1-x)·δ from those of centres·δ
+    and offsets·δ by the angle-sum formulas (`_point_angles`): an eighth of the trigonometry.
+    The prefix rows move by at most 2e-15 of their largest value, and no float32 entry of
+    the bench scenes' tables moves (bench/RESULTS.md, host stages)."""
+    amplitude, sigma_t = consts[:, C_AMPLITUDE], consts[:, C_SIGMA_T]
     g = float(consts[0, C_G])
     beta = np.asarray(beta, dtype=np.float64)[:, None]
     x = np.asarray(x, dtype=np.float64)
@@ -213,11 +224,69 @@ def _row_integrand(kind, consts, beta, x) -> np.ndarray:
         # Rows are written in δ = π-β (sinβ = sinδ, β+γ = π-(1-x)δ); the floor keeps the
         # β = π row finite, where K tends to ρ(-1)·exp(-σt·d_el·(1+x)/(1-x)).
         delta = np.maximum(math.pi - beta, 1e-150)
-        sin_bg = np.sin((1.0 - x) * delta)
-        ratio = (np.sin(delta) + np.sin(x * delta)) / sin_bg
-        return amplitude * hg_phase(-np.cos((1.0 - x) * delta), g) * np.exp(-sigma_t * d_el * ratio) / d_el
+        if cells is None:
+            angle = (1.0 - x) * delta  # (1-x)·δ = π - (β+γ)
+            ratio = np.sin(x * delta)
+            ratio += np.sin(delta)
+            ratio /= np.sin(angle)  # (sinβ + sinγ) / sin(β+γ)
+            cos_angle = np.cos(angle, out=angle)
+        else:
+            ratio, cos_angle = _point_angles(delta, *cells)
+        phase = _hg_phase_in_place(np.negative(cos_angle, out=cos_angle), g)  # ρ(cos(β+γ))
+        out = np.empty((len(consts),) + ratio.shape)
+        for c, row in enumerate(out):
+            np.multiply(ratio, -sigma_t[c] * d_el, out=row)
+            np.exp(row, out=row)
+            row *= amplitude[c] * phase
+            row /= d_el
+        return out
     s_end = consts[:, C_S_END, None, None]
-    return amplitude * hg_phase(np.cos(beta), g) * np.exp(-sigma_t * (x * s_end))
+    return amplitude[:, None, None] * hg_phase(np.cos(beta), g) * np.exp(-sigma_t[:, None, None] * (x * s_end))
+
+
+def _point_angles(delta, centres, offsets) -> tuple[np.ndarray, np.ndarray]:
+    """(sinβ + sinγ)/sin(β+γ) and cos((1-x)·δ) on x = centres[:, None] + offsets[None, :]
+    (flattened) for each row's δ = π-β, from sin and cos of centres·δ and offsets·δ:
+    sin(a+b) = sin a·cos b + cos a·sin b, and (1-x)·δ = δ - x·δ likewise."""
+    rows = len(delta)
+    sin_a, cos_a = _progression_sin_cos(delta, centres)
+    sin_a, cos_a = sin_a[:, :, None], cos_a[:, :, None]
+    b = offsets[None, :] * delta
+    sin_b, cos_b = np.sin(b)[:, None, :], np.cos(b)[:, None, :]
+    sin_x = (sin_a * cos_b + cos_a * sin_b).reshape(rows, -1)  # sin(x·δ) = sin γ
+    cos_x = (cos_a * cos_b - sin_a * sin_b).reshape(rows, -1)
+    sin_delta, cos_delta = np.sin(delta), np.cos(delta)
+    sin_angle = sin_delta * cos_x - cos_delta * sin_x  # sin((1-x)·δ) = sin(β+γ)
+    cos_x *= cos_delta
+    cos_x += sin_delta * sin_x  # cos((1-x)·δ)
+    sin_x += sin_delta
+    sin_x /= sin_angle
+    return sin_x, cos_x
+
+
+def _progression_sin_cos(delta, centres, block=32) -> tuple[np.ndarray, np.ndarray]:
+    """sin and cos of centres·δ, (rows, cells), for centres evenly spaced (the cells of a row):
+    by angle sums from the first centre of each block of `block` cells and the offsets within a
+    block, so that the sines and cosines are taken of 2·cells/block angles per row, not cells."""
+    block = min(block, len(centres))
+    a = centres[None, ::block] * delta  # each block's first centre
+    b = (centres[:block] - centres[0])[None, :] * delta  # the offsets within a block
+    sin_a, cos_a = np.sin(a)[:, :, None], np.cos(a)[:, :, None]
+    sin_b, cos_b = np.sin(b)[:, None, :], np.cos(b)[:, None, :]
+    sines = (sin_a * cos_b + cos_a * sin_b).reshape(len(delta), -1)[:, :len(centres)]
+    cosines = (cos_a * cos_b - sin_a * sin_b).reshape(len(delta), -1)[:, :len(centres)]
+    return sines, cosines
+
+
+def _hg_phase_in_place(cos_theta: np.ndarray, g: float) -> np.ndarray:
+    """hg_phase(cos_theta, g), overwriting cos_theta (float64, already in [-1, 1]): the
+    same operations in the same order, so the same bits."""
+    d = np.multiply(cos_theta, 2.0 * g, out=cos_theta)
+    d = np.subtract(1.0 + g * g, d, out=d)
+    value = np.sqrt(d)
+    value *= d
+    value *= 4.0 * math.pi
+    return np.divide(1.0 - g * g, value, out=value)
 
 
 def _prefix_rows(kind, consts, beta, n_gamma) -> np.ndarray:
@@ -226,15 +295,17 @@ def _prefix_rows(kind, consts, beta, n_gamma) -> np.ndarray:
     nodes, weights = np.polynomial.legendre.leggauss(QUAD_NODES)
     edges = np.linspace(0.0, 1.0, n_gamma)
     h = edges[1] - edges[0]
-    x = (0.5 * (edges[:-1] + edges[1:]))[:, None] + 0.5 * h * nodes[None, :]
+    centres = 0.5 * (edges[:-1] + edges[1:])
+    x = centres[:, None] + 0.5 * h * nodes[None, :]
     shared = _shared_channel(consts)
     if shared is not None:  # grey medium: one channel's table, scaled by each amplitude
         return consts[:, C_AMPLITUDE, None, None] * _prefix_rows(kind, shared, beta, n_gamma)
     out = np.zeros((len(consts), len(beta), n_gamma))
-    rows_per_chunk = max(1, 400_000 // x.size)
+    rows_per_chunk = max(1, ROW_CHUNK_VALUES // x.size)
     for j0 in range(0, len(beta), rows_per_chunk):
         rows = slice(j0, j0 + rows_per_chunk)
-        k = _row_integrand(kind, consts, beta[rows], x.ravel()).reshape(len(consts), -1, *x.shape)
+        k = _row_integrand(kind, consts, beta[rows], x.ravel(), (centres, 0.5 * h * nodes)).reshape(
+            len(consts), -1, *x.shape)
         cells = 0.5 * h * (k @ weights)
         if kind == "point":
             cells[..., -1] = _last_cell(kind, consts, beta[rows], h, nodes, weights)

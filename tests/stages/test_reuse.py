@@ -133,6 +133,39 @@ def test_identical_frame_is_kept_whole(renderer):
     assert renderer.render(scene, "raymarch").stage_status["raymarch"] == "computed"  # the method is an input
 
 
+def test_a_frame_that_keeps_nothing_digests_nothing(device, monkeypatch):
+    """Without reuse no key is made: digesting a mesh costs milliseconds a frame (bench/RESULTS.md,
+    host stages); the image is the one a keeping session renders."""
+    import clrays.reuse
+
+    scene = make_scene(_slats(), lights=[PointLight(v3(0.3, 5, -0.5), np.full(3, 60.0)),
+                                         DirectionalLight(v3(0.2, -1, 0.1) / np.linalg.norm([0.2, -1, 0.1]),
+                                                          np.full(3, 2.0))], **SMALL)
+    kept = Renderer(device).render(scene).image
+    fed = []
+    feed = clrays.reuse._feed
+    monkeypatch.setattr(clrays.reuse, "_feed", lambda h, value: fed.append(1) or feed(h, value))
+    image = Renderer(device, reuse=False).render(scene).image
+    assert not fed
+    np.testing.assert_array_equal(image, kept)
+
+
+def test_geometry_passes_are_kept_per_instance():
+    """Geometry.bounds and farthest_from pass over every vertex once per instance (the last point
+    for farthest_from), and hand out copies."""
+    geometry = make_scene(_slats()).geometry
+    points = geometry.triangles.reshape(-1, 3)
+    lo, hi = geometry.bounds()
+    np.testing.assert_array_equal(lo, points.min(axis=0))
+    np.testing.assert_array_equal(hi, points.max(axis=0))
+    lo[:] = 99.0  # a caller's change stays its own
+    np.testing.assert_array_equal(geometry.bounds()[0], points.min(axis=0))
+    for eye in ([0, 2, 8], [1, 1, 1], [0, 2, 8]):
+        assert geometry.farthest_from(eye) == float(np.sqrt(((points - eye) ** 2).sum(axis=1).max()))
+    moved = replace(geometry, triangles=geometry.triangles + 1.0)  # a new instance: its own passes
+    np.testing.assert_array_equal(moved.bounds()[1], points.max(axis=0) + 1.0)
+
+
 def test_exact_frames_are_kept_too(renderer):
     scene = make_scene(box_triangles(v3(-1, 2, -1), v3(1, 2.2, 1)), width=8, height=6)
     assert renderer.render(scene, "exact").stage_status == {"exact": "computed"}
