@@ -99,6 +99,101 @@ inline int row_span(const float2 corner[4], int count, int y, int width, int* x0
     return *x0 <= *x1;
 }
 
+/* The terms of a triangle's Möller–Trumbore test that are the same for every sample of a
+ * view, computed once per triangle with intersect_triangle's operations: for a perspective
+ * view the ray origin is fixed (tv, qv and the numerator of t), for an orthographic one the
+ * direction (pv, det and 1/det). */
+typedef struct {
+    float3 v0, e1, e2;
+    float3 tv, qv;  /* perspective: origin − v0, cross(tv, e1) */
+    float t_num;    /* perspective: dot(e2, qv) */
+    float3 pv;      /* orthographic: cross(forward, e2) */
+    float det, inv; /* orthographic: dot(e1, pv), 1 / det */
+} triangle_test_t;
+
+inline triangle_test_t triangle_test(global const view_t* view, float3 v0, float3 v1, float3 v2)
+{
+    triangle_test_t test;
+    test.v0 = v0;
+    test.e1 = v1 - v0;
+    test.e2 = v2 - v0;
+    if (view->projection == PROJECTION_PERSPECTIVE) {
+        test.tv = view->origin.xyz - v0;
+        test.qv = cross(test.tv, test.e1);
+        test.t_num = dot(test.e2, test.qv);
+    } else {
+        test.pv = cross(view->forward.xyz, test.e2);
+        test.det = dot(test.e1, test.pv);
+        test.inv = 1.0f / test.det;
+    }
+    return test;
+}
+
+/* Lanes of the column loop: one ray test covers this many neighbouring columns of a row
+ * (8 floats fill a 256-bit vector register; a compiler that does not vectorize the
+ * work-item loop, as PoCL does not for this one, still does each lane's arithmetic at once). */
+#define RASTER_LANES 8
+
+/* The triangle against the rays of columns [x, x + RASTER_LANES) of row y at one sample
+ * offset: t per lane, INFINITY where the ray misses (or lies past column `last`).
+ * Every lane does exactly the float operations of view_screen, view_ray (normalize: p times
+ * 1/sqrt(dot(p, p)) for dot(p, p) in [FLT_MIN, ∞)) and intersect_triangle, in the same
+ * order, unfused, so its t has the same bits as the one-sample path; a lane outside that
+ * range of dot(p, p) (none in a valid view) takes the one-sample path itself. */
+inline float8 intersect_columns(global const view_t* view, const triangle_test_t* test, int x, int last, int y,
+                                float2 offset)
+{
+#pragma OPENCL FP_CONTRACT OFF
+    const int8 lane = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
+    float8 sx = 2.0f * (convert_float8(x + lane) + offset.x) / (float)view->width - 1.0f;
+    float sy = 1.0f - 2.0f * ((float)y + offset.y) / (float)view->height;
+    float8 right_scale = sx * view->scale_x;
+    float3 up = view->up.xyz * (sy * view->scale_y);
+    float8 rx = view->right.x * right_scale, ry = view->right.y * right_scale, rz = view->right.z * right_scale;
+    float8 t;
+    int8 hit;
+    if (view->projection == PROJECTION_PERSPECTIVE) {
+        float8 px = (view->forward.x + rx) + up.x, py = (view->forward.y + ry) + up.y,
+               pz = (view->forward.z + rz) + up.z;
+        float8 length2 = (px * px + py * py) + pz * pz;
+        int8 plain = length2 >= FLT_MIN && length2 < INFINITY;
+        float8 inv_length = 1.0f / sqrt(length2);
+        float8 dx = px * inv_length, dy = py * inv_length, dz = pz * inv_length;
+        float3 e1 = test->e1, e2 = test->e2, tv = test->tv, qv = test->qv;
+        float8 pvx = dy * e2.z - dz * e2.y, pvy = dz * e2.x - dx * e2.z, pvz = dx * e2.y - dy * e2.x;
+        float8 det = (e1.x * pvx + e1.y * pvy) + e1.z * pvz;
+        float8 inv = 1.0f / det;
+        float8 u = ((tv.x * pvx + tv.y * pvy) + tv.z * pvz) * inv;
+        float8 v = ((dx * qv.x + dy * qv.y) + dz * qv.z) * inv;
+        t = test->t_num * inv;
+        hit = det != 0.0f && !(u < -EDGE_SLACK || u > 1.0f + EDGE_SLACK)
+              && !(v < -EDGE_SLACK || u + v > 1.0f + EDGE_SLACK) && t > 0.0f;
+        if (!all(plain)) { /* dot(p, p) outside normalize's plain range: the one-sample path */
+            float lane_t[RASTER_LANES];
+            vstore8(select(t, INFINITY, hit == 0), 0, lane_t);
+            for (int k = 0; k < RASTER_LANES; ++k) {
+                float3 origin, dir;
+                view_ray(view, view_screen(view, x + k, y, offset), &origin, &dir);
+                lane_t[k] = intersect_triangle(origin, dir, test->v0, test->v0 + e1, test->v0 + e2);
+            }
+            t = vload8(0, lane_t);
+            hit = t != INFINITY;
+        }
+    } else {
+        if (test->det == 0.0f) return (float8)(INFINITY);
+        float3 v0 = test->v0, e1 = test->e1, e2 = test->e2, pv = test->pv, forward = view->forward.xyz;
+        float8 tvx = ((view->origin.x + rx) + up.x) - v0.x, tvy = ((view->origin.y + ry) + up.y) - v0.y,
+               tvz = ((view->origin.z + rz) + up.z) - v0.z;
+        float8 u = ((tvx * pv.x + tvy * pv.y) + tvz * pv.z) * test->inv;
+        float8 qx = tvy * e1.z - tvz * e1.y, qy = tvz * e1.x - tvx * e1.z, qz = tvx * e1.y - tvy * e1.x;
+        float8 v = ((forward.x * qx + forward.y * qy) + forward.z * qz) * test->inv;
+        t = ((e2.x * qx + e2.y * qy) + e2.z * qz) * test->inv;
+        hit = !(u < -EDGE_SLACK || u > 1.0f + EDGE_SLACK) && !(v < -EDGE_SLACK || u + v > 1.0f + EDGE_SLACK)
+              && t > 0.0f;
+    }
+    return select((float8)(INFINITY), t, hit && x + lane <= last);
+}
+
 /* The triangle `tri` clipped and projected into the view; its rows are [y0, y1]. */
 #define PROJECT_TRIANGLE                                                                    \
     global const view_t* view = views + view_index;                                         \
@@ -110,22 +205,30 @@ inline int row_span(const float2 corner[4], int count, int y, int width, int* x0
     float top = INFINITY, bottom = -INFINITY;                                               \
     for (int k = 0; k < count; ++k) { top = fmin(top, corner[k].y); bottom = fmax(bottom, corner[k].y); } \
     int y0 = max((int)floor(fmax(top, -1.0f)) - 1, 0);                                      \
-    int y1 = min((int)ceil(fmin(bottom, (float)view->height)), view->height - 1);
+    int y1 = min((int)ceil(fmin(bottom, (float)view->height)), view->height - 1);           \
+    triangle_test_t test = triangle_test(view, v0, v1, v2);
 
-/* Every sample of row y that the triangle may cover; BODY sees idx, t and tri. */
+/* Every sample of row y that the triangle may cover, RASTER_LANES columns per ray test;
+ * BODY sees idx, t and tri for each sample the triangle covers. */
 #define COVERED_SAMPLES_OF_ROW(y, BODY)                                                     \
     {                                                                                       \
         int x0, x1;                                                                         \
         if (row_span(corner, count, y, view->width, &x0, &x1))                              \
-            for (int x = x0; x <= x1; ++x)                                                  \
-                for (int s = 0; s < sample_count; ++s) {                                    \
-                    float3 origin, dir;                                                     \
-                    view_ray(view, view_screen(view, x, y, offsets[s]), &origin, &dir);     \
-                    float t = intersect_triangle(origin, dir, v0, v1, v2);                  \
-                    if (t == INFINITY) continue;                                            \
-                    int idx = view->depth_offset + (y * view->width + x) * sample_count + s; \
-                    BODY                                                                    \
+            for (int s = 0; s < sample_count; ++s) {                                        \
+                float2 offset = offsets[s];                                                 \
+                for (int first = x0; first <= x1; first += RASTER_LANES) {                 \
+                    float8 lanes = intersect_columns(view, &test, first, x1, y, offset);    \
+                    if (!any(lanes != INFINITY)) continue;                                  \
+                    float lane_t[RASTER_LANES];                                             \
+                    vstore8(lanes, 0, lane_t);                                              \
+                    for (int k = 0; k < RASTER_LANES; ++k) {                                \
+                        float t = lane_t[k];                                                \
+                        if (t == INFINITY) continue;                                        \
+                        int idx = view->depth_offset + (y * view->width + first + k) * sample_count + s; \
+                        BODY                                                                \
+                    }                                                                       \
                 }                                                                           \
+            }                                                                               \
     }
 
 /* Pass 1, one work-item per triangle: it visits every covered sample of its rows, unless
