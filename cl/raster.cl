@@ -267,18 +267,29 @@ inline float8 intersect_columns(global const view_t* view, const triangle_test_t
     kernel void name(RASTER_ARGS, TARGET) { FOR_EACH_COVERED_SAMPLE(BODY) }                \
     kernel void name##_rows(RASTER_ROWS_ARGS, TARGET) { FOR_EACH_COVERED_SAMPLE_OF_BIG_ROW(BODY) }
 
-RASTER_KERNELS(raster_depth, global uint* depth, atomic_min(depth + idx, as_uint(t));)
+/* The stored depths only ever decrease, so a depth that does not beat the one read now
+ * cannot win the atomic later: the plain read skips most atomics where triangles overlap. */
+RASTER_KERNELS(raster_depth, global uint* depth,
+               if (as_uint(t) < depth[idx]) atomic_min(depth + idx, as_uint(t));)
 
 #define RESOLVE_TARGET global const uint* depth, global int* tri_id
 RASTER_KERNELS(raster_resolve, RESOLVE_TARGET,
-               if (as_uint(t) == depth[idx]) atomic_max(tri_id + idx, tri);)
+               if (as_uint(t) == depth[idx] && tri > tri_id[idx]) atomic_max(tri_id + idx, tri);)
 
 #ifdef RASTER_ATOMIC64
 #pragma OPENCL EXTENSION cl_khr_int64_extended_atomics : enable
 /* One pass for depth and triangle: the key (as_uint(t) << 32 | tri) orders by depth
  * first (positive floats order like their bits), ties to the lowest index. */
+/* The key's depth word (32 bits, read whole on any device, unlike a plain 64-bit read)
+ * only ever decreases: a sample whose depth is beyond it now cannot win the atomic later. */
+#ifdef __ENDIAN_LITTLE__
+#define KEY_DEPTH_WORD 1
+#else
+#define KEY_DEPTH_WORD 0
+#endif
 RASTER_KERNELS(raster_nearest, global ulong* nearest,
-               atom_min(nearest + idx, ((ulong)as_uint(t) << 32) | (ulong)tri);)
+               if (as_uint(t) <= ((global const uint*)(nearest + idx))[KEY_DEPTH_WORD])
+                   atom_min(nearest + idx, ((ulong)as_uint(t) << 32) | (ulong)tri);)
 
 kernel void raster_split(global const ulong* nearest, int samples, global uint* depth, global int* tri_id)
 {
