@@ -209,9 +209,13 @@ inline float8 intersect_columns(global const view_t* view, const triangle_test_t
     triangle_test_t test = triangle_test(view, v0, v1, v2);
 
 /* Every sample of row y that the triangle may cover, RASTER_LANES columns per ray test;
- * BODY sees idx, t and tri for each sample the triangle covers. */
+ * BODY sees idx, t and tri for each sample the triangle covers. A row whose strip
+ * [y, y + 1] lies wholly above or below the polygon is skipped before row_span, which
+ * would find it empty: no corner lies in the strip, and no edge reaches it (the products
+ * of its sign test are at least 2^-48, no underflow to 0, except for the strip [0, 1]
+ * below a polygon that ends a hair above y = 0, which row_span is left to decide). */
 #define COVERED_SAMPLES_OF_ROW(y, BODY)                                                     \
-    {                                                                                       \
+    if (!((float)(y + 1) < top || ((float)y > bottom && y > 0))) {                          \
         int x0, x1;                                                                         \
         if (row_span(corner, count, y, view->width, &x0, &x1))                              \
             for (int s = 0; s < sample_count; ++s) {                                        \
@@ -246,14 +250,16 @@ inline float8 intersect_columns(global const view_t* view, const triangle_test_t
     }                                                                                       \
     for (int y = y0; y <= y1; ++y) COVERED_SAMPLES_OF_ROW(y, BODY)
 
-/* Pass 2, one work-item per (listed triangle, row): the host expands pass 1's list into
- * `rows` (clrays/stages/raster.py), so no work-item waits on a row outside its triangle. */
+/* Pass 2, one work-item per (listed triangle, group of RASTER_ROWS_PER_ITEM rows): the host
+ * expands pass 1's list into `rows` (first row of each group; clrays/stages/raster.py), so
+ * no work-item waits on a row outside its triangle. */
 #define FOR_EACH_COVERED_SAMPLE_OF_BIG_ROW(BODY)                                            \
     int item = get_global_id(0);                                                            \
     if (item >= row_count) return;                                                          \
-    int tri = rows[item].x, y = rows[item].y;                                               \
+    int tri = rows[item].x, first_row = rows[item].y;                                       \
     PROJECT_TRIANGLE                                                                        \
-    COVERED_SAMPLES_OF_ROW(y, BODY)
+    int last_row = min(first_row + RASTER_ROWS_PER_ITEM - 1, y1);                           \
+    for (int y = first_row; y <= last_row; ++y) COVERED_SAMPLES_OF_ROW(y, BODY)
 
 #define RASTER_ARGS global const float4* tri_vertices, int tri_count, global const view_t* views, \
                     int view_index, global const float2* offsets, int sample_count,           \
