@@ -79,20 +79,23 @@ inline int row_span(const float2 corner[4], int count, int y, int width, int* x0
 {
     float top = (float)y, bottom = (float)(y + 1);
     float lo = INFINITY, hi = -INFINITY;
+    /* Comparisons, not fmin/fmax (library calls on PoCL, a tenth of a small triangle's cost):
+     * they differ only on a NaN, which both skip, and on ±0, which floor to the same column. */
+#define WIDEN_SPAN(x) { lo = (x) < lo ? (x) : lo; hi = (x) > hi ? (x) : hi; }
     for (int k = 0; k < count; ++k) {
-        float2 a = corner[k], b = corner[(k + 1) % count];
-        if (a.y >= top && a.y <= bottom) { lo = fmin(lo, a.x); hi = fmax(hi, a.x); }
+        float2 a = corner[k], b = corner[k + 1 < count ? k + 1 : 0];
+        if (a.y >= top && a.y <= bottom) WIDEN_SPAN(a.x)
         if (a.y != b.y) {
             for (int side = 0; side < 2; ++side) {
                 float edge_y = side ? bottom : top;
                 if ((a.y - edge_y) * (b.y - edge_y) <= 0.0f) {
                     float x = a.x + (edge_y - a.y) * (b.x - a.x) / (b.y - a.y);
-                    lo = fmin(lo, x);
-                    hi = fmax(hi, x);
+                    WIDEN_SPAN(x)
                 }
             }
         }
     }
+#undef WIDEN_SPAN
     if (!(lo <= hi)) return 0;
     *x0 = max((int)floor(fmax(lo, -1.0f)) - 1, 0);
     *x1 = min((int)ceil(fmin(hi, (float)width)) + 1, width - 1);
@@ -134,6 +137,14 @@ inline triangle_test_t triangle_test(global const view_t* view, float3 v0, float
  * work-item loop, as PoCL does not for this one, still does each lane's arithmetic at once). */
 #define RASTER_LANES 8
 
+/* Whether any lane of a comparison is true, without a library call (PoCL's any() is one). */
+inline int any_lane(int8 mask)
+{
+    int4 halves = mask.lo | mask.hi;
+    int2 quarters = halves.lo | halves.hi;
+    return (quarters.x | quarters.y) != 0;
+}
+
 /* The triangle against the rays of columns [x, x + RASTER_LANES) of row y at one sample
  * offset: t per lane, INFINITY where the ray misses (or lies past column `last`).
  * Every lane does exactly the float operations of view_screen, view_ray (normalize: p times
@@ -168,9 +179,8 @@ inline float8 intersect_columns(global const view_t* view, const triangle_test_t
         t = test->t_num * inv;
         hit = det != 0.0f && !(u < -EDGE_SLACK || u > 1.0f + EDGE_SLACK)
               && !(v < -EDGE_SLACK || u + v > 1.0f + EDGE_SLACK) && t > 0.0f;
-        if (!all(plain)) { /* dot(p, p) outside normalize's plain range: the one-sample path */
+        if (any_lane(~plain)) { /* dot(p, p) outside normalize's plain range: the one-sample path */
             float lane_t[RASTER_LANES];
-            vstore8(select(t, INFINITY, hit == 0), 0, lane_t);
             for (int k = 0; k < RASTER_LANES; ++k) {
                 float3 origin, dir;
                 view_ray(view, view_screen(view, x + k, y, offset), &origin, &dir);
@@ -191,7 +201,7 @@ inline float8 intersect_columns(global const view_t* view, const triangle_test_t
         hit = !(u < -EDGE_SLACK || u > 1.0f + EDGE_SLACK) && !(v < -EDGE_SLACK || u + v > 1.0f + EDGE_SLACK)
               && t > 0.0f;
     }
-    return select((float8)(INFINITY), t, hit && x + lane <= last);
+    return hit && x + lane <= last ? t : (float8)(INFINITY);
 }
 
 /* The triangle `tri` clipped and projected into the view; its rows are [y0, y1]. */
@@ -222,7 +232,7 @@ inline float8 intersect_columns(global const view_t* view, const triangle_test_t
                 float2 offset = offsets[s];                                                 \
                 for (int first = x0; first <= x1; first += RASTER_LANES) {                 \
                     float8 lanes = intersect_columns(view, &test, first, x1, y, offset);    \
-                    if (!any(lanes != INFINITY)) continue;                                  \
+                    if (!any_lane(lanes != INFINITY)) continue;                             \
                     float lane_t[RASTER_LANES];                                             \
                     vstore8(lanes, 0, lane_t);                                              \
                     for (int k = 0; k < RASTER_LANES; ++k) {                                \
