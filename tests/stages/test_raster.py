@@ -166,10 +166,16 @@ def test_lanes_give_the_bits_of_the_one_sample_ray_test(device):
     # operations, unfused: every depth must be the same bits (misses included), in the
     # camera's perspective view and a directional light's orthographic one, at several
     # sample offsets, for random triangles (small, large, around and through the eye).
+    import pytest
+
     from clrays.device import build_options
     from clrays.inputs import light_pass_inputs
     from conftest import DirectionalLight
 
+    if "Portable Computing Language" not in device.device.platform.name:
+        # The lanes write normalize out as PoCL's does in its plain range, p·(1/√(p·p));
+        # another device's normalize may round differently (docs/design.md §4.1).
+        pytest.skip(f"the lanes repeat PoCL's normalize; this session runs on {device.name}")
     rng = np.random.default_rng(7)
     small = rng.uniform(-4, 4, (280, 1, 3)) + [0, 1, 0] + rng.choice([0.2, 1.0, 4.0], (280, 1, 1)) * rng.normal(
         size=(280, 3, 3))
