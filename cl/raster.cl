@@ -35,15 +35,29 @@ inline float intersect_triangle(float3 origin, float3 dir, float3 v0, float3 v1,
 }
 
 /* PoCL calls its library for dot, fabs, fmax, floor and the like (no inlining): in the
- * per-triangle and per-row code, where they were a fifth of a small triangle's cost, these
- * do the same operations inline. dot as PoCL's: products, then (x + y) + z, unfused. */
+ * per-triangle and per-row code, where they were a fifth of a small triangle's cost, a clang
+ * build does the same operations inline (its builtins; dot as PoCL's: products, then
+ * (x + y) + z, unfused); another compiler keeps the OpenCL functions. */
+#ifdef __clang__
 inline float dot_inline(float3 a, float3 b)
 {
 #pragma OPENCL FP_CONTRACT OFF
     return (a.x * b.x + a.y * b.y) + a.z * b.z;
 }
+#define DOT_3(a, b) dot_inline(a, b)
+#define FABS(x) __builtin_fabsf(x)
+#define FMIN(a, b) __builtin_fminf(a, b)
+#define FMAX(a, b) __builtin_fmaxf(a, b)
 #define FLOOR_INT(x) ((int)__builtin_floorf(x))
 #define CEIL_INT(x) ((int)__builtin_ceilf(x))
+#else
+#define DOT_3(a, b) dot(a, b)
+#define FABS(x) fabs(x)
+#define FMIN(a, b) fmin(a, b)
+#define FMAX(a, b) fmax(a, b)
+#define FLOOR_INT(x) ((int)floor(x))
+#define CEIL_INT(x) ((int)ceil(x))
+#endif
 #define MAX_INT(a, b) ((a) > (b) ? (a) : (b))
 #define MIN_INT(a, b) ((a) < (b) ? (a) : (b))
 
@@ -56,10 +70,8 @@ inline int projected_polygon(global const view_t* view, float3 v0, float3 v1, fl
     float extent = 0.0f;
     for (int k = 0; k < 3; ++k) {
         float3 q = world[k] - view->origin.xyz;
-        in_view[k] = (float3)(dot_inline(q, view->right.xyz), dot_inline(q, view->up.xyz),
-                              dot_inline(q, view->forward.xyz));
-        extent = __builtin_fmaxf(extent, __builtin_fmaxf(__builtin_fabsf(in_view[k].x),
-                                 __builtin_fmaxf(__builtin_fabsf(in_view[k].y), __builtin_fabsf(in_view[k].z))));
+        in_view[k] = (float3)(DOT_3(q, view->right.xyz), DOT_3(q, view->up.xyz), DOT_3(q, view->forward.xyz));
+        extent = FMAX(extent, FMAX(FABS(in_view[k].x), FMAX(FABS(in_view[k].y), FABS(in_view[k].z))));
     }
     float2 to_pixels = (float2)(0.5f * (float)view->width, 0.5f * (float)view->height);
     int count = 0;
@@ -112,8 +124,8 @@ inline int row_span(const float2 corner[4], int count, int y, int width, int* x0
     }
 #undef WIDEN_SPAN
     if (!(lo <= hi)) return 0;
-    *x0 = MAX_INT(FLOOR_INT(__builtin_fmaxf(lo, -1.0f)) - 1, 0);
-    *x1 = MIN_INT(CEIL_INT(__builtin_fminf(hi, (float)width)) + 1, width - 1);
+    *x0 = MAX_INT(FLOOR_INT(FMAX(lo, -1.0f)) - 1, 0);
+    *x1 = MIN_INT(CEIL_INT(FMIN(hi, (float)width)) + 1, width - 1);
     return *x0 <= *x1;
 }
 
@@ -228,12 +240,9 @@ inline float8 intersect_columns(global const view_t* view, const triangle_test_t
     int count = projected_polygon(view, v0, v1, v2, corner);                                \
     if (count < 3) return;                                                                  \
     float top = INFINITY, bottom = -INFINITY;                                               \
-    for (int k = 0; k < count; ++k) {                                                       \
-        top = __builtin_fminf(top, corner[k].y);                                            \
-        bottom = __builtin_fmaxf(bottom, corner[k].y);                                      \
-    }                                                                                       \
-    int y0 = MAX_INT(FLOOR_INT(__builtin_fmaxf(top, -1.0f)) - 1, 0);                        \
-    int y1 = MIN_INT(CEIL_INT(__builtin_fminf(bottom, (float)view->height)), view->height - 1); \
+    for (int k = 0; k < count; ++k) { top = FMIN(top, corner[k].y); bottom = FMAX(bottom, corner[k].y); } \
+    int y0 = MAX_INT(FLOOR_INT(FMAX(top, -1.0f)) - 1, 0);                                   \
+    int y1 = MIN_INT(CEIL_INT(FMIN(bottom, (float)view->height)), view->height - 1);        \
     triangle_test_t test = triangle_test(view, v0, v1, v2);
 
 /* Every sample of row y that the triangle may cover, RASTER_LANES columns per ray test;
