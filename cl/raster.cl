@@ -6,8 +6,9 @@
  *
  * One work-item per triangle: it clips the triangle to the view's near side,
  * projects the polygon, and per pixel row ray-tests the samples in the row's span of
- * the polygon; triangles taller than RASTER_BIG_ROWS go to a second pass with one
- * work-item per (triangle, row it spans) (`*_rows`). The ray test (not interpolation)
+ * the polygon, 8 columns per test (intersect_columns); triangles taller than
+ * RASTER_BIG_ROWS go to a second pass with one work-item per (triangle, group of
+ * RASTER_ROWS_PER_ITEM rows it spans) (`*_rows`). The ray test (not interpolation)
  * makes depth exact along the sample ray, and two-sided. Depth buffer layout per view:
  * [height][width][samples]. */
 #include "lighting.h"
@@ -322,9 +323,9 @@ RASTER_KERNELS(raster_resolve, RESOLVE_TARGET,
 #ifdef RASTER_ATOMIC64
 #pragma OPENCL EXTENSION cl_khr_int64_extended_atomics : enable
 /* One pass for depth and triangle: the key (as_uint(t) << 32 | tri) orders by depth
- * first (positive floats order like their bits), ties to the lowest index. */
-/* The key's depth word (32 bits, read whole on any device, unlike a plain 64-bit read)
- * only ever decreases: a sample whose depth is beyond it now cannot win the atomic later. */
+ * first (positive floats order like their bits), ties to the lowest index. The key's depth
+ * word (32 bits, read whole on any device, unlike a plain 64-bit read) only ever decreases:
+ * a sample whose depth is beyond it now cannot win the atomic later. */
 #ifdef __ENDIAN_LITTLE__
 #define KEY_DEPTH_WORD 1
 #else
