@@ -6,8 +6,9 @@
  *
  * One work-item per triangle: it clips the triangle to the view's near side,
  * projects the polygon, and per pixel row ray-tests the samples in the row's span of
- * the polygon; triangles taller than RASTER_BIG_ROWS go to a second pass with one
- * work-item per (triangle, row it spans) (`*_rows`). The ray test (not interpolation)
+ * the polygon, 8 columns per test (intersect_columns); triangles taller than
+ * RASTER_BIG_ROWS go to a second pass with one work-item per (triangle, group of
+ * RASTER_ROWS_PER_ITEM rows it spans) (`*_rows`). The ray test (not interpolation)
  * makes depth exact along the sample ray, and two-sided. Depth buffer layout per view:
  * [height][width][samples]. */
 #include "lighting.h"
@@ -34,6 +35,33 @@ inline float intersect_triangle(float3 origin, float3 dir, float3 v0, float3 v1,
     return t > 0.0f ? t : INFINITY;
 }
 
+/* PoCL calls its library for dot, fabs, fmax, floor and the like (no inlining): in the
+ * per-triangle and per-row code, where they were a fifth of a small triangle's cost, a clang
+ * build does the same operations inline (its builtins; dot as PoCL's: products, then
+ * (x + y) + z, unfused); another compiler keeps the OpenCL functions. */
+#ifdef __clang__
+inline float dot_inline(float3 a, float3 b)
+{
+#pragma OPENCL FP_CONTRACT OFF
+    return (a.x * b.x + a.y * b.y) + a.z * b.z;
+}
+#define DOT_3(a, b) dot_inline(a, b)
+#define FABS(x) __builtin_fabsf(x)
+#define FMIN(a, b) __builtin_fminf(a, b)
+#define FMAX(a, b) __builtin_fmaxf(a, b)
+#define FLOOR_INT(x) ((int)__builtin_floorf(x))
+#define CEIL_INT(x) ((int)__builtin_ceilf(x))
+#else
+#define DOT_3(a, b) dot(a, b)
+#define FABS(x) fabs(x)
+#define FMIN(a, b) fmin(a, b)
+#define FMAX(a, b) fmax(a, b)
+#define FLOOR_INT(x) ((int)floor(x))
+#define CEIL_INT(x) ((int)ceil(x))
+#endif
+#define MAX_INT(a, b) ((a) > (b) ? (a) : (b))
+#define MIN_INT(a, b) ((a) < (b) ? (a) : (b))
+
 /* The triangle clipped to the view's near side and projected to pixel coordinates
  * (x right, y down): a convex polygon of up to 4 corners. Returns the corner count. */
 inline int projected_polygon(global const view_t* view, float3 v0, float3 v1, float3 v2, float2 corner[4])
@@ -43,8 +71,8 @@ inline int projected_polygon(global const view_t* view, float3 v0, float3 v1, fl
     float extent = 0.0f;
     for (int k = 0; k < 3; ++k) {
         float3 q = world[k] - view->origin.xyz;
-        in_view[k] = (float3)(dot(q, view->right.xyz), dot(q, view->up.xyz), dot(q, view->forward.xyz));
-        extent = fmax(extent, fmax(fabs(in_view[k].x), fmax(fabs(in_view[k].y), fabs(in_view[k].z))));
+        in_view[k] = (float3)(DOT_3(q, view->right.xyz), DOT_3(q, view->up.xyz), DOT_3(q, view->forward.xyz));
+        extent = FMAX(extent, FMAX(FABS(in_view[k].x), FMAX(FABS(in_view[k].y), FABS(in_view[k].z))));
     }
     float2 to_pixels = (float2)(0.5f * (float)view->width, 0.5f * (float)view->height);
     int count = 0;
@@ -79,24 +107,129 @@ inline int row_span(const float2 corner[4], int count, int y, int width, int* x0
 {
     float top = (float)y, bottom = (float)(y + 1);
     float lo = INFINITY, hi = -INFINITY;
+    /* Comparisons, not fmin/fmax (library calls on PoCL, a tenth of a small triangle's cost):
+     * they differ only on a NaN, which both skip, and on ±0, which floor to the same column. */
+#define WIDEN_SPAN(x) { lo = (x) < lo ? (x) : lo; hi = (x) > hi ? (x) : hi; }
     for (int k = 0; k < count; ++k) {
-        float2 a = corner[k], b = corner[(k + 1) % count];
-        if (a.y >= top && a.y <= bottom) { lo = fmin(lo, a.x); hi = fmax(hi, a.x); }
+        float2 a = corner[k], b = corner[k + 1 < count ? k + 1 : 0];
+        if (a.y >= top && a.y <= bottom) WIDEN_SPAN(a.x)
         if (a.y != b.y) {
             for (int side = 0; side < 2; ++side) {
                 float edge_y = side ? bottom : top;
                 if ((a.y - edge_y) * (b.y - edge_y) <= 0.0f) {
                     float x = a.x + (edge_y - a.y) * (b.x - a.x) / (b.y - a.y);
-                    lo = fmin(lo, x);
-                    hi = fmax(hi, x);
+                    WIDEN_SPAN(x)
                 }
             }
         }
     }
+#undef WIDEN_SPAN
     if (!(lo <= hi)) return 0;
-    *x0 = max((int)floor(fmax(lo, -1.0f)) - 1, 0);
-    *x1 = min((int)ceil(fmin(hi, (float)width)) + 1, width - 1);
+    *x0 = MAX_INT(FLOOR_INT(FMAX(lo, -1.0f)) - 1, 0);
+    *x1 = MIN_INT(CEIL_INT(FMIN(hi, (float)width)) + 1, width - 1);
     return *x0 <= *x1;
+}
+
+/* The terms of a triangle's Möller–Trumbore test that are the same for every sample of a
+ * view, computed once per triangle with intersect_triangle's operations: for a perspective
+ * view the ray origin is fixed (tv, qv and the numerator of t), for an orthographic one the
+ * direction (pv, det and 1/det). */
+typedef struct {
+    float3 v0, e1, e2;
+    float3 tv, qv;  /* perspective: origin − v0, cross(tv, e1) */
+    float t_num;    /* perspective: dot(e2, qv) */
+    float3 pv;      /* orthographic: cross(forward, e2) */
+    float det, inv; /* orthographic: dot(e1, pv), 1 / det */
+} triangle_test_t;
+
+inline triangle_test_t triangle_test(global const view_t* view, float3 v0, float3 v1, float3 v2)
+{
+    triangle_test_t test;
+    test.v0 = v0;
+    test.e1 = v1 - v0;
+    test.e2 = v2 - v0;
+    if (view->projection == PROJECTION_PERSPECTIVE) {
+        test.tv = view->origin.xyz - v0;
+        test.qv = cross(test.tv, test.e1);
+        test.t_num = dot(test.e2, test.qv);
+    } else {
+        test.pv = cross(view->forward.xyz, test.e2);
+        test.det = dot(test.e1, test.pv);
+        test.inv = 1.0f / test.det;
+    }
+    return test;
+}
+
+/* Lanes of the column loop: one ray test covers this many neighbouring columns of a row
+ * (8 floats fill a 256-bit vector register; a compiler that does not vectorize the
+ * work-item loop, as PoCL does not for this one, still does each lane's arithmetic at once). */
+#define RASTER_LANES 8
+
+/* Whether any lane of a comparison is true, without a library call (PoCL's any() is one). */
+inline int any_lane(int8 mask)
+{
+    int4 halves = mask.lo | mask.hi;
+    int2 quarters = halves.lo | halves.hi;
+    return (quarters.x | quarters.y) != 0;
+}
+
+/* The triangle against the rays of columns [x, x + RASTER_LANES) of row y at one sample
+ * offset: t per lane, INFINITY where the ray misses (or lies past column `last`).
+ * Every lane does exactly the float operations of view_screen, view_ray (normalize: p times
+ * 1/sqrt(dot(p, p)) for dot(p, p) in [FLT_MIN, ∞)) and intersect_triangle, in the same
+ * order, unfused, so its t has the same bits as the one-sample path; a lane outside that
+ * range of dot(p, p) (none in a valid view) takes the one-sample path itself. */
+inline float8 intersect_columns(global const view_t* view, const triangle_test_t* test, int x, int last, int y,
+                                float2 offset)
+{
+#pragma OPENCL FP_CONTRACT OFF
+    const int8 lane = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
+    float8 sx = 2.0f * (convert_float8(x + lane) + offset.x) / (float)view->width - 1.0f;
+    float sy = 1.0f - 2.0f * ((float)y + offset.y) / (float)view->height;
+    float8 right_scale = sx * view->scale_x;
+    float3 up = view->up.xyz * (sy * view->scale_y);
+    float8 rx = view->right.x * right_scale, ry = view->right.y * right_scale, rz = view->right.z * right_scale;
+    float8 t;
+    int8 hit;
+    if (view->projection == PROJECTION_PERSPECTIVE) {
+        float8 px = (view->forward.x + rx) + up.x, py = (view->forward.y + ry) + up.y,
+               pz = (view->forward.z + rz) + up.z;
+        float8 length2 = (px * px + py * py) + pz * pz;
+        int8 plain = length2 >= FLT_MIN && length2 < INFINITY;
+        float8 inv_length = 1.0f / sqrt(length2);
+        float8 dx = px * inv_length, dy = py * inv_length, dz = pz * inv_length;
+        float3 e1 = test->e1, e2 = test->e2, tv = test->tv, qv = test->qv;
+        float8 pvx = dy * e2.z - dz * e2.y, pvy = dz * e2.x - dx * e2.z, pvz = dx * e2.y - dy * e2.x;
+        float8 det = (e1.x * pvx + e1.y * pvy) + e1.z * pvz;
+        float8 inv = 1.0f / det;
+        float8 u = ((tv.x * pvx + tv.y * pvy) + tv.z * pvz) * inv;
+        float8 v = ((dx * qv.x + dy * qv.y) + dz * qv.z) * inv;
+        t = test->t_num * inv;
+        hit = det != 0.0f && !(u < -EDGE_SLACK || u > 1.0f + EDGE_SLACK)
+              && !(v < -EDGE_SLACK || u + v > 1.0f + EDGE_SLACK) && t > 0.0f;
+        if (any_lane(~plain)) { /* dot(p, p) outside normalize's plain range: the one-sample path */
+            float lane_t[RASTER_LANES];
+            for (int k = 0; k < RASTER_LANES; ++k) {
+                float3 origin, dir;
+                view_ray(view, view_screen(view, x + k, y, offset), &origin, &dir);
+                lane_t[k] = intersect_triangle(origin, dir, test->v0, test->v0 + e1, test->v0 + e2);
+            }
+            t = vload8(0, lane_t);
+            hit = t != INFINITY;
+        }
+    } else {
+        if (test->det == 0.0f) return (float8)(INFINITY);
+        float3 v0 = test->v0, e1 = test->e1, e2 = test->e2, pv = test->pv, forward = view->forward.xyz;
+        float8 tvx = ((view->origin.x + rx) + up.x) - v0.x, tvy = ((view->origin.y + ry) + up.y) - v0.y,
+               tvz = ((view->origin.z + rz) + up.z) - v0.z;
+        float8 u = ((tvx * pv.x + tvy * pv.y) + tvz * pv.z) * test->inv;
+        float8 qx = tvy * e1.z - tvz * e1.y, qy = tvz * e1.x - tvx * e1.z, qz = tvx * e1.y - tvy * e1.x;
+        float8 v = ((forward.x * qx + forward.y * qy) + forward.z * qz) * test->inv;
+        t = ((e2.x * qx + e2.y * qy) + e2.z * qz) * test->inv;
+        hit = !(u < -EDGE_SLACK || u > 1.0f + EDGE_SLACK) && !(v < -EDGE_SLACK || u + v > 1.0f + EDGE_SLACK)
+              && t > 0.0f;
+    }
+    return hit && x + lane <= last ? t : (float8)(INFINITY);
 }
 
 /* The triangle `tri` clipped and projected into the view; its rows are [y0, y1]. */
@@ -108,24 +241,36 @@ inline int row_span(const float2 corner[4], int count, int y, int width, int* x0
     int count = projected_polygon(view, v0, v1, v2, corner);                                \
     if (count < 3) return;                                                                  \
     float top = INFINITY, bottom = -INFINITY;                                               \
-    for (int k = 0; k < count; ++k) { top = fmin(top, corner[k].y); bottom = fmax(bottom, corner[k].y); } \
-    int y0 = max((int)floor(fmax(top, -1.0f)) - 1, 0);                                      \
-    int y1 = min((int)ceil(fmin(bottom, (float)view->height)), view->height - 1);
+    for (int k = 0; k < count; ++k) { top = FMIN(top, corner[k].y); bottom = FMAX(bottom, corner[k].y); } \
+    int y0 = MAX_INT(FLOOR_INT(FMAX(top, -1.0f)) - 1, 0);                                   \
+    int y1 = MIN_INT(CEIL_INT(FMIN(bottom, (float)view->height)), view->height - 1);        \
+    triangle_test_t test = triangle_test(view, v0, v1, v2);
 
-/* Every sample of row y that the triangle may cover; BODY sees idx, t and tri. */
+/* Every sample of row y that the triangle may cover, RASTER_LANES columns per ray test;
+ * BODY sees idx, t and tri for each sample the triangle covers. A row whose strip
+ * [y, y + 1] lies wholly above or below the polygon is skipped before row_span, which
+ * would find it empty: no corner lies in the strip, and no edge reaches it (the products
+ * of its sign test are at least 2^-48, no underflow to 0, except for the strip [0, 1]
+ * below a polygon that ends a hair above y = 0, which row_span is left to decide). */
 #define COVERED_SAMPLES_OF_ROW(y, BODY)                                                     \
-    {                                                                                       \
+    if (!((float)(y + 1) < top || ((float)y > bottom && y > 0))) {                          \
         int x0, x1;                                                                         \
         if (row_span(corner, count, y, view->width, &x0, &x1))                              \
-            for (int x = x0; x <= x1; ++x)                                                  \
-                for (int s = 0; s < sample_count; ++s) {                                    \
-                    float3 origin, dir;                                                     \
-                    view_ray(view, view_screen(view, x, y, offsets[s]), &origin, &dir);     \
-                    float t = intersect_triangle(origin, dir, v0, v1, v2);                  \
-                    if (t == INFINITY) continue;                                            \
-                    int idx = view->depth_offset + (y * view->width + x) * sample_count + s; \
-                    BODY                                                                    \
+            for (int s = 0; s < sample_count; ++s) {                                        \
+                float2 offset = offsets[s];                                                 \
+                for (int first = x0; first <= x1; first += RASTER_LANES) {                 \
+                    float8 lanes = intersect_columns(view, &test, first, x1, y, offset);    \
+                    if (!any_lane(lanes != INFINITY)) continue;                             \
+                    float lane_t[RASTER_LANES];                                             \
+                    vstore8(lanes, 0, lane_t);                                              \
+                    for (int k = 0; k < RASTER_LANES; ++k) {                                \
+                        float t = lane_t[k];                                                \
+                        if (t == INFINITY) continue;                                        \
+                        int idx = view->depth_offset + (y * view->width + first + k) * sample_count + s; \
+                        BODY                                                                \
+                    }                                                                       \
                 }                                                                           \
+            }                                                                               \
     }
 
 /* Pass 1, one work-item per triangle: it visits every covered sample of its rows, unless
@@ -143,14 +288,16 @@ inline int row_span(const float2 corner[4], int count, int y, int width, int* x0
     }                                                                                       \
     for (int y = y0; y <= y1; ++y) COVERED_SAMPLES_OF_ROW(y, BODY)
 
-/* Pass 2, one work-item per (listed triangle, row): the host expands pass 1's list into
- * `rows` (clrays/stages/raster.py), so no work-item waits on a row outside its triangle. */
+/* Pass 2, one work-item per (listed triangle, group of RASTER_ROWS_PER_ITEM rows): the host
+ * expands pass 1's list into `rows` (first row of each group; clrays/stages/raster.py), so
+ * no work-item waits on a row outside its triangle. */
 #define FOR_EACH_COVERED_SAMPLE_OF_BIG_ROW(BODY)                                            \
     int item = get_global_id(0);                                                            \
     if (item >= row_count) return;                                                          \
-    int tri = rows[item].x, y = rows[item].y;                                               \
+    int tri = rows[item].x, first_row = rows[item].y;                                       \
     PROJECT_TRIANGLE                                                                        \
-    COVERED_SAMPLES_OF_ROW(y, BODY)
+    int last_row = min(first_row + RASTER_ROWS_PER_ITEM - 1, y1);                           \
+    for (int y = first_row; y <= last_row; ++y) COVERED_SAMPLES_OF_ROW(y, BODY)
 
 #define RASTER_ARGS global const float4* tri_vertices, int tri_count, global const view_t* views, \
                     int view_index, global const float2* offsets, int sample_count,           \
@@ -164,18 +311,29 @@ inline int row_span(const float2 corner[4], int count, int y, int width, int* x0
     kernel void name(RASTER_ARGS, TARGET) { FOR_EACH_COVERED_SAMPLE(BODY) }                \
     kernel void name##_rows(RASTER_ROWS_ARGS, TARGET) { FOR_EACH_COVERED_SAMPLE_OF_BIG_ROW(BODY) }
 
-RASTER_KERNELS(raster_depth, global uint* depth, atomic_min(depth + idx, as_uint(t));)
+/* The stored depths only ever decrease, so a depth that does not beat the one read now
+ * cannot win the atomic later: the plain read skips most atomics where triangles overlap. */
+RASTER_KERNELS(raster_depth, global uint* depth,
+               if (as_uint(t) < depth[idx]) atomic_min(depth + idx, as_uint(t));)
 
 #define RESOLVE_TARGET global const uint* depth, global int* tri_id
 RASTER_KERNELS(raster_resolve, RESOLVE_TARGET,
-               if (as_uint(t) == depth[idx]) atomic_max(tri_id + idx, tri);)
+               if (as_uint(t) == depth[idx] && tri > tri_id[idx]) atomic_max(tri_id + idx, tri);)
 
 #ifdef RASTER_ATOMIC64
 #pragma OPENCL EXTENSION cl_khr_int64_extended_atomics : enable
 /* One pass for depth and triangle: the key (as_uint(t) << 32 | tri) orders by depth
- * first (positive floats order like their bits), ties to the lowest index. */
+ * first (positive floats order like their bits), ties to the lowest index. The key's depth
+ * word (32 bits, read whole on any device, unlike a plain 64-bit read) only ever decreases:
+ * a sample whose depth is beyond it now cannot win the atomic later. */
+#ifdef __ENDIAN_LITTLE__
+#define KEY_DEPTH_WORD 1
+#else
+#define KEY_DEPTH_WORD 0
+#endif
 RASTER_KERNELS(raster_nearest, global ulong* nearest,
-               atom_min(nearest + idx, ((ulong)as_uint(t) << 32) | (ulong)tri);)
+               if (as_uint(t) <= ((global const uint*)(nearest + idx))[KEY_DEPTH_WORD])
+                   atom_min(nearest + idx, ((ulong)as_uint(t) << 32) | (ulong)tri);)
 
 kernel void raster_split(global const ulong* nearest, int samples, global uint* depth, global int* tri_id)
 {

@@ -70,6 +70,9 @@ SIN_BETA_MIN = 1e-9
 # launches just their rows), the rest draw their own rows.
 RASTER_BIG_ROWS = 32
 RASTER_BIG_TRIANGLES = 1 << 16
+# The second pass gives each work-item this many consecutive rows of a listed triangle:
+# the clipping and projection it repeats per work-item are paid once per group of rows.
+RASTER_ROWS_PER_ITEM = 4
 
 #: Every constant above by its C name: the `-D` options of every kernel build.
 KERNEL_CONSTANTS = {

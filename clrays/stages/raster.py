@@ -51,13 +51,15 @@ def raster_passes(device: Device, program: str, name: str, defines: dict | None,
     listed = min(int(device.read(big_count, 1, np.uint32)[0]), capacity)
     if not listed:
         return
-    # Pass 1's list expanded to its rows on the host (a few thousand entries): a grid of
-    # (listed, view height) work-items cost more in empty ones than the rows themselves.
+    # Pass 1's list expanded on the host to groups of RASTER_ROWS_PER_ITEM rows (the first
+    # row of each; a few thousand entries): a grid of (listed, view height) work-items cost
+    # more in empty ones than the rows themselves.
     tri, first, last = device.read(big, (listed, 3), np.int32).T
-    spans = last - first + 1
-    rows = np.empty((int(spans.sum()), 2), np.int32)
-    rows[:, 0] = np.repeat(tri, spans)
-    rows[:, 1] = np.arange(len(rows)) - np.repeat(np.cumsum(spans) - spans, spans) + np.repeat(first, spans)
+    groups = (last - first) // structs.RASTER_ROWS_PER_ITEM + 1
+    rows = np.empty((int(groups.sum()), 2), np.int32)
+    rows[:, 0] = np.repeat(tri, groups)
+    rank = np.arange(len(rows)) - np.repeat(np.cumsum(groups) - groups, groups)  # group index within its triangle
+    rows[:, 1] = np.repeat(first, groups) + structs.RASTER_ROWS_PER_ITEM * rank
     timer.add(stage, device.kernel(program, f"{name}_rows", defines)(
         device.queue, (len(rows),), None, vertices, views, np.int32(view_index), offsets,
         np.int32(sample_count), device.buffer(rows, writable=False), np.int32(len(rows)), *target))

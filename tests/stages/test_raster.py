@@ -115,3 +115,84 @@ def test_more_tall_triangles_than_pass_2_lists_give_the_same_maps(device, monkey
     _, depth_one, tri_one, shadow_one = _rasterized(Device(TEST_DEVICE), scene)
     assert np.array_equal(depth, depth_one) and np.array_equal(tri, tri_one)
     assert np.array_equal(shadow, shadow_one)
+
+
+
+def test_rows_per_work_item_give_the_same_maps(device, monkeypatch):
+    # Pass 2 gives a work-item RASTER_ROWS_PER_ITEM rows of a listed triangle; one row per
+    # work-item, or 5 (not dividing any triangle's rows), must draw the same bits.
+    from clrays import structs
+    from clrays.device import Device
+    from conftest import TEST_DEVICE
+
+    scene = _scene(spp=2, shadow_map=256)
+    _, depth, tri, shadow = _rasterized(device, scene)
+    for rows in (1, 5):
+        monkeypatch.setitem(structs.KERNEL_CONSTANTS, "RASTER_ROWS_PER_ITEM", rows)
+        monkeypatch.setattr(structs, "RASTER_ROWS_PER_ITEM", rows)
+        _, depth_rows, tri_rows, shadow_rows = _rasterized(Device(TEST_DEVICE), scene)
+        assert np.array_equal(depth, depth_rows) and np.array_equal(tri, tri_rows), f"{rows} rows per item"
+        assert np.array_equal(shadow, shadow_rows), f"{rows} rows per item"
+
+# Every view sample ray-tested twice: by intersect_columns (RASTER_LANES columns at once, the
+# path the raster kernels take) and by the one-sample view_ray + intersect_triangle.
+_LANES_AGAINST_ONE_SAMPLE = """
+#include "raster.cl"
+kernel void lanes_against_one_sample(global const view_t* views, int view_index, global const float4* tri_vertices,
+                                     float2 offset, global float* lane_t, global float* one_t)
+{
+    int y = get_global_id(0), tri = get_global_id(1);
+    global const view_t* view = views + view_index;
+    int width = view->width;
+    float3 v0 = tri_vertices[3 * tri].xyz, v1 = tri_vertices[3 * tri + 1].xyz, v2 = tri_vertices[3 * tri + 2].xyz;
+    triangle_test_t test = triangle_test(view, v0, v1, v2);
+    int row = (tri * view->height + y) * width;
+    for (int first = 0; first < width; first += RASTER_LANES) {
+        float lanes[RASTER_LANES];
+        vstore8(intersect_columns(view, &test, first, width - 1, y, offset), 0, lanes);
+        for (int k = 0; k < RASTER_LANES && first + k < width; ++k) lane_t[row + first + k] = lanes[k];
+    }
+    for (int x = 0; x < width; ++x) {
+        float3 origin, dir;
+        view_ray(view, view_screen(view, x, y, offset), &origin, &dir);
+        one_t[row + x] = intersect_triangle(origin, dir, v0, v1, v2);
+    }
+}
+"""
+
+
+def test_lanes_give_the_bits_of_the_one_sample_ray_test(device):
+    # The raster kernels test RASTER_LANES columns at once with the one-sample test's float
+    # operations, unfused: every depth must be the same bits (misses included), in the
+    # camera's perspective view and a directional light's orthographic one, at several
+    # sample offsets, for random triangles (small, large, around and through the eye).
+    import pytest
+
+    from clrays.device import build_options
+    from clrays.inputs import light_pass_inputs
+    from conftest import DirectionalLight
+
+    if "Portable Computing Language" not in device.device.platform.name:
+        # The lanes write normalize out as PoCL's does in its plain range, p·(1/√(p·p));
+        # another device's normalize may round differently (docs/design.md §4.1).
+        pytest.skip(f"the lanes repeat PoCL's normalize; this session runs on {device.name}")
+    rng = np.random.default_rng(7)
+    small = rng.uniform(-4, 4, (280, 1, 3)) + [0, 1, 0] + rng.choice([0.2, 1.0, 4.0], (280, 1, 1)) * rng.normal(
+        size=(280, 3, 3))
+    around_eye = np.array([0.0, 2.0, 8.0]) + 40.0 * rng.normal(size=(20, 3, 3))
+    sun = [DirectionalLight(v3(0.3, -1.0, -0.2) / np.linalg.norm([0.3, -1.0, -0.2]), np.ones(3))]
+    camera_inputs = frame_inputs(make_scene(np.concatenate([small, around_eye]), sun, width=37, height=21))
+    sun_inputs = light_pass_inputs(frame_inputs(make_scene(small, sun, width=37, height=21, shadow_map=61)), 0)
+    kernel = device.cl.Kernel(device.cl.Program(device.context, _LANES_AGAINST_ONE_SAMPLE).build(
+        options=build_options()), "lanes_against_one_sample")
+    for inputs, view_index in ((camera_inputs, 0), (sun_inputs, 1)):
+        view, triangles = inputs.views[view_index], len(inputs.tri_vertices) // 3
+        samples = triangles * int(view["width"]) * int(view["height"])
+        for offset in ((0.5, 0.5), (0.0, 0.0), (0.875, 0.125)):
+            lane_t, one_t = device.buffer(nbytes=4 * samples), device.buffer(nbytes=4 * samples)
+            kernel(device.queue, (int(view["height"]), triangles), None, device.buffer(inputs.views, writable=False),
+                   np.int32(view_index), device.buffer(inputs.tri_vertices, writable=False),
+                   np.array(offset, np.float32), lane_t, one_t)
+            lanes, one = device.read(lane_t, samples, np.uint32), device.read(one_t, samples, np.uint32)
+            assert (one != np.float32(np.inf).view(np.uint32)).sum() > 1000, "too few hits to compare"
+            assert np.array_equal(lanes, one), f"view {view_index} offset {offset}: {(lanes != one).sum()} differ"
