@@ -12,9 +12,11 @@
  * there); visibility_mark reads map_read, writes read_mask (a bit per texel read): the
  * bound passes draw only those.
  * visibility reads frame, views, lights, shadow_depth, bound, writer, map_read, camera_depth, tri_id,
- * tri_vertices, tri_normal, offsets, node_bounds, node_children; writes visible where it
- * is pending (float per sample and light, [sample][light]; 0 where the surface turns away
- * from the light, which shade then weighs by zero). */
+ * tri_vertices, tri_normal, offsets; writes visible where the maps decide a pending entry
+ * (float per sample and light, [sample][light]; 0 where the surface turns away from the
+ * light, which shade then weighs by zero) and lists the entries they leave (ray_entries,
+ * ray_count); visibility_rays reads those, tri_vertices, node_bounds, node_children and
+ * writes their visible from a shadow ray. */
 #include "lighting.h"
 #include "bvh.h"
 
@@ -524,14 +526,16 @@ kernel void visibility_mark(global const int2* map_read, int entries, global uin
 /* The rest of the decision, for the pending samples and lights. Lit: the bound map says no
  * triangle in the texel comes nearer the light than the sample's own depth, less what its
  * own surface may have written there (at most the map's bias); or the writer map says no
- * triangle but the sample's own touches that texel. Shadowed: the 3 × 3 test. Otherwise a
- * shadow ray through the BVH. */
+ * triangle but the sample's own touches that texel. Shadowed: the 3 × 3 test. Otherwise
+ * the entry (sample × light_count + light) stays pending and is listed in ray_entries
+ * (ray_count starts at 0) for visibility_rays: the host builds the BVH only when some
+ * entry needs a ray (clrays/stages/visibility.py). */
 kernel void visibility(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                        global const uint* shadow_depth, global const uint* bound, global const int* writer,
                        global const int2* map_read, global const uint* camera_depth, global const int* tri_id,
                        global const float4* tri_vertices, global const float4* tri_normal,
-                       global const float2* offsets, global const float4* node_bounds,
-                       global const int2* node_children, int root, global float* visible)
+                       global const float2* offsets, global float* visible, global int* ray_entries,
+                       volatile global int* ray_count)
 {
     int sample = get_global_id(0);
     if (sample >= frame->width * frame->height * frame->spp) return;
@@ -552,16 +556,16 @@ kernel void visibility(global const frame_t* frame, global const view_t* views, 
             out[l] = 1.0f;
             continue;
         }
-        if (!surface)
-            surface = camera_surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p, &dir,
-                                           &n);
-        float3 to_light;
-        light_reaches(light, frame->sigma_t.xyz, p, &to_light);
-        float3 start = shadow_ray_start(light, p, n, to_light);
         if (read.x >= 0) {
+            if (!surface)
+                surface = camera_surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p,
+                                               &dir, &n);
             /* Lit when depth ≤ bound + min(bias, slack), both ≥ 0: the slack's trigonometry
              * only within the bias (same answer as computing it first). */
             if (depth <= bound_depth + SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth)) {
+                float3 to_light;
+                light_reaches(light, frame->sigma_t.xyz, p, &to_light);
+                float3 start = shadow_ray_start(light, p, n, to_light);
                 global const view_t* view = views + light_view_index(light, start);
                 float reach = 0.0f; /* of the sample's triangle from the view's origin */
                 for (int k = 0; k < 3; ++k)
@@ -577,9 +581,33 @@ kernel void visibility(global const frame_t* frame, global const view_t* views, 
                 continue;
             }
         }
-        float3 ray = light->type == LIGHT_DIRECTIONAL ? to_light : light->position.xyz - start;
-        float t_max = light->type == LIGHT_DIRECTIONAL ? INFINITY : 1.0f;
-        out[l] = bvh_occluded(node_bounds, node_children, root, tri_vertices, start, ray, 0.0f, t_max, tri)
-                     ? 0.0f : 1.0f;
+        ray_entries[atomic_inc(ray_count)] = sample * frame->light_count + l;
     }
+}
+
+/* The shadow rays of the entries visibility left pending, one work-item per listed entry:
+ * from the point moved off the surface on the light's side, through the BVH, skipping the
+ * sample's own triangle. Each entry's answer depends on it alone, so the list's order
+ * (atomics) changes nothing. */
+kernel void visibility_rays(global const frame_t* frame, global const view_t* views, global const light_t* lights,
+                            global const uint* camera_depth, global const int* tri_id,
+                            global const float4* tri_vertices, global const float4* tri_normal,
+                            global const float2* offsets, global const float4* node_bounds,
+                            global const int2* node_children, int root, global const int* ray_entries,
+                            int ray_count, global float* visible)
+{
+    int item = get_global_id(0);
+    if (item >= ray_count) return;
+    int entry = ray_entries[item];
+    int sample = entry / frame->light_count;
+    global const light_t* light = lights + entry % frame->light_count;
+    float3 p, dir, n;
+    camera_surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p, &dir, &n);
+    float3 to_light;
+    light_reaches(light, frame->sigma_t.xyz, p, &to_light);
+    float3 start = shadow_ray_start(light, p, n, to_light);
+    float3 ray = light->type == LIGHT_DIRECTIONAL ? to_light : light->position.xyz - start;
+    float t_max = light->type == LIGHT_DIRECTIONAL ? INFINITY : 1.0f;
+    visible[entry] = bvh_occluded(node_bounds, node_children, root, tri_vertices, start, ray, 0.0f, t_max,
+                                  tri_id[sample]) ? 0.0f : 1.0f;
 }

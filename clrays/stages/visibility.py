@@ -12,12 +12,14 @@ surface turns away from the light needs neither: shade weighs it by zero.
 
 In order: `visibility_prepare` decides what needs no map and notes the texel each other
 sample's lit test reads, `visibility_bound` draws each light's maps at those texels only,
-`visibility` decides the rest (docs/design.md §4.6).
+`visibility` decides the rest from the maps and lists those left to a shadow ray, and
+`visibility_rays` casts them through the BVH, built only then (docs/design.md §4.6).
 """
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -197,14 +199,25 @@ def bound_atlas(device: Device, buffers: FrameBuffers, bounds: list[BoundMap]) -
 
 
 def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, prepared: Prepared, bound: BoundMap,
-               bvh: DeviceBvh, timer: StageTimer):
+               bvh: Callable[[], DeviceBvh], timer: StageTimer):
     """float[samples × lights]: 1 where the sample sees the light, 0 where it does not
-    (`prepared.visible`, its pending entries decided)."""
+    (`prepared.visible`, its pending entries decided). The maps decide first; `bvh()` is
+    asked for the BVH only when some entry is left to a shadow ray (a thumbnail of a
+    scanned mesh often has none, and building the BVH of its triangles costs more than
+    the rest of the stage)."""
     inputs = buffers.inputs
-    event = device.kernel("visibility", "visibility")(
+    entries = inputs.samples * max(len(inputs.scene.lights), 1)
+    ray_entries = device.buffer(nbytes=4 * entries)
+    ray_count = device.buffer(np.zeros(1, np.int32))
+    timer.add("visibility", device.kernel("visibility", "visibility")(
         device.queue, (inputs.samples,), None, buffers.params, buffers.views, buffers.lights,
         rastered.shadow_depth, bound.bound, bound.writer, prepared.map_read, rastered.camera_depth, rastered.tri_id,
-        buffers.tri_vertices, buffers.tri_normal, buffers.offsets, bvh.node_bounds, bvh.node_children,
-        np.int32(bvh.root), prepared.visible)
-    timer.add("visibility", event)
+        buffers.tri_vertices, buffers.tri_normal, buffers.offsets, prepared.visible, ray_entries, ray_count))
+    rays = int(device.read(ray_count, 1, np.int32)[0])
+    if rays:
+        tree = bvh()
+        timer.add("visibility", device.kernel("visibility", "visibility_rays")(
+            device.queue, (rays,), None, buffers.params, buffers.views, buffers.lights, rastered.camera_depth,
+            rastered.tri_id, buffers.tri_vertices, buffers.tri_normal, buffers.offsets, tree.node_bounds,
+            tree.node_children, np.int32(tree.root), ray_entries, np.int32(rays), prepared.visible))
     return prepared.visible
