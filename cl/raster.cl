@@ -99,6 +99,56 @@ inline int row_span(const float2 corner[4], int count, int y, int width, int* x0
     return *x0 <= *x1;
 }
 
+/* Pass 1 skips a triangle whose ray tests could hit no sample (RASTER_CULL, 1 unless a
+ * test builds with 0): at a thumbnail's size, or in a shadow map of a scanned mesh, most
+ * triangles are a small fraction of a pixel and fall between sample positions, and their
+ * ray tests (a 3 × 4 block of pixels around each) are most of the stage's time. The test
+ * is conservative: the corners' box, grown by a margin, holds no sample position
+ * (x + offset.x, y + offset.y). The margin covers what can move a ray test's hit off the
+ * projected triangle: EDGE_SLACK (a relative 1e-5 of the triangle), float32 rounding of
+ * the projection and of the ray test (a few ulps of the coordinates, under 1e-3 pixel at
+ * the sizes the views have), and the ray test's ill-conditioning for a triangle seen
+ * nearly edge-on, which grows as longest edge² / twice its area (in pixels): that term
+ * gets its own share, and a sliver (area under 1 % of longest edge²) or a triangle with a
+ * vertex near or behind a perspective view's origin (clipped) is never skipped. Images
+ * are bit-identical with and without it (tests/stages/test_raster.py, bench/RESULTS.md). */
+#ifndef RASTER_CULL
+#define RASTER_CULL 1
+#endif
+#define CULL_MARGIN 0.05f        /* pixels, for rounding (no hit outside the box seen at all) */
+#define CULL_MARGIN_REL 1e-4f    /* of the box's extent: EDGE_SLACK's 1e-5 on three vertices, ×3 */
+#define CULL_SLIVER 0.01f        /* twice the area / longest edge² under this: never skipped */
+#define CULL_CONDITION 1e-6f     /* × pixels per unit of screen × longest edge² / twice the area */
+#define CULL_IN_FRONT 1e-3f      /* perspective: each vertex's depth / distance at least this */
+
+inline int misses_every_sample(global const view_t* view, float3 v0, float3 v1, float3 v2, const float2 corner[4],
+                               int count, global const float2* offsets, int sample_count)
+{
+    if (!RASTER_CULL || count != 3) return 0;
+    if (view->projection == PROJECTION_PERSPECTIVE) { /* every vertex well in front: nothing clipped */
+        float3 a = v0 - view->origin.xyz, b = v1 - view->origin.xyz, c = v2 - view->origin.xyz;
+        float3 forward = view->forward.xyz;
+        if (!(dot(a, forward) >= CULL_IN_FRONT * length(a) && dot(b, forward) >= CULL_IN_FRONT * length(b)
+              && dot(c, forward) >= CULL_IN_FRONT * length(c)))
+            return 0;
+    }
+    float2 lo = fmin(corner[0], fmin(corner[1], corner[2])), hi = fmax(corner[0], fmax(corner[1], corner[2]));
+    float2 e0 = corner[1] - corner[0], e1 = corner[2] - corner[0], e2 = corner[2] - corner[1];
+    float longest = fmax(dot(e0, e0), fmax(dot(e1, e1), dot(e2, e2)));
+    float twice_area = fabs(e0.x * e1.y - e0.y * e1.x);
+    if (!(twice_area >= CULL_SLIVER * longest) || !(longest > 0.0f)) return 0;
+    float pixels_per_unit = 0.5f * fmax((float)view->width / view->scale_x, (float)view->height / view->scale_y);
+    float2 margin = (float2)(CULL_MARGIN + CULL_CONDITION * pixels_per_unit * longest / twice_area)
+                    + CULL_MARGIN_REL * (hi - lo);
+    lo -= margin;
+    hi += margin;
+    for (int s = 0; s < sample_count; ++s) {
+        float2 o = offsets[s];
+        if (floor(hi.x - o.x) >= ceil(lo.x - o.x) && floor(hi.y - o.y) >= ceil(lo.y - o.y)) return 0;
+    }
+    return 1;
+}
+
 /* The triangle `tri` clipped and projected into the view; its rows are [y0, y1]. */
 #define PROJECT_TRIANGLE                                                                    \
     global const view_t* view = views + view_index;                                         \
@@ -137,6 +187,7 @@ inline int row_span(const float2 corner[4], int count, int y, int width, int* x0
     int tri = get_global_id(0);                                                             \
     if (tri >= tri_count) return;                                                           \
     PROJECT_TRIANGLE                                                                        \
+    if (misses_every_sample(view, v0, v1, v2, corner, count, offsets, sample_count)) return; \
     if (y1 - y0 + 1 > RASTER_BIG_ROWS) {                                                    \
         uint slot = atomic_inc(big_count);                                                  \
         if (slot < RASTER_BIG_TRIANGLES) { vstore3((int3)(tri, y0, y1), slot, big); return; } \
