@@ -274,7 +274,7 @@ class Renderer:
                            lambda: bound_atlas(device, buffers, bounds))
         reuse.record.note("visibility", COMPUTED)
         return visibility(device, buffers, rastered, prepared, atlas, lambda: self._bvh(buffers, keys, reuse, timer),
-                          timer)
+                          timer, bounds)
 
     def _shadow_filter(self, buffers: FrameBuffers, rastered: RasterResult, keys: StageKeys, reuse: Reuse,
                        timer: StageTimer):
