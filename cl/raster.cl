@@ -110,8 +110,10 @@ inline int row_span(const float2 corner[4], int count, int y, int width, int* x0
  * the sizes the views have), and the ray test's ill-conditioning for a triangle seen
  * nearly edge-on, which grows as longest edge² / twice its area (in pixels): that term
  * gets its own share, and a sliver (area under 1 % of longest edge²) or a triangle with a
- * vertex near or behind a perspective view's origin (clipped) is never skipped. Images
- * are bit-identical with and without it (tests/stages/test_raster.py, bench/RESULTS.md). */
+ * vertex near or behind a perspective view's origin (one the near plane may clip) is
+ * never skipped. The test runs first, on the vertices, in straight-line code: the
+ * clipping's loops and arrays cost several times more on a CPU device. Images are
+ * bit-identical with and without it (tests/stages/test_raster.py, bench/RESULTS.md). */
 #ifndef RASTER_CULL
 #define RASTER_CULL 1
 #endif
@@ -121,19 +123,32 @@ inline int row_span(const float2 corner[4], int count, int y, int width, int* x0
 #define CULL_CONDITION 1e-6f     /* × pixels per unit of screen × longest edge² / twice the area */
 #define CULL_IN_FRONT 1e-3f      /* perspective: each vertex's depth / distance at least this */
 
-inline int misses_every_sample(global const view_t* view, float3 v0, float3 v1, float3 v2, const float2 corner[4],
-                               int count, global const float2* offsets, int sample_count)
+/* A vertex in pixel coordinates (projected_polygon's formula), and whether it lies well
+ * in front of a perspective view (always, orthographic). */
+inline int cull_corner(global const view_t* view, float3 v, float2* corner)
 {
-    if (!RASTER_CULL || count != 3) return 0;
-    if (view->projection == PROJECTION_PERSPECTIVE) { /* every vertex well in front: nothing clipped */
-        float3 a = v0 - view->origin.xyz, b = v1 - view->origin.xyz, c = v2 - view->origin.xyz;
-        float3 forward = view->forward.xyz;
-        if (!(dot(a, forward) >= CULL_IN_FRONT * length(a) && dot(b, forward) >= CULL_IN_FRONT * length(b)
-              && dot(c, forward) >= CULL_IN_FRONT * length(c)))
-            return 0;
+    float3 q = v - view->origin.xyz;
+    float x = dot(q, view->right.xyz), y = dot(q, view->up.xyz), z = dot(q, view->forward.xyz);
+    float2 to_pixels = (float2)(0.5f * (float)view->width, 0.5f * (float)view->height);
+    if (view->projection != PROJECTION_PERSPECTIVE) {
+        *corner = (float2)(x / view->scale_x + 1.0f, 1.0f - y / view->scale_y) * to_pixels;
+        return 1;
     }
-    float2 lo = fmin(corner[0], fmin(corner[1], corner[2])), hi = fmax(corner[0], fmax(corner[1], corner[2]));
-    float2 e0 = corner[1] - corner[0], e1 = corner[2] - corner[0], e2 = corner[2] - corner[1];
+    *corner = (float2)(x / (z * view->scale_x) + 1.0f, 1.0f - y / (z * view->scale_y)) * to_pixels;
+    return z > 0.0f && z * z >= CULL_IN_FRONT * CULL_IN_FRONT * dot(q, q);
+}
+
+inline int misses_every_sample(global const view_t* view, global const float4* tri_vertices, int tri,
+                               global const float2* offsets, int sample_count)
+{
+    if (!RASTER_CULL) return 0;
+    float2 a, b, c;
+    int in_front = cull_corner(view, tri_vertices[3 * tri].xyz, &a);
+    in_front &= cull_corner(view, tri_vertices[3 * tri + 1].xyz, &b);
+    in_front &= cull_corner(view, tri_vertices[3 * tri + 2].xyz, &c);
+    if (!in_front) return 0; /* clipped, or nearly: never skipped */
+    float2 lo = fmin(a, fmin(b, c)), hi = fmax(a, fmax(b, c));
+    float2 e0 = b - a, e1 = c - a, e2 = c - b;
     float longest = fmax(dot(e0, e0), fmax(dot(e1, e1), dot(e2, e2)));
     float twice_area = fabs(e0.x * e1.y - e0.y * e1.x);
     if (!(twice_area >= CULL_SLIVER * longest) || !(longest > 0.0f)) return 0;
@@ -186,8 +201,8 @@ inline int misses_every_sample(global const view_t* view, float3 v0, float3 v1, 
 #define FOR_EACH_COVERED_SAMPLE(BODY)                                                       \
     int tri = get_global_id(0);                                                             \
     if (tri >= tri_count) return;                                                           \
+    if (misses_every_sample(views + view_index, tri_vertices, tri, offsets, sample_count)) return; \
     PROJECT_TRIANGLE                                                                        \
-    if (misses_every_sample(view, v0, v1, v2, corner, count, offsets, sample_count)) return; \
     if (y1 - y0 + 1 > RASTER_BIG_ROWS) {                                                    \
         uint slot = atomic_inc(big_count);                                                  \
         if (slot < RASTER_BIG_TRIANGLES) { vstore3((int3)(tri, y0, y1), slot, big); return; } \
