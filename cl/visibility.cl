@@ -199,6 +199,19 @@ inline void note_writer(global int* texel_writer, int tri)
     if (before != WRITER_NONE && before != tri) atomic_xchg(texel_writer, WRITER_MANY);
 }
 
+/* Whether any texel of [x0, x1] in the row at frame address `row` has its read_mask bit:
+ * a word of 32 texels at a time. */
+inline int row_is_read(global const uint* read_mask, int row, int x0, int x1)
+{
+    for (int at = row + x0, last = row + x1; at <= last;) {
+        int bits = min(32 - (at & 31), last - at + 1);
+        uint span = bits == 32 ? 0xffffffffu : ((1u << bits) - 1u) << (at & 31);
+        if (read_mask[at >> 5] & span) return 1;
+        at += bits;
+    }
+    return 0;
+}
+
 /* Beside the writer map, with a capacity (touching_capacity > 0: a frame of few samples,
  * clrays/stages/visibility.py), every triangle that touches a texel read, as a list per
  * texel: touching_head[texel] (-1 empty) → touching[node] = (triangle, next node). The
@@ -284,7 +297,12 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
         if (!read) return;
     }
     if (small_rows > 0 && y1 - y0 + 1 > small_rows) {
-        big_items[atomic_inc(big_count)] = item; /* many rows: the split pass takes it */
+        /* many rows: the split pass takes it, unless (masked) no texel of the rectangle is
+         * read, a word of 32 at a time (a thumbnail reads a few dozen texels of a face) */
+        int read = !masked;
+        for (int ty = y0; ty <= y1 && !read; ++ty)
+            read = row_is_read(read_mask, mask_offset + view->depth_offset + ty * view->width, x0, x1);
+        if (read) big_items[atomic_inc(big_count)] = item;
         return;
     }
     float3 normal = cross(vertex[1] - vertex[0], vertex[2] - vertex[0]);
