@@ -42,7 +42,7 @@ BOUND_ROW_SPLIT = 16
 
 #: A frame of at most TOUCHING_ENTRIES samples × lights (a 64×64 thumbnail) has the bound
 #: passes list, per texel read, the triangles touching it, in up to
-#: TOUCHING_NODES_PER_ENTRY × entries nodes (the bunny at 16×9: about 60 per texel): its
+#: TOUCHING_NODES_PER_ENTRY × entries nodes (the bunny at 16×9: 3.5k of 9.2k, 84 per texel): its
 #: shadow rays test those instead of building the BVH. Larger frames cast enough rays for
 #: the BVH to pay, and their lists would be millions of nodes.
 TOUCHING_ENTRIES = 4096
