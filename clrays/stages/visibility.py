@@ -130,7 +130,6 @@ class TouchingLists:
     nodes: object  # int2 per node: (triangle, next node)
     count: object  # int: nodes taken; more than `capacity`, and some were left out
     capacity: int
-    first: int  # the frame's address of the light's texel 0
 
 
 @dataclass
@@ -162,7 +161,7 @@ def visibility_bound(device: Device, buffers: FrameBuffers, light_index: int, ti
     if prepared is not None and entries <= TOUCHING_ENTRIES:
         capacity = max(TOUCHING_NODES_PER_ENTRY * entries, 1)  # (0 would read as lists left whole)
         touching = TouchingLists(device.buffer(nbytes=4 * texels), device.buffer(nbytes=8 * capacity),
-                                 device.buffer(np.zeros(1, np.int32)), capacity, first)
+                                 device.buffer(np.zeros(1, np.int32)), capacity)
     lists = ((touching.head, touching.nodes, touching.count, np.int32(touching.capacity)) if touching is not None
              else (device.buffer(nbytes=4), device.buffer(nbytes=8), device.buffer(nbytes=4), np.int32(0)))
     if prepared is None:
@@ -252,10 +251,12 @@ def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, pr
     if (not without_texel and touching and all(lists is not None for lists in touching)
             and all(int(device.read(lists.count, 1, np.int32)[0]) <= lists.capacity for lists in touching)):
         for index, lists in enumerate(touching):
+            # this frame's address of the light's texel 0 (a kept map's lists are by the light's own addresses)
+            first = int(inputs.views[inputs.light_views[index][0]]["depth_offset"])
             timer.add("visibility", device.kernel("visibility", "visibility_rays_listed")(
                 device.queue, (rays,), None, buffers.params, buffers.views, buffers.lights, rastered.camera_depth,
                 rastered.tri_id, buffers.tri_vertices, buffers.tri_normal, buffers.offsets, prepared.map_read,
-                np.int32(index), np.int32(lists.first), lists.head, lists.nodes, ray_entries, np.int32(rays),
+                np.int32(index), np.int32(first), lists.head, lists.nodes, ray_entries, np.int32(rays),
                 prepared.visible))
         return prepared.visible
     tree = bvh()

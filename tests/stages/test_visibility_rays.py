@@ -64,3 +64,17 @@ def test_full_lists_fall_back_to_the_bvh(device, monkeypatch):
     monkeypatch.setattr(stage, "bvh_build_tree", lambda *args: built.append(1) or real(*args))
     np.testing.assert_array_equal(Renderer(device, reuse=False).render(scene).image, reference)
     assert built == [1]
+
+
+def test_a_kept_bound_map_lists_by_the_lights_own_texels(device):
+    # The spot's bound map, kept from a frame where its texels come first, serves a frame
+    # where the point light's cube comes before them: its lists must be read at this
+    # frame's addresses (a read at the old ones ran off the lists), and the image must be
+    # the one computed from scratch.
+    session = Renderer(device)
+    spot = make_scene(_triangles(), [LIGHTS["spot"]], width=40, height=30, shadow_map=64)
+    both = make_scene(_triangles(), [LIGHTS["point"], LIGHTS["spot"]], width=40, height=30, shadow_map=64)
+    session.render(spot)
+    kept = session.render(both)
+    assert kept.stage_status["visibility"] == "computed"
+    np.testing.assert_array_equal(kept.image, Renderer(device, reuse=False).render(both).image)
