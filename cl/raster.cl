@@ -232,6 +232,71 @@ inline float8 intersect_columns(global const view_t* view, const triangle_test_t
     return hit && x + lane <= last ? t : (float8)(INFINITY);
 }
 
+/* Pass 1 skips a triangle whose ray tests could hit no sample (RASTER_CULL, 1 unless a
+ * test builds with 0): at a thumbnail's size, or in a shadow map of a scanned mesh, most
+ * triangles are a small fraction of a pixel and fall between sample positions, and their
+ * ray tests (a 3 × 4 block of pixels around each) are most of the stage's time. The test
+ * is conservative: the corners' box, grown by a margin, holds no sample position
+ * (x + offset.x, y + offset.y). The margin covers what can move a ray test's hit off the
+ * projected triangle: EDGE_SLACK (a relative 1e-5 of the triangle), float32 rounding of
+ * the projection and of the ray test (a few ulps of the coordinates, under 1e-3 pixel at
+ * the sizes the views have), and the ray test's ill-conditioning for a triangle seen
+ * nearly edge-on, which grows as longest edge² / twice its area (in pixels): that term
+ * gets its own share, and a sliver (area under 1 % of longest edge²) or a triangle with a
+ * vertex near or behind a perspective view's origin (one the near plane may clip) is
+ * never skipped. The test runs first, on the vertices, in straight-line code: the
+ * clipping's loops and arrays cost several times more on a CPU device. Images are
+ * bit-identical with and without it (tests/stages/test_raster.py, bench/RESULTS.md). */
+#ifndef RASTER_CULL
+#define RASTER_CULL 1
+#endif
+#define CULL_MARGIN 0.05f        /* pixels, for rounding (no hit outside the box seen at all) */
+#define CULL_MARGIN_REL 1e-4f    /* of the box's extent: EDGE_SLACK's 1e-5 on three vertices, ×3 */
+#define CULL_SLIVER 0.01f        /* twice the area / longest edge² under this: never skipped */
+#define CULL_CONDITION 1e-6f     /* × pixels per unit of screen × longest edge² / twice the area */
+#define CULL_IN_FRONT 1e-3f      /* perspective: each vertex's depth / distance at least this */
+
+/* A vertex in pixel coordinates (projected_polygon's formula), and whether it lies well
+ * in front of a perspective view (always, orthographic). */
+inline int cull_corner(global const view_t* view, float3 v, float2* corner)
+{
+    float3 q = v - view->origin.xyz;
+    float x = dot(q, view->right.xyz), y = dot(q, view->up.xyz), z = dot(q, view->forward.xyz);
+    float2 to_pixels = (float2)(0.5f * (float)view->width, 0.5f * (float)view->height);
+    if (view->projection != PROJECTION_PERSPECTIVE) {
+        *corner = (float2)(x / view->scale_x + 1.0f, 1.0f - y / view->scale_y) * to_pixels;
+        return 1;
+    }
+    *corner = (float2)(x / (z * view->scale_x) + 1.0f, 1.0f - y / (z * view->scale_y)) * to_pixels;
+    return z > 0.0f && z * z >= CULL_IN_FRONT * CULL_IN_FRONT * dot(q, q);
+}
+
+inline int misses_every_sample(global const view_t* view, global const float4* tri_vertices, int tri,
+                               global const float2* offsets, int sample_count)
+{
+    if (!RASTER_CULL) return 0;
+    float2 a, b, c;
+    int in_front = cull_corner(view, tri_vertices[3 * tri].xyz, &a);
+    in_front &= cull_corner(view, tri_vertices[3 * tri + 1].xyz, &b);
+    in_front &= cull_corner(view, tri_vertices[3 * tri + 2].xyz, &c);
+    if (!in_front) return 0; /* clipped, or nearly: never skipped */
+    float2 lo = fmin(a, fmin(b, c)), hi = fmax(a, fmax(b, c));
+    float2 e0 = b - a, e1 = c - a, e2 = c - b;
+    float longest = fmax(dot(e0, e0), fmax(dot(e1, e1), dot(e2, e2)));
+    float twice_area = fabs(e0.x * e1.y - e0.y * e1.x);
+    if (!(twice_area >= CULL_SLIVER * longest) || !(longest > 0.0f)) return 0;
+    float pixels_per_unit = 0.5f * fmax((float)view->width / view->scale_x, (float)view->height / view->scale_y);
+    float2 margin = (float2)(CULL_MARGIN + CULL_CONDITION * pixels_per_unit * longest / twice_area)
+                    + CULL_MARGIN_REL * (hi - lo);
+    lo -= margin;
+    hi += margin;
+    for (int s = 0; s < sample_count; ++s) {
+        float2 o = offsets[s];
+        if (floor(hi.x - o.x) >= ceil(lo.x - o.x) && floor(hi.y - o.y) >= ceil(lo.y - o.y)) return 0;
+    }
+    return 1;
+}
+
 /* The triangle `tri` clipped and projected into the view; its rows are [y0, y1]. */
 #define PROJECT_TRIANGLE                                                                    \
     global const view_t* view = views + view_index;                                         \
@@ -281,6 +346,7 @@ inline float8 intersect_columns(global const view_t* view, const triangle_test_t
 #define FOR_EACH_COVERED_SAMPLE(BODY)                                                       \
     int tri = get_global_id(0);                                                             \
     if (tri >= tri_count) return;                                                           \
+    if (misses_every_sample(views + view_index, tri_vertices, tri, offsets, sample_count)) return; \
     PROJECT_TRIANGLE                                                                        \
     if (y1 - y0 + 1 > RASTER_BIG_ROWS) {                                                    \
         uint slot = atomic_inc(big_count);                                                  \

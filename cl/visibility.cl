@@ -1,10 +1,12 @@
 /* visibility — exact hard shadows on surfaces: per camera sample and light, 1 when the
  * segment to the light is clear, else 0. The shadow map decides where its neighbourhood
- * is unanimous; the other samples cast a shadow ray through the BVH (docs/design.md §4, visibility).
+ * is unanimous; the other samples cast a shadow ray through the BVH, or in a frame of few
+ * samples against the triangles touching their texel (docs/design.md §4, visibility).
  * visibility_bound, visibility_bound_split read tri_vertices, views; write bound (a lower
  * bound of the depth of every triangle that touches each texel, atomic min), writer (the
- * one triangle that touches each texel, or WRITER_MANY) and the list of triangles whose
- * rectangles the split pass takes (big_items, big_count).
+ * one triangle that touches each texel, or WRITER_MANY), with a capacity the lists of the
+ * triangles touching each texel read (touching_head, touching, touching_count) and the
+ * list of triangles whose rectangles the split pass takes (big_items, big_count).
  * visibility_prepare reads frame, views, lights, camera_depth, tri_id,
  * tri_normal, tri_vertex_normals, offsets; writes visible (1 no light reaches the sample,
  * 0 its surface turns away from the light, else pending: the maps or a ray decide) and
@@ -12,9 +14,12 @@
  * there); visibility_mark reads map_read, writes read_mask (a bit per texel read): the
  * bound passes draw only those.
  * visibility reads frame, views, lights, shadow_depth, bound, writer, map_read, camera_depth, tri_id,
- * tri_vertices, tri_normal, offsets, node_bounds, node_children; writes visible where it
- * is pending (float per sample and light, [sample][light]; 0 where the surface turns away
- * from the light, which shade then weighs by zero). */
+ * tri_vertices, tri_normal, offsets; writes visible where the maps decide a pending entry
+ * (float per sample and light, [sample][light]; 0 where the surface turns away from the
+ * light, which shade then weighs by zero) and lists the entries they leave (ray_entries,
+ * ray_count: the count, and how many have no texel); visibility_rays reads those,
+ * tri_vertices, node_bounds, node_children, and visibility_rays_listed those, map_read and
+ * a light's lists, and both write their visible from a shadow ray. */
 #include "lighting.h"
 #include "bvh.h"
 
@@ -194,6 +199,40 @@ inline void note_writer(global int* texel_writer, int tri)
     if (before != WRITER_NONE && before != tri) atomic_xchg(texel_writer, WRITER_MANY);
 }
 
+/* Whether any texel of [x0, x1] in the row at frame address `row` has its read_mask bit:
+ * a word of 32 texels at a time. */
+inline int row_is_read(global const uint* read_mask, int row, int x0, int x1)
+{
+    for (int at = row + x0, last = row + x1; at <= last;) {
+        int bits = min(32 - (at & 31), last - at + 1);
+        uint span = bits == 32 ? 0xffffffffu : ((1u << bits) - 1u) << (at & 31);
+        if (read_mask[at >> 5] & span) return 1;
+        at += bits;
+    }
+    return 0;
+}
+
+/* Beside the writer map, with a capacity (touching_capacity > 0: a frame of few samples,
+ * clrays/stages/visibility.py), every triangle that touches a texel read, as a list per
+ * texel: touching_head[texel] (-1 empty) → touching[node] = (triangle, next node). The
+ * segment from a sample to the light projects into its texel, so every triangle it
+ * crosses is in that texel's list (the writer map's argument), and visibility_rays_listed
+ * tests those alone instead of walking a BVH. Nodes past the capacity are not linked;
+ * the host then builds the BVH. */
+#define TOUCHING_ARGS global int* touching_head, global int2* touching, volatile global int* touching_count, \
+                      int touching_capacity
+#define TOUCHING_PASS touching_head, touching, touching_count, touching_capacity
+
+inline void note_touching(global int* head, int tri, global int2* touching, volatile global int* touching_count,
+                          int touching_capacity)
+{
+    if (touching_capacity <= 0) return;
+    int node = atomic_inc(touching_count);
+    if (node >= touching_capacity) return;
+    touching[node].x = tri;
+    touching[node].y = atomic_xchg(head, node);
+}
+
 /* The conservative bound map: every texel a triangle may touch (per row, the span whose
  * squares, grown by COVER_GROWTH, meet the projection of its part inside the frustum)
  * gets a depth no larger than the triangle's nearest point inside that texel's footprint:
@@ -208,8 +247,8 @@ inline void note_writer(global int* texel_writer, int tri)
  * hold starting values (visibility_clear). */
 inline void bound_triangle(global const float4* tri_vertices, global const view_t* views, int first_view,
                            int view_count, global uint* bound, global int* writer, int masked,
-                           global const uint* read_mask, int mask_offset, int item, int row_first, int row_step,
-                           int small_rows, global int* big_items, volatile global int* big_count)
+                           global const uint* read_mask, int mask_offset, TOUCHING_ARGS, int item, int row_first,
+                           int row_step, int small_rows, global int* big_items, volatile global int* big_count)
 {
     int tri = item / view_count;
     global const view_t* view = views + first_view + item % view_count;
@@ -258,7 +297,12 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
         if (!read) return;
     }
     if (small_rows > 0 && y1 - y0 + 1 > small_rows) {
-        big_items[atomic_inc(big_count)] = item; /* many rows: the split pass takes it */
+        /* many rows: the split pass takes it, unless (masked) no texel of the rectangle is
+         * read, a word of 32 at a time (a thumbnail reads a few dozen texels of a face) */
+        int read = !masked;
+        for (int ty = y0; ty <= y1 && !read; ++ty)
+            read = row_is_read(read_mask, mask_offset + view->depth_offset + ty * view->width, x0, x1);
+        if (read) big_items[atomic_inc(big_count)] = item;
         return;
     }
     float3 normal = cross(vertex[1] - vertex[0], vertex[2] - vertex[0]);
@@ -310,6 +354,8 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
                 if (!(bits & 1u)) continue;
             }
             note_writer(writer + view->depth_offset + ty * view->width + tx, tri);
+            note_touching(touching_head + view->depth_offset + ty * view->width + tx, tri, touching, touching_count,
+                          touching_capacity);
             if (bound[view->depth_offset + ty * view->width + tx] <= floor_bits) continue;
             float depth = nearest;
             if (perspective && normal_length > 0.0f) {
@@ -336,7 +382,7 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
  * work-item per word of the mask over the light's texels [first, first + texels) (frame
  * addresses; the light's own maps are at address - first). */
 kernel void visibility_clear(global const uint* read_mask, int first, int texels, global uint* bound,
-                             global int* writer)
+                             global int* writer, global int* touching_head, int touching_capacity)
 {
     int word = (first >> 5) + get_global_id(0);
     uint bits = read_mask[word];
@@ -346,6 +392,7 @@ kernel void visibility_clear(global const uint* read_mask, int first, int texels
         if (((bits >> bit) & 1u) && at >= first && at < first + texels) {
             bound[at - first] = DEPTH_EMPTY;
             writer[at - first] = WRITER_NONE;
+            if (touching_capacity > 0) touching_head[at - first] = -1;
         }
     }
 }
@@ -356,24 +403,24 @@ kernel void visibility_clear(global const uint* read_mask, int first, int texels
  * then spreads each listed rectangle's rows over the global size of its dimension 1. */
 kernel void visibility_bound(global const float4* tri_vertices, int count, global const view_t* views,
                              int first_view, int view_count, global uint* bound, global int* writer,
-                             int masked, global const uint* read_mask, int mask_offset, int small_rows,
-                             global int* big_items, volatile global int* big_count)
+                             int masked, global const uint* read_mask, int mask_offset, TOUCHING_ARGS,
+                             int small_rows, global int* big_items, volatile global int* big_count)
 {
     int item = get_global_id(0);
     if (item >= count * view_count) return;
-    bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, masked, read_mask, mask_offset, item,
-                   0, 1, small_rows, big_items, big_count);
+    bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, masked, read_mask, mask_offset,
+                   TOUCHING_PASS, item, 0, 1, small_rows, big_items, big_count);
 }
 
 kernel void visibility_bound_split(global const float4* tri_vertices, global const view_t* views, int first_view,
                                    int view_count, global uint* bound, global int* writer,
-                                   int masked, global const uint* read_mask, int mask_offset,
+                                   int masked, global const uint* read_mask, int mask_offset, TOUCHING_ARGS,
                                    global const int* big_items, global const int* big_count)
 {
     int index = get_global_id(0);
     if (index >= *big_count) return;
     bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, masked, read_mask, mask_offset,
-                   big_items[index], get_global_id(1), get_global_size(1), 0, 0, 0);
+                   TOUCHING_PASS, big_items[index], get_global_id(1), get_global_size(1), 0, 0, 0);
 }
 
 /* How far the sample's own triangle (plane through p with unit normal n, largest distance
@@ -524,14 +571,16 @@ kernel void visibility_mark(global const int2* map_read, int entries, global uin
 /* The rest of the decision, for the pending samples and lights. Lit: the bound map says no
  * triangle in the texel comes nearer the light than the sample's own depth, less what its
  * own surface may have written there (at most the map's bias); or the writer map says no
- * triangle but the sample's own touches that texel. Shadowed: the 3 × 3 test. Otherwise a
- * shadow ray through the BVH. */
+ * triangle but the sample's own touches that texel. Shadowed: the 3 × 3 test. Otherwise
+ * the entry (sample × light_count + light) stays pending and is listed in ray_entries
+ * (ray_count starts at 0) for visibility_rays: the host builds the BVH only when some
+ * entry needs a ray (clrays/stages/visibility.py). */
 kernel void visibility(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                        global const uint* shadow_depth, global const uint* bound, global const int* writer,
                        global const int2* map_read, global const uint* camera_depth, global const int* tri_id,
                        global const float4* tri_vertices, global const float4* tri_normal,
-                       global const float2* offsets, global const float4* node_bounds,
-                       global const int2* node_children, int root, global float* visible)
+                       global const float2* offsets, global float* visible, global int* ray_entries,
+                       volatile global int* ray_count)
 {
     int sample = get_global_id(0);
     if (sample >= frame->width * frame->height * frame->spp) return;
@@ -552,16 +601,16 @@ kernel void visibility(global const frame_t* frame, global const view_t* views, 
             out[l] = 1.0f;
             continue;
         }
-        if (!surface)
-            surface = camera_surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p, &dir,
-                                           &n);
-        float3 to_light;
-        light_reaches(light, frame->sigma_t.xyz, p, &to_light);
-        float3 start = shadow_ray_start(light, p, n, to_light);
         if (read.x >= 0) {
+            if (!surface)
+                surface = camera_surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p,
+                                               &dir, &n);
             /* Lit when depth ≤ bound + min(bias, slack), both ≥ 0: the slack's trigonometry
              * only within the bias (same answer as computing it first). */
             if (depth <= bound_depth + SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth)) {
+                float3 to_light;
+                light_reaches(light, frame->sigma_t.xyz, p, &to_light);
+                float3 start = shadow_ray_start(light, p, n, to_light);
                 global const view_t* view = views + light_view_index(light, start);
                 float reach = 0.0f; /* of the sample's triangle from the view's origin */
                 for (int k = 0; k < 3; ++k)
@@ -577,9 +626,73 @@ kernel void visibility(global const frame_t* frame, global const view_t* views, 
                 continue;
             }
         }
-        float3 ray = light->type == LIGHT_DIRECTIONAL ? to_light : light->position.xyz - start;
-        float t_max = light->type == LIGHT_DIRECTIONAL ? INFINITY : 1.0f;
-        out[l] = bvh_occluded(node_bounds, node_children, root, tri_vertices, start, ray, 0.0f, t_max, tri)
-                     ? 0.0f : 1.0f;
+        ray_entries[atomic_inc(ray_count)] = sample * frame->light_count + l;
+        if (read.x < 0) atomic_inc(ray_count + 1); /* no texel: only the BVH can answer it */
     }
+}
+
+/* A listed entry's shadow ray: from the point moved off the surface on the light's side,
+ * to the light (t in (0, t_max)); its sample's own triangle is skipped. */
+inline void listed_shadow_ray(global const frame_t* frame, global const view_t* views, global const light_t* lights,
+                              global const uint* camera_depth, global const int* tri_id,
+                              global const float4* tri_normal, global const float2* offsets, int entry,
+                              float3* start, float3* ray, float* t_max)
+{
+    int sample = entry / frame->light_count;
+    global const light_t* light = lights + entry % frame->light_count;
+    float3 p, dir, n;
+    camera_surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p, &dir, &n);
+    float3 to_light;
+    light_reaches(light, frame->sigma_t.xyz, p, &to_light);
+    *start = shadow_ray_start(light, p, n, to_light);
+    *ray = light->type == LIGHT_DIRECTIONAL ? to_light : light->position.xyz - *start;
+    *t_max = light->type == LIGHT_DIRECTIONAL ? INFINITY : 1.0f;
+}
+
+/* The shadow rays of the entries visibility listed, through the BVH, one work-item per
+ * entry. Each entry's answer depends on it alone, so the list's order (atomics) changes
+ * nothing. */
+kernel void visibility_rays(global const frame_t* frame, global const view_t* views, global const light_t* lights,
+                            global const uint* camera_depth, global const int* tri_id,
+                            global const float4* tri_vertices, global const float4* tri_normal,
+                            global const float2* offsets, global const float4* node_bounds,
+                            global const int2* node_children, int root, global const int* ray_entries,
+                            int ray_count, global float* visible)
+{
+    int item = get_global_id(0);
+    if (item >= ray_count) return;
+    int entry = ray_entries[item];
+    float3 start, ray;
+    float t_max;
+    listed_shadow_ray(frame, views, lights, camera_depth, tri_id, tri_normal, offsets, entry, &start, &ray, &t_max);
+    visible[entry] = bvh_occluded(node_bounds, node_children, root, tri_vertices, start, ray, 0.0f, t_max,
+                                  tri_id[entry / frame->light_count]) ? 0.0f : 1.0f;
+}
+
+/* The same rays of one light's entries (`light`), each against the triangles that touch
+ * its texel (note_touching: the light's lists, texel addresses less `first`, the frame's
+ * address of the light's texel 0) instead of the BVH's: the same triangles that can meet
+ * the segment, tested by the same ray test, so the same answer (docs/design.md §4.6). */
+kernel void visibility_rays_listed(global const frame_t* frame, global const view_t* views,
+                                   global const light_t* lights, global const uint* camera_depth,
+                                   global const int* tri_id, global const float4* tri_vertices,
+                                   global const float4* tri_normal, global const float2* offsets,
+                                   global const int2* map_read, int light, int first,
+                                   global const int* touching_head, global const int2* touching,
+                                   global const int* ray_entries, int ray_count, global float* visible)
+{
+    int item = get_global_id(0);
+    if (item >= ray_count) return;
+    int entry = ray_entries[item];
+    if (entry % frame->light_count != light) return;
+    float3 start, ray;
+    float t_max;
+    listed_shadow_ray(frame, views, lights, camera_depth, tri_id, tri_normal, offsets, entry, &start, &ray, &t_max);
+    int skip = tri_id[entry / frame->light_count], occluded = 0;
+    for (int node = touching_head[map_read[entry].x - first]; node >= 0 && !occluded; node = touching[node].y) {
+        int tri = touching[node].x;
+        occluded = tri != skip && ray_meets_triangle(start, ray, 0.0f, t_max, tri_vertices[3 * tri].xyz,
+                                                     tri_vertices[3 * tri + 1].xyz, tri_vertices[3 * tri + 2].xyz);
+    }
+    visible[entry] = occluded ? 0.0f : 1.0f;
 }

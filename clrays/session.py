@@ -162,7 +162,6 @@ class Renderer:
         buffers = upload(device, inputs)  # the scene in eye space, packed into device structs
         keys = StageKeys(buffers.inputs)
         occluders = opaque_occluder_buffers(device, buffers)  # (translucent triangles block no shadow ray)
-        bvh = self._bvh(occluders, keys, reuse, timer)  # (visibility's BVH, on the host before the device is busy)
         rastered, maps = self._raster(buffers, keys, reuse, timer)  # raster: camera depth and ids, shadow maps
         layers = self._translucency(buffers, keys, reuse, timer)  # translucency: layers nearest each light
         films = self._films(buffers, rastered, reuse, timer)  # transparency: translucent films before the opaque depth
@@ -214,7 +213,7 @@ class Renderer:
                     films.add_in_scatter(device, timer, lambda r, s, t, e=epipolar, i=tables, x=texture, y=rectified:
                                          traverse(device, buffers, r, e, i, s, t, x, y))
             reuse.record.note(VOLUME_STAGES[method][-1], COMPUTED)
-        visible = self._visibility(occluders, rastered, keys, reuse, timer, bvh)  # visibility: exact surface shadows
+        visible = self._visibility(occluders, rastered, keys, reuse, timer)  # visibility: exact surface shadows
         through = None if layers is None or scene.render.surface_shadows != "exact" else \
             surface_transmittance(device, buffers, rastered, layers, timer)  # (translucent shadows' exact edges)
         # transparency: the films' surfaces and fog composited in front of the opaque samples
@@ -247,23 +246,19 @@ class Renderer:
                            lambda: translucency(self.device, buffers, timer))
 
     def _bvh(self, buffers: FrameBuffers, keys: StageKeys, reuse: Reuse, timer: StageTimer):
-        """The visibility stage's BVH, or None when the stage does not run: its tree kept
-        while the geometry is, its boxes while the eye-space triangles are (geometry and
-        eye position; not where the camera looks). Built before the frame's kernels are
-        queued, so on a CPU device the host build does not share the cores with them."""
-        scene = buffers.inputs.scene
-        if scene.render.surface_shadows != "exact" or not scene.lights:
-            return None
+        """The visibility stage's BVH: its tree kept while the geometry is, its boxes while
+        the eye-space triangles are (geometry and eye position; not where the camera looks).
+        Asked for only when some sample needs a shadow ray (stages/visibility.py)."""
         topology = reuse.keep("bvh.topology", lambda: digest("bvh.topology", keys.geometry),
                               lambda: bvh_topology_of(self.device, buffers.inputs, timer))
         return reuse.keep("bvh", lambda: digest("bvh", keys.geometry, buffers.inputs.eye_ws),
                           lambda: upload_bvh(self.device, buffers, topology, timer))
 
     def _visibility(self, buffers: FrameBuffers, rastered: RasterResult, keys: StageKeys, reuse: Reuse,
-                    timer: StageTimer, bvh):
+                    timer: StageTimer):
         """The visibility stage: each light's bound map kept while its shadow map is, and the
-        frame's BVH (`_bvh`); None unless `render.surface_shadows` is exact (or filtered:
-        then the shadow_filter stage answers instead)."""
+        frame's BVH (`_bvh`) when a shadow ray needs it; None unless `render.surface_shadows`
+        is exact (or filtered: then the shadow_filter stage answers instead)."""
         scene = buffers.inputs.scene
         if scene.render.surface_shadows == "filtered" and scene.lights:
             return self._shadow_filter(buffers, rastered, keys, reuse, timer)
@@ -281,7 +276,8 @@ class Renderer:
         atlas = reuse.keep("bound_atlas", lambda: digest("bound", tuple(keys.shadow), keys.camera, keys.surfaces),
                            lambda: bound_atlas(device, buffers, bounds))
         reuse.record.note("visibility", COMPUTED)
-        return visibility(device, buffers, rastered, prepared, atlas, bvh, timer)
+        return visibility(device, buffers, rastered, prepared, atlas, lambda: self._bvh(buffers, keys, reuse, timer),
+                          timer, bounds)
 
     def _shadow_filter(self, buffers: FrameBuffers, rastered: RasterResult, keys: StageKeys, reuse: Reuse,
                        timer: StageTimer):

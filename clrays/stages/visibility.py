@@ -12,12 +12,16 @@ surface turns away from the light needs neither: shade weighs it by zero.
 
 In order: `visibility_prepare` decides what needs no map and notes the texel each other
 sample's lit test reads, `visibility_bound` draws each light's maps at those texels only,
-`visibility` decides the rest (docs/design.md §4.6).
+`visibility` decides the rest from the maps and lists those left to a shadow ray, and
+`visibility_rays` casts them through the BVH, built only then; in a frame of few samples
+(a thumbnail) the bound passes also list, per texel read, the triangles touching it, and
+`visibility_rays_listed` tests those instead: no BVH at all (docs/design.md §4.6).
 """
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -35,6 +39,14 @@ from .raster import RasterResult
 #: each taking every BOUND_ROW_SPLIT-th row (a floor's rectangle can be a whole face).
 BOUND_SMALL_ROWS = 8
 BOUND_ROW_SPLIT = 16
+
+#: A frame of at most TOUCHING_ENTRIES samples × lights (a 64×64 thumbnail) has the bound
+#: passes list, per texel read, the triangles touching it, in up to
+#: TOUCHING_NODES_PER_ENTRY × entries nodes (the bunny at 16×9: 3.5k of 9.2k, 84 per texel): its
+#: shadow rays test those instead of building the BVH. Larger frames cast enough rays for
+#: the BVH to pay, and their lists would be millions of nodes.
+TOUCHING_ENTRIES = 4096
+TOUCHING_NODES_PER_ENTRY = 64
 
 
 @dataclass
@@ -110,13 +122,26 @@ def visibility_prepare(device: Device, buffers: FrameBuffers, rastered: RasterRe
 
 
 @dataclass
+class TouchingLists:
+    """One light's lists, per texel read, of the triangles touching it (cl/visibility.cl
+    note_touching): what a shadow ray from a sample in that texel tests instead of the BVH."""
+
+    head: object  # int per texel of the light's maps: first node, -1 none
+    nodes: object  # int2 per node: (triangle, next node)
+    count: object  # int: nodes taken; more than `capacity`, and some were left out
+    capacity: int
+
+
+@dataclass
 class BoundMap:
     """A light's (or every light's, back to back) bound and writer maps, texel for texel
-    the layout of its shadow map."""
+    the layout of its shadow map, and for a frame of few samples the light's lists of the
+    triangles touching each texel read."""
 
     bound: object  # uint per texel, as_uint(depth): no triangle touching the texel is nearer
     writer: object  # int per texel: the one triangle that touches it, -1 none, -2 several
     texels: int
+    touching: TouchingLists | None = None
 
 
 def visibility_bound(device: Device, buffers: FrameBuffers, light_index: int, timer: StageTimer,
@@ -131,6 +156,14 @@ def visibility_bound(device: Device, buffers: FrameBuffers, light_index: int, ti
     texels = max(inputs.shadow_texels, 1)
     bound = device.buffer(nbytes=4 * texels)
     writer = device.buffer(nbytes=4 * texels)
+    entries = buffers.inputs.samples * max(len(buffers.inputs.scene.lights), 1)
+    touching = None
+    if prepared is not None and entries <= TOUCHING_ENTRIES:
+        capacity = max(TOUCHING_NODES_PER_ENTRY * entries, 1)  # (0 would read as lists left whole)
+        touching = TouchingLists(device.buffer(nbytes=4 * texels), device.buffer(nbytes=8 * capacity),
+                                 device.buffer(np.zeros(1, np.int32)), capacity)
+    lists = ((touching.head, touching.nodes, touching.count, np.int32(touching.capacity)) if touching is not None
+             else (device.buffer(nbytes=4), device.buffer(nbytes=8), device.buffer(nbytes=4), np.int32(0)))
     if prepared is None:
         device.fill(bound, structs.DEPTH_EMPTY, 4 * texels, timer, "visibility")
         device.fill(writer, np.int32(structs.WRITER_NONE), 4 * texels, timer, "visibility")
@@ -141,7 +174,7 @@ def visibility_bound(device: Device, buffers: FrameBuffers, light_index: int, ti
         words = (first + inputs.shadow_texels - 1) // 32 - first // 32 + 1
         timer.add("visibility", device.kernel("visibility", "visibility_clear")(
             device.queue, (words,), None, prepared.read_mask, np.int32(first), np.int32(inputs.shadow_texels), bound,
-            writer))
+            writer, lists[0], lists[3]))
     count = inputs.tri_vertices.shape[0] // 3
     if count:
         vertices = device.buffer(inputs.tri_vertices, writable=False)
@@ -158,14 +191,14 @@ def visibility_bound(device: Device, buffers: FrameBuffers, light_index: int, ti
             device.fill(big_count, np.int32(0), 4, timer, "visibility")
             timer.add("visibility", first_pass(
                 device.queue, (count,), None, vertices, np.int32(count), views, np.int32(view), np.int32(1), bound,
-                writer, masked, read_mask, np.int32(first), np.int32(BOUND_SMALL_ROWS), big_items, big_count))
+                writer, masked, read_mask, np.int32(first), *lists, np.int32(BOUND_SMALL_ROWS), big_items, big_count))
             listed = int(device.read(big_count, 1, np.int32)[0])
             if listed:
                 nearest_first(device, big_items, listed, inputs, view)
                 timer.add("visibility", split_pass(
                     device.queue, (listed, BOUND_ROW_SPLIT), None, vertices, views, np.int32(view), np.int32(1),
-                    bound, writer, masked, read_mask, np.int32(first), big_items, big_count))
-    return BoundMap(bound, writer, inputs.shadow_texels)
+                    bound, writer, masked, read_mask, np.int32(first), *lists, big_items, big_count))
+    return BoundMap(bound, writer, inputs.shadow_texels, touching)
 
 
 def nearest_first(device: Device, big_items, listed: int, inputs: FrameInputs, view: int) -> None:
@@ -197,14 +230,38 @@ def bound_atlas(device: Device, buffers: FrameBuffers, bounds: list[BoundMap]) -
 
 
 def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, prepared: Prepared, bound: BoundMap,
-               bvh: DeviceBvh, timer: StageTimer):
+               bvh: Callable[[], DeviceBvh], timer: StageTimer, lights: list[BoundMap] | None = None):
     """float[samples × lights]: 1 where the sample sees the light, 0 where it does not
-    (`prepared.visible`, its pending entries decided)."""
+    (`prepared.visible`, its pending entries decided). The maps decide first; the entries
+    they leave cast a shadow ray: against the triangles touching their texel where every
+    light's BoundMap in `lights` has its lists whole and every ray has a texel, else
+    through the BVH, which `bvh()` builds (or gives the one a session kept) only then."""
     inputs = buffers.inputs
-    event = device.kernel("visibility", "visibility")(
+    entries = inputs.samples * max(len(inputs.scene.lights), 1)
+    ray_entries = device.buffer(nbytes=4 * entries)
+    ray_count = device.buffer(np.zeros(2, np.int32))  # rays, and those with no texel
+    timer.add("visibility", device.kernel("visibility", "visibility")(
         device.queue, (inputs.samples,), None, buffers.params, buffers.views, buffers.lights,
         rastered.shadow_depth, bound.bound, bound.writer, prepared.map_read, rastered.camera_depth, rastered.tri_id,
-        buffers.tri_vertices, buffers.tri_normal, buffers.offsets, bvh.node_bounds, bvh.node_children,
-        np.int32(bvh.root), prepared.visible)
-    timer.add("visibility", event)
+        buffers.tri_vertices, buffers.tri_normal, buffers.offsets, prepared.visible, ray_entries, ray_count))
+    rays, without_texel = (int(v) for v in device.read(ray_count, 2, np.int32))
+    if not rays:
+        return prepared.visible
+    touching = [light.touching for light in lights or ()]
+    if (not without_texel and touching and all(lists is not None for lists in touching)
+            and all(int(device.read(lists.count, 1, np.int32)[0]) <= lists.capacity for lists in touching)):
+        for index, lists in enumerate(touching):
+            # this frame's address of the light's texel 0 (a kept map's lists are by the light's own addresses)
+            first = int(inputs.views[inputs.light_views[index][0]]["depth_offset"])
+            timer.add("visibility", device.kernel("visibility", "visibility_rays_listed")(
+                device.queue, (rays,), None, buffers.params, buffers.views, buffers.lights, rastered.camera_depth,
+                rastered.tri_id, buffers.tri_vertices, buffers.tri_normal, buffers.offsets, prepared.map_read,
+                np.int32(index), np.int32(first), lists.head, lists.nodes, ray_entries, np.int32(rays),
+                prepared.visible))
+        return prepared.visible
+    tree = bvh()
+    timer.add("visibility", device.kernel("visibility", "visibility_rays")(
+        device.queue, (rays,), None, buffers.params, buffers.views, buffers.lights, rastered.camera_depth,
+        rastered.tri_id, buffers.tri_vertices, buffers.tri_normal, buffers.offsets, tree.node_bounds,
+        tree.node_children, np.int32(tree.root), ray_entries, np.int32(rays), prepared.visible))
     return prepared.visible

@@ -196,3 +196,48 @@ def test_lanes_give_the_bits_of_the_one_sample_ray_test(device):
             lanes, one = device.read(lane_t, samples, np.uint32), device.read(one_t, samples, np.uint32)
             assert (one != np.float32(np.inf).view(np.uint32)).sum() > 1000, "too few hits to compare"
             assert np.array_equal(lanes, one), f"view {view_index} offset {offset}: {(lanes != one).sum()} differ"
+
+def _small_triangle_soup(seed: int, count: int = 6000) -> np.ndarray:
+    """Triangles from a thousandth of a pixel to a few pixels across at 16×9, in front of
+    make_scene's camera: random shapes (slivers among them), a third seen nearly edge-on,
+    and a few through the camera's plane beside it."""
+    rng = np.random.default_rng(seed)
+    centre = rng.uniform([-3.0, -1.0, -3.0], [3.0, 3.0, 3.0], (count, 1, 3))
+    size = 10.0 ** rng.uniform(-4.0, -0.5, (count, 1, 1))
+    triangles = centre + size * rng.normal(size=(count, 3, 3))
+    edge_on = slice(0, count // 3)  # the third vertex on the line of the first two, or nearly
+    along = triangles[edge_on, 1] - triangles[edge_on, 0]
+    triangles[edge_on, 2] = triangles[edge_on, 0] + rng.uniform(-1, 2, (count // 3, 1)) * along \
+        + 1e-4 * size[edge_on, 0] * rng.normal(size=(count // 3, 3))
+    near = triangles[-20:]  # beside the eye, through its plane: clipped, and off the screen
+    near += np.array([0.3, 2.0, 8.0]) - near.mean(axis=1, keepdims=True) + rng.normal(0, 0.01, (20, 1, 3))
+    return triangles
+
+
+def _unit(*xs) -> np.ndarray:
+    return v3(*xs) / np.linalg.norm(xs)
+
+
+def test_skipped_triangles_change_no_bit(device, monkeypatch):
+    # Pass 1 skips a triangle whose grown box holds no sample position (cl/raster.cl,
+    # RASTER_CULL). A device built without the skip ray-tests every one: camera depth,
+    # triangle ids and the shadow maps of a point light (cube, perspective), a spot and a
+    # sun (orthographic) must be the same bits, at a thumbnail's size and larger.
+    from clrays import structs
+    from clrays.device import Device
+    from conftest import TEST_DEVICE, DirectionalLight, SpotLight
+
+    monkeypatch.setitem(structs.KERNEL_CONSTANTS, "RASTER_CULL", 0)
+    every = Device(TEST_DEVICE)
+    monkeypatch.undo()
+    lights = [PointLight(v3(0.5, 5, 0.3), np.full(3, 30.0)),
+              SpotLight(v3(-1, 5, 2), _unit(0.1, -1, -0.3), 35.0, np.full(3, 30.0)),
+              DirectionalLight(_unit(0.3, -1, 0.2), np.full(3, 3.0))]
+    for seed, (width, height, spp, shadow_map) in enumerate([(16, 9, 1, 64), (16, 9, 4, 128), (160, 90, 2, 512)]):
+        triangles = _small_triangle_soup(seed)
+        for light in lights:
+            scene = make_scene(triangles, [light], width=width, height=height, spp=spp, shadow_map=shadow_map)
+            skipped, drawn = _rasterized(device, scene), _rasterized(every, scene)
+            for ours, theirs in zip(skipped[1:], drawn[1:]):
+                assert np.array_equal(ours, theirs, equal_nan=True), (width, height, type(light).__name__)
+            assert np.isfinite(skipped[1]).sum() > 0.1 * width * height * spp

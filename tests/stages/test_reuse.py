@@ -251,6 +251,7 @@ def test_the_bvh_tree_outlives_a_moving_camera(device, monkeypatch):
             return function(*args, **kwargs)
         return wrapper
 
+    monkeypatch.setattr(stage, "TOUCHING_ENTRIES", 0)  # the rays take the BVH, not a thumbnail's lists
     monkeypatch.setattr(stage, "bvh_build_tree", counted("tree", stage.bvh_build_tree))
     monkeypatch.setattr(stage, "bvh_build_refit", counted("refit", stage.bvh_build_refit))
     session = Renderer(device)
@@ -263,6 +264,31 @@ def test_the_bvh_tree_outlives_a_moving_camera(device, monkeypatch):
         np.testing.assert_array_equal(kept.image, Renderer(device, reuse=False).render(scene).image)
     # The scratch renders above count too: 3 trees and 3 refits of their own.
     assert calls == {"tree": 1 + 3, "refit": 2 + 3}
+
+
+def test_the_bvh_is_built_only_for_a_shadow_ray(device, monkeypatch):
+    """The maps decide every sample of a floor under a spot with nothing between: no
+    shadow ray, no BVH (no `bvh` time). Slats over the floor leave shadow edges to rays:
+    then it is built, once, and kept for the next frame."""
+    import clrays.stages.visibility as stage
+
+    real, built = stage.bvh_build_tree, []
+
+    def counted(*args):
+        built.append(1)
+        return real(*args)
+
+    monkeypatch.setattr(stage, "bvh_build_tree", counted)
+    monkeypatch.setattr(stage, "TOUCHING_ENTRIES", 0)  # the rays take the BVH, not a thumbnail's lists
+    session = Renderer(device)
+    floor = make_scene(grid_plane(0.0, 6.0, 2), [SpotLight(v3(0, 4, 0), v3(0, -1, 0), 30.0, np.full(3, 30.0))],
+                       **SMALL)
+    assert "bvh" not in session.render(floor).stage_ms and built == []
+    slats = make_scene(_slats(), **SMALL)
+    denser = replace(slats, medium=replace(slats.medium, sigma_s=np.full(3, 0.08)))  # the same surfaces
+    first, second = session.render(slats), session.render(denser)
+    assert "bvh" in first.stage_ms and "bvh" not in second.stage_ms and built == [1]
+    np.testing.assert_array_equal(second.image, Renderer(device, reuse=False).render(denser).image)
 
 
 def test_shading_normals_are_part_of_a_kept_bound_map(device, monkeypatch):

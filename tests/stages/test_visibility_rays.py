@@ -1,0 +1,80 @@
+"""The visibility stage's shadow rays (cl/visibility.cl, docs/design.md §4.6): in a frame
+of few samples they test the triangles listed as touching their texel instead of walking
+the BVH, which is then never built. Both must give the same image, bit for bit."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import clrays.stages.visibility as stage
+from clrays.scene.load import load_scene
+from clrays.session import Renderer
+from conftest import make_scene
+from test_visibility_bound import LIGHTS, _triangles  # a floor, a box, a sub-texel wire, random triangles
+
+SCENES = Path(__file__).resolve().parents[2] / "scenes"
+
+
+def _both_ways(device, scene, monkeypatch):
+    """(image with the lists, image through the BVH, BVH builds with the lists, with the BVH)."""
+    real, built = stage.bvh_build_tree, []
+
+    def counted(*args):
+        built.append(1)
+        return real(*args)
+
+    monkeypatch.setattr(stage, "bvh_build_tree", counted)
+    listed = Renderer(device, reuse=False).render(scene).image
+    with_lists = len(built)
+    monkeypatch.setattr(stage, "TOUCHING_ENTRIES", 0)
+    walked = Renderer(device, reuse=False).render(scene).image
+    return listed, walked, with_lists, len(built) - with_lists
+
+
+@pytest.mark.parametrize("kind", LIGHTS)
+def test_listed_triangles_answer_as_the_bvh(device, monkeypatch, kind):
+    scene = make_scene(_triangles(), [LIGHTS[kind]], width=40, height=30, shadow_map=64)
+    listed, walked, with_lists, with_bvh = _both_ways(device, scene, monkeypatch)
+    assert with_lists == 0 and with_bvh == 1  # rays were cast, through the lists, then the BVH
+    np.testing.assert_array_equal(listed, walked)
+
+
+def test_every_light_has_its_lists(device, monkeypatch):
+    scene = make_scene(_triangles(), list(LIGHTS.values()), width=32, height=24, shadow_map=64)
+    listed, walked, with_lists, with_bvh = _both_ways(device, scene, monkeypatch)
+    assert with_lists == 0 and with_bvh == 1
+    np.testing.assert_array_equal(listed, walked)
+
+
+@pytest.mark.parametrize("size", ["16x9", "64x36"])
+def test_the_bunny_thumbnail_builds_no_bvh(device, monkeypatch, size):
+    width, height = size.split("x")
+    scene = load_scene(SCENES / "bunny.yaml", overrides=[f"image.width={width}", f"image.height={height}"])
+    listed, walked, with_lists, with_bvh = _both_ways(device, scene, monkeypatch)
+    assert with_lists == 0 and with_bvh == 1
+    np.testing.assert_array_equal(listed, walked)
+
+
+def test_full_lists_fall_back_to_the_bvh(device, monkeypatch):
+    # Room for one node: the lists are not whole, so the rays take the BVH, with the same image.
+    scene = make_scene(_triangles(), [LIGHTS["point"]], width=40, height=30, shadow_map=64)
+    reference = Renderer(device, reuse=False).render(scene).image
+    monkeypatch.setattr(stage, "TOUCHING_NODES_PER_ENTRY", 0)
+    real, built = stage.bvh_build_tree, []
+    monkeypatch.setattr(stage, "bvh_build_tree", lambda *args: built.append(1) or real(*args))
+    np.testing.assert_array_equal(Renderer(device, reuse=False).render(scene).image, reference)
+    assert built == [1]
+
+
+def test_a_kept_bound_map_lists_by_the_lights_own_texels(device):
+    # The spot's bound map, kept from a frame where its texels come first, serves a frame
+    # where the point light's cube comes before them: its lists must be read at this
+    # frame's addresses (a read at the old ones ran off the lists), and the image must be
+    # the one computed from scratch.
+    session = Renderer(device)
+    spot = make_scene(_triangles(), [LIGHTS["spot"]], width=40, height=30, shadow_map=64)
+    both = make_scene(_triangles(), [LIGHTS["point"], LIGHTS["spot"]], width=40, height=30, shadow_map=64)
+    session.render(spot)
+    kept = session.render(both)
+    assert kept.stage_status["visibility"] == "computed"
+    np.testing.assert_array_equal(kept.image, Renderer(device, reuse=False).render(both).image)
