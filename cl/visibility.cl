@@ -445,13 +445,73 @@ inline float own_surface_slack(global const light_t* light, global const view_t*
     return depth - nearest + margin;
 }
 
+/* The per-sample helpers below are written with inline_math.h's functions (the
+ * library's operations in its order: the same bits) so that the per-sample kernels make
+ * no library call on their common path (docs/design.md §4.5, "Cost on PoCL"). */
+
+/* length(v), inline where its squared length is a normal finite float (inline_length's
+ * path, the library's too); the library's own rescaling for the rest. */
+ALWAYS_INLINE float length_exact(float3 v)
+{
+    float squared = inline_dot(v, v);
+    return squared >= 1.17549435e-38f && squared <= 3.40282347e38f ? inline_sqrt(squared) : length(v);
+}
+
+/* camera_surface_point (lighting.h) with inline math: view_ray's direction has a squared
+ * length ≥ 1 (forward is a unit vector orthogonal to right and up), inline_normalize's path. */
+ALWAYS_INLINE int surface_point(global const frame_t* frame, global const view_t* views,
+                                global const uint* camera_depth, global const int* tri_id,
+                                global const float4* tri_normal, global const float2* offsets, int sample,
+                                float3* p, float3* n)
+{
+    int pixel = sample / frame->spp;
+    int x = pixel % frame->width, y = pixel / frame->width;
+    float distance = as_float(camera_depth[sample]);
+    int tri = tri_id[sample];
+    if (tri < 0 || distance > frame->far) return 0;
+    float2 s = view_screen(views, x, y, offsets[sample % frame->spp]);
+    float3 right = views->right.xyz * (s.x * views->scale_x);
+    float3 up = views->up.xyz * (s.y * views->scale_y);
+    float3 origin, dir;
+    if (views->projection == PROJECTION_PERSPECTIVE) {
+        origin = views->origin.xyz;
+        dir = inline_normalize(views->forward.xyz + right + up);
+    } else {
+        origin = views->origin.xyz + right + up;
+        dir = views->forward.xyz;
+    }
+    *p = origin + distance * dir;
+    *n = tri_normal[tri].xyz;
+    if (inline_dot(*n, dir) > 0.0f) *n = -*n;
+    return 1;
+}
+
+/* light_view_index (lighting.h) with inline math. */
+ALWAYS_INLINE int light_view_of(global const light_t* light, float3 p)
+{
+    if (light->view_count == 1) return light->first_view;
+    float3 w = p - light->position.xyz;
+    float ax = inline_fabs(w.x), ay = inline_fabs(w.y), az = inline_fabs(w.z);
+    int axis = (ax >= ay && ax >= az) ? 0 : (ay >= az ? 1 : 2);
+    float component = axis == 0 ? w.x : (axis == 1 ? w.y : w.z);
+    return light->first_view + 2 * axis + (component < 0.0f ? 1 : 0);
+}
+
+/* shadow_texel (lighting.h) with inline math. */
+ALWAYS_INLINE float map_texel(global const view_t* view, global const uint* shadow_depth, int tx, int ty)
+{
+    tx = inline_clamp_int(tx, 0, view->width - 1);
+    ty = inline_clamp_int(ty, 0, view->height - 1);
+    return as_float(shadow_depth[view->depth_offset + ty * view->width + tx]);
+}
+
 /* Whether the map says the sample is shadowed: every centre of the 3×3 texels around
  * `lookup` holds a blocker nearer than the bias (a hole smaller than a texel in an
  * occluder is missed here, the map's one approximation). */
-inline int blocked_all_around(global const light_t* light, global const view_t* views,
+ALWAYS_INLINE int blocked_all_around(global const light_t* light, global const view_t* views,
                               global const uint* shadow_depth, float3 lookup)
 {
-    global const view_t* view = views + light_view_index(light, lookup);
+    global const view_t* view = views + light_view_of(light, lookup);
     float2 texel;
     float depth;
     if (!view_project(view, lookup, &texel, &depth)) return 0;
@@ -459,7 +519,7 @@ inline int blocked_all_around(global const light_t* light, global const view_t* 
     int tx = (int)texel.x, ty = (int)texel.y;
     for (int j = -1; j <= 1; ++j)
         for (int i = -1; i <= 1; ++i)
-            if (depth <= shadow_texel(view, shadow_depth, tx + i, ty + j) + tolerance) return 0;
+            if (depth <= map_texel(view, shadow_depth, tx + i, ty + j) + tolerance) return 0;
     return 1;
 }
 
@@ -468,15 +528,15 @@ inline int blocked_all_around(global const light_t* light, global const view_t* 
  * away from the light and, on a smooth triangle, so does every vertex normal (flipped
  * with n), whose weighted sum is shade's shading normal. The margin keeps the float32
  * rounding of that sum from ever making shade's cosine positive where this says ≤ 0. */
-inline int turned_away(global const float4* tri_normal, global const float4* tri_vertex_normals, int tri, float3 n,
-                       float3 to_light)
+ALWAYS_INLINE int turned_away(global const float4* tri_normal, global const float4* tri_vertex_normals, int tri,
+                              float3 n, float3 to_light)
 {
     const float margin = -1e-4f;
-    if (dot(n, to_light) > margin) return 0;
+    if (inline_dot(n, to_light) > margin) return 0;
     if (tri_normal[tri].w == 0.0f) return 1;
-    float side = dot(n, tri_normal[tri].xyz) >= 0.0f ? 1.0f : -1.0f;
+    float side = inline_dot(n, tri_normal[tri].xyz) >= 0.0f ? 1.0f : -1.0f;
     for (int k = 0; k < 3; ++k)
-        if (side * dot(tri_vertex_normals[3 * tri + k].xyz, to_light) > margin) return 0;
+        if (side * inline_dot(tri_vertex_normals[3 * tri + k].xyz, to_light) > margin) return 0;
     return 1;
 }
 
@@ -484,14 +544,14 @@ inline int turned_away(global const float4* tri_normal, global const float4* tri
  * direction from p towards the light. Its three exp() only where they could decide it:
  * inside a spot's cone, some channel with power ≥ 1e-6, σt·d ≤ 30 and d² ≤ 1e10 is
  * ≥ 1e-29 for sure, a normal float, so non-zero. */
-inline int light_reaches(global const light_t* light, float3 sigma_t, float3 p, float3* to_light)
+ALWAYS_INLINE int light_reaches(global const light_t* light, float3 sigma_t, float3 p, float3* to_light)
 {
     if (light->type != LIGHT_DIRECTIONAL) {
         float3 w = p - light->position.xyz;
-        float d2 = dot(w, w);
-        float d = sqrt(d2);
+        float d2 = inline_dot(w, w);
+        float d = inline_sqrt(d2);
         *to_light = d > 0.0f ? -w / d : (float3)(0.0f, 1.0f, 0.0f);
-        if (light->type == LIGHT_SPOT && dot(w, light->direction.xyz) < light->cos_cone * d) return 0;
+        if (light->type == LIGHT_SPOT && inline_dot(w, light->direction.xyz) < light->cos_cone * d) return 0;
         float3 power = light->power.xyz, attenuation = sigma_t * d;
         if (d2 <= 1e10f && ((power.x >= 1e-6f && attenuation.x <= 30.0f) || (power.y >= 1e-6f && attenuation.y <= 30.0f)
                             || (power.z >= 1e-6f && attenuation.z <= 30.0f)))
@@ -503,11 +563,11 @@ inline int light_reaches(global const light_t* light, float3 sigma_t, float3 p, 
 
 /* Where the shadow ray leaves: on the light's side of the surface, as the exact
  * reference's does. */
-inline float3 shadow_ray_start(global const light_t* light, float3 p, float3 n, float3 to_light)
+ALWAYS_INLINE float3 shadow_ray_start(global const light_t* light, float3 p, float3 n, float3 to_light)
 {
-    float to_light_distance = light->type == LIGHT_DIRECTIONAL ? 0.0f : length(light->position.xyz - p);
-    float3 side = dot(n, to_light) >= 0.0f ? n : -n;
-    return p + side * (SHADOW_RAY_OFFSET_REL * (length(p) + to_light_distance));
+    float to_light_distance = light->type == LIGHT_DIRECTIONAL ? 0.0f : length_exact(light->position.xyz - p);
+    float3 side = inline_dot(n, to_light) >= 0.0f ? n : -n;
+    return p + side * (SHADOW_RAY_OFFSET_REL * (length_exact(p) + to_light_distance));
 }
 
 /* The part of the decision that needs no bound map, before it is drawn, one work-item per
@@ -531,18 +591,19 @@ kernel void visibility_prepare(global const frame_t* frame, global const view_t*
     int entry = sample * frame->light_count + l;
     visible[entry] = 1.0f;
     map_read[entry] = (int2)(MAP_TEXEL_NONE, 0);
-    float3 p, dir, n;
-    if (!camera_surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p, &dir, &n)) return;
+    float3 p, n;
+    if (!surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p, &n)) return;
     int tri = tri_id[sample];
     global const light_t* light = lights + l;
     float3 to_light;
-    int reaches = light_reaches(light, frame->sigma_t.xyz, p, &to_light) && !eye_in_lamp(light, frame->lamp_radius);
+    int reaches = light_reaches(light, frame->sigma_t.xyz, p, &to_light)
+                  && !(light->type != LIGHT_DIRECTIONAL && length_exact(light->position.xyz) < frame->lamp_radius);
     if (turned_away(tri_normal, tri_vertex_normals, tri, n, to_light)) {
         if (reaches) visible[entry] = 0.0f; /* shade weighs this light by a cosine ≤ 0: no map test, no ray */
         return;
     }
     float3 start = shadow_ray_start(light, p, n, to_light);
-    global const view_t* view = views + light_view_index(light, start);
+    global const view_t* view = views + light_view_of(light, start);
     float2 texel;
     float depth = 0.0f;
     int address = MAP_TEXEL_NONE;
@@ -586,7 +647,7 @@ kernel void visibility(global const frame_t* frame, global const view_t* views, 
     if (sample >= frame->width * frame->height * frame->spp) return;
     global float* out = visible + sample * frame->light_count;
     int tri = tri_id[sample];
-    float3 p, dir, n;
+    float3 p, n;
     int surface = 0; /* p and n worked out: only for samples the lit test leaves */
     for (int l = 0; l < frame->light_count; ++l) {
         if (out[l] != VISIBILITY_PENDING) continue;
@@ -603,24 +664,23 @@ kernel void visibility(global const frame_t* frame, global const view_t* views, 
         }
         if (read.x >= 0) {
             if (!surface)
-                surface = camera_surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p,
-                                               &dir, &n);
+                surface = surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p, &n);
             /* Lit when depth ≤ bound + min(bias, slack), both ≥ 0: the slack's trigonometry
              * only within the bias (same answer as computing it first). */
             if (depth <= bound_depth + SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth)) {
                 float3 to_light;
                 light_reaches(light, frame->sigma_t.xyz, p, &to_light);
                 float3 start = shadow_ray_start(light, p, n, to_light);
-                global const view_t* view = views + light_view_index(light, start);
+                global const view_t* view = views + light_view_of(light, start);
                 float reach = 0.0f; /* of the sample's triangle from the view's origin */
                 for (int k = 0; k < 3; ++k)
-                    reach = fmax(reach, length(tri_vertices[3 * tri + k].xyz - view->origin.xyz));
+                    reach = inline_fmax(reach, length_exact(tri_vertices[3 * tri + k].xyz - view->origin.xyz));
                 if (depth <= bound_depth + own_surface_slack(light, view, start, n, depth, reach)) {
                     out[l] = 1.0f;
                     continue;
                 }
             }
-            float3 lookup = p + n * shadow_texel_size(light, length(p - light->position.xyz));
+            float3 lookup = p + n * shadow_texel_size(light, length_exact(p - light->position.xyz));
             if (blocked_all_around(light, views, shadow_depth, lookup)) {
                 out[l] = 0.0f;
                 continue;
