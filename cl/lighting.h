@@ -28,14 +28,17 @@ inline float2 view_screen(global const view_t* view, int x, int y, float2 offset
                     1.0f - 2.0f * ((float)y + offset.y) / (float)view->height);
 }
 
-/* The ray of a view sample: origin and unit direction. */
-inline void view_ray(global const view_t* view, float2 s, float3* origin, float3* dir)
+/* The ray of a view sample: origin and unit direction. A perspective direction's squared
+ * length is at least 1 (forward is a unit vector orthogonal to right and up), the plain
+ * path of inline_normalize, which is the library's there (the same bits on PoCL, without
+ * a call: docs/design.md §4.5, "Cost on PoCL"). */
+ALWAYS_INLINE void view_ray(global const view_t* view, float2 s, float3* origin, float3* dir)
 {
     float3 right = view->right.xyz * (s.x * view->scale_x);
     float3 up = view->up.xyz * (s.y * view->scale_y);
     if (view->projection == PROJECTION_PERSPECTIVE) {
         *origin = view->origin.xyz;
-        *dir = normalize(view->forward.xyz + right + up);
+        *dir = inline_normalize(view->forward.xyz + right + up);
     } else {
         *origin = view->origin.xyz + right + up;
         *dir = view->forward.xyz;
@@ -45,7 +48,7 @@ inline void view_ray(global const view_t* view, float2 s, float3* origin, float3
 /* A camera sample's surface point p, its ray direction and its normal turned to face the
  * camera (surfaces are two-sided, as shade has them). Returns 0 where the sample sees no
  * surface (no triangle, or beyond far). */
-inline int camera_surface_point(global const frame_t* frame, global const view_t* views,
+ALWAYS_INLINE int camera_surface_point(global const frame_t* frame, global const view_t* views,
                                 global const uint* camera_depth, global const int* tri_id,
                                 global const float4* tri_normal, global const float2* offsets, int sample,
                                 float3* p, float3* dir, float3* n)
@@ -59,7 +62,7 @@ inline int camera_surface_point(global const frame_t* frame, global const view_t
     view_ray(views, view_screen(views, x, y, offsets[sample % frame->spp]), &origin, dir);
     *p = origin + distance * *dir;
     *n = tri_normal[tri].xyz;
-    if (dot(*n, *dir) > 0.0f) *n = -*n;
+    if (inline_dot(*n, *dir) > 0.0f) *n = -*n;
     return 1;
 }
 
@@ -156,21 +159,21 @@ ALWAYS_INLINE int spot_interval(global const light_t* light, float3 dir, float f
 
 /* The shadow-map view of a light that holds p: the cube face of p's major axis
  * (faces ordered +x, -x, +y, -y, +z, -z), or the single view. */
-inline int light_view_index(global const light_t* light, float3 p)
+ALWAYS_INLINE int light_view_index(global const light_t* light, float3 p)
 {
     if (light->view_count == 1) return light->first_view;
     float3 w = p - light->position.xyz;
-    float3 a = fabs(w);
+    float3 a = (float3)(inline_fabs(w.x), inline_fabs(w.y), inline_fabs(w.z));
     int axis = (a.x >= a.y && a.x >= a.z) ? 0 : (a.y >= a.z ? 1 : 2);
     float component = axis == 0 ? w.x : (axis == 1 ? w.y : w.z);
     return light->first_view + 2 * axis + (component < 0.0f ? 1 : 0);
 }
 
 /* Stored blocker depth at integer texel (tx, ty) of a view, clamped to the map. */
-inline float shadow_texel(global const view_t* view, global const uint* shadow_depth, int tx, int ty)
+ALWAYS_INLINE float shadow_texel(global const view_t* view, global const uint* shadow_depth, int tx, int ty)
 {
-    tx = clamp(tx, 0, view->width - 1);
-    ty = clamp(ty, 0, view->height - 1);
+    tx = inline_clamp_int(tx, 0, view->width - 1);
+    ty = inline_clamp_int(ty, 0, view->height - 1);
     return as_float(shadow_depth[view->depth_offset + ty * view->width + tx]);
 }
 

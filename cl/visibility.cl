@@ -457,61 +457,13 @@ ALWAYS_INLINE float length_exact(float3 v)
     return squared >= 1.17549435e-38f && squared <= 3.40282347e38f ? inline_sqrt(squared) : length(v);
 }
 
-/* camera_surface_point (lighting.h) with inline math: view_ray's direction has a squared
- * length ≥ 1 (forward is a unit vector orthogonal to right and up), inline_normalize's path. */
-ALWAYS_INLINE int surface_point(global const frame_t* frame, global const view_t* views,
-                                global const uint* camera_depth, global const int* tri_id,
-                                global const float4* tri_normal, global const float2* offsets, int sample,
-                                float3* p, float3* n)
-{
-    int pixel = sample / frame->spp;
-    int x = pixel % frame->width, y = pixel / frame->width;
-    float distance = as_float(camera_depth[sample]);
-    int tri = tri_id[sample];
-    if (tri < 0 || distance > frame->far) return 0;
-    float2 s = view_screen(views, x, y, offsets[sample % frame->spp]);
-    float3 right = views->right.xyz * (s.x * views->scale_x);
-    float3 up = views->up.xyz * (s.y * views->scale_y);
-    float3 origin, dir;
-    if (views->projection == PROJECTION_PERSPECTIVE) {
-        origin = views->origin.xyz;
-        dir = inline_normalize(views->forward.xyz + right + up);
-    } else {
-        origin = views->origin.xyz + right + up;
-        dir = views->forward.xyz;
-    }
-    *p = origin + distance * dir;
-    *n = tri_normal[tri].xyz;
-    if (inline_dot(*n, dir) > 0.0f) *n = -*n;
-    return 1;
-}
-
-/* light_view_index (lighting.h) with inline math. */
-ALWAYS_INLINE int light_view_of(global const light_t* light, float3 p)
-{
-    if (light->view_count == 1) return light->first_view;
-    float3 w = p - light->position.xyz;
-    float ax = inline_fabs(w.x), ay = inline_fabs(w.y), az = inline_fabs(w.z);
-    int axis = (ax >= ay && ax >= az) ? 0 : (ay >= az ? 1 : 2);
-    float component = axis == 0 ? w.x : (axis == 1 ? w.y : w.z);
-    return light->first_view + 2 * axis + (component < 0.0f ? 1 : 0);
-}
-
-/* shadow_texel (lighting.h) with inline math. */
-ALWAYS_INLINE float map_texel(global const view_t* view, global const uint* shadow_depth, int tx, int ty)
-{
-    tx = inline_clamp_int(tx, 0, view->width - 1);
-    ty = inline_clamp_int(ty, 0, view->height - 1);
-    return as_float(shadow_depth[view->depth_offset + ty * view->width + tx]);
-}
-
 /* Whether the map says the sample is shadowed: every centre of the 3×3 texels around
  * `lookup` holds a blocker nearer than the bias (a hole smaller than a texel in an
  * occluder is missed here, the map's one approximation). */
 ALWAYS_INLINE int blocked_all_around(global const light_t* light, global const view_t* views,
                               global const uint* shadow_depth, float3 lookup)
 {
-    global const view_t* view = views + light_view_of(light, lookup);
+    global const view_t* view = views + light_view_index(light, lookup);
     float2 texel;
     float depth;
     if (!view_project(view, lookup, &texel, &depth)) return 0;
@@ -519,7 +471,7 @@ ALWAYS_INLINE int blocked_all_around(global const light_t* light, global const v
     int tx = (int)texel.x, ty = (int)texel.y;
     for (int j = -1; j <= 1; ++j)
         for (int i = -1; i <= 1; ++i)
-            if (depth <= map_texel(view, shadow_depth, tx + i, ty + j) + tolerance) return 0;
+            if (depth <= shadow_texel(view, shadow_depth, tx + i, ty + j) + tolerance) return 0;
     return 1;
 }
 
@@ -591,8 +543,8 @@ kernel void visibility_prepare(global const frame_t* frame, global const view_t*
     int entry = sample * frame->light_count + l;
     visible[entry] = 1.0f;
     map_read[entry] = (int2)(MAP_TEXEL_NONE, 0);
-    float3 p, n;
-    if (!surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p, &n)) return;
+    float3 p, dir, n;
+    if (!camera_surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p, &dir, &n)) return;
     int tri = tri_id[sample];
     global const light_t* light = lights + l;
     float3 to_light;
@@ -603,7 +555,7 @@ kernel void visibility_prepare(global const frame_t* frame, global const view_t*
         return;
     }
     float3 start = shadow_ray_start(light, p, n, to_light);
-    global const view_t* view = views + light_view_of(light, start);
+    global const view_t* view = views + light_view_index(light, start);
     float2 texel;
     float depth = 0.0f;
     int address = MAP_TEXEL_NONE;
@@ -647,7 +599,7 @@ kernel void visibility(global const frame_t* frame, global const view_t* views, 
     if (sample >= frame->width * frame->height * frame->spp) return;
     global float* out = visible + sample * frame->light_count;
     int tri = tri_id[sample];
-    float3 p, n;
+    float3 p, dir, n;
     int surface = 0; /* p and n worked out: only for samples the lit test leaves */
     for (int l = 0; l < frame->light_count; ++l) {
         if (out[l] != VISIBILITY_PENDING) continue;
@@ -664,14 +616,15 @@ kernel void visibility(global const frame_t* frame, global const view_t* views, 
         }
         if (read.x >= 0) {
             if (!surface)
-                surface = surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p, &n);
+                surface = camera_surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p,
+                                               &dir, &n);
             /* Lit when depth ≤ bound + min(bias, slack), both ≥ 0: the slack's trigonometry
              * only within the bias (same answer as computing it first). */
             if (depth <= bound_depth + SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth)) {
                 float3 to_light;
                 light_reaches(light, frame->sigma_t.xyz, p, &to_light);
                 float3 start = shadow_ray_start(light, p, n, to_light);
-                global const view_t* view = views + light_view_of(light, start);
+                global const view_t* view = views + light_view_index(light, start);
                 float reach = 0.0f; /* of the sample's triangle from the view's origin */
                 for (int k = 0; k < 3; ++k)
                     reach = inline_fmax(reach, length_exact(tri_vertices[3 * tri + k].xyz - view->origin.xyz));
