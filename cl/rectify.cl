@@ -69,9 +69,12 @@ kernel void rectify_bounds(global const frame_t* frame, global const view_t* vie
         float_lanes dx = forward.x, dy = forward.y, dz = forward.z;
         if (perspective) {
             float_lanes along_right = sx * views->scale_x, along_up = sy * views->scale_y;
-            dx = dx + right.x * along_right + up.x * along_up;
-            dy = dy + right.y * along_right + up.y * along_up;
-            dz = dz + right.z * along_right + up.z * along_up;
+            /* products in their own statements, as view_ray's: no fused multiply-add */
+            float_lanes rx = right.x * along_right, ry = right.y * along_right, rz = right.z * along_right;
+            float_lanes ux = up.x * along_up, uy = up.y * along_up, uz = up.z * along_up;
+            dx = dx + rx + ux;
+            dy = dy + ry + uy;
+            dz = dz + rz + uz;
             float_lanes inverse = 1.0f / sqrt_lanes(squared_length_lanes(dx, dy, dz));
             dx *= inverse;
             dy *= inverse;
