@@ -2,7 +2,7 @@
  * light angle γ, the view angle β of the light ray's blocker, S[α, γ] (docs/design.md §2, §3).
  * Reads views, lights, shadow_depth, epipolar, slice_sides, texel_angles; writes level 0
  * of the min-max tree (float2 (S, S) per texel). rectify_bounds reads camera_depth and reduces the
- * β and γ ranges the visible rays need (as pseudo-angles, see pseudo_angle).
+ * β and γ ranges the visible rays need (as pseudo-angles, see pseudo_angle_lanes).
  *
  *   tree row α: | level 0: N texels | level 1: N/2 | level 2: N/4 | ... | 1 | (float2 min, max)
  *               0                   N            3N/2                    2N-1 */
@@ -24,14 +24,8 @@
 /* A stand-in for the angle θ ∈ [0, π] of (x, y), y ≥ 0, that rises with it: tan(θ/2) up to
  * π/2, 2 - cot(θ/2) above. rectify_bounds reduces it instead of θ and the host takes the arc
  * tangent of the extremes only (clrays/stages/rectify.py angle_of_pseudo): PoCL's atan2 cost
- * more than the rest of the kernel, twice per camera sample. */
-inline float pseudo_angle(float x, float y)
-{
-    float r = sqrt(x * x + y * y);
-    return x >= 0.0f ? (r + x > 0.0f ? y / (r + x) : 0.0f) : 2.0f - y / (r - x);
-}
-
-/* pseudo_angle on each lane, in the same operations (both sides computed, one kept). */
+ * more than the rest of the kernel, twice per camera sample.
+ * On each lane: both sides computed, one kept. */
 inline float_lanes pseudo_angle_lanes(float_lanes x, float_lanes y)
 {
     float_lanes r = sqrt_lanes(x * x + y * y);

@@ -137,7 +137,7 @@ def texel_angles(params: np.ndarray) -> np.ndarray:
 
 
 def angle_of_pseudo(q: float) -> float:
-    """The angle θ ∈ [0, π] of cl/rectify.cl pseudo_angle q: 2·atan(q) up to q = 1, π - 2·atan(2 - q)
+    """The angle θ ∈ [0, π] of cl/rectify.cl pseudo_angle_lanes q: 2·atan(q) up to q = 1, π - 2·atan(2 - q)
     above (q = 2 - cot(θ/2)); +inf (no camera sample) stays +inf."""
     if not math.isfinite(q):
         return q
