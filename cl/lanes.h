@@ -65,6 +65,14 @@ ALWAYS_INLINE float_lanes dot_lanes(float_lanes ax, float_lanes ay, float_lanes 
     return z + (x + y);
 }
 
+/* dot_lanes where both vectors vary by lane. */
+ALWAYS_INLINE float_lanes dot_lanes_of_lanes(float_lanes ax, float_lanes ay, float_lanes az, float_lanes bx,
+                                             float_lanes by, float_lanes bz)
+{
+    float_lanes x = ax * bx, y = ay * by, z = az * bz;
+    return z + (x + y);
+}
+
 ALWAYS_INLINE float_lanes squared_length_lanes(float_lanes ax, float_lanes ay, float_lanes az)
 {
     float_lanes x = ax * ax, y = ay * ay, z = az * az;

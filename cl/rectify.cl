@@ -2,119 +2,199 @@
  * light angle γ, the view angle β of the light ray's blocker, S[α, γ] (docs/design.md §2, §3).
  * Reads views, lights, shadow_depth, epipolar, slice_sides, texel_angles; writes level 0
  * of the min-max tree (float2 (S, S) per texel). rectify_bounds reads camera_depth and reduces the
- * β and γ ranges the visible rays need (as pseudo-angles, see pseudo_angle).
+ * β and γ ranges the visible rays need (as pseudo-angles, see pseudo_angle_lanes).
  *
  *   tree row α: | level 0: N texels | level 1: N/2 | level 2: N/4 | ... | 1 | (float2 min, max)
  *               0                   N            3N/2                    2N-1 */
 #include "lighting.h"
 #include "atan2_approx.h"
+#include "lanes.h"
 
 #define PI_F 3.14159265358979f
 
-/* Camera samples per rectify_bounds work-item (clrays/stages/rectify.py BOUNDS_CHUNK). */
+/* Camera samples per rectify_bounds work-item (clrays/stages/rectify.py BOUNDS_CHUNK), LANES
+ * at a time. */
 #ifndef BOUNDS_CHUNK
-#define BOUNDS_CHUNK 16
+#define BOUNDS_CHUNK 64
+#endif
+#if BOUNDS_CHUNK % LANES != 0
+#error "BOUNDS_CHUNK must be a multiple of LANES"
 #endif
 
 /* A stand-in for the angle θ ∈ [0, π] of (x, y), y ≥ 0, that rises with it: tan(θ/2) up to
  * π/2, 2 - cot(θ/2) above. rectify_bounds reduces it instead of θ and the host takes the arc
  * tangent of the extremes only (clrays/stages/rectify.py angle_of_pseudo): PoCL's atan2 cost
- * more than the rest of the kernel, twice per camera sample. */
-inline float pseudo_angle(float x, float y)
+ * more than the rest of the kernel, twice per camera sample.
+ * On each lane: both sides computed, one kept. */
+inline float_lanes pseudo_angle_lanes(float_lanes x, float_lanes y)
 {
-    float r = sqrt(x * x + y * y);
-    return x >= 0.0f ? (r + x > 0.0f ? y / (r + x) : 0.0f) : 2.0f - y / (r - x);
+    float_lanes r = sqrt_lanes(x * x + y * y);
+    float_lanes ahead = r + x > 0.0f ? y / (r + x) : 0.0f;
+    return x >= 0.0f ? ahead : 2.0f - y / (r - x);
 }
 
-/* One work-item per BOUNDS_CHUNK camera samples: it reduces their β and γ in registers and
- * then updates the three bounds, so the atomics do not serialize every sample on them. */
+/* One work-item per BOUNDS_CHUNK camera samples, LANES at a time as float8 (lanes.h; PoCL
+ * would run the scalar loop one sample at a time, docs/design.md §4.5): it reduces their β
+ * and γ in registers and then updates the three bounds, so the atomics do not serialize
+ * every sample on them. Each sample's ray is view_ray's and its β and γ are the scalar
+ * formulas' (docs/design.md §3), operation for operation: the bounds are the same bits. */
 kernel void rectify_bounds(global const frame_t* frame, global const view_t* views,
                            global const light_t* lights, global const epipolar_t* epipolar,
                            global const uint* camera_depth, global const float2* offsets,
                            global uint* bounds)
 {
     int samples = frame->width * frame->height * frame->spp;
-    int first = get_global_id(0) * BOUNDS_CHUNK, last = min(first + BOUNDS_CHUNK, samples);
+    int first = get_global_id(0) * BOUNDS_CHUNK;
     if (first >= samples) return;
     int directional = lights[epipolar->light_index].type == LIGHT_DIRECTIONAL;
-    float q_beta_min = INFINITY, q_beta_max = 0.0f, gamma_max = 0.0f;
-    /* The chunk's pixel (x, y) and sample within it advance by counting: three integer divisions
-     * per sample cost PoCL 6 % of the kernel (bench/RESULTS.md, host stages). */
-    int spp = frame->spp, width = frame->width;
-    int pixel = first / spp, sub = first - pixel * spp;
-    int x = pixel % width, y = pixel / width;
-    for (int sample = first; sample < last; ++sample) {
-        float3 origin, dir;
-        view_ray(views, view_screen(views, x, y, offsets[sub]), &origin, &dir);
-        if (++sub == spp) {
-            sub = 0;
-            if (++x == width) {
-                x = 0;
-                ++y;
-            }
+    int perspective = views->projection == PROJECTION_PERSPECTIVE;
+    float3 forward = views->forward.xyz, right = views->right.xyz, up = views->up.xyz;
+    float3 axis = epipolar->axis.xyz;
+    float d_el = epipolar->d_el, far = frame->far, width = (float)views->width, height = (float)views->height;
+    global const float* offset = (global const float*)offsets;
+    float_lanes q_beta_min = INFINITY, q_beta_max = 0.0f, gamma_max = 0.0f;
+    for (int group = first; group < first + BOUNDS_CHUNK && group < samples; group += LANES) {
+        /* lanes past the last sample take the last one again: min and max do not mind */
+        int_lanes sample = min_lanes(group + (int_lanes)(0, 1, 2, 3, 4, 5, 6, 7), (int_lanes)(samples - 1));
+        int_lanes pixel = sample / frame->spp, sub = sample % frame->spp;
+        /* view_screen and view_ray (lighting.h) */
+        float_lanes sx = 2.0f * (float_of_lanes(pixel % frame->width) + LOAD_LANES(offset, 2 * sub)) / width - 1.0f;
+        float_lanes sy = 1.0f - 2.0f * (float_of_lanes(pixel / frame->width) + LOAD_LANES(offset, 2 * sub + 1)) / height;
+        float_lanes dx = forward.x, dy = forward.y, dz = forward.z;
+        if (perspective) {
+            float_lanes along_right = sx * views->scale_x, along_up = sy * views->scale_y;
+            /* products in their own statements, as view_ray's: no fused multiply-add */
+            float_lanes rx = right.x * along_right, ry = right.y * along_right, rz = right.z * along_right;
+            float_lanes ux = up.x * along_up, uy = up.y * along_up, uz = up.z * along_up;
+            dx = dx + rx + ux;
+            dy = dy + ry + uy;
+            dz = dz + rz + uz;
+            float_lanes inverse = 1.0f / sqrt_lanes(squared_length_lanes(dx, dy, dz));
+            dx *= inverse;
+            dy *= inverse;
+            dz *= inverse;
         }
-        float s = fmin(as_float(camera_depth[sample]), frame->far);
-        float cos_beta = dot(dir, epipolar->axis.xyz), sin_beta = length(cross(dir, epipolar->axis.xyz));
-        float q_beta = pseudo_angle(cos_beta, sin_beta);
+        float_lanes s = fmin_lanes(LOAD_LANES((global const float*)camera_depth, sample), (float_lanes)(far));
+        float_lanes cos_beta = dot_lanes(dx, dy, dz, axis.x, axis.y, axis.z);
+        float_lanes sin_beta = cross_length_lanes(dx, dy, dz, axis.x, axis.y, axis.z);
+        float_lanes q_beta = pseudo_angle_lanes(cos_beta, sin_beta);
         /* γ (docs/design.md §3): s·sin β for a directional light, else the angle at the light. */
-        float gamma = directional ? s * sin_beta : pseudo_angle(epipolar->d_el - s * cos_beta, s * sin_beta);
-        q_beta_min = fmin(q_beta_min, q_beta);
-        q_beta_max = fmax(q_beta_max, q_beta);
-        gamma_max = fmax(gamma_max, gamma);
+        float_lanes gamma = directional ? s * sin_beta : pseudo_angle_lanes(d_el - s * cos_beta, s * sin_beta);
+        q_beta_min = fmin_lanes(q_beta_min, q_beta);
+        q_beta_max = fmax_lanes(q_beta_max, q_beta);
+        gamma_max = fmax_lanes(gamma_max, gamma);
+    }
+    float q_min = INFINITY, q_max = 0.0f, g_max = 0.0f;
+    for (int k = 0; k < LANES; ++k) {
+        q_min = inline_fmin(q_min, q_beta_min[k]);
+        q_max = inline_fmax(q_max, q_beta_max[k]);
+        g_max = inline_fmax(g_max, gamma_max[k]);
     }
     /* Non-negative floats order like their bit patterns, so uint atomics reduce them. */
-    atomic_min(bounds + 0, as_uint(q_beta_min));
-    atomic_max(bounds + 1, as_uint(q_beta_max));
-    atomic_max(bounds + 2, as_uint(gamma_max));
+    atomic_min(bounds + 0, as_uint(q_min));
+    atomic_max(bounds + 1, as_uint(q_max));
+    atomic_max(bounds + 2, as_uint(g_max));
 }
+
+/* A vector of component `component` of field `field` of each lane's view (views[index]). */
+#define VIEW_LANES(views, index, field, component)                                                         \
+    LOAD_LANES((global const float*)(views) + __builtin_offsetof(view_t, field) / 4 + (component),          \
+               (index) * (int)(sizeof(view_t) / 4))
+#define VIEW_INT_LANES(views, index, field) as_int8(VIEW_LANES(views, index, field, 0))
 
 /* slice_sides[α] = u·cos α + w·sin α at the slice's centre and texel_angles[γ] = (γ, cos γ,
  * sin γ) come from the host (clrays/stages/rectify.py slice_sides, texel_angles): the same for every
  * texel of a row or column, they cost the kernel no trigonometry. Texel centres, except
  * texel 0 at γ = 0: the eye's own light ray (through the eye, the same for every slice). A
  * ray straight away from the light (β → π) spans only γ < SIN_BETA_MIN·s, far less than
- * half a texel, and its visibility is that ray's. */
+ * half a texel, and its visibility is that ray's.
+ *
+ * One work-item per LANES texels of a slice, as float8 (lanes.h, docs/design.md §4.5): the
+ * operations of view_project, light_view_index and shadow_texel (lighting.h) in their order,
+ * so S is the same bits as one texel per work-item. */
 kernel void rectify(global const view_t* views, global const light_t* lights,
                     global const uint* shadow_depth, global const epipolar_t* epipolar,
                     global const float4* slice_sides, global const float4* texel_angles, global float2* tree)
 {
-    int texel = get_global_id(0), slice = get_global_id(1);
+    int first = get_global_id(0) * LANES, slice = get_global_id(1);
     global const epipolar_t* ep = epipolar;
-    if (texel >= ep->gamma_samples || slice >= ep->slices) return;
+    int n = ep->gamma_samples;
+    if (first >= n || slice >= ep->slices) return;
     global const light_t* light = lights + ep->light_index;
-    float4 angle = texel_angles[texel];
-    float gamma = angle.x, cos_gamma = angle.y, sin_gamma = angle.z;
+    /* lanes past the last texel compute the last one again, and store nothing */
+    int_lanes texel = min_lanes(first + (int_lanes)(0, 1, 2, 3, 4, 5, 6, 7), (int_lanes)(n - 1));
+    global const float* angles = (global const float*)texel_angles;
+    float_lanes gamma = LOAD_LANES(angles, 4 * texel), cos_gamma = LOAD_LANES(angles, 4 * texel + 1),
+                sin_gamma = LOAD_LANES(angles, 4 * texel + 2);
     float3 r = slice_sides[slice].xyz;
-    float blocker_beta;
+    float_lanes stored = INFINITY, blocker_beta;
     if (light->type == LIGHT_DIRECTIONAL) {
         /* Light ray: γ·r + t·ω. The orthographic map stores depth along -ω from its
          * origin o, so the blocker sits at t_b = -(depth + o·(-ω)); S = atan2(γ, t_b). */
         global const view_t* view = views + light->first_view;
-        float2 texel_xy;
-        float unused;
-        view_project(view, gamma * r, &texel_xy, &unused);
-        float stored = INFINITY;
-        if (texel_xy.x >= 0.0f && texel_xy.y >= 0.0f && texel_xy.x < (float)view->width && texel_xy.y < (float)view->height)
-            stored = shadow_texel(view, shadow_depth, (int)texel_xy.x, (int)texel_xy.y);
-        float t_blocker = -(stored + dot(view->origin.xyz, view->forward.xyz));
-        blocker_beta = stored == INFINITY ? PI_F : atan2_approx(gamma, t_blocker);
+        float3 origin = view->origin.xyz;
+        /* two statements, as view_project's p - origin: no fused multiply-add */
+        float_lanes px = gamma * r.x, py = gamma * r.y, pz = gamma * r.z;
+        float_lanes qx = px - origin.x, qy = py - origin.y, qz = pz - origin.z;
+        /* view_project, orthographic */
+        float_lanes x = dot_lanes(qx, qy, qz, view->right.x, view->right.y, view->right.z);
+        float_lanes y = dot_lanes(qx, qy, qz, view->up.x, view->up.y, view->up.z);
+        float_lanes texel_x = (x / view->scale_x + 1.0f) * 0.5f * (float)view->width;
+        float_lanes texel_y = (1.0f - y / view->scale_y) * 0.5f * (float)view->height;
+        int_lanes inside = texel_x >= 0.0f & texel_y >= 0.0f & texel_x < (float)view->width
+                           & texel_y < (float)view->height;
+        int_lanes tx = clamp_int_lanes(int_of_lanes(texel_x), 0, view->width - 1);
+        int_lanes ty = clamp_int_lanes(int_of_lanes(texel_y), 0, view->height - 1);
+        int_lanes index = inside ? view->depth_offset + ty * view->width + tx : view->depth_offset;
+        float_lanes depth = LOAD_LANES((global const float*)shadow_depth, index);
+        stored = inside ? depth : stored;
+        float t_offset = dot(view->origin.xyz, view->forward.xyz);
+        float_lanes t_blocker = -(stored + t_offset);
+        blocker_beta = stored == INFINITY ? PI_F : atan2_approx_lanes(gamma, t_blocker);
     } else {
         /* Light ray from l at angle γ to l → e, in slice α. */
-        float3 dir = -ep->axis.xyz * cos_gamma + r * sin_gamma;
-        {
-            /* Spot lights: outside the cone the map has no texel and the ray counts as
-             * unblocked; traverse clips each eye ray to the cone analytically, so the
-             * cone's edge is exact rather than a texel wide. */
-            float3 probe = light->position.xyz + dir;
-            global const view_t* view = views + light_view_index(light, probe);
-            float2 texel_xy;
-            float unused;
-            float stored = INFINITY;
-            if (view_project(view, probe, &texel_xy, &unused))
-                stored = shadow_texel(view, shadow_depth, (int)texel_xy.x, (int)texel_xy.y);
-            blocker_beta = stored == INFINITY ? PI_F
-                                              : atan2_approx(stored * sin_gamma, ep->d_el - stored * cos_gamma);
+        float3 axis = ep->axis.xyz;
+        float_lanes dir_x = -axis.x * cos_gamma + r.x * sin_gamma;
+        float_lanes dir_y = -axis.y * cos_gamma + r.y * sin_gamma;
+        float_lanes dir_z = -axis.z * cos_gamma + r.z * sin_gamma;
+        /* Spot lights: outside the cone the map has no texel and the ray counts as
+         * unblocked; traverse clips each eye ray to the cone analytically, so the
+         * cone's edge is exact rather than a texel wide. */
+        float3 l = light->position.xyz;
+        float_lanes px = l.x + dir_x, py = l.y + dir_y, pz = l.z + dir_z;
+        int_lanes view_index = light->first_view;
+        if (light->view_count != 1) {
+            /* light_view_index: the cube face of the probe's major axis */
+            float_lanes wx = px - l.x, wy = py - l.y, wz = pz - l.z;
+            float_lanes ax = fabs_lanes(wx), ay = fabs_lanes(wy), az = fabs_lanes(wz);
+            int_lanes axis_index = (ax >= ay & ax >= az) ? 0 : (ay >= az ? 1 : 2);
+            float_lanes component = axis_index == 0 ? wx : (axis_index == 1 ? wy : wz);
+            view_index = light->first_view + 2 * axis_index + (component < 0.0f ? 1 : 0);
         }
+        /* view_project, perspective (a spot light's view or a cube face) */
+        float_lanes qx = px - VIEW_LANES(views, view_index, origin, 0);
+        float_lanes qy = py - VIEW_LANES(views, view_index, origin, 1);
+        float_lanes qz = pz - VIEW_LANES(views, view_index, origin, 2);
+        float_lanes x = dot_lanes_of_lanes(qx, qy, qz, VIEW_LANES(views, view_index, right, 0),
+                                   VIEW_LANES(views, view_index, right, 1), VIEW_LANES(views, view_index, right, 2));
+        float_lanes y = dot_lanes_of_lanes(qx, qy, qz, VIEW_LANES(views, view_index, up, 0), VIEW_LANES(views, view_index, up, 1),
+                                   VIEW_LANES(views, view_index, up, 2));
+        float_lanes z = dot_lanes_of_lanes(qx, qy, qz, VIEW_LANES(views, view_index, forward, 0),
+                                   VIEW_LANES(views, view_index, forward, 1), VIEW_LANES(views, view_index, forward, 2));
+        int_lanes width = VIEW_INT_LANES(views, view_index, width), height = VIEW_INT_LANES(views, view_index, height);
+        float_lanes sx = x / (z * VIEW_LANES(views, view_index, scale_x, 0));
+        float_lanes sy = y / (z * VIEW_LANES(views, view_index, scale_y, 0));
+        float_lanes texel_x = (sx + 1.0f) * 0.5f * float_of_lanes(width);
+        float_lanes texel_y = (1.0f - sy) * 0.5f * float_of_lanes(height);
+        /* shadow_texel: truncated, then clamped to the map */
+        int_lanes tx = min_lanes(max_lanes(int_of_lanes(texel_x), (int_lanes)(0)), width - 1);
+        int_lanes ty = min_lanes(max_lanes(int_of_lanes(texel_y), (int_lanes)(0)), height - 1);
+        int_lanes in_front = !(z <= 0.0f);
+        int_lanes index = VIEW_INT_LANES(views, view_index, depth_offset) + (in_front ? ty * width + tx : 0);
+        float_lanes depth = LOAD_LANES((global const float*)shadow_depth, index);
+        stored = in_front ? depth : stored;
+        blocker_beta = stored == INFINITY ? PI_F : atan2_approx_lanes(stored * sin_gamma, ep->d_el - stored * cos_gamma);
     }
-    tree[(size_t)slice * 2 * ep->gamma_samples + texel] = (float2)(blocker_beta, blocker_beta);
+    global float* row = (global float*)(tree + (size_t)slice * 2 * n);
+    for (int k = 0; k < LANES && first + k < n; ++k) vstore2((float2)(blocker_beta[k], blocker_beta[k]), first + k, row);
 }

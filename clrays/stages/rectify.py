@@ -19,9 +19,12 @@ from ..inputs import FrameBuffers
 from .raster import RasterResult
 from ..scene.model import DirectionalLight
 
-# Camera samples one rectify_bounds work-item reduces (cl/rectify.cl): 16 and 32 measured
-# fastest at 1280×720 on PoCL (34–38 ms; 70–100 ms with 1–8 or with 64–1280).
-BOUNDS_CHUNK = 16
+# Camera samples (rectify_bounds) and texels (rectify) one work-item computes at a time, as
+# float8 lanes (cl/lanes.h).
+LANES = 8
+# Camera samples one rectify_bounds work-item reduces, LANES at a time (cl/rectify.cl); a
+# multiple of LANES.
+BOUNDS_CHUNK = 64
 
 
 @dataclass
@@ -134,7 +137,7 @@ def texel_angles(params: np.ndarray) -> np.ndarray:
 
 
 def angle_of_pseudo(q: float) -> float:
-    """The angle θ ∈ [0, π] of cl/rectify.cl pseudo_angle q: 2·atan(q) up to q = 1, π - 2·atan(2 - q)
+    """The angle θ ∈ [0, π] of cl/rectify.cl pseudo_angle_lanes q: 2·atan(q) up to q = 1, π - 2·atan(2 - q)
     above (q = 2 - cot(θ/2)); +inf (no camera sample) stays +inf."""
     if not math.isfinite(q):
         return q
@@ -150,7 +153,7 @@ def rectify(device: Device, buffers: FrameBuffers, rastered: RasterResult, light
     bounds = np.array([structs.DEPTH_EMPTY, 0, 0, 0], dtype=np.uint32)
     bounds_buffer = device.buffer(bounds)
     samples = buffers.inputs.samples
-    event = device.kernel("rectify", "rectify_bounds", {"BOUNDS_CHUNK": BOUNDS_CHUNK})(
+    event = device.kernel("rectify", "rectify_bounds", {"BOUNDS_CHUNK": BOUNDS_CHUNK, "LANES": LANES})(
         device.queue, (-(-samples // BOUNDS_CHUNK),), None, buffers.params, buffers.views, buffers.lights,
         frame_buffer, rastered.camera_depth, buffers.offsets, bounds_buffer)
     timer.add("rectify", event)
@@ -169,8 +172,8 @@ def rectify(device: Device, buffers: FrameBuffers, rastered: RasterResult, light
     tree = device.buffer(nbytes=8 * slices * 2 * n)
     sides = device.buffer(slice_sides(params), writable=False)
     angles = device.buffer(texel_angles(params), writable=False)
-    event = device.kernel("rectify", "rectify", {"BOUNDS_CHUNK": BOUNDS_CHUNK})(
-        device.queue, (n, slices), None, buffers.views, buffers.lights, rastered.shadow_depth, frame_buffer, sides,
+    event = device.kernel("rectify", "rectify", {"BOUNDS_CHUNK": BOUNDS_CHUNK, "LANES": LANES})(
+        device.queue, (-(-n // LANES), slices), None, buffers.views, buffers.lights, rastered.shadow_depth, frame_buffer, sides,
         angles, tree)
     timer.add("rectify", event)
     return Epipolar(params, frame_buffer, tree, float(beta_min), float(beta_max), float(gamma_max))
