@@ -11,6 +11,7 @@
 #define CLRAYS_LANES_H
 
 #include "inline_math.h"
+#include "atan2_approx.h"
 
 /* LANES comes from clrays/stages/sampling.py (-D); the vectors below are float8. */
 #ifndef LANES
@@ -103,16 +104,45 @@ ALWAYS_INLINE float_lanes atan2_approx_lanes(float_lanes y, float_lanes x)
     float_lanes ax = fabs_lanes(x), ay = fabs_lanes(y);
     float_lanes big = fmax_lanes(ax, ay), small = fmin_lanes(ax, ay);
     float_lanes t = big > 0.0f ? small / big : 0.0f;
-    int_lanes reduced = t > 0.41421356f;
+    int_lanes reduced = t > ATAN_REDUCE_ABOVE;
     float_lanes r = reduced ? (t - 1.0f) / (t + 1.0f) : t;
     float_lanes z = r * r;
-    float_lanes a =
-        (((8.05374449538e-2f * z - 1.38776856032e-1f) * z + 1.99777106478e-1f) * z - 3.33329491539e-1f) * z * r + r;
+    float_lanes a = ATAN_OF_REDUCED(r, z);
     a = reduced ? a + M_PI_4_F : a;
     a = ay > ax ? M_PI_2_F - a : a;
     a = x < 0.0f ? M_PI_F - a : a;
     return copysign_lanes(a, y);
 }
 
+
+/* The camera's ray direction for LANES camera samples: view_screen and view_ray
+ * (lighting.h) operation for operation, each product in its own statement as there (no
+ * fused multiply-add), so the same bits; an orthographic view's direction is forward.
+ * Needs common.h's frame_t and view_t (its includers have them). */
+ALWAYS_INLINE void camera_ray_lanes(global const frame_t* frame, global const view_t* views,
+                                    global const float2* offsets, int_lanes sample, float_lanes* dx,
+                                    float_lanes* dy, float_lanes* dz)
+{
+    int_lanes pixel = sample / frame->spp, sub = sample % frame->spp;
+    global const float* offset = (global const float*)offsets;
+    float_lanes sx = 2.0f * (float_of_lanes(pixel % frame->width) + LOAD_LANES(offset, 2 * sub)) / (float)views->width
+                     - 1.0f;
+    float_lanes sy = 1.0f - 2.0f * (float_of_lanes(pixel / frame->width) + LOAD_LANES(offset, 2 * sub + 1))
+                                / (float)views->height;
+    float3 forward = views->forward.xyz, right = views->right.xyz, up = views->up.xyz;
+    *dx = forward.x;
+    *dy = forward.y;
+    *dz = forward.z;
+    if (views->projection == PROJECTION_PERSPECTIVE) {
+        float_lanes along_right = sx * views->scale_x, along_up = sy * views->scale_y;
+        float_lanes rx = right.x * along_right, ry = right.y * along_right, rz = right.z * along_right;
+        float_lanes ux = up.x * along_up, uy = up.y * along_up, uz = up.z * along_up;
+        float_lanes x = *dx + rx + ux, y = *dy + ry + uy, z = *dz + rz + uz;
+        float_lanes inverse = 1.0f / sqrt_lanes(squared_length_lanes(x, y, z));
+        *dx = x * inverse;
+        *dy = y * inverse;
+        *dz = z * inverse;
+    }
+}
 
 #endif

@@ -47,33 +47,14 @@ kernel void rectify_bounds(global const frame_t* frame, global const view_t* vie
     int first = get_global_id(0) * BOUNDS_CHUNK;
     if (first >= samples) return;
     int directional = lights[epipolar->light_index].type == LIGHT_DIRECTIONAL;
-    int perspective = views->projection == PROJECTION_PERSPECTIVE;
-    float3 forward = views->forward.xyz, right = views->right.xyz, up = views->up.xyz;
     float3 axis = epipolar->axis.xyz;
-    float d_el = epipolar->d_el, far = frame->far, width = (float)views->width, height = (float)views->height;
-    global const float* offset = (global const float*)offsets;
+    float d_el = epipolar->d_el, far = frame->far;
     float_lanes q_beta_min = INFINITY, q_beta_max = 0.0f, gamma_max = 0.0f;
     for (int group = first; group < first + BOUNDS_CHUNK && group < samples; group += LANES) {
         /* lanes past the last sample take the last one again: min and max do not mind */
         int_lanes sample = min_lanes(group + (int_lanes)(0, 1, 2, 3, 4, 5, 6, 7), (int_lanes)(samples - 1));
-        int_lanes pixel = sample / frame->spp, sub = sample % frame->spp;
-        /* view_screen and view_ray (lighting.h) */
-        float_lanes sx = 2.0f * (float_of_lanes(pixel % frame->width) + LOAD_LANES(offset, 2 * sub)) / width - 1.0f;
-        float_lanes sy = 1.0f - 2.0f * (float_of_lanes(pixel / frame->width) + LOAD_LANES(offset, 2 * sub + 1)) / height;
-        float_lanes dx = forward.x, dy = forward.y, dz = forward.z;
-        if (perspective) {
-            float_lanes along_right = sx * views->scale_x, along_up = sy * views->scale_y;
-            /* products in their own statements, as view_ray's: no fused multiply-add */
-            float_lanes rx = right.x * along_right, ry = right.y * along_right, rz = right.z * along_right;
-            float_lanes ux = up.x * along_up, uy = up.y * along_up, uz = up.z * along_up;
-            dx = dx + rx + ux;
-            dy = dy + ry + uy;
-            dz = dz + rz + uz;
-            float_lanes inverse = 1.0f / sqrt_lanes(squared_length_lanes(dx, dy, dz));
-            dx *= inverse;
-            dy *= inverse;
-            dz *= inverse;
-        }
+        float_lanes dx, dy, dz;
+        camera_ray_lanes(frame, views, offsets, sample, &dx, &dy, &dz);
         float_lanes s = fmin_lanes(LOAD_LANES((global const float*)camera_depth, sample), (float_lanes)(far));
         float_lanes cos_beta = dot_lanes(dx, dy, dz, axis.x, axis.y, axis.z);
         float_lanes sin_beta = cross_length_lanes(dx, dy, dz, axis.x, axis.y, axis.z);

@@ -429,28 +429,8 @@ kernel void gather(global const frame_t* frame, global const view_t* views, glob
     int first = get_global_id(0) * LANES;
     /* lanes past the last sample compute the last one again, and store nothing */
     int_lanes sample = min_lanes(first + (int_lanes)(0, 1, 2, 3, 4, 5, 6, 7), (int_lanes)(samples - 1));
-    /* camera_ray (walk.h), a perspective and an orthographic view alike */
-    int_lanes pixel = sample / frame->spp;
-    int_lanes sub = sample % frame->spp;
-    global const float* offset = (global const float*)offsets;
-    float_lanes sx = 2.0f * (float_of_lanes(pixel % frame->width) + LOAD_LANES(offset, 2 * sub)) / (float)views->width
-                     - 1.0f;
-    float_lanes sy = 1.0f - 2.0f * (float_of_lanes(pixel / frame->width) + LOAD_LANES(offset, 2 * sub + 1))
-                                / (float)views->height;
-    float3 forward = views->forward.xyz, right = views->right.xyz, up = views->up.xyz;
-    float_lanes dx = forward.x, dy = forward.y, dz = forward.z;
-    if (views->projection == PROJECTION_PERSPECTIVE) {
-        float_lanes along_right = sx * views->scale_x, along_up = sy * views->scale_y;
-        float_lanes rx = right.x * along_right, ry = right.y * along_right, rz = right.z * along_right;
-        float_lanes ux = up.x * along_up, uy = up.y * along_up, uz = up.z * along_up;
-        dx = dx + rx + ux;
-        dy = dy + ry + uy;
-        dz = dz + rz + uz;
-        float_lanes inverse = 1.0f / sqrt_lanes(squared_length_lanes(dx, dy, dz));
-        dx *= inverse;
-        dy *= inverse;
-        dz *= inverse;
-    }
+    float_lanes dx, dy, dz; /* camera_ray (walk.h), a perspective and an orthographic view alike */
+    camera_ray_lanes(frame, views, offsets, sample, &dx, &dy, &dz);
     float_lanes distance = fmin_lanes(LOAD_LANES((global const float*)camera_depth, sample), (float_lanes)(frame->far));
     float3 axis = ep->axis.xyz, u = ep->u.xyz, w = ep->w.xyz;
     float_lanes alpha = atan2_approx_lanes(dot_lanes(dx, dy, dz, w.x, w.y, w.z), dot_lanes(dx, dy, dz, u.x, u.y, u.z));
