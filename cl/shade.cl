@@ -164,7 +164,16 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
     int_lanes pixel = (int_lanes)(first) + (int_lanes)(0, 1, 2, 3, 4, 5, 6, 7);
     int_lanes inside = pixel < pixels;
     pixel = inside ? pixel : (int_lanes)(first); /* lanes past the image redo the first, unstored */
-    int_lanes x = pixel % frame->width, y = pixel / frame->width;
+    /* x and y of each lane without a division per lane (integer vector division has no
+     * instruction): the first pixel's, then a step to the next row where a lane passes the
+     * width, as often as the width needs. Lanes past the image get coordinates past it, and
+     * read their buffers at the first pixel's samples. */
+    int width = frame->width;
+    int_lanes x = (int_lanes)(first % width) + (int_lanes)(0, 1, 2, 3, 4, 5, 6, 7), y = (int_lanes)(first / width);
+    for (int_lanes past = x >= width; any(past); past = x >= width) {
+        x = past ? x - width : x;
+        y = past ? y + 1 : y;
+    }
     float_lanes x_f = float_of_lanes(x), y_f = float_of_lanes(y);
     float3 sigma_t = frame->sigma_t.xyz;
     int light_count = frame->light_count;
