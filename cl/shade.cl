@@ -68,6 +68,17 @@ ALWAYS_INLINE vec_lanes gather_xyz(global const float4* array, int_lanes index, 
  * component, checked on all 2^32 inputs (bench/RESULTS.md, "shade in lanes"). */
 ALWAYS_INLINE float_lanes exp_lanes(float_lanes x) { return exp(x); }
 
+/* exp(-σt·d) of each channel. A grey medium (the same σt bits in the three channels, as every
+ * bench scene has) asks exp once: the same argument gives the same bits. */
+ALWAYS_INLINE vec_lanes attenuation_lanes(float3 sigma_t, float_lanes d)
+{
+    float_lanes red = exp_lanes(-sigma_t.x * d);
+    vec_lanes out = {red, red, red};
+    if (as_uint(sigma_t.y) != as_uint(sigma_t.x)) out.y = exp_lanes(-sigma_t.y * d);
+    if (as_uint(sigma_t.z) != as_uint(sigma_t.x)) out.z = exp_lanes(-sigma_t.z * d);
+    return out;
+}
+
 /* length(v) as the built-in, bit for bit: inline_length where |v|² is a normal float, the
  * library's call (which rescales) for the rare rest, shorter than 1e-19 or longer than 1e19. */
 ALWAYS_INLINE float exact_length(float3 v)
@@ -243,9 +254,9 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                     vec_lanes away = {-w.x / d, -w.y / d, -w.z / d};
                     to_light = select_lanes(d > 0.0f, away, splat_lanes((float3)(0.0f, 1.0f, 0.0f)));
                     float_lanes falloff = fmax_lanes(d2, 1e-30f);
-                    vec_lanes lit = {light->power.x * exp_lanes(-sigma_t.x * d) / falloff,
-                                     light->power.y * exp_lanes(-sigma_t.y * d) / falloff,
-                                     light->power.z * exp_lanes(-sigma_t.z * d) / falloff};
+                    vec_lanes attenuated = attenuation_lanes(sigma_t, d);
+                    vec_lanes lit = {light->power.x * attenuated.x / falloff, light->power.y * attenuated.y / falloff,
+                                     light->power.z * attenuated.z / falloff};
                     incident = lit;
                     if (light->type == LIGHT_SPOT) {
                         int_lanes outside = dot_lanes(w.x, w.y, w.z, light->direction.x, light->direction.y,
@@ -304,16 +315,16 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                                  albedo.z * irradiance.z * M_1_PI_F};
             surface = select_lanes(background, surface, lambert);
         }
-        vec_lanes in_scatter = gather_xyz(scatter, sample, 0);
+        vec_lanes in_scatter = gather_xyz(scatter, sample, 0), to_eye = attenuation_lanes(sigma_t, distance);
 #ifdef SHADE_TRANSPARENCY
         vec_lanes through = gather_xyz(transmittance, sample, 0), front = gather_xyz(in_front, sample, 0);
-        total.x += through.x * (surface.x * exp_lanes(-sigma_t.x * distance) + in_scatter.x) + front.x;
-        total.y += through.y * (surface.y * exp_lanes(-sigma_t.y * distance) + in_scatter.y) + front.y;
-        total.z += through.z * (surface.z * exp_lanes(-sigma_t.z * distance) + in_scatter.z) + front.z;
+        total.x += through.x * (surface.x * to_eye.x + in_scatter.x) + front.x;
+        total.y += through.y * (surface.y * to_eye.y + in_scatter.y) + front.y;
+        total.z += through.z * (surface.z * to_eye.z + in_scatter.z) + front.z;
 #else
-        total.x += surface.x * exp_lanes(-sigma_t.x * distance) + in_scatter.x;
-        total.y += surface.y * exp_lanes(-sigma_t.y * distance) + in_scatter.y;
-        total.z += surface.z * exp_lanes(-sigma_t.z * distance) + in_scatter.z;
+        total.x += surface.x * to_eye.x + in_scatter.x;
+        total.y += surface.y * to_eye.y + in_scatter.y;
+        total.z += surface.z * to_eye.z + in_scatter.z;
 #endif
     }
     float spp = (float)frame->spp;
