@@ -309,8 +309,7 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                 sum.z += incident.z * weight;
                 irradiance = select_lanes(lit, sum, irradiance);
             }
-            float_lanes albedo_w;
-            vec_lanes albedo = gather_xyz(tri_albedo, safe_tri, &albedo_w);
+            vec_lanes albedo = gather_xyz(tri_albedo, safe_tri, 0);
             vec_lanes lambert = {albedo.x * irradiance.x * M_1_PI_F, albedo.y * irradiance.y * M_1_PI_F,
                                  albedo.z * irradiance.z * M_1_PI_F};
             surface = select_lanes(background, surface, lambert);
