@@ -7,9 +7,17 @@
  * with surface_shadows filtered), light_textures and texels (a light's texture,
  * docs/light-textures.md), and with translucent objects the translucency stage's layers
  * (translucency.h); writes image (one
- * float4 per pixel, linear rgb). */
+ * float4 per pixel, linear rgb).
+ *
+ * Each work-item shades LANES (8) neighbouring pixels as float8 vectors (lanes.h), with the
+ * built-ins written out (inline_math.h): PoCL would run one pixel at a time, each dot,
+ * length or normalize a library call (docs/design.md §4.5, "Cost on PoCL"). Every lane does
+ * the operations of the one-pixel code in the same order, so the image is the same bit for
+ * bit; the rare paths (a textured light, the shadow map's test, translucent layers) call
+ * the shared functions lane by lane. */
 #include "light_texture.h"
 #include "translucency.h"
+#include "lanes.h"
 
 #define SURFACE_BIAS_TEXELS 1.5f /* depth tolerance of the surface shadow test */
 
@@ -23,30 +31,133 @@
 #define TRANSPARENCY_ARGS
 #endif
 
+/* A vector quantity over the lanes: each component a float8. */
+typedef struct {
+    float_lanes x, y, z;
+} vec_lanes;
+
+ALWAYS_INLINE vec_lanes splat_lanes(float3 v)
+{
+    vec_lanes out = {(float_lanes)(v.x), (float_lanes)(v.y), (float_lanes)(v.z)};
+    return out;
+}
+
+ALWAYS_INLINE float3 lane_of(vec_lanes v, int k) { return (float3)(v.x[k], v.y[k], v.z[k]); }
+
+ALWAYS_INLINE vec_lanes select_lanes(int_lanes condition, vec_lanes a, vec_lanes b)
+{
+    vec_lanes out = {condition ? a.x : b.x, condition ? a.y : b.y, condition ? a.z : b.z};
+    return out;
+}
+
+/* array[index].xyz and .w of each lane. */
+ALWAYS_INLINE vec_lanes gather_xyz(global const float4* array, int_lanes index, float_lanes* w)
+{
+    vec_lanes out;
+    for (int k = 0; k < LANES; ++k) {
+        float4 a = array[index[k]];
+        out.x[k] = a.x;
+        out.y[k] = a.y;
+        out.z[k] = a.z;
+        if (w) (*w)[k] = a.w;
+    }
+    return out;
+}
+
+/* exp of each lane: PoCL's float8 exp gives each lane the bits its float3 exp gives each
+ * component, checked on all 2^32 inputs (bench/RESULTS.md, "shade in lanes"). */
+ALWAYS_INLINE float_lanes exp_lanes(float_lanes x) { return exp(x); }
+
+/* exp(-σt·d) of each channel. A grey medium (the same σt bits in the three channels, as every
+ * bench scene has) asks exp once: the same argument gives the same bits. */
+ALWAYS_INLINE vec_lanes attenuation_lanes(float3 sigma_t, float_lanes d)
+{
+    float_lanes red = exp_lanes(-sigma_t.x * d);
+    vec_lanes out = {red, red, red};
+    if (as_uint(sigma_t.y) != as_uint(sigma_t.x)) out.y = exp_lanes(-sigma_t.y * d);
+    if (as_uint(sigma_t.z) != as_uint(sigma_t.x)) out.z = exp_lanes(-sigma_t.z * d);
+    return out;
+}
+
+/* length(v) as the built-in, bit for bit: inline_length where |v|² is a normal float, the
+ * library's call (which rescales) for the rare rest, shorter than 1e-19 or longer than 1e19. */
+ALWAYS_INLINE float exact_length(float3 v)
+{
+    float squared = inline_dot(v, v);
+    return squared >= 1.17549435e-38f && squared <= 3.40282347e38f ? inline_sqrt(squared) : length(v);
+}
+
+ALWAYS_INLINE float_lanes exact_length_lanes(vec_lanes v)
+{
+    float_lanes squared = squared_length_lanes(v.x, v.y, v.z);
+    float_lanes out = sqrt_lanes(squared);
+    int_lanes rare = !((squared >= 1.17549435e-38f) & (squared <= 3.40282347e38f));
+    if (any(rare))
+        for (int k = 0; k < LANES; ++k)
+            if (rare[k]) out[k] = length(lane_of(v, k));
+    return out;
+}
+
+#pragma OPENCL FP_CONTRACT OFF /* as the library's dot and cross (inline_math.h) */
+ALWAYS_INLINE float_lanes dot_vec_lanes(vec_lanes a, vec_lanes b)
+{
+    float_lanes x = a.x * b.x, y = a.y * b.y, z = a.z * b.z;
+    return z + (x + y);
+}
+
+ALWAYS_INLINE vec_lanes cross_lanes(vec_lanes a, vec_lanes b)
+{
+    vec_lanes out = {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+    return out;
+}
+#pragma OPENCL FP_CONTRACT ON
+
+ALWAYS_INLINE vec_lanes sub_lanes(vec_lanes a, vec_lanes b)
+{
+    vec_lanes out = {a.x - b.x, a.y - b.y, a.z - b.z};
+    return out;
+}
+
+ALWAYS_INLINE vec_lanes negate_lanes(vec_lanes a)
+{
+    vec_lanes out = {-a.x, -a.y, -a.z};
+    return out;
+}
+
 /* The shading normal of a smooth triangle where the sample ray meets it: its three vertex
  * normals weighted by the barycentric coordinates of the hit (Möller–Trumbore on the ray,
  * clamped to the triangle, as a sample by an edge may land just outside), normalised.
  * `flat` where that is undefined: a ray in the triangle's plane, or normals that cancel. */
-inline float3 smooth_normal(global const float4* tri_vertices, global const float4* tri_vertex_normals,
-                            int tri, float3 origin, float3 dir, float3 flat)
+ALWAYS_INLINE vec_lanes smooth_normal_lanes(global const float4* tri_vertices, global const float4* tri_vertex_normals,
+                                            int_lanes tri, vec_lanes origin, vec_lanes dir, vec_lanes flat)
 {
-    float3 v0 = tri_vertices[3 * tri].xyz;
-    float3 edge1 = tri_vertices[3 * tri + 1].xyz - v0, edge2 = tri_vertices[3 * tri + 2].xyz - v0;
-    float3 p = cross(dir, edge2);
-    float det = dot(edge1, p);
-    if (det == 0.0f) return flat;
-    float3 t = origin - v0;
-    float u = clamp(dot(t, p) / det, 0.0f, 1.0f);
-    float v = clamp(dot(dir, cross(t, edge1)) / det, 0.0f, 1.0f);
-    if (u + v > 1.0f) {
-        float sum = u + v;
-        u /= sum;
-        v /= sum;
-    }
-    float3 n = (1.0f - u - v) * tri_vertex_normals[3 * tri].xyz + u * tri_vertex_normals[3 * tri + 1].xyz
-               + v * tri_vertex_normals[3 * tri + 2].xyz;
-    float n_length = length(n);
-    return n_length > 0.0f ? n / n_length : flat;
+    vec_lanes v0 = gather_xyz(tri_vertices, 3 * tri, 0);
+    vec_lanes edge1 = sub_lanes(gather_xyz(tri_vertices, 3 * tri + 1, 0), v0);
+    vec_lanes edge2 = sub_lanes(gather_xyz(tri_vertices, 3 * tri + 2, 0), v0);
+    vec_lanes p = cross_lanes(dir, edge2);
+    float_lanes det = dot_vec_lanes(edge1, p);
+    vec_lanes t = sub_lanes(origin, v0);
+    float_lanes u = fmin_lanes(fmax_lanes(dot_vec_lanes(t, p) / det, 0.0f), 1.0f);
+    float_lanes v = fmin_lanes(fmax_lanes(dot_vec_lanes(dir, cross_lanes(t, edge1)) / det, 0.0f), 1.0f);
+    int_lanes over = u + v > 1.0f;
+    float_lanes sum = u + v;
+    u = over ? u / sum : u;
+    v = over ? v / sum : v;
+    vec_lanes n0 = gather_xyz(tri_vertex_normals, 3 * tri, 0), n1 = gather_xyz(tri_vertex_normals, 3 * tri + 1, 0),
+              n2 = gather_xyz(tri_vertex_normals, 3 * tri + 2, 0);
+    /* The same expression as the one-pixel code's float3 one, so that contraction fuses alike. */
+    vec_lanes n = {(1.0f - u - v) * n0.x + u * n1.x + v * n2.x, (1.0f - u - v) * n0.y + u * n1.y + v * n2.y,
+                   (1.0f - u - v) * n0.z + u * n1.z + v * n2.z};
+    float_lanes n_length = exact_length_lanes(n);
+    vec_lanes normalised = {n.x / n_length, n.y / n_length, n.z / n_length};
+    return select_lanes((det != 0.0f) & (n_length > 0.0f), normalised, flat);
+}
+
+/* The shadow lookup point of a surface point: offset along its normal by a texel, which keeps
+ * a lit surface from shadowing itself. */
+ALWAYS_INLINE float3 shadow_lookup(global const light_t* light, float3 p, float3 n)
+{
+    return p + n * shadow_texel_size(light, exact_length(p - light->position.xyz));
 }
 
 kernel void shade(global const frame_t* frame, global const view_t* views,
@@ -59,68 +170,163 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                   global const float4* texels, global float4* image TRANSLUCENCY_ARGS SURFACE_THROUGH_ARGS
                   TRANSPARENCY_ARGS)
 {
-    int pixel = get_global_id(0);
-    if (pixel >= frame->width * frame->height) return;
-    int x = pixel % frame->width, y = pixel / frame->width;
+    int pixels = frame->width * frame->height, first = get_global_id(0) * LANES;
+    if (first >= pixels) return;
+    int_lanes pixel = (int_lanes)(first) + (int_lanes)(0, 1, 2, 3, 4, 5, 6, 7);
+    int_lanes inside = pixel < pixels;
+    pixel = inside ? pixel : (int_lanes)(first); /* lanes past the image redo the first, unstored */
+    /* x and y of each lane without a division per lane (integer vector division has no
+     * instruction): the first pixel's, then a step to the next row where a lane passes the
+     * width, as often as the width needs. Lanes past the image get coordinates past it, and
+     * read their buffers at the first pixel's samples. */
+    int width = frame->width;
+    int_lanes x = (int_lanes)(first % width) + (int_lanes)(0, 1, 2, 3, 4, 5, 6, 7), y = (int_lanes)(first / width);
+    for (int_lanes past = x >= width; any(past); past = x >= width) {
+        x = past ? x - width : x;
+        y = past ? y + 1 : y;
+    }
+    float_lanes x_f = float_of_lanes(x), y_f = float_of_lanes(y);
     float3 sigma_t = frame->sigma_t.xyz;
-    float3 total = (float3)(0.0f);
+    int light_count = frame->light_count;
+    int map_test = frame->surface_shadows != SURFACE_SHADOWS_EXACT && frame->surface_shadows != SURFACE_SHADOWS_FILTERED;
+    vec_lanes total = splat_lanes((float3)(0.0f));
     for (int s = 0; s < frame->spp; ++s) {
-        int sample = pixel * frame->spp + s;
-        float3 origin, dir;
-        view_ray(views, view_screen(views, x, y, offsets[s]), &origin, &dir);
-        float distance = as_float(camera_depth[sample]);
-        int tri = tri_id[sample];
-        float3 surface;
-        if (tri < 0 || distance > frame->far) {
-            distance = frame->far;
-            surface = frame->background.xyz;
+        int_lanes sample = pixel * frame->spp + s;
+        /* view_screen and view_ray (lighting.h) on each lane */
+        float2 offset = offsets[s];
+        float_lanes screen_x = 2.0f * (x_f + offset.x) / (float)views->width - 1.0f;
+        float_lanes screen_y = 1.0f - 2.0f * (y_f + offset.y) / (float)views->height;
+        float_lanes right = screen_x * views->scale_x, up = screen_y * views->scale_y;
+        vec_lanes origin, dir;
+        vec_lanes right_v = {views->right.x * right, views->right.y * right, views->right.z * right};
+        vec_lanes up_v = {views->up.x * up, views->up.y * up, views->up.z * up};
+        if (views->projection == PROJECTION_PERSPECTIVE) {
+            origin = splat_lanes(views->origin.xyz);
+            vec_lanes v = {views->forward.x + right_v.x + up_v.x, views->forward.y + right_v.y + up_v.y,
+                           views->forward.z + right_v.z + up_v.z};
+            float_lanes inverse = 1.0f / sqrt_lanes(squared_length_lanes(v.x, v.y, v.z));
+            vec_lanes unit = {v.x * inverse, v.y * inverse, v.z * inverse};
+            dir = unit;
         } else {
-            float3 p = origin + distance * dir;
+            vec_lanes o = {views->origin.x + right_v.x + up_v.x, views->origin.y + right_v.y + up_v.y,
+                           views->origin.z + right_v.z + up_v.z};
+            origin = o;
+            dir = splat_lanes(views->forward.xyz);
+        }
+        float_lanes distance;
+        int_lanes tri;
+        for (int k = 0; k < LANES; ++k) {
+            distance[k] = as_float(camera_depth[sample[k]]);
+            tri[k] = tri_id[sample[k]];
+        }
+        int_lanes background = (tri < 0) | (distance > frame->far);
+        distance = background ? frame->far : distance;
+        vec_lanes surface = splat_lanes(frame->background.xyz);
+        if (!all(background)) {
+            int some_tri = 0; /* a triangle of the lanes that see one: the others read it, unused */
+            for (int k = LANES - 1; k >= 0; --k)
+                if (!background[k]) some_tri = tri[k];
+            int_lanes safe_tri = background ? (int_lanes)(some_tri) : tri;
+            vec_lanes p = {origin.x + distance * dir.x, origin.y + distance * dir.y, origin.z + distance * dir.z};
             /* n, the triangle's own normal, picks the side and offsets the shadow lookup;
              * the shading normal (n itself unless the triangle is smooth) weighs the light. */
-            float3 n = tri_normal[tri].xyz;
-            float3 shading = tri_normal[tri].w != 0.0f
-                                 ? smooth_normal(tri_vertices, tri_vertex_normals, tri, origin, dir, n)
-                                 : n;
-            if (dot(n, dir) > 0.0f) { /* two-sided: face the camera */
-                n = -n;
-                shading = -shading;
-            }
-            float3 irradiance = (float3)(0.0f);
-            for (int l = 0; l < frame->light_count; ++l) {
-                float3 to_light;
-                float3 incident = light_incident(lights + l, sigma_t, p, &to_light)
-                                  * light_texture(light_textures + l, texels, lights + l, p);
-                float cosine = dot(shading, to_light);
-                if (cosine <= 0.0f || incident.x + incident.y + incident.z == 0.0f) continue;
-                /* Normal offset by a texel keeps a lit surface from shadowing itself. */
-                float3 lookup = p + n * shadow_texel_size(lights + l, length(p - lights[l].position.xyz));
-                float visible;
-                if (eye_in_lamp(lights + l, frame->lamp_radius))
-                    visible = 1.0f;
-                else if (frame->surface_shadows == SURFACE_SHADOWS_EXACT
-                         || frame->surface_shadows == SURFACE_SHADOWS_FILTERED)
-                    visible = visible_exact[sample * frame->light_count + l];
+            float_lanes smooth;
+            vec_lanes n = gather_xyz(tri_normal, safe_tri, &smooth);
+            vec_lanes shading = n;
+            if (any(smooth != 0.0f))
+                shading = select_lanes(smooth != 0.0f,
+                                       smooth_normal_lanes(tri_vertices, tri_vertex_normals, safe_tri, origin, dir, n), n);
+            int_lanes facing_away = dot_vec_lanes(n, dir) > 0.0f; /* two-sided: face the camera */
+            n = select_lanes(facing_away, negate_lanes(n), n);
+            shading = select_lanes(facing_away, negate_lanes(shading), shading);
+            vec_lanes irradiance = splat_lanes((float3)(0.0f));
+            for (int l = 0; l < light_count; ++l) {
+                global const light_t* light = lights + l;
+                /* light_incident (lighting.h) on each lane */
+                vec_lanes to_light, incident;
+                if (light->type == LIGHT_DIRECTIONAL) {
+                    to_light = splat_lanes(-light->direction.xyz);
+                    incident = splat_lanes(light->power.xyz);
+                } else {
+                    vec_lanes w = sub_lanes(p, splat_lanes(light->position.xyz));
+                    float_lanes d2 = squared_length_lanes(w.x, w.y, w.z);
+                    float_lanes d = sqrt_lanes(d2);
+                    vec_lanes away = {-w.x / d, -w.y / d, -w.z / d};
+                    to_light = select_lanes(d > 0.0f, away, splat_lanes((float3)(0.0f, 1.0f, 0.0f)));
+                    float_lanes falloff = fmax_lanes(d2, 1e-30f);
+                    vec_lanes attenuated = attenuation_lanes(sigma_t, d);
+                    vec_lanes lit = {light->power.x * attenuated.x / falloff, light->power.y * attenuated.y / falloff,
+                                     light->power.z * attenuated.z / falloff};
+                    incident = lit;
+                    if (light->type == LIGHT_SPOT) {
+                        int_lanes outside = dot_lanes(w.x, w.y, w.z, light->direction.x, light->direction.y,
+                                                      light->direction.z) < light->cos_cone * d;
+                        incident = select_lanes(outside, splat_lanes((float3)(0.0f)), incident);
+                    }
+                }
+                if (light_textures[l].textured)
+                    for (int k = 0; k < LANES; ++k) {
+                        if (background[k]) continue;
+                        float3 factor = light_texture(light_textures + l, texels, light, lane_of(p, k));
+                        incident.x[k] *= factor.x;
+                        incident.y[k] *= factor.y;
+                        incident.z[k] *= factor.z;
+                    }
+                float_lanes cosine = dot_vec_lanes(shading, to_light);
+                int_lanes lit = !background & !((cosine <= 0.0f) | (incident.x + incident.y + incident.z == 0.0f));
+                if (!any(lit)) continue;
+                float_lanes visible = 1.0f;
+                if (light->type != LIGHT_DIRECTIONAL && exact_length(light->position.xyz) < frame->lamp_radius)
+                    visible = 1.0f; /* eye_in_lamp (lighting.h) */
+                else if (!map_test)
+                    visible = LOAD_LANES(visible_exact, sample * light_count + l);
                 else
-                    visible = shadow_visibility(lights + l, views, shadow_depth, lookup, SURFACE_BIAS_TEXELS,
-                                                frame->pcf);
+                    for (int k = 0; k < LANES; ++k)
+                        if (lit[k])
+                            visible[k] = shadow_visibility(light, views, shadow_depth,
+                                                           shadow_lookup(light, lane_of(p, k), lane_of(n, k)),
+                                                           SURFACE_BIAS_TEXELS, frame->pcf);
 #ifdef TRANSLUCENT_LAYERS /* through the translucent surfaces nearer the light (translucency.h) */
-                if (visible > 0.0f)
-                    incident *= has_surface_through
-                                    ? surface_through[sample * frame->light_count + l].xyz
-                                    : light_transmittance(lights + l, views, layer_depth, layer_clear, layer_stride,
-                                                          lookup, SURFACE_BIAS_TEXELS);
+                for (int k = 0; k < LANES; ++k) {
+                    if (!lit[k] || !(visible[k] > 0.0f)) continue;
+                    int at = sample[k] * light_count + l;
+                    float3 through = has_surface_through
+                                         ? surface_through[at].xyz
+                                         : light_transmittance(light, views, layer_depth, layer_clear, layer_stride,
+                                                               shadow_lookup(light, lane_of(p, k), lane_of(n, k)),
+                                                               SURFACE_BIAS_TEXELS);
+                    incident.x[k] *= through.x;
+                    incident.y[k] *= through.y;
+                    incident.z[k] *= through.z;
+                }
 #endif
-                irradiance += incident * (cosine * visible);
+                /* irradiance += incident · (cosine · visible) on the lit lanes, as one statement each
+                 * so that contraction fuses it as the one-pixel code's. */
+                float_lanes weight = cosine * visible;
+                vec_lanes sum = irradiance;
+                sum.x += incident.x * weight;
+                sum.y += incident.y * weight;
+                sum.z += incident.z * weight;
+                irradiance = select_lanes(lit, sum, irradiance);
             }
-            surface = tri_albedo[tri].xyz * irradiance * M_1_PI_F;
+            vec_lanes albedo = gather_xyz(tri_albedo, safe_tri, 0);
+            vec_lanes lambert = {albedo.x * irradiance.x * M_1_PI_F, albedo.y * irradiance.y * M_1_PI_F,
+                                 albedo.z * irradiance.z * M_1_PI_F};
+            surface = select_lanes(background, surface, lambert);
         }
+        vec_lanes in_scatter = gather_xyz(scatter, sample, 0), to_eye = attenuation_lanes(sigma_t, distance);
 #ifdef SHADE_TRANSPARENCY
-        total += transmittance[sample].xyz * (surface * exp(-sigma_t * distance) + scatter[sample].xyz)
-                 + in_front[sample].xyz;
+        vec_lanes through = gather_xyz(transmittance, sample, 0), front = gather_xyz(in_front, sample, 0);
+        total.x += through.x * (surface.x * to_eye.x + in_scatter.x) + front.x;
+        total.y += through.y * (surface.y * to_eye.y + in_scatter.y) + front.y;
+        total.z += through.z * (surface.z * to_eye.z + in_scatter.z) + front.z;
 #else
-        total += surface * exp(-sigma_t * distance) + scatter[sample].xyz;
+        total.x += surface.x * to_eye.x + in_scatter.x;
+        total.y += surface.y * to_eye.y + in_scatter.y;
+        total.z += surface.z * to_eye.z + in_scatter.z;
 #endif
     }
-    image[pixel] = (float4)(total / (float)frame->spp, 1.0f);
+    float spp = (float)frame->spp;
+    for (int k = 0; k < LANES; ++k)
+        if (inside[k]) image[pixel[k]] = (float4)(total.x[k] / spp, total.y[k] / spp, total.z[k] / spp, 1.0f);
 }

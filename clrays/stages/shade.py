@@ -8,6 +8,11 @@ from ..device import Device, StageTimer
 from ..inputs import FrameBuffers
 from .raster import RasterResult
 
+LANES = 8  # pixels per work-item, as float8 vectors (cl/shade.cl, cl/lanes.h)
+# Work-items per work-group: PoCL's own choice ran about 10 % slower at 1280×720 than 64, and
+# 256 no faster (bench/RESULTS.md, "shade in lanes"). The last group's extra items return.
+GROUP = 64
+
 
 def shade(device: Device, buffers: FrameBuffers, rastered: RasterResult, scatter, timer: StageTimer,
           visible=None, layers=None, surface_through=None, transparency=None) -> np.ndarray:
@@ -30,8 +35,9 @@ def shade(device: Device, buffers: FrameBuffers, rastered: RasterResult, scatter
     if transparency is not None:  # the camera's translucent films (clrays.stages.transparency)
         defines = {**(defines or {}), "SHADE_TRANSPARENCY": 1}
         extra = extra + tuple(transparency)
-    event = device.kernel("shade", "shade", defines)(
-        device.queue, (pixels,), None, buffers.params, buffers.views, buffers.lights, rastered.shadow_depth,
+    work_items = -(-pixels // (LANES * GROUP)) * GROUP
+    event = device.kernel("shade", "shade", {**(defines or {}), "LANES": LANES})(
+        device.queue, (work_items,), (GROUP,), buffers.params, buffers.views, buffers.lights, rastered.shadow_depth,
         rastered.camera_depth, rastered.tri_id, buffers.tri_vertices, buffers.tri_normal, buffers.tri_vertex_normals,
         buffers.tri_albedo, buffers.offsets, scatter, visible, buffers.light_textures, buffers.texels, out, *extra)
     timer.add("shade", event)
