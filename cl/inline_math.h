@@ -67,6 +67,15 @@ ALWAYS_INLINE float inline_length(float3 v)
     return squared >= 1.17549435e-38f ? inline_sqrt(squared) : 0.0f;
 }
 
+/* length(v) as the built-in, bit for bit, for any v: inline_length where |v|² is a normal
+ * float, the library's call (which rescales) for the rare rest, shorter than 1e-19 or longer
+ * than 1e19. */
+ALWAYS_INLINE float exact_length(float3 v)
+{
+    float squared = inline_dot(v, v);
+    return squared >= 1.17549435e-38f && squared <= 3.40282347e38f ? inline_sqrt(squared) : length(v);
+}
+
 /* normalize of a vector whose squared length is a normal float: v · (1 / |v|), the
  * library's path for it (ray directions: their squared length is near 1 or above). */
 ALWAYS_INLINE float3 inline_normalize(float3 v) { return v * (1.0f / inline_sqrt(inline_dot(v, v))); }

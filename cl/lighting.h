@@ -16,9 +16,9 @@
 /* The eye (eye space's origin) is inside a point or spot light's lamp, d_el → 0: then every
  * point the eye sees, the light sees too, and nothing visible is shadowed (docs/design.md §6). A
  * shadow-map test there would only add its texel-wide errors along every silhouette. */
-inline int eye_in_lamp(global const light_t* light, float lamp_radius)
+ALWAYS_INLINE int eye_in_lamp(global const light_t* light, float lamp_radius)
 {
-    return light->type != LIGHT_DIRECTIONAL && length(light->position.xyz) < lamp_radius;
+    return light->type != LIGHT_DIRECTIONAL && exact_length(light->position.xyz) < lamp_radius;
 }
 
 /* Screen coordinates of sample (x + ox, y + oy) in [-1, 1], y up. */

@@ -79,14 +79,6 @@ ALWAYS_INLINE vec_lanes attenuation_lanes(float3 sigma_t, float_lanes d)
     return out;
 }
 
-/* length(v) as the built-in, bit for bit: inline_length where |v|² is a normal float, the
- * library's call (which rescales) for the rare rest, shorter than 1e-19 or longer than 1e19. */
-ALWAYS_INLINE float exact_length(float3 v)
-{
-    float squared = inline_dot(v, v);
-    return squared >= 1.17549435e-38f && squared <= 3.40282347e38f ? inline_sqrt(squared) : length(v);
-}
-
 ALWAYS_INLINE float_lanes exact_length_lanes(vec_lanes v)
 {
     float_lanes squared = squared_length_lanes(v.x, v.y, v.z);
@@ -276,8 +268,8 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                 int_lanes lit = !background & !((cosine <= 0.0f) | (incident.x + incident.y + incident.z == 0.0f));
                 if (!any(lit)) continue;
                 float_lanes visible = 1.0f;
-                if (light->type != LIGHT_DIRECTIONAL && exact_length(light->position.xyz) < frame->lamp_radius)
-                    visible = 1.0f; /* eye_in_lamp (lighting.h) */
+                if (eye_in_lamp(light, frame->lamp_radius))
+                    visible = 1.0f;
                 else if (!map_test)
                     visible = LOAD_LANES(visible_exact, sample * light_count + l);
                 else

@@ -449,14 +449,6 @@ inline float own_surface_slack(global const light_t* light, global const view_t*
  * library's operations in its order: the same bits) so that the per-sample kernels make
  * no library call on their common path (docs/design.md §4.5, "Cost on PoCL"). */
 
-/* length(v), inline where its squared length is a normal finite float (inline_length's
- * path, the library's too); the library's own rescaling for the rest. */
-ALWAYS_INLINE float length_exact(float3 v)
-{
-    float squared = inline_dot(v, v);
-    return squared >= 1.17549435e-38f && squared <= 3.40282347e38f ? inline_sqrt(squared) : length(v);
-}
-
 /* Whether the map says the sample is shadowed: every centre of the 3×3 texels around
  * `lookup` holds a blocker nearer than the bias (a hole smaller than a texel in an
  * occluder is missed here, the map's one approximation). */
@@ -517,9 +509,9 @@ ALWAYS_INLINE int light_reaches(global const light_t* light, float3 sigma_t, flo
  * reference's does. */
 ALWAYS_INLINE float3 shadow_ray_start(global const light_t* light, float3 p, float3 n, float3 to_light)
 {
-    float to_light_distance = light->type == LIGHT_DIRECTIONAL ? 0.0f : length_exact(light->position.xyz - p);
+    float to_light_distance = light->type == LIGHT_DIRECTIONAL ? 0.0f : exact_length(light->position.xyz - p);
     float3 side = inline_dot(n, to_light) >= 0.0f ? n : -n;
-    return p + side * (SHADOW_RAY_OFFSET_REL * (length_exact(p) + to_light_distance));
+    return p + side * (SHADOW_RAY_OFFSET_REL * (exact_length(p) + to_light_distance));
 }
 
 /* The part of the decision that needs no bound map, before it is drawn, one work-item per
@@ -549,7 +541,7 @@ kernel void visibility_prepare(global const frame_t* frame, global const view_t*
     global const light_t* light = lights + l;
     float3 to_light;
     int reaches = light_reaches(light, frame->sigma_t.xyz, p, &to_light)
-                  && !(light->type != LIGHT_DIRECTIONAL && length_exact(light->position.xyz) < frame->lamp_radius);
+                  && !eye_in_lamp(light, frame->lamp_radius);
     if (turned_away(tri_normal, tri_vertex_normals, tri, n, to_light)) {
         if (reaches) visible[entry] = 0.0f; /* shade weighs this light by a cosine ≤ 0: no map test, no ray */
         return;
@@ -627,13 +619,13 @@ kernel void visibility(global const frame_t* frame, global const view_t* views, 
                 global const view_t* view = views + light_view_index(light, start);
                 float reach = 0.0f; /* of the sample's triangle from the view's origin */
                 for (int k = 0; k < 3; ++k)
-                    reach = inline_fmax(reach, length_exact(tri_vertices[3 * tri + k].xyz - view->origin.xyz));
+                    reach = inline_fmax(reach, exact_length(tri_vertices[3 * tri + k].xyz - view->origin.xyz));
                 if (depth <= bound_depth + own_surface_slack(light, view, start, n, depth, reach)) {
                     out[l] = 1.0f;
                     continue;
                 }
             }
-            float3 lookup = p + n * shadow_texel_size(light, length_exact(p - light->position.xyz));
+            float3 lookup = p + n * shadow_texel_size(light, exact_length(p - light->position.xyz));
             if (blocked_all_around(light, views, shadow_depth, lookup)) {
                 out[l] = 0.0f;
                 continue;
