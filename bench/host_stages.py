@@ -26,15 +26,17 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 SCENES = ("demo", "bunny", "behind", "sun")
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from arguments import frame_count, image_size  # noqa: E402  (bench/, beside this script; no clrays import)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("scenes", nargs="*", default=SCENES, help="scene names in scenes/ (default: the bench four)")
     parser.add_argument("--repo", type=Path, default=REPO, help="the source tree whose clrays runs")
-    parser.add_argument("--size", default="1280x720", help="WxH (default 1280x720)")
-    parser.add_argument("--frames", type=int, default=5, help="timed frames per scene (default 5)")
-    parser.add_argument("--builds", type=int, default=9, help="integrand rebuilds per scene (default 9)")
+    parser.add_argument("--size", type=image_size, default="1280x720", help="WxH (default 1280x720)")
+    parser.add_argument("--frames", type=frame_count, default=5, help="timed frames per scene (default 5)")
+    parser.add_argument("--builds", type=frame_count, default=9, help="integrand rebuilds per scene (default 9)")
     parser.add_argument("--against", type=Path, help="another source tree whose table build runs in turns")
     args = parser.parse_args()
     width, height = (int(v) for v in args.size.split("x"))

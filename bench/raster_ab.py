@@ -25,6 +25,8 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 SCENES = ("demo", "bunny", "behind", "sun")
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from arguments import frame_count, image_size  # noqa: E402  (bench/, beside this script; no clrays import)
 
 
 def child(tree: Path, size: str, names: list[str]) -> None:
@@ -88,8 +90,8 @@ def child(tree: Path, size: str, names: list[str]) -> None:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repo", type=Path, required=True, help="the other source tree (A); this one is B")
-    parser.add_argument("--size", default="1280x720", help="image WxH (default 1280x720)")
-    parser.add_argument("--rounds", type=int, default=11, help="frames per scene and tree (default 11)")
+    parser.add_argument("--size", type=image_size, default="1280x720", help="image WxH (default 1280x720)")
+    parser.add_argument("--rounds", type=frame_count, default=11, help="frames per scene and tree (default 11)")
     parser.add_argument("scenes", nargs="*", default=list(SCENES))
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()

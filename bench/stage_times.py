@@ -24,26 +24,12 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from arguments import frame_count, image_size  # noqa: E402  (bench/, beside this script)
 from clrays.scene.load import load_scene  # noqa: E402
 from clrays.session import Renderer  # noqa: E402
 
 SCENES = ("demo", "bunny", "behind", "sun")
 STAGES = ("raster", "rectify", "minmax", "integrand", "traverse", "visibility", "bvh", "shade")
-
-
-def image_size(text: str) -> str:
-    """`--size`: WxH, both positive integers (argparse prints the error in one line)."""
-    parts = text.split("x")
-    if len(parts) != 2 or not all(part.isdigit() and int(part) > 0 for part in parts):
-        raise argparse.ArgumentTypeError(f"expected WxH, e.g. 1280x720, got {text!r}")
-    return text
-
-
-def frame_count(text: str) -> int:
-    """`--frames`: a positive integer."""
-    if not text.isdigit() or int(text) < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
-    return int(text)
 
 
 def frame_arguments(description: str, size: str, frames: int) -> argparse.ArgumentParser:

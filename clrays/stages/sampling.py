@@ -166,7 +166,6 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
     return SampleCounts(computed, samples - fixed_up, fixed_up)
 
 
-
 def fixup_list(device: Device, fixup_flags, samples: int, run) -> tuple[object, int]:
     """(the fix-up list, its length) from gather's flags: each block of FIXUP_BLOCK camera
     samples counts its flagged ones, and lists them from the prefix sum of the counts
