@@ -96,6 +96,14 @@ class FrameInputs:
         return self.scene.image.width * self.scene.image.height * self.scene.image.spp
 
 
+def padded_float32(rows: np.ndarray) -> np.ndarray:
+    """(n, 3) rows as the device's float4: cast to float32 into a zeroed (n, 4) array, with
+    no float64 copy between (a 75 k-triangle mesh's vertices are 225 k rows a frame)."""
+    out = np.zeros((len(rows), 4), dtype=np.float32)
+    out[:, :3] = rows
+    return out
+
+
 def frame_inputs(scene: Scene) -> FrameInputs:
     """Pack a scene into the device structs, in eye space; sizes the scene leaves unset
     are derived from its image first (`inputs.scene` holds them)."""
@@ -187,11 +195,10 @@ def frame_inputs(scene: Scene) -> FrameInputs:
     normals = np.cross(tris[:drawn, 1] - tris[:drawn, 0], tris[:drawn, 2] - tris[:drawn, 0])
     length = np.linalg.norm(normals, axis=1, keepdims=True)
     normals = np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
-    pad = lambda a: np.concatenate([a, np.zeros((len(a), 1))], axis=1).astype(np.float32)  # noqa: E731
     smooth = scene.geometry.smooth[:drawn]  # a relief is flat
-    tri_normal = pad(normals)
+    tri_normal = padded_float32(normals)
     tri_normal[:, 3] = smooth  # the shade kernel's flag: interpolate the vertex normals
-    tri_albedo = pad(scene.geometry.albedo[:drawn])
+    tri_albedo = padded_float32(scene.geometry.albedo[:drawn])
     if drawn < scene.geometry.count:  # the reliefs' faces, after the others (place_reliefs)
         faces = [relief_faces(record, scene.geometry) for record in scene.geometry.reliefs]
         tri_normal = np.concatenate([tri_normal] + [normal for normal, _ in faces])
@@ -205,9 +212,9 @@ def frame_inputs(scene: Scene) -> FrameInputs:
         lights=np.array(lights, dtype=structs.light_dtype) if lights else np.zeros(1, structs.light_dtype),
         params=params,
         offsets=sample_offsets(image.spp).astype(np.float32),
-        tri_vertices=pad(tris.reshape(-1, 3)),
+        tri_vertices=padded_float32(tris.reshape(-1, 3)),
         tri_normal=tri_normal,
-        tri_vertex_normals=pad(vertex_normals),
+        tri_vertex_normals=padded_float32(vertex_normals),
         tri_albedo=tri_albedo,
         shadow_texels=texels,
         light_anchor_ws=np.array(anchors, dtype=np.float64).reshape(-1, 3),
@@ -290,7 +297,7 @@ def _light_pass_inputs(inputs: FrameInputs, light_index: int, triangles: int) ->
         views=np.concatenate([inputs.views[:1], views]),
         view_needed=np.concatenate([[True], inputs.view_needed[first:first + count]]),
         lights=light,
-        tri_vertices=np.concatenate([vertices, np.zeros((len(vertices), 1))], axis=1).astype(np.float32),
+        tri_vertices=padded_float32(vertices),
         shadow_texels=texels,
         light_anchor_ws=anchor.reshape(1, 3),
     )

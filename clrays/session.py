@@ -145,8 +145,9 @@ class Renderer:
         status = record.status() or {stage: REUSED for stage in stages}
         device_bytes = self._device.allocated_bytes if self._device is not None else 0
         wall_ms = (time.perf_counter() - start) * 1e3
-        return RenderResult(image.copy(), method, timer.milliseconds(), wall_ms, device_bytes, status,
-                            timer.host_labels, scene.render, textures, samples)
+        # A kept frame's image is shared with the cache: the caller gets a copy to change.
+        return RenderResult(image.copy() if use_cache else image, method, timer.milliseconds(), wall_ms,
+                            device_bytes, status, timer.host_labels, scene.render, textures, samples)
 
     def _frame(self, scene: Scene, method: str, reuse: Reuse, timer: StageTimer, progress: bool):
         """(image, stage labels, epipolar texture sizes, sample counts) of one frame: the
