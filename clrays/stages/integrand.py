@@ -224,44 +224,50 @@ def _row_integrand(kind, consts, beta, x, cells=None) -> np.ndarray:
         # Rows are written in δ = π-β (sinβ = sinδ, β+γ = π-(1-x)δ); the floor keeps the
         # β = π row finite, where K tends to ρ(-1)·exp(-σt·d_el·(1+x)/(1-x)).
         delta = np.maximum(math.pi - beta, 1e-150)
+        # Half angles: sinβ + sinγ = 2·sin((1+x)δ/2)·cos((1-x)δ/2) and sin(β+γ) =
+        # 2·sin((1-x)δ/2)·cos((1-x)δ/2), so the ratio is sin((1+x)δ/2)/sin((1-x)δ/2), and
+        # cos(β+γ) = 2·sin²((1-x)δ/2) - 1: two sines per node, no cosine.
         if cells is None:
-            angle = (1.0 - x) * delta  # (1-x)·δ = π - (β+γ)
-            ratio = np.sin(x * delta)
-            ratio += np.sin(delta)
-            ratio /= np.sin(angle)  # (sinβ + sinγ) / sin(β+γ)
-            cos_angle = np.cos(angle, out=angle)
+            ratio = np.sin((1.0 + x) * (0.5 * delta))
+            far = np.sin((1.0 - x) * (0.5 * delta))
         else:
-            ratio, cos_angle = _point_angles(delta, *cells)
-        phase = _hg_phase_in_place(np.negative(cos_angle, out=cos_angle), g)  # ρ(cos(β+γ))
+            ratio, far = _point_half_sines(delta, *cells)
+        ratio /= far  # (sinβ + sinγ) / sin(β+γ)
+        # HG denominator 1 + g² - 2g·cos(β+γ) = (1+g)² - 4g·sin²((1-x)δ/2).
+        d = np.multiply(far, far, out=far)
+        d *= -4.0 * g
+        d += (1.0 + g) * (1.0 + g)
+        falloff = np.sqrt(d)
+        falloff *= d  # d·√d: no pow()
+        scale = (1.0 - g * g) / (4.0 * math.pi * d_el)  # ρ's numerator and 1/d_el
         out = np.empty((len(consts),) + ratio.shape)
         for c, row in enumerate(out):
             np.multiply(ratio, -sigma_t[c] * d_el, out=row)
             np.exp(row, out=row)
-            row *= amplitude[c] * phase
-            row /= d_el
+            row /= falloff
+            row *= amplitude[c] * scale
         return out
     s_end = consts[:, C_S_END, None, None]
     return amplitude[:, None, None] * hg_phase(np.cos(beta), g) * np.exp(-sigma_t[:, None, None] * (x * s_end))
 
 
-def _point_angles(delta, centres, offsets) -> tuple[np.ndarray, np.ndarray]:
-    """(sinβ + sinγ)/sin(β+γ) and cos((1-x)·δ) on x = centres[:, None] + offsets[None, :]
-    (flattened) for each row's δ = π-β, from sin and cos of centres·δ and offsets·δ:
-    sin(a+b) = sin a·cos b + cos a·sin b, and (1-x)·δ = δ - x·δ likewise."""
+def _point_half_sines(delta, centres, offsets) -> tuple[np.ndarray, np.ndarray]:
+    """sin((1+x)δ/2) and sin((1-x)δ/2) on x = centres[:, None] + offsets[None, :] (flattened)
+    for each row's δ = π-β, from sin and cos of centres·δ/2 and offsets·δ/2 by angle sums:
+    with a = x·δ/2, sin(δ/2 ± a) = sin(δ/2)·cos a ± cos(δ/2)·sin a."""
     rows = len(delta)
-    sin_a, cos_a = _progression_sin_cos(delta, centres)
-    sin_a, cos_a = sin_a[:, :, None], cos_a[:, :, None]
-    b = offsets[None, :] * delta
-    sin_b, cos_b = np.sin(b)[:, None, :], np.cos(b)[:, None, :]
-    sin_x = (sin_a * cos_b + cos_a * sin_b).reshape(rows, -1)  # sin(x·δ) = sin γ
-    cos_x = (cos_a * cos_b - sin_a * sin_b).reshape(rows, -1)
-    sin_delta, cos_delta = np.sin(delta), np.cos(delta)
-    sin_angle = sin_delta * cos_x - cos_delta * sin_x  # sin((1-x)·δ) = sin(β+γ)
-    cos_x *= cos_delta
-    cos_x += sin_delta * sin_x  # cos((1-x)·δ)
-    sin_x += sin_delta
-    sin_x /= sin_angle
-    return sin_x, cos_x
+    half = 0.5 * delta
+    sin_c, cos_c = _progression_sin_cos(half, centres)
+    sin_c, cos_c = sin_c[:, :, None], cos_c[:, :, None]
+    b = offsets[None, :] * half
+    sin_o, cos_o = np.sin(b)[:, None, :], np.cos(b)[:, None, :]
+    cos_a = (cos_c * cos_o - sin_c * sin_o).reshape(rows, -1)
+    sin_a = (sin_c * cos_o + cos_c * sin_o).reshape(rows, -1)
+    cos_a *= np.sin(half)
+    sin_a *= np.cos(half)
+    near = np.add(cos_a, sin_a)  # sin((1+x)δ/2)
+    cos_a -= sin_a  # sin((1-x)δ/2)
+    return near, cos_a
 
 
 def _progression_sin_cos(delta, centres, block=32) -> tuple[np.ndarray, np.ndarray]:
@@ -276,17 +282,6 @@ def _progression_sin_cos(delta, centres, block=32) -> tuple[np.ndarray, np.ndarr
     sines = (sin_a * cos_b + cos_a * sin_b).reshape(len(delta), -1)[:, :len(centres)]
     cosines = (cos_a * cos_b - sin_a * sin_b).reshape(len(delta), -1)[:, :len(centres)]
     return sines, cosines
-
-
-def _hg_phase_in_place(cos_theta: np.ndarray, g: float) -> np.ndarray:
-    """hg_phase(cos_theta, g), overwriting cos_theta (float64, already in [-1, 1]): the
-    same operations in the same order, so the same bits."""
-    d = np.multiply(cos_theta, 2.0 * g, out=cos_theta)
-    d = np.subtract(1.0 + g * g, d, out=d)
-    value = np.sqrt(d)
-    value *= d
-    value *= 4.0 * math.pi
-    return np.divide(1.0 - g * g, value, out=value)
 
 
 def _prefix_rows(kind, consts, beta, n_gamma) -> np.ndarray:
