@@ -210,11 +210,12 @@ def _row_integrand(kind, consts, beta, x, cells=None) -> np.ndarray:
     x of shape (m,) or (len(beta), m). x must lie in [0, 1) (the nodes used are interior).
 
     The point rows are the table build's whole cost: each step runs in place on one
-    (rows, m) buffer. `cells` = (centres, offsets), with x the flattened centres[:, None] +
-    offsets[None, :], takes the sines and cosines of x·δ and (1-x)·δ from those of centres·δ
-    and offsets·δ by the angle-sum formulas (`_point_angles`): an eighth of the trigonometry.
-    The prefix rows move by at most 2e-15 of their largest value, and no float32 entry of
-    the bench scenes' tables moves (bench/RESULTS.md, host stages)."""
+    (rows, m) buffer. `cells` = (centres, offsets), with x the flattened offsets[:, None] +
+    centres[None, :] (node-major), takes the two half-angle sines of each node from sines and
+    cosines of centres·δ/2 and offsets·δ/2 by the angle-sum formulas (`_point_half_sines`):
+    an eighth of the trigonometry. The prefix rows move by at most 2e-15 of their largest
+    value against a direct evaluation, and no float32 entry of the bench scenes' tables
+    moves (bench/RESULTS.md, host stages)."""
     amplitude, sigma_t = consts[:, C_AMPLITUDE], consts[:, C_SIGMA_T]
     g = float(consts[0, C_G])
     beta = np.asarray(beta, dtype=np.float64)[:, None]
