@@ -67,9 +67,11 @@ SVD_SAMPLES = 64
 # extension divides by σ_i).
 SVD_RELATIVE_CUTOFF = 1e-13
 # Gauss–Legendre nodes per table cell. Cells are ~1e-3 wide in x and K is smooth on that
-# scale (the one exception, the last cell of a point row, gets halving panels): 4 nodes
-# agree with 16 to 4e-10 of a row's total.
-QUAD_NODES = 4
+# scale (the one exception, the last cell of a point row, gets halving panels): 3 nodes
+# agree with 8 to 6e-9 of the table's largest value, and the bench scenes' float32 tables with
+# 8 nodes' but for 1 ulp in at most 3 of 65 536 entries (4 nodes: none), for 0.75× the
+# build time (bench/RESULTS.md, "Integrand build").
+QUAD_NODES = 3
 # Integrand values per chunk of rows: chunks that stay in the CPU's L2 cache build a 128 × 512
 # table in 0.6× the time of one 400 000-value chunk in a plain Python process (in the
 # renderer's, where PoCL is loaded, about the same time; bench/RESULTS.md, host stages).
