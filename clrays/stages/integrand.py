@@ -45,6 +45,7 @@ docs/integrand.md.
 """
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass, replace
@@ -289,10 +290,17 @@ def _progression_sin_cos(delta, centres, block=32) -> tuple[np.ndarray, np.ndarr
     return sines, cosines
 
 
+@functools.cache
+def _gauss_legendre(n) -> tuple[np.ndarray, np.ndarray]:
+    """leggauss(n) once: it solves an eigenproblem on every call (about 0.25 ms, twice per
+    grey table). Callers must not write to the arrays."""
+    return np.polynomial.legendre.leggauss(n)
+
+
 def _prefix_rows(kind, consts, beta, n_gamma) -> np.ndarray:
     """F(β_j, x_k) = ∫_0^{x_k} K(β_j, x) dx on x_k = k/(n_gamma-1), (3, len(beta), n_gamma):
     Gauss–Legendre with QUAD_NODES per cell, summed in float64."""
-    nodes, weights = np.polynomial.legendre.leggauss(QUAD_NODES)
+    nodes, weights = _gauss_legendre(QUAD_NODES)
     edges = np.linspace(0.0, 1.0, n_gamma)
     h = edges[1] - edges[0]
     centres = 0.5 * (edges[:-1] + edges[1:])
