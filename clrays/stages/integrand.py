@@ -45,6 +45,7 @@ docs/integrand.md.
 """
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass, replace
@@ -67,9 +68,11 @@ SVD_SAMPLES = 64
 # extension divides by σ_i).
 SVD_RELATIVE_CUTOFF = 1e-13
 # Gauss–Legendre nodes per table cell. Cells are ~1e-3 wide in x and K is smooth on that
-# scale (the one exception, the last cell of a point row, gets halving panels): 4 nodes
-# agree with 16 to 4e-10 of a row's total.
-QUAD_NODES = 4
+# scale (the one exception, the last cell of a point row, gets halving panels): 3 nodes
+# agree with 8 to 6e-9 of the table's largest value, and the bench scenes' float32 tables with
+# 8 nodes' but for 1 ulp in at most 3 of 65 536 entries (4 nodes: none), for 0.75× the
+# build time (bench/RESULTS.md, "Integrand build").
+QUAD_NODES = 3
 # Integrand values per chunk of rows: chunks that stay in the CPU's L2 cache build a 128 × 512
 # table in 0.6× the time of one 400 000-value chunk in a plain Python process (in the
 # renderer's, where PoCL is loaded, about the same time; bench/RESULTS.md, host stages).
@@ -210,11 +213,12 @@ def _row_integrand(kind, consts, beta, x, cells=None) -> np.ndarray:
     x of shape (m,) or (len(beta), m). x must lie in [0, 1) (the nodes used are interior).
 
     The point rows are the table build's whole cost: each step runs in place on one
-    (rows, m) buffer. `cells` = (centres, offsets), with x the flattened centres[:, None] +
-    offsets[None, :], takes the sines and cosines of x·δ and (1-x)·δ from those of centres·δ
-    and offsets·δ by the angle-sum formulas (`_point_angles`): an eighth of the trigonometry.
-    The prefix rows move by at most 2e-15 of their largest value, and no float32 entry of
-    the bench scenes' tables moves (bench/RESULTS.md, host stages)."""
+    (rows, m) buffer. `cells` = (centres, offsets), with x the flattened offsets[:, None] +
+    centres[None, :] (node-major), takes the two half-angle sines of each node from sines and
+    cosines of centres·δ/2 and offsets·δ/2 by the angle-sum formulas (`_point_half_sines`):
+    an eighth of the trigonometry. The prefix rows move by at most 2e-15 of their largest
+    value against a direct evaluation, and no float32 entry of the bench scenes' tables
+    moves (bench/RESULTS.md, host stages)."""
     amplitude, sigma_t = consts[:, C_AMPLITUDE], consts[:, C_SIGMA_T]
     g = float(consts[0, C_G])
     beta = np.asarray(beta, dtype=np.float64)[:, None]
@@ -224,44 +228,52 @@ def _row_integrand(kind, consts, beta, x, cells=None) -> np.ndarray:
         # Rows are written in δ = π-β (sinβ = sinδ, β+γ = π-(1-x)δ); the floor keeps the
         # β = π row finite, where K tends to ρ(-1)·exp(-σt·d_el·(1+x)/(1-x)).
         delta = np.maximum(math.pi - beta, 1e-150)
+        # Half angles: sinβ + sinγ = 2·sin((1+x)δ/2)·cos((1-x)δ/2) and sin(β+γ) =
+        # 2·sin((1-x)δ/2)·cos((1-x)δ/2), so the ratio is sin((1+x)δ/2)/sin((1-x)δ/2), and
+        # cos(β+γ) = 2·sin²((1-x)δ/2) - 1: two sines per node, no cosine.
         if cells is None:
-            angle = (1.0 - x) * delta  # (1-x)·δ = π - (β+γ)
-            ratio = np.sin(x * delta)
-            ratio += np.sin(delta)
-            ratio /= np.sin(angle)  # (sinβ + sinγ) / sin(β+γ)
-            cos_angle = np.cos(angle, out=angle)
+            ratio = np.sin((1.0 + x) * (0.5 * delta))
+            far = np.sin((1.0 - x) * (0.5 * delta))
         else:
-            ratio, cos_angle = _point_angles(delta, *cells)
-        phase = _hg_phase_in_place(np.negative(cos_angle, out=cos_angle), g)  # ρ(cos(β+γ))
+            ratio, far = _point_half_sines(delta, *cells)
+        ratio /= far  # (sinβ + sinγ) / sin(β+γ)
+        # HG denominator 1 + g² - 2g·cos(β+γ) = (1+g)² - 4g·sin²((1-x)δ/2).
+        d = np.multiply(far, far, out=far)
+        d *= -4.0 * g
+        d += (1.0 + g) * (1.0 + g)
+        falloff = np.sqrt(d)
+        falloff *= d  # d·√d: no pow()
+        scale = (1.0 - g * g) / (4.0 * math.pi * d_el)  # ρ's numerator and 1/d_el
         out = np.empty((len(consts),) + ratio.shape)
         for c, row in enumerate(out):
             np.multiply(ratio, -sigma_t[c] * d_el, out=row)
             np.exp(row, out=row)
-            row *= amplitude[c] * phase
-            row /= d_el
+            row /= falloff
+            row *= amplitude[c] * scale
         return out
     s_end = consts[:, C_S_END, None, None]
     return amplitude[:, None, None] * hg_phase(np.cos(beta), g) * np.exp(-sigma_t[:, None, None] * (x * s_end))
 
 
-def _point_angles(delta, centres, offsets) -> tuple[np.ndarray, np.ndarray]:
-    """(sinβ + sinγ)/sin(β+γ) and cos((1-x)·δ) on x = centres[:, None] + offsets[None, :]
-    (flattened) for each row's δ = π-β, from sin and cos of centres·δ and offsets·δ:
-    sin(a+b) = sin a·cos b + cos a·sin b, and (1-x)·δ = δ - x·δ likewise."""
+def _point_half_sines(delta, centres, offsets) -> tuple[np.ndarray, np.ndarray]:
+    """sin((1+x)δ/2) and sin((1-x)δ/2) on x = offsets[:, None] + centres[None, :] (flattened,
+    node-major: one run of all cells per node) for each row's δ = π-β, from sin and cos of
+    centres·δ/2 and offsets·δ/2 by angle sums: with a = x·δ/2, sin(δ/2 ± a) =
+    sin(δ/2)·cos a ± cos(δ/2)·sin a. Node-major keeps numpy's inner loops one row of cells
+    long (cell-major loops over 4 nodes at a time and costs 3× as much)."""
     rows = len(delta)
-    sin_a, cos_a = _progression_sin_cos(delta, centres)
-    sin_a, cos_a = sin_a[:, :, None], cos_a[:, :, None]
-    b = offsets[None, :] * delta
-    sin_b, cos_b = np.sin(b)[:, None, :], np.cos(b)[:, None, :]
-    sin_x = (sin_a * cos_b + cos_a * sin_b).reshape(rows, -1)  # sin(x·δ) = sin γ
-    cos_x = (cos_a * cos_b - sin_a * sin_b).reshape(rows, -1)
-    sin_delta, cos_delta = np.sin(delta), np.cos(delta)
-    sin_angle = sin_delta * cos_x - cos_delta * sin_x  # sin((1-x)·δ) = sin(β+γ)
-    cos_x *= cos_delta
-    cos_x += sin_delta * sin_x  # cos((1-x)·δ)
-    sin_x += sin_delta
-    sin_x /= sin_angle
-    return sin_x, cos_x
+    half = 0.5 * delta
+    sin_c, cos_c = _progression_sin_cos(half, centres)
+    sin_c, cos_c = sin_c[:, None, :], cos_c[:, None, :]
+    b = offsets[None, :] * half
+    sin_o, cos_o = np.sin(b)[:, :, None], np.cos(b)[:, :, None]
+    cos_a = (cos_c * cos_o - sin_c * sin_o).reshape(rows, -1)
+    sin_a = (sin_c * cos_o + cos_c * sin_o).reshape(rows, -1)
+    cos_a *= np.sin(half)
+    sin_a *= np.cos(half)
+    near = np.add(cos_a, sin_a)  # sin((1+x)δ/2)
+    cos_a -= sin_a  # sin((1-x)δ/2)
+    return near, cos_a
 
 
 def _progression_sin_cos(delta, centres, block=32) -> tuple[np.ndarray, np.ndarray]:
@@ -278,25 +290,21 @@ def _progression_sin_cos(delta, centres, block=32) -> tuple[np.ndarray, np.ndarr
     return sines, cosines
 
 
-def _hg_phase_in_place(cos_theta: np.ndarray, g: float) -> np.ndarray:
-    """hg_phase(cos_theta, g), overwriting cos_theta (float64, already in [-1, 1]): the
-    same operations in the same order, so the same bits."""
-    d = np.multiply(cos_theta, 2.0 * g, out=cos_theta)
-    d = np.subtract(1.0 + g * g, d, out=d)
-    value = np.sqrt(d)
-    value *= d
-    value *= 4.0 * math.pi
-    return np.divide(1.0 - g * g, value, out=value)
+@functools.cache
+def _gauss_legendre(n) -> tuple[np.ndarray, np.ndarray]:
+    """leggauss(n) once: it solves an eigenproblem on every call (about 0.25 ms, twice per
+    grey table). Callers must not write to the arrays."""
+    return np.polynomial.legendre.leggauss(n)
 
 
 def _prefix_rows(kind, consts, beta, n_gamma) -> np.ndarray:
     """F(β_j, x_k) = ∫_0^{x_k} K(β_j, x) dx on x_k = k/(n_gamma-1), (3, len(beta), n_gamma):
     Gauss–Legendre with QUAD_NODES per cell, summed in float64."""
-    nodes, weights = np.polynomial.legendre.leggauss(QUAD_NODES)
+    nodes, weights = _gauss_legendre(QUAD_NODES)
     edges = np.linspace(0.0, 1.0, n_gamma)
     h = edges[1] - edges[0]
     centres = 0.5 * (edges[:-1] + edges[1:])
-    x = centres[:, None] + 0.5 * h * nodes[None, :]
+    x = 0.5 * h * nodes[:, None] + centres[None, :]  # node-major, as _point_half_sines
     shared = _shared_channel(consts)
     if shared is not None:  # grey medium: one channel's table, scaled by each amplitude
         return consts[:, C_AMPLITUDE, None, None] * _prefix_rows(kind, shared, beta, n_gamma)
@@ -306,7 +314,10 @@ def _prefix_rows(kind, consts, beta, n_gamma) -> np.ndarray:
         rows = slice(j0, j0 + rows_per_chunk)
         k = _row_integrand(kind, consts, beta[rows], x.ravel(), (centres, 0.5 * h * nodes)).reshape(
             len(consts), -1, *x.shape)
-        cells = 0.5 * h * (k @ weights)
+        cells = k[:, :, 0] * weights[0]  # Σ_n w_n·K(x_n), summed in node order
+        for n in range(1, len(weights)):
+            cells += k[:, :, n] * weights[n]
+        cells *= 0.5 * h
         if kind == "point":
             cells[..., -1] = _last_cell(kind, consts, beta[rows], h, nodes, weights)
         out[:, rows, 1:] = np.cumsum(cells, axis=-1)
