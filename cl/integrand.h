@@ -17,14 +17,6 @@
 #define CLRAYS_INTEGRAND_H
 #include "lighting.h"
 
-/* The arc tangent of the per-ray γ and row coordinates (here and in walk.h): the library's
- * atan2 unless a kernel file defines ROW_ATAN2 before including this (sampling.cl takes
- * atan2_approx.h's, within 3 ulp: docs/design.md §4.5 "Cost on PoCL"). β itself, which the
- * walk compares with the tree, keeps the library's everywhere. */
-#ifndef ROW_ATAN2
-#define ROW_ATAN2 atan2
-#endif
-
 /* SIN_BETA_MIN, the clamp of sinβ in every 1/sinβ, comes from clrays/structs.py (-D): the
  * host's tables use the same one. */
 
@@ -43,7 +35,7 @@ inline float beta_coordinate(global const integrand_t* in, float beta)
     if (!(span > 0.0f)) return 0.0f;
     float lo = inline_sqrt(inline_clamp(beta - in->beta_min, 0.0f, span));
     float hi = inline_sqrt(inline_clamp(in->beta_max - beta, 0.0f, span));
-    return M_2_PI_F * ROW_ATAN2(lo, hi) * (float)(in->n_beta - 1);
+    return M_2_PI_F * atan2(lo, hi) * (float)(in->n_beta - 1);
 }
 
 /* x(β, γ) per channel (only directional rows differ per channel, through s_end).
@@ -109,7 +101,7 @@ inline integrand_row_t integrand_row(global const integrand_t* in, float beta, f
     r.beta = beta;
     r.sin_beta = inline_fmax(sin_beta, SIN_BETA_MIN);
     r.cos_beta = cos_beta;
-    r.delta = ROW_ATAN2(r.sin_beta, -cos_beta);
+    r.delta = atan2(r.sin_beta, -cos_beta);
     r.scale = row_scale(in, r.delta, r.sin_beta);
     r.row = in->mode == INTEGRAND_ANALYTIC ? 0 : grid_split(beta_coordinate(in, beta), in->n_beta, &r.row_t);
     return r;

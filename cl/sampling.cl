@@ -31,10 +31,8 @@
  * A line sample walks one row (it lies on its slice); a camera sample would walk two.
  * Radiance is kept times sin β for point and spot lights (radiance_scale): what remains
  * varies slowly even next to the light, where the brightest pixels are. */
-#include "atan2_approx.h"
-/* The walks' γ extents and integrand rows take atan2_approx (integrand.h ROW_ATAN2). */
-#define ROW_ATAN2 atan2_approx
 #include "walk.h"
+#include "atan2_approx.h"
 #include "lanes.h"
 
 /* The light's type (LIGHT_*): gather computes a camera sample's unshadowed weight for a

@@ -119,8 +119,8 @@ inline int ray_span(global const epipolar_t* ep, global const light_t* light, gl
     /* A ray from the eye (begin 0, all but a spot light's) starts at γ = atan2(+0, d_el) = +0:
      * no arc tangent for it, the same value. */
     span->gamma_begin = directional ? begin * sin_beta
-                                    : (begin > 0.0f ? ROW_ATAN2(begin * sin_beta, ep->d_el - begin * cos_beta) : 0.0f);
-    span->gamma_end = directional ? end * sin_beta : ROW_ATAN2(end * sin_beta, ep->d_el - end * cos_beta);
+                                    : (begin > 0.0f ? atan2(begin * sin_beta, ep->d_el - begin * cos_beta) : 0.0f);
+    span->gamma_end = directional ? end * sin_beta : atan2(end * sin_beta, ep->d_el - end * cos_beta);
     if (!(span->gamma_end > span->gamma_begin)) return 0;
     /* The lamp (lighting.h): a ray that passes within its radius of a point or spot light
      * leaves out the chord inside it, as exact does; this keeps a ray through the light
@@ -130,8 +130,8 @@ inline int ray_span(global const epipolar_t* ep, global const light_t* light, gl
     if (!directional && miss < radius) {
         float closest = ep->d_el * cos_beta, half_chord = inline_sqrt(radius * radius - miss * miss);
         float s0 = inline_clamp(closest - half_chord, begin, end), s1 = inline_clamp(closest + half_chord, begin, end);
-        span->gamma_lamp0 = ROW_ATAN2(s0 * sin_beta, ep->d_el - s0 * cos_beta);
-        span->gamma_lamp1 = ROW_ATAN2(s1 * sin_beta, ep->d_el - s1 * cos_beta);
+        span->gamma_lamp0 = atan2(s0 * sin_beta, ep->d_el - s0 * cos_beta);
+        span->gamma_lamp1 = atan2(s1 * sin_beta, ep->d_el - s1 * cos_beta);
     }
     span->ray = integrand_row(integrand, beta, sin_beta, cos_beta);
     return 1;
