@@ -26,6 +26,10 @@ ALWAYS_INLINE float inline_copysign(float x, float sign)
 ALWAYS_INLINE float inline_fmax(float a, float b) { return (b != b || a > b) ? a : b; }
 ALWAYS_INLINE float inline_fmin(float a, float b) { return (b != b || a < b) ? a : b; }
 ALWAYS_INLINE float inline_clamp(float x, float lo, float hi) { return inline_fmin(inline_fmax(x, lo), hi); }
+ALWAYS_INLINE float3 inline_clamp3(float3 v, float lo, float hi)
+{
+    return (float3)(inline_clamp(v.x, lo, hi), inline_clamp(v.y, lo, hi), inline_clamp(v.z, lo, hi));
+}
 ALWAYS_INLINE int inline_min(int a, int b) { return a > b ? b : a; }
 ALWAYS_INLINE int inline_max(int a, int b) { return a < b ? b : a; }
 ALWAYS_INLINE int inline_clamp_int(int x, int lo, int hi) { return inline_min(inline_max(x, lo), hi); }

@@ -23,7 +23,7 @@
 /* Cell index in [0, n-2] and the fraction within it. */
 inline int grid_split(float coordinate, int n, float* fraction)
 {
-    int i = clamp((int)floor(coordinate), 0, n - 2);
+    int i = inline_clamp_int((int)inline_floor(coordinate), 0, n - 2);
     *fraction = coordinate - (float)i;
     return i;
 }
@@ -33,8 +33,8 @@ inline float beta_coordinate(global const integrand_t* in, float beta)
 {
     float span = in->beta_max - in->beta_min;
     if (!(span > 0.0f)) return 0.0f;
-    float lo = sqrt(clamp(beta - in->beta_min, 0.0f, span));
-    float hi = sqrt(clamp(in->beta_max - beta, 0.0f, span));
+    float lo = inline_sqrt(inline_clamp(beta - in->beta_min, 0.0f, span));
+    float hi = inline_sqrt(inline_clamp(in->beta_max - beta, 0.0f, span));
     return M_2_PI_F * atan2(lo, hi) * (float)(in->n_beta - 1);
 }
 
@@ -44,9 +44,9 @@ inline float beta_coordinate(global const integrand_t* in, float beta)
 inline float3 row_coordinate(global const integrand_t* in, float delta, float sin_beta, float gamma)
 {
     if (in->light_type == LIGHT_DIRECTIONAL)
-        return clamp((gamma / sin_beta) / in->s_end.xyz, 0.0f, 1.0f);
+        return inline_clamp3((gamma / sin_beta) / in->s_end.xyz, 0.0f, 1.0f);
     float x = delta > 0.0f ? gamma / delta : (gamma > 0.0f ? 1.0f : 0.0f);
-    return (float3)(clamp(x, 0.0f, 1.0f));
+    return (float3)(inline_clamp(x, 0.0f, 1.0f));
 }
 
 inline float3 row_scale(global const integrand_t* in, float delta, float sin_beta)
@@ -99,7 +99,7 @@ inline integrand_row_t integrand_row(global const integrand_t* in, float beta, f
 {
     integrand_row_t r;
     r.beta = beta;
-    r.sin_beta = fmax(sin_beta, SIN_BETA_MIN);
+    r.sin_beta = inline_fmax(sin_beta, SIN_BETA_MIN);
     r.cos_beta = cos_beta;
     r.delta = atan2(r.sin_beta, -cos_beta);
     r.scale = row_scale(in, r.delta, r.sin_beta);
@@ -114,12 +114,12 @@ inline float3 segment_radiance(global const integrand_t* in, global const float*
         if (in->light_type == LIGHT_DIRECTIONAL) {
             /* σs·E·ρ(cos β)·e^{-σt·s0}·(1 - e^{-σt·Δs})/σt, → Δs as σt → 0 (s = γ/sin β). */
             float3 sigma_t = in->sigma_t.xyz;
-            float s0 = fmax(gamma0, 0.0f) / r->sin_beta;
-            float ds = fmax(gamma1, 0.0f) / r->sin_beta - s0;
+            float s0 = inline_fmax(gamma0, 0.0f) / r->sin_beta;
+            float ds = inline_fmax(gamma1, 0.0f) / r->sin_beta - s0;
             float3 tail = select((float3)(ds), -expm1(-sigma_t * ds) / sigma_t, isgreater(sigma_t, (float3)(0.0f)));
             return in->amplitude.xyz * phase_function(frame, r->cos_beta) * exp(-sigma_t * s0) * tail;
         }
-        float span = clamp(gamma1, 0.0f, r->delta) - clamp(gamma0, 0.0f, r->delta);
+        float span = inline_clamp(gamma1, 0.0f, r->delta) - inline_clamp(gamma0, 0.0f, r->delta);
         return in->amplitude.xyz * (span / (4.0f * M_PI_F * in->d_el * r->sin_beta));
     }
     int j = r->row;

@@ -164,7 +164,7 @@ ALWAYS_INLINE void slices_around(global const epipolar_t* ep, float alpha, int* 
 /* The two slices nearest dir, and the weight t of the second. */
 inline void nearest_slices(global const epipolar_t* ep, float3 dir, int* i0, int* i1, float* t)
 {
-    slices_around(ep, atan2(dot(dir, ep->w.xyz), dot(dir, ep->u.xyz)), i0, i1, t);
+    slices_around(ep, atan2(inline_dot(dir, ep->w.xyz), inline_dot(dir, ep->u.xyz)), i0, i1, t);
 }
 
 /* Radiance of the lit part of [gamma_begin, gamma_end) of ray beta along one row.
