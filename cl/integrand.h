@@ -16,6 +16,7 @@
 #ifndef CLRAYS_INTEGRAND_H
 #define CLRAYS_INTEGRAND_H
 #include "lighting.h"
+#include "atan2_approx.h"
 
 /* SIN_BETA_MIN, the clamp of sinβ in every 1/sinβ, comes from clrays/structs.py (-D): the
  * host's tables use the same one. */
@@ -35,7 +36,7 @@ inline float beta_coordinate(global const integrand_t* in, float beta)
     if (!(span > 0.0f)) return 0.0f;
     float lo = inline_sqrt(inline_clamp(beta - in->beta_min, 0.0f, span));
     float hi = inline_sqrt(inline_clamp(in->beta_max - beta, 0.0f, span));
-    return M_2_PI_F * atan2(lo, hi) * (float)(in->n_beta - 1);
+    return M_2_PI_F * atan2_approx(lo, hi) * (float)(in->n_beta - 1);
 }
 
 /* x(β, γ) per channel (only directional rows differ per channel, through s_end).
@@ -101,7 +102,7 @@ inline integrand_row_t integrand_row(global const integrand_t* in, float beta, f
     r.beta = beta;
     r.sin_beta = inline_fmax(sin_beta, SIN_BETA_MIN);
     r.cos_beta = cos_beta;
-    r.delta = atan2(r.sin_beta, -cos_beta);
+    r.delta = atan2_approx(r.sin_beta, -cos_beta);
     r.scale = row_scale(in, r.delta, r.sin_beta);
     r.row = in->mode == INTEGRAND_ANALYTIC ? 0 : grid_split(beta_coordinate(in, beta), in->n_beta, &r.row_t);
     return r;

@@ -94,9 +94,9 @@ inline float3 textured_run_radiance(global const textured_integrand_t* ti, globa
     float row_t = 0.0f;
     int j = 0;
     if (span > 0.0f) {
-        float lo = sqrt(clamp(ray->beta - ti->beta_min, 0.0f, span));
-        float hi = sqrt(clamp(ti->beta_max - ray->beta, 0.0f, span));
-        j = grid_split(M_2_PI_F * atan2(lo, hi) * (float)(ti->n_beta - 1), ti->n_beta, &row_t);
+        float lo = inline_sqrt(inline_clamp(ray->beta - ti->beta_min, 0.0f, span));
+        float hi = inline_sqrt(inline_clamp(ti->beta_max - ray->beta, 0.0f, span));
+        j = grid_split(M_2_PI_F * atan2_approx(lo, hi) * (float)(ti->n_beta - 1), ti->n_beta, &row_t);
     }
     size_t row_length = (size_t)(n + 1);
     float radiance[3];

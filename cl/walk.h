@@ -102,7 +102,7 @@ ALWAYS_INLINE float ray_beta(global const epipolar_t* ep, float3 dir, float* sin
 {
     *cos_beta = inline_dot(dir, ep->axis.xyz);
     *sin_beta = inline_fmax(inline_length(inline_cross(dir, ep->axis.xyz)), SIN_BETA_MIN);
-    return inline_fmin(atan2(*sin_beta, *cos_beta), nextafter(M_PI_F, 0.0f));
+    return inline_fmin(atan2_approx(*sin_beta, *cos_beta), nextafter(M_PI_F, 0.0f));
 }
 
 /* The γ extent of the ray along dir up to distance; 0 when it has none (it misses a
@@ -119,8 +119,8 @@ inline int ray_span(global const epipolar_t* ep, global const light_t* light, gl
     /* A ray from the eye (begin 0, all but a spot light's) starts at γ = atan2(+0, d_el) = +0:
      * no arc tangent for it, the same value. */
     span->gamma_begin = directional ? begin * sin_beta
-                                    : (begin > 0.0f ? atan2(begin * sin_beta, ep->d_el - begin * cos_beta) : 0.0f);
-    span->gamma_end = directional ? end * sin_beta : atan2(end * sin_beta, ep->d_el - end * cos_beta);
+                                    : (begin > 0.0f ? atan2_approx(begin * sin_beta, ep->d_el - begin * cos_beta) : 0.0f);
+    span->gamma_end = directional ? end * sin_beta : atan2_approx(end * sin_beta, ep->d_el - end * cos_beta);
     if (!(span->gamma_end > span->gamma_begin)) return 0;
     /* The lamp (lighting.h): a ray that passes within its radius of a point or spot light
      * leaves out the chord inside it, as exact does; this keeps a ray through the light
@@ -130,8 +130,8 @@ inline int ray_span(global const epipolar_t* ep, global const light_t* light, gl
     if (!directional && miss < radius) {
         float closest = ep->d_el * cos_beta, half_chord = inline_sqrt(radius * radius - miss * miss);
         float s0 = inline_clamp(closest - half_chord, begin, end), s1 = inline_clamp(closest + half_chord, begin, end);
-        span->gamma_lamp0 = atan2(s0 * sin_beta, ep->d_el - s0 * cos_beta);
-        span->gamma_lamp1 = atan2(s1 * sin_beta, ep->d_el - s1 * cos_beta);
+        span->gamma_lamp0 = atan2_approx(s0 * sin_beta, ep->d_el - s0 * cos_beta);
+        span->gamma_lamp1 = atan2_approx(s1 * sin_beta, ep->d_el - s1 * cos_beta);
     }
     span->ray = integrand_row(integrand, beta, sin_beta, cos_beta);
     return 1;
@@ -164,7 +164,7 @@ ALWAYS_INLINE void slices_around(global const epipolar_t* ep, float alpha, int* 
 /* The two slices nearest dir, and the weight t of the second. */
 inline void nearest_slices(global const epipolar_t* ep, float3 dir, int* i0, int* i1, float* t)
 {
-    slices_around(ep, atan2(inline_dot(dir, ep->w.xyz), inline_dot(dir, ep->u.xyz)), i0, i1, t);
+    slices_around(ep, atan2_approx(inline_dot(dir, ep->w.xyz), inline_dot(dir, ep->u.xyz)), i0, i1, t);
 }
 
 /* Radiance of the lit part of [gamma_begin, gamma_end) of ray beta along one row.
