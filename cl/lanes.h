@@ -37,6 +37,19 @@ ALWAYS_INLINE float_lanes copysign_lanes(float_lanes x, float_lanes sign)
 }
 ALWAYS_INLINE float_lanes fmax_lanes(float_lanes a, float_lanes b) { return ((b != b) | (a > b)) ? a : b; }
 ALWAYS_INLINE float_lanes fmin_lanes(float_lanes a, float_lanes b) { return ((b != b) | (a < b)) ? a : b; }
+/* Whether every (any) lane of a comparison is true, without PoCL's all() (any()) library call. */
+ALWAYS_INLINE int all_lanes(int_lanes mask)
+{
+    int4 halves = mask.lo & mask.hi;
+    int2 quarters = halves.lo & halves.hi;
+    return (quarters.x & quarters.y) != 0;
+}
+ALWAYS_INLINE int any_lanes(int_lanes mask)
+{
+    int4 halves = mask.lo | mask.hi;
+    int2 quarters = halves.lo | halves.hi;
+    return (quarters.x | quarters.y) != 0;
+}
 ALWAYS_INLINE int_lanes min_lanes(int_lanes a, int_lanes b) { return a > b ? b : a; }
 ALWAYS_INLINE int_lanes max_lanes(int_lanes a, int_lanes b) { return a < b ? b : a; }
 ALWAYS_INLINE int_lanes clamp_int_lanes(int_lanes x, int lo, int hi)

@@ -83,6 +83,43 @@ kernel void rectify_bounds(global const frame_t* frame, global const view_t* vie
                (index) * (int)(sizeof(view_t) / 4))
 #define VIEW_INT_LANES(views, index, field) as_int8(VIEW_LANES(views, index, field, 0))
 
+/* The fields of a perspective view that rectify reads, one per lane. */
+typedef struct {
+    float_lanes origin_x, origin_y, origin_z, right_x, right_y, right_z, up_x, up_y, up_z;
+    float_lanes forward_x, forward_y, forward_z, scale_x, scale_y;
+    int_lanes width, height, depth_offset;
+} view_lanes_t;
+
+/* Each lane's own view, views[index]. */
+ALWAYS_INLINE view_lanes_t view_gather(global const view_t* views, int_lanes index)
+{
+    view_lanes_t v;
+    v.origin_x = VIEW_LANES(views, index, origin, 0), v.origin_y = VIEW_LANES(views, index, origin, 1);
+    v.origin_z = VIEW_LANES(views, index, origin, 2);
+    v.right_x = VIEW_LANES(views, index, right, 0), v.right_y = VIEW_LANES(views, index, right, 1);
+    v.right_z = VIEW_LANES(views, index, right, 2);
+    v.up_x = VIEW_LANES(views, index, up, 0), v.up_y = VIEW_LANES(views, index, up, 1), v.up_z = VIEW_LANES(views, index, up, 2);
+    v.forward_x = VIEW_LANES(views, index, forward, 0), v.forward_y = VIEW_LANES(views, index, forward, 1);
+    v.forward_z = VIEW_LANES(views, index, forward, 2);
+    v.scale_x = VIEW_LANES(views, index, scale_x, 0), v.scale_y = VIEW_LANES(views, index, scale_y, 0);
+    v.width = VIEW_INT_LANES(views, index, width), v.height = VIEW_INT_LANES(views, index, height);
+    v.depth_offset = VIEW_INT_LANES(views, index, depth_offset);
+    return v;
+}
+
+/* One view for every lane. */
+ALWAYS_INLINE view_lanes_t view_broadcast(global const view_t* view)
+{
+    view_lanes_t v;
+    v.origin_x = view->origin.x, v.origin_y = view->origin.y, v.origin_z = view->origin.z;
+    v.right_x = view->right.x, v.right_y = view->right.y, v.right_z = view->right.z;
+    v.up_x = view->up.x, v.up_y = view->up.y, v.up_z = view->up.z;
+    v.forward_x = view->forward.x, v.forward_y = view->forward.y, v.forward_z = view->forward.z;
+    v.scale_x = view->scale_x, v.scale_y = view->scale_y;
+    v.width = view->width, v.height = view->height, v.depth_offset = view->depth_offset;
+    return v;
+}
+
 /* slice_sides[α] = u·cos α + w·sin α at the slice's centre and texel_angles[γ] = (γ, cos γ,
  * sin γ) come from the host (clrays/stages/rectify.py slice_sides, texel_angles): the same for every
  * texel of a row or column, they cost the kernel no trigonometry. Texel centres, except
@@ -152,30 +189,35 @@ kernel void rectify(global const view_t* views, global const light_t* lights,
             float_lanes component = axis_index == 0 ? wx : (axis_index == 1 ? wy : wz);
             view_index = light->first_view + 2 * axis_index + (component < 0.0f ? 1 : 0);
         }
-        /* view_project, perspective (a spot light's view or a cube face) */
-        float_lanes qx = px - VIEW_LANES(views, view_index, origin, 0);
-        float_lanes qy = py - VIEW_LANES(views, view_index, origin, 1);
-        float_lanes qz = pz - VIEW_LANES(views, view_index, origin, 2);
-        float_lanes x = dot_lanes_of_lanes(qx, qy, qz, VIEW_LANES(views, view_index, right, 0),
-                                   VIEW_LANES(views, view_index, right, 1), VIEW_LANES(views, view_index, right, 2));
-        float_lanes y = dot_lanes_of_lanes(qx, qy, qz, VIEW_LANES(views, view_index, up, 0), VIEW_LANES(views, view_index, up, 1),
-                                   VIEW_LANES(views, view_index, up, 2));
-        float_lanes z = dot_lanes_of_lanes(qx, qy, qz, VIEW_LANES(views, view_index, forward, 0),
-                                   VIEW_LANES(views, view_index, forward, 1), VIEW_LANES(views, view_index, forward, 2));
-        int_lanes width = VIEW_INT_LANES(views, view_index, width), height = VIEW_INT_LANES(views, view_index, height);
-        float_lanes sx = x / (z * VIEW_LANES(views, view_index, scale_x, 0));
-        float_lanes sy = y / (z * VIEW_LANES(views, view_index, scale_y, 0));
+        /* view_project, perspective (a spot light's view or a cube face). The lanes of a
+         * spot light, and most lanes of a point light, share one view: its fields are then
+         * read once, not gathered per lane (the same values, so the same bits). */
+        int shared_view = all_lanes(view_index == view_index.s0);
+        view_lanes_t v = shared_view ? view_broadcast(views + view_index.s0) : view_gather(views, view_index);
+        float_lanes qx = px - v.origin_x, qy = py - v.origin_y, qz = pz - v.origin_z;
+        float_lanes x = dot_lanes_of_lanes(qx, qy, qz, v.right_x, v.right_y, v.right_z);
+        float_lanes y = dot_lanes_of_lanes(qx, qy, qz, v.up_x, v.up_y, v.up_z);
+        float_lanes z = dot_lanes_of_lanes(qx, qy, qz, v.forward_x, v.forward_y, v.forward_z);
+        int_lanes width = v.width, height = v.height;
+        float_lanes sx = x / (z * v.scale_x);
+        float_lanes sy = y / (z * v.scale_y);
         float_lanes texel_x = (sx + 1.0f) * 0.5f * float_of_lanes(width);
         float_lanes texel_y = (1.0f - sy) * 0.5f * float_of_lanes(height);
         /* shadow_texel: truncated, then clamped to the map */
         int_lanes tx = min_lanes(max_lanes(int_of_lanes(texel_x), (int_lanes)(0)), width - 1);
         int_lanes ty = min_lanes(max_lanes(int_of_lanes(texel_y), (int_lanes)(0)), height - 1);
         int_lanes in_front = !(z <= 0.0f);
-        int_lanes index = VIEW_INT_LANES(views, view_index, depth_offset) + (in_front ? ty * width + tx : 0);
+        int_lanes index = v.depth_offset + (in_front ? ty * width + tx : 0);
         float_lanes depth = LOAD_LANES((global const float*)shadow_depth, index);
         stored = in_front ? depth : stored;
         blocker_beta = stored == INFINITY ? PI_F : atan2_approx_lanes(stored * sin_gamma, ep->d_el - stored * cos_gamma);
     }
     global float* row = (global float*)(tree + (size_t)slice * 2 * n);
-    for (int k = 0; k < LANES && first + k < n; ++k) vstore2((float2)(blocker_beta[k], blocker_beta[k]), first + k, row);
+    if (first + LANES <= n) {
+        /* level 0 holds (min, max) = (β, β): each lane twice, in one store */
+        *(global float16*)(row + 2 * first) = __builtin_shufflevector(blocker_beta, blocker_beta, 0, 8, 1, 9, 2, 10, 3, 11,
+                                                                     4, 12, 5, 13, 6, 14, 7, 15);
+    } else {
+        for (int k = 0; first + k < n; ++k) row[2 * (first + k)] = row[2 * (first + k) + 1] = blocker_beta[k];
+    }
 }

@@ -25,6 +25,10 @@ LANES = 8
 # Camera samples one rectify_bounds work-item reduces, LANES at a time (cl/rectify.cl); a
 # multiple of LANES.
 BOUNDS_CHUNK = 64
+# Slices one rectify work-group covers at the same texels: neighbouring slices read
+# neighbouring shadow-map texels, so a group that sweeps across slices, rather than along
+# one slice's row, finds them in cache (PoCL runs a group's work-items in turn).
+SLICES_PER_GROUP = 64
 
 
 @dataclass
@@ -172,8 +176,9 @@ def rectify(device: Device, buffers: FrameBuffers, rastered: RasterResult, light
     tree = device.buffer(nbytes=8 * slices * 2 * n)
     sides = device.buffer(slice_sides(params), writable=False)
     angles = device.buffer(texel_angles(params), writable=False)
+    group = min(SLICES_PER_GROUP, slices)
     event = device.kernel("rectify", "rectify", {"BOUNDS_CHUNK": BOUNDS_CHUNK, "LANES": LANES})(
-        device.queue, (-(-n // LANES), slices), None, buffers.views, buffers.lights, rastered.shadow_depth, frame_buffer, sides,
+        device.queue, (-(-n // LANES), -(-slices // group) * group), (1, group), buffers.views, buffers.lights, rastered.shadow_depth, frame_buffer, sides,
         angles, tree)
     timer.add("rectify", event)
     return Epipolar(params, frame_buffer, tree, float(beta_min), float(beta_max), float(gamma_max))
