@@ -355,7 +355,7 @@ def _beta_nodes(beta_min, beta_max, n) -> np.ndarray:
 
 
 def build_integrand(mode, light_kind, sigma_s, sigma_t, phase, power, d_el, beta_min, beta_max, gamma_max,
-                    n_beta=256, n_gamma=1024, rank=4, *, s_max=None) -> IntegrandTables:
+                    n_beta=256, n_gamma=1024, rank=4, *, s_max=None, rows=True) -> IntegrandTables:
     """Build one frame's integrand tables (float64).
 
     mode: "table" | "svd" | "analytic". light_kind: "point" | "spot" | "directional".
@@ -367,7 +367,8 @@ def build_integrand(mode, light_kind, sigma_s, sigma_t, phase, power, d_el, beta
     n_beta (default 256), n_gamma (default 1024): table nodes, >= 2. rank (default 4):
     SVD terms, 1..64. s_max (keyword, directional table/svd only): the longest camera
     ray in the medium (m); the rows end at s_end = min(s_max, 20/min σt). Required when
-    some channel has σt = 0.
+    some channel has σt = 0. rows=False (table only): everything but the prefix rows, which
+    `device_table` then builds on the device.
 
     Raises ValueError (one line, starting "integrand:") on bad input and when `analytic`
     has no closed form for the light and medium.
@@ -423,9 +424,9 @@ def build_integrand(mode, light_kind, sigma_s, sigma_t, phase, power, d_el, beta
 
     beta = _beta_nodes(beta_min, beta_max, n_beta)
     if mode == "table":
-        prefix = _prefix_rows(kind, consts, beta, n_gamma)
+        prefix = _prefix_rows(kind, consts, beta, n_gamma) if rows else None
         return IntegrandTables(mode, kind, beta_min, beta_max, gamma_max, n_beta, n_gamma, 0,
-                               np.ascontiguousarray(prefix), None, None, consts)
+                               None if prefix is None else np.ascontiguousarray(prefix), None, None, consts)
 
     if not 1 <= rank <= SVD_SAMPLES:
         raise ValueError(f"integrand: rank: expected 1..{SVD_SAMPLES}, got {rank}")
@@ -593,18 +594,69 @@ def integrand_table_size(width: int, height: int) -> tuple[int, int]:
 _MODE_IDS = {"table": structs.INTEGRAND_TABLE, "svd": structs.INTEGRAND_SVD, "analytic": structs.INTEGRAND_ANALYTIC}
 
 
-@dataclass
-class DeviceIntegrand:
-    """One light's integrand tables, packed as `cl/integrand.h` reads them, on the device."""
+#: Cells one integrand_cells work-item integrates at once, as float8 lanes (cl/lanes.h).
+INTEGRAND_LANES = 8
 
-    tables: IntegrandTables
-    params: object  # integrand_t
-    data: object  # float[]: the prefix table, or the SVD bases then prefix integrals
+
+def table_rows(tables: IntegrandTables) -> np.ndarray:
+    """(n_beta, 4) float32: what cl/integrand_build.cl needs of each β row, from float64:
+    (δ = π - β, β, ρ(cos β) (directional rows), 0)."""
+    beta = _beta_nodes(tables.beta_min, tables.beta_max, tables.n_beta)
+    rows = np.zeros((tables.n_beta, 4))
+    rows[:, 0] = np.maximum(math.pi - beta, 1e-20)  # the β = π row stays finite, as _row_integrand's
+    rows[:, 1] = beta
+    rows[:, 2] = hg_phase(np.cos(beta), float(tables.constants[0, C_G]))
+    return rows.astype(np.float32)
+
+
+def device_table(device: Device, tables: IntegrandTables, timer: StageTimer | None = None) -> object:
+    """The `table` mode's prefix rows F(β_j, x_k), (3, n_beta, n_gamma) float32, built on the
+    device (cl/integrand_build.cl): the same rule as `_prefix_rows`, in float32, with a
+    compensated running sum. The cells are independent, so the device takes them all at
+    once where the host would loop over chunks of rows (docs/design.md §4.4)."""
+    c = tables.constants
+    point = int(tables.light_kind == "point")
+    grey = int(_shared_channel(c) is not None)
+    defines = {"LANES": INTEGRAND_LANES, "QUAD_NODES": QUAD_NODES}
+    amplitude, sigma_t = structs.float4(c[:, C_AMPLITUDE]), structs.float4(c[:, C_SIGMA_T])
+    d_el, g = np.float32(c[0, C_D_EL]), np.float32(c[0, C_G])
+    n_beta, n_gamma = tables.n_beta, tables.n_gamma
+    rows = device.buffer(table_rows(tables), writable=False)
+    table = device.buffer(nbytes=4 * 3 * n_beta * n_gamma)
+    cells = device.kernel("integrand_build", "integrand_cells", defines)
+    events = [cells(device.queue, (-(-(n_gamma - 1) // INTEGRAND_LANES), n_beta), None, rows, np.int32(point), amplitude, sigma_t,
+          structs.float4(c[:, C_S_END]), d_el, g, np.int32(grey), np.int32(n_gamma), table)]
+    prefix = device.kernel("integrand_build", "integrand_prefix", defines)
+    events.append(prefix(device.queue, (n_beta,), None, rows, np.int32(point), amplitude, sigma_t, d_el, g,
+                         np.int32(grey), np.int32(n_gamma), table))
+    for event in events if timer is not None else ():
+        timer.add("integrand", event)
+    return table
+
+
+class DeviceIntegrand:
+    """One light's integrand tables, packed as `cl/integrand.h` reads them, on the device.
+    A table built on the device is read back into `tables` only when asked for."""
+
+    def __init__(self, tables: IntegrandTables, params, data, device: Device | None = None):
+        self._tables = tables
+        self.params = params  # integrand_t
+        self.data = data  # float[]: the prefix table, or the SVD bases then prefix integrals
+        self._device = device
+
+    @property
+    def tables(self) -> IntegrandTables:
+        if self._tables.mode == "table" and self._tables.prefix is None:
+            t = self._tables
+            prefix = self._device.read(self.data, (3, t.n_beta, t.n_gamma), np.float32)
+            self._tables = replace(t, prefix=prefix.astype(np.float64))
+        return self._tables
 
 
 def integrand(device: Device, scene, light, epipolar, timer: StageTimer) -> DeviceIntegrand:
     """Stage integrand: one light's per-frame tables over the β and γ ranges of the
-    visible rays (`epipolar`), built on the host in float64 and uploaded."""
+    visible rays (`epipolar`): the `table` mode's built on the device (`device_table`),
+    the others on the host in float64 and uploaded."""
     start = time.perf_counter()
     render, medium = scene.render, scene.medium
     directional = isinstance(light, DirectionalLight)
@@ -615,13 +667,18 @@ def integrand(device: Device, scene, light, epipolar, timer: StageTimer) -> Devi
             medium.phase, light.irradiance if directional else light.intensity, epipolar.d_el,
             epipolar.beta_min, epipolar.beta_max, epipolar.gamma_max, rank=render.svd_rank,
             n_beta=n_beta, n_gamma=n_gamma,
-            s_max=effective_far(scene) if directional and render.integrand != "analytic" else None)
+            s_max=effective_far(scene) if directional and render.integrand != "analytic" else None,
+            rows=render.integrand != "table")
     except ValueError as exc:  # e.g. `analytic` where no closed form exists
         where = f"{scene.source}: " if scene.source else ""
         raise ClraysError(f"{where}render.integrand: {str(exc).removeprefix('integrand: ')}") from exc
     params, data = pack_integrand(tables)
-    packed = DeviceIntegrand(tables, device.buffer(params.reshape(1), writable=False),
-                             device.buffer(data, writable=False))
+    if tables.mode == "table":
+        packed = DeviceIntegrand(tables, device.buffer(params.reshape(1), writable=False),
+                                 device_table(device, tables, timer), device)
+    else:
+        packed = DeviceIntegrand(tables, device.buffer(params.reshape(1), writable=False),
+                                 device.buffer(data, writable=False))
     timer.add_host("integrand", (time.perf_counter() - start) * 1e3)
     return packed
 
@@ -639,7 +696,7 @@ def pack_integrand(tables: IntegrandTables) -> tuple[np.ndarray, np.ndarray]:
     params["n_beta"], params["n_gamma"], params["rank"] = tables.n_beta, tables.n_gamma, tables.rank
     params["light_type"] = structs.LIGHT_DIRECTIONAL if tables.light_kind == "directional" else structs.LIGHT_POINT
     if tables.mode == "table":
-        data = tables.prefix.ravel()
+        data = tables.prefix.ravel() if tables.prefix is not None else np.zeros(1)  # None: built on the device
     elif tables.mode == "svd":
         data = np.concatenate([tables.basis_beta.ravel(), tables.prefix_gamma.ravel()])
     else:
