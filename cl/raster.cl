@@ -7,8 +7,8 @@
  * One work-item per triangle: it clips the triangle to the view's near side,
  * projects the polygon, and per pixel row ray-tests the samples in the row's span of
  * the polygon, 8 columns per test (intersect_columns); triangles taller than
- * RASTER_BIG_ROWS go to a second pass with one work-item per (triangle, group of
- * RASTER_ROWS_PER_ITEM rows it spans) (`*_rows`). The ray test (not interpolation)
+ * RASTER_BIG_ROWS go to a second pass with one work-item per RASTER_ROWS_PER_ITEM rows
+ * of the view, which owns them (`*_rows`). The ray test (not interpolation)
  * makes depth exact along the sample ray, and two-sided. Depth buffer layout per view:
  * [height][width][samples]. */
 #include "lighting.h"
@@ -297,14 +297,15 @@ inline int misses_every_sample(global const view_t* view, global const float4* t
     return 1;
 }
 
-/* The triangle `tri` clipped and projected into the view; its rows are [y0, y1]. */
-#define PROJECT_TRIANGLE                                                                    \
+/* The triangle `tri` clipped and projected into the view; its rows are [y0, y1]. EXIT
+ * leaves when nothing of it is in front of the view. */
+#define PROJECT_TRIANGLE(EXIT)                                                              \
     global const view_t* view = views + view_index;                                         \
     float3 v0 = tri_vertices[3 * tri].xyz, v1 = tri_vertices[3 * tri + 1].xyz,              \
            v2 = tri_vertices[3 * tri + 2].xyz;                                              \
     float2 corner[4];                                                                       \
     int count = projected_polygon(view, v0, v1, v2, corner);                                \
-    if (count < 3) return;                                                                  \
+    if (count < 3) EXIT;                                                                    \
     float top = INFINITY, bottom = -INFINITY;                                               \
     for (int k = 0; k < count; ++k) { top = FMIN(top, corner[k].y); bottom = FMAX(bottom, corner[k].y); } \
     int y0 = MAX_INT(FLOOR_INT(FMAX(top, -1.0f)) - 1, 0);                                   \
@@ -317,7 +318,7 @@ inline int misses_every_sample(global const view_t* view, global const float4* t
  * would find it empty: no corner lies in the strip, and no edge reaches it (the products
  * of its sign test are at least 2^-48, no underflow to 0, except for the strip [0, 1]
  * below a polygon that ends a hair above y = 0, which row_span is left to decide). */
-#define COVERED_SAMPLES_OF_ROW(y, BODY)                                                     \
+#define COVERED_SAMPLES_OF_ROW(y, BODY, LANES_BODY)                                         \
     if (!((float)(y + 1) < top || ((float)y > bottom && y > 0))) {                          \
         int x0, x1;                                                                         \
         if (row_span(corner, count, y, view->width, &x0, &x1))                              \
@@ -326,6 +327,7 @@ inline int misses_every_sample(global const view_t* view, global const float4* t
                 for (int first = x0; first <= x1; first += RASTER_LANES) {                 \
                     float8 lanes = intersect_columns(view, &test, first, x1, y, offset);    \
                     if (!any_lane(lanes != INFINITY)) continue;                             \
+                    LANES_BODY                                                              \
                     float lane_t[RASTER_LANES];                                             \
                     vstore8(lanes, 0, lane_t);                                              \
                     for (int k = 0; k < RASTER_LANES; ++k) {                                \
@@ -341,50 +343,69 @@ inline int misses_every_sample(global const view_t* view, global const float4* t
 /* Pass 1, one work-item per triangle: it visits every covered sample of its rows, unless
  * it spans more than RASTER_BIG_ROWS rows; then it lists itself in `big` as (triangle,
  * first row, last row) (while there is room) for pass 2, so a floor plane does not keep
- * one work-item busy for the whole view. The samples and the atomic updates are the same
- * either way, so is the depth map. */
+ * one work-item busy for the whole view. The samples are the same either way, and every
+ * update is a min (or max) that does not depend on the order, so is the depth map. */
 #define FOR_EACH_COVERED_SAMPLE(BODY)                                                       \
     int tri = get_global_id(0);                                                             \
     if (tri >= tri_count) return;                                                           \
     if (misses_every_sample(views + view_index, tri_vertices, tri, offsets, sample_count)) return; \
-    PROJECT_TRIANGLE                                                                        \
+    PROJECT_TRIANGLE(return)                                                                \
     if (y1 - y0 + 1 > RASTER_BIG_ROWS) {                                                    \
         uint slot = atomic_inc(big_count);                                                  \
         if (slot < RASTER_BIG_TRIANGLES) { vstore3((int3)(tri, y0, y1), slot, big); return; } \
     }                                                                                       \
-    for (int y = y0; y <= y1; ++y) COVERED_SAMPLES_OF_ROW(y, BODY)
+    for (int y = y0; y <= y1; ++y) COVERED_SAMPLES_OF_ROW(y, BODY, )
 
-/* Pass 2, one work-item per (listed triangle, group of RASTER_ROWS_PER_ITEM rows): the host
- * expands pass 1's list into `rows` (first row of each group; clrays/stages/raster.py), so
- * no work-item waits on a row outside its triangle. */
-#define FOR_EACH_COVERED_SAMPLE_OF_BIG_ROW(BODY)                                            \
-    int item = get_global_id(0);                                                            \
-    if (item >= row_count) return;                                                          \
-    int tri = rows[item].x, first_row = rows[item].y;                                       \
-    PROJECT_TRIANGLE                                                                        \
-    int last_row = min(first_row + RASTER_ROWS_PER_ITEM - 1, y1);                           \
-    for (int y = first_row; y <= last_row; ++y) COVERED_SAMPLES_OF_ROW(y, BODY)
+/* Pass 2, one work-item per RASTER_ROWS_PER_ITEM rows of the view: it draws its rows of
+ * every triangle pass 1 listed. Pass 1 has finished, and no other work-item touches these
+ * rows, so the updates need no atomics (OWNED_BODY), and a run of RASTER_LANES samples of
+ * one row can be read, updated and written as one vector (LANES_BODY). */
+#define FOR_EACH_COVERED_SAMPLE_OF_OWNED_ROWS(OWNED_BODY, LANES_BODY)                        \
+    int row0 = get_global_id(0) * RASTER_ROWS_PER_ITEM;                                     \
+    if (row0 >= views[view_index].height) return;                                           \
+    int row1 = min(row0 + RASTER_ROWS_PER_ITEM, views[view_index].height) - 1;              \
+    for (int listed = 0; listed < big_count; ++listed) {                                    \
+        int3 entry = vload3(listed, big);                                                   \
+        if (entry.z < row0 || entry.y > row1) continue;                                     \
+        int tri = entry.x;                                                                  \
+        PROJECT_TRIANGLE(continue)                                                          \
+        int last_row = min(row1, y1);                                                       \
+        for (int y = max(row0, y0); y <= last_row; ++y) COVERED_SAMPLES_OF_ROW(y, OWNED_BODY, LANES_BODY) \
+    }
 
 #define RASTER_ARGS global const float4* tri_vertices, int tri_count, global const view_t* views, \
                     int view_index, global const float2* offsets, int sample_count,           \
                     global uint* big_count, global int* big
 
 #define RASTER_ROWS_ARGS global const float4* tri_vertices, global const view_t* views, int view_index, \
-                         global const float2* offsets, int sample_count, global const int2* rows, int row_count
+                         global const float2* offsets, int sample_count, global const int* big, int big_count
 
 /* Each pass-1 kernel `name` has a pass-2 twin `name_rows`. */
-#define RASTER_KERNELS(name, TARGET, BODY)                                                  \
+#define RASTER_KERNELS(name, TARGET, BODY, OWNED_BODY, LANES_BODY)                          \
     kernel void name(RASTER_ARGS, TARGET) { FOR_EACH_COVERED_SAMPLE(BODY) }                \
-    kernel void name##_rows(RASTER_ROWS_ARGS, TARGET) { FOR_EACH_COVERED_SAMPLE_OF_BIG_ROW(BODY) }
+    kernel void name##_rows(RASTER_ROWS_ARGS, TARGET) { FOR_EACH_COVERED_SAMPLE_OF_OWNED_ROWS(OWNED_BODY, LANES_BODY) }
+
+/* Pass 2's depth update of a whole run of RASTER_LANES columns, with one sample per pixel
+ * and the run inside the row: the stored depths and the run's as one vector min (a lane
+ * the triangle misses holds INFINITY, whose bits are DEPTH_EMPTY, the largest depth). */
+#define DEPTH_MIN_LANES(depth)                                                              \
+    if (sample_count == 1 && first + RASTER_LANES <= view->width) {                        \
+        global uint* run = depth + view->depth_offset + y * view->width + first;           \
+        vstore8(min(vload8(0, run), as_uint8(lanes)), 0, run);                              \
+        continue;                                                                           \
+    }
 
 /* The stored depths only ever decrease, so a depth that does not beat the one read now
  * cannot win the atomic later: the plain read skips most atomics where triangles overlap. */
 RASTER_KERNELS(raster_depth, global uint* depth,
-               if (as_uint(t) < depth[idx]) atomic_min(depth + idx, as_uint(t));)
+               if (as_uint(t) < depth[idx]) atomic_min(depth + idx, as_uint(t));,
+               if (as_uint(t) < depth[idx]) depth[idx] = as_uint(t);,
+               DEPTH_MIN_LANES(depth))
 
 #define RESOLVE_TARGET global const uint* depth, global int* tri_id
 RASTER_KERNELS(raster_resolve, RESOLVE_TARGET,
-               if (as_uint(t) == depth[idx] && tri > tri_id[idx]) atomic_max(tri_id + idx, tri);)
+               if (as_uint(t) == depth[idx] && tri > tri_id[idx]) atomic_max(tri_id + idx, tri);,
+               if (as_uint(t) == depth[idx] && tri > tri_id[idx]) tri_id[idx] = tri;, )
 
 #ifdef RASTER_ATOMIC64
 #pragma OPENCL EXTENSION cl_khr_int64_extended_atomics : enable
@@ -399,7 +420,8 @@ RASTER_KERNELS(raster_resolve, RESOLVE_TARGET,
 #endif
 RASTER_KERNELS(raster_nearest, global ulong* nearest,
                if (as_uint(t) <= ((global const uint*)(nearest + idx))[KEY_DEPTH_WORD])
-                   atom_min(nearest + idx, ((ulong)as_uint(t) << 32) | (ulong)tri);)
+                   atom_min(nearest + idx, ((ulong)as_uint(t) << 32) | (ulong)tri);,
+               ulong key = ((ulong)as_uint(t) << 32) | (ulong)tri; if (key < nearest[idx]) nearest[idx] = key;, )
 
 kernel void raster_split(global const ulong* nearest, int samples, global uint* depth, global int* tri_id)
 {

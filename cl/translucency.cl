@@ -19,7 +19,8 @@
 
 #define PEEL_TARGET global uint* depth, global const uint* previous
 RASTER_KERNELS(translucency_peel, PEEL_TARGET,
-               if (as_uint(t) > previous[idx] + PEEL_GAP_ULPS) atomic_min(depth + idx, as_uint(t));)
+               if (as_uint(t) > previous[idx] + PEEL_GAP_ULPS) atomic_min(depth + idx, as_uint(t));,
+               if (as_uint(t) > previous[idx] + PEEL_GAP_ULPS && as_uint(t) < depth[idx]) depth[idx] = as_uint(t);, )
 
 /* Layer k of every texel into the light's atlas: its depth, and the product of (1 − α)
  * of layers 0 … k, packed unorm16 (rounded, so 1 stays exactly 1). */

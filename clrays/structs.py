@@ -65,13 +65,13 @@ FAR_DEVICE_MAX = 1e18
 SIN_BETA_MIN = 1e-9
 
 # raster: a triangle spanning more than RASTER_BIG_ROWS rows of a view (a floor plane)
-# is drawn by one work-item per row in a second pass instead of looping over its rows
-# alone; up to RASTER_BIG_TRIANGLES of them per launch (the host reads the list and
-# launches just their rows), the rest draw their own rows.
+# is listed by the first pass instead of looping over its rows alone; up to
+# RASTER_BIG_TRIANGLES of them per launch, the rest draw their own rows.
 RASTER_BIG_ROWS = 32
 RASTER_BIG_TRIANGLES = 1 << 16
-# The second pass gives each work-item this many consecutive rows of a listed triangle:
-# the clipping and projection it repeats per work-item are paid once per group of rows.
+# The second pass gives each work-item this many consecutive rows of the view, of every
+# listed triangle: it owns them (no atomics), and the clipping and projection it repeats
+# per triangle are paid once per group of rows.
 RASTER_ROWS_PER_ITEM = 4
 
 #: Every constant above by its C name: the `-D` options of every kernel build.

@@ -29,17 +29,18 @@ def _launch(device: Device, buffers: FrameBuffers, name: str, defines: dict | No
     count = buffers.inputs.tri_vertices.shape[0] // 3
     if buffers.inputs.raster_triangles is not None:  # the reliefs' triangles, last, are pre-warped instead
         count = buffers.inputs.raster_triangles
-    raster_passes(device, "raster", name, defines, buffers.tri_vertices, count, buffers.views, view_index, offsets,
-                  sample_count, target, timer)
+    raster_passes(device, "raster", name, defines, buffers.tri_vertices, count, buffers.views, view_index,
+                  int(buffers.inputs.views[view_index]["height"]), offsets, sample_count, target, timer)
 
 
 def raster_passes(device: Device, program: str, name: str, defines: dict | None, vertices, count: int, views,
-                  view_index: int, offsets, sample_count: int, target: tuple, timer: StageTimer,
+                  view_index: int, view_height: int, offsets, sample_count: int, target: tuple, timer: StageTimer,
                   stage: str = "raster") -> None:
     """The two passes of one raster kernel (cl/raster.cl's RASTER_KERNELS, built in
-    `program`) over `count` triangles for one view: `name`, one work-item per triangle,
-    lists the triangles taller than RASTER_BIG_ROWS with their rows; `name_rows` draws
-    those with one work-item per (triangle, row) (docs/design.md §4.1)."""
+    `program`) over `count` triangles for one view (`view_height` rows): `name`, one
+    work-item per triangle, lists the triangles taller than RASTER_BIG_ROWS with their rows;
+    `name_rows` draws those with one work-item per RASTER_ROWS_PER_ITEM rows of the view,
+    which owns its rows (docs/design.md §4.1)."""
     if count == 0:
         return
     big_count = device.buffer(np.zeros(1, np.uint32))
@@ -51,18 +52,9 @@ def raster_passes(device: Device, program: str, name: str, defines: dict | None,
     listed = min(int(device.read(big_count, 1, np.uint32)[0]), capacity)
     if not listed:
         return
-    # Pass 1's list expanded on the host to groups of RASTER_ROWS_PER_ITEM rows (the first
-    # row of each; a few thousand entries): a grid of (listed, view height) work-items cost
-    # more in empty ones than the rows themselves.
-    tri, first, last = device.read(big, (listed, 3), np.int32).T
-    groups = (last - first) // structs.RASTER_ROWS_PER_ITEM + 1
-    rows = np.empty((int(groups.sum()), 2), np.int32)
-    rows[:, 0] = np.repeat(tri, groups)
-    rank = np.arange(len(rows)) - np.repeat(np.cumsum(groups) - groups, groups)  # group index within its triangle
-    rows[:, 1] = np.repeat(first, groups) + structs.RASTER_ROWS_PER_ITEM * rank
     timer.add(stage, device.kernel(program, f"{name}_rows", defines)(
-        device.queue, (len(rows),), None, vertices, views, np.int32(view_index), offsets,
-        np.int32(sample_count), device.buffer(rows, writable=False), np.int32(len(rows)), *target))
+        device.queue, (-(-view_height // structs.RASTER_ROWS_PER_ITEM),), None, vertices, views, np.int32(view_index),
+        offsets, np.int32(sample_count), big, np.int32(listed), *target))
 
 
 def _rasterize(device: Device, buffers: FrameBuffers, view_index: int, offsets, sample_count: int,
