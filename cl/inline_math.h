@@ -43,6 +43,9 @@ ALWAYS_INLINE float inline_floor(float x)
     return inline_fabs(x) < 8388608.0f ? floored : x;
 }
 
+/* ceil as -floor(-x): exact, -0 for x in (-1, 0], x itself for |x| ≥ 2^23, ±inf and NaN. */
+ALWAYS_INLINE float inline_ceil(float x) { return -inline_floor(-x); }
+
 ALWAYS_INLINE float inline_dot(float3 a, float3 b)
 {
     float x = a.x * b.x, y = a.y * b.y, z = a.z * b.z;

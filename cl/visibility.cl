@@ -41,15 +41,15 @@
 inline float3 closest_on_triangle(float3 p, float3 a, float3 b, float3 c)
 {
     float3 ab = b - a, ac = c - a, ap = p - a;
-    float d1 = dot(ab, ap), d2 = dot(ac, ap);
+    float d1 = inline_dot(ab, ap), d2 = inline_dot(ac, ap);
     if (d1 <= 0.0f && d2 <= 0.0f) return a;
     float3 bp = p - b;
-    float d3 = dot(ab, bp), d4 = dot(ac, bp);
+    float d3 = inline_dot(ab, bp), d4 = inline_dot(ac, bp);
     if (d3 >= 0.0f && d4 <= d3) return b;
     float vc = d1 * d4 - d3 * d2;
     if (vc <= 0.0f && d1 >= 0.0f && d3 <= 0.0f) return a + ab * (d1 / (d1 - d3));
     float3 cp = p - c;
-    float d5 = dot(ab, cp), d6 = dot(ac, cp);
+    float d5 = inline_dot(ab, cp), d6 = inline_dot(ac, cp);
     if (d6 >= 0.0f && d5 <= d6) return c;
     float vb = d5 * d2 - d1 * d6;
     if (vb <= 0.0f && d2 >= 0.0f && d6 <= 0.0f) return a + ac * (d2 / (d2 - d6));
@@ -64,7 +64,7 @@ inline float3 closest_on_triangle(float3 p, float3 a, float3 b, float3 c)
 inline float3 view_direction(global const view_t* view, float px, float py)
 {
     float sx = 2.0f * px / (float)view->width - 1.0f, sy = 1.0f - 2.0f * py / (float)view->height;
-    return normalize(view->forward.xyz + view->right.xyz * (sx * view->scale_x) + view->up.xyz * (sy * view->scale_y));
+    return inline_normalize(view->forward.xyz + view->right.xyz * (sx * view->scale_x) + view->up.xyz * (sy * view->scale_y));
 }
 
 /* Signed side of q (view coordinates: right, up, forward) against one of the five planes
@@ -105,8 +105,8 @@ inline float2 texel_coordinates(global const view_t* view, float3 q, int perspec
 inline int near_the_view(global const view_t* view, const float2* corner, int corners)
 {
     for (int k = 0; k < corners; ++k)
-        if (!(fabs(corner[k].x - 0.5f * view->width) <= 0.5f * view->width + 2.0f
-              && fabs(corner[k].y - 0.5f * view->height) <= 0.5f * view->height + 2.0f))
+        if (!(inline_fabs(corner[k].x - 0.5f * view->width) <= 0.5f * view->width + 2.0f
+              && inline_fabs(corner[k].y - 0.5f * view->height) <= 0.5f * view->height + 2.0f))
             return 0;
     return 1;
 }
@@ -117,7 +117,7 @@ inline int near_the_view(global const view_t* view, const float2* corner, int co
 inline int clip_to_frustum(global const view_t* view, float3* polygon, float extent)
 {
     float3 clipped[8];
-    float grow = 1.0f + 4.0f / (float)min(view->width, view->height);
+    float grow = 1.0f + 4.0f / (float)inline_min(view->width, view->height);
     int corners = 3;
     for (int plane = 0; plane < 5 && corners > 0; ++plane) {
         int kept = 0;
@@ -147,17 +147,17 @@ inline int polygon_edges(const float2* corner, int corners, float3* edge)
     for (int k = 0; k < corners; ++k) {
         float2 u = corner[k] - corner[0], v = corner[(k + 1) % corners] - corner[0];
         area += u.x * v.y - u.y * v.x;
-        perimeter += fabs(v.x - u.x) + fabs(v.y - u.y);
-        lo = fmin(lo, corner[k]);
-        hi = fmax(hi, corner[k]);
+        perimeter += inline_fabs(v.x - u.x) + inline_fabs(v.y - u.y);
+        lo = (float2)(inline_fmin(lo.x, corner[k].x), inline_fmin(lo.y, corner[k].y));
+        hi = (float2)(inline_fmax(hi.x, corner[k].x), inline_fmax(hi.y, corner[k].y));
     }
-    if (!(fabs(area) >= 0.01f * perimeter)) return 0;
+    if (!(inline_fabs(area) >= 0.01f * perimeter)) return 0;
     float orientation = area > 0.0f ? 1.0f : -1.0f;
-    float shortest = fmax(0.05f, 2e-3f * fmax(hi.x - lo.x, hi.y - lo.y));
+    float shortest = inline_fmax(0.05f, 2e-3f * inline_fmax(hi.x - lo.x, hi.y - lo.y));
     int edges = 0;
     for (int k = 0; k < corners; ++k) {
         float2 from = corner[k], along = corner[(k + 1) % corners] - from;
-        if (fabs(along.x) + fabs(along.y) < shortest) continue;
+        if (inline_fabs(along.x) + inline_fabs(along.y) < shortest) continue;
         float a = -orientation * along.y, b = orientation * along.x;
         edge[edges++] = (float3)(a, b, -(a * from.x + b * from.y));
     }
@@ -171,11 +171,11 @@ inline int row_span(const float3* edge, int edges, int ty, int* first, int* last
     float y_low = (float)ty - COVER_GROWTH, y_high = (float)ty + 1.0f + COVER_GROWTH;
     float left = (float)*first, right = (float)*last;
     for (int k = 0; k < edges; ++k) {
-        float a = edge[k].x, rest = edge[k].z + fmax(edge[k].y * y_low, edge[k].y * y_high);
+        float a = edge[k].x, rest = edge[k].z + inline_fmax(edge[k].y * y_low, edge[k].y * y_high);
         if (a > 0.0f) /* the square's right side x = tx + 1 + growth is the most inside */
-            left = fmax(left, ceil(-rest / a - 1.0f - COVER_GROWTH));
+            left = inline_fmax(left, inline_ceil(-rest / a - 1.0f - COVER_GROWTH));
         else if (a < 0.0f) /* its left side x = tx - growth */
-            right = fmin(right, floor(rest / -a + COVER_GROWTH));
+            right = inline_fmin(right, inline_floor(rest / -a + COVER_GROWTH));
         else if (rest < 0.0f)
             return 0;
     }
@@ -204,7 +204,7 @@ inline void note_writer(global int* texel_writer, int tri)
 inline int row_is_read(global const uint* read_mask, int row, int x0, int x1)
 {
     for (int at = row + x0, last = row + x1; at <= last;) {
-        int bits = min(32 - (at & 31), last - at + 1);
+        int bits = inline_min(32 - (at & 31), last - at + 1);
         uint span = bits == 32 ? 0xffffffffu : ((1u << bits) - 1u) << (at & 31);
         if (read_mask[at >> 5] & span) return 1;
         at += bits;
@@ -236,9 +236,9 @@ inline void note_touching(global int* head, int tri, global int2* touching, vola
 /* The conservative bound map: every texel a triangle may touch (per row, the span whose
  * squares, grown by COVER_GROWTH, meet the projection of its part inside the frustum)
  * gets a depth no larger than the triangle's nearest point inside that texel's footprint:
- *   perspective: max(distance to the closest point of the triangle, distance to its plane
- *     along the texel's cone, bounded by the cone's half-angle ρ: h / cos(max(φ - ρ, 0)));
- *   orthographic: max(nearest vertex, the plane's depth at the texel's nearest corner).
+ *   perspective: inline_max(distance to the closest point of the triangle, distance to its plane
+ *     along the texel's cone, bounded by the cone's half-angle ρ: h / cos(inline_max(φ - ρ, 0)));
+ *   orthographic: inline_max(nearest vertex, the plane's depth at the texel's nearest corner).
  * A triangle thinner than a texel, which the centre-sampled map may miss, is still here.
  * The same texels get the triangle in the writer map (note_writer).
  * With a read_mask (masked ≠ 0), only the texels that a camera sample's lit test reads are
@@ -256,9 +256,9 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
     float extent = 0.0f;
     for (int k = 0; k < 3; ++k) {
         vertex[k] = tri_vertices[3 * tri + k].xyz - view->origin.xyz;
-        in_view[k] = (float3)(dot(vertex[k], view->right.xyz), dot(vertex[k], view->up.xyz),
-                              dot(vertex[k], view->forward.xyz));
-        extent = fmax(extent, fmax(fabs(in_view[k].x), fmax(fabs(in_view[k].y), fabs(in_view[k].z))));
+        in_view[k] = (float3)(inline_dot(vertex[k], view->right.xyz), inline_dot(vertex[k], view->up.xyz),
+                              inline_dot(vertex[k], view->forward.xyz));
+        extent = inline_fmax(extent, inline_fmax(inline_fabs(in_view[k].x), inline_fmax(inline_fabs(in_view[k].y), inline_fabs(in_view[k].z))));
     }
     int perspective = view->projection == PROJECTION_PERSPECTIVE;
     /* The part of the triangle inside the view's frustum (near plane and four sides,
@@ -269,7 +269,7 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
     int corners = 3;
     for (int k = 0; k < 3; ++k) polygon[k] = in_view[k];
     float2 corner[8]; /* the polygon's corners in texel coordinates */
-    int clip = perspective && fmin(in_view[0].z, fmin(in_view[1].z, in_view[2].z)) <= 1e-5f * extent;
+    int clip = perspective && inline_fmin(in_view[0].z, inline_fmin(in_view[1].z, in_view[2].z)) <= 1e-5f * extent;
     if (!clip) {
         for (int k = 0; k < 3; ++k) corner[k] = texel_coordinates(view, polygon[k], perspective);
         clip = !near_the_view(view, corner, 3);
@@ -281,12 +281,12 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
     }
     float2 lo = (float2)(INFINITY), hi = (float2)(-INFINITY);
     for (int k = 0; k < corners; ++k) {
-        lo = fmin(lo, corner[k]);
-        hi = fmax(hi, corner[k]);
+        lo = (float2)(inline_fmin(lo.x, corner[k].x), inline_fmin(lo.y, corner[k].y));
+        hi = (float2)(inline_fmax(hi.x, corner[k].x), inline_fmax(hi.y, corner[k].y));
     }
-    int x0 = max((int)floor(fmax(lo.x, -2.0f)) - 1, 0), y0 = max((int)floor(fmax(lo.y, -2.0f)) - 1, 0);
-    int x1 = min((int)floor(fmin(hi.x, (float)view->width + 2.0f)) + 1, view->width - 1);
-    int y1 = min((int)floor(fmin(hi.y, (float)view->height + 2.0f)) + 1, view->height - 1);
+    int x0 = inline_max((int)inline_floor(inline_fmax(lo.x, -2.0f)) - 1, 0), y0 = inline_max((int)inline_floor(inline_fmax(lo.y, -2.0f)) - 1, 0);
+    int x1 = inline_min((int)inline_floor(inline_fmin(hi.x, (float)view->width + 2.0f)) + 1, view->width - 1);
+    int y1 = inline_min((int)inline_floor(inline_fmin(hi.y, (float)view->height + 2.0f)) + 1, view->height - 1);
     if (x0 > x1 || y0 + row_first > y1) return; /* outside the view, or no row for this item */
     if (masked && small_rows > 0 && y1 - y0 + 1 <= small_rows) { /* no sample reads its rectangle: nothing to draw */
         int read = 0;
@@ -305,34 +305,34 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
         if (read) big_items[atomic_inc(big_count)] = item;
         return;
     }
-    float3 normal = cross(vertex[1] - vertex[0], vertex[2] - vertex[0]);
-    float normal_length = length(normal);
+    float3 normal = inline_cross(vertex[1] - vertex[0], vertex[2] - vertex[0]);
+    float normal_length = exact_length(normal);
     float3 n = normal_length > 0.0f ? normal / normal_length : (float3)(0.0f);
-    float plane = dot(n, vertex[0]); /* signed distance of the plane from the view origin */
+    float plane = inline_dot(n, vertex[0]); /* signed distance of the plane from the view origin */
     if (plane < 0.0f) {
         n = -n;
         plane = -plane;
     }
     float nearest; /* the triangle's nearest depth anywhere */
     if (perspective) {
-        nearest = length(closest_on_triangle((float3)(0.0f), vertex[0], vertex[1], vertex[2]));
+        nearest = exact_length(closest_on_triangle((float3)(0.0f), vertex[0], vertex[1], vertex[2]));
     } else {
-        nearest = fmin(in_view[0].z, fmin(in_view[1].z, in_view[2].z));
+        nearest = inline_fmin(in_view[0].z, inline_fmin(in_view[1].z, in_view[2].z));
     }
-    float n_forward = dot(n, view->forward.xyz);
+    float n_forward = inline_dot(n, view->forward.xyz);
     /* A texel's cone is widest at the view's centre: ρ there bounds every texel's. */
     float3 middle = view_direction(view, 0.5f * (float)view->width, 0.5f * (float)view->height);
-    float cos_rho = dot(middle, view_direction(view, 0.5f * (float)view->width + 1.0f,
+    float cos_rho = inline_dot(middle, view_direction(view, 0.5f * (float)view->width + 1.0f,
                                                  0.5f * (float)view->height + 1.0f));
-    float sin_rho = sqrt(fmax(1.0f - cos_rho * cos_rho, 0.0f));
+    float sin_rho = inline_sqrt(inline_fmax(1.0f - cos_rho * cos_rho, 0.0f));
     /* No texel gets less than this from the triangle (the margin below is monotonic in the
      * depth): a texel already at or under it is skipped before its cone maths, which
      * leaves the atomic-min result unchanged. */
-    uint floor_bits = as_uint(fmax(nearest - BOUND_MARGIN_REL * fabs(nearest) - BOUND_MARGIN_REL * extent, 0.0f));
+    uint floor_bits = as_uint(inline_fmax(nearest - BOUND_MARGIN_REL * inline_fabs(nearest) - BOUND_MARGIN_REL * extent, 0.0f));
     /* The texel maths in view coordinates (right, up, forward), per row what a row shares:
      * the centre of texel (tx, ty) looks along (x, y, 1), x = ((2·tx + 1)/width - 1)·scale_x,
      * y = (1 - (2·ty + 1)/height)·scale_y (view_direction, unnormalised). */
-    float3 n_view = (float3)(dot(n, view->right.xyz), dot(n, view->up.xyz), n_forward);
+    float3 n_view = (float3)(inline_dot(n, view->right.xyz), inline_dot(n, view->up.xyz), n_forward);
     float inverse_width = 1.0f / (float)view->width, inverse_height = 1.0f / (float)view->height;
     /* Orthographic: the plane's depth (plane - n_r·x - n_u·y) / n_f is linear across the
      * texel, so its least corner is the same one in every texel, (tx + corner_x, ty + corner_y). */
@@ -360,17 +360,17 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
             float depth = nearest;
             if (perspective && normal_length > 0.0f) {
                 float x_centre = ((2.0f * (float)tx + 1.0f) * inverse_width - 1.0f) * view->scale_x;
-                float cos_phi = (row_dot + n_view.x * x_centre) * rsqrt(row_length2 + x_centre * x_centre);
-                float sin_phi = sqrt(fmax(1.0f - cos_phi * cos_phi, 0.0f));
+                float cos_phi = (row_dot + n_view.x * x_centre) * (1.0f / inline_sqrt(row_length2 + x_centre * x_centre));
+                float sin_phi = inline_sqrt(inline_fmax(1.0f - cos_phi * cos_phi, 0.0f));
                 /* cos(φ - ρ) ≥ the largest n·u over the texel's cone; φ ≤ ρ: the foot may be inside */
                 float cos_gap = cos_phi >= cos_rho ? 1.0f : cos_phi * cos_rho + sin_phi * sin_rho;
                 if (cos_gap <= 0.0f) continue; /* no ray of this texel meets the plane */
-                depth = fmax(depth, plane / cos_gap);
-            } else if (!perspective && fabs(n_forward) > 1e-6f) {
+                depth = inline_fmax(depth, plane / cos_gap);
+            } else if (!perspective && inline_fabs(n_forward) > 1e-6f) {
                 float x_corner = (2.0f * (float)(tx + corner_x) * inverse_width - 1.0f) * view->scale_x;
-                depth = fmax(depth, (row_plane - n_view.x * x_corner) / n_forward);
+                depth = inline_fmax(depth, (row_plane - n_view.x * x_corner) / n_forward);
             }
-            depth = fmax(depth - BOUND_MARGIN_REL * fabs(depth) - BOUND_MARGIN_REL * extent, 0.0f);
+            depth = inline_fmax(depth - BOUND_MARGIN_REL * inline_fabs(depth) - BOUND_MARGIN_REL * extent, 0.0f);
             global uint* texel = bound + view->depth_offset + ty * view->width + tx;
             if (as_uint(depth) < *texel) atomic_min(texel, as_uint(depth)); /* the read spares most atomics */
         }
