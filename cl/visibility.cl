@@ -386,10 +386,10 @@ kernel void visibility_clear(global const uint* read_mask, int first, int texels
 {
     int word = (first >> 5) + get_global_id(0);
     uint bits = read_mask[word];
-    if (bits == 0u) return;
-    for (int bit = 0; bit < 32; ++bit) {
-        int at = 32 * word + bit;
-        if (((bits >> bit) & 1u) && at >= first && at < first + texels) {
+    /* only the set bits, lowest first (__builtin_ctz is an instruction, not a library call) */
+    for (; bits != 0u; bits &= bits - 1u) {
+        int at = 32 * word + __builtin_ctz(bits);
+        if (at >= first && at < first + texels) {
             bound[at - first] = DEPTH_EMPTY;
             writer[at - first] = WRITER_NONE;
             if (touching_capacity > 0) touching_head[at - first] = -1;
