@@ -434,9 +434,21 @@ kernel void raster_split(global const ulong* nearest, int samples, global uint* 
 #endif
 
 /* Whether any texel of a depth buffer holds a depth (map_is_empty): a flag set on the
- * device, so the host reads 4 bytes instead of the whole map. */
+ * device, so the host reads 4 bytes instead of the whole map. One work-item per
+ * RASTER_ANY_TEXELS texels (clrays/structs.py), read as vectors of 16. */
 kernel void raster_any(global const uint* depth, int texels, global uint* any)
 {
-    int i = get_global_id(0);
-    if (i < texels && depth[i] != DEPTH_EMPTY) *any = 1u;
+    int first = get_global_id(0) * RASTER_ANY_TEXELS;
+    if (first >= texels) return;
+    if (first + RASTER_ANY_TEXELS <= texels) {
+        uint16 seen = (uint16)(0u);
+        for (int k = 0; k < RASTER_ANY_TEXELS / 16; ++k) seen |= vload16(0, depth + first + 16 * k) ^ DEPTH_EMPTY;
+        uint8 half_seen = seen.lo | seen.hi;
+        uint4 quarter = half_seen.lo | half_seen.hi;
+        uint2 eighth = quarter.lo | quarter.hi;
+        if ((eighth.x | eighth.y) != 0u) *any = 1u;
+        return;
+    }
+    for (int i = first; i < texels; ++i)
+        if (depth[i] != DEPTH_EMPTY) *any = 1u;
 }

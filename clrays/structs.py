@@ -73,6 +73,8 @@ RASTER_BIG_TRIANGLES = 1 << 16
 # listed triangle: it owns them (no atomics), and the clipping and projection it repeats
 # per triangle are paid once per group of rows.
 RASTER_ROWS_PER_ITEM = 4
+# raster_any (is a map empty?) reads this many texels per work-item, a multiple of 16.
+RASTER_ANY_TEXELS = 256
 
 #: Every constant above by its C name: the `-D` options of every kernel build.
 KERNEL_CONSTANTS = {

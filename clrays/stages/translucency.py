@@ -158,7 +158,7 @@ def translucency(device: Device, buffers: FrameBuffers, timer: StageTimer) -> La
                 _launch(device, "raster_resolve", defines, vertices, triangles, views, int(view), height, (depth, tri),
                         timer)
             flag = device.buffer(np.zeros(1, np.uint32))
-            device.kernel("translucency", "raster_any", defines)(device.queue, (texels,), None, depth, np.int32(texels), flag)
+            device.kernel("translucency", "raster_any", defines)(device.queue, (-(-texels // structs.RASTER_ANY_TEXELS),), None, depth, np.int32(texels), flag)
             if not device.read(flag, 1, np.uint32)[0]:
                 break  # no texel has this many layers: the rest stay empty
             packed_depth = device.buffer(nbytes=4 * texels)
