@@ -596,6 +596,7 @@ _MODE_IDS = {"table": structs.INTEGRAND_TABLE, "svd": structs.INTEGRAND_SVD, "an
 
 #: Cells one integrand_cells work-item integrates at once, as float8 lanes (cl/lanes.h).
 INTEGRAND_LANES = 8
+TABLE_BUILD_DEFINES = {"LANES": INTEGRAND_LANES, "QUAD_NODES": QUAD_NODES}
 
 
 def table_rows(tables: IntegrandTables) -> np.ndarray:
@@ -617,7 +618,7 @@ def device_table(device: Device, tables: IntegrandTables, timer: StageTimer | No
     c = tables.constants
     point = int(tables.light_kind == "point")
     grey = int(_shared_channel(c) is not None)
-    defines = {"LANES": INTEGRAND_LANES, "QUAD_NODES": QUAD_NODES}
+    defines = TABLE_BUILD_DEFINES
     amplitude, sigma_t = structs.float4(c[:, C_AMPLITUDE]), structs.float4(c[:, C_SIGMA_T])
     d_el, g = np.float32(c[0, C_D_EL]), np.float32(c[0, C_G])
     n_beta, n_gamma = tables.n_beta, tables.n_gamma
@@ -657,8 +658,10 @@ def integrand(device: Device, scene, light, epipolar, timer: StageTimer) -> Devi
     """Stage integrand: one light's per-frame tables over the β and γ ranges of the
     visible rays (`epipolar`): the `table` mode's built on the device (`device_table`),
     the others on the host in float64 and uploaded."""
-    start = time.perf_counter()
     render, medium = scene.render, scene.medium
+    if render.integrand == "table":  # built before the clock starts, as every device stage's kernels are
+        device.program("integrand_build", TABLE_BUILD_DEFINES)
+    start = time.perf_counter()
     directional = isinstance(light, DirectionalLight)
     n_beta, n_gamma = integrand_table_size(scene.image.width, scene.image.height)
     try:
