@@ -45,20 +45,33 @@ inline float dot_inline(float3 a, float3 b)
 #pragma OPENCL FP_CONTRACT OFF
     return (a.x * b.x + a.y * b.y) + a.z * b.z;
 }
+inline float dot2_inline(float2 a, float2 b)
+{
+#pragma OPENCL FP_CONTRACT OFF
+    return a.x * b.x + a.y * b.y;
+}
 #define DOT_3(a, b) dot_inline(a, b)
+#define DOT_2(a, b) dot2_inline(a, b)
+#define CROSS_3(a, b) inline_cross(a, b)
 #define FABS(x) __builtin_fabsf(x)
 #define FMIN(a, b) __builtin_fminf(a, b)
 #define FMAX(a, b) __builtin_fmaxf(a, b)
-#define FLOOR_INT(x) ((int)__builtin_floorf(x))
-#define CEIL_INT(x) ((int)__builtin_ceilf(x))
+#define FLOOR(x) __builtin_floorf(x)
+#define CEIL(x) __builtin_ceilf(x)
 #else
 #define DOT_3(a, b) dot(a, b)
+#define DOT_2(a, b) dot(a, b)
+#define CROSS_3(a, b) cross(a, b)
 #define FABS(x) fabs(x)
 #define FMIN(a, b) fmin(a, b)
 #define FMAX(a, b) fmax(a, b)
-#define FLOOR_INT(x) ((int)floor(x))
-#define CEIL_INT(x) ((int)ceil(x))
+#define FLOOR(x) floor(x)
+#define CEIL(x) ceil(x)
 #endif
+#define FLOOR_INT(x) ((int)FLOOR(x))
+#define CEIL_INT(x) ((int)CEIL(x))
+#define FMIN_2(a, b) ((float2)(FMIN((a).x, (b).x), FMIN((a).y, (b).y)))
+#define FMAX_2(a, b) ((float2)(FMAX((a).x, (b).x), FMAX((a).y, (b).y)))
 #define MAX_INT(a, b) ((a) > (b) ? (a) : (b))
 #define MIN_INT(a, b) ((a) < (b) ? (a) : (b))
 
@@ -150,11 +163,11 @@ inline triangle_test_t triangle_test(global const view_t* view, float3 v0, float
     test.e2 = v2 - v0;
     if (view->projection == PROJECTION_PERSPECTIVE) {
         test.tv = view->origin.xyz - v0;
-        test.qv = cross(test.tv, test.e1);
-        test.t_num = dot(test.e2, test.qv);
+        test.qv = CROSS_3(test.tv, test.e1);
+        test.t_num = DOT_3(test.e2, test.qv);
     } else {
-        test.pv = cross(view->forward.xyz, test.e2);
-        test.det = dot(test.e1, test.pv);
+        test.pv = CROSS_3(view->forward.xyz, test.e2);
+        test.det = DOT_3(test.e1, test.pv);
         test.inv = 1.0f / test.det;
     }
     return test;
@@ -261,14 +274,14 @@ inline float8 intersect_columns(global const view_t* view, const triangle_test_t
 inline int cull_corner(global const view_t* view, float3 v, float2* corner)
 {
     float3 q = v - view->origin.xyz;
-    float x = dot(q, view->right.xyz), y = dot(q, view->up.xyz), z = dot(q, view->forward.xyz);
+    float x = DOT_3(q, view->right.xyz), y = DOT_3(q, view->up.xyz), z = DOT_3(q, view->forward.xyz);
     float2 to_pixels = (float2)(0.5f * (float)view->width, 0.5f * (float)view->height);
     if (view->projection != PROJECTION_PERSPECTIVE) {
         *corner = (float2)(x / view->scale_x + 1.0f, 1.0f - y / view->scale_y) * to_pixels;
         return 1;
     }
     *corner = (float2)(x / (z * view->scale_x) + 1.0f, 1.0f - y / (z * view->scale_y)) * to_pixels;
-    return z > 0.0f && z * z >= CULL_IN_FRONT * CULL_IN_FRONT * dot(q, q);
+    return z > 0.0f && z * z >= CULL_IN_FRONT * CULL_IN_FRONT * DOT_3(q, q);
 }
 
 inline int misses_every_sample(global const view_t* view, global const float4* tri_vertices, int tri,
@@ -280,19 +293,19 @@ inline int misses_every_sample(global const view_t* view, global const float4* t
     in_front &= cull_corner(view, tri_vertices[3 * tri + 1].xyz, &b);
     in_front &= cull_corner(view, tri_vertices[3 * tri + 2].xyz, &c);
     if (!in_front) return 0; /* clipped, or nearly: never skipped */
-    float2 lo = fmin(a, fmin(b, c)), hi = fmax(a, fmax(b, c));
+    float2 lo = FMIN_2(a, FMIN_2(b, c)), hi = FMAX_2(a, FMAX_2(b, c));
     float2 e0 = b - a, e1 = c - a, e2 = c - b;
-    float longest = fmax(dot(e0, e0), fmax(dot(e1, e1), dot(e2, e2)));
-    float twice_area = fabs(e0.x * e1.y - e0.y * e1.x);
+    float longest = FMAX(DOT_2(e0, e0), FMAX(DOT_2(e1, e1), DOT_2(e2, e2)));
+    float twice_area = FABS(e0.x * e1.y - e0.y * e1.x);
     if (!(twice_area >= CULL_SLIVER * longest) || !(longest > 0.0f)) return 0;
-    float pixels_per_unit = 0.5f * fmax((float)view->width / view->scale_x, (float)view->height / view->scale_y);
+    float pixels_per_unit = 0.5f * FMAX((float)view->width / view->scale_x, (float)view->height / view->scale_y);
     float2 margin = (float2)(CULL_MARGIN + CULL_CONDITION * pixels_per_unit * longest / twice_area)
                     + CULL_MARGIN_REL * (hi - lo);
     lo -= margin;
     hi += margin;
     for (int s = 0; s < sample_count; ++s) {
         float2 o = offsets[s];
-        if (floor(hi.x - o.x) >= ceil(lo.x - o.x) && floor(hi.y - o.y) >= ceil(lo.y - o.y)) return 0;
+        if (FLOOR(hi.x - o.x) >= CEIL(lo.x - o.x) && FLOOR(hi.y - o.y) >= CEIL(lo.y - o.y)) return 0;
     }
     return 1;
 }
