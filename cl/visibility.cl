@@ -378,10 +378,11 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
 }
 
 /* Before the bound passes, with a read_mask: only the texels read get their starting
- * values (bound DEPTH_EMPTY, writer WRITER_NONE), as only they are drawn and read; one
+ * values (bound DEPTH_EMPTY, writer WRITER_NONE, unless clear_maps is 0; the touching
+ * lists' heads -1), as only they are drawn and read; one
  * work-item per word of the mask over the light's texels [first, first + texels) (frame
  * addresses; the light's own maps are at address - first). */
-kernel void visibility_clear(global const uint* read_mask, int first, int texels, global uint* bound,
+kernel void visibility_clear(global const uint* read_mask, int first, int texels, int clear_maps, global uint* bound,
                              global int* writer, global int* touching_head, int touching_capacity)
 {
     int word = (first >> 5) + get_global_id(0);
@@ -390,8 +391,10 @@ kernel void visibility_clear(global const uint* read_mask, int first, int texels
     for (; bits != 0u; bits &= bits - 1u) {
         int at = 32 * word + __builtin_ctz(bits);
         if (at >= first && at < first + texels) {
-            bound[at - first] = DEPTH_EMPTY;
-            writer[at - first] = WRITER_NONE;
+            if (clear_maps) {
+                bound[at - first] = DEPTH_EMPTY;
+                writer[at - first] = WRITER_NONE;
+            }
             if (touching_capacity > 0) touching_head[at - first] = -1;
         }
     }
@@ -571,6 +574,20 @@ kernel void visibility_mark(global const int2* map_read, int entries, global uin
     global uint* word = read_mask + (address >> 5);
     uint bit = 1u << (address & 31);
     if (!(*word & bit)) atomic_or(word, bit); /* the read spares most atomics */
+}
+
+/* The texels of the entries left to a shadow ray (clrays/stages/visibility.py ray_lists):
+ * their addresses get their bit in read_mask, as visibility_mark's. */
+kernel void visibility_mark_listed(global const int* ray_entries, int ray_count, global const int2* map_read,
+                                   global uint* read_mask)
+{
+    int item = get_global_id(0);
+    if (item >= ray_count) return;
+    int address = map_read[ray_entries[item]].x;
+    if (address < 0) return;
+    global uint* word = read_mask + (address >> 5);
+    uint bit = 1u << (address & 31);
+    if (!(*word & bit)) atomic_or(word, bit);
 }
 
 /* The rest of the decision, for the pending samples and lights. Lit: the bound map says no

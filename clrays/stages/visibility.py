@@ -15,7 +15,9 @@ sample's lit test reads, `visibility_bound` draws each light's maps at those tex
 `visibility` decides the rest from the maps and lists those left to a shadow ray, and
 `visibility_rays` casts them through the BVH, built only then; in a frame of few samples
 (a thumbnail) the bound passes also list, per texel read, the triangles touching it, and
-`visibility_rays_listed` tests those instead: no BVH at all (docs/design.md §4.6).
+`visibility_rays_listed` tests those instead: no BVH at all; in a frame that leaves fewer
+rays than it has triangles, the bound passes run again over the rays' texels alone to
+list them (`ray_lists`; docs/design.md §4.6).
 """
 from __future__ import annotations
 
@@ -47,6 +49,10 @@ BOUND_ROW_SPLIT = 16
 #: the BVH to pay, and their lists would be millions of nodes.
 TOUCHING_ENTRIES = 4096
 TOUCHING_NODES_PER_ENTRY = 64
+#: A larger frame whose maps leave at most this many shadow rays, and no more than it has
+#: triangles, lists the triangles touching the texels of those rays alone (`ray_lists`: the
+#: bound passes again over those texels) rather than building the BVH.
+RAY_LIST_ENTRIES = 1 << 17
 
 
 @dataclass
@@ -173,32 +179,74 @@ def visibility_bound(device: Device, buffers: FrameBuffers, light_index: int, ti
         # drawing them).
         words = (first + inputs.shadow_texels - 1) // 32 - first // 32 + 1
         timer.add("visibility", device.kernel("visibility", "visibility_clear")(
-            device.queue, (words,), None, prepared.read_mask, np.int32(first), np.int32(inputs.shadow_texels), bound,
-            writer, lists[0], lists[3]))
-    count = inputs.tri_vertices.shape[0] // 3
-    if count:
-        vertices = device.buffer(inputs.tri_vertices, writable=False)
-        views = device.buffer(inputs.views, writable=False)
-        big_items = device.buffer(nbytes=4 * count)
-        big_count = device.buffer(nbytes=4)
-        masked = np.int32(prepared is not None)
-        read_mask = prepared.read_mask if prepared is not None else device.buffer(nbytes=4)
-        first_pass = device.kernel("visibility", "visibility_bound")
-        split_pass = device.kernel("visibility", "visibility_bound_split")
-        # Only the cube faces the frame can read (`view_needed`, as raster.shadow does): no
-        # sample projects into the others, so their texels are never asked for.
-        for view in np.flatnonzero(inputs.view_needed[1:]) + 1:
-            device.fill(big_count, np.int32(0), 4, timer, "visibility")
-            timer.add("visibility", first_pass(
-                device.queue, (count,), None, vertices, np.int32(count), views, np.int32(view), np.int32(1), bound,
-                writer, masked, read_mask, np.int32(first), *lists, np.int32(BOUND_SMALL_ROWS), big_items, big_count))
-            listed = int(device.read(big_count, 1, np.int32)[0])
-            if listed:
-                nearest_first(device, big_items, listed, inputs, view)
-                timer.add("visibility", split_pass(
-                    device.queue, (listed, BOUND_ROW_SPLIT), None, vertices, views, np.int32(view), np.int32(1),
-                    bound, writer, masked, read_mask, np.int32(first), *lists, big_items, big_count))
+            device.queue, (words,), None, prepared.read_mask, np.int32(first), np.int32(inputs.shadow_texels),
+            np.int32(1), bound, writer, lists[0], lists[3]))
+    _bound_passes(device, inputs, first, bound, writer, prepared.read_mask if prepared is not None else None, lists,
+                  timer)
     return BoundMap(bound, writer, inputs.shadow_texels, touching)
+
+
+def _bound_passes(device: Device, inputs: FrameInputs, first: int, bound, writer, read_mask, lists: tuple,
+                  timer: StageTimer) -> None:
+    """Both bound passes of one light (`inputs` anchored at it) over the views the frame
+    can read: with `read_mask`, only the texels whose bit it has (at the texel's address +
+    `first`); `lists`, the touching-list arguments (capacity 0: none)."""
+    count = inputs.tri_vertices.shape[0] // 3
+    if not count:
+        return
+    vertices = device.buffer(inputs.tri_vertices, writable=False)
+    views = device.buffer(inputs.views, writable=False)
+    big_items = device.buffer(nbytes=4 * count)
+    big_count = device.buffer(nbytes=4)
+    masked = np.int32(read_mask is not None)
+    read_mask = read_mask if read_mask is not None else device.buffer(nbytes=4)
+    first_pass = device.kernel("visibility", "visibility_bound")
+    split_pass = device.kernel("visibility", "visibility_bound_split")
+    # Only the cube faces the frame can read (`view_needed`, as raster.shadow does): no
+    # sample projects into the others, so their texels are never asked for.
+    for view in np.flatnonzero(inputs.view_needed[1:]) + 1:
+        device.fill(big_count, np.int32(0), 4, timer, "visibility")
+        timer.add("visibility", first_pass(
+            device.queue, (count,), None, vertices, np.int32(count), views, np.int32(view), np.int32(1), bound,
+            writer, masked, read_mask, np.int32(first), *lists, np.int32(BOUND_SMALL_ROWS), big_items, big_count))
+        listed = int(device.read(big_count, 1, np.int32)[0])
+        if listed:
+            nearest_first(device, big_items, listed, inputs, view)
+            timer.add("visibility", split_pass(
+                device.queue, (listed, BOUND_ROW_SPLIT), None, vertices, views, np.int32(view), np.int32(1),
+                bound, writer, masked, read_mask, np.int32(first), *lists, big_items, big_count))
+
+
+def ray_lists(device: Device, buffers: FrameBuffers, prepared: Prepared, ray_entries, rays: int,
+              bounds: list[BoundMap], timer: StageTimer) -> list[TouchingLists] | None:
+    """Per light, the triangles touching each texel that a listed shadow ray reads, or None
+    when some list outgrew its room. The bound passes run again over those texels alone:
+    they write the bound and writer maps' own values again (each texel's is the least, or
+    the one, of the same triangles), and list the triangles as they go."""
+    inputs = buffers.inputs
+    words = max((inputs.shadow_texels + 31) // 32, 1)
+    mask = device.buffer(nbytes=4 * words)
+    device.fill(mask, np.uint32(0), 4 * words, timer, "visibility")
+    timer.add("visibility", device.kernel("visibility", "visibility_mark_listed")(
+        device.queue, (rays,), None, ray_entries, np.int32(rays), prepared.map_read, mask))
+    capacity = TOUCHING_NODES_PER_ENTRY * rays
+    lists = []
+    for index, light in enumerate(bounds):
+        light_inputs = light_pass_inputs(inputs, index)
+        first = int(inputs.views[inputs.light_views[index][0]]["depth_offset"])
+        touching = TouchingLists(device.buffer(nbytes=4 * max(light.texels, 1)), device.buffer(nbytes=8 * capacity),
+                                 device.buffer(np.zeros(1, np.int32)), capacity)
+        arguments = (touching.head, touching.nodes, touching.count, np.int32(capacity))
+        if light.texels:
+            light_words = (first + light.texels - 1) // 32 - first // 32 + 1
+            timer.add("visibility", device.kernel("visibility", "visibility_clear")(
+                device.queue, (light_words,), None, mask, np.int32(first), np.int32(light.texels), np.int32(0),
+                light.bound, light.writer, *arguments[::3]))
+            _bound_passes(device, light_inputs, first, light.bound, light.writer, mask, arguments, timer)
+        lists.append(touching)
+    if any(int(device.read(t.count, 1, np.int32)[0]) > t.capacity for t in lists):
+        return None
+    return lists
 
 
 def nearest_first(device: Device, big_items, listed: int, inputs: FrameInputs, view: int) -> None:
@@ -248,8 +296,12 @@ def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, pr
     if not rays:
         return prepared.visible
     touching = [light.touching for light in lights or ()]
-    if (not without_texel and touching and all(lists is not None for lists in touching)
-            and all(int(device.read(lists.count, 1, np.int32)[0]) <= lists.capacity for lists in touching)):
+    whole = (touching and all(lists is not None for lists in touching)
+             and all(int(device.read(lists.count, 1, np.int32)[0]) <= lists.capacity for lists in touching))
+    if not whole and lights and not without_texel and rays <= min(RAY_LIST_ENTRIES, inputs.scene.geometry.count):
+        touching = ray_lists(device, buffers, prepared, ray_entries, rays, lights, timer)
+        whole = touching is not None
+    if not without_texel and whole:
         for index, lists in enumerate(touching):
             # this frame's address of the light's texel 0 (a kept map's lists are by the light's own addresses)
             first = int(inputs.views[inputs.light_views[index][0]]["depth_offset"])

@@ -1,6 +1,7 @@
 """The visibility stage's shadow rays (cl/visibility.cl, docs/design.md §4.6): in a frame
-of few samples they test the triangles listed as touching their texel instead of walking
-the BVH, which is then never built. Both must give the same image, bit for bit."""
+of few samples, or one whose maps leave fewer rays than it has triangles, they test the
+triangles listed as touching their texel instead of walking the BVH, which is then never
+built. Both must give the same image, bit for bit."""
 from pathlib import Path
 
 import numpy as np
@@ -9,10 +10,15 @@ import pytest
 import clrays.stages.visibility as stage
 from clrays.scene.load import load_scene
 from clrays.session import Renderer
-from conftest import make_scene
+from conftest import grid_plane, make_scene
 from test_visibility_bound import LIGHTS, _triangles  # a floor, a box, a sub-texel wire, random triangles
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
+
+
+def _small_grid() -> np.ndarray:
+    """A plate of 1152 small triangles above the floor: many triangles, few shadow edges."""
+    return grid_plane(2.2, 1.0, 24)
 
 
 def _both_ways(device, scene, monkeypatch):
@@ -27,8 +33,28 @@ def _both_ways(device, scene, monkeypatch):
     listed = Renderer(device, reuse=False).render(scene).image
     with_lists = len(built)
     monkeypatch.setattr(stage, "TOUCHING_ENTRIES", 0)
+    monkeypatch.setattr(stage, "RAY_LIST_ENTRIES", 0)
     walked = Renderer(device, reuse=False).render(scene).image
     return listed, walked, with_lists, len(built) - with_lists
+
+
+def _rays_listed_and_walked(device, scene, monkeypatch):
+    """(image with the lists of the rays' texels, image through the BVH, how often each
+    way was taken) for a frame too large for the first pass's lists."""
+    monkeypatch.setattr(stage, "TOUCHING_ENTRIES", 0)
+    real_lists, real_build, taken = stage.ray_lists, stage.bvh_build_tree, {"lists": 0, "bvh": 0}
+
+    def lists(*args):
+        taken["lists"] += 1
+        return real_lists(*args)
+
+    monkeypatch.setattr(stage, "ray_lists", lists)
+    monkeypatch.setattr(stage, "bvh_build_tree", lambda *args: taken.__setitem__("bvh", taken["bvh"] + 1) or real_build(*args))
+    listed = Renderer(device, reuse=False).render(scene).image
+    counts = dict(taken)
+    monkeypatch.setattr(stage, "RAY_LIST_ENTRIES", 0)
+    walked = Renderer(device, reuse=False).render(scene).image
+    return listed, walked, counts, taken["bvh"] - counts["bvh"]
 
 
 @pytest.mark.parametrize("kind", LIGHTS)
@@ -52,6 +78,22 @@ def test_the_bunny_thumbnail_builds_no_bvh(device, monkeypatch, size):
     scene = load_scene(SCENES / "bunny.yaml", overrides=[f"image.width={width}", f"image.height={height}"])
     listed, walked, with_lists, with_bvh = _both_ways(device, scene, monkeypatch)
     assert with_lists == 0 and with_bvh == 1
+    np.testing.assert_array_equal(listed, walked)
+
+
+@pytest.mark.parametrize("kind", LIGHTS)
+def test_the_rays_texels_listed_answer_as_the_bvh(device, monkeypatch, kind):
+    # A grid of small triangles, so that the rays are fewer than the triangles.
+    scene = make_scene(np.concatenate([_triangles(), _small_grid()]), [LIGHTS[kind]], width=64, height=48, shadow_map=64)
+    listed, walked, counts, with_bvh = _rays_listed_and_walked(device, scene, monkeypatch)
+    assert counts == {"lists": 1, "bvh": 0} and with_bvh == 1
+    np.testing.assert_array_equal(listed, walked)
+
+
+def test_the_bunny_at_640x360_builds_no_bvh(device, monkeypatch):
+    scene = load_scene(SCENES / "bunny.yaml", overrides=["image.width=640", "image.height=360"])
+    listed, walked, counts, with_bvh = _rays_listed_and_walked(device, scene, monkeypatch)
+    assert counts == {"lists": 1, "bvh": 0} and with_bvh == 1
     np.testing.assert_array_equal(listed, walked)
 
 
