@@ -158,4 +158,55 @@ ALWAYS_INLINE void camera_ray_lanes(global const frame_t* frame, global const vi
     }
 }
 
+
+/* A vector of component `component` of field `field` of each lane's view (views[index]). */
+#define VIEW_LANES(views, index, field, component)                                                         \
+    LOAD_LANES((global const float*)(views) + __builtin_offsetof(view_t, field) / 4 + (component),          \
+               (index) * (int)(sizeof(view_t) / 4))
+#define VIEW_INT_LANES(views, index, field) as_int8(VIEW_LANES(views, index, field, 0))
+
+/* The fields of a view that a projection reads, one per lane. */
+typedef struct {
+    float_lanes origin_x, origin_y, origin_z, right_x, right_y, right_z, up_x, up_y, up_z;
+    float_lanes forward_x, forward_y, forward_z, scale_x, scale_y;
+    int_lanes width, height, depth_offset;
+} view_lanes_t;
+
+/* Each lane's own view, views[index]. */
+ALWAYS_INLINE view_lanes_t view_gather(global const view_t* views, int_lanes index)
+{
+    view_lanes_t v;
+    v.origin_x = VIEW_LANES(views, index, origin, 0), v.origin_y = VIEW_LANES(views, index, origin, 1);
+    v.origin_z = VIEW_LANES(views, index, origin, 2);
+    v.right_x = VIEW_LANES(views, index, right, 0), v.right_y = VIEW_LANES(views, index, right, 1);
+    v.right_z = VIEW_LANES(views, index, right, 2);
+    v.up_x = VIEW_LANES(views, index, up, 0), v.up_y = VIEW_LANES(views, index, up, 1), v.up_z = VIEW_LANES(views, index, up, 2);
+    v.forward_x = VIEW_LANES(views, index, forward, 0), v.forward_y = VIEW_LANES(views, index, forward, 1);
+    v.forward_z = VIEW_LANES(views, index, forward, 2);
+    v.scale_x = VIEW_LANES(views, index, scale_x, 0), v.scale_y = VIEW_LANES(views, index, scale_y, 0);
+    v.width = VIEW_INT_LANES(views, index, width), v.height = VIEW_INT_LANES(views, index, height);
+    v.depth_offset = VIEW_INT_LANES(views, index, depth_offset);
+    return v;
+}
+
+/* One view for every lane. */
+ALWAYS_INLINE view_lanes_t view_broadcast(global const view_t* view)
+{
+    view_lanes_t v;
+    v.origin_x = view->origin.x, v.origin_y = view->origin.y, v.origin_z = view->origin.z;
+    v.right_x = view->right.x, v.right_y = view->right.y, v.right_z = view->right.z;
+    v.up_x = view->up.x, v.up_y = view->up.y, v.up_z = view->up.z;
+    v.forward_x = view->forward.x, v.forward_y = view->forward.y, v.forward_z = view->forward.z;
+    v.scale_x = view->scale_x, v.scale_y = view->scale_y;
+    v.width = view->width, v.height = view->height, v.depth_offset = view->depth_offset;
+    return v;
+}
+
+/* The views of the lanes' indices: read once when the lanes share one (the same values,
+ * so the same bits), else gathered. */
+ALWAYS_INLINE view_lanes_t views_of_lanes(global const view_t* views, int_lanes index)
+{
+    return all_lanes(index == index.s0) ? view_broadcast(views + index.s0) : view_gather(views, index);
+}
+
 #endif

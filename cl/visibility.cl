@@ -22,6 +22,7 @@
  * a light's lists, and both write their visible from a shadow ray. */
 #include "lighting.h"
 #include "bvh.h"
+#include "lanes.h"
 
 #define SURFACE_BIAS_TEXELS 1.5f /* depth tolerance of the map test, as in shade.cl */
 /* Shadow rays leave the surface by this much × (|p| + distance to the light): a few
@@ -528,13 +529,11 @@ ALWAYS_INLINE float3 shadow_ray_start(global const light_t* light, float3 p, flo
  * the texels read (visibility_mark) follow the geometry with its shading normals (which
  * turn a surface away and offset the ray's start), the camera and the light's place alone,
  * which is what a kept bound map is keyed on (clrays/session.py). */
-kernel void visibility_prepare(global const frame_t* frame, global const view_t* views,
-                               global const light_t* lights, global const uint* camera_depth, global const int* tri_id,
-                               global const float4* tri_normal, global const float4* tri_vertex_normals,
-                               global const float2* offsets, global float* visible, global int2* map_read)
+inline void prepare_entry(global const frame_t* frame, global const view_t* views, global const light_t* lights,
+                          global const uint* camera_depth, global const int* tri_id, global const float4* tri_normal,
+                          global const float4* tri_vertex_normals, global const float2* offsets,
+                          global float* visible, global int2* map_read, int sample, int l)
 {
-    int sample = get_global_id(0), l = get_global_id(1);
-    if (sample >= frame->width * frame->height * frame->spp) return;
     int entry = sample * frame->light_count + l;
     visible[entry] = 1.0f;
     map_read[entry] = (int2)(MAP_TEXEL_NONE, 0);
@@ -561,6 +560,164 @@ kernel void visibility_prepare(global const frame_t* frame, global const view_t*
     }
     map_read[entry] = (int2)(address, as_int(depth));
     if (reaches) visible[entry] = VISIBILITY_PENDING;
+}
+
+/* prepare_entry on LANES consecutive samples at once; 0, having written nothing, where a
+ * lane needs a path written only there (visibility_prepare). */
+ALWAYS_INLINE int prepare_lanes(global const frame_t* frame, global const view_t* views, global const light_t* light,
+                                int l, global const uint* camera_depth, global const int* tri_id,
+                                global const float4* tri_normal, global const float4* tri_vertex_normals,
+                                global const float2* offsets, int first, global float* visible,
+                                global int2* map_read)
+{
+    int_lanes sample = first + (int_lanes)(0, 1, 2, 3, 4, 5, 6, 7);
+    /* camera_surface_point */
+    float_lanes distance = as_float8(vload8(0, camera_depth + first));
+    int_lanes tri = vload8(0, tri_id + first);
+    int_lanes surface = tri >= 0 & !(distance > frame->far);
+    if (!any_lanes(surface)) { /* the sky, or past far: lit, no texel */
+        for (int k = 0; k < LANES; ++k) {
+            int entry = (first + k) * frame->light_count + l;
+            visible[entry] = 1.0f;
+            map_read[entry] = (int2)(MAP_TEXEL_NONE, 0);
+        }
+        return 1;
+    }
+    int_lanes own = surface ? tri : 0;
+    float_lanes dx, dy, dz;
+    camera_ray_lanes(frame, views, offsets, sample, &dx, &dy, &dz);
+    float3 eye = views->origin.xyz;
+    float_lanes px = eye.x + distance * dx, py = eye.y + distance * dy, pz = eye.z + distance * dz;
+    global const float* normals = (global const float*)tri_normal;
+    float_lanes nx = LOAD_LANES(normals, 4 * own), ny = LOAD_LANES(normals, 4 * own + 1),
+                nz = LOAD_LANES(normals, 4 * own + 2);
+    int_lanes facing_away = dot_lanes_of_lanes(nx, ny, nz, dx, dy, dz) > 0.0f;
+    nx = facing_away ? -nx : nx, ny = facing_away ? -ny : ny, nz = facing_away ? -nz : nz;
+    /* light_reaches, where no exp is needed to know */
+    float_lanes lx, ly, lz; /* to_light */
+    int_lanes reaches;
+    float3 position = light->position.xyz;
+    if (light->type == LIGHT_DIRECTIONAL) {
+        float3 power = light->power.xyz;
+        lx = -light->direction.x, ly = -light->direction.y, lz = -light->direction.z;
+        reaches = (int_lanes)(power.x + power.y + power.z != 0.0f ? -1 : 0);
+    } else {
+        float_lanes wx = px - position.x, wy = py - position.y, wz = pz - position.z;
+        float_lanes d2 = squared_length_lanes(wx, wy, wz);
+        float_lanes d = sqrt_lanes(d2);
+        int_lanes away = d > 0.0f;
+        lx = away ? -wx / d : 0.0f, ly = away ? -wy / d : 1.0f, lz = away ? -wz / d : 0.0f;
+        float3 spot = light->direction.xyz, power = light->power.xyz, sigma_t = frame->sigma_t.xyz;
+        int_lanes outside = light->type == LIGHT_SPOT ? dot_lanes(wx, wy, wz, spot.x, spot.y, spot.z)
+                                                            < light->cos_cone * d
+                                                      : (int_lanes)(0);
+        float_lanes ax = sigma_t.x * d, ay = sigma_t.y * d, az = sigma_t.z * d;
+        /* (a scalar comparison is 1, a vector's -1: the channels' tests stay vectors) */
+        int_lanes none = (int_lanes)(0);
+        int_lanes arrives = d2 <= 1e10f & ((power.x >= 1e-6f ? ax <= 30.0f : none) | (power.y >= 1e-6f ? ay <= 30.0f : none)
+                                           | (power.z >= 1e-6f ? az <= 30.0f : none));
+        if (any_lanes(surface & !outside & !arrives)) return 0; /* light_incident decides */
+        reaches = !outside & arrives;
+    }
+    if (eye_in_lamp(light, frame->lamp_radius)) reaches = (int_lanes)(0);
+    /* turned_away */
+    const float margin = -1e-4f;
+    float_lanes facing = dot_lanes_of_lanes(nx, ny, nz, lx, ly, lz);
+    float_lanes flat_w = LOAD_LANES(normals, 4 * own + 3);
+    float_lanes side = dot_lanes_of_lanes(nx, ny, nz, LOAD_LANES(normals, 4 * own), LOAD_LANES(normals, 4 * own + 1),
+                                          LOAD_LANES(normals, 4 * own + 2)) >= 0.0f ? 1.0f : -1.0f;
+    int_lanes vertex_lit = (int_lanes)(0);
+    global const float* vertex_normals = (global const float*)tri_vertex_normals;
+    if (any_lanes(surface & !(facing > margin) & flat_w != 0.0f)) /* a smooth triangle's vertex normals decide */
+        for (int k = 0; k < 3; ++k) {
+            int_lanes at = 4 * (3 * own + k);
+            vertex_lit |= side * dot_lanes_of_lanes(LOAD_LANES(vertex_normals, at), LOAD_LANES(vertex_normals, at + 1),
+                                                    LOAD_LANES(vertex_normals, at + 2), lx, ly, lz) > margin;
+        }
+    int_lanes turned = !(facing > margin) & ((flat_w == 0.0f) | !vertex_lit);
+    if (!any_lanes(surface & !turned)) { /* nothing to project: no surface, or turned away */
+        for (int k = 0; k < LANES; ++k) {
+            int entry = (first + k) * frame->light_count + l;
+            visible[entry] = surface[k] && reaches[k] ? 0.0f : 1.0f;
+            map_read[entry] = (int2)(MAP_TEXEL_NONE, 0);
+        }
+        return 1;
+    }
+    /* shadow_ray_start */
+    float_lanes ex = position.x - px, ey = position.y - py, ez = position.z - pz;
+    float_lanes to_light_squared = squared_length_lanes(ex, ey, ez), p_squared = squared_length_lanes(px, py, pz);
+    int_lanes plain = p_squared >= 1.17549435e-38f & p_squared <= 3.40282347e38f;
+    if (light->type != LIGHT_DIRECTIONAL) plain &= to_light_squared >= 1.17549435e-38f & to_light_squared <= 3.40282347e38f;
+    if (any_lanes(surface & !turned & !plain)) return 0; /* exact_length's library call */
+    float_lanes to_light_distance = light->type == LIGHT_DIRECTIONAL ? 0.0f : sqrt_lanes(to_light_squared);
+    float_lanes push = SHADOW_RAY_OFFSET_REL * (sqrt_lanes(p_squared) + to_light_distance);
+    int_lanes towards = facing >= 0.0f;
+    float_lanes sx = towards ? nx : -nx, sy = towards ? ny : -ny, sz = towards ? nz : -nz;
+    float_lanes start_x = px + sx * push, start_y = py + sy * push, start_z = pz + sz * push;
+    /* light_view_index, then view_project */
+    int_lanes view_index = light->first_view;
+    if (light->view_count != 1) {
+        float_lanes wx = start_x - position.x, wy = start_y - position.y, wz = start_z - position.z;
+        float_lanes ax = fabs_lanes(wx), ay = fabs_lanes(wy), az = fabs_lanes(wz);
+        int_lanes axis_index = (ax >= ay & ax >= az) ? 0 : (ay >= az ? 1 : 2);
+        float_lanes component = axis_index == 0 ? wx : (axis_index == 1 ? wy : wz);
+        view_index = light->first_view + 2 * axis_index + (component < 0.0f ? 1 : 0);
+    }
+    view_lanes_t v = views_of_lanes(views, view_index);
+    float_lanes qx = start_x - v.origin_x, qy = start_y - v.origin_y, qz = start_z - v.origin_z;
+    float_lanes x = dot_lanes_of_lanes(qx, qy, qz, v.right_x, v.right_y, v.right_z);
+    float_lanes y = dot_lanes_of_lanes(qx, qy, qz, v.up_x, v.up_y, v.up_z);
+    float_lanes z = dot_lanes_of_lanes(qx, qy, qz, v.forward_x, v.forward_y, v.forward_z);
+    int perspective = views[light->first_view].projection == PROJECTION_PERSPECTIVE;
+    int_lanes projects = perspective ? !(z <= 0.0f) : (int_lanes)(-1);
+    float_lanes depth = perspective ? length_lanes(qx, qy, qz) : z;
+    float_lanes screen_x = perspective ? x / (z * v.scale_x) : x / v.scale_x;
+    float_lanes screen_y = perspective ? y / (z * v.scale_y) : y / v.scale_y;
+    float_lanes texel_x = (screen_x + 1.0f) * 0.5f * float_of_lanes(v.width);
+    float_lanes texel_y = (1.0f - screen_y) * 0.5f * float_of_lanes(v.height);
+    int_lanes inside = texel_x >= 0.0f & texel_y >= 0.0f & texel_x < float_of_lanes(v.width)
+                       & texel_y < float_of_lanes(v.height);
+    int_lanes address = projects ? (inside ? v.depth_offset + int_of_lanes(texel_y) * v.width + int_of_lanes(texel_x)
+                                           : (int_lanes)(MAP_TEXEL_OUTSIDE))
+                                 : (int_lanes)(MAP_TEXEL_NONE);
+    depth = projects ? depth : 0.0f;
+    /* what prepare_entry writes: no surface, turned away, or pending with its texel */
+    float_lanes when_reached = turned ? (float_lanes)(0.0f) : (float_lanes)(VISIBILITY_PENDING);
+    float_lanes answer = surface & reaches ? when_reached : (float_lanes)(1.0f);
+    int_lanes read_address = surface & !turned ? address : (int_lanes)(MAP_TEXEL_NONE);
+    int_lanes read_depth = surface & !turned ? as_int8(depth) : (int_lanes)(0);
+    for (int k = 0; k < LANES; ++k) {
+        int entry = (first + k) * frame->light_count + l;
+        visible[entry] = answer[k];
+        map_read[entry] = (int2)(read_address[k], read_depth[k]);
+    }
+    return 1;
+}
+
+/* visibility_prepare for LANES camera samples and one light per work-item, as float8
+ * (lanes.h): prepare_entry's operations on each lane, each statement of the same shape,
+ * so the same bits (tests/stages/test_visibility_prepare.py). A group of lanes where one
+ * would take a rarer path (an orthographic camera, a light that needs light_incident's
+ * exp to know it arrives, a length outside inline_length's range) takes prepare_entry
+ * lane by lane. PREPARE_ONE_BY_ONE builds the kernel with prepare_entry alone (the test). */
+kernel void visibility_prepare(global const frame_t* frame, global const view_t* views,
+                               global const light_t* lights, global const uint* camera_depth, global const int* tri_id,
+                               global const float4* tri_normal, global const float4* tri_vertex_normals,
+                               global const float2* offsets, global float* visible, global int2* map_read)
+{
+    int first = get_global_id(0) * LANES, l = get_global_id(1);
+    int samples = frame->width * frame->height * frame->spp;
+    if (first >= samples) return;
+    global const light_t* light = lights + l;
+#ifndef PREPARE_ONE_BY_ONE
+    if (first + LANES <= samples && views->projection == PROJECTION_PERSPECTIVE
+        && prepare_lanes(frame, views, light, l, camera_depth, tri_id, tri_normal, tri_vertex_normals, offsets, first,
+                         visible, map_read))
+        return;
+#endif
+    for (int k = 0; k < LANES && first + k < samples; ++k)
+        prepare_entry(frame, views, lights, camera_depth, tri_id, tri_normal, tri_vertex_normals, offsets, visible,
+                      map_read, first + k, l);
 }
 
 /* The texels that the lit tests read: map_read's addresses get their bit in read_mask

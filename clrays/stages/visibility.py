@@ -53,6 +53,10 @@ TOUCHING_NODES_PER_ENTRY = 64
 #: triangles, lists the triangles touching the texels of those rays alone (`ray_lists`: the
 #: bound passes again over those texels) rather than building the BVH.
 RAY_LIST_ENTRIES = 1 << 17
+#: Camera samples one visibility_prepare work-item takes, as float8 lanes (cl/lanes.h).
+PREPARE_LANES = 8
+#: visible's value for a sample and light left to the maps (cl/visibility.cl).
+VISIBILITY_PENDING = -1.0
 
 
 @dataclass
@@ -116,7 +120,7 @@ def visibility_prepare(device: Device, buffers: FrameBuffers, rastered: RasterRe
     visible = device.buffer(nbytes=4 * entries)
     map_read = device.buffer(nbytes=8 * entries)
     timer.add("visibility", device.kernel("visibility", "visibility_prepare")(
-        device.queue, (inputs.samples, lights), None, buffers.params, buffers.views, buffers.lights,
+        device.queue, (-(-inputs.samples // PREPARE_LANES), lights), None, buffers.params, buffers.views, buffers.lights,
         rastered.camera_depth, rastered.tri_id, buffers.tri_normal,
         buffers.tri_vertex_normals, buffers.offsets, visible, map_read))
     words = max((inputs.shadow_texels + 31) // 32, 1)

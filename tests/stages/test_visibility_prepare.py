@@ -1,0 +1,60 @@
+"""visibility_prepare's lanes (8 samples per work-item, cl/visibility.cl prepare_lanes)
+against the kernel built to take every sample one by one (prepare_entry): the same
+answers and the same texels, bit for bit, for every light type, on the bench scenes and
+on frames whose sample count is no multiple of 8."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import clrays.stages.visibility as stage
+from clrays.device import StageTimer
+from clrays.inputs import frame_inputs, upload
+from clrays.scene.load import load_scene
+from clrays.stages.raster import raster
+from conftest import make_scene
+from test_visibility_bound import LIGHTS, _triangles
+
+SCENES = Path(__file__).resolve().parents[2] / "scenes"
+
+
+def _prepared(device, scene, defines):
+    """(visible, map_read) of visibility_prepare built with `defines`."""
+    buffers = upload(device, frame_inputs(scene))
+    timer = StageTimer()
+    rastered = raster(device, buffers, timer)
+    kernel = device.kernel("visibility", "visibility_prepare", defines)
+    inputs = buffers.inputs
+    lights = max(len(scene.lights), 1)
+    entries = inputs.samples * lights
+    visible, map_read = device.buffer(nbytes=4 * entries), device.buffer(nbytes=8 * entries)
+    kernel(device.queue, (-(-inputs.samples // stage.PREPARE_LANES), lights), None, buffers.params, buffers.views,
+           buffers.lights, rastered.camera_depth, rastered.tri_id, buffers.tri_normal, buffers.tri_vertex_normals,
+           buffers.offsets, visible, map_read)
+    return device.read(visible, entries, np.float32), device.read(map_read, (entries, 2), np.int32)
+
+
+def _same(device, scene):
+    lanes = _prepared(device, scene, None)
+    one_by_one = _prepared(device, scene, {"PREPARE_ONE_BY_ONE": 1})
+    np.testing.assert_array_equal(lanes[0].view(np.int32), one_by_one[0].view(np.int32))
+    np.testing.assert_array_equal(lanes[1], one_by_one[1])
+    return lanes
+
+
+@pytest.mark.parametrize("name", ["demo", "bunny", "behind", "sun"])
+def test_bench_scenes(device, name):
+    scene = load_scene(SCENES / f"{name}.yaml", overrides=["image.width=160", "image.height=90"])
+    visible, _ = _same(device, scene)
+    assert (visible == stage.VISIBILITY_PENDING).any()  # the lanes answered some samples with a texel
+
+
+@pytest.mark.parametrize("kind", LIGHTS)
+def test_every_light_type_and_a_ragged_end(device, kind):
+    scene = make_scene(_triangles(), [LIGHTS[kind]], width=37, height=23, shadow_map=64)
+    _same(device, scene)
+
+
+def test_several_lights_and_samples(device):
+    scene = make_scene(_triangles(), list(LIGHTS.values()), width=24, height=16, spp=4, shadow_map=64)
+    _same(device, scene)
