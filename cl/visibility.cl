@@ -37,6 +37,13 @@
  * maps that decides the lit test, or one of these. */
 #define MAP_TEXEL_OUTSIDE -1 /* the point projects outside the map: lit (a map covers every occluder) */
 #define MAP_TEXEL_NONE -2    /* behind a perspective view: a ray decides */
+/* visibility_bound's rect_mode (clrays/stages/visibility.py): none, record each item's
+ * texel rectangle, or skip the items whose recorded rectangle holds no texel read. */
+#define RECTS_NONE 0
+#define RECTS_RECORD 1
+#define RECTS_FILTER 2
+/* rectangle_is_read goes texel by texel up to this many rows (the small pass's own). */
+#define RECT_TEXEL_ROWS 8
 
 /* Closest point of triangle abc to p (Ericson, Real-Time Collision Detection §5.1.5). */
 inline float3 closest_on_triangle(float3 p, float3 a, float3 b, float3 c)
@@ -213,6 +220,26 @@ inline int row_is_read(global const uint* read_mask, int row, int x0, int x1)
     return 0;
 }
 
+/* Whether the read_mask has a bit in the texel rectangle [x0, x1] × [y0, y1] of a view:
+ * texel by texel for a few rows, a word of 32 at a time for more (a thumbnail reads a few
+ * dozen texels of a face). */
+inline int rectangle_is_read(global const view_t* view, global const uint* read_mask, int mask_offset, int x0, int y0,
+                             int x1, int y1)
+{
+    int row_start = mask_offset + view->depth_offset;
+    if (y1 - y0 + 1 > RECT_TEXEL_ROWS) {
+        for (int ty = y0; ty <= y1; ++ty)
+            if (row_is_read(read_mask, row_start + ty * view->width, x0, x1)) return 1;
+        return 0;
+    }
+    for (int ty = y0; ty <= y1; ++ty)
+        for (int tx = x0; tx <= x1; ++tx) {
+            int at = row_start + ty * view->width + tx;
+            if ((read_mask[at >> 5] >> (at & 31)) & 1u) return 1;
+        }
+    return 0;
+}
+
 /* Beside the writer map, with a capacity (touching_capacity > 0: a frame of few samples,
  * clrays/stages/visibility.py), every triangle that touches a texel read, as a list per
  * texel: touching_head[texel] (-1 empty) → touching[node] = (triangle, next node). The
@@ -249,7 +276,8 @@ inline void note_touching(global int* head, int tri, global int2* touching, vola
 inline void bound_triangle(global const float4* tri_vertices, global const view_t* views, int first_view,
                            int view_count, global uint* bound, global int* writer, int masked,
                            global const uint* read_mask, int mask_offset, TOUCHING_ARGS, int item, int row_first,
-                           int row_step, int small_rows, global int* big_items, volatile global int* big_count)
+                           int row_step, int small_rows, global int* big_items, volatile global int* big_count,
+                           global int4* rect)
 {
     int tri = item / view_count;
     global const view_t* view = views + first_view + item % view_count;
@@ -277,7 +305,10 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
     }
     if (clip) {
         corners = clip_to_frustum(view, polygon, extent);
-        if (corners == 0) return;
+        if (corners == 0) {
+            if (rect) *rect = (int4)(0, 0, -1, -1); /* nothing of it in the view */
+            return;
+        }
         for (int k = 0; k < corners; ++k) corner[k] = texel_coordinates(view, polygon[k], perspective);
     }
     float2 lo = (float2)(INFINITY), hi = (float2)(-INFINITY);
@@ -288,22 +319,12 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
     int x0 = inline_max((int)inline_floor(inline_fmax(lo.x, -2.0f)) - 1, 0), y0 = inline_max((int)inline_floor(inline_fmax(lo.y, -2.0f)) - 1, 0);
     int x1 = inline_min((int)inline_floor(inline_fmin(hi.x, (float)view->width + 2.0f)) + 1, view->width - 1);
     int y1 = inline_min((int)inline_floor(inline_fmin(hi.y, (float)view->height + 2.0f)) + 1, view->height - 1);
+    if (rect) *rect = (int4)(x0, y0, x1, y1);
     if (x0 > x1 || y0 + row_first > y1) return; /* outside the view, or no row for this item */
-    if (masked && small_rows > 0 && y1 - y0 + 1 <= small_rows) { /* no sample reads its rectangle: nothing to draw */
-        int read = 0;
-        for (int ty = y0; ty <= y1 && !read; ++ty)
-            for (int tx = x0; tx <= x1 && !read; ++tx)
-                read = (read_mask[(mask_offset + view->depth_offset + ty * view->width + tx) >> 5]
-                        >> ((mask_offset + view->depth_offset + ty * view->width + tx) & 31)) & 1u;
-        if (!read) return;
-    }
-    if (small_rows > 0 && y1 - y0 + 1 > small_rows) {
-        /* many rows: the split pass takes it, unless (masked) no texel of the rectangle is
-         * read, a word of 32 at a time (a thumbnail reads a few dozen texels of a face) */
-        int read = !masked;
-        for (int ty = y0; ty <= y1 && !read; ++ty)
-            read = row_is_read(read_mask, mask_offset + view->depth_offset + ty * view->width, x0, x1);
-        if (read) big_items[atomic_inc(big_count)] = item;
+    /* no sample reads its rectangle: nothing to draw */
+    if (masked && small_rows > 0 && !rectangle_is_read(view, read_mask, mask_offset, x0, y0, x1, y1)) return;
+    if (small_rows > 0 && y1 - y0 + 1 > small_rows) { /* many rows: the split pass takes it */
+        big_items[atomic_inc(big_count)] = item;
         return;
     }
     float3 normal = inline_cross(vertex[1] - vertex[0], vertex[2] - vertex[0]);
@@ -408,12 +429,22 @@ kernel void visibility_clear(global const uint* read_mask, int first, int texels
 kernel void visibility_bound(global const float4* tri_vertices, int count, global const view_t* views,
                              int first_view, int view_count, global uint* bound, global int* writer,
                              int masked, global const uint* read_mask, int mask_offset, TOUCHING_ARGS,
-                             int small_rows, global int* big_items, volatile global int* big_count)
+                             int small_rows, global int* big_items, volatile global int* big_count,
+                             int rect_mode, global int4* rects)
 {
     int item = get_global_id(0);
     if (item >= count * view_count) return;
+    if (rect_mode == RECTS_FILTER) {
+        /* a pass again over fewer texels: a triangle whose rectangle holds none of them is
+         * done before its projection */
+        int4 rect = rects[item];
+        global const view_t* view = views + first_view + item % view_count;
+        if (rect.x > rect.z || !rectangle_is_read(view, read_mask, mask_offset, rect.x, rect.y, rect.z, rect.w))
+            return;
+    }
     bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, masked, read_mask, mask_offset,
-                   TOUCHING_PASS, item, 0, 1, small_rows, big_items, big_count);
+                   TOUCHING_PASS, item, 0, 1, small_rows, big_items, big_count,
+                   rect_mode == RECTS_RECORD ? rects + item : 0);
 }
 
 kernel void visibility_bound_split(global const float4* tri_vertices, global const view_t* views, int first_view,
@@ -424,7 +455,7 @@ kernel void visibility_bound_split(global const float4* tri_vertices, global con
     int index = get_global_id(0);
     if (index >= *big_count) return;
     bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, masked, read_mask, mask_offset,
-                   TOUCHING_PASS, big_items[index], get_global_id(1), get_global_size(1), 0, 0, 0);
+                   TOUCHING_PASS, big_items[index], get_global_id(1), get_global_size(1), 0, 0, 0, 0);
 }
 
 /* How far the sample's own triangle (plane through p with unit normal n, largest distance

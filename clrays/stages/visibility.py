@@ -53,6 +53,8 @@ TOUCHING_NODES_PER_ENTRY = 64
 #: triangles, lists the triangles touching the texels of those rays alone (`ray_lists`: the
 #: bound passes again over those texels) rather than building the BVH.
 RAY_LIST_ENTRIES = 1 << 17
+#: visibility_bound's rect_mode (cl/visibility.cl RECTS_*).
+RECTS_NONE, RECTS_RECORD, RECTS_FILTER = 0, 1, 2
 #: Camera samples one visibility_prepare work-item takes, as float8 lanes (cl/lanes.h).
 PREPARE_LANES = 8
 #: visible's value for a sample and light left to the maps (cl/visibility.cl).
@@ -152,6 +154,7 @@ class BoundMap:
     writer: object  # int per texel: the one triangle that touches it, -1 none, -2 several
     texels: int
     touching: TouchingLists | None = None
+    rects: dict | None = None  # view → int4 per triangle: its texel rectangle there (x0 > x1: none)
 
 
 def visibility_bound(device: Device, buffers: FrameBuffers, light_index: int, timer: StageTimer,
@@ -185,16 +188,21 @@ def visibility_bound(device: Device, buffers: FrameBuffers, light_index: int, ti
         timer.add("visibility", device.kernel("visibility", "visibility_clear")(
             device.queue, (words,), None, prepared.read_mask, np.int32(first), np.int32(inputs.shadow_texels),
             np.int32(1), bound, writer, lists[0], lists[3]))
+    # A frame too large for lists now may list its rays' texels later (ray_lists): the
+    # rectangles let that pass skip the triangles that touch none of them.
+    rects = {} if prepared is not None and touching is None else None
     _bound_passes(device, inputs, first, bound, writer, prepared.read_mask if prepared is not None else None, lists,
-                  timer)
-    return BoundMap(bound, writer, inputs.shadow_texels, touching)
+                  timer, rects)
+    return BoundMap(bound, writer, inputs.shadow_texels, touching, rects)
 
 
 def _bound_passes(device: Device, inputs: FrameInputs, first: int, bound, writer, read_mask, lists: tuple,
-                  timer: StageTimer) -> None:
+                  timer: StageTimer, rects: dict | None = None, filter_rects: bool = False) -> None:
     """Both bound passes of one light (`inputs` anchored at it) over the views the frame
     can read: with `read_mask`, only the texels whose bit it has (at the texel's address +
-    `first`); `lists`, the touching-list arguments (capacity 0: none)."""
+    `first`); `lists`, the touching-list arguments (capacity 0: none). `rects` (view →
+    buffer): filled with each triangle's texel rectangle, or with `filter_rects`, read to
+    skip the triangles whose rectangle holds no texel of `read_mask`."""
     count = inputs.tri_vertices.shape[0] // 3
     if not count:
         return
@@ -209,10 +217,17 @@ def _bound_passes(device: Device, inputs: FrameInputs, first: int, bound, writer
     # Only the cube faces the frame can read (`view_needed`, as raster.shadow does): no
     # sample projects into the others, so their texels are never asked for.
     for view in np.flatnonzero(inputs.view_needed[1:]) + 1:
+        mode = RECTS_NONE if rects is None else (RECTS_FILTER if filter_rects else RECTS_RECORD)
+        if mode == RECTS_FILTER and int(view) not in rects:  # (a view the recording frame did not draw)
+            mode = RECTS_NONE
+        if mode == RECTS_RECORD:
+            rects[int(view)] = device.buffer(nbytes=16 * count)
+        view_rects = rects[int(view)] if mode != RECTS_NONE else big_count  # (unread without rects)
         device.fill(big_count, np.int32(0), 4, timer, "visibility")
         timer.add("visibility", first_pass(
             device.queue, (count,), None, vertices, np.int32(count), views, np.int32(view), np.int32(1), bound,
-            writer, masked, read_mask, np.int32(first), *lists, np.int32(BOUND_SMALL_ROWS), big_items, big_count))
+            writer, masked, read_mask, np.int32(first), *lists, np.int32(BOUND_SMALL_ROWS), big_items, big_count,
+            np.int32(mode), view_rects))
         listed = int(device.read(big_count, 1, np.int32)[0])
         if listed:
             nearest_first(device, big_items, listed, inputs, view)
@@ -246,7 +261,8 @@ def ray_lists(device: Device, buffers: FrameBuffers, prepared: Prepared, ray_ent
             timer.add("visibility", device.kernel("visibility", "visibility_clear")(
                 device.queue, (light_words,), None, mask, np.int32(first), np.int32(light.texels), np.int32(0),
                 light.bound, light.writer, *arguments[::3]))
-            _bound_passes(device, light_inputs, first, light.bound, light.writer, mask, arguments, timer)
+            _bound_passes(device, light_inputs, first, light.bound, light.writer, mask, arguments, timer,
+                          light.rects, filter_rects=light.rects is not None)
         lists.append(touching)
     if any(int(device.read(t.count, 1, np.int32)[0]) > t.capacity for t in lists):
         return None
