@@ -268,16 +268,22 @@ def _check_nesting(text: str) -> None:
     """Walk the parser's events (flat, no recursion) and stop at the first mapping or list
     nested deeper than `MAX_NESTING`."""
     events = _Loader(text)
+    depth, last = 0, None
     try:
-        depth = 0
         while not events.check_event(yaml.StreamEndEvent):
             event = events.get_event()
+            last = event.end_mark
             if isinstance(event, (yaml.SequenceStartEvent, yaml.MappingStartEvent)):
                 depth += 1
                 if depth > MAX_NESTING:
                     raise _TooDeep(event.start_mark)
             elif isinstance(event, (yaml.SequenceEndEvent, yaml.MappingEndEvent)):
                 depth -= 1
+    except yaml.YAMLError as exc:
+        too_deep = _first_too_deep_bracket(text, last, depth) if "nesting depth" in str(exc) else None
+        if too_deep is None:
+            raise
+        raise _TooDeep(too_deep) from None
     finally:
         events.dispose()
 
@@ -285,6 +291,40 @@ def _check_nesting(text: str) -> None:
 class _TooDeep(Exception):
     def __init__(self, mark: yaml.Mark):
         self.mark = mark
+
+
+def _first_too_deep_bracket(text: str, start: yaml.Mark | None, depth: int) -> yaml.Mark | None:
+    """Where flow brackets ([ and {, outside quotes and comments) from `start` (None: the
+    text's start), `depth` levels in already, first nest deeper than MAX_NESTING, or None.
+    PyYAML from 6.0.3 refuses a flow nesting of 1000 in its scanner, which reads far ahead of
+    the parser, so such a scene never gets its events to `_check_nesting`; this finds the
+    place that check would have named."""
+    index, line, column = (start.index, start.line, start.column) if start is not None else (0, 0, 0)
+    quote = ""
+    while index < len(text):
+        c = text[index]
+        if quote:
+            if c == "\\" and quote == '"':
+                index, column = index + 1, column + 1
+            elif c == quote:
+                quote = ""
+        elif c in "'\"":
+            quote = c
+        elif c == "#" and (index == 0 or text[index - 1] in " \t\n"):
+            while index + 1 < len(text) and text[index + 1] != "\n":
+                index += 1
+        elif c in "[{":
+            depth += 1
+            if depth > MAX_NESTING:
+                return yaml.Mark("<scene>", index, line, column, None, None)
+        elif c in "]}":
+            depth = max(depth - 1, 0)
+        if c == "\n":
+            line, column = line + 1, 0
+        else:
+            column += 1
+        index += 1
+    return None
 
 
 def compose(text: str, path: str, where: Callable[[yaml.Mark], str | Place], fallback: str) -> Node | None:
