@@ -202,6 +202,19 @@ ALWAYS_INLINE view_lanes_t view_broadcast(global const view_t* view)
     return v;
 }
 
+/* light_view_index (lighting.h) on each lane: the light's one view, or the cube face of
+ * the major axis of p - the light's position. */
+ALWAYS_INLINE int_lanes light_view_index_lanes(global const light_t* light, float_lanes px, float_lanes py,
+                                               float_lanes pz)
+{
+    if (light->view_count == 1) return (int_lanes)(light->first_view);
+    float_lanes wx = px - light->position.x, wy = py - light->position.y, wz = pz - light->position.z;
+    float_lanes ax = fabs_lanes(wx), ay = fabs_lanes(wy), az = fabs_lanes(wz);
+    int_lanes axis_index = (ax >= ay & ax >= az) ? 0 : (ay >= az ? 1 : 2);
+    float_lanes component = axis_index == 0 ? wx : (axis_index == 1 ? wy : wz);
+    return light->first_view + 2 * axis_index + (component < 0.0f ? 1 : 0);
+}
+
 /* The views of the lanes' indices: read once when the lanes share one (the same values,
  * so the same bits), else gathered. */
 ALWAYS_INLINE view_lanes_t views_of_lanes(global const view_t* views, int_lanes index)

@@ -138,19 +138,10 @@ kernel void rectify(global const view_t* views, global const light_t* lights,
          * cone's edge is exact rather than a texel wide. */
         float3 l = light->position.xyz;
         float_lanes px = l.x + dir_x, py = l.y + dir_y, pz = l.z + dir_z;
-        int_lanes view_index = light->first_view;
-        if (light->view_count != 1) {
-            /* light_view_index: the cube face of the probe's major axis */
-            float_lanes wx = px - l.x, wy = py - l.y, wz = pz - l.z;
-            float_lanes ax = fabs_lanes(wx), ay = fabs_lanes(wy), az = fabs_lanes(wz);
-            int_lanes axis_index = (ax >= ay & ax >= az) ? 0 : (ay >= az ? 1 : 2);
-            float_lanes component = axis_index == 0 ? wx : (axis_index == 1 ? wy : wz);
-            view_index = light->first_view + 2 * axis_index + (component < 0.0f ? 1 : 0);
-        }
         /* view_project, perspective (a spot light's view or a cube face). The lanes of a
          * spot light, and most lanes of a point light, share one view: its fields are then
          * read once, not gathered per lane (the same values, so the same bits). */
-        view_lanes_t v = views_of_lanes(views, view_index);
+        view_lanes_t v = views_of_lanes(views, light_view_index_lanes(light, px, py, pz));
         float_lanes qx = px - v.origin_x, qy = py - v.origin_y, qz = pz - v.origin_z;
         float_lanes x = dot_lanes_of_lanes(qx, qy, qz, v.right_x, v.right_y, v.right_z);
         float_lanes y = dot_lanes_of_lanes(qx, qy, qz, v.up_x, v.up_y, v.up_z);

@@ -686,15 +686,7 @@ ALWAYS_INLINE int prepare_lanes(global const frame_t* frame, global const view_t
     float_lanes sx = towards ? nx : -nx, sy = towards ? ny : -ny, sz = towards ? nz : -nz;
     float_lanes start_x = px + sx * push, start_y = py + sy * push, start_z = pz + sz * push;
     /* light_view_index, then view_project */
-    int_lanes view_index = light->first_view;
-    if (light->view_count != 1) {
-        float_lanes wx = start_x - position.x, wy = start_y - position.y, wz = start_z - position.z;
-        float_lanes ax = fabs_lanes(wx), ay = fabs_lanes(wy), az = fabs_lanes(wz);
-        int_lanes axis_index = (ax >= ay & ax >= az) ? 0 : (ay >= az ? 1 : 2);
-        float_lanes component = axis_index == 0 ? wx : (axis_index == 1 ? wy : wz);
-        view_index = light->first_view + 2 * axis_index + (component < 0.0f ? 1 : 0);
-    }
-    view_lanes_t v = views_of_lanes(views, view_index);
+    view_lanes_t v = views_of_lanes(views, light_view_index_lanes(light, start_x, start_y, start_z));
     float_lanes qx = start_x - v.origin_x, qy = start_y - v.origin_y, qz = start_z - v.origin_z;
     float_lanes x = dot_lanes_of_lanes(qx, qy, qz, v.right_x, v.right_y, v.right_z);
     float_lanes y = dot_lanes_of_lanes(qx, qy, qz, v.up_x, v.up_y, v.up_z);
