@@ -52,6 +52,11 @@ ALWAYS_INLINE int any_lanes(int_lanes mask)
 }
 ALWAYS_INLINE int_lanes min_lanes(int_lanes a, int_lanes b) { return a > b ? b : a; }
 ALWAYS_INLINE int_lanes max_lanes(int_lanes a, int_lanes b) { return a < b ? b : a; }
+/* Each lane clamped to [0, size - 1] of its own size (shadow_texel's clamp). */
+ALWAYS_INLINE int_lanes clamp_lanes_of_lanes(int_lanes x, int_lanes size)
+{
+    return min_lanes(max_lanes(x, (int_lanes)(0)), size - 1);
+}
 ALWAYS_INLINE int_lanes clamp_int_lanes(int_lanes x, int lo, int hi)
 {
     return min_lanes(max_lanes(x, (int_lanes)(lo)), (int_lanes)(hi));

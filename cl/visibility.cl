@@ -777,6 +777,160 @@ kernel void visibility_mark_listed(global const int* ray_entries, int ray_count,
  * the entry (sample × light_count + light) stays pending and is listed in ray_entries
  * (ray_count starts at 0) for visibility_rays: the host builds the BVH only when some
  * entry needs a ray (clrays/stages/visibility.py). */
+/* The decision of one sample and light (entry = sample × light_count + l) that
+ * visibility_prepare left pending. */
+inline void decide_entry(global const frame_t* frame, global const view_t* views, global const light_t* lights,
+                         global const uint* shadow_depth, global const uint* bound, global const int* writer,
+                         global const int2* map_read, global const uint* camera_depth, global const int* tri_id,
+                         global const float4* tri_vertices, global const float4* tri_normal,
+                         global const float2* offsets, global float* visible, global int* ray_entries,
+                         volatile global int* ray_count, int sample, int l)
+{
+    global float* out = visible + sample * frame->light_count;
+    if (out[l] != VISIBILITY_PENDING) return;
+    int tri = tri_id[sample];
+    global const light_t* light = lights + l;
+    int2 read = map_read[sample * frame->light_count + l];
+    if (read.x == MAP_TEXEL_OUTSIDE) {
+        out[l] = 1.0f;
+        return;
+    }
+    float depth = as_float(read.y), bound_depth = read.x >= 0 ? as_float(bound[read.x]) : 0.0f;
+    if (read.x >= 0 && (depth <= bound_depth || writer[read.x] == tri)) {
+        out[l] = 1.0f;
+        return;
+    }
+    if (read.x >= 0) {
+        float3 p, dir, n;
+        camera_surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p, &dir, &n);
+        /* Lit when depth ≤ bound + min(bias, slack), both ≥ 0: the slack's trigonometry
+         * only within the bias (same answer as computing it first). */
+        if (depth <= bound_depth + SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth)) {
+            float3 to_light;
+            light_reaches(light, frame->sigma_t.xyz, p, &to_light);
+            float3 start = shadow_ray_start(light, p, n, to_light);
+            global const view_t* view = views + light_view_index(light, start);
+            float reach = 0.0f; /* of the sample's triangle from the view's origin */
+            for (int k = 0; k < 3; ++k)
+                reach = inline_fmax(reach, exact_length(tri_vertices[3 * tri + k].xyz - view->origin.xyz));
+            if (depth <= bound_depth + own_surface_slack(light, view, start, n, depth, reach)) {
+                out[l] = 1.0f;
+                return;
+            }
+        }
+        float3 lookup = p + n * shadow_texel_size(light, exact_length(p - light->position.xyz));
+        if (blocked_all_around(light, views, shadow_depth, lookup)) {
+            out[l] = 0.0f;
+            return;
+        }
+    }
+    ray_entries[atomic_inc(ray_count)] = sample * frame->light_count + l;
+    if (read.x < 0) atomic_inc(ray_count + 1); /* no texel: only the BVH can answer it */
+}
+
+/* decide_entry on LANES consecutive samples and one light at once. A lane within the bias
+ * of its bound, whose own surface's slack decides (acos, cos), takes decide_entry alone;
+ * 0, having written nothing, where a lane needs exact_length's library call. An
+ * orthographic camera is never sent here. */
+ALWAYS_INLINE int decide_lanes(global const frame_t* frame, global const view_t* views, global const light_t* lights,
+                               int l, global const uint* shadow_depth, global const uint* bound,
+                               global const int* writer, global const int2* map_read, global const uint* camera_depth,
+                               global const int* tri_id, global const float4* tri_vertices,
+                               global const float4* tri_normal, global const float2* offsets, global float* visible,
+                               global int* ray_entries, volatile global int* ray_count, int first)
+{
+    global const light_t* light = lights + l;
+    int light_count = frame->light_count;
+    int_lanes sample = first + (int_lanes)(0, 1, 2, 3, 4, 5, 6, 7), entry = sample * light_count + l;
+    float_lanes answer = LOAD_LANES(visible, entry);
+    int_lanes pending = answer == VISIBILITY_PENDING;
+    if (!any_lanes(pending)) return 1;
+    global const int* reads = (global const int*)map_read;
+    int_lanes address = as_int8(LOAD_LANES((global const float*)reads, 2 * entry));
+    float_lanes depth = LOAD_LANES((global const float*)reads, 2 * entry + 1);
+    int_lanes texel = address >= 0, safe = texel ? address : 0;
+    int_lanes tri = vload8(0, tri_id + first);
+    float_lanes bound_depth = texel ? LOAD_LANES((global const float*)bound, safe) : 0.0f;
+    int_lanes only_own = as_int8(LOAD_LANES((global const float*)writer, safe)) == tri;
+    int_lanes lit = pending & ((address == MAP_TEXEL_OUTSIDE) | (texel & ((depth <= bound_depth) | only_own)));
+    int_lanes heavy = pending & texel & !lit;
+    int_lanes blocked = (int_lanes)(0), slack = (int_lanes)(0);
+    if (any_lanes(heavy)) {
+        /* camera_surface_point */
+        float_lanes distance = as_float8(vload8(0, camera_depth + first));
+        float_lanes dx, dy, dz;
+        camera_ray_lanes(frame, views, offsets, sample, &dx, &dy, &dz);
+        float3 eye = views->origin.xyz;
+        float_lanes px = eye.x + distance * dx, py = eye.y + distance * dy, pz = eye.z + distance * dz;
+        int_lanes own = heavy ? tri : 0;
+        global const float* normals = (global const float*)tri_normal;
+        float_lanes nx = LOAD_LANES(normals, 4 * own), ny = LOAD_LANES(normals, 4 * own + 1),
+                    nz = LOAD_LANES(normals, 4 * own + 2);
+        int_lanes facing_away = dot_lanes_of_lanes(nx, ny, nz, dx, dy, dz) > 0.0f;
+        nx = facing_away ? -nx : nx, ny = facing_away ? -ny : ny, nz = facing_away ? -nz : nz;
+        float_lanes bias_size = light->type == LIGHT_DIRECTIONAL ? (float_lanes)(light->texel_angle)
+                                                                 : depth * light->texel_angle;
+        slack = heavy & (depth <= bound_depth + SURFACE_BIAS_TEXELS * bias_size); /* decide_entry's, lane by lane */
+        heavy &= !slack;
+        /* lookup = p + n · shadow_texel_size(|p - light|), then blocked_all_around */
+        float3 position = light->position.xyz;
+        float_lanes wx = px - position.x, wy = py - position.y, wz = pz - position.z;
+        float_lanes w_squared = squared_length_lanes(wx, wy, wz);
+        if (light->type != LIGHT_DIRECTIONAL && any_lanes(heavy & !(w_squared >= 1.17549435e-38f & w_squared <= 3.40282347e38f)))
+            return 0; /* exact_length's library call */
+        float_lanes lookup_size = light->type == LIGHT_DIRECTIONAL ? (float_lanes)(light->texel_angle)
+                                                                   : sqrt_lanes(w_squared) * light->texel_angle;
+        float_lanes lx = px + nx * lookup_size, ly = py + ny * lookup_size, lz = pz + nz * lookup_size;
+        view_lanes_t v = views_of_lanes(views, light_view_index_lanes(light, lx, ly, lz));
+        float_lanes qx = lx - v.origin_x, qy = ly - v.origin_y, qz = lz - v.origin_z;
+        float_lanes x = dot_lanes_of_lanes(qx, qy, qz, v.right_x, v.right_y, v.right_z);
+        float_lanes y = dot_lanes_of_lanes(qx, qy, qz, v.up_x, v.up_y, v.up_z);
+        float_lanes z = dot_lanes_of_lanes(qx, qy, qz, v.forward_x, v.forward_y, v.forward_z);
+        int perspective = views[light->first_view].projection == PROJECTION_PERSPECTIVE;
+        int_lanes projects = perspective ? !(z <= 0.0f) : (int_lanes)(-1);
+        float_lanes lookup_depth = perspective ? length_lanes(qx, qy, qz) : z;
+        float_lanes screen_x = perspective ? x / (z * v.scale_x) : x / v.scale_x;
+        float_lanes screen_y = perspective ? y / (z * v.scale_y) : y / v.scale_y;
+        float_lanes texel_x = (screen_x + 1.0f) * 0.5f * float_of_lanes(v.width);
+        float_lanes texel_y = (1.0f - screen_y) * 0.5f * float_of_lanes(v.height);
+        float_lanes size = light->type == LIGHT_DIRECTIONAL ? (float_lanes)(light->texel_angle)
+                                                            : lookup_depth * light->texel_angle;
+        float_lanes tolerance = SURFACE_BIAS_TEXELS * size;
+        int_lanes tx = int_of_lanes(texel_x), ty = int_of_lanes(texel_y);
+        blocked = heavy & projects;
+        for (int j = -1; j <= 1; ++j)
+            for (int i = -1; i <= 1; ++i) {
+                int_lanes cx = clamp_lanes_of_lanes(tx + i, v.width), cy = clamp_lanes_of_lanes(ty + j, v.height);
+                float_lanes stored = LOAD_LANES((global const float*)shadow_depth, v.depth_offset + cy * v.width + cx);
+                blocked &= !(lookup_depth <= stored + tolerance);
+            }
+    }
+    for (int k = 0; k < LANES; ++k) {
+        if (!pending[k]) continue;
+        if (slack[k]) {
+            decide_entry(frame, views, lights, shadow_depth, bound, writer, map_read, camera_depth, tri_id, tri_vertices,
+                         tri_normal, offsets, visible, ray_entries, ray_count, first + k, l);
+        } else if (lit[k]) {
+            visible[entry[k]] = 1.0f;
+        } else if (blocked[k]) {
+            visible[entry[k]] = 0.0f;
+        } else {
+            ray_entries[atomic_inc(ray_count)] = entry[k];
+            if (!texel[k]) atomic_inc(ray_count + 1); /* no texel: only the BVH can answer it */
+        }
+    }
+    return 1;
+}
+
+/* The rest of the decision, for the pending samples and lights. Lit: the bound map says no
+ * triangle in the texel comes nearer the light than the sample's own depth, less what its
+ * own surface may have written there (at most the map's bias); or the writer map says no
+ * triangle but the sample's own touches that texel. Shadowed: the 3 × 3 test. Otherwise
+ * the entry (sample × light_count + light) stays pending and is listed in ray_entries
+ * (ray_count starts at 0) for visibility_rays: the host builds the BVH only when some
+ * entry needs a ray (clrays/stages/visibility.py). One work-item per LANES samples
+ * (decide_lanes, the same bits as decide_entry's; DECIDE_ONE_BY_ONE builds it with
+ * decide_entry alone, for tests/stages/test_visibility_prepare.py). */
 kernel void visibility(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                        global const uint* shadow_depth, global const uint* bound, global const int* writer,
                        global const int2* map_read, global const uint* camera_depth, global const int* tri_id,
@@ -784,52 +938,19 @@ kernel void visibility(global const frame_t* frame, global const view_t* views, 
                        global const float2* offsets, global float* visible, global int* ray_entries,
                        volatile global int* ray_count)
 {
-    int sample = get_global_id(0);
-    if (sample >= frame->width * frame->height * frame->spp) return;
-    global float* out = visible + sample * frame->light_count;
-    int tri = tri_id[sample];
-    float3 p, dir, n;
-    int surface = 0; /* p and n worked out: only for samples the lit test leaves */
+    int first = get_global_id(0) * LANES;
+    int samples = frame->width * frame->height * frame->spp;
+    if (first >= samples) return;
     for (int l = 0; l < frame->light_count; ++l) {
-        if (out[l] != VISIBILITY_PENDING) continue;
-        global const light_t* light = lights + l;
-        int2 read = map_read[sample * frame->light_count + l];
-        if (read.x == MAP_TEXEL_OUTSIDE) {
-            out[l] = 1.0f;
+#ifndef DECIDE_ONE_BY_ONE
+        if (first + LANES <= samples && views->projection == PROJECTION_PERSPECTIVE
+            && decide_lanes(frame, views, lights, l, shadow_depth, bound, writer, map_read, camera_depth, tri_id,
+                            tri_vertices, tri_normal, offsets, visible, ray_entries, ray_count, first))
             continue;
-        }
-        float depth = as_float(read.y), bound_depth = read.x >= 0 ? as_float(bound[read.x]) : 0.0f;
-        if (read.x >= 0 && (depth <= bound_depth || writer[read.x] == tri)) {
-            out[l] = 1.0f;
-            continue;
-        }
-        if (read.x >= 0) {
-            if (!surface)
-                surface = camera_surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p,
-                                               &dir, &n);
-            /* Lit when depth ≤ bound + min(bias, slack), both ≥ 0: the slack's trigonometry
-             * only within the bias (same answer as computing it first). */
-            if (depth <= bound_depth + SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth)) {
-                float3 to_light;
-                light_reaches(light, frame->sigma_t.xyz, p, &to_light);
-                float3 start = shadow_ray_start(light, p, n, to_light);
-                global const view_t* view = views + light_view_index(light, start);
-                float reach = 0.0f; /* of the sample's triangle from the view's origin */
-                for (int k = 0; k < 3; ++k)
-                    reach = inline_fmax(reach, exact_length(tri_vertices[3 * tri + k].xyz - view->origin.xyz));
-                if (depth <= bound_depth + own_surface_slack(light, view, start, n, depth, reach)) {
-                    out[l] = 1.0f;
-                    continue;
-                }
-            }
-            float3 lookup = p + n * shadow_texel_size(light, exact_length(p - light->position.xyz));
-            if (blocked_all_around(light, views, shadow_depth, lookup)) {
-                out[l] = 0.0f;
-                continue;
-            }
-        }
-        ray_entries[atomic_inc(ray_count)] = sample * frame->light_count + l;
-        if (read.x < 0) atomic_inc(ray_count + 1); /* no texel: only the BVH can answer it */
+#endif
+        for (int k = 0; k < LANES && first + k < samples; ++k)
+            decide_entry(frame, views, lights, shadow_depth, bound, writer, map_read, camera_depth, tri_id, tri_vertices,
+                         tri_normal, offsets, visible, ray_entries, ray_count, first + k, l);
     }
 }
 

@@ -55,7 +55,7 @@ TOUCHING_NODES_PER_ENTRY = 64
 RAY_LIST_ENTRIES = 1 << 17
 #: visibility_bound's rect_mode (cl/visibility.cl RECTS_*).
 RECTS_NONE, RECTS_RECORD, RECTS_FILTER = 0, 1, 2
-#: Camera samples one visibility_prepare work-item takes, as float8 lanes (cl/lanes.h).
+#: Camera samples one visibility_prepare or visibility work-item takes, as float8 lanes (cl/lanes.h).
 PREPARE_LANES = 8
 #: visible's value for a sample and light left to the maps (cl/visibility.cl).
 VISIBILITY_PENDING = -1.0
@@ -309,7 +309,7 @@ def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, pr
     ray_entries = device.buffer(nbytes=4 * entries)
     ray_count = device.buffer(np.zeros(2, np.int32))  # rays, and those with no texel
     timer.add("visibility", device.kernel("visibility", "visibility")(
-        device.queue, (inputs.samples,), None, buffers.params, buffers.views, buffers.lights,
+        device.queue, (-(-inputs.samples // PREPARE_LANES),), None, buffers.params, buffers.views, buffers.lights,
         rastered.shadow_depth, bound.bound, bound.writer, prepared.map_read, rastered.camera_depth, rastered.tri_id,
         buffers.tri_vertices, buffers.tri_normal, buffers.offsets, prepared.visible, ray_entries, ray_count))
     rays, without_texel = (int(v) for v in device.read(ray_count, 2, np.int32))

@@ -1,16 +1,18 @@
-"""visibility_prepare's lanes (8 samples per work-item, cl/visibility.cl prepare_lanes)
-against the kernel built to take every sample one by one (prepare_entry): the same
-answers and the same texels, bit for bit, for every light type, on the bench scenes and
-on frames whose sample count is no multiple of 8."""
+"""visibility_prepare's and the decision's lanes (8 samples per work-item, cl/visibility.cl
+prepare_lanes, decide_lanes) against the kernels built to take every sample one by one
+(prepare_entry, decide_entry): the same answers and the same texels, bit for bit, for
+every light type, on the bench scenes and on frames whose sample count is no multiple of
+8."""
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 import clrays.stages.visibility as stage
-from clrays.device import StageTimer
+from clrays.device import Device, StageTimer
 from clrays.inputs import frame_inputs, upload
 from clrays.scene.load import load_scene
+from clrays.session import Renderer
 from clrays.stages.raster import raster
 from conftest import make_scene
 from test_visibility_bound import LIGHTS, _triangles
@@ -58,3 +60,32 @@ def test_every_light_type_and_a_ragged_end(device, kind):
 def test_several_lights_and_samples(device):
     scene = make_scene(_triangles(), list(LIGHTS.values()), width=24, height=16, spp=4, shadow_map=64)
     _same(device, scene)
+
+
+def _image(device, scene, monkeypatch, defines):
+    """The frame with the decision kernel built with `defines` (None: as it ships)."""
+    real = Device.kernel
+
+    def kernel(self, stage_name, name, extra=None):
+        if (stage_name, name) == ("visibility", "visibility") and defines:
+            extra = {**(extra or {}), **defines}
+        return real(self, stage_name, name, extra)
+
+    monkeypatch.setattr(Device, "kernel", kernel)
+    image = Renderer(device, reuse=False).render(scene).image
+    monkeypatch.setattr(Device, "kernel", real)
+    return image
+
+
+@pytest.mark.parametrize("name", ["demo", "behind", "sun"])
+def test_the_decision_in_lanes_gives_the_same_image(device, monkeypatch, name):
+    scene = load_scene(SCENES / f"{name}.yaml", overrides=["image.width=160", "image.height=90"])
+    np.testing.assert_array_equal(_image(device, scene, monkeypatch, None),
+                                  _image(device, scene, monkeypatch, {"DECIDE_ONE_BY_ONE": 1}))
+
+
+@pytest.mark.parametrize("kind", LIGHTS)
+def test_the_decision_for_every_light_type(device, monkeypatch, kind):
+    scene = make_scene(_triangles(), [LIGHTS[kind]], width=37, height=23, spp=2, shadow_map=64)
+    np.testing.assert_array_equal(_image(device, scene, monkeypatch, None),
+                                  _image(device, scene, monkeypatch, {"DECIDE_ONE_BY_ONE": 1}))
