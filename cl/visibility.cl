@@ -605,7 +605,7 @@ ALWAYS_INLINE int prepare_lanes(global const frame_t* frame, global const view_t
     /* camera_surface_point */
     float_lanes distance = as_float8(vload8(0, camera_depth + first));
     int_lanes tri = vload8(0, tri_id + first);
-    int_lanes surface = tri >= 0 & !(distance > frame->far);
+    int_lanes surface = (tri >= 0) & !(distance > frame->far);
     if (!any_lanes(surface)) { /* the sky, or past far: lit, no texel */
         for (int k = 0; k < LANES; ++k) {
             int entry = (first + k) * frame->light_count + l;
@@ -645,8 +645,9 @@ ALWAYS_INLINE int prepare_lanes(global const frame_t* frame, global const view_t
         float_lanes ax = sigma_t.x * d, ay = sigma_t.y * d, az = sigma_t.z * d;
         /* (a scalar comparison is 1, a vector's -1: the channels' tests stay vectors) */
         int_lanes none = (int_lanes)(0);
-        int_lanes arrives = d2 <= 1e10f & ((power.x >= 1e-6f ? ax <= 30.0f : none) | (power.y >= 1e-6f ? ay <= 30.0f : none)
-                                           | (power.z >= 1e-6f ? az <= 30.0f : none));
+        int_lanes arrives = (d2 <= 1e10f)
+                            & ((power.x >= 1e-6f ? ax <= 30.0f : none) | (power.y >= 1e-6f ? ay <= 30.0f : none)
+                               | (power.z >= 1e-6f ? az <= 30.0f : none));
         if (any_lanes(surface & !outside & !arrives)) return 0; /* light_incident decides */
         reaches = !outside & arrives;
     }
@@ -677,8 +678,9 @@ ALWAYS_INLINE int prepare_lanes(global const frame_t* frame, global const view_t
     /* shadow_ray_start */
     float_lanes ex = position.x - px, ey = position.y - py, ez = position.z - pz;
     float_lanes to_light_squared = squared_length_lanes(ex, ey, ez), p_squared = squared_length_lanes(px, py, pz);
-    int_lanes plain = p_squared >= 1.17549435e-38f & p_squared <= 3.40282347e38f;
-    if (light->type != LIGHT_DIRECTIONAL) plain &= to_light_squared >= 1.17549435e-38f & to_light_squared <= 3.40282347e38f;
+    int_lanes plain = (p_squared >= 1.17549435e-38f) & (p_squared <= 3.40282347e38f);
+    if (light->type != LIGHT_DIRECTIONAL)
+        plain &= (to_light_squared >= 1.17549435e-38f) & (to_light_squared <= 3.40282347e38f);
     if (any_lanes(surface & !turned & !plain)) return 0; /* exact_length's library call */
     float_lanes to_light_distance = light->type == LIGHT_DIRECTIONAL ? 0.0f : sqrt_lanes(to_light_squared);
     float_lanes push = SHADOW_RAY_OFFSET_REL * (sqrt_lanes(p_squared) + to_light_distance);
@@ -706,9 +708,9 @@ ALWAYS_INLINE int prepare_lanes(global const frame_t* frame, global const view_t
     depth = projects ? depth : 0.0f;
     /* what prepare_entry writes: no surface, turned away, or pending with its texel */
     float_lanes when_reached = turned ? (float_lanes)(0.0f) : (float_lanes)(VISIBILITY_PENDING);
-    float_lanes answer = surface & reaches ? when_reached : (float_lanes)(1.0f);
-    int_lanes read_address = surface & !turned ? address : (int_lanes)(MAP_TEXEL_NONE);
-    int_lanes read_depth = surface & !turned ? as_int8(depth) : (int_lanes)(0);
+    float_lanes answer = (surface & reaches) ? when_reached : (float_lanes)(1.0f);
+    int_lanes read_address = (surface & !turned) ? address : (int_lanes)(MAP_TEXEL_NONE);
+    int_lanes read_depth = (surface & !turned) ? as_int8(depth) : (int_lanes)(0);
     for (int k = 0; k < LANES; ++k) {
         int entry = (first + k) * frame->light_count + l;
         visible[entry] = answer[k];
@@ -876,7 +878,7 @@ ALWAYS_INLINE int decide_lanes(global const frame_t* frame, global const view_t*
         float3 position = light->position.xyz;
         float_lanes wx = px - position.x, wy = py - position.y, wz = pz - position.z;
         float_lanes w_squared = squared_length_lanes(wx, wy, wz);
-        if (light->type != LIGHT_DIRECTIONAL && any_lanes(heavy & !(w_squared >= 1.17549435e-38f & w_squared <= 3.40282347e38f)))
+        if (light->type != LIGHT_DIRECTIONAL && any_lanes(heavy & !((w_squared >= 1.17549435e-38f) & (w_squared <= 3.40282347e38f))))
             return 0; /* exact_length's library call */
         float_lanes lookup_size = light->type == LIGHT_DIRECTIONAL ? (float_lanes)(light->texel_angle)
                                                                    : sqrt_lanes(w_squared) * light->texel_angle;
