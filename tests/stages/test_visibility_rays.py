@@ -90,6 +90,14 @@ def test_the_rays_texels_listed_answer_as_the_bvh(device, monkeypatch, kind):
     np.testing.assert_array_equal(listed, walked)
 
 
+def test_the_rays_texels_listed_for_every_light_at_once(device, monkeypatch):
+    scene = make_scene(np.concatenate([_triangles(), _small_grid()]), list(LIGHTS.values()), width=64, height=48,
+                       shadow_map=64)
+    listed, walked, counts, with_bvh = _rays_listed_and_walked(device, scene, monkeypatch)
+    assert counts == {"lists": 1, "bvh": 0} and with_bvh == 1
+    np.testing.assert_array_equal(listed, walked)
+
+
 def test_the_bunny_at_640x360_builds_no_bvh(device, monkeypatch):
     scene = load_scene(SCENES / "bunny.yaml", overrides=["image.width=640", "image.height=360"])
     listed, walked, counts, with_bvh = _rays_listed_and_walked(device, scene, monkeypatch)
@@ -120,3 +128,19 @@ def test_a_kept_bound_map_lists_by_the_lights_own_texels(device):
     kept = session.render(both)
     assert kept.stage_status["visibility"] == "computed"
     np.testing.assert_array_equal(kept.image, Renderer(device, reuse=False).render(both).image)
+
+
+def test_a_kept_bound_map_lists_its_rays_texels_again(device, monkeypatch):
+    # A brighter light keeps the bound map (and its triangles' rectangles) but decides the
+    # visibility again: the rays' lists are built from the kept map, and the image is the
+    # one computed from scratch.
+    calls, real = [], stage.ray_lists
+    monkeypatch.setattr(stage, "ray_lists", lambda *args: calls.append(1) or real(*args))
+    size = ["image.width=160", "image.height=90"]
+    brighter = load_scene(SCENES / "bunny.yaml", overrides=size + ["lights.0.intensity=[500, 450, 400]"])
+    session = Renderer(device)
+    session.render(load_scene(SCENES / "bunny.yaml", overrides=size))
+    kept = session.render(brighter)
+    assert kept.stage_status["raster.shadow"] == "reused" and kept.stage_status["visibility"] == "computed"
+    assert calls == [1, 1]
+    np.testing.assert_array_equal(kept.image, Renderer(device, reuse=False).render(brighter).image)
