@@ -133,6 +133,29 @@ ALWAYS_INLINE float_lanes atan2_approx_lanes(float_lanes y, float_lanes x)
 }
 
 
+/* Each lane's pixel column and row and its sample within the pixel. Eight consecutive
+ * samples of a one-sample-per-pixel frame at least 8 wide lie in one row or wrap once into
+ * the next: one scalar division then, instead of integer divisions on every lane (each a
+ * slow instruction of its own on a CPU). */
+ALWAYS_INLINE void sample_pixel_lanes(global const frame_t* frame, int_lanes sample, int_lanes* column, int_lanes* row,
+                                      int_lanes* sub)
+{
+    const int_lanes lane = (int_lanes)(0, 1, 2, 3, 4, 5, 6, 7);
+    int first = sample.s0, width = frame->width;
+    if (frame->spp == 1 && width >= LANES && all_lanes(sample == first + lane)) {
+        int_lanes x = first % width + lane;
+        int_lanes wraps = x >= width; /* -1 where the run passes the row's end */
+        *column = wraps ? x - width : x;
+        *row = first / width - wraps;
+        *sub = (int_lanes)(0);
+        return;
+    }
+    int_lanes pixel = sample / frame->spp;
+    *sub = sample % frame->spp;
+    *column = pixel % width;
+    *row = pixel / width;
+}
+
 /* The camera's ray direction for LANES camera samples: view_screen and view_ray
  * (lighting.h) operation for operation, each product in its own statement as there (no
  * fused multiply-add), so the same bits; an orthographic view's direction is forward.
@@ -141,12 +164,11 @@ ALWAYS_INLINE void camera_ray_lanes(global const frame_t* frame, global const vi
                                     global const float2* offsets, int_lanes sample, float_lanes* dx,
                                     float_lanes* dy, float_lanes* dz)
 {
-    int_lanes pixel = sample / frame->spp, sub = sample % frame->spp;
+    int_lanes column, row, sub;
+    sample_pixel_lanes(frame, sample, &column, &row, &sub);
     global const float* offset = (global const float*)offsets;
-    float_lanes sx = 2.0f * (float_of_lanes(pixel % frame->width) + LOAD_LANES(offset, 2 * sub)) / (float)views->width
-                     - 1.0f;
-    float_lanes sy = 1.0f - 2.0f * (float_of_lanes(pixel / frame->width) + LOAD_LANES(offset, 2 * sub + 1))
-                                / (float)views->height;
+    float_lanes sx = 2.0f * (float_of_lanes(column) + LOAD_LANES(offset, 2 * sub)) / (float)views->width - 1.0f;
+    float_lanes sy = 1.0f - 2.0f * (float_of_lanes(row) + LOAD_LANES(offset, 2 * sub + 1)) / (float)views->height;
     float3 forward = views->forward.xyz, right = views->right.xyz, up = views->up.xyz;
     *dx = forward.x;
     *dy = forward.y;
