@@ -89,3 +89,11 @@ def test_the_decision_for_every_light_type(device, monkeypatch, kind):
     scene = make_scene(_triangles(), [LIGHTS[kind]], width=37, height=23, spp=2, shadow_map=64)
     np.testing.assert_array_equal(_image(device, scene, monkeypatch, None),
                                   _image(device, scene, monkeypatch, {"DECIDE_ONE_BY_ONE": 1}))
+
+
+def test_a_frame_narrower_than_the_lanes(device):
+    # 5 pixels wide: a run of 8 samples spans rows, so the lanes divide per lane (cl/lanes.h
+    # sample_pixel_lanes); the answers must still be prepare_entry's.
+    scene = make_scene(_triangles(), [LIGHTS["point"]], width=5, height=7, shadow_map=64)
+    visible, _ = _same(device, scene)
+    assert (visible == stage.VISIBILITY_PENDING).any() or (visible == 0.0).any()
