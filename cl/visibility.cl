@@ -593,6 +593,27 @@ inline void prepare_entry(global const frame_t* frame, global const view_t* view
     if (reaches) visible[entry] = VISIBILITY_PENDING;
 }
 
+/* light_view_index, then view_project (lighting.h) on each lane: the view of p, its
+ * continuous texel coordinates and its depth there; the lanes where p is behind a
+ * perspective view come back 0 (their texel and depth unused). */
+ALWAYS_INLINE int_lanes light_project_lanes(global const view_t* views, global const light_t* light, float_lanes px,
+                                            float_lanes py, float_lanes pz, view_lanes_t* v, float_lanes* texel_x,
+                                            float_lanes* texel_y, float_lanes* depth)
+{
+    *v = views_of_lanes(views, light_view_index_lanes(light, px, py, pz));
+    float_lanes qx = px - v->origin_x, qy = py - v->origin_y, qz = pz - v->origin_z;
+    float_lanes x = dot_lanes_of_lanes(qx, qy, qz, v->right_x, v->right_y, v->right_z);
+    float_lanes y = dot_lanes_of_lanes(qx, qy, qz, v->up_x, v->up_y, v->up_z);
+    float_lanes z = dot_lanes_of_lanes(qx, qy, qz, v->forward_x, v->forward_y, v->forward_z);
+    int perspective = views[light->first_view].projection == PROJECTION_PERSPECTIVE;
+    *depth = perspective ? length_lanes(qx, qy, qz) : z;
+    float_lanes screen_x = perspective ? x / (z * v->scale_x) : x / v->scale_x;
+    float_lanes screen_y = perspective ? y / (z * v->scale_y) : y / v->scale_y;
+    *texel_x = (screen_x + 1.0f) * 0.5f * float_of_lanes(v->width);
+    *texel_y = (1.0f - screen_y) * 0.5f * float_of_lanes(v->height);
+    return perspective ? !(z <= 0.0f) : (int_lanes)(-1);
+}
+
 /* prepare_entry on LANES consecutive samples at once; 0, having written nothing, where a
  * lane needs a path written only there (visibility_prepare). */
 ALWAYS_INLINE int prepare_lanes(global const frame_t* frame, global const view_t* views, global const light_t* light,
@@ -687,19 +708,9 @@ ALWAYS_INLINE int prepare_lanes(global const frame_t* frame, global const view_t
     int_lanes towards = facing >= 0.0f;
     float_lanes sx = towards ? nx : -nx, sy = towards ? ny : -ny, sz = towards ? nz : -nz;
     float_lanes start_x = px + sx * push, start_y = py + sy * push, start_z = pz + sz * push;
-    /* light_view_index, then view_project */
-    view_lanes_t v = views_of_lanes(views, light_view_index_lanes(light, start_x, start_y, start_z));
-    float_lanes qx = start_x - v.origin_x, qy = start_y - v.origin_y, qz = start_z - v.origin_z;
-    float_lanes x = dot_lanes_of_lanes(qx, qy, qz, v.right_x, v.right_y, v.right_z);
-    float_lanes y = dot_lanes_of_lanes(qx, qy, qz, v.up_x, v.up_y, v.up_z);
-    float_lanes z = dot_lanes_of_lanes(qx, qy, qz, v.forward_x, v.forward_y, v.forward_z);
-    int perspective = views[light->first_view].projection == PROJECTION_PERSPECTIVE;
-    int_lanes projects = perspective ? !(z <= 0.0f) : (int_lanes)(-1);
-    float_lanes depth = perspective ? length_lanes(qx, qy, qz) : z;
-    float_lanes screen_x = perspective ? x / (z * v.scale_x) : x / v.scale_x;
-    float_lanes screen_y = perspective ? y / (z * v.scale_y) : y / v.scale_y;
-    float_lanes texel_x = (screen_x + 1.0f) * 0.5f * float_of_lanes(v.width);
-    float_lanes texel_y = (1.0f - screen_y) * 0.5f * float_of_lanes(v.height);
+    view_lanes_t v;
+    float_lanes texel_x, texel_y, depth;
+    int_lanes projects = light_project_lanes(views, light, start_x, start_y, start_z, &v, &texel_x, &texel_y, &depth);
     int_lanes inside = texel_x >= 0.0f & texel_y >= 0.0f & texel_x < float_of_lanes(v.width)
                        & texel_y < float_of_lanes(v.height);
     int_lanes address = projects ? (inside ? v.depth_offset + int_of_lanes(texel_y) * v.width + int_of_lanes(texel_x)
@@ -883,18 +894,9 @@ ALWAYS_INLINE int decide_lanes(global const frame_t* frame, global const view_t*
         float_lanes lookup_size = light->type == LIGHT_DIRECTIONAL ? (float_lanes)(light->texel_angle)
                                                                    : sqrt_lanes(w_squared) * light->texel_angle;
         float_lanes lx = px + nx * lookup_size, ly = py + ny * lookup_size, lz = pz + nz * lookup_size;
-        view_lanes_t v = views_of_lanes(views, light_view_index_lanes(light, lx, ly, lz));
-        float_lanes qx = lx - v.origin_x, qy = ly - v.origin_y, qz = lz - v.origin_z;
-        float_lanes x = dot_lanes_of_lanes(qx, qy, qz, v.right_x, v.right_y, v.right_z);
-        float_lanes y = dot_lanes_of_lanes(qx, qy, qz, v.up_x, v.up_y, v.up_z);
-        float_lanes z = dot_lanes_of_lanes(qx, qy, qz, v.forward_x, v.forward_y, v.forward_z);
-        int perspective = views[light->first_view].projection == PROJECTION_PERSPECTIVE;
-        int_lanes projects = perspective ? !(z <= 0.0f) : (int_lanes)(-1);
-        float_lanes lookup_depth = perspective ? length_lanes(qx, qy, qz) : z;
-        float_lanes screen_x = perspective ? x / (z * v.scale_x) : x / v.scale_x;
-        float_lanes screen_y = perspective ? y / (z * v.scale_y) : y / v.scale_y;
-        float_lanes texel_x = (screen_x + 1.0f) * 0.5f * float_of_lanes(v.width);
-        float_lanes texel_y = (1.0f - screen_y) * 0.5f * float_of_lanes(v.height);
+        view_lanes_t v;
+        float_lanes texel_x, texel_y, lookup_depth;
+        int_lanes projects = light_project_lanes(views, light, lx, ly, lz, &v, &texel_x, &texel_y, &lookup_depth);
         float_lanes size = light->type == LIGHT_DIRECTIONAL ? (float_lanes)(light->texel_angle)
                                                             : lookup_depth * light->texel_angle;
         float_lanes tolerance = SURFACE_BIAS_TEXELS * size;
