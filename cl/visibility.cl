@@ -30,20 +30,14 @@
 #define SHADOW_RAY_OFFSET_REL 2e-6f
 /* Bounds are shrunk by this relative margin against float32 rounding of the bound itself. */
 #define BOUND_MARGIN_REL 1e-5f
-/* visible's value, between visibility_prepare and visibility, of a sample and light that
- * the maps or a ray decide (never left in it). */
-#define VISIBILITY_PENDING -1.0f
+/* VISIBILITY_PENDING (clrays/structs.py): visible's value, between visibility_prepare and
+ * visibility, of a sample and light that the maps or a ray decide (never left in it). */
 /* map_read's texel, between the two: the address of the texel of the bound and writer
  * maps that decides the lit test, or one of these. */
 #define MAP_TEXEL_OUTSIDE -1 /* the point projects outside the map: lit (a map covers every occluder) */
 #define MAP_TEXEL_NONE -2    /* behind a perspective view: a ray decides */
-/* visibility_bound's rect_mode (clrays/stages/visibility.py): none, record each item's
+/* visibility_bound's rect_mode, RECTS_* (clrays/structs.py): none, record each item's
  * texel rectangle, or skip the items whose recorded rectangle holds no texel read. */
-#define RECTS_NONE 0
-#define RECTS_RECORD 1
-#define RECTS_FILTER 2
-/* rectangle_is_read goes texel by texel up to this many rows (the small pass's own). */
-#define RECT_TEXEL_ROWS 8
 
 /* Closest point of triangle abc to p (Ericson, Real-Time Collision Detection §5.1.5). */
 inline float3 closest_on_triangle(float3 p, float3 a, float3 b, float3 c)
@@ -221,13 +215,13 @@ inline int row_is_read(global const uint* read_mask, int row, int x0, int x1)
 }
 
 /* Whether the read_mask has a bit in the texel rectangle [x0, x1] × [y0, y1] of a view:
- * texel by texel for a few rows, a word of 32 at a time for more (a thumbnail reads a few
- * dozen texels of a face). */
+ * texel by texel up to `texel_rows` rows, a word of 32 at a time for more (a thumbnail
+ * reads a few dozen texels of a face). */
 inline int rectangle_is_read(global const view_t* view, global const uint* read_mask, int mask_offset, int x0, int y0,
-                             int x1, int y1)
+                             int x1, int y1, int texel_rows)
 {
     int row_start = mask_offset + view->depth_offset;
-    if (y1 - y0 + 1 > RECT_TEXEL_ROWS) {
+    if (y1 - y0 + 1 > texel_rows) {
         for (int ty = y0; ty <= y1; ++ty)
             if (row_is_read(read_mask, row_start + ty * view->width, x0, x1)) return 1;
         return 0;
@@ -322,7 +316,8 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
     if (rect) *rect = (int4)(x0, y0, x1, y1);
     if (x0 > x1 || y0 + row_first > y1) return; /* outside the view, or no row for this item */
     /* no sample reads its rectangle: nothing to draw */
-    if (masked && small_rows > 0 && !rectangle_is_read(view, read_mask, mask_offset, x0, y0, x1, y1)) return;
+    if (masked && small_rows > 0 && !rectangle_is_read(view, read_mask, mask_offset, x0, y0, x1, y1, small_rows))
+        return;
     if (small_rows > 0 && y1 - y0 + 1 > small_rows) { /* many rows: the split pass takes it */
         big_items[atomic_inc(big_count)] = item;
         return;
@@ -439,7 +434,8 @@ kernel void visibility_bound(global const float4* tri_vertices, int count, globa
          * done before its projection */
         int4 rect = rects[item];
         global const view_t* view = views + first_view + item % view_count;
-        if (rect.x > rect.z || !rectangle_is_read(view, read_mask, mask_offset, rect.x, rect.y, rect.z, rect.w))
+        if (rect.x > rect.z
+            || !rectangle_is_read(view, read_mask, mask_offset, rect.x, rect.y, rect.z, rect.w, small_rows))
             return;
     }
     bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, masked, read_mask, mask_offset,

@@ -76,12 +76,18 @@ RASTER_ROWS_PER_ITEM = 4
 # raster_any (is a map empty?) reads this many texels per work-item, a multiple of 16.
 RASTER_ANY_TEXELS = 256
 
+# visibility: the value of a sample and light that visibility_prepare leaves to the maps
+# or a ray; and visibility_bound's rect_mode: none, record each triangle's texel rectangle,
+# or skip the triangles whose recorded rectangle holds no texel read (cl/visibility.cl).
+VISIBILITY_PENDING = -1.0
+RECTS_NONE, RECTS_RECORD, RECTS_FILTER = 0, 1, 2
+
 #: Every constant above by its C name: the `-D` options of every kernel build.
 KERNEL_CONSTANTS = {
     name: value for name, value in dict(globals()).items()
     if name.startswith(("PROJECTION_", "LIGHT_", "PHASE_", "INTEGRAND_", "TRAVERSAL_", "RASTER_", "SURFACE_SHADOWS_",
-                         "TEXTURE_WRAP_", "SHADOW_FILTER_", "WRITER_", "STEP_SPACING_"))
-    or name in ("DEPTH_EMPTY", "SIN_BETA_MIN")
+                         "TEXTURE_WRAP_", "SHADOW_FILTER_", "WRITER_", "STEP_SPACING_", "RECTS_"))
+    or name in ("DEPTH_EMPTY", "SIN_BETA_MIN", "VISIBILITY_PENDING")
 }
 
 

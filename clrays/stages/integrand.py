@@ -618,18 +618,19 @@ def device_table(device: Device, tables: IntegrandTables, timer: StageTimer | No
     c = tables.constants
     point = int(tables.light_kind == "point")
     grey = int(_shared_channel(c) is not None)
-    defines = TABLE_BUILD_DEFINES
     amplitude, sigma_t = structs.float4(c[:, C_AMPLITUDE]), structs.float4(c[:, C_SIGMA_T])
     d_el, g = np.float32(c[0, C_D_EL]), np.float32(c[0, C_G])
     n_beta, n_gamma = tables.n_beta, tables.n_gamma
     rows = device.buffer(table_rows(tables), writable=False)
     table = device.buffer(nbytes=4 * 3 * n_beta * n_gamma)
-    cells = device.kernel("integrand_build", "integrand_cells", defines)
-    events = [cells(device.queue, (-(-(n_gamma - 1) // INTEGRAND_LANES), n_beta), None, rows, np.int32(point), amplitude, sigma_t,
-          structs.float4(c[:, C_S_END]), d_el, g, np.int32(grey), np.int32(n_gamma), table)]
-    prefix = device.kernel("integrand_build", "integrand_prefix", defines)
-    events.append(prefix(device.queue, (n_beta,), None, rows, np.int32(point), amplitude, sigma_t, d_el, g,
-                         np.int32(grey), np.int32(n_gamma), table))
+    cells = device.kernel("integrand_build", "integrand_cells", TABLE_BUILD_DEFINES)
+    prefix = device.kernel("integrand_build", "integrand_prefix", TABLE_BUILD_DEFINES)
+    events = [
+        cells(device.queue, (-(-(n_gamma - 1) // INTEGRAND_LANES), n_beta), None, rows, np.int32(point), amplitude,
+              sigma_t, structs.float4(c[:, C_S_END]), d_el, g, np.int32(grey), np.int32(n_gamma), table),
+        prefix(device.queue, (n_beta,), None, rows, np.int32(point), amplitude, sigma_t, d_el, g, np.int32(grey),
+               np.int32(n_gamma), table),
+    ]
     for event in events if timer is not None else ():
         timer.add("integrand", event)
     return table
@@ -676,12 +677,8 @@ def integrand(device: Device, scene, light, epipolar, timer: StageTimer) -> Devi
         where = f"{scene.source}: " if scene.source else ""
         raise ClraysError(f"{where}render.integrand: {str(exc).removeprefix('integrand: ')}") from exc
     params, data = pack_integrand(tables)
-    if tables.mode == "table":
-        packed = DeviceIntegrand(tables, device.buffer(params.reshape(1), writable=False),
-                                 device_table(device, tables, timer), device)
-    else:
-        packed = DeviceIntegrand(tables, device.buffer(params.reshape(1), writable=False),
-                                 device.buffer(data, writable=False))
+    data = device_table(device, tables, timer) if tables.mode == "table" else device.buffer(data, writable=False)
+    packed = DeviceIntegrand(tables, device.buffer(params.reshape(1), writable=False), data, device)
     timer.add_host("integrand", (time.perf_counter() - start) * 1e3)
     return packed
 

@@ -134,8 +134,8 @@ def map_is_empty(device: Device, shadow_map: ShadowMap) -> bool:
             shadow_map.empty = True
         else:
             flag = device.buffer(np.zeros(1, np.uint32))
-            device.kernel("raster", "raster_any")(device.queue, (-(-shadow_map.texels // structs.RASTER_ANY_TEXELS),), None, shadow_map.depth,
-                                                  np.int32(shadow_map.texels), flag)
+            device.kernel("raster", "raster_any")(device.queue, (-(-shadow_map.texels // structs.RASTER_ANY_TEXELS),),
+                                                  None, shadow_map.depth, np.int32(shadow_map.texels), flag)
             shadow_map.empty = not device.read(flag, 1, np.uint32)[0]
     return shadow_map.empty
 

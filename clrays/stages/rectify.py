@@ -178,7 +178,7 @@ def rectify(device: Device, buffers: FrameBuffers, rastered: RasterResult, light
     angles = device.buffer(texel_angles(params), writable=False)
     group = min(SLICES_PER_GROUP, slices)
     event = device.kernel("rectify", "rectify", {"BOUNDS_CHUNK": BOUNDS_CHUNK, "LANES": LANES})(
-        device.queue, (-(-n // LANES), -(-slices // group) * group), (1, group), buffers.views, buffers.lights, rastered.shadow_depth, frame_buffer, sides,
-        angles, tree)
+        device.queue, (-(-n // LANES), -(-slices // group) * group), (1, group), buffers.views, buffers.lights,
+        rastered.shadow_depth, frame_buffer, sides, angles, tree)
     timer.add("rectify", event)
     return Epipolar(params, frame_buffer, tree, float(beta_min), float(beta_max), float(gamma_max))

@@ -118,8 +118,7 @@ def _launch(device: Device, name: str, defines: dict, vertices, count: int, view
 
     centre = device.buffer(np.array([[0.5, 0.5]], dtype=np.float32), writable=False)
     raster_passes(device, "translucency", name, defines, vertices, count, views, view_index, view_height, centre, 1,
-                  target,
-                  timer, stage="translucency")
+                  target, timer, stage="translucency")
 
 
 def translucency(device: Device, buffers: FrameBuffers, timer: StageTimer) -> Layers:
@@ -158,7 +157,8 @@ def translucency(device: Device, buffers: FrameBuffers, timer: StageTimer) -> La
                 _launch(device, "raster_resolve", defines, vertices, triangles, views, int(view), height, (depth, tri),
                         timer)
             flag = device.buffer(np.zeros(1, np.uint32))
-            device.kernel("translucency", "raster_any", defines)(device.queue, (-(-texels // structs.RASTER_ANY_TEXELS),), None, depth, np.int32(texels), flag)
+            device.kernel("translucency", "raster_any", defines)(
+                device.queue, (-(-texels // structs.RASTER_ANY_TEXELS),), None, depth, np.int32(texels), flag)
             if not device.read(flag, 1, np.uint32)[0]:
                 break  # no texel has this many layers: the rest stay empty
             packed_depth = device.buffer(nbytes=4 * texels)

@@ -53,12 +53,8 @@ TOUCHING_NODES_PER_ENTRY = 64
 #: triangles, lists the triangles touching the texels of those rays alone (`ray_lists`: the
 #: bound passes again over those texels) rather than building the BVH.
 RAY_LIST_ENTRIES = 1 << 17
-#: visibility_bound's rect_mode (cl/visibility.cl RECTS_*).
-RECTS_NONE, RECTS_RECORD, RECTS_FILTER = 0, 1, 2
 #: Camera samples one visibility_prepare or visibility work-item takes, as float8 lanes (cl/lanes.h).
 PREPARE_LANES = 8
-#: visible's value for a sample and light left to the maps (cl/visibility.cl).
-VISIBILITY_PENDING = -1.0
 
 
 @dataclass
@@ -122,8 +118,8 @@ def visibility_prepare(device: Device, buffers: FrameBuffers, rastered: RasterRe
     visible = device.buffer(nbytes=4 * entries)
     map_read = device.buffer(nbytes=8 * entries)
     timer.add("visibility", device.kernel("visibility", "visibility_prepare")(
-        device.queue, (-(-inputs.samples // PREPARE_LANES), lights), None, buffers.params, buffers.views, buffers.lights,
-        rastered.camera_depth, rastered.tri_id, buffers.tri_normal,
+        device.queue, (-(-inputs.samples // PREPARE_LANES), lights), None, buffers.params, buffers.views,
+        buffers.lights, rastered.camera_depth, rastered.tri_id, buffers.tri_normal,
         buffers.tri_vertex_normals, buffers.offsets, visible, map_read))
     words = max((inputs.shadow_texels + 31) // 32, 1)
     read_mask = device.buffer(nbytes=4 * words)
@@ -217,12 +213,13 @@ def _bound_passes(device: Device, inputs: FrameInputs, first: int, bound, writer
     # Only the cube faces the frame can read (`view_needed`, as raster.shadow does): no
     # sample projects into the others, so their texels are never asked for.
     for view in np.flatnonzero(inputs.view_needed[1:]) + 1:
-        mode = RECTS_NONE if rects is None else (RECTS_FILTER if filter_rects else RECTS_RECORD)
-        if mode == RECTS_FILTER and int(view) not in rects:  # (a view the recording frame did not draw)
-            mode = RECTS_NONE
-        if mode == RECTS_RECORD:
+        if rects is None or (filter_rects and int(view) not in rects):  # (a view the recording frame did not draw)
+            mode = structs.RECTS_NONE
+        else:
+            mode = structs.RECTS_FILTER if filter_rects else structs.RECTS_RECORD
+        if mode == structs.RECTS_RECORD:
             rects[int(view)] = device.buffer(nbytes=16 * count)
-        view_rects = rects[int(view)] if mode != RECTS_NONE else big_count  # (unread without rects)
+        view_rects = rects[int(view)] if mode != structs.RECTS_NONE else big_count  # (unread without rects)
         device.fill(big_count, np.int32(0), 4, timer, "visibility")
         timer.add("visibility", first_pass(
             device.queue, (count,), None, vertices, np.int32(count), views, np.int32(view), np.int32(1), bound,
@@ -258,9 +255,10 @@ def ray_lists(device: Device, buffers: FrameBuffers, prepared: Prepared, ray_ent
         arguments = (touching.head, touching.nodes, touching.count, np.int32(capacity))
         if light.texels:
             light_words = (first + light.texels - 1) // 32 - first // 32 + 1
+            # the lists' heads only: the maps keep their values, which the passes write again
             timer.add("visibility", device.kernel("visibility", "visibility_clear")(
                 device.queue, (light_words,), None, mask, np.int32(first), np.int32(light.texels), np.int32(0),
-                light.bound, light.writer, *arguments[::3]))
+                light.bound, light.writer, touching.head, np.int32(capacity)))
             _bound_passes(device, light_inputs, first, light.bound, light.writer, mask, arguments, timer,
                           light.rects, filter_rects=light.rects is not None)
         lists.append(touching)

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import clrays.stages.visibility as stage
+from clrays import structs
 from clrays.device import Device, StageTimer
 from clrays.inputs import frame_inputs, upload
 from clrays.scene.load import load_scene
@@ -48,7 +49,7 @@ def _same(device, scene):
 def test_bench_scenes(device, name):
     scene = load_scene(SCENES / f"{name}.yaml", overrides=["image.width=160", "image.height=90"])
     visible, _ = _same(device, scene)
-    assert (visible == stage.VISIBILITY_PENDING).any()  # the lanes answered some samples with a texel
+    assert (visible == structs.VISIBILITY_PENDING).any()  # the lanes answered some samples with a texel
 
 
 @pytest.mark.parametrize("kind", LIGHTS)
@@ -96,4 +97,4 @@ def test_a_frame_narrower_than_the_lanes(device):
     # sample_pixel_lanes); the answers must still be prepare_entry's.
     scene = make_scene(_triangles(), [LIGHTS["point"]], width=5, height=7, shadow_map=64)
     visible, _ = _same(device, scene)
-    assert (visible == stage.VISIBILITY_PENDING).any() or (visible == 0.0).any()
+    assert (visible == structs.VISIBILITY_PENDING).any() or (visible == 0.0).any()
