@@ -30,8 +30,11 @@ ROW = re.compile(r"\| (\w+) \|(.*)\| ([\d.]+) \([\d.]+–[\d.]+\)")
 def round_of(tree: Path, size: str, frames: int, scenes: list[str]) -> dict[str, list[float]]:
     """scene → the stage medians then the total's, from one stage_times run in `tree`."""
     command = [sys.executable, str(tree / "bench" / "stage_times.py"), "--size", size, "--frames", str(frames), *scenes]
-    out = subprocess.run(command, cwd=tree, capture_output=True, text=True, check=True,
-                         env={**os.environ, "PYTHONPATH": str(tree)}).stdout
+    run = subprocess.run(command, cwd=tree, capture_output=True, text=True, env={**os.environ, "PYTHONPATH": str(tree)})
+    if run.returncode != 0:
+        last = (run.stderr.strip().splitlines() or ["no output"])[-1]
+        sys.exit(f"stage_ab.py: bench/stage_times.py in {tree} failed: {last}")
+    out = run.stdout
     rows = {}
     for line in out.splitlines():
         match = ROW.match(line)
@@ -49,6 +52,11 @@ def main() -> None:
     parser.add_argument("--rounds", type=frame_count, default=4)
     parser.add_argument("--frames", type=frame_count, default=5, help="frames per stage_times run")
     args = parser.parse_args()
+    if not (args.repo / "bench" / "stage_times.py").is_file():
+        parser.error(f"--repo: {args.repo} holds no bench/stage_times.py (a clrays checkout, e.g. a git worktree)")
+    unknown = sorted(set(args.scenes) - {path.stem for path in (REPO / "scenes").glob("*.yaml")})
+    if unknown:
+        parser.error(f"scenes: no scenes/{unknown[0]}.yaml")
     trees = {"A": args.repo.resolve(), "B": REPO}
     runs = {tree: [] for tree in trees}
     for number in range(args.rounds):

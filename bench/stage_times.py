@@ -42,13 +42,20 @@ def frame_arguments(description: str, size: str, frames: int) -> argparse.Argume
     return parser
 
 
-def timed_frames(name: str, width: int, height: int, frames: int) -> tuple[object, list]:
+def timed_frames(name: str, width: int, height: int, frames: int, after_each=None) -> tuple[object, list]:
     """(scene, results): scenes/<name>.yaml at width×height rendered from scratch (no reuse)
-    once to build the kernels, then `frames` times."""
+    once to build the kernels, then `frames` times. `after_each(timed, result)` runs after
+    every frame, the warm-up one (timed False) included."""
     scene = load_scene(REPO / "scenes" / f"{name}.yaml", overrides=[f"image.width={width}", f"image.height={height}"])
     renderer = Renderer(reuse=False)
-    renderer.render(scene)
-    return scene, [renderer.render(scene) for _ in range(frames)]
+    results = []
+    for index in range(frames + 1):
+        result = renderer.render(scene)
+        if after_each is not None:
+            after_each(index > 0, result)
+        if index > 0:
+            results.append(result)
+    return scene, results
 
 
 def main() -> None:
