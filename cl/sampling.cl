@@ -457,9 +457,17 @@ kernel void gather(global const frame_t* frame, global const view_t* views, glob
                                          own_weight, &r1, &g1, &b1);
     float_lanes red = (1.0f - t) * r0 + t * r1, green = (1.0f - t) * g0 + t * g1, blue = (1.0f - t) * b0 + t * b1;
     int_lanes flags = (from0 ? 0 : 1) | (from1 ? 0 : 2);
+    /* Through private arrays, not red[k]: NVIDIA's compiler emits invalid PTX (a `selp` of
+     * mismatched operands) for a lane picked by a loop index and narrowed to uchar. */
+    float reds[LANES], greens[LANES], blues[LANES];
+    int flag[LANES];
+    vstore8(red, 0, reds);
+    vstore8(green, 0, greens);
+    vstore8(blue, 0, blues);
+    vstore8(flags, 0, flag);
     for (int k = 0; k < LANES && first + k < samples; ++k) {
-        scatter[first + k] += (float4)(red[k], green[k], blue[k], 0.0f);
-        fixup_flags[first + k] = (uchar)flags[k];
+        scatter[first + k] += (float4)(reds[k], greens[k], blues[k], 0.0f);
+        fixup_flags[first + k] = (uchar)flag[k];
     }
 }
 
