@@ -25,6 +25,12 @@
 #error "the constants of clrays/structs.py are missing: build with clrays.device.build_options()"
 #endif
 
+/* Barycentric slack of every camera-ray triangle test (Möller–Trumbore, edges inclusive):
+ * float32 rounding, fused or not, can put a ray through an edge two triangles share outside
+ * both; a relative 1e-5 overlap closes such cracks (the depth test, or a same-surface merge,
+ * resolves the double hit). */
+#define EDGE_SLACK 1e-5f
+
 /* A pinhole or orthographic view: the camera, a spot light's map, a cube face,
  * a directional light's map. All positions are in eye space: world space
  * translated so the camera sits at the origin (keeps float32 precise far from

@@ -13,10 +13,6 @@
  * [height][width][samples]. */
 #include "lighting.h"
 
-/* Barycentric slack: float32 rounding can put a ray through a shared edge outside
- * both triangles; a relative 1e-5 overlap closes such cracks (depth test resolves it). */
-#define EDGE_SLACK 1e-5f
-
 /* Möller–Trumbore, two-sided, edges inclusive with EDGE_SLACK. */
 inline float intersect_triangle(float3 origin, float3 dir, float3 v0, float3 v1, float3 v2)
 {

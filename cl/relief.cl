@@ -13,8 +13,7 @@
 #include "lighting.h"
 
 /* The same Möller–Trumbore as raster.cl's (two-sided, edges inclusive with the same
- * slack), so a relief sample gets the depth its triangle gets there. */
-#define RELIEF_EDGE_SLACK 1e-5f
+ * EDGE_SLACK), so a relief sample gets the depth its triangle gets there. */
 inline float relief_intersect(float3 origin, float3 dir, float3 v0, float3 v1, float3 v2)
 {
     float3 e1 = v1 - v0, e2 = v2 - v0;
@@ -24,10 +23,10 @@ inline float relief_intersect(float3 origin, float3 dir, float3 v0, float3 v1, f
     float inv = 1.0f / det;
     float3 tv = origin - v0;
     float u = dot(tv, pv) * inv;
-    if (u < -RELIEF_EDGE_SLACK || u > 1.0f + RELIEF_EDGE_SLACK) return INFINITY;
+    if (u < -EDGE_SLACK || u > 1.0f + EDGE_SLACK) return INFINITY;
     float3 qv = cross(tv, e1);
     float v = dot(dir, qv) * inv;
-    if (v < -RELIEF_EDGE_SLACK || u + v > 1.0f + RELIEF_EDGE_SLACK) return INFINITY;
+    if (v < -EDGE_SLACK || u + v > 1.0f + EDGE_SLACK) return INFINITY;
     float t = dot(e2, qv) * inv;
     return t > 0.0f ? t : INFINITY;
 }

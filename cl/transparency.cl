@@ -31,7 +31,8 @@
 #endif
 #define SURFACE_BIAS_TEXELS 1.5f /* as shade.cl's surface shadow test */
 
-/* Möller–Trumbore, two-sided, edges inclusive: the distance along the ray, +inf for a miss. */
+/* Möller–Trumbore, two-sided, edges inclusive with EDGE_SLACK (common.h): the distance along
+ * the ray, +inf for a miss. */
 inline float hit_distance(float3 origin, float3 dir, global const float4* tri_vertices, int tri)
 {
     float3 v0 = tri_vertices[3 * tri].xyz;
@@ -42,10 +43,10 @@ inline float hit_distance(float3 origin, float3 dir, global const float4* tri_ve
     float inv = 1.0f / det;
     float3 tv = origin - v0;
     float u = dot(tv, pv) * inv;
-    if (u < 0.0f || u > 1.0f) return INFINITY;
+    if (u < -EDGE_SLACK || u > 1.0f + EDGE_SLACK) return INFINITY;
     float3 qv = cross(tv, e1);
     float v = dot(dir, qv) * inv;
-    if (v < 0.0f || u + v > 1.0f) return INFINITY;
+    if (v < -EDGE_SLACK || u + v > 1.0f + EDGE_SLACK) return INFINITY;
     float t = dot(e2, qv) * inv;
     return t > 0.0f ? t : INFINITY;
 }
