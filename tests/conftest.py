@@ -19,6 +19,8 @@ from clrays.scene.model import (Camera, DirectionalLight, Geometry, Image, Mediu
 #: the tests that make their own `Renderer()` or run the command line use it too.
 TEST_DEVICE = os.environ.get("CLRAYS_TEST_DEVICE") or "Portable Computing Language"
 os.environ["CLRAYS_DEVICE"] = TEST_DEVICE
+#: Whether the spec names PoCL (tests whose bounds are PoCL's arithmetic mark themselves by it).
+TEST_ON_POCL = any(name in TEST_DEVICE.lower() for name in ("portable", "pocl"))
 
 
 def pytest_addoption(parser):
