@@ -5,13 +5,13 @@
  *
  *   line_samples  per line sample: the camera distance where it lands, and what its
  *                 ray would gather unshadowed (the "line value")
- *   line_scatter  per line sample: walk its own row where it is needed (every
+ *   line_scatter  per run of line samples: walk its own row where it is needed (every
  *                 `step`-th sample, the ends, both sides of a break: an edge, a spot
- *                 light's cone, the epipole); the others are left for line_fill
- *   line_refine   per line sample not computed: computed too where the computed
- *                 samples either side differ in radiance (a shadow's edge between them)
- *   line_fill     per line sample not computed: interpolate between the computed
- *                 samples either side (no break lies between them)
+ *                 light's cone, the epipole); the others are left for line_refine_fill
+ *   line_refine_fill  per run between two `step`-th line samples: compute too the
+ *                 samples whose computed neighbours differ in radiance (a shadow's edge
+ *                 between them), then interpolate the rest between the computed samples
+ *                 either side (no break lies between them)
  *   gather        per camera sample: interpolate each of its two slices at its β when
  *                 the samples there match its distance and unshadowed weight and each
  *                 other's radiance, blending the two slices as traverse does; flag it
@@ -261,7 +261,10 @@ ALWAYS_INLINE int radiance_breaks(float3 a, float3 b, float threshold)
     return inline_fabs(la - lb) > threshold * inline_fmax(la, lb);
 }
 
-/* Per line sample: its radiance times radiance_scale (w = 1) where it is needed, else w = 0. */
+/* Per run of line samples from a `step`-th one to the next (the last run: to the line's
+ * last sample too): each sample's radiance times radiance_scale (w = 1) where it is
+ * needed, else w = 0. A work-item per run, not per sample: most samples are not needed,
+ * and on PoCL a work-item that does nothing still costs its launch. */
 kernel void line_scatter(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                          global const epipolar_t* ep, global const float2* tree,
                          global const integrand_t* integrand, global const float* tables,
@@ -272,64 +275,70 @@ kernel void line_scatter(global const frame_t* frame, global const view_t* views
 {
     row_texture_t texture = {textured, texture_basis, texture_prefix};
     ATTACH_RECTIFIED_LAYERS(texture) /* translucent objects only (translucent_walk.h) */
-    int j = get_global_id(0), i = get_global_id(1);
-    if (j >= n || i >= ep->slices) return;
+    int run = get_global_id(0), i = get_global_id(1);
+    int first = run * step;
+    if (first >= n - 1 || i >= ep->slices) return;
+    int end = first + step >= n - 1 ? n : first + step;
     global const float2* samples = line + i * n;
-    float4 result = (float4)(0.0f);
-    if (samples[j].x < 0.0f) {
-        result.w = 1.0f; /* the slice does not cross the screen: nothing reads it */
-    } else if (line_sample_needed(samples, j, n, step, threshold)) {
-        result.xyz = line_sample_radiance(frame, lights, ep, tree, integrand, tables, &texture, ranges, sides,
-                                          samples[j].x, i, j, n, counts);
-        result.w = 1.0f;
+    for (int j = first; j < end; ++j) {
+        float4 result = (float4)(0.0f);
+        if (samples[j].x < 0.0f) {
+            result.w = 1.0f; /* the slice does not cross the screen: nothing reads it */
+        } else if (line_sample_needed(samples, j, n, step, threshold)) {
+            result.xyz = line_sample_radiance(frame, lights, ep, tree, integrand, tables, &texture, ranges, sides,
+                                              samples[j].x, i, j, n, counts);
+            result.w = 1.0f;
+        }
+        radiance[i * n + j] = result;
     }
-    radiance[i * n + j] = result;
 }
 
-/* Per line sample line_scatter left: computed too where the computed samples either side
- * differ by more than 4 × the threshold (a shadow edge crosses the line between them),
- * so that line_fill draws no straight line across it. Not 1 ×: over `step` samples the
- * light's own falloff often changes radiance by a few percent, and refining on it walked
- * many more samples for no error gained on the bench scenes. Reads `radiance`, writes `refined`,
- * so that every decision sees line_scatter's samples only. */
-kernel void line_refine(global const frame_t* frame, global const light_t* lights, global const epipolar_t* ep,
-                        global const float2* tree, global const integrand_t* integrand, global const float* tables,
-                        global const textured_integrand_t* textured, global const float* texture_basis,
-                        global const float* texture_prefix, global const float2* ranges,
-                        global const float4* sides, global const float2* line, int n, float threshold,
-                        global const float4* radiance, global float4* refined, global uint* counts RECTIFIED_LAYER_ARGS)
+/* Per run of line samples between two `step`-th ones (which line_scatter computed, as it
+ * did the line's last): first refine, then fill, in place in `radiance`.
+ * - Refine: a sample line_scatter left is computed too where the samples line_scatter
+ *   computed either side differ by more than 4 × the threshold (a shadow edge crosses the
+ *   line between them), so that the fill draws no straight line across it. Not 1 ×: over
+ *   `step` samples the light's own falloff often changes radiance by a few percent, and
+ *   refining on it walked many more samples for no error gained on the bench scenes. A
+ *   refined sample is marked w = 2, so that every decision sees line_scatter's samples
+ *   (w = 1) only.
+ * - Fill: each sample still not computed (w = 0) is linear in j between the computed
+ *   samples either side; it keeps w = 0, so the next fill skips it.
+ * The run's ends are computed (w = 1) and stay as they are: the work-items of the runs on
+ * either side read them, and write only inside their own runs. */
+kernel void line_refine_fill(global const frame_t* frame, global const light_t* lights, global const epipolar_t* ep,
+                             global const float2* tree, global const integrand_t* integrand,
+                             global const float* tables, global const textured_integrand_t* textured,
+                             global const float* texture_basis, global const float* texture_prefix,
+                             global const float2* ranges, global const float4* sides, global const float2* line,
+                             int n, int step, float threshold, global float4* radiance,
+                             global uint* counts RECTIFIED_LAYER_ARGS)
 {
     row_texture_t texture = {textured, texture_basis, texture_prefix};
     ATTACH_RECTIFIED_LAYERS(texture) /* translucent objects only (translucent_walk.h) */
-    int j = get_global_id(0), i = get_global_id(1);
-    if (j >= n || i >= ep->slices) return;
-    global const float4* samples = radiance + i * n;
-    float4 result = samples[j];
-    if (result.w == 0.0f) {
+    int run = get_global_id(0), i = get_global_id(1);
+    int first = run * step, last = inline_min(first + step, n - 1); /* the run's computed ends */
+    if (first >= n - 1 || i >= ep->slices) return;
+    global float4* samples = radiance + i * n;
+    for (int j = first + 1; j < last; ++j) {
+        if (samples[j].w != 0.0f) continue;
         int left = j - 1, right = j + 1;
-        while (samples[left].w == 0.0f) --left;   /* j % step == 0 and j = n - 1 are computed: */
-        while (samples[right].w == 0.0f) ++right; /* both loops end within step samples */
+        while (samples[left].w != 1.0f) --left;
+        while (samples[right].w != 1.0f) ++right;
         if (radiance_breaks(samples[left].xyz, samples[right].xyz, 4.0f * threshold)) {
-            result.xyz = line_sample_radiance(frame, lights, ep, tree, integrand, tables, &texture, ranges, sides,
-                                              line[i * n + j].x, i, j, n, counts);
-            result.w = 1.0f;
+            float3 computed = line_sample_radiance(frame, lights, ep, tree, integrand, tables, &texture, ranges, sides,
+                                                   line[i * n + j].x, i, j, n, counts);
+            samples[j] = (float4)(computed, 2.0f);
         }
     }
-    refined[i * n + j] = result;
-}
-
-/* Per line sample not computed: linear in j between the computed samples either side. */
-kernel void line_fill(global const epipolar_t* ep, int n, global float4* radiance)
-{
-    int j = get_global_id(0), i = get_global_id(1);
-    if (j >= n || i >= ep->slices) return;
-    global float4* samples = radiance + i * n;
-    if (samples[j].w != 0.0f) return;
-    int left = j - 1, right = j + 1;
-    while (samples[left].w == 0.0f) --left;   /* j % step == 0 and j = n - 1 are computed: */
-    while (samples[right].w == 0.0f) ++right; /* both loops end within step samples */
-    float t = (float)(j - left) / (float)(right - left);
-    samples[j] = (float4)(mix(samples[left].xyz, samples[right].xyz, t), 0.0f);
+    for (int j = first + 1; j < last; ++j) {
+        if (samples[j].w != 0.0f) continue;
+        int left = j - 1, right = j + 1;
+        while (samples[left].w == 0.0f) --left;
+        while (samples[right].w == 0.0f) ++right;
+        float t = (float)(j - left) / (float)(right - left);
+        samples[j] = (float4)(mix(samples[left].xyz, samples[right].xyz, t), 0.0f);
+    }
 }
 
 #pragma OPENCL FP_CONTRACT OFF /* as luminance's dot (inline_math.h) */

@@ -144,15 +144,13 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
 
     run("line_samples", (-(-n // LANES), slices), None, buffers.params, buffers.views, buffers.lights, epipolar.buffer,
         rastered.camera_depth, ranges_buffer, sides, n32, line)
-    run("line_scatter", (n, slices), None, buffers.params, buffers.views, buffers.lights,
+    runs = -(-(n - 1) // int(step))  # the runs between every step-th line sample
+    run("line_scatter", (runs, slices), None, buffers.params, buffers.views, buffers.lights,
         epipolar.buffer, epipolar.tree, integrand.params, integrand.data, texture.params, texture.basis,
         texture.prefix, ranges_buffer, sides, line, n32, step, threshold, radiance, counts, *walked)
-    refined = device.buffer(nbytes=16 * slices * n)
-    run("line_refine", (n, slices), None, buffers.params, buffers.lights, epipolar.buffer, epipolar.tree,
+    run("line_refine_fill", (runs, slices), None, buffers.params, buffers.lights, epipolar.buffer, epipolar.tree,
         integrand.params, integrand.data, texture.params, texture.basis, texture.prefix, ranges_buffer, sides, line,
-        n32, threshold, radiance, refined, counts, *walked)
-    radiance = refined
-    run("line_fill", (n, slices), None, epipolar.buffer, n32, radiance)
+        n32, step, threshold, radiance, counts, *walked)
     fixup_flags = device.buffer(nbytes=samples)  # per camera sample: a bit per slice fix_up walks
     run("gather", (-(-samples // LANES),), None, buffers.params, buffers.views, buffers.lights,
         epipolar.buffer, rastered.camera_depth, buffers.offsets, ranges_buffer, line, radiance, n32, threshold,
