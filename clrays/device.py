@@ -125,6 +125,39 @@ class StageTimer:
         return times
 
 
+#: A CPU launch of fewer work-items than this is split into work-groups by clrays (spread_local_size).
+SPREAD_BELOW = 1 << 16
+#: The work-groups per compute unit such a launch gets, so that uneven ones still balance.
+GROUPS_PER_UNIT = 32
+#: PoCL's largest work-group.
+MAX_CPU_GROUP = 4096
+
+
+def spread_local_size(global_size: tuple[int, ...], units: int) -> tuple[int, ...]:
+    """The largest work-group along the first axis of `global_size` that divides it and
+    leaves GROUPS_PER_UNIT work-groups for each of `units` compute units (1 along the
+    others)."""
+    first, rest = int(global_size[0]), int(np.prod(global_size[1:], dtype=np.int64))
+    largest = max(1, min(first * rest // (GROUPS_PER_UNIT * units), MAX_CPU_GROUP, first))
+    size = next(d for d in range(largest, 0, -1) if first % d == 0)
+    return (size,) + (1,) * (len(global_size) - 1)
+
+
+class _Launcher:
+    """A kernel whose launches that name no work-group shape take Device.local_size's."""
+
+    def __init__(self, kernel, device: "Device"):
+        self._kernel, self._device = kernel, device
+
+    def __call__(self, queue, global_size, local_size, *args, **kwargs):
+        if local_size is None:
+            local_size = self._device.local_size(global_size)
+        return self._kernel(queue, global_size, local_size, *args, **kwargs)
+
+    def __getattr__(self, name):
+        return getattr(self._kernel, name)
+
+
 class Device:
     """Context, profiling queue and a cache of built stage programs for one device."""
 
@@ -136,6 +169,9 @@ class Device:
         self.queue = cl.CommandQueue(self.context, properties=cl.command_queue_properties.PROFILING_ENABLE)
         self._programs: dict[tuple, object] = {}
         self._kernels: dict[tuple, object] = {}
+        self._spread = bool(self.device.type & cl.device_type.CPU)
+        self._units = max(int(self.device.max_compute_units), 1)
+        self._local_sizes: dict[tuple, tuple] = {}
         self.allocated_bytes = 0
 
     @property
@@ -161,8 +197,21 @@ class Device:
         """The kernel `name` of `cl/<stage>.cl`, retrieved once and reused."""
         key = (stage, name, tuple(sorted((defines or {}).items())))
         if key not in self._kernels:
-            self._kernels[key] = self.cl.Kernel(self.program(stage, defines), name)
+            self._kernels[key] = _Launcher(self.cl.Kernel(self.program(stage, defines), name), self)
         return self._kernels[key]
+
+    def local_size(self, global_size: tuple) -> tuple | None:
+        """The work-group shape of a launch that names none. PoCL makes a small launch one
+        work-group, which one core runs while the others wait: a frame's raster passes
+        over its views' rows, or over a few hundred triangles, ran at one core's speed.
+        So on a CPU device a launch of fewer than SPREAD_BELOW work-items gets
+        spread_local_size's shape; larger launches, and other devices, the driver's."""
+        global_size = tuple(int(g) for g in global_size)
+        if not self._spread or int(np.prod(global_size, dtype=np.int64)) >= SPREAD_BELOW:
+            return None
+        if global_size not in self._local_sizes:
+            self._local_sizes[global_size] = spread_local_size(global_size, self._units)
+        return self._local_sizes[global_size]
 
     def buffer(self, array: np.ndarray | None = None, nbytes: int | None = None, writable: bool = True):
         """A device buffer, filled from `array` or of `nbytes` uninitialised bytes."""
