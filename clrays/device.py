@@ -125,9 +125,7 @@ class StageTimer:
         return times
 
 
-#: A CPU launch of fewer work-items than this is split into work-groups by clrays (spread_local_size).
-SPREAD_BELOW = 1 << 16
-#: The work-groups per compute unit such a launch gets, so that uneven ones still balance.
+#: The work-groups per compute unit a CPU launch gets (spread_local_size), so that uneven ones balance.
 GROUPS_PER_UNIT = 32
 #: PoCL's largest work-group.
 MAX_CPU_GROUP = 4096
@@ -201,14 +199,15 @@ class Device:
         return self._kernels[key]
 
     def local_size(self, global_size: tuple) -> tuple | None:
-        """The work-group shape of a launch that names none. PoCL makes a small launch one
-        work-group, which one core runs while the others wait: a frame's raster passes
-        over its views' rows, or over a few hundred triangles, ran at one core's speed.
-        So on a CPU device a launch of fewer than SPREAD_BELOW work-items gets
-        spread_local_size's shape; larger launches, and other devices, the driver's."""
-        global_size = tuple(int(g) for g in global_size)
-        if not self._spread or int(np.prod(global_size, dtype=np.int64)) >= SPREAD_BELOW:
+        """The work-group shape of a launch that names none: on a CPU device,
+        spread_local_size's; on others, the driver's. PoCL makes a launch as few
+        work-groups as it can: a small one is one work-group, which one core runs while
+        the others wait (a frame's raster passes over its views' rows, or over a few
+        hundred triangles, ran at one core's speed), and a large one a few dozen, whose
+        uneven costs (walks where the shafts are) leave a core idle at the end."""
+        if not self._spread:
             return None
+        global_size = tuple(int(g) for g in global_size)
         if global_size not in self._local_sizes:
             self._local_sizes[global_size] = spread_local_size(global_size, self._units)
         return self._local_sizes[global_size]
