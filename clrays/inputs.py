@@ -30,6 +30,8 @@ SPOT_SINGLE_VIEW_MAX_DEG = 75.0
 
 #: All lights' shadow maps share one depth buffer, indexed by an int offset per view.
 MAX_SHADOW_TEXELS = 2**31 - 1
+#: Light-anchored vertex sets a geometry keeps (light_pass_inputs): a few static lights' own.
+ANCHORED_KEPT = 4
 
 #: Cube faces in the order `light_view_index` expects: +x, -x, +y, -y, +z, -z, with an up vector each.
 _CUBE_FACES = [
@@ -102,6 +104,30 @@ def padded_float32(rows: np.ndarray) -> np.ndarray:
     out = np.zeros((len(rows), 4), dtype=np.float32)
     out[:, :3] = rows
     return out
+
+
+def _read_only(array: np.ndarray) -> np.ndarray:
+    array.setflags(write=False)
+    return array
+
+
+def face_rows(geometry, drawn: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The float4 rows of the first `drawn` triangles that no eye moves, kept on the
+    geometry (a scanned mesh's cost milliseconds a frame): unit face normals, w = 1 where
+    the triangle is shaded smooth; albedo; the shading normal at each vertex, (0, 4) when
+    no triangle is smooth. Normals do not move with eye space's translation."""
+    def rows():
+        tris = geometry.triangles[:drawn]
+        normals = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+        length = np.linalg.norm(normals, axis=1, keepdims=True)
+        normals = np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
+        smooth = geometry.smooth[:drawn]  # a relief is flat
+        tri_normal = padded_float32(normals)
+        tri_normal[:, 3] = smooth  # the shade kernel's flag: interpolate the vertex normals
+        vertex_normals = geometry.normals[:drawn].reshape(-1, 3) if smooth.any() else np.zeros((0, 3))
+        return (_read_only(tri_normal), _read_only(padded_float32(geometry.albedo[:drawn])),
+                _read_only(padded_float32(vertex_normals)))
+    return geometry.kept(("face rows", drawn), rows)
 
 
 def frame_inputs(scene: Scene) -> FrameInputs:
@@ -192,20 +218,13 @@ def frame_inputs(scene: Scene) -> FrameInputs:
                                  "filtered": structs.SURFACE_SHADOWS_FILTERED}[scene.render.surface_shadows]
     params["pcf"] = scene.render.pcf if scene.render.surface_shadows == "pcf" else 0
 
-    normals = np.cross(tris[:drawn, 1] - tris[:drawn, 0], tris[:drawn, 2] - tris[:drawn, 0])
-    length = np.linalg.norm(normals, axis=1, keepdims=True)
-    normals = np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
-    smooth = scene.geometry.smooth[:drawn]  # a relief is flat
-    tri_normal = padded_float32(normals)
-    tri_normal[:, 3] = smooth  # the shade kernel's flag: interpolate the vertex normals
-    tri_albedo = padded_float32(scene.geometry.albedo[:drawn])
+    tri_normal, tri_albedo, vertex_normals = face_rows(scene.geometry, drawn)
     if drawn < scene.geometry.count:  # the reliefs' faces, after the others (place_reliefs)
         faces = [relief_faces(record, scene.geometry) for record in scene.geometry.reliefs]
         tri_normal = np.concatenate([tri_normal] + [normal for normal, _ in faces])
         tri_albedo = np.concatenate([tri_albedo] + [albedo for _, albedo in faces])
-    # Normals do not move with eye space's translation; a frame without smooth triangles uploads
-    # none, and shade reads them for smooth triangles only, none of which is a relief's.
-    vertex_normals = scene.geometry.normals[:drawn].reshape(-1, 3) if smooth.any() else np.zeros((0, 3))
+    # A frame without smooth triangles uploads no vertex normals, and shade reads them for
+    # smooth triangles only, none of which is a relief's.
     return FrameInputs(
         scene=scene, eye_ws=eye_ws,
         views=np.array(views, dtype=structs.view_dtype),
@@ -214,7 +233,7 @@ def frame_inputs(scene: Scene) -> FrameInputs:
         offsets=sample_offsets(image.spp).astype(np.float32),
         tri_vertices=padded_float32(tris.reshape(-1, 3)),
         tri_normal=tri_normal,
-        tri_vertex_normals=padded_float32(vertex_normals),
+        tri_vertex_normals=vertex_normals,
         tri_albedo=tri_albedo,
         shadow_texels=texels,
         light_anchor_ws=np.array(anchors, dtype=np.float64).reshape(-1, 3),
@@ -290,14 +309,17 @@ def _light_pass_inputs(inputs: FrameInputs, light_index: int, triangles: int) ->
     light["first_view"] = 1
     if light["type"][0] != structs.LIGHT_DIRECTIONAL:
         light["position"] = 0.0
-    triangles = inputs.scene.geometry.triangles[:triangles] - anchor
-    vertices = triangles.reshape(-1, 3)
+    geometry = inputs.scene.geometry
+    # the vertices around the light: no eye moves them, so a static light's are kept
+    vertices = geometry.kept(("anchored", triangles, anchor.tobytes()),
+                             lambda: _read_only(padded_float32((geometry.triangles[:triangles] - anchor).reshape(-1, 3))),
+                             most=ANCHORED_KEPT)
     return replace(
         inputs,
         views=np.concatenate([inputs.views[:1], views]),
         view_needed=np.concatenate([[True], inputs.view_needed[first:first + count]]),
         lights=light,
-        tri_vertices=padded_float32(vertices),
+        tri_vertices=vertices,
         shadow_texels=texels,
         light_anchor_ws=anchor.reshape(1, 3),
     )

@@ -233,6 +233,20 @@ class Geometry:
             object.__setattr__(self, "_vertex_memo", memo)
         return memo
 
+    def kept(self, key, compute, most: int | None = None):
+        """compute()'s result, computed once per `key` for this geometry: arrays derived from
+        it that frames ask for again (clrays.inputs), which must not be changed. With `most`,
+        at most that many results of keys beginning with key[0] are kept, the oldest dropped
+        first (a light that moves every frame would otherwise keep one per frame)."""
+        memo = self._memo()
+        if key not in memo:
+            if most is not None:
+                kin = [k for k in memo if isinstance(k, tuple) and k[:1] == key[:1]]
+                for old in kin[:max(len(kin) - most + 1, 0)]:
+                    del memo[old]
+            memo[key] = compute()
+        return memo[key]
+
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Axis-aligned bounds (lo, hi); a unit box at the origin when there are no triangles.
         A relief's part comes from its texels (clrays.scene.relief_frame), not its triangles."""
