@@ -28,6 +28,11 @@ typedef int8 int_lanes;
     ((float_lanes)((pointer)[(index).s0], (pointer)[(index).s1], (pointer)[(index).s2], (pointer)[(index).s3], \
                    (pointer)[(index).s4], (pointer)[(index).s5], (pointer)[(index).s6], (pointer)[(index).s7]))
 
+/* The same for an int pointer. */
+#define LOAD_INT_LANES(pointer, index)                                                                     \
+    ((int_lanes)((pointer)[(index).s0], (pointer)[(index).s1], (pointer)[(index).s2], (pointer)[(index).s3], \
+                 (pointer)[(index).s4], (pointer)[(index).s5], (pointer)[(index).s6], (pointer)[(index).s7]))
+
 ALWAYS_INLINE float_lanes float_of_lanes(int_lanes x) { return __builtin_convertvector(x, float_lanes); }
 ALWAYS_INLINE int_lanes int_of_lanes(float_lanes x) { return __builtin_convertvector(x, int_lanes); }
 ALWAYS_INLINE float_lanes fabs_lanes(float_lanes x) { return as_float8(as_uint8(x) & 0x7fffffffu); }

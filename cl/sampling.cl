@@ -159,11 +159,13 @@ ALWAYS_INLINE float_lanes unshadowed_weight_lanes(global const epipolar_t* ep, g
  * and view_project (lighting.h), in the same order (lanes.h). */
 kernel void line_samples(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                          global const epipolar_t* ep, global const uint* camera_depth, global const float2* ranges,
-                         global const float4* sides, int n, global float2* line)
+                         global const float4* sides, int n, global const int* lengths, global float2* line)
 {
     int first = get_global_id(0) * LANES, i = get_global_id(1);
-    if (first >= n || i >= ep->slices) return;
-    int count = min(LANES, n - first); /* the lanes that store */
+    if (i >= ep->slices) return;
+    int samples = lengths[i];
+    if (first >= samples) return;
+    int count = min(LANES, samples - first); /* the lanes that store */
     global float2* out = line + i * n + first;
     float2 range = ranges[i];
     if (!(range.x <= range.y)) { /* the slice does not cross the screen */
@@ -172,7 +174,7 @@ kernel void line_samples(global const frame_t* frame, global const view_t* views
     }
     /* line_q */
     int_lanes j = first + (int_lanes)(0, 1, 2, 3, 4, 5, 6, 7);
-    float_lanes q = mix_lanes((float_lanes)(range.x), (float_lanes)(range.y), float_of_lanes(j) / (float)(n - 1));
+    float_lanes q = mix_lanes((float_lanes)(range.x), (float_lanes)(range.y), float_of_lanes(j) / (float)(samples - 1));
     /* line_direction */
     float_lanes k = q <= 1.0f ? q : 2.0f - q; /* tan(β/2), or cot(β/2) */
     float_lanes across = 2.0f * k / (1.0f + k * k), along = (1.0f - k * k) / (1.0f + k * k);
@@ -270,23 +272,24 @@ kernel void line_scatter(global const frame_t* frame, global const view_t* views
                          global const integrand_t* integrand, global const float* tables,
                          global const textured_integrand_t* textured, global const float* texture_basis,
                          global const float* texture_prefix, global const float2* ranges,
-                         global const float4* sides, global const float2* line, int n, int step, float threshold,
-                         global float4* radiance, global uint* counts RECTIFIED_LAYER_ARGS)
+                         global const float4* sides, global const float2* line, int n, global const int* lengths,
+                         int step, float threshold, global float4* radiance, global uint* counts RECTIFIED_LAYER_ARGS)
 {
     row_texture_t texture = {textured, texture_basis, texture_prefix};
     ATTACH_RECTIFIED_LAYERS(texture) /* translucent objects only (translucent_walk.h) */
     int run = get_global_id(0), i = get_global_id(1);
-    int first = run * step;
-    if (first >= n - 1 || i >= ep->slices) return;
-    int end = first + step >= n - 1 ? n : first + step;
+    if (i >= ep->slices) return;
+    int first = run * step, length = lengths[i];
+    if (first >= length - 1) return;
+    int end = first + step >= length - 1 ? length : first + step;
     global const float2* samples = line + i * n;
     for (int j = first; j < end; ++j) {
         float4 result = (float4)(0.0f);
         if (samples[j].x < 0.0f) {
             result.w = 1.0f; /* the slice does not cross the screen: nothing reads it */
-        } else if (line_sample_needed(samples, j, n, step, threshold)) {
+        } else if (line_sample_needed(samples, j, length, step, threshold)) {
             result.xyz = line_sample_radiance(frame, lights, ep, tree, integrand, tables, &texture, ranges, sides,
-                                              samples[j].x, i, j, n, counts);
+                                              samples[j].x, i, j, length, counts);
             result.w = 1.0f;
         }
         radiance[i * n + j] = result;
@@ -311,14 +314,15 @@ kernel void line_refine_fill(global const frame_t* frame, global const light_t* 
                              global const float* tables, global const textured_integrand_t* textured,
                              global const float* texture_basis, global const float* texture_prefix,
                              global const float2* ranges, global const float4* sides, global const float2* line,
-                             int n, int step, float threshold, global float4* radiance,
-                             global uint* counts RECTIFIED_LAYER_ARGS)
+                             int n, global const int* lengths, int step, float threshold,
+                             global float4* radiance, global uint* counts RECTIFIED_LAYER_ARGS)
 {
     row_texture_t texture = {textured, texture_basis, texture_prefix};
     ATTACH_RECTIFIED_LAYERS(texture) /* translucent objects only (translucent_walk.h) */
     int run = get_global_id(0), i = get_global_id(1);
-    int first = run * step, last = inline_min(first + step, n - 1); /* the run's computed ends */
-    if (first >= n - 1 || i >= ep->slices) return;
+    if (i >= ep->slices) return;
+    int length = lengths[i], first = run * step, last = inline_min(first + step, length - 1); /* the run's computed ends */
+    if (first >= length - 1) return;
     global float4* samples = radiance + i * n;
     for (int j = first + 1; j < last; ++j) {
         if (samples[j].w != 0.0f) continue;
@@ -327,7 +331,7 @@ kernel void line_refine_fill(global const frame_t* frame, global const light_t* 
         while (samples[right].w != 1.0f) ++right;
         if (radiance_breaks(samples[left].xyz, samples[right].xyz, 4.0f * threshold)) {
             float3 computed = line_sample_radiance(frame, lights, ep, tree, integrand, tables, &texture, ranges, sides,
-                                                   line[i * n + j].x, i, j, n, counts);
+                                                   line[i * n + j].x, i, j, length, counts);
             samples[j] = (float4)(computed, 2.0f);
         }
     }
@@ -382,14 +386,16 @@ ALWAYS_INLINE void slices_around_lanes(global const epipolar_t* ep, float_lanes 
  * instead was tried: it ignores the change in β between them, and failed the opaque-fog
  * closed form of tests/methods/test_stability.py (0.83 % against its 0.1 %). */
 ALWAYS_INLINE int_lanes slice_interpolates(global const float* ranges, global const float* line,
-                                           global const float* radiance, int n, float threshold, int_lanes i,
+                                           global const float* radiance, int n, global const int* lengths,
+                                           float threshold, int_lanes i,
                                            float_lanes q, float_lanes scale, float_lanes own_distance,
                                            float_lanes own_weight, float_lanes* r, float_lanes* g, float_lanes* b)
 {
     float_lanes lo = LOAD_LANES(ranges, 2 * i), hi = LOAD_LANES(ranges, 2 * i + 1);
     float_lanes clamped = fmin_lanes(fmax_lanes((q - lo) / (hi - lo), (float_lanes)(0.0f)), (float_lanes)(1.0f));
-    float_lanes f = hi > lo ? clamped * (float)(n - 1) : 0.0f;
-    int_lanes j = min_lanes(int_of_lanes(f), (int_lanes)(n - 2));
+    int_lanes length = LOAD_INT_LANES(lengths, i);
+    float_lanes f = hi > lo ? clamped * float_of_lanes(length - 1) : 0.0f;
+    int_lanes j = min_lanes(int_of_lanes(f), length - 2);
     float_lanes s = f - float_of_lanes(j);
     int_lanes at = i * n + j; /* line: (distance, weight) at 2·at, the next at 2·at + 2; radiance: 4·at, 4·at + 4 */
     float_lanes a_distance = LOAD_LANES(line, 2 * at), a_weight = LOAD_LANES(line, 2 * at + 1);
@@ -433,7 +439,8 @@ inline float3 gather_ray(global const frame_t* frame, global const view_t* views
 kernel void gather(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                    global const epipolar_t* ep, global const uint* camera_depth, global const float2* offsets,
                    global const float2* ranges, global const float2* line, global const float4* radiance, int n,
-                   float threshold, int samples, global float4* scatter, global uchar* fixup_flags)
+                   global const int* lengths, float threshold, float epipole_sin, int samples,
+                   global float4* scatter, global uchar* fixup_flags)
 {
     int first = get_global_id(0) * LANES;
     /* lanes past the last sample compute the last one again, and store nothing */
@@ -459,11 +466,24 @@ kernel void gather(global const frame_t* frame, global const view_t* views, glob
         light->type == LIGHT_DIRECTIONAL ? (float_lanes)(1.0f) : fmax_lanes(sin_beta, (float_lanes)(SIN_BETA_MIN));
     float_lanes r0, g0, b0, r1, g1, b1;
     int_lanes from0 = slice_interpolates((global const float*)ranges, (global const float*)line,
-                                         (global const float*)radiance, n, threshold, i0, q, scale, distance,
+                                         (global const float*)radiance, n, lengths, threshold, i0, q, scale, distance,
                                          own_weight, &r0, &g0, &b0);
     int_lanes from1 = slice_interpolates((global const float*)ranges, (global const float*)line,
-                                         (global const float*)radiance, n, threshold, i1, q, scale, distance,
+                                         (global const float*)radiance, n, lengths, threshold, i1, q, scale, distance,
                                          own_weight, &r1, &g1, &b1);
+    /* Within epipole_sin of the epipole the radiance grows as 1/sin β faster than a line's
+     * samples follow, and the pixels there are the frame's brightest: they walk their rays. */
+    int_lanes beside_epipole = (cos_beta > 0.0f) & (sin_beta < epipole_sin);
+    if (any_lanes(beside_epipole)) {
+        from0 &= ~beside_epipole;
+        from1 &= ~beside_epipole;
+        r0 = from0 ? r0 : 0.0f;
+        g0 = from0 ? g0 : 0.0f;
+        b0 = from0 ? b0 : 0.0f;
+        r1 = from1 ? r1 : 0.0f;
+        g1 = from1 ? g1 : 0.0f;
+        b1 = from1 ? b1 : 0.0f;
+    }
     float_lanes red = (1.0f - t) * r0 + t * r1, green = (1.0f - t) * g0 + t * g1, blue = (1.0f - t) * b0 + t * b1;
     int_lanes flags = (from0 ? 0 : 1) | (from1 ? 0 : 2);
     /* Through private arrays, not red[k]: NVIDIA's compiler emits invalid PTX (a `selp` of

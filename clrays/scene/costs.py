@@ -30,10 +30,10 @@ MAX_GAMMA_SAMPLES = 1024
 MIN_SHADOW_MAP = 64
 MIN_SLICES = 16
 MIN_GAMMA_SAMPLES = 16
-#: Epipolar sampling: samples along each slice's line. The longest line on the screen is
-#: about its diagonal, so a sample per two pixels of the diagonal puts them no further
-#: apart than two pixels on any line (short lines, near the epipole or across a corner,
-#: get them closer). One per pixel computes about twice the samples for 1.4× the traverse
+#: Epipolar sampling: samples along the longest slice's line on the screen (shorter lines
+#: get as many as keep its spacing: clrays.stages.sampling.line_lengths). That line is at
+#: most the diagonal, so a sample per two pixels of the diagonal puts them no further apart
+#: than two pixels on any line. One per pixel computes about twice the samples for 1.4× the traverse
 #: time and brings behind.yaml's p99 against `exact` from 0.324 to 0.289 % at 1280×720
 #: (bench/RESULTS.md, "Epipolar sampling").
 LINE_SAMPLES_PER_PIXEL = 0.5

@@ -297,7 +297,8 @@ RENDER = Section("render", (
                 "([docs/design.md](design.md) §4.5)", read_by=("minmax",)),
     Field("line_samples", "integer", Render.line_samples, 2, 16384,
           shown_default=f"from the image: half its diagonal in pixels, in [{MIN_LINE_SAMPLES}, {MAX_LINE_SAMPLES}]",
-          notes="`sampling: epipolar`: samples along each slice's line", read_by=("minmax",)),
+          notes="`sampling: epipolar`: samples along the slice's line that is longest on the screen; a "
+                "shorter line gets as many as keep the same spacing on the screen (at least 2)", read_by=("minmax",)),
     Field("initial_step", "integer", Render.initial_step, 1, 1024,
           notes="`sampling: epipolar`: every `initial_step`-th line sample is computed, and those beside a break; "
                 "the others are interpolated along the line", read_by=("minmax",)),

@@ -18,7 +18,7 @@ import numpy as np
 from .. import structs
 from ..device import Device, StageTimer
 from ..inputs import FrameBuffers
-from ..scene.model import TRAVERSALS, SpotLight
+from ..scene.model import TRAVERSALS, DirectionalLight, SpotLight
 from ..scene.camera import camera_basis
 from .integrand import DeviceIntegrand
 from .light_texture import TextureTables, untextured_tables
@@ -99,6 +99,57 @@ def line_ranges(scene, params: np.ndarray) -> np.ndarray:
         return np.stack([pseudo_beta(lo), pseudo_beta(hi)], axis=1).astype(np.float32)
 
 
+def line_lengths(scene, params: np.ndarray, ranges: np.ndarray, n: int) -> np.ndarray:
+    """(slices,) int32: the line samples of each slice, `n` on the line that is longest on
+    the screen and on the others as many as keep that line's spacing (at least 2: its
+    ends). Evenly spaced in q, a line's samples are as far apart on the screen as its
+    length over their count, and lines through a corner or along the short side of the
+    frame are a fraction of the longest: with `n` samples each they were walked several
+    times as densely, for no error. A line's length is between the screen points of its
+    range's ends (a plane through the eye meets the screen in a straight line); a slice
+    that does not cross the screen gets 2, and every slice gets `n` where an end is not in
+    front of the eye."""
+    camera, image = scene.camera, scene.image
+    right, up, forward = camera_basis(camera)
+    tan_y = np.tan(np.radians(camera.fov_deg) / 2)
+    tan_x = tan_y * image.width / image.height
+    axis = params["axis"][:3].astype(float)
+    sides = slice_sides(params)[:, :3].astype(float)
+    lo, hi = ranges[:, 0].astype(float), ranges[:, 1].astype(float)
+    crosses = lo <= hi
+
+    def screen_point(q):
+        beta = np.where(q <= 1.0, 2.0 * np.arctan(q), np.pi - 2.0 * np.arctan(np.maximum(2.0 - q, 0.0)))
+        direction = np.cos(beta)[:, None] * axis + np.sin(beta)[:, None] * sides
+        depth = direction @ forward
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x = 0.5 * image.width * (direction @ right) / (depth * tan_x)
+            y = 0.5 * image.height * (direction @ up) / (depth * tan_y)
+        return np.stack([x, y], axis=1), depth
+
+    (start, start_depth), (end, end_depth) = screen_point(np.where(crosses, lo, 0.0)), screen_point(np.where(crosses, hi, 0.0))
+    length = np.where(crosses, np.linalg.norm(end - start, axis=1), 0.0)
+    longest = float(length.max()) if len(length) else 0.0
+    if not (np.isfinite(longest) and longest > 0.0) or np.any(crosses & ((start_depth <= 0) | (end_depth <= 0))):
+        return np.where(crosses, n, 2).astype(np.int32)
+    counts = np.ceil((n - 1) * length / longest - 1e-9).astype(np.int64) + 1
+    return np.where(crosses, np.clip(counts, 2, n), 2).astype(np.int32)
+
+
+#: Pixels from the epipole within which gather walks every camera sample (epipole_sin).
+EPIPOLE_WALK_PIXELS = 8.0
+
+
+def epipole_sin(scene, light) -> float:
+    """sin β of EPIPOLE_WALK_PIXELS pixels (at the image's centre) from the epipole of a
+    point or spot light: closer, the radiance grows as 1/sin β faster than the samples of a
+    line follow. 0 for a directional light, whose radiance has no such growth."""
+    if isinstance(light, DirectionalLight):
+        return 0.0
+    pixel = 2.0 * np.tan(np.radians(scene.camera.fov_deg) / 2) / scene.image.height
+    return float(np.sin(np.arctan(EPIPOLE_WALK_PIXELS * pixel)))
+
+
 def pseudo_beta(beta: np.ndarray) -> np.ndarray:
     """q(β), the monotonic stand-in for β that line samples are spaced evenly in:
     tan(β/2) up to π/2, 2 - cot(β/2) above (cl/sampling.cl, line_samples and gather)."""
@@ -125,8 +176,10 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
     render = inputs.scene.render
     slices, n = int(epipolar.params["slices"]), render.line_samples
     step, threshold = np.int32(render.initial_step), np.float32(render.refine_threshold)
-    ranges_buffer = device.buffer(line_ranges(inputs.scene, epipolar.params), writable=False)
+    ranges = line_ranges(inputs.scene, epipolar.params)
+    ranges_buffer = device.buffer(ranges, writable=False)
     sides = device.buffer(slice_sides(epipolar.params), writable=False)
+    lengths = device.buffer(line_lengths(inputs.scene, epipolar.params, ranges, n), writable=False)
     line = device.buffer(nbytes=8 * slices * n)  # (distance, lit extent) per line sample
     radiance = device.buffer(nbytes=16 * slices * n)
     counts = device.buffer(np.zeros(2, dtype=np.uint32))
@@ -143,18 +196,18 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
         timer.add("traverse", event)  # the traverse stage, sampled
 
     run("line_samples", (-(-n // LANES), slices), None, buffers.params, buffers.views, buffers.lights, epipolar.buffer,
-        rastered.camera_depth, ranges_buffer, sides, n32, line)
+        rastered.camera_depth, ranges_buffer, sides, n32, lengths, line)
     runs = -(-(n - 1) // int(step))  # the runs between every step-th line sample
     run("line_scatter", (runs, slices), None, buffers.params, buffers.views, buffers.lights,
         epipolar.buffer, epipolar.tree, integrand.params, integrand.data, texture.params, texture.basis,
-        texture.prefix, ranges_buffer, sides, line, n32, step, threshold, radiance, counts, *walked)
+        texture.prefix, ranges_buffer, sides, line, n32, lengths, step, threshold, radiance, counts, *walked)
     run("line_refine_fill", (runs, slices), None, buffers.params, buffers.lights, epipolar.buffer, epipolar.tree,
         integrand.params, integrand.data, texture.params, texture.basis, texture.prefix, ranges_buffer, sides, line,
-        n32, step, threshold, radiance, counts, *walked)
+        n32, lengths, step, threshold, radiance, counts, *walked)
     fixup_flags = device.buffer(nbytes=samples)  # per camera sample: a bit per slice fix_up walks
     run("gather", (-(-samples // LANES),), None, buffers.params, buffers.views, buffers.lights,
-        epipolar.buffer, rastered.camera_depth, buffers.offsets, ranges_buffer, line, radiance, n32, threshold,
-        np.int32(samples), scatter, fixup_flags)
+        epipolar.buffer, rastered.camera_depth, buffers.offsets, ranges_buffer, line, radiance, n32, lengths, threshold,
+        np.float32(epipole_sin(inputs.scene, light)), np.int32(samples), scatter, fixup_flags)
     fixups, fixed_up = fixup_list(device, fixup_flags, samples, run)
     computed = int(device.read(counts, 2, np.uint32)[0])
     if fixed_up:

@@ -184,3 +184,55 @@ def test_a_partial_last_vector_of_camera_samples(renderer, light):
     assert np.all(last_p > 0.0)  # the light reaches the last row
     # measured 0.10 % (point), 0.21 % (spot); a last vector left out is 100 % off
     assert np.max(np.abs(last_e - last_p) / last_p) < 0.01
+
+
+def _epipole_pixel(scene):
+    """(column, row) of the light's projection, pixel units, for a camera like CAMERA."""
+    from clrays.scene.camera import camera_basis
+
+    right, up, forward = camera_basis(scene.camera)
+    to_light = scene.lights[0].position - scene.camera.position
+    tan_y = np.tan(np.radians(scene.camera.fov_deg) / 2)
+    tan_x = tan_y * scene.image.width / scene.image.height
+    z = to_light @ forward
+    return ((to_light @ right / (z * tan_x) + 1) * scene.image.width / 2,
+            (1 - to_light @ up / (z * tan_y)) * scene.image.height / 2)
+
+
+def test_the_pixels_beside_the_epipole_walk_their_rays(renderer):
+    """Within EPIPOLE_WALK_PIXELS of a point light's epipole every pixel is walked: it has
+    the per-pixel walk's value, where interpolation would follow 1/sin β too slowly."""
+    from clrays.stages.sampling import EPIPOLE_WALK_PIXELS
+
+    scene = _shafts(PointLight(EPIPOLES["in view"], np.full(3, 60.0)), width=320, height=180, **CAMERA)
+    epipolar, pixel = _both(renderer, scene)
+    x, y = _epipole_pixel(scene)
+    rows, columns = np.mgrid[0:scene.image.height, 0:scene.image.width]
+    near = np.hypot(columns + 0.5 - x, rows + 0.5 - y) < 0.8 * EPIPOLE_WALK_PIXELS
+    assert near.sum() > 20
+    np.testing.assert_allclose(epipolar.image[near], pixel.image[near], rtol=1e-6)
+    assert not np.allclose(epipolar.image[~near], pixel.image[~near], rtol=1e-6)  # the rest is interpolated
+
+
+def test_each_line_gets_samples_as_long_as_it_is():
+    """line_lengths: the longest line on the screen gets line_samples, a shorter one as many
+    as keep that spacing (at least 2), a slice that misses the screen 2."""
+    from types import SimpleNamespace
+
+    from clrays.inputs import frame_inputs
+    from clrays.stages.rectify import epipolar_frame
+    from clrays.stages.sampling import line_lengths, line_ranges
+
+    scene = _shafts(PointLight(EPIPOLES["off screen"], np.full(3, 60.0)), **CAMERA)
+    inputs = frame_inputs(scene)
+    params = epipolar_frame(inputs.scene, SimpleNamespace(inputs=inputs), 0)
+    ranges = line_ranges(inputs.scene, params)
+    n = 200
+    lengths = line_lengths(inputs.scene, params, ranges, n)
+    crosses = ranges[:, 0] <= ranges[:, 1]
+    assert lengths.max() == n and (lengths[~crosses] == 2).all() and (lengths >= 2).all()
+    assert lengths[crosses].min() < n // 2  # lines across a corner are short
+    # twice the n: twice the samples on every line but the shortest (rounding up, and the floor of 2)
+    doubled = line_lengths(inputs.scene, params, ranges, 2 * n - 1)
+    long_lines = crosses & (lengths > 10)
+    np.testing.assert_allclose((doubled[long_lines] - 1) / (lengths[long_lines] - 1), 2.0, rtol=0.1)
