@@ -127,16 +127,16 @@ class StageTimer:
 
 #: The work-groups per compute unit a CPU launch gets (spread_local_size), so that uneven ones balance.
 GROUPS_PER_UNIT = 32
-#: PoCL's largest work-group.
+#: The largest work-group spread_local_size makes (PoCL's largest), unless the device's is smaller.
 MAX_CPU_GROUP = 4096
 
 
-def spread_local_size(global_size: tuple[int, ...], units: int) -> tuple[int, ...]:
-    """The largest work-group along the first axis of `global_size` that divides it and
-    leaves GROUPS_PER_UNIT work-groups for each of `units` compute units (1 along the
-    others)."""
+def spread_local_size(global_size: tuple[int, ...], units: int, max_group: int = MAX_CPU_GROUP) -> tuple[int, ...]:
+    """The largest work-group along the first axis of `global_size`, at most `max_group`,
+    that divides it and leaves GROUPS_PER_UNIT work-groups for each of `units` compute
+    units (1 along the others)."""
     first, rest = int(global_size[0]), int(np.prod(global_size[1:], dtype=np.int64))
-    largest = max(1, min(first * rest // (GROUPS_PER_UNIT * units), MAX_CPU_GROUP, first))
+    largest = max(1, min(first * rest // (GROUPS_PER_UNIT * units), max_group, first))
     size = next(d for d in range(largest, 0, -1) if first % d == 0)
     return (size,) + (1,) * (len(global_size) - 1)
 
@@ -169,6 +169,7 @@ class Device:
         self._kernels: dict[tuple, object] = {}
         self._spread = bool(self.device.type & cl.device_type.CPU)
         self._units = max(int(self.device.max_compute_units), 1)
+        self._max_group = max(min(MAX_CPU_GROUP, int(self.device.max_work_group_size)), 1)
         self._local_sizes: dict[tuple, tuple] = {}
         self.allocated_bytes = 0
 
@@ -209,7 +210,7 @@ class Device:
             return None
         global_size = tuple(int(g) for g in global_size)
         if global_size not in self._local_sizes:
-            self._local_sizes[global_size] = spread_local_size(global_size, self._units)
+            self._local_sizes[global_size] = spread_local_size(global_size, self._units, self._max_group)
         return self._local_sizes[global_size]
 
     def buffer(self, array: np.ndarray | None = None, nbytes: int | None = None, writable: bool = True):

@@ -20,6 +20,11 @@ def test_a_shape_divides_the_launch_and_leaves_groups_to_balance(shape, units):
     assert groups >= min(GROUPS_PER_UNIT * units, int(np.prod(shape))) or local[0] == 1
 
 
+def test_a_device_with_smaller_work_groups_is_obeyed():
+    assert spread_local_size((1 << 20,), 1, max_group=256) == (256,)
+    assert spread_local_size((1 << 20,), 1) == (MAX_CPU_GROUP,)
+
+
 def test_the_largest_divisor_is_taken():
     assert spread_local_size((180,), 2) == (2,)  # 180 / 64 rounds down to 2, which divides it
     assert spread_local_size((1000,), 2) == (10,)  # 1000 / 64 → 15; the largest divisor under it
