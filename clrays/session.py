@@ -382,8 +382,8 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
         gamma_samples = 1 << max(int(np.ceil(np.log2(scene.render.gamma_samples))), 1)
         tree = 8 * scene.render.slices * 2 * gamma_samples
         sizes += [(f"min-max tree of light {index}", tree) for index in range(len(scene.lights))]
-        if scene.render.sampling == "epipolar":  # per line sample: (distance, weight), radiance twice, one light at a time
-            sizes.append(("epipolar line samples", 40 * scene.render.slices * scene.render.line_samples))
+        if scene.render.sampling == "epipolar":  # per line sample: (distance, weight) and radiance, one light at a time
+            sizes.append(("epipolar line samples", 24 * scene.render.slices * scene.render.line_samples))
             sizes.append(("epipolar fix-up list", 4 * samples))
         # A textured light's rectified texture and prefix sums (clrays.stages.light_texture).
         sizes += [(f"texture prefix sums of light {index}",
@@ -397,8 +397,11 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
             sizes.append(("moment prefix sums of one light", prefix))
     if scene.render.surface_shadows == "exact" and scene.lights:  # visibility's bound and writer maps, every light's
         sizes.append(("bound and writer maps", 8 * inputs.shadow_texels))
-        # and per sample and light the texel its lit test reads (address, depth), a bit per texel read
-        sizes.append(("texels the visibility stage reads", 8 * samples * len(scene.lights) + inputs.shadow_texels // 8))
+        # and per sample and light the texel its lit test reads (address, depth), a bit per texel
+        # read, its answer and its place in the list of shadow rays
+        entries = samples * len(scene.lights)
+        sizes += [("texels the visibility stage reads", 8 * entries + inputs.shadow_texels // 8),
+                  ("visibility's answers", 4 * entries), ("the list of shadow rays", 4 * entries)]
     if scene.geometry.translucent and scene.lights:  # the translucency stage's layers (translucency.py)
         layers = scene.render.translucent_layers
         sizes.append(("translucent layers", 12 * layers * inputs.shadow_texels))
