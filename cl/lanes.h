@@ -23,15 +23,12 @@
 typedef float8 float_lanes;
 typedef int8 int_lanes;
 
-/* A vector of pointer[index] for each lane's index. */
-#define LOAD_LANES(pointer, index)                                                                         \
-    ((float_lanes)((pointer)[(index).s0], (pointer)[(index).s1], (pointer)[(index).s2], (pointer)[(index).s3], \
-                   (pointer)[(index).s4], (pointer)[(index).s5], (pointer)[(index).s6], (pointer)[(index).s7]))
-
-/* The same for an int pointer. */
-#define LOAD_INT_LANES(pointer, index)                                                                     \
-    ((int_lanes)((pointer)[(index).s0], (pointer)[(index).s1], (pointer)[(index).s2], (pointer)[(index).s3], \
-                 (pointer)[(index).s4], (pointer)[(index).s5], (pointer)[(index).s6], (pointer)[(index).s7]))
+/* A vector of `type` holding pointer[index] for each lane's index. */
+#define GATHER_LANES(type, pointer, index)                                                                  \
+    ((type)((pointer)[(index).s0], (pointer)[(index).s1], (pointer)[(index).s2], (pointer)[(index).s3],     \
+            (pointer)[(index).s4], (pointer)[(index).s5], (pointer)[(index).s6], (pointer)[(index).s7]))
+#define LOAD_LANES(pointer, index) GATHER_LANES(float_lanes, pointer, index)
+#define LOAD_INT_LANES(pointer, index) GATHER_LANES(int_lanes, pointer, index)
 
 ALWAYS_INLINE float_lanes float_of_lanes(int_lanes x) { return __builtin_convertvector(x, float_lanes); }
 ALWAYS_INLINE int_lanes int_of_lanes(float_lanes x) { return __builtin_convertvector(x, int_lanes); }

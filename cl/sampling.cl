@@ -321,7 +321,8 @@ kernel void line_refine_fill(global const frame_t* frame, global const light_t* 
     ATTACH_RECTIFIED_LAYERS(texture) /* translucent objects only (translucent_walk.h) */
     int run = get_global_id(0), i = get_global_id(1);
     if (i >= ep->slices) return;
-    int length = lengths[i], first = run * step, last = inline_min(first + step, length - 1); /* the run's computed ends */
+    int length = lengths[i], first = run * step;
+    int last = inline_min(first + step, length - 1); /* the run's computed ends */
     if (first >= length - 1) return;
     global float4* samples = radiance + i * n;
     for (int j = first + 1; j < last; ++j) {
@@ -381,15 +382,16 @@ ALWAYS_INLINE void slices_around_lanes(global const epipolar_t* ep, float_lanes 
  * weight), their weights do not break, and their radiances agree; then (r, g, b) is the
  * straight line between them over `scale` (radiance_scale), else 0. Otherwise (an edge
  * lies between them, the camera sample is off both lines' surfaces, a shadow's edge
- * crosses the line, the light's own radiance jumps: its cone, the epipole) the fix-up
- * walks the row for the camera sample. Taking the one sample on its side of an edge
+ * crosses the line, the light's own radiance jumps: its cone, the epipole), or where
+ * `walk` says so, the fix-up walks the row for the camera sample. Taking the one sample on its side of an edge
  * instead was tried: it ignores the change in β between them, and failed the opaque-fog
  * closed form of tests/methods/test_stability.py (0.83 % against its 0.1 %). */
 ALWAYS_INLINE int_lanes slice_interpolates(global const float* ranges, global const float* line,
                                            global const float* radiance, int n, global const int* lengths,
                                            float threshold, int_lanes i,
                                            float_lanes q, float_lanes scale, float_lanes own_distance,
-                                           float_lanes own_weight, float_lanes* r, float_lanes* g, float_lanes* b)
+                                           float_lanes own_weight, int_lanes walk, float_lanes* r, float_lanes* g,
+                                           float_lanes* b)
 {
     float_lanes lo = LOAD_LANES(ranges, 2 * i), hi = LOAD_LANES(ranges, 2 * i + 1);
     float_lanes clamped = fmin_lanes(fmax_lanes((q - lo) / (hi - lo), (float_lanes)(0.0f)), (float_lanes)(1.0f));
@@ -408,7 +410,7 @@ ALWAYS_INLINE int_lanes slice_interpolates(global const float* ranges, global co
     float_lanes between_weight = own_weight < 0.0f ? own_weight : mix_lanes(a_weight, b_weight, s);
     float_lanes luminance_a = luminance_lanes(ra, ga, ba), luminance_b = luminance_lanes(rb, gb, bb);
     int_lanes interpolates =
-        !(a_distance < 0.0f) /* the slice misses the screen */
+        ~walk & !(a_distance < 0.0f) /* the slice misses the screen */
         & !(fabs_lanes(a_weight - b_weight) > threshold * fmax_lanes(fabs_lanes(a_weight), fabs_lanes(b_weight)))
         & (fabs_lanes(between_distance - own_distance) <= threshold * own_distance)
         & (fabs_lanes(between_weight - own_weight)
@@ -464,26 +466,16 @@ kernel void gather(global const frame_t* frame, global const view_t* views, glob
 #endif
     float_lanes scale = /* radiance_scale */
         light->type == LIGHT_DIRECTIONAL ? (float_lanes)(1.0f) : fmax_lanes(sin_beta, (float_lanes)(SIN_BETA_MIN));
-    float_lanes r0, g0, b0, r1, g1, b1;
-    int_lanes from0 = slice_interpolates((global const float*)ranges, (global const float*)line,
-                                         (global const float*)radiance, n, lengths, threshold, i0, q, scale, distance,
-                                         own_weight, &r0, &g0, &b0);
-    int_lanes from1 = slice_interpolates((global const float*)ranges, (global const float*)line,
-                                         (global const float*)radiance, n, lengths, threshold, i1, q, scale, distance,
-                                         own_weight, &r1, &g1, &b1);
     /* Within epipole_sin of the epipole the radiance grows as 1/sin β faster than a line's
      * samples follow, and the pixels there are the frame's brightest: they walk their rays. */
     int_lanes beside_epipole = (cos_beta > 0.0f) & (sin_beta < epipole_sin);
-    if (any_lanes(beside_epipole)) {
-        from0 &= ~beside_epipole;
-        from1 &= ~beside_epipole;
-        r0 = from0 ? r0 : 0.0f;
-        g0 = from0 ? g0 : 0.0f;
-        b0 = from0 ? b0 : 0.0f;
-        r1 = from1 ? r1 : 0.0f;
-        g1 = from1 ? g1 : 0.0f;
-        b1 = from1 ? b1 : 0.0f;
-    }
+    float_lanes r0, g0, b0, r1, g1, b1;
+    int_lanes from0 = slice_interpolates((global const float*)ranges, (global const float*)line,
+                                         (global const float*)radiance, n, lengths, threshold, i0, q, scale, distance,
+                                         own_weight, beside_epipole, &r0, &g0, &b0);
+    int_lanes from1 = slice_interpolates((global const float*)ranges, (global const float*)line,
+                                         (global const float*)radiance, n, lengths, threshold, i1, q, scale, distance,
+                                         own_weight, beside_epipole, &r1, &g1, &b1);
     float_lanes red = (1.0f - t) * r0 + t * r1, green = (1.0f - t) * g0 + t * g1, blue = (1.0f - t) * b0 + t * b1;
     int_lanes flags = (from0 ? 0 : 1) | (from1 ? 0 : 2);
     /* Through private arrays, not red[k]: NVIDIA's compiler emits invalid PTX (a `selp` of
