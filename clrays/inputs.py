@@ -311,9 +311,8 @@ def _light_pass_inputs(inputs: FrameInputs, light_index: int, triangles: int) ->
         light["position"] = 0.0
     geometry = inputs.scene.geometry
     # the vertices around the light: no eye moves them, so a static light's are kept
-    vertices = geometry.kept(("anchored", triangles, anchor.tobytes()),
-                             lambda: _read_only(padded_float32((geometry.triangles[:triangles] - anchor).reshape(-1, 3))),
-                             most=ANCHORED_KEPT)
+    anchored = lambda: _read_only(padded_float32((geometry.triangles[:triangles] - anchor).reshape(-1, 3)))
+    vertices = geometry.kept(("anchored", triangles, anchor.tobytes()), anchored, most=ANCHORED_KEPT)
     return replace(
         inputs,
         views=np.concatenate([inputs.views[:1], views]),

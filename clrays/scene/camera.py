@@ -27,6 +27,13 @@ def camera_basis(camera: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return right, up, forward
 
 
+def half_extents(camera: Camera, image: Image) -> tuple[float, float]:
+    """(tan_x, tan_y): the screen's half width and half height at unit distance along
+    forward, tan(fov/2) scaled by the aspect ratio horizontally."""
+    tan_y = math.tan(math.radians(camera.fov_deg) / 2)
+    return tan_y * image.width / image.height, tan_y
+
+
 def sample_offsets(spp: int) -> np.ndarray:
     """Sub-pixel offsets (spp, 2) in [0, 1): the centre for spp = 1, a stratified grid
     when spp is a square, otherwise the R2 low-discrepancy sequence. Deterministic."""

@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 from ..reference.radiometry import effective_far
-from ..scene.camera import camera_basis
+from ..scene.camera import camera_basis, half_extents
 
 #: The six faces' axes, in view order: (axis index, sign).
 _FACE_AXES = ((0, 1.0), (0, -1.0), (1, 1.0), (1, -1.0), (2, 1.0), (2, -1.0))
@@ -36,8 +36,7 @@ def view_pyramid(scene, light_position, margin_rad: float) -> np.ndarray | None:
     off the view direction (then it is not a pyramid and nothing is culled)."""
     camera, image = scene.camera, scene.image
     right, up, forward = camera_basis(camera)
-    tan_y = math.tan(math.radians(camera.fov_deg) / 2)
-    tan_x = tan_y * image.width / image.height
+    tan_x, tan_y = half_extents(camera, image)
     half_x, half_y = math.atan(tan_x) + margin_rad, math.atan(tan_y) + margin_rad
     if max(half_x, half_y) >= math.pi / 2 - 1e-3:
         return None

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import structs
-from ..scene.camera import camera_basis
+from ..scene.camera import camera_basis, half_extents
 from ..device import Device, StageTimer
 from ..inputs import FrameBuffers
 from .raster import RasterResult
@@ -62,8 +62,7 @@ def poles_on_screen(scene, axis: np.ndarray) -> tuple[bool, bool]:
     """Whether the epipole (the direction `axis`) and the anti-epipole (`-axis`) are on screen."""
     camera, image = scene.camera, scene.image
     right, up, forward = camera_basis(camera)
-    tan_y = math.tan(math.radians(camera.fov_deg) / 2)
-    tan_x = tan_y * image.width / image.height
+    tan_x, tan_y = half_extents(camera, image)
     on_screen = []
     for pole in (axis, -axis):
         depth = pole @ forward
@@ -78,8 +77,7 @@ def slice_fan(scene, axis: np.ndarray, u: np.ndarray, w: np.ndarray) -> tuple[fl
     circle minus the largest gap between the angles of rays along the screen border."""
     camera, image = scene.camera, scene.image
     right, up, forward = camera_basis(camera)
-    tan_y = math.tan(math.radians(camera.fov_deg) / 2)
-    tan_x = tan_y * image.width / image.height
+    tan_x, tan_y = half_extents(camera, image)
     if any(poles_on_screen(scene, axis)):
         return -math.pi, 2 * math.pi, True
     edge = np.linspace(-1.0, 1.0, 4 * max(image.width, image.height) + 1)

@@ -19,7 +19,7 @@ from .. import structs
 from ..device import Device, StageTimer
 from ..inputs import FrameBuffers
 from ..scene.model import TRAVERSALS, DirectionalLight, SpotLight
-from ..scene.camera import camera_basis
+from ..scene.camera import camera_basis, half_extents
 from .integrand import DeviceIntegrand
 from .light_texture import TextureTables, untextured_tables
 from .raster import RasterResult
@@ -55,8 +55,7 @@ def line_ranges(scene, params: np.ndarray) -> np.ndarray:
     is still read by the pixels beside it."""
     camera, image = scene.camera, scene.image
     right, up, forward = camera_basis(camera)
-    tan_y = np.tan(np.radians(camera.fov_deg) / 2)
-    tan_x = tan_y * image.width / image.height
+    tan_x, tan_y = half_extents(camera, image)
     axis, u, w = (params[name][:3].astype(float) for name in ("axis", "u", "w"))
     slices, step = int(params["slices"]), float(params["alpha_step"])
     centres = float(params["alpha_min"]) + (np.arange(slices) + 0.5) * step
@@ -111,15 +110,14 @@ def line_lengths(scene, params: np.ndarray, ranges: np.ndarray, n: int) -> np.nd
     front of the eye."""
     camera, image = scene.camera, scene.image
     right, up, forward = camera_basis(camera)
-    tan_y = np.tan(np.radians(camera.fov_deg) / 2)
-    tan_x = tan_y * image.width / image.height
+    tan_x, tan_y = half_extents(camera, image)
     axis = params["axis"][:3].astype(float)
     sides = slice_sides(params)[:, :3].astype(float)
     lo, hi = ranges[:, 0].astype(float), ranges[:, 1].astype(float)
     crosses = lo <= hi
 
     def screen_point(q):
-        beta = np.where(q <= 1.0, 2.0 * np.arctan(q), np.pi - 2.0 * np.arctan(np.maximum(2.0 - q, 0.0)))
+        beta = beta_of_pseudo(q)
         direction = np.cos(beta)[:, None] * axis + np.sin(beta)[:, None] * sides
         depth = direction @ forward
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -127,7 +125,8 @@ def line_lengths(scene, params: np.ndarray, ranges: np.ndarray, n: int) -> np.nd
             y = 0.5 * image.height * (direction @ up) / (depth * tan_y)
         return np.stack([x, y], axis=1), depth
 
-    (start, start_depth), (end, end_depth) = screen_point(np.where(crosses, lo, 0.0)), screen_point(np.where(crosses, hi, 0.0))
+    start, start_depth = screen_point(np.where(crosses, lo, 0.0))
+    end, end_depth = screen_point(np.where(crosses, hi, 0.0))
     length = np.where(crosses, np.linalg.norm(end - start, axis=1), 0.0)
     longest = float(length.max()) if len(length) else 0.0
     if not (np.isfinite(longest) and longest > 0.0) or np.any(crosses & ((start_depth <= 0) | (end_depth <= 0))):
@@ -156,6 +155,12 @@ def pseudo_beta(beta: np.ndarray) -> np.ndarray:
     half = np.asarray(beta, dtype=float) / 2
     with np.errstate(divide="ignore"):
         return np.where(half <= np.pi / 4, np.tan(half), 2.0 - 1.0 / np.tan(half))
+
+
+def beta_of_pseudo(q: np.ndarray) -> np.ndarray:
+    """β of q: the inverse of pseudo_beta, q in [0, 2]."""
+    q = np.asarray(q, dtype=float)
+    return np.where(q <= 1.0, 2.0 * np.arctan(q), np.pi - 2.0 * np.arctan(np.maximum(2.0 - q, 0.0)))
 
 
 #: Camera or line samples per work-item of gather and line_samples: cl/lanes.h's float8.

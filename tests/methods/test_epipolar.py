@@ -221,7 +221,10 @@ def test_each_line_gets_samples_as_long_as_it_is():
 
     from clrays.inputs import frame_inputs
     from clrays.stages.rectify import epipolar_frame
-    from clrays.stages.sampling import line_lengths, line_ranges
+    from clrays.stages.sampling import beta_of_pseudo, line_lengths, line_ranges, pseudo_beta
+
+    betas = np.linspace(0.0, np.pi, 1001)
+    np.testing.assert_allclose(beta_of_pseudo(pseudo_beta(betas)), betas, atol=1e-12)  # the ends' β
 
     scene = _shafts(PointLight(EPIPOLES["off screen"], np.full(3, 60.0)), **CAMERA)
     inputs = frame_inputs(scene)
