@@ -5,6 +5,7 @@ quotes these for every change that moves an image).
 
     .venv/bin/python bench/errors.py --size 1280x720
     .venv/bin/python bench/errors.py demo sun --size 640x360
+    .venv/bin/python bench/errors.py --size 640x360 --set render.sampling=pixel   # another setting
 """
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ sys.path.insert(0, str(REPO))
 from arguments import image_size  # noqa: E402  (bench/, beside this script)
 from clrays.runs.bench import error_pixels  # noqa: E402
 from clrays.runs.references import EXACT, ReferenceCache  # noqa: E402
+from clrays.errors import ClraysError  # noqa: E402
 from clrays.scene.load import load_scene  # noqa: E402
 from clrays.session import Renderer  # noqa: E402
 
@@ -28,17 +30,23 @@ def main() -> None:
     parser.add_argument("--size", type=image_size, default="1280x720")
     parser.add_argument("--pixels", type=int, default=4000)
     parser.add_argument("--cache", default=str(REPO / ".cache" / "references"))
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="a scene override, as `clrays render --set` (repeatable)")
     args = parser.parse_args()
     width, height = (int(v) for v in args.size.split("x"))
     pixels = error_pixels(width, height, args.pixels)
     references = ReferenceCache(Path(args.cache))
     renderer = Renderer(reuse=False)
-    print(f"{width}×{height}, default settings; error against exact on {args.pixels} pixels, depth edges out\n")
+    settings = ", ".join(args.set) or "default settings"
+    print(f"{width}×{height}, {settings}; error against exact on {args.pixels} pixels, depth edges out\n")
     print("| scene | relative RMSE % | p99 % |")
     print("|---|---|---|")
     for name in args.scenes:
-        scene = load_scene(REPO / "scenes" / f"{name}.yaml", overrides=[f"image.width={width}",
-                                                                          f"image.height={height}"])
+        try:
+            scene = load_scene(REPO / "scenes" / f"{name}.yaml", overrides=[f"image.width={width}",
+                                                                              f"image.height={height}", *args.set])
+        except ClraysError as exc:
+            sys.exit(f"errors.py: {exc}")
         error = references.error(scene, EXACT, renderer.render(scene).image, pixels)
         print(f"| {name} | {100 * error.rmse:.4f} | {100 * error.p99:.4f} |", flush=True)
 
