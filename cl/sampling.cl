@@ -266,7 +266,7 @@ ALWAYS_INLINE int radiance_breaks(float3 a, float3 b, float threshold)
 /* Per run of line samples from a `step`-th one to the next (the last run: to the line's
  * last sample too): each sample's radiance times radiance_scale (w = 1) where it is
  * needed, else w = 0. A work-item per run, not per sample: most samples are not needed,
- * and on PoCL a work-item that does nothing still costs its launch. */
+ * and the run's ends bound line_refine_fill's work-item too. */
 kernel void line_scatter(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                          global const epipolar_t* ep, global const float2* tree,
                          global const integrand_t* integrand, global const float* tables,
