@@ -19,14 +19,12 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 import clrays.device as device_module  # noqa: E402
-from stage_times import frame_arguments, timed_frames  # noqa: E402  (bench/, beside this script)
+from stage_times import check_scenes, frame_arguments, timed_frames  # noqa: E402  (bench/, beside this script)
 
 
 def main() -> None:
     args = frame_arguments(__doc__.splitlines()[0], "1280x720", 5).parse_args()
-    unknown = sorted(set(args.scenes) - {path.stem for path in (REPO / "scenes").glob("*.yaml")})
-    if unknown:
-        sys.exit(f"kernel_times.py: scenes: no scenes/{unknown[0]}.yaml")
+    check_scenes("kernel_times.py", args.scenes)
     width, height = (int(v) for v in args.size.split("x"))
     launches: list[tuple[str, object]] = []
     kernel = device_module.Device.kernel

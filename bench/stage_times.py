@@ -42,6 +42,13 @@ def frame_arguments(description: str, size: str, frames: int) -> argparse.Argume
     return parser
 
 
+def check_scenes(script: str, scenes: list[str]) -> None:
+    """Exit in one line naming the first of `scenes` that scenes/ does not hold."""
+    unknown = sorted(set(scenes) - {path.stem for path in (REPO / "scenes").glob("*.yaml")})
+    if unknown:
+        sys.exit(f"{script}: scenes: no scenes/{unknown[0]}.yaml")
+
+
 def timed_frames(name: str, width: int, height: int, frames: int, after_each=None) -> tuple[object, list]:
     """(scene, results): scenes/<name>.yaml at width×height rendered from scratch (no reuse)
     once to build the kernels, then `frames` times. `after_each(timed, result)` runs after

@@ -20,16 +20,14 @@ sys.path.insert(0, str(REPO))
 import clrays.device as device_module  # noqa: E402
 from clrays.scene.load import load_scene  # noqa: E402
 from clrays.session import Renderer  # noqa: E402
-from stage_times import frame_arguments  # noqa: E402  (bench/, beside this script)
+from stage_times import check_scenes, frame_arguments  # noqa: E402  (bench/, beside this script)
 
 SHAPES = ("driver's", "clrays's")
 
 
 def main() -> None:
     args = frame_arguments(__doc__.splitlines()[0], "1280x720", 8).parse_args()
-    unknown = sorted(set(args.scenes) - {path.stem for path in (REPO / "scenes").glob("*.yaml")})
-    if unknown:
-        sys.exit(f"work_groups.py: scenes: no scenes/{unknown[0]}.yaml")
+    check_scenes("work_groups.py", args.scenes)
     width, height = (int(v) for v in args.size.split("x"))
     launches: list[tuple[str, object]] = []
     call = device_module._Launcher.__call__
