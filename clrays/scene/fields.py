@@ -12,8 +12,8 @@ from typing import Any
 
 from .animation import EASINGS
 from .limits import MAX_LIGHTS, MAX_MESH_BYTES, MAX_OBJECTS, MAX_SCENE_BYTES, MAX_TRIANGLES
-from .costs import (MAX_GAMMA_SAMPLES, MAX_LINE_SAMPLES, MAX_SHADOW_MAP, MAX_SLICES, MIN_GAMMA_SAMPLES,
-                    MIN_LINE_SAMPLES, MIN_SHADOW_MAP, MIN_SLICES)
+from .costs import (INITIAL_SAMPLES_PER_LINE, MAX_GAMMA_SAMPLES, MAX_INITIAL_STEP, MAX_LINE_SAMPLES, MAX_SHADOW_MAP,
+                    MAX_SLICES, MIN_GAMMA_SAMPLES, MIN_INITIAL_STEP, MIN_LINE_SAMPLES, MIN_SHADOW_MAP, MIN_SLICES)
 from .model import (INTEGRAND_MODES, METHODS, NORMALS, RELIEF_MODES, SAMPLINGS, SHADOW_FILTERS, STEP_SPACINGS,
                     SURFACE_SHADOWS, TEXTURE_WRAPS, TRANSPARENCY_TYPES, TRANSPARENCY_WARPS, TRAVERSALS, Camera,
                     DirectionalLight, Image, Render, ShadowFilter, Transparency)
@@ -300,6 +300,8 @@ RENDER = Section("render", (
           notes="`sampling: epipolar`: samples along the slice's line that is longest on the screen; a "
                 "shorter line gets as many as keep the same spacing on the screen (at least 2)", read_by=("minmax",)),
     Field("initial_step", "integer", Render.initial_step, 1, 1024,
+          shown_default=f"from `line_samples`: a {INITIAL_SAMPLES_PER_LINE}th of them, in [{MIN_INITIAL_STEP}, "
+                        f"{MAX_INITIAL_STEP}] (6 at 1280×720, 3 at 640×360)",
           notes="`sampling: epipolar`: every `initial_step`-th line sample is computed, and those beside a break; "
                 "the others are interpolated along the line", read_by=("minmax",)),
     Field("refine_threshold", "number", Render.refine_threshold, 0.0, 1.0,

@@ -177,7 +177,7 @@ class Render:
     traversal: str = "tree"  # one of TRAVERSALS
     sampling: str = "epipolar"  # one of SAMPLINGS
     line_samples: int | None = None  # epipolar: samples along each slice's line
-    initial_step: int = 6  # epipolar: every initial_step-th line sample walks its row
+    initial_step: int | None = None  # epipolar: every initial_step-th line sample walks its row
     refine_threshold: float = 0.02  # epipolar: relative change in distance or unshadowed radiance that is a break
     relief: str = "prewarp"  # one of RELIEF_MODES
     translucent_layers: int = 4  # translucent surfaces per light texel, nearest the light first

@@ -125,17 +125,19 @@ def test_orbit_adds_no_flicker(renderer):
 
 
 def test_stats_count_what_sampling_did(renderer):
-    """Every camera sample is interpolated or fixed up; under one box's shadow, at 320×180,
+    """Every camera sample is interpolated or fixed up; under one box's shadow, at 640×360,
     most are interpolated, from fewer line samples than there are pixels. (On the other
     tests' 96×64 images most pixels are fixed up: near the light the in-scattering changes
-    faster than samples two pixels apart follow. Sampling pays at large images.)"""
+    faster than samples two pixels apart follow. Sampling pays at large images: at 320×180
+    the 1024 slices' lines, at the initial step of 3, compute more samples than there are
+    pixels.)"""
     scene = make_scene(np.concatenate([grid_plane(0.0, 8.0, 4), box_triangles([-1.0, 3.0, -1.0], [1.0, 3.2, 1.0])]),
-                       [POINT], width=320, height=180, far=25.0, sigma_s=0.08, sigma_a=0.02, albedo=0.0)
+                       [POINT], width=640, height=360, far=25.0, sigma_s=0.08, sigma_a=0.02, albedo=0.0)
     epipolar, pixel = _both(renderer, scene)
     counts = epipolar.samples
-    assert counts.interpolated + counts.fixed_up == 320 * 180
-    assert counts.interpolated > 0.5 * 320 * 180
-    assert 0 < counts.computed < 320 * 180
+    assert counts.interpolated + counts.fixed_up == 640 * 360
+    assert counts.interpolated > 0.5 * 640 * 360
+    assert 0 < counts.computed < 640 * 360
     assert pixel.samples is None
 
 
