@@ -222,10 +222,11 @@ def measure(renderer: Renderer, scene: Scene, method: str, repeats: int, warm_up
 
 def run(scene_paths=DEFAULT_SCENES, resolutions=((640, 360),), repeats: int = 5, pixels: int = 4000,
         cache: Path = Path(".cache/clrays"), device: str | None = None, progress: bool = False, log=print,
-        quick: bool = False, volume: bool = False) -> list[BenchPoint]:
+        quick: bool = False, volume: bool = False, targets=RMSE_TARGETS) -> list[BenchPoint]:
     """The whole sweep; `cache`: the folder of the exact references; `progress`: a bar while
     one is computed; `log(line)` after each point; `volume`: surfaces black, so the error
-    is the in-scattering's alone (`volume_only`)."""
+    is the in-scattering's alone (`volume_only`); `targets`: the relative RMSEs that
+    raymarch's ladder climbs to (down to the lowest)."""
     renderer = Renderer(device, reuse=False)  # every frame computed from scratch
     references = ReferenceCache(cache, renderer, progress)
     plan = []
@@ -261,11 +262,11 @@ def run(scene_paths=DEFAULT_SCENES, resolutions=((640, 360),), repeats: int = 5,
         mine = [point_at(method, label, overrides) for method, label, overrides in points]
         if quick:
             continue
-        if not any(p.method == "minmax" and p.rmse <= min(RMSE_TARGETS) for p in mine):
+        if not any(p.method == "minmax" and p.rmse <= min(targets) for p in mine):
             point_at("minmax", *finer_minmax(scene))
         raymarch_ladder(lambda steps, shadow_map: point_at("raymarch", f"steps={steps} shadow_map={shadow_map}",
                                                            {"steps": steps, "shadow_map": shadow_map}),
-                        with_derived_sizes(scene).render.shadow_map)
+                        with_derived_sizes(scene).render.shadow_map, targets)
     return results
 
 
@@ -285,7 +286,7 @@ def pareto_front(points: list[BenchPoint]) -> list[BenchPoint]:
     return front
 
 
-def summary(points: list[BenchPoint]) -> list[dict]:
+def summary(points: list[BenchPoint], targets=RMSE_TARGETS) -> list[dict]:
     """Per scene and resolution and target: speedup of minmax over raymarch at equal error,
     by wall time and by CPU time. Where raymarch reaches no target, equal error needs more
     than its costliest point: `speedup_above@` is that point's frame time over minmax's, a
@@ -296,7 +297,7 @@ def summary(points: list[BenchPoint]) -> list[dict]:
         raymarch = [p for p in group if p.method == "raymarch"]
         costliest = max(raymarch, key=lambda p: p.frame_ms) if raymarch else None
         row = {"scene": key[0], "resolution": key[1]}
-        for target in RMSE_TARGETS:
+        for target in targets:
             fast, slow = cheapest_at(group, "minmax", target), cheapest_at(group, "raymarch", target)
             tag = target_tag(target)
             row[f"minmax_ms@{tag}"] = fast.frame_ms if fast else None
@@ -325,7 +326,7 @@ def write_csv(points: list[BenchPoint], path: Path) -> None:
                             + [f"{p.stage_ms.get(s, 0.0):.2f}" for s in stages])
 
 
-def plot(points: list[BenchPoint], path: Path) -> None:
+def plot(points: list[BenchPoint], path: Path, targets=RMSE_TARGETS) -> None:
     """Error against time, log-log, one panel per scene and resolution, one curve per method,
     the Pareto front of all points marked."""
     import matplotlib
@@ -349,7 +350,7 @@ def plot(points: list[BenchPoint], path: Path) -> None:
         overall = pareto_front(group)
         axis.scatter([p.frame_ms for p in overall], [max(p.rmse, 1e-5) for p in overall], s=70,
                      facecolors="none", edgecolors="black", label="Pareto front (all)")
-        for target in RMSE_TARGETS:
+        for target in targets:
             axis.axhline(target, color="grey", ls=":", lw=0.8)
         axis.set_xscale("log")
         axis.set_yscale("log")
@@ -378,7 +379,7 @@ def peak_host_mib() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
-def markdown_summary(points: list[BenchPoint]) -> str:
+def markdown_summary(points: list[BenchPoint], targets=RMSE_TARGETS) -> str:
     """The headline table, as it goes into bench/RESULTS.md."""
     lines = ["| scene | resolution | target rel. RMSE | minmax (ms, setting) | raymarch (ms, setting) | speedup "
              "| speedup, CPU time |",
@@ -387,8 +388,8 @@ def markdown_summary(points: list[BenchPoint]) -> str:
     def times(value, spec):
         return "—" if value is None else f"{value:{spec}}"
 
-    for row in summary(points):
-        for target in RMSE_TARGETS:
+    for row in summary(points, targets):
+        for target in targets:
             tag = target_tag(target)
             raymarch = f"{times(row[f'raymarch_ms@{tag}'], '.0f')} ({row[f'raymarch_setting@{tag}']})"
             speedup = times(row[f"speedup@{tag}"], ".1f") + "×"
@@ -402,11 +403,12 @@ def markdown_summary(points: list[BenchPoint]) -> str:
     return "\n".join(lines)
 
 
-def save(points: list[BenchPoint], out: Path, extra: dict | None = None, device: str | None = None) -> None:
+def save(points: list[BenchPoint], out: Path, extra: dict | None = None, device: str | None = None,
+         targets=RMSE_TARGETS) -> None:
     """CSV, plot, summary table and machine description into `out` (created)."""
     make_folder(out)
     write_csv(points, out / "bench.csv")
-    plot(points, out / "bench.png")
-    (out / "summary.md").write_text(markdown_summary(points) + "\n")
+    plot(points, out / "bench.png", targets)
+    (out / "summary.md").write_text(markdown_summary(points, targets) + "\n")
     info = {"machine": machine(device), "peak_host_mib": peak_host_mib(), **(extra or {})}
     (out / "machine.json").write_text(json.dumps(info, indent=2) + "\n")

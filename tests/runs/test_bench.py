@@ -1,5 +1,6 @@
 """The benchmark's bookkeeping, and a smoke run of `clrays bench` end to end."""
 import csv
+import json
 from dataclasses import replace
 from pathlib import Path
 
@@ -38,7 +39,17 @@ def test_speedup_compares_the_cheapest_points_that_reach_each_error():
 
 
 def test_targets_are_labelled_as_percentages():
-    assert [target_tag(t) for t in (0.05, 0.01, 0.005)] == ["5%", "1%", "0.5%"]
+    assert [target_tag(t) for t in (0.05, 0.01, 0.005, 0.001)] == ["5%", "1%", "0.5%", "0.1%"]
+
+
+def test_speedup_is_read_at_the_targets_asked_for():
+    # minmax's 0.08 % reaches 0.1 %, where raymarch needs its 900 ms point
+    points = [_point("raymarch", 100, 0.004), _point("raymarch", 900, 0.0009), _point("minmax", 20, 0.0008)]
+    (row,) = summary(points, targets=(0.005, 0.001))
+    assert row["speedup@0.5%"] == pytest.approx(100 / 20) and row["speedup@0.1%"] == pytest.approx(900 / 20)
+    assert "speedup@5%" not in row
+    table = markdown_summary(points, targets=(0.005, 0.001))
+    assert "| 0.1% | 20 (20) | 900 (900) | 45.0× |" in table and "| 5% |" not in table
 
 
 def _ladder(error_at, ms_per_step=1.0):
@@ -92,13 +103,16 @@ def test_bench_command_writes_csv_plot_and_summary(tmp_path):
     pytest.importorskip("matplotlib")  # the `bench` extra, which `make test` installs
     out = tmp_path / "out"
     result = CliRunner().invoke(main, ["bench", str(DEMO), "-r", "48x27", "--quick", "--repeats", "1",
-                                       "--pixels", "300", "--out", str(out), "--cache", str(tmp_path / "cache")])
+                                       "--pixels", "300", "--targets", "5,0.1", "--out", str(out), "--cache",
+                                       str(tmp_path / "cache")])
     assert result.exit_code == 0, result.output
     rows = list(csv.DictReader(open(out / "bench.csv")))
     assert {r["method"] for r in rows} == {"raymarch", "minmax", "moments"}
     assert all(float(r["frame_ms"]) > 0 and 0 <= float(r["rel_rmse"]) < 10 for r in rows)
     assert (out / "bench.png").stat().st_size > 1000
-    assert "speedup" in (out / "summary.md").read_text()
+    summary_text = (out / "summary.md").read_text()
+    assert "speedup" in summary_text and "| 0.1% |" in summary_text and "| 0.5% |" not in summary_text
+    assert json.loads((out / "machine.json").read_text())["targets"] == [0.05, 0.001]
     assert any((tmp_path / "cache").iterdir())  # exact was cached
 
 
@@ -119,6 +133,12 @@ def test_volume_only_skips_the_surface_shadows_it_cannot_show(device):
 def test_bench_rejects_a_bad_resolution():
     result = CliRunner().invoke(main, ["bench", str(DEMO), "-r", "640by360"])
     assert result.exit_code == 2 and "WIDTHxHEIGHT" in result.output
+
+
+@pytest.mark.parametrize("targets", ["1,abc", "0", "100", ""])
+def test_bench_rejects_bad_targets(targets):
+    result = CliRunner().invoke(main, ["bench", str(DEMO), "--targets", targets])
+    assert result.exit_code == 2 and "--targets" in result.output and "percentages" in result.output
 
 
 def test_reference_cache_keeps_exact_on_pixels_on_disk(tmp_path, monkeypatch, device):
