@@ -444,11 +444,13 @@ kernel void raster_split(global const ulong* nearest, int samples, global uint* 
 
 /* Whether any texel of a depth buffer holds a depth (map_is_empty): a flag set on the
  * device, so the host reads 4 bytes instead of the whole map. One work-item per
- * RASTER_ANY_TEXELS texels (clrays/structs.py), read as vectors of 16. */
-kernel void raster_any(global const uint* depth, int texels, global uint* any)
+ * RASTER_ANY_TEXELS texels (clrays/structs.py), read as vectors of 16; once the flag is
+ * set, the work-items after it read nothing more (a map with any occluder is the usual
+ * case, and a stale 0 only means one more scan). */
+kernel void raster_any(global const uint* depth, int texels, volatile global uint* any)
 {
     int first = get_global_id(0) * RASTER_ANY_TEXELS;
-    if (first >= texels) return;
+    if (first >= texels || *any) return;
     if (first + RASTER_ANY_TEXELS <= texels) {
         uint16 seen = (uint16)(0u);
         for (int k = 0; k < RASTER_ANY_TEXELS / 16; ++k) seen |= vload16(0, depth + first + 16 * k) ^ DEPTH_EMPTY;
