@@ -129,6 +129,10 @@ class StageTimer:
 GROUPS_PER_UNIT = 32
 #: The largest work-group spread_local_size makes (PoCL's largest), unless the device's is smaller.
 MAX_CPU_GROUP = 4096
+#: Device.fill on a CPU device: fills of at least this many bytes run as a kernel, each
+#: work-item storing this many 16-byte vectors.
+PARALLEL_FILL_BYTES = 1 << 20
+FILL_VECTORS = 1024
 
 
 def spread_local_size(global_size: tuple[int, ...], units: int, max_group: int = MAX_CPU_GROUP) -> tuple[int, ...]:
@@ -228,9 +232,24 @@ class Device:
         return self.cl.Buffer(self.context, flags, max(int(nbytes), 16))
 
     def fill(self, buffer, value: np.ndarray, nbytes: int, timer: StageTimer | None = None, label: str = "fill"):
-        event = self.cl.enqueue_fill_buffer(self.queue, buffer, value, 0, nbytes)
-        if timer is not None:
-            timer.add(label, event)
+        """The first `nbytes` of `buffer` set to `value` (a 4- or 8-byte numpy scalar) over
+        and over. On a CPU device a large fill is a kernel, which every core runs (PoCL's
+        own fill runs on one thread while the others wait: a frame's cube map, 25 MB at
+        1280×720, took 4.5 ms); the tail past the last 16-byte vector is the driver's."""
+        value = np.asarray(value)
+        vectors = nbytes // 16 if self._spread and nbytes >= PARALLEL_FILL_BYTES else 0
+        event = None
+        if vectors:
+            pattern = np.frombuffer(np.tile(value, 16 // value.itemsize).tobytes(), np.uint32)
+            event = self.kernel("fill", "fill_vectors", {"FILL_VECTORS": FILL_VECTORS})(
+                self.queue, (-(-vectors // FILL_VECTORS),), None, buffer,
+                self.cl.cltypes.make_uint4(*pattern.tolist()), np.int32(vectors))
+            if timer is not None:
+                timer.add(label, event)
+        if 16 * vectors < nbytes:
+            event = self.cl.enqueue_fill_buffer(self.queue, buffer, value, 16 * vectors, nbytes - 16 * vectors)
+            if timer is not None:
+                timer.add(label, event)
         return event
 
     def read(self, buffer, shape, dtype) -> np.ndarray:
