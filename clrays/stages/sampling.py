@@ -127,7 +127,8 @@ def line_lengths(scene, params: np.ndarray, ranges: np.ndarray, n: int) -> np.nd
 
     start, start_depth = screen_point(np.where(crosses, lo, 0.0))
     end, end_depth = screen_point(np.where(crosses, hi, 0.0))
-    length = np.where(crosses, np.linalg.norm(end - start, axis=1), 0.0)
+    with np.errstate(invalid="ignore"):  # (an end in the eye's plane is at infinity: `n` below, as behind it)
+        length = np.where(crosses, np.linalg.norm(end - start, axis=1), 0.0)
     longest = float(length.max()) if len(length) else 0.0
     if not (np.isfinite(longest) and longest > 0.0) or np.any(crosses & ((start_depth <= 0) | (end_depth <= 0))):
         return np.where(crosses, n, 2).astype(np.int32)

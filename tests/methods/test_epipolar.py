@@ -10,7 +10,7 @@ import pytest
 
 from clrays.reference.metrics import depth_edges, depth_map, image_error
 from clrays.scene.geometry import box_triangles, sphere_triangles
-from conftest import DirectionalLight, PointLight, SpotLight, grid_plane, make_scene, v3
+from conftest import TEST_ON_POCL, DirectionalLight, PointLight, SpotLight, grid_plane, make_scene, v3
 
 
 def _sampled(scene, sampling):
@@ -203,7 +203,10 @@ def _epipole_pixel(scene):
 
 def test_the_pixels_beside_the_epipole_walk_their_rays(renderer):
     """Within EPIPOLE_WALK_PIXELS of a point light's epipole every pixel is walked: it has
-    the per-pixel walk's value, where interpolation would follow 1/sin β too slowly."""
+    the per-pixel walk's value, where interpolation would follow 1/sin β too slowly.
+    Interpolated, these pixels were up to 8e-4 off (258 of the 390 by more than 5e-5). On
+    PoCL the two walks are the same bits; NVIDIA's compiler builds fix_up's walk and
+    traverse's apart, 9.5e-6 at most on an H100."""
     from clrays.stages.sampling import EPIPOLE_WALK_PIXELS
 
     scene = _shafts(PointLight(EPIPOLES["in view"], np.full(3, 60.0)), width=320, height=180, **CAMERA)
@@ -212,7 +215,7 @@ def test_the_pixels_beside_the_epipole_walk_their_rays(renderer):
     rows, columns = np.mgrid[0:scene.image.height, 0:scene.image.width]
     near = np.hypot(columns + 0.5 - x, rows + 0.5 - y) < 0.8 * EPIPOLE_WALK_PIXELS
     assert near.sum() > 20
-    np.testing.assert_allclose(epipolar.image[near], pixel.image[near], rtol=1e-6)
+    np.testing.assert_allclose(epipolar.image[near], pixel.image[near], rtol=1e-6 if TEST_ON_POCL else 5e-5)
     assert not np.allclose(epipolar.image[~near], pixel.image[~near], rtol=1e-6)  # the rest is interpolated
 
 
