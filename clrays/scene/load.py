@@ -322,7 +322,8 @@ def _triangles(m: dict[str, Node]) -> _Shape:
         if not isinstance(face.value, list) or len(face.value) != 3:
             face.fail("a face: a list of 3 vertex indices [i, j, k]")
         faces.append([integer(i, 0, n - 1) for i in face.value])
-    return primitives.indexed_triangles(vertices, np.array(faces)), None
+    triangles = primitives.indexed_triangles(vertices, np.array(faces))
+    return triangles[primitives.spatial_order(triangles)], None  # as a mesh file's
 
 
 def _box(m: dict[str, Node]) -> _Shape:
