@@ -204,33 +204,41 @@ def _bound_passes(device: Device, inputs: FrameInputs, first: int, bound, writer
         return
     vertices = device.buffer(inputs.tri_vertices, writable=False)
     views = device.buffer(inputs.views, writable=False)
-    big_items = device.buffer(nbytes=4 * count)
-    big_count = device.buffer(nbytes=4)
     masked = np.int32(read_mask is not None)
     read_mask = read_mask if read_mask is not None else device.buffer(nbytes=4)
     first_pass = device.kernel("visibility", "visibility_bound")
     split_pass = device.kernel("visibility", "visibility_bound_split")
     # Only the cube faces the frame can read (`view_needed`, as raster.shadow does): no
     # sample projects into the others, so their texels are never asked for.
-    for view in np.flatnonzero(inputs.view_needed[1:]) + 1:
-        if rects is None or (filter_rects and int(view) not in rects):  # (a view the recording frame did not draw)
+    drawn = [int(view) for view in np.flatnonzero(inputs.view_needed[1:]) + 1]
+    # Every view's first pass, then one wait for all their lists; then the host orders a
+    # view's list while the device runs the split pass of the view before (each view has
+    # texels of its own, and a texel's values do not depend on the order of the passes).
+    big = {}  # view → (its list of big items, their count)
+    for view in drawn:
+        if rects is None or (filter_rects and view not in rects):  # (a view the recording frame did not draw)
             mode = structs.RECTS_NONE
         else:
             mode = structs.RECTS_FILTER if filter_rects else structs.RECTS_RECORD
         if mode == structs.RECTS_RECORD:
-            rects[int(view)] = device.buffer(nbytes=16 * count)
-        view_rects = rects[int(view)] if mode != structs.RECTS_NONE else big_count  # (unread without rects)
-        device.fill(big_count, np.int32(0), 4, timer, "visibility")
+            rects[view] = device.buffer(nbytes=16 * count)
+        big[view] = device.buffer(nbytes=4 * count), device.buffer(np.zeros(1, np.int32))
+        view_rects = rects[view] if mode != structs.RECTS_NONE else big[view][1]  # (unread without rects)
         timer.add("visibility", first_pass(
             device.queue, (count,), None, vertices, np.int32(count), views, np.int32(view), np.int32(1), bound,
-            writer, masked, read_mask, np.int32(first), *lists, np.int32(BOUND_SMALL_ROWS), big_items, big_count,
+            writer, masked, read_mask, np.int32(first), *lists, np.int32(BOUND_SMALL_ROWS), *big[view],
             np.int32(mode), view_rects))
-        listed = int(device.read(big_count, 1, np.int32)[0])
-        if listed:
-            nearest_first(device, big_items, listed, inputs, view)
-            timer.add("visibility", split_pass(
-                device.queue, (listed, BOUND_ROW_SPLIT), None, vertices, views, np.int32(view), np.int32(1),
-                bound, writer, masked, read_mask, np.int32(first), *lists, big_items, big_count))
+    listed = {view: np.empty(1, np.int32) for view in drawn}
+    reads = [device.cl.enqueue_copy(device.queue, listed[view], big[view][1], is_blocking=False) for view in drawn]
+    device.cl.wait_for_events(reads[-1:])
+    items = {view: np.empty(int(listed[view][0]), np.int32) for view in drawn if listed[view][0]}
+    reads = [device.cl.enqueue_copy(device.queue, items[view], big[view][0], is_blocking=False) for view in items]
+    device.cl.wait_for_events(reads[-1:])
+    for view, listed_items in items.items():
+        ordered = device.buffer(nearest_first(listed_items, inputs, view), writable=False)  # (copied, no wait)
+        timer.add("visibility", split_pass(
+            device.queue, (len(listed_items), BOUND_ROW_SPLIT), None, vertices, views, np.int32(view), np.int32(1),
+            bound, writer, masked, read_mask, np.int32(first), *lists, ordered, big[view][1]))
 
 
 def ray_lists(device: Device, buffers: FrameBuffers, prepared: Prepared, ray_entries, rays: int,
@@ -267,19 +275,18 @@ def ray_lists(device: Device, buffers: FrameBuffers, prepared: Prepared, ray_ent
     return lists
 
 
-def nearest_first(device: Device, big_items, listed: int, inputs: FrameInputs, view: int) -> None:
-    """Reorders the split pass's list by the distance of each triangle's centroid from the
-    view (orthographic: its depth), nearest first. The result is the same in any order; in
-    this one a far floor under nearer triangles mostly finds their bounds already below its
-    own nearest depth and skips its texel maths (bound_triangle's floor_bits)."""
-    items = device.read(big_items, listed, np.int32)
+def nearest_first(items: np.ndarray, inputs: FrameInputs, view: int) -> np.ndarray:
+    """The split pass's list of triangles ordered by the distance of each one's centroid
+    from the view (orthographic: its depth), nearest first. The result is the same in any
+    order; in this one a far floor under nearer triangles mostly finds their bounds already
+    below its own nearest depth and skips its texel maths (bound_triangle's floor_bits)."""
     centroids = inputs.tri_vertices[:, :3].reshape(-1, 3, 3)[items].astype(np.float64).mean(axis=1)
     centroids -= np.asarray(inputs.views[view]["origin"][:3], np.float64)
     if inputs.views[view]["projection"] == structs.PROJECTION_PERSPECTIVE:
         distance = np.linalg.norm(centroids, axis=1)
     else:
         distance = centroids @ np.asarray(inputs.views[view]["forward"][:3], np.float64)
-    device.cl.enqueue_copy(device.queue, big_items, np.ascontiguousarray(items[np.argsort(distance, kind="stable")]))
+    return np.ascontiguousarray(items[np.argsort(distance, kind="stable")])
 
 
 def bound_atlas(device: Device, buffers: FrameBuffers, bounds: list[BoundMap]) -> BoundMap:
