@@ -6,7 +6,8 @@
  * bound of the depth of every triangle that touches each texel, atomic min), writer (the
  * one triangle that touches each texel, or WRITER_MANY), with a capacity the lists of the
  * triangles touching each texel read (touching_head, touching, touching_count) and the
- * list of triangles whose rectangles the split pass takes (big_items, big_count).
+ * list of triangles whose rectangles the split pass takes, with their sizes (big_items,
+ * big_count).
  * visibility_prepare reads frame, views, lights, camera_depth, tri_id,
  * tri_normal, tri_vertex_normals, offsets; writes visible (1 no light reaches the sample,
  * 0 its surface turns away from the light, else pending: the maps or a ray decide) and
@@ -270,7 +271,7 @@ inline void note_touching(global int* head, int tri, global int2* touching, vola
 inline void bound_triangle(global const float4* tri_vertices, global const view_t* views, int first_view,
                            int view_count, global uint* bound, global int* writer, int masked,
                            global const uint* read_mask, int mask_offset, TOUCHING_ARGS, int item, int row_first,
-                           int row_step, int small_rows, global int* big_items, volatile global int* big_count,
+                           int row_step, int small_rows, global int4* big_items, volatile global int* big_count,
                            global int4* rect)
 {
     int tri = item / view_count;
@@ -319,7 +320,7 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
     if (masked && small_rows > 0 && !rectangle_is_read(view, read_mask, mask_offset, x0, y0, x1, y1, small_rows))
         return;
     if (small_rows > 0 && y1 - y0 + 1 > small_rows) { /* many rows: the split pass takes it */
-        big_items[atomic_inc(big_count)] = item;
+        big_items[atomic_inc(big_count)] = (int4)(item, y1 - y0 + 1, (y1 - y0 + 1) * (x1 - x0 + 1), 0);
         return;
     }
     float3 normal = inline_cross(vertex[1] - vertex[0], vertex[2] - vertex[0]);
@@ -364,11 +365,15 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
         float y_corner = (1.0f - 2.0f * (float)(ty + corner_y) * inverse_height) * view->scale_y;
         float row_plane = plane - n_view.y * y_corner;
         for (int tx = first; tx <= last; ++tx) {
-            if (masked) {
+            if (masked) { /* on to the next texel read: a camera sample reads few of a face's */
                 int at = mask_offset + view->depth_offset + ty * view->width + tx;
                 uint bits = read_mask[at >> 5] >> (at & 31); /* this texel's and the next ones in its word */
-                if (bits == 0u) tx += 31 - (at & 31); /* none read to the word's end */
-                if (!(bits & 1u)) continue;
+                if (bits == 0u) { /* none read to the word's end */
+                    tx += 31 - (at & 31);
+                    continue;
+                }
+                tx += __builtin_ctz(bits);
+                if (tx > last) break;
             }
             note_writer(writer + view->depth_offset + ty * view->width + tx, tri);
             note_touching(touching_head + view->depth_offset + ty * view->width + tx, tri, touching, touching_count,
@@ -419,12 +424,17 @@ kernel void visibility_clear(global const uint* read_mask, int first, int texels
 
 /* Two passes, because a triangle's rectangle may hold a few texels or a whole face:
  * visibility_bound takes one work-item per triangle and view and does the rectangles of
- * up to `small_rows` rows at once, listing the others in big_items; visibility_bound_split
- * then spreads each listed rectangle's rows over the global size of its dimension 1. */
+ * up to `small_rows` rows at once, listing the others in big_items with their rows and
+ * texels; visibility_bound_split then spreads each listed rectangle's rows over as many
+ * work-items of its dimension 1 as give each about BOUND_SPLIT_TEXELS texels of it (at
+ * least a row each, at most its global size). Each work-item projects and clips the
+ * triangle again, which a rectangle of ten rows spread over sixteen work-items did
+ * sixteen times for a row each (demo's sphere: 1639 triangles on one cube face). */
+#define BOUND_SPLIT_TEXELS 64
 kernel void visibility_bound(global const float4* tri_vertices, int count, global const view_t* views,
                              int first_view, int view_count, global uint* bound, global int* writer,
                              int masked, global const uint* read_mask, int mask_offset, TOUCHING_ARGS,
-                             int small_rows, global int* big_items, volatile global int* big_count,
+                             int small_rows, global int4* big_items, volatile global int* big_count,
                              int rect_mode, global int4* rects)
 {
     int item = get_global_id(0);
@@ -446,12 +456,15 @@ kernel void visibility_bound(global const float4* tri_vertices, int count, globa
 kernel void visibility_bound_split(global const float4* tri_vertices, global const view_t* views, int first_view,
                                    int view_count, global uint* bound, global int* writer,
                                    int masked, global const uint* read_mask, int mask_offset, TOUCHING_ARGS,
-                                   global const int* big_items, global const int* big_count)
+                                   global const int4* big_items, global const int* big_count)
 {
     int index = get_global_id(0);
     if (index >= *big_count) return;
+    int4 big = big_items[index]; /* (item, its rows, its texels) */
+    int steps = min(min((int)get_global_size(1), big.y), (big.z + BOUND_SPLIT_TEXELS - 1) / BOUND_SPLIT_TEXELS);
+    if ((int)get_global_id(1) >= steps) return;
     bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, masked, read_mask, mask_offset,
-                   TOUCHING_PASS, big_items[index], get_global_id(1), get_global_size(1), 0, 0, 0, 0);
+                   TOUCHING_PASS, big.x, get_global_id(1), steps, 0, 0, 0, 0);
 }
 
 /* How far the sample's own triangle (plane through p with unit normal n, largest distance

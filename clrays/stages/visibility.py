@@ -37,8 +37,9 @@ from .raster import RasterResult
 
 #: `visibility_bound` does a triangle's texel rectangle of up to this many rows in one
 #: work-item (most triangles of a fine mesh: one item each, no idle ones) and leaves
-#: taller ones to `visibility_bound_split`, which gives each BOUND_ROW_SPLIT work-items,
-#: each taking every BOUND_ROW_SPLIT-th row (a floor's rectangle can be a whole face).
+#: taller ones to `visibility_bound_split`, which gives each at most BOUND_ROW_SPLIT
+#: work-items (cl/visibility.cl's BOUND_SPLIT_TEXELS of its rectangle each), each taking
+#: every n-th row (a floor's rectangle can be a whole face).
 BOUND_SMALL_ROWS = 8
 BOUND_ROW_SPLIT = 16
 
@@ -222,7 +223,7 @@ def _bound_passes(device: Device, inputs: FrameInputs, first: int, bound, writer
             mode = structs.RECTS_FILTER if filter_rects else structs.RECTS_RECORD
         if mode == structs.RECTS_RECORD:
             rects[view] = device.buffer(nbytes=16 * count)
-        big[view] = device.buffer(nbytes=4 * count), device.buffer(np.zeros(1, np.int32))
+        big[view] = device.buffer(nbytes=16 * count), device.buffer(np.zeros(1, np.int32))
         view_rects = rects[view] if mode != structs.RECTS_NONE else big[view][1]  # (unread without rects)
         timer.add("visibility", first_pass(
             device.queue, (count,), None, vertices, np.int32(count), views, np.int32(view), np.int32(1), bound,
@@ -231,7 +232,7 @@ def _bound_passes(device: Device, inputs: FrameInputs, first: int, bound, writer
     listed = {view: np.empty(1, np.int32) for view in drawn}
     reads = [device.cl.enqueue_copy(device.queue, listed[view], big[view][1], is_blocking=False) for view in drawn]
     device.cl.wait_for_events(reads[-1:])
-    items = {view: np.empty(int(listed[view][0]), np.int32) for view in drawn if listed[view][0]}
+    items = {view: np.empty((int(listed[view][0]), 4), np.int32) for view in drawn if listed[view][0]}
     reads = [device.cl.enqueue_copy(device.queue, items[view], big[view][0], is_blocking=False) for view in items]
     device.cl.wait_for_events(reads[-1:])
     for view, listed_items in items.items():
@@ -276,11 +277,11 @@ def ray_lists(device: Device, buffers: FrameBuffers, prepared: Prepared, ray_ent
 
 
 def nearest_first(items: np.ndarray, inputs: FrameInputs, view: int) -> np.ndarray:
-    """The split pass's list of triangles ordered by the distance of each one's centroid
+    """The split pass's list (rows of item, rows, texels) ordered by the distance of each item's centroid
     from the view (orthographic: its depth), nearest first. The result is the same in any
     order; in this one a far floor under nearer triangles mostly finds their bounds already
     below its own nearest depth and skips its texel maths (bound_triangle's floor_bits)."""
-    centroids = inputs.tri_vertices[:, :3].reshape(-1, 3, 3)[items].astype(np.float64).mean(axis=1)
+    centroids = inputs.tri_vertices[:, :3].reshape(-1, 3, 3)[items[:, 0]].astype(np.float64).mean(axis=1)
     centroids -= np.asarray(inputs.views[view]["origin"][:3], np.float64)
     if inputs.views[view]["projection"] == structs.PROJECTION_PERSPECTIVE:
         distance = np.linalg.norm(centroids, axis=1)
