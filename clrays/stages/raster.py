@@ -23,43 +23,53 @@ class RasterResult:
     shadow_depth: object  # uint[shadow_texels]: every light's views, back to back
 
 
-def _launch(device: Device, buffers: FrameBuffers, name: str, defines: dict | None, view_index: int, offsets,
-            sample_count: int, target: tuple, timer: StageTimer) -> None:
-    """Both passes of one raster kernel over every triangle the frame draws, for one view."""
+def _launch(device: Device, buffers: FrameBuffers, name: str, defines: dict | None, view_indices: list[int],
+            offsets, sample_count: int, target: tuple, timer: StageTimer) -> None:
+    """Both passes of one raster kernel over every triangle the frame draws, for some views."""
     count = buffers.inputs.tri_vertices.shape[0] // 3
     if buffers.inputs.raster_triangles is not None:  # the reliefs' triangles, last, are pre-warped instead
         count = buffers.inputs.raster_triangles
-    raster_passes(device, "raster", name, defines, buffers.tri_vertices, count, buffers.views, view_index,
-                  int(buffers.inputs.views[view_index]["height"]), offsets, sample_count, target, timer)
+    heights = [int(buffers.inputs.views[view]["height"]) for view in view_indices]
+    raster_passes(device, "raster", name, defines, buffers.tri_vertices, count, buffers.views, view_indices,
+                  heights, offsets, sample_count, target, timer)
 
 
 def raster_passes(device: Device, program: str, name: str, defines: dict | None, vertices, count: int, views,
-                  view_index: int, view_height: int, offsets, sample_count: int, target: tuple, timer: StageTimer,
-                  stage: str = "raster") -> None:
+                  view_indices: list[int], view_heights: list[int], offsets, sample_count: int, target: tuple,
+                  timer: StageTimer, stage: str = "raster") -> None:
     """The two passes of one raster kernel (cl/raster.cl's RASTER_KERNELS, built in
-    `program`) over `count` triangles for one view (`view_height` rows): `name`, one
-    work-item per triangle, lists the triangles taller than RASTER_BIG_ROWS with their rows;
-    `name_rows` draws those with one work-item per RASTER_ROWS_PER_ITEM rows of the view,
-    which owns its rows (docs/design.md §4.1)."""
-    if count == 0:
+    `program`) over `count` triangles for each view of `view_indices` (`view_heights`
+    rows): `name`, one work-item per triangle, lists the triangles taller than
+    RASTER_BIG_ROWS with their rows; `name_rows` draws those with one work-item per
+    RASTER_ROWS_PER_ITEM rows of the view, which owns its rows (docs/design.md §4.1).
+    Every view's first pass runs before the host waits, once, for all their lists: a wait
+    per cube face left the device idle six times a frame. (The views have texels of their
+    own, and every update is a min or a max, which no order changes.)"""
+    if count == 0 or not view_indices:
         return
-    big_count = device.buffer(np.zeros(1, np.uint32))
     capacity = min(count, structs.RASTER_BIG_TRIANGLES)  # a triangle lists itself at most once
-    big = device.buffer(nbytes=12 * capacity)  # (triangle, first row, last row)
-    timer.add(stage, device.kernel(program, name, defines)(
-        device.queue, (count,), None, vertices, np.int32(count), views, np.int32(view_index),
-        offsets, np.int32(sample_count), big_count, big, *target))
-    listed = min(int(device.read(big_count, 1, np.uint32)[0]), capacity)
-    if not listed:
-        return
-    timer.add(stage, device.kernel(program, f"{name}_rows", defines)(
-        device.queue, (-(-view_height // structs.RASTER_ROWS_PER_ITEM),), None, vertices, views, np.int32(view_index),
-        offsets, np.int32(sample_count), big, np.int32(listed), *target))
+    first_pass = device.kernel(program, name, defines)
+    lists = []  # per view: its count of big triangles, and their (triangle, first row, last row)
+    for view_index in view_indices:
+        lists.append((device.buffer(np.zeros(1, np.uint32)), device.buffer(nbytes=12 * capacity)))
+        timer.add(stage, first_pass(device.queue, (count,), None, vertices, np.int32(count), views,
+                                    np.int32(view_index), offsets, np.int32(sample_count), *lists[-1], *target))
+    counts = [np.empty(1, np.uint32) for _ in lists]
+    reads = [device.cl.enqueue_copy(device.queue, listed, big_count, is_blocking=False)
+             for listed, (big_count, _) in zip(counts, lists)]
+    device.cl.wait_for_events(reads[-1:])
+    rows_pass = device.kernel(program, f"{name}_rows", defines)
+    for view_index, height, listed, (_, big) in zip(view_indices, view_heights, counts, lists):
+        if listed[0]:
+            timer.add(stage, rows_pass(
+                device.queue, (-(-height // structs.RASTER_ROWS_PER_ITEM),), None, vertices, views,
+                np.int32(view_index), offsets, np.int32(sample_count), big, np.int32(min(int(listed[0]), capacity)),
+                *target))
 
 
-def _rasterize(device: Device, buffers: FrameBuffers, view_index: int, offsets, sample_count: int,
+def _rasterize(device: Device, buffers: FrameBuffers, view_indices: list[int], offsets, sample_count: int,
                depth, timer: StageTimer) -> None:
-    _launch(device, buffers, "raster_depth", None, view_index, offsets, sample_count, (depth,), timer)
+    _launch(device, buffers, "raster_depth", None, view_indices, offsets, sample_count, (depth,), timer)
 
 
 def _atomic64(device: Device) -> bool:
@@ -78,16 +88,16 @@ def raster_camera(device: Device, buffers: FrameBuffers, timer: StageTimer) -> t
         defines = {"RASTER_ATOMIC64": 1}
         nearest = device.buffer(nbytes=8 * samples)
         device.fill(nearest, np.uint64((int(structs.DEPTH_EMPTY) << 32) | 0xFFFFFFFF), 8 * samples, timer, "raster")
-        _launch(device, buffers, "raster_nearest", defines, 0, buffers.offsets, spp, (nearest,), timer)
+        _launch(device, buffers, "raster_nearest", defines, [0], buffers.offsets, spp, (nearest,), timer)
         reliefs.map("relief_map_nearest", defines, buffers.views, inputs.views, 0, buffers.offsets, spp, (nearest,))
         timer.add("raster", device.kernel("raster", "raster_split", defines)(
             device.queue, (samples,), None, nearest, np.int32(samples), camera_depth, tri_id))
         return camera_depth, tri_id
     device.fill(camera_depth, structs.DEPTH_EMPTY, 4 * samples, timer, "raster")
     device.fill(tri_id, np.int32(-1), 4 * samples, timer, "raster")
-    _rasterize(device, buffers, 0, buffers.offsets, spp, camera_depth, timer)
+    _rasterize(device, buffers, [0], buffers.offsets, spp, camera_depth, timer)
     reliefs.map("relief_map_depth", None, buffers.views, inputs.views, 0, buffers.offsets, spp, (camera_depth,))
-    _launch(device, buffers, "raster_resolve", None, 0, buffers.offsets, spp, (camera_depth, tri_id), timer)
+    _launch(device, buffers, "raster_resolve", None, [0], buffers.offsets, spp, (camera_depth, tri_id), timer)
     reliefs.map("relief_map_resolve", None, buffers.views, inputs.views, 0, buffers.offsets, spp,
                 (camera_depth, tri_id))
     return camera_depth, tri_id
@@ -119,10 +129,10 @@ def raster_shadow_map(device: Device, buffers: FrameBuffers, light_index: int, t
     device.fill(depth, structs.DEPTH_EMPTY, 4 * texels, timer, "raster")
     centre = device.buffer(np.array([[0.5, 0.5]], dtype=np.float32), writable=False)
     reliefs = ReliefDrawer(device, inputs.reliefs, inputs.light_anchor_ws[0], timer)  # anchored, as the triangles
-    for view_index in range(1, len(inputs.views)):
-        if inputs.view_needed[view_index]:  # a cube face the frame cannot read stays empty
-            _rasterize(device, light_buffers, view_index, centre, 1, depth, timer)
-            reliefs.map("relief_map_depth", None, light_buffers.views, inputs.views, view_index, centre, 1, (depth,))
+    drawn = [view for view in range(1, len(inputs.views)) if inputs.view_needed[view]]  # (a face no sample reads stays empty)
+    _rasterize(device, light_buffers, drawn, centre, 1, depth, timer)
+    for view_index in drawn:
+        reliefs.map("relief_map_depth", None, light_buffers.views, inputs.views, view_index, centre, 1, (depth,))
     return ShadowMap(depth, inputs.shadow_texels, inputs.scene.geometry.count)
 
 

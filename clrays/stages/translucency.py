@@ -117,8 +117,8 @@ def _launch(device: Device, name: str, defines: dict, vertices, count: int, view
     from .raster import raster_passes  # raster imports this module (opaque_occluders)
 
     centre = device.buffer(np.array([[0.5, 0.5]], dtype=np.float32), writable=False)
-    raster_passes(device, "translucency", name, defines, vertices, count, views, view_index, view_height, centre, 1,
-                  target, timer, stage="translucency")
+    raster_passes(device, "translucency", name, defines, vertices, count, views, [view_index], [view_height], centre,
+                  1, target, timer, stage="translucency")
 
 
 def translucency(device: Device, buffers: FrameBuffers, timer: StageTimer) -> Layers:
