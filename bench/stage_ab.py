@@ -25,10 +25,12 @@ from arguments import frame_count, image_size  # noqa: E402  (bench/, beside thi
 from stage_times import SCENES, STAGES  # noqa: E402
 
 ROW = re.compile(r"\| (\w+) \|(.*)\| ([\d.]+) \([\d.]+–[\d.]+\)")
+WALL = re.compile(r"\| wall ([\d.]+) \|")  # (a tree from before stage_times printed it has none)
 
 
 def round_of(tree: Path, size: str, frames: int, scenes: list[str]) -> dict[str, list[float]]:
-    """scene → the stage medians then the total's, from one stage_times run in `tree`."""
+    """scene → the stage medians, the total's, then the wall time's (None where the tree
+    prints none), from one stage_times run in `tree`."""
     command = [sys.executable, str(tree / "bench" / "stage_times.py"), "--size", size, "--frames", str(frames), *scenes]
     run = subprocess.run(command, cwd=tree, capture_output=True, text=True, env={**os.environ, "PYTHONPATH": str(tree)})
     if run.returncode != 0:
@@ -40,7 +42,8 @@ def round_of(tree: Path, size: str, frames: int, scenes: list[str]) -> dict[str,
         match = ROW.match(line)
         if match:
             cells = [float(cell) for cell in match.group(2).split("|") if cell.strip()]
-            rows[match.group(1)] = cells[:len(STAGES)] + [float(match.group(3))]
+            wall = WALL.search(line)
+            rows[match.group(1)] = cells[:len(STAGES)] + [float(match.group(3)), float(wall.group(1)) if wall else None]
     return rows
 
 
@@ -65,17 +68,20 @@ def main() -> None:
         print(f"round {number + 1} of {args.rounds}, load {os.getloadavg()[0]:.1f}", file=sys.stderr, flush=True)
     print(f"{args.size}, A = {trees['A']}, B = {trees['B']}; stage ms, medians over {args.rounds} rounds of "
           f"{args.frames}-frame medians\n")
-    print("| scene | tree | " + " | ".join(STAGES) + " | total, each round | total | B/A |")
-    print("|---|---|" + "---|" * (len(STAGES) + 3))
+    print("| scene | tree | " + " | ".join(STAGES) + " | total, each round | total | B/A | wall | B/A |")
+    print("|---|---|" + "---|" * (len(STAGES) + 5))
     for scene in args.scenes:
-        totals = {}
+        totals, walls = {}, {}
         for tree in trees:
             columns = list(zip(*(run[scene] for run in runs[tree])))
-            cells = [f"{statistics.median(column):.1f}" for column in columns[:-1]]
-            totals[tree] = statistics.median(columns[-1])
+            cells = [f"{statistics.median(column):.1f}" for column in columns[:-2]]
+            totals[tree] = statistics.median(columns[-2])
+            walls[tree] = statistics.median(columns[-1]) if None not in columns[-1] else None
             ratio = f"**{totals['B'] / totals['A']:.2f}**" if tree == "B" else ""
-            print(f"| {scene} | {tree} | " + " | ".join(cells) + f" | {', '.join(f'{t:.0f}' for t in columns[-1])} "
-                  f"| **{totals[tree]:.1f}** | {ratio} |", flush=True)
+            wall = "—" if walls[tree] is None else f"{walls[tree]:.1f}"
+            wall_ratio = f"{walls['B'] / walls['A']:.2f}" if tree == "B" and None not in walls.values() else ""
+            print(f"| {scene} | {tree} | " + " | ".join(cells) + f" | {', '.join(f'{t:.0f}' for t in columns[-2])} "
+                  f"| **{totals[tree]:.1f}** | {ratio} | {wall} | {wall_ratio} |", flush=True)
 
 
 if __name__ == "__main__":
