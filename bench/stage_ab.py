@@ -25,12 +25,12 @@ from arguments import frame_count, image_size  # noqa: E402  (bench/, beside thi
 from stage_times import SCENES, STAGES  # noqa: E402
 
 ROW = re.compile(r"\| (\w+) \|(.*)\| ([\d.]+) \([\d.]+–[\d.]+\)")
-WALL = re.compile(r"\| wall ([\d.]+) \|")  # (a tree from before stage_times printed it has none)
+WALL = re.compile(r"\| wall ([\d.]+) \| CPU ([\d.]+) \|")  # (a tree from before stage_times printed them has none)
 
 
 def round_of(tree: Path, size: str, frames: int, scenes: list[str]) -> dict[str, list[float]]:
-    """scene → the stage medians, the total's, then the wall time's (None where the tree
-    prints none), from one stage_times run in `tree`."""
+    """scene → the stage medians, the total's, then the wall and CPU times' (None where
+    the tree prints none), from one stage_times run in `tree`."""
     command = [sys.executable, str(tree / "bench" / "stage_times.py"), "--size", size, "--frames", str(frames), *scenes]
     run = subprocess.run(command, cwd=tree, capture_output=True, text=True, env={**os.environ, "PYTHONPATH": str(tree)})
     if run.returncode != 0:
@@ -43,7 +43,8 @@ def round_of(tree: Path, size: str, frames: int, scenes: list[str]) -> dict[str,
         if match:
             cells = [float(cell) for cell in match.group(2).split("|") if cell.strip()]
             wall = WALL.search(line)
-            rows[match.group(1)] = cells[:len(STAGES)] + [float(match.group(3)), float(wall.group(1)) if wall else None]
+            rows[match.group(1)] = cells[:len(STAGES)] + [float(match.group(3))] + \
+                ([float(wall.group(1)), float(wall.group(2))] if wall else [None, None])
     return rows
 
 
@@ -68,20 +69,23 @@ def main() -> None:
         print(f"round {number + 1} of {args.rounds}, load {os.getloadavg()[0]:.1f}", file=sys.stderr, flush=True)
     print(f"{args.size}, A = {trees['A']}, B = {trees['B']}; stage ms, medians over {args.rounds} rounds of "
           f"{args.frames}-frame medians\n")
-    print("| scene | tree | " + " | ".join(STAGES) + " | total, each round | total | B/A | wall | B/A |")
-    print("|---|---|" + "---|" * (len(STAGES) + 5))
+    print("| scene | tree | " + " | ".join(STAGES) + " | total, each round | total | B/A | wall | B/A | CPU | B/A |")
+    print("|---|---|" + "---|" * (len(STAGES) + 7))
     for scene in args.scenes:
-        totals, walls = {}, {}
+        totals, walls, cpus = {}, {}, {}
         for tree in trees:
             columns = list(zip(*(run[scene] for run in runs[tree])))
-            cells = [f"{statistics.median(column):.1f}" for column in columns[:-2]]
-            totals[tree] = statistics.median(columns[-2])
-            walls[tree] = statistics.median(columns[-1]) if None not in columns[-1] else None
+            cells = [f"{statistics.median(column):.1f}" for column in columns[:-3]]
+            totals[tree] = statistics.median(columns[-3])
+            walls[tree], cpus[tree] = (statistics.median(c) if None not in c else None for c in columns[-2:])
             ratio = f"**{totals['B'] / totals['A']:.2f}**" if tree == "B" else ""
-            wall = "—" if walls[tree] is None else f"{walls[tree]:.1f}"
-            wall_ratio = f"{walls['B'] / walls['A']:.2f}" if tree == "B" and None not in walls.values() else ""
-            print(f"| {scene} | {tree} | " + " | ".join(cells) + f" | {', '.join(f'{t:.0f}' for t in columns[-2])} "
-                  f"| **{totals[tree]:.1f}** | {ratio} | {wall} | {wall_ratio} |", flush=True)
+            extra = ""
+            for measure in (walls, cpus):
+                both = tree == "B" and None not in measure.values()
+                extra += (" — |" if measure[tree] is None else f" {measure[tree]:.1f} |") + \
+                    (f" {measure['B'] / measure['A']:.2f} |" if both else " |")
+            print(f"| {scene} | {tree} | " + " | ".join(cells) + f" | {', '.join(f'{t:.0f}' for t in columns[-3])} "
+                  f"| **{totals[tree]:.1f}** | {ratio} |{extra}", flush=True)
 
 
 if __name__ == "__main__":

@@ -12,7 +12,8 @@ With `--error`, the last frame is compared with `exact` at the same size
 Frame time here is stage time: the device time of every stage plus the host-timed
 integrand stage, as `clrays render --stats` totals it; start-up and kernel builds are
 left out (the warm-up frame builds the kernels). The wall column is the median frame's
-wall time, which adds the host's work and the device's waits for it.
+wall time, which adds the host's work and the device's waits for it; the CPU column is
+the process's CPU time per frame, every thread's.
 """
 from __future__ import annotations
 
@@ -51,20 +52,23 @@ def check_scenes(script: str, scenes: list[str]) -> None:
         sys.exit(f"{script}: scenes: no scenes/{unknown[0]}.yaml")
 
 
-def timed_frames(name: str, width: int, height: int, frames: int, after_each=None, walls: list | None = None
-                 ) -> tuple[object, list]:
+def timed_frames(name: str, width: int, height: int, frames: int, after_each=None, walls: list | None = None,
+                 cpus: list | None = None) -> tuple[object, list]:
     """(scene, results): scenes/<name>.yaml at width×height rendered from scratch (no reuse)
     once to build the kernels, then `frames` times. `after_each(timed, result)` runs after
     every frame, the warm-up one (timed False) included; `walls` gets each timed frame's
-    wall time (ms: the render call, host work and waits included)."""
+    wall time (ms: the render call, host work and waits included), `cpus` its CPU time (ms,
+    every thread of the process: what other tenants of a shared machine change least)."""
     scene = load_scene(REPO / "scenes" / f"{name}.yaml", overrides=[f"image.width={width}", f"image.height={height}"])
     renderer = Renderer(reuse=False)
     results = []
     for index in range(frames + 1):
-        start = time.perf_counter()
+        start, start_cpu = time.perf_counter(), time.process_time()
         result = renderer.render(scene)
         if index > 0 and walls is not None:
             walls.append(1000 * (time.perf_counter() - start))
+        if index > 0 and cpus is not None:
+            cpus.append(1000 * (time.process_time() - start_cpu))
         if after_each is not None:
             after_each(index > 0, result)
         if index > 0:
@@ -79,11 +83,11 @@ def main() -> None:
     width, height = (int(v) for v in args.size.split("x"))
     print(f"{width}×{height}, median of {args.frames} frames, ms; load average {os.getloadavg()[0]:.1f} at start\n")
     error_header = " | error vs exact: mean / p99 / RMSE %" if args.error else ""
-    print("| scene | " + " | ".join(STAGES) + " | total (min–max) | wall | sizes" + error_header + " |")
-    print("|---|" + "---|" * (len(STAGES) + 3 + args.error))
+    print("| scene | " + " | ".join(STAGES) + " | total (min–max) | wall | CPU | sizes" + error_header + " |")
+    print("|---|" + "---|" * (len(STAGES) + 4 + args.error))
     for name in args.scenes:
-        walls = []
-        scene, runs = timed_frames(name, width, height, args.frames, walls=walls)
+        walls, cpus = [], []
+        scene, runs = timed_frames(name, width, height, args.frames, walls=walls, cpus=cpus)
         totals = [sum(run.stage_ms.values()) for run in runs]
         cells = [f"{statistics.median(run.stage_ms.get(stage, 0.0) for run in runs):.1f}" for stage in STAGES]
         render = getattr(runs[0], "render", None)  # None: a checkout from before the sizes followed the image
@@ -100,7 +104,7 @@ def main() -> None:
             e = metrics.image_error(runs[-1].image, reference, edges if not kept else None)
             error = f" | {100 * e.mean:.2f} / {100 * e.p99:.2f} / {100 * e.rmse:.2f}{kept}"
         print(f"| {name} | " + " | ".join(cells) + f" | {statistics.median(totals):.1f} ({min(totals):.1f}–{max(totals):.1f})"
-              f" | wall {statistics.median(walls):.1f} | {sizes}{error} |", flush=True)
+              f" | wall {statistics.median(walls):.1f} | CPU {statistics.median(cpus):.1f} | {sizes}{error} |", flush=True)
 
 
 if __name__ == "__main__":
