@@ -87,7 +87,7 @@ def main() -> None:
             before_each()
 
         before_each()
-        timed_frames(name, width, height, args.frames, after_each=after_each)
+        timed_frames(name, width, height, args.frames, after_each=after_each, overrides=args.overrides)
         top = sorted(((statistics.median(v), k) for k, v in gaps.items()), reverse=True)[:3]
         cells = " | ".join(f"{statistics.median(measures[key]):.1f}" for key in ("wall", "span", "busy", "idle", "fills"))
         print(f"| {name} | {cells} | " + "; ".join(f"{k} {v:.2f}" for v, k in top) + " |", flush=True)

@@ -54,7 +54,7 @@ def main() -> None:
                 if timed:
                     per_kernel[kernel_name].append(total)
 
-        _, runs = timed_frames(name, width, height, args.frames, after_each=record)
+        _, runs = timed_frames(name, width, height, args.frames, after_each=record, overrides=args.overrides)
         totals = [sum(run.stage_ms.values()) for run in runs]
         medians = sorted(((statistics.median(v), k) for k, v in per_kernel.items()), reverse=True)
         print(f"{name}: stage total {statistics.median(totals):.1f} ms; "

@@ -5,6 +5,7 @@ after a warm-up one, for the bench scenes at one image size; prints a markdown t
     .venv/bin/python bench/stage_times.py --size 16x9
     .venv/bin/python bench/stage_times.py --size 1280x720 --frames 3 demo behind
     .venv/bin/python bench/stage_times.py --size 16x9 --error     # and the error against exact
+    .venv/bin/python bench/stage_times.py --size 320x180 --set render.sampling=pixel demo
 
 With `--error`, the last frame is compared with `exact` at the same size
 (`metrics.image_error`, depth edges excluded: relative luminance mean / p99 / RMSE, in %).
@@ -28,6 +29,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from arguments import frame_count, image_size  # noqa: E402  (bench/, beside this script)
+from clrays.errors import ClraysError  # noqa: E402
 from clrays.scene.load import load_scene  # noqa: E402
 from clrays.session import Renderer  # noqa: E402
 
@@ -42,6 +44,8 @@ def frame_arguments(description: str, size: str, frames: int) -> argparse.Argume
     parser.add_argument("--size", type=image_size, default=size, help=f"WxH (default {size})")
     parser.add_argument("--frames", type=frame_count, default=frames, help=f"timed frames per scene after the warm-up "
                                                                    f"(default {frames})")
+    parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                        help="a scene override, as `clrays render --set` (repeatable)")
     return parser
 
 
@@ -53,13 +57,18 @@ def check_scenes(script: str, scenes: list[str]) -> None:
 
 
 def timed_frames(name: str, width: int, height: int, frames: int, after_each=None, walls: list | None = None,
-                 cpus: list | None = None) -> tuple[object, list]:
+                 cpus: list | None = None, overrides: tuple = ()) -> tuple[object, list]:
     """(scene, results): scenes/<name>.yaml at width×height rendered from scratch (no reuse)
     once to build the kernels, then `frames` times. `after_each(timed, result)` runs after
     every frame, the warm-up one (timed False) included; `walls` gets each timed frame's
     wall time (ms: the render call, host work and waits included), `cpus` its CPU time (ms,
-    every thread of the process: what other tenants of a shared machine change least)."""
-    scene = load_scene(REPO / "scenes" / f"{name}.yaml", overrides=[f"image.width={width}", f"image.height={height}"])
+    every thread of the process: what other tenants of a shared machine change least).
+    `overrides`: more `--set` overrides, after the size."""
+    try:
+        scene = load_scene(REPO / "scenes" / f"{name}.yaml",
+                           overrides=[f"image.width={width}", f"image.height={height}", *overrides])
+    except ClraysError as exc:  # a bad --set: one line, no traceback
+        sys.exit(f"{Path(sys.argv[0]).name}: {exc}")
     renderer = Renderer(reuse=False)
     results = []
     for index in range(frames + 1):
@@ -81,13 +90,15 @@ def main() -> None:
     parser.add_argument("--error", action="store_true", help="also the error against exact at this size")
     args = parser.parse_args()
     width, height = (int(v) for v in args.size.split("x"))
-    print(f"{width}×{height}, median of {args.frames} frames, ms; load average {os.getloadavg()[0]:.1f} at start\n")
+    settings = f"; {', '.join(args.overrides)}" if args.overrides else ""
+    print(f"{width}×{height}{settings}, median of {args.frames} frames, ms; load average {os.getloadavg()[0]:.1f} "
+          f"at start\n")
     error_header = " | error vs exact: mean / p99 / RMSE %" if args.error else ""
     print("| scene | " + " | ".join(STAGES) + " | total (min–max) | wall | CPU | sizes" + error_header + " |")
     print("|---|" + "---|" * (len(STAGES) + 4 + args.error))
     for name in args.scenes:
         walls, cpus = [], []
-        scene, runs = timed_frames(name, width, height, args.frames, walls=walls, cpus=cpus)
+        scene, runs = timed_frames(name, width, height, args.frames, walls=walls, cpus=cpus, overrides=args.overrides)
         totals = [sum(run.stage_ms.values()) for run in runs]
         cells = [f"{statistics.median(run.stage_ms.get(stage, 0.0) for run in runs):.1f}" for stage in STAGES]
         render = getattr(runs[0], "render", None)  # None: a checkout from before the sizes followed the image

@@ -58,7 +58,7 @@ def main() -> None:
           "| (visibility + bvh) / frame |")
     print("|---|---|---|---|---|---|---|")
     for name in args.scenes:
-        _, runs = timed_frames(name, width, height, args.frames)
+        _, runs = timed_frames(name, width, height, args.frames, overrides=args.overrides)
 
         def median(stage):
             return statistics.median(run.stage_ms.get(stage, 0.0) for run in runs)
