@@ -21,7 +21,8 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 import clrays.device as device_module  # noqa: E402
-from stage_times import check_scenes, frame_arguments, timed_frames  # noqa: E402  (bench/, beside this script)
+from kernel_times import record_launches  # noqa: E402  (bench/, beside this script)
+from stage_times import check_scenes, frame_arguments, timed_frames  # noqa: E402
 
 LARGE_FILL_BYTES = 1 << 20
 
@@ -31,17 +32,8 @@ def main() -> None:
     width, height = (int(v) for v in args.size.split("x"))
     commands: list[tuple[str, object]] = []  # (name, event) in enqueue order
     fills: list[tuple[int, object]] = []  # (bytes, the event Device.fill returned)
-    kernel, fill = device_module.Device.kernel, device_module.Device.fill
-
-    def timed_kernel(self, stage, name, defines=None):
-        built = kernel(self, stage, name, defines)
-
-        def launch(*arguments, **keywords):
-            event = built(*arguments, **keywords)
-            commands.append((name, event))
-            return event
-
-        return launch
+    record_launches(commands)
+    fill = device_module.Device.fill
 
     def timed_fill(self, buffer, value, nbytes, timer=None, label="fill"):
         event = fill(self, buffer, value, nbytes, timer, label)
@@ -49,7 +41,7 @@ def main() -> None:
         fills.append((nbytes, event))
         return event
 
-    device_module.Device.kernel, device_module.Device.fill = timed_kernel, timed_fill
+    device_module.Device.fill = timed_fill
     print(f"{width}×{height}, ms per frame, median of {args.frames} frames\n")
     print("| scene | wall | first command to last | busy | idle between commands | large fills | largest gaps |")
     print("|---|---|---|---|---|---|---|")

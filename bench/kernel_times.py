@@ -22,14 +22,12 @@ import clrays.device as device_module  # noqa: E402
 from stage_times import check_scenes, frame_arguments, timed_frames  # noqa: E402  (bench/, beside this script)
 
 
-def main() -> None:
-    args = frame_arguments(__doc__.splitlines()[0], "1280x720", 5).parse_args()
-    check_scenes("kernel_times.py", args.scenes)
-    width, height = (int(v) for v in args.size.split("x"))
-    launches: list[tuple[str, object]] = []
+def record_launches(launches: list) -> None:
+    """From now on every kernel launch through `Device.kernel` appends (kernel name, its
+    event) to `launches`."""
     kernel = device_module.Device.kernel
 
-    def timed_kernel(self, stage, name, defines=None):
+    def recorded_kernel(self, stage, name, defines=None):
         built = kernel(self, stage, name, defines)
 
         def launch(*arguments, **keywords):
@@ -39,7 +37,15 @@ def main() -> None:
 
         return launch
 
-    device_module.Device.kernel = timed_kernel
+    device_module.Device.kernel = recorded_kernel
+
+
+def main() -> None:
+    args = frame_arguments(__doc__.splitlines()[0], "1280x720", 5).parse_args()
+    check_scenes("kernel_times.py", args.scenes)
+    width, height = (int(v) for v in args.size.split("x"))
+    launches: list[tuple[str, object]] = []
+    record_launches(launches)
     print(f"{width}×{height}, device ms per kernel, median of {args.frames} frames\n")
     for name in args.scenes:
         per_kernel = collections.defaultdict(list)
