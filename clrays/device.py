@@ -234,8 +234,9 @@ class Device:
     def fill(self, buffer, value: np.ndarray, nbytes: int, timer: StageTimer | None = None, label: str = "fill"):
         """The first `nbytes` of `buffer` set to `value` (a 4- or 8-byte numpy scalar) over
         and over. On a CPU device a large fill is a kernel, which every core runs (PoCL's
-        own fill runs on one thread while the others wait: a frame's cube map, 25 MB at
-        1280×720, took 4.5 ms); the tail past the last 16-byte vector is the driver's."""
+        own fill runs on one thread while the others wait, for a frame's 25 MB cube map at
+        1280×720 too: docs/design.md §4.5); the tail past the last 16-byte vector is the
+        driver's."""
         value = np.asarray(value)
         vectors = nbytes // 16 if self._spread and nbytes >= PARALLEL_FILL_BYTES else 0
         event = None
