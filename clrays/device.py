@@ -253,6 +253,13 @@ class Device:
                 timer.add(label, event)
         return event
 
+    def wait_last(self, events: list) -> None:
+        """Wait for the last of `events`, commands of this in-order queue, so for all of
+        them; none, no wait (OpenCL refuses an empty wait list: NVIDIA's driver with
+        CL_INVALID_VALUE, where PoCL returned)."""
+        if events:
+            self.cl.wait_for_events(events[-1:])
+
     def read(self, buffer, shape, dtype) -> np.ndarray:
         out = np.empty(shape, dtype=dtype)
         self.cl.enqueue_copy(self.queue, out, buffer).wait()

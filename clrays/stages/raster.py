@@ -57,7 +57,7 @@ def raster_passes(device: Device, program: str, name: str, defines: dict | None,
     counts = [np.empty(1, np.uint32) for _ in lists]
     reads = [device.cl.enqueue_copy(device.queue, listed, big_count, is_blocking=False)
              for listed, (big_count, _) in zip(counts, lists)]
-    device.cl.wait_for_events(reads[-1:])
+    device.wait_last(reads)
     rows_pass = device.kernel(program, f"{name}_rows", defines)
     for view_index, height, listed, (_, big) in zip(view_indices, view_heights, counts, lists):
         if listed[0]:

@@ -231,10 +231,10 @@ def _bound_passes(device: Device, inputs: FrameInputs, first: int, bound, writer
             np.int32(mode), view_rects))
     listed = {view: np.empty(1, np.int32) for view in drawn}
     reads = [device.cl.enqueue_copy(device.queue, listed[view], big[view][1], is_blocking=False) for view in drawn]
-    device.cl.wait_for_events(reads[-1:])
+    device.wait_last(reads)
     items = {view: np.empty((int(listed[view][0]), 4), np.int32) for view in drawn if listed[view][0]}
     reads = [device.cl.enqueue_copy(device.queue, items[view], big[view][0], is_blocking=False) for view in items]
-    device.cl.wait_for_events(reads[-1:])
+    device.wait_last(reads)
     for view, listed_items in items.items():
         ordered = device.buffer(nearest_first(listed_items, inputs, view), writable=False)  # (copied, no wait)
         timer.add("visibility", split_pass(
