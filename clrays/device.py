@@ -255,8 +255,7 @@ class Device:
 
     def wait_last(self, events: list) -> None:
         """Wait for the last of `events`, commands of this in-order queue, so for all of
-        them; none, no wait (OpenCL refuses an empty wait list: NVIDIA's driver with
-        CL_INVALID_VALUE, where PoCL returned)."""
+        them; none, no wait (OpenCL refuses an empty wait list with CL_INVALID_VALUE)."""
         if events:
             self.cl.wait_for_events(events[-1:])
 
