@@ -111,6 +111,9 @@ class ShadowMap:
     texels: int
     triangles: int  # scene triangles: with none, the map is empty without looking
     empty: bool | None = None  # nothing rasterized: filled in by `map_is_empty` when first asked
+    # raster_any's flag on its way to the host: (the host array, the read's event), or None
+    # where the map is empty without looking
+    flag: tuple | None = None
 
 
 def raster_shadow_map(device: Device, buffers: FrameBuffers, light_index: int, timer: StageTimer) -> ShadowMap:
@@ -133,20 +136,30 @@ def raster_shadow_map(device: Device, buffers: FrameBuffers, light_index: int, t
     _rasterize(device, light_buffers, drawn, centre, 1, depth, timer)
     for view_index in drawn:
         reliefs.map("relief_map_depth", None, light_buffers.views, inputs.views, view_index, centre, 1, (depth,))
-    return ShadowMap(depth, inputs.shadow_texels, inputs.scene.geometry.count)
+    shadow_map = ShadowMap(depth, inputs.shadow_texels, inputs.scene.geometry.count)
+    if shadow_map.triangles and shadow_map.texels:
+        # Whether the map is empty, asked now and read when map_is_empty needs it: the host
+        # does the next stages' set-up while the device answers (it waited for the flag,
+        # then built the epipolar frame, the device idle meanwhile).
+        flag = device.buffer(np.zeros(1, np.uint32))
+        device.kernel("raster", "raster_any")(device.queue, (-(-texels // structs.RASTER_ANY_TEXELS),), None, depth,
+                                              np.int32(shadow_map.texels), flag)
+        seen = np.zeros(1, np.uint32)
+        shadow_map.flag = (seen, device.cl.enqueue_copy(device.queue, seen, flag, is_blocking=False))
+    return shadow_map
 
 
 def map_is_empty(device: Device, shadow_map: ShadowMap) -> bool:
-    """Whether nothing at all was rasterized into a light's map (asked once, on the device:
-    the host reads a flag, not the map)."""
+    """Whether nothing at all was rasterized into a light's map (asked on the device when
+    the map was drawn: the host reads a flag, not the map)."""
     if shadow_map.empty is None:
-        if shadow_map.triangles == 0 or shadow_map.texels == 0:
+        if shadow_map.flag is None:  # no triangle or no texel
             shadow_map.empty = True
         else:
-            flag = device.buffer(np.zeros(1, np.uint32))
-            device.kernel("raster", "raster_any")(device.queue, (-(-shadow_map.texels // structs.RASTER_ANY_TEXELS),),
-                                                  None, shadow_map.depth, np.int32(shadow_map.texels), flag)
-            shadow_map.empty = not device.read(flag, 1, np.uint32)[0]
+            seen, read = shadow_map.flag
+            read.wait()
+            shadow_map.empty = not seen[0]
+            shadow_map.flag = None
     return shadow_map.empty
 
 
