@@ -365,15 +365,11 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
         float y_corner = (1.0f - 2.0f * (float)(ty + corner_y) * inverse_height) * view->scale_y;
         float row_plane = plane - n_view.y * y_corner;
         for (int tx = first; tx <= last; ++tx) {
-            if (masked) { /* on to the next texel read: a camera sample reads few of a face's */
+            if (masked) {
                 int at = mask_offset + view->depth_offset + ty * view->width + tx;
                 uint bits = read_mask[at >> 5] >> (at & 31); /* this texel's and the next ones in its word */
-                if (bits == 0u) { /* none read to the word's end */
-                    tx += 31 - (at & 31);
-                    continue;
-                }
-                tx += __builtin_ctz(bits);
-                if (tx > last) break;
+                if (bits == 0u) tx += 31 - (at & 31); /* none read to the word's end */
+                if (!(bits & 1u)) continue;
             }
             note_writer(writer + view->depth_offset + ty * view->width + tx, tri);
             note_touching(touching_head + view->depth_offset + ty * view->width + tx, tri, touching, touching_count,
