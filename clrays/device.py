@@ -253,11 +253,17 @@ class Device:
                 timer.add(label, event)
         return event
 
-    def wait_last(self, events: list) -> None:
-        """Wait for the last of `events`, commands of this in-order queue, so for all of
-        them; none, no wait (OpenCL refuses an empty wait list with CL_INVALID_VALUE)."""
+    def read_all(self, reads: list[tuple[object, tuple | int]], dtype) -> list[np.ndarray]:
+        """Several buffers read at once, `reads` as (buffer, shape) pairs, with one wait for
+        the last (this queue is in order, so the others are done then): the host waits once,
+        not once per buffer. No read, no wait (OpenCL refuses an empty wait list with
+        CL_INVALID_VALUE)."""
+        arrays = [np.empty(shape, dtype=dtype) for _, shape in reads]
+        events = [self.cl.enqueue_copy(self.queue, array, buffer, is_blocking=False)
+                  for array, (buffer, _) in zip(arrays, reads)]
         if events:
             self.cl.wait_for_events(events[-1:])
+        return arrays
 
     def read(self, buffer, shape, dtype) -> np.ndarray:
         out = np.empty(shape, dtype=dtype)

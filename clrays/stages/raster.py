@@ -54,10 +54,7 @@ def raster_passes(device: Device, program: str, name: str, defines: dict | None,
         lists.append((device.buffer(np.zeros(1, np.uint32)), device.buffer(nbytes=12 * capacity)))
         timer.add(stage, first_pass(device.queue, (count,), None, vertices, np.int32(count), views,
                                     np.int32(view_index), offsets, np.int32(sample_count), *lists[-1], *target))
-    counts = [np.empty(1, np.uint32) for _ in lists]
-    reads = [device.cl.enqueue_copy(device.queue, listed, big_count, is_blocking=False)
-             for listed, (big_count, _) in zip(counts, lists)]
-    device.wait_last(reads)
+    counts = device.read_all([(big_count, 1) for big_count, _ in lists], np.uint32)
     rows_pass = device.kernel(program, f"{name}_rows", defines)
     for view_index, height, listed, (_, big) in zip(view_indices, view_heights, counts, lists):
         if listed[0]:

@@ -146,7 +146,7 @@ def epipole_sin(scene, light) -> float:
     line follow. 0 for a directional light, whose radiance has no such growth."""
     if isinstance(light, DirectionalLight):
         return 0.0
-    pixel = 2.0 * np.tan(np.radians(scene.camera.fov_deg) / 2) / scene.image.height
+    pixel = 2.0 * half_extents(scene.camera, scene.image)[1] / scene.image.height
     return float(np.sin(np.arctan(EPIPOLE_WALK_PIXELS * pixel)))
 
 

@@ -229,13 +229,10 @@ def _bound_passes(device: Device, inputs: FrameInputs, first: int, bound, writer
             device.queue, (count,), None, vertices, np.int32(count), views, np.int32(view), np.int32(1), bound,
             writer, masked, read_mask, np.int32(first), *lists, np.int32(BOUND_SMALL_ROWS), *big[view],
             np.int32(mode), view_rects))
-    listed = {view: np.empty(1, np.int32) for view in drawn}
-    reads = [device.cl.enqueue_copy(device.queue, listed[view], big[view][1], is_blocking=False) for view in drawn]
-    device.wait_last(reads)
-    items = {view: np.empty((int(listed[view][0]), 4), np.int32) for view in drawn if listed[view][0]}
-    reads = [device.cl.enqueue_copy(device.queue, items[view], big[view][0], is_blocking=False) for view in items]
-    device.wait_last(reads)
-    for view, listed_items in items.items():
+    listed = dict(zip(drawn, device.read_all([(big[view][1], 1) for view in drawn], np.int32)))
+    views_listed = [view for view in drawn if listed[view][0]]
+    items = device.read_all([(big[view][0], (int(listed[view][0]), 4)) for view in views_listed], np.int32)
+    for view, listed_items in zip(views_listed, items):
         ordered = device.buffer(nearest_first(listed_items, inputs, view), writable=False)  # (copied, no wait)
         timer.add("visibility", split_pass(
             device.queue, (len(listed_items), BOUND_ROW_SPLIT), None, vertices, views, np.int32(view), np.int32(1),
@@ -277,10 +274,11 @@ def ray_lists(device: Device, buffers: FrameBuffers, prepared: Prepared, ray_ent
 
 
 def nearest_first(items: np.ndarray, inputs: FrameInputs, view: int) -> np.ndarray:
-    """The split pass's list (rows of item, rows, texels) ordered by the distance of each item's centroid
-    from the view (orthographic: its depth), nearest first. The result is the same in any
-    order; in this one a far floor under nearer triangles mostly finds their bounds already
-    below its own nearest depth and skips its texel maths (bound_triangle's floor_bits)."""
+    """The split pass's list (rows of item, rows, texels) ordered by the distance of each
+    item's centroid from the view (orthographic: its depth), nearest first. The result is
+    the same in any order; in this one a far floor under nearer triangles mostly finds
+    their bounds already below its own nearest depth and skips its texel maths
+    (bound_triangle's floor_bits)."""
     centroids = inputs.tri_vertices[:, :3].reshape(-1, 3, 3)[items[:, 0]].astype(np.float64).mean(axis=1)
     centroids -= np.asarray(inputs.views[view]["origin"][:3], np.float64)
     if inputs.views[view]["projection"] == structs.PROJECTION_PERSPECTIVE:
