@@ -190,12 +190,11 @@ def test_a_partial_last_vector_of_camera_samples(renderer, light):
 
 def _epipole_pixel(scene):
     """(column, row) of the light's projection, pixel units, for a camera like CAMERA."""
-    from clrays.scene.camera import camera_basis
+    from clrays.scene.camera import camera_basis, half_extents
 
     right, up, forward = camera_basis(scene.camera)
     to_light = scene.lights[0].position - scene.camera.position
-    tan_y = np.tan(np.radians(scene.camera.fov_deg) / 2)
-    tan_x = tan_y * scene.image.width / scene.image.height
+    tan_x, tan_y = half_extents(scene.camera, scene.image)
     z = to_light @ forward
     return ((to_light @ right / (z * tan_x) + 1) * scene.image.width / 2,
             (1 - to_light @ up / (z * tan_y)) * scene.image.height / 2)
