@@ -25,6 +25,8 @@ def test_the_order_is_a_permutation_that_keeps_neighbours_together():
     def mean_step(triangles):  # distance between consecutive triangles' centroids
         return np.linalg.norm(np.diff(triangles.mean(axis=1), axis=0), axis=1).mean()
 
+    # measured: 1.01 cells between neighbours in Morton order, 16.5 shuffled (0.06 of it); a
+    # row-by-row order would give about 1, a random one about a third of the grid's side
     assert mean_step(shuffled[order]) < 0.15 * mean_step(shuffled)
 
 
