@@ -13,9 +13,10 @@
  *                 between them), then interpolate the rest between the computed samples
  *                 either side (no break lies between them)
  *   gather        per camera sample: interpolate each of its two slices at its β when
- *                 the samples there match its distance and unshadowed weight and each
- *                 other's radiance, blending the two slices as traverse does; flag it
- *                 for fix_up where a slice cannot
+ *                 the samples there match its distance (or, both slices standing, the
+ *                 blend of their distances does) and unshadowed weight and each other's
+ *                 radiance, blending the two slices as traverse does; flag it for fix_up
+ *                 where a slice cannot
  *   fixup_count,  per block of camera samples: count the flagged ones, then list them
  *   fixup_list    (offsets: the counts' prefix sums, from the host)
  *   fix_up        per listed camera sample: walk those rows for the sample itself
@@ -375,23 +376,24 @@ ALWAYS_INLINE void slices_around_lanes(global const epipolar_t* ep, float_lanes 
     }
 }
 
-/* Whether slice i interpolates at a camera sample (own line value (own_distance,
- * own_weight), pseudo-angle q), per lane (-1: it does): the two line samples either side
- * of its q match it (distance, and for a spot light, whose cone's silhouette runs along
- * the slices and so can pass between a camera sample and its lines, the unshadowed
- * weight), their weights do not break, and their radiances agree; then (r, g, b) is the
- * straight line between them over `scale` (radiance_scale), else 0. Otherwise (an edge
- * lies between them, the camera sample is off both lines' surfaces, a shadow's edge
- * crosses the line, the light's own radiance jumps: its cone, the epipole), or where
- * `walk` says so, the fix-up walks the row for the camera sample. Taking the one sample on its side of an edge
- * instead was tried: it ignores the change in β between them, and failed the opaque-fog
- * closed form of tests/methods/test_stability.py (0.83 % against its 0.1 %). */
-ALWAYS_INLINE int_lanes slice_interpolates(global const float* ranges, global const float* line,
-                                           global const float* radiance, int n, global const int* lengths,
-                                           float threshold, int_lanes i,
-                                           float_lanes q, float_lanes scale, float_lanes own_distance,
-                                           float_lanes own_weight, int_lanes walk, float_lanes* r, float_lanes* g,
-                                           float_lanes* b)
+/* What slice i offers a camera sample (its unshadowed weight own_weight, its pseudo-angle
+ * q), per lane: the straight line between the two line samples either side
+ * of its q, in (r, g, b) (still times radiance_scale); the distance on that line in
+ * `between`; and whether the line may stand for the sample (-1), from the line alone: the
+ * slice is on the screen, its two samples' weights do not break, their radiances agree,
+ * and for a spot light, whose cone's silhouette runs along the slices and so can pass
+ * between a camera sample and its lines, the unshadowed weight there matches the sample's.
+ * Whether the sample lies on the surface the line sees is gather's test (the distances).
+ * Where the line cannot stand for it (an edge lies between them, a shadow's edge crosses
+ * the line, the light's own radiance jumps: its cone, the epipole), or where `walk` says
+ * so, the fix-up walks the row for the camera sample. Taking the one sample on its side
+ * of an edge instead was tried: it ignores the change in β between them, and failed the
+ * opaque-fog closed form of tests/methods/test_stability.py (0.83 % against its 0.1 %). */
+ALWAYS_INLINE int_lanes slice_line(global const float* ranges, global const float* line,
+                                   global const float* radiance, int n, global const int* lengths, float threshold,
+                                   int_lanes i, float_lanes q, float_lanes own_weight,
+                                   int_lanes walk, float_lanes* between, float_lanes* r, float_lanes* g,
+                                   float_lanes* b)
 {
     float_lanes lo = LOAD_LANES(ranges, 2 * i), hi = LOAD_LANES(ranges, 2 * i + 1);
     float_lanes clamped = fmin_lanes(fmax_lanes((q - lo) / (hi - lo), (float_lanes)(0.0f)), (float_lanes)(1.0f));
@@ -405,21 +407,26 @@ ALWAYS_INLINE int_lanes slice_interpolates(global const float* ranges, global co
     float_lanes ra = LOAD_LANES(radiance, 4 * at), ga = LOAD_LANES(radiance, 4 * at + 1);
     float_lanes ba = LOAD_LANES(radiance, 4 * at + 2), rb = LOAD_LANES(radiance, 4 * at + 4);
     float_lanes gb = LOAD_LANES(radiance, 4 * at + 5), bb = LOAD_LANES(radiance, 4 * at + 6);
-    float_lanes between_distance = mix_lanes(a_distance, b_distance, s);
+    *between = mix_lanes(a_distance, b_distance, s);
     /* not a spot light (own_weight < 0): the weight is not compared */
     float_lanes between_weight = own_weight < 0.0f ? own_weight : mix_lanes(a_weight, b_weight, s);
     float_lanes luminance_a = luminance_lanes(ra, ga, ba), luminance_b = luminance_lanes(rb, gb, bb);
-    int_lanes interpolates =
+    int_lanes stands =
         ~walk & !(a_distance < 0.0f) /* the slice misses the screen */
         & !(fabs_lanes(a_weight - b_weight) > threshold * fmax_lanes(fabs_lanes(a_weight), fabs_lanes(b_weight)))
-        & (fabs_lanes(between_distance - own_distance) <= threshold * own_distance)
         & (fabs_lanes(between_weight - own_weight)
            <= threshold * fmax_lanes(fabs_lanes(between_weight), fabs_lanes(own_weight)))
         & !(fabs_lanes(luminance_a - luminance_b) > threshold * fmax_lanes(luminance_a, luminance_b));
-    *r = interpolates ? mix_lanes(ra, rb, s) / scale : 0.0f;
-    *g = interpolates ? mix_lanes(ga, gb, s) / scale : 0.0f;
-    *b = interpolates ? mix_lanes(ba, bb, s) / scale : 0.0f;
-    return interpolates;
+    *r = mix_lanes(ra, rb, s);
+    *g = mix_lanes(ga, gb, s);
+    *b = mix_lanes(ba, bb, s);
+    return stands;
+}
+
+/* Whether a distance on a line is the camera sample's own, within `threshold` of it. */
+ALWAYS_INLINE int_lanes same_distance(float_lanes between, float_lanes own, float threshold)
+{
+    return fabs_lanes(between - own) <= threshold * own;
 }
 
 /* A camera sample's direction, distance, two nearest slices and their weight, as fix_up
@@ -469,14 +476,26 @@ kernel void gather(global const frame_t* frame, global const view_t* views, glob
     /* Within epipole_sin of the epipole the radiance grows as 1/sin β faster than a line's
      * samples follow, and the pixels there are the frame's brightest: they walk their rays. */
     int_lanes beside_epipole = (cos_beta > 0.0f) & (sin_beta < epipole_sin);
-    float_lanes r0, g0, b0, r1, g1, b1;
-    int_lanes from0 = slice_interpolates((global const float*)ranges, (global const float*)line,
-                                         (global const float*)radiance, n, lengths, threshold, i0, q, scale, distance,
-                                         own_weight, beside_epipole, &r0, &g0, &b0);
-    int_lanes from1 = slice_interpolates((global const float*)ranges, (global const float*)line,
-                                         (global const float*)radiance, n, lengths, threshold, i1, q, scale, distance,
-                                         own_weight, beside_epipole, &r1, &g1, &b1);
-    float_lanes red = (1.0f - t) * r0 + t * r1, green = (1.0f - t) * g0 + t * g1, blue = (1.0f - t) * b0 + t * b1;
+    float_lanes r0, g0, b0, r1, g1, b1, between0, between1;
+    int_lanes stands0 = slice_line((global const float*)ranges, (global const float*)line,
+                                   (global const float*)radiance, n, lengths, threshold, i0, q, own_weight,
+                                   beside_epipole, &between0, &r0, &g0, &b0);
+    int_lanes stands1 = slice_line((global const float*)ranges, (global const float*)line,
+                                   (global const float*)radiance, n, lengths, threshold, i1, q, own_weight,
+                                   beside_epipole, &between1, &r1, &g1, &b1);
+    /* A slice interpolates where its line sees the sample's own surface there; or where
+     * both lines stand, see one surface (their distances within 4 × the threshold) and the
+     * sample's distance is theirs blended as their radiances are: a surface seen at a
+     * grazing angle changes its distance across the slices, and the blend follows it where
+     * each line alone is a few percent off (docs/design.md §4.5, "A surface at a grazing
+     * angle"). */
+    int_lanes blended = stands0 & stands1 & same_distance((1.0f - t) * between0 + t * between1, distance, threshold)
+                        & same_distance(between0, between1, 4.0f * threshold);
+    int_lanes from0 = stands0 & (same_distance(between0, distance, threshold) | blended);
+    int_lanes from1 = stands1 & (same_distance(between1, distance, threshold) | blended);
+    float_lanes w0 = from0 ? 1.0f - t : 0.0f, w1 = from1 ? t : 0.0f; /* the slices' weights, as traverse's */
+    float_lanes red = (w0 * r0 + w1 * r1) / scale, green = (w0 * g0 + w1 * g1) / scale;
+    float_lanes blue = (w0 * b0 + w1 * b1) / scale;
     int_lanes flags = (from0 ? 0 : 1) | (from1 ? 0 : 2);
     /* Through private arrays, not red[k]: NVIDIA's compiler emits invalid PTX (a `selp` of
      * mismatched operands) for a lane picked by a loop index and narrowed to uchar. */

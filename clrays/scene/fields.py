@@ -307,7 +307,8 @@ RENDER = Section("render", (
     Field("refine_threshold", "number", Render.refine_threshold, 0.0, 1.0,
           notes="`sampling: epipolar`: neighbouring line samples whose camera distance or unshadowed "
                 "in-scattering differ by more than this fraction are a break, computed both; a pixel whose "
-                "distance differs this much from its line samples' walks its own rays", read_by=("minmax",)),
+                "distance differs this much from its line samples' (and from the blend of its two lines', where "
+                "those two agree) walks its own rays", read_by=("minmax",)),
     Field("relief", "string", Render.relief, choices=RELIEF_MODES,
           notes="how relief objects reach the depth maps: `prewarp` warps each relief's depth image for "
                 "every view and maps it onto its base rectangle, `triangles` rasterizes its height-field "

@@ -57,6 +57,22 @@ def test_interpolation_matches_the_walk_across_depth_breaks(renderer, occluder):
     assert error.rmse < RMSE_TOLERANCE and error.p99 < P99_TOLERANCE, error
 
 
+def test_a_floor_at_a_grazing_angle_is_interpolated(renderer):
+    """A floor out to the horizon under a light, 128 slices at 320×180 (a slice every few
+    pixels, as 1024 are at 1280×720): the floor's distance changes across the slices, a
+    pixel's by more than the threshold from either line's, and gather follows it with the
+    blend of the two lines' distances instead of walking. Measured: 33 % of the camera
+    samples fixed up (46 % when each line alone had to match), relative RMSE 0.08 % and p99
+    1.7 % against the walk."""
+    light = PointLight(v3(0.0, 6.0, -4.0), np.full(3, 80.0))
+    scene = make_scene(grid_plane(0.0, 60.0, 4), [light], width=320, height=180, far=40.0, sigma_s=0.08,
+                       sigma_a=0.02, albedo=0.0, slices=128, position=(0.0, 1.0, 10.0), look_at=(0.0, 0.6, 0.0),
+                       fov_deg=60.0)
+    error, epipolar = _error(renderer, scene)
+    assert epipolar.samples.fixed_up < 0.4 * 320 * 180, epipolar.samples
+    assert error.rmse < RMSE_TOLERANCE and error.p99 < P99_TOLERANCE, error
+
+
 CAMERA = dict(position=(0.0, 2.0, 8.0), look_at=(0.0, 1.5, 0.0), fov_deg=50.0)
 EPIPOLES = {  # where the light projects, for the camera above
     "in view": v3(0.3, 3.5, 0.0),
