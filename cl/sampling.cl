@@ -380,9 +380,11 @@ ALWAYS_INLINE void slices_around_lanes(global const epipolar_t* ep, float_lanes 
  * q), per lane: the straight line between the two line samples either side
  * of its q, in (r, g, b) (still times radiance_scale); the distance on that line in
  * `between`; and whether the line may stand for the sample (-1), from the line alone: the
- * slice is on the screen, its two samples' weights do not break, their radiances agree,
- * and for a spot light, whose cone's silhouette runs along the slices and so can pass
- * between a camera sample and its lines, the unshadowed weight there matches the sample's.
+ * slice is on the screen, its two samples' radiances agree, and for a spot light, whose
+ * cone's silhouette runs along the slices and so can pass between a camera sample and its
+ * lines, their weights do not break and the weight between them matches the sample's. (A
+ * point or directional light's weights differ where the distances do, which gather
+ * weighs; docs/design.md §4.5, "Back to camera samples".)
  * Whether the sample lies on the surface the line sees is gather's test (the distances).
  * Where the line cannot stand for it (an edge lies between them, a shadow's edge crosses
  * the line, the light's own radiance jumps: its cone, the epipole), or where `walk` says
@@ -413,7 +415,8 @@ ALWAYS_INLINE int_lanes slice_line(global const float* ranges, global const floa
     float_lanes luminance_a = luminance_lanes(ra, ga, ba), luminance_b = luminance_lanes(rb, gb, bb);
     int_lanes stands =
         ~walk & !(a_distance < 0.0f) /* the slice misses the screen */
-        & !(fabs_lanes(a_weight - b_weight) > threshold * fmax_lanes(fabs_lanes(a_weight), fabs_lanes(b_weight)))
+        & !((own_weight >= 0.0f)
+            & (fabs_lanes(a_weight - b_weight) > threshold * fmax_lanes(fabs_lanes(a_weight), fabs_lanes(b_weight))))
         & (fabs_lanes(between_weight - own_weight)
            <= threshold * fmax_lanes(fabs_lanes(between_weight), fabs_lanes(own_weight)))
         & !(fabs_lanes(luminance_a - luminance_b) > threshold * fmax_lanes(luminance_a, luminance_b));
