@@ -67,26 +67,25 @@ def line_ranges(scene, params: np.ndarray) -> np.ndarray:
         directions = directions / np.linalg.norm(directions, axis=-1, keepdims=True)
         return np.arccos(np.clip(directions @ axis, -1.0, 1.0))
 
-    betas = []  # (slices, k) candidates, NaN where absent
-    for alpha in (centres - step, centres, centres + step):
-        normal = np.outer(np.cos(alpha), w) - np.outer(np.sin(alpha), u)  # the slice's plane
-        side = np.outer(np.cos(alpha), u) + np.outer(np.sin(alpha), w)  # its half
-        a, b, c = normal @ forward, tan_x * (normal @ right), tan_y * (normal @ up)  # a + b·sx + c·sy = 0
-        with np.errstate(divide="ignore", invalid="ignore"):
-            edges = [(np.full(slices, edge), -(a + b * edge) / c) for edge in (-1.0, 1.0)]
-            edges += [(-(a + c * edge) / b, np.full(slices, edge)) for edge in (-1.0, 1.0)]
-        for sx, sy in edges:
-            inside = (np.abs(sx) <= 1.0 + 1e-6) & (np.abs(sy) <= 1.0 + 1e-6)
-            directions = screen_direction(np.where(inside, sx, 0.0), np.where(inside, sy, 0.0))
-            on_half = np.einsum("ij,ij->i", directions, side) > 0
-            betas.append(np.where(inside & on_half, beta_of(directions), np.nan))
+    # The centre lines of each slice and of its two neighbours, (3, slices), where they
+    # cross the screen's four edges (a + b·sx + c·sy = 0 on the slice's plane), all at once.
+    alpha = np.stack([centres - step, centres, centres + step])
+    normal = np.multiply.outer(np.cos(alpha), w) - np.multiply.outer(np.sin(alpha), u)  # the slice's plane
+    side = np.multiply.outer(np.cos(alpha), u) + np.multiply.outer(np.sin(alpha), w)  # its half
+    a, b, c = normal @ forward, tan_x * (normal @ right), tan_y * (normal @ up)
+    edge = np.array([-1.0, 1.0])[:, None, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sx = np.concatenate([np.broadcast_to(edge, (2, *a.shape)), -(a + c * edge) / b])  # (4, 3, slices)
+        sy = np.concatenate([-(a + b * edge) / c, np.broadcast_to(edge, (2, *a.shape))])
+    inside = (np.abs(sx) <= 1.0 + 1e-6) & (np.abs(sy) <= 1.0 + 1e-6)
+    directions = screen_direction(np.where(inside, sx, 0.0), np.where(inside, sy, 0.0))
+    on_half = np.einsum("...j,...j->...", directions, side) > 0
+    betas = np.where(inside & on_half, beta_of(directions), np.nan).reshape(12, slices).T  # NaN: absent
     corners = np.array([(-1, -1), (-1, 1), (1, -1), (1, 1)], dtype=float)
     corner_dirs = screen_direction(corners[:, 0], corners[:, 1])
     corner_alpha = np.arctan2(corner_dirs @ w, corner_dirs @ u)
-    for corner_beta, alpha in zip(beta_of(corner_dirs), corner_alpha):
-        near = np.abs((alpha - centres + np.pi) % (2 * np.pi) - np.pi) < step
-        betas.append(np.where(near, corner_beta, np.nan))
-    betas = np.stack(betas, axis=1)
+    near = np.abs((corner_alpha[:, None] - centres + np.pi) % (2 * np.pi) - np.pi) < step  # (4, slices)
+    betas = np.concatenate([betas, np.where(near, beta_of(corner_dirs)[:, None], np.nan).T], axis=1)
     lo = np.min(np.where(np.isnan(betas), np.inf, betas), axis=1)
     hi = np.max(np.where(np.isnan(betas), -np.inf, betas), axis=1)
     epipole, anti_epipole = poles_on_screen(scene, axis)
