@@ -445,13 +445,14 @@ inline float3 gather_ray(global const frame_t* frame, global const view_t* views
 }
 
 /* Per LANES camera samples: add each of its two slices' interpolated radiance,
- * weighted as traverse blends them; flag the sample in `fixup_flags` (a bit per slice)
+ * weighted as traverse blends them, to `scatter` (with `overwrite`, write it there: the
+ * first light's, into a buffer not cleared); flag the sample in `fixup_flags` (a bit per slice)
  * for fix_up where a slice cannot interpolate. No walk and no atomic here: vector
  * arithmetic, a load per lane where the lanes read different slices. */
 kernel void gather(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                    global const epipolar_t* ep, global const uint* camera_depth, global const float2* offsets,
                    global const float2* ranges, global const float2* line, global const float4* radiance, int n,
-                   global const int* lengths, float threshold, float epipole_sin, int samples,
+                   global const int* lengths, float threshold, float epipole_sin, int samples, int overwrite,
                    global float4* scatter, global uchar* fixup_flags)
 {
     int first = get_global_id(0) * LANES;
@@ -509,7 +510,8 @@ kernel void gather(global const frame_t* frame, global const view_t* views, glob
     vstore8(blue, 0, blues);
     vstore8(flags, 0, flag);
     for (int k = 0; k < LANES && first + k < samples; ++k) {
-        scatter[first + k] += (float4)(reds[k], greens[k], blues[k], 0.0f);
+        float4 interpolated = (float4)(reds[k], greens[k], blues[k], 0.0f);
+        scatter[first + k] = overwrite ? interpolated : scatter[first + k] + interpolated;
         fixup_flags[first + k] = (uchar)flag[k];
     }
 }

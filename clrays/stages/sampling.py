@@ -170,9 +170,10 @@ FIXUP_BLOCK = 1024
 
 
 def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterResult, epipolar: Epipolar,
-                      integrand: DeviceIntegrand, scatter, timer: StageTimer,
+                      integrand: DeviceIntegrand, scatter, overwrite: bool, timer: StageTimer,
                       texture: TextureTables | None = None, layers=None) -> SampleCounts:
-    """Add one light's in-scattered radiance into `scatter` (float4 per camera sample);
+    """Add one light's in-scattered radiance into `scatter` (float4 per camera sample), or
+    with `overwrite` write it there (gather writes every sample: no clear needed before);
     `texture`: the light's texture tables (stage light_texture; None: an untextured light);
     `layers`: its rectified translucent layers (stage translucency; None: an opaque-only scene),
     which the kernels that walk rows take last."""
@@ -212,7 +213,7 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
     fixup_flags = device.buffer(nbytes=samples)  # per camera sample: a bit per slice fix_up walks
     run("gather", (-(-samples // LANES),), None, buffers.params, buffers.views, buffers.lights,
         epipolar.buffer, rastered.camera_depth, buffers.offsets, ranges_buffer, line, radiance, n32, lengths, threshold,
-        np.float32(epipole_sin(inputs.scene, light)), np.int32(samples), scatter, fixup_flags)
+        np.float32(epipole_sin(inputs.scene, light)), np.int32(samples), np.int32(overwrite), scatter, fixup_flags)
     fixups, fixed_up = fixup_list(device, fixup_flags, samples, run)
     computed = int(device.read(counts, 2, np.uint32)[0])
     if fixed_up:

@@ -73,6 +73,24 @@ def test_a_floor_at_a_grazing_angle_is_interpolated(renderer):
     assert error.rmse < RMSE_TOLERANCE and error.p99 < P99_TOLERANCE, error
 
 
+def test_lights_add_after_the_first_writes(renderer):
+    """The in-scattering buffer is not cleared before epipolar sampling's gather, which
+    writes every sample of the first light it takes; a second light adds to it. Two lights
+    together give what each gives alone, summed (surfaces black: the in-scattering alone),
+    on a frame rendered after a brighter one, whose values a buffer left as it was would
+    keep."""
+    second = SpotLight(v3(-2.0, 4.5, 1.0), np.array([0.3, -1.0, -0.2]) / np.linalg.norm([0.3, -1.0, -0.2]), 40.0,
+                       np.full(3, 50.0))
+    first, other = (_shafts(light, width=97, height=61) for light in (POINT, second))
+    both = replace(first, lights=(POINT, second))
+    renderer.render(_shafts(PointLight(v3(0.3, 5.0, -0.5), np.full(3, 6000.0)), width=97, height=61), "minmax",
+                    reuse=False)  # a brighter frame first
+    together = renderer.render(both, "minmax", reuse=False).image
+    alone = sum(renderer.render(scene, "minmax", reuse=False).image for scene in (first, other))
+    assert np.all(alone > 0.0)
+    assert np.max(np.abs(together - alone) / alone) < 1e-5  # measured: float rounding
+
+
 CAMERA = dict(position=(0.0, 2.0, 8.0), look_at=(0.0, 1.5, 0.0), fov_deg=50.0)
 EPIPOLES = {  # where the light projects, for the camera above
     "in view": v3(0.3, 3.5, 0.0),
