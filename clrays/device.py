@@ -269,3 +269,15 @@ class Device:
         out = np.empty(shape, dtype=dtype)
         self.cl.enqueue_copy(self.queue, out, buffer).wait()
         return out
+
+    def read_in_place(self, buffer, shape, dtype) -> np.ndarray:
+        """A buffer the frame is done with, as an array: on a CPU device the buffer's own
+        memory, mapped, which is the host's (no copy: a 1280×720 image's 14.7 MB took
+        3–5 ms to copy, and its fresh pages to fault in); on another device a read. The
+        buffer lives as long as the array."""
+        if not self._spread:
+            return self.read(buffer, shape, dtype)
+        flags = self.cl.map_flags.READ | self.cl.map_flags.WRITE  # (the caller may write to its image)
+        array, event = self.cl.enqueue_map_buffer(self.queue, buffer, flags, 0, shape, dtype)
+        event.wait()
+        return array

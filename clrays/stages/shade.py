@@ -41,4 +41,4 @@ def shade(device: Device, buffers: FrameBuffers, rastered: RasterResult, scatter
         rastered.camera_depth, rastered.tri_id, buffers.tri_vertices, buffers.tri_normal, buffers.tri_vertex_normals,
         buffers.tri_albedo, buffers.offsets, scatter, visible, buffers.light_textures, buffers.texels, out, *extra)
     timer.add("shade", event)
-    return device.read(out, (image.height, image.width, 4), np.float32)[..., :3]
+    return device.read_in_place(out, (image.height, image.width, 4), np.float32)[..., :3]

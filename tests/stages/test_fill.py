@@ -38,3 +38,18 @@ def test_a_large_fill_on_a_cpu_device_runs_on_every_core(device):
     finally:
         del device.kernel
     assert kernels == ["fill_vectors"]
+
+
+def test_a_buffer_read_in_place_holds_what_a_read_gives(device):
+    """Device.read_in_place (shade's image): on a CPU device the buffer's memory mapped, not
+    copied, the same values as a read, after a kernel wrote them, and writable."""
+    values = np.random.default_rng(7).random((6, 5, 4), dtype=np.float32)
+    buffer = device.buffer(values)
+    device.fill(buffer, np.float32(0.5), 16 * 5)  # the first row, by the device, before the read
+    expected = values.copy()
+    expected[0] = 0.5
+    image = device.read_in_place(buffer, (6, 5, 4), np.float32)
+    np.testing.assert_array_equal(image, expected)
+    image[..., :3] *= 2.0  # a caller's own use of its image
+    if device.device.type & device.cl.device_type.CPU:
+        assert image.base is not None  # a view of the mapping, no copy
