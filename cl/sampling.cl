@@ -3,11 +3,11 @@
  * screen and fast across lines, so it is computed at samples on each slice's line and
  * interpolated to the camera samples:
  *
- *   line_samples  per line sample: the camera distance where it lands, and what its
- *                 ray would gather unshadowed (the "line value")
+ *   line_samples  per line sample: the camera distance where it lands, and for a spot
+ *                 light what its ray would gather unshadowed (the "line value")
  *   line_scatter  per run of line samples: walk its own row where it is needed (every
  *                 `step`-th sample, the ends, both sides of a break: an edge, a spot
- *                 light's cone, the epipole); the others are left for line_refine_fill
+ *                 light's cone); the others are left for line_refine_fill
  *   line_refine_fill  per run between two `step`-th line samples: compute too the
  *                 samples whose computed neighbours differ in radiance (a shadow's edge
  *                 between them), then interpolate the rest between the computed samples
@@ -155,8 +155,8 @@ ALWAYS_INLINE float_lanes unshadowed_weight_lanes(global const epipolar_t* ep, g
 
 /* Per LANES line samples of a slice: (distance, unshadowed weight): where each lands (the
  * depth of the pixel it points into, its first camera sample, clamped to the screen and
- * to far), and what it would gather unshadowed; distance -1 where the slice has no camera
- * sample beside it. Each lane does the operations of the scalar line_q, line_direction
+ * to far), and for a spot light what it would gather unshadowed (0 for other lights: no
+ * kernel reads it); distance -1 where the slice has no camera sample beside it. Each lane does the operations of the scalar line_q, line_direction
  * and view_project (lighting.h), in the same order (lanes.h). */
 kernel void line_samples(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                          global const epipolar_t* ep, global const uint* camera_depth, global const float2* ranges,
@@ -208,13 +208,18 @@ kernel void line_samples(global const frame_t* frame, global const view_t* views
     int_lanes row = clamp_int_lanes(int_of_lanes(floor_lanes(texel_y)), 0, frame->height - 1);
     float_lanes depth = LOAD_LANES((global const float*)camera_depth, (row * frame->width + column) * frame->spp);
     float_lanes distance = in_front ? fmin_lanes(depth, (float_lanes)(frame->far)) : (float_lanes)(frame->far);
+#if SAMPLING_LIGHT == LIGHT_SPOT
     float_lanes weight = unshadowed_weight_lanes(ep, lights + ep->light_index, dx, dy, dz, distance);
+#else
+    float_lanes weight = 0.0f; /* read for a spot light only (line_sample_needed, slice_line) */
+#endif
     for (int lane = 0; lane < count; ++lane) out[lane] = (float2)(distance[lane], weight[lane]);
 }
 
 /* Two neighbouring line samples are not interpolated across when their distances differ
- * by more than `threshold` relatively (an edge), or their unshadowed weights (a spot
- * light's cone, or the epipole, where 1/sin β grows faster than samples follow). */
+ * by more than `threshold` relatively (an edge), or a spot light's unshadowed weights (its
+ * cone). A point or directional light's weights differ where the distances do, and beside
+ * the epipole the camera samples walk their own rays (gather's epipole_sin). */
 ALWAYS_INLINE int distance_breaks(float2 a, float2 b, float threshold)
 {
     return inline_fabs(a.x - b.x) > threshold * inline_fmin(a.x, b.x);
@@ -230,8 +235,12 @@ ALWAYS_INLINE int line_sample_needed(global const float2* line, int j, int n, in
 {
     if (j % step == 0 || j == n - 1) return 1;
     float2 before = line[j - 1], here = line[j], after = line[j + 1];
+#if SAMPLING_LIGHT == LIGHT_SPOT
     return distance_breaks(before, here, threshold) || weight_breaks(before, here, threshold)
            || distance_breaks(here, after, threshold) || weight_breaks(here, after, threshold);
+#else
+    return distance_breaks(before, here, threshold) || distance_breaks(here, after, threshold);
+#endif
 }
 
 /* The radiance of line sample j of slice i, times radiance_scale: its own walk along

@@ -198,7 +198,8 @@ class Renderer:
             reuse.skip(*VOLUME_STAGES[method])  # no medium: no volume stages at all
         elif method == "raymarch":
             reuse.record.note("raymarch", COMPUTED)
-            raymarch(device, buffers, rastered, in_scatter.adding(), timer, layers)  # raymarch: the brute-force reference
+            # raymarch: the brute-force reference
+            raymarch(device, buffers, rastered, in_scatter.adding(), timer, layers)
             if films is not None and films.walked is not None:  # MBOIT: one weighted march per sample with films
                 transparency_march(device, buffers, rastered, films, timer, layers)
             elif films is not None:  # and up to each translucent film

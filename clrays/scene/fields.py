@@ -305,8 +305,8 @@ RENDER = Section("render", (
           notes="`sampling: epipolar`: every `initial_step`-th line sample is computed, and those beside a break; "
                 "the others are interpolated along the line", read_by=("minmax",)),
     Field("refine_threshold", "number", Render.refine_threshold, 0.0, 1.0,
-          notes="`sampling: epipolar`: neighbouring line samples whose camera distance or unshadowed "
-                "in-scattering differ by more than this fraction are a break, computed both; a pixel whose "
+          notes="`sampling: epipolar`: neighbouring line samples whose camera distance (or a spot light's "
+                "unshadowed in-scattering) differ by more than this fraction are a break, computed both; a pixel whose "
                 "distance differs this much from its line samples' (and from the blend of its two lines', where "
                 "those two agree) walks its own rays", read_by=("minmax",)),
     Field("relief", "string", Render.relief, choices=RELIEF_MODES,
