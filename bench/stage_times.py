@@ -23,6 +23,7 @@ import os
 import statistics
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
@@ -63,7 +64,8 @@ def timed_frames(name: str, width: int, height: int, frames: int, after_each=Non
     every frame, the warm-up one (timed False) included; `walls` gets each timed frame's
     wall time (ms: the render call, host work and waits included), `cpus` its CPU time (ms,
     every thread of the process: what other tenants of a shared machine change least).
-    `overrides`: more `--set` overrides, after the size."""
+    `overrides`: more `--set` overrides, after the size. Only the last result keeps its
+    image, as a sequence of frames does."""
     try:
         scene = load_scene(REPO / "scenes" / f"{name}.yaml",
                            overrides=[f"image.width={width}", f"image.height={height}", *overrides])
@@ -81,7 +83,9 @@ def timed_frames(name: str, width: int, height: int, frames: int, after_each=Non
         if after_each is not None:
             after_each(index > 0, result)
         if index > 0:
-            results.append(result)
+            if results:  # only the last frame keeps its image: a kept image holds its device
+                results[-1] = replace(results[-1], image=None)  # buffer (mapped on a CPU device),
+            results.append(result)  # and the next frames' buffers would come from fresh pages
     return scene, results
 
 
