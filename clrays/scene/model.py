@@ -178,7 +178,7 @@ class Render:
     sampling: str = "epipolar"  # one of SAMPLINGS
     line_samples: int | None = None  # epipolar: samples along each slice's line
     initial_step: int | None = None  # epipolar: every initial_step-th line sample walks its row
-    refine_threshold: float = 0.02  # epipolar: relative change in distance or unshadowed radiance that is a break
+    refine_threshold: float = 0.02  # epipolar: relative change in distance (spot light: or unshadowed radiance) that is a break
     relief: str = "prewarp"  # one of RELIEF_MODES
     translucent_layers: int = 4  # translucent surfaces per light texel, nearest the light first
     transparency: Transparency | None = None  # translucent surfaces: None takes Transparency()'s defaults
