@@ -51,7 +51,7 @@ typedef struct {
     int height;
     int projection; /* PROJECTION_* */
     int depth_offset; /* first texel of this view in its depth buffer */
-    int _pad0;
+    int cull_back_faces; /* 1: its origin is outside every closed solid (solids.h) */
     int _pad1;
 } view_t;
 

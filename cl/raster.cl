@@ -1,10 +1,12 @@
 /* raster — triangles → depth for one view (the camera or a shadow-map view).
- * Reads tri_vertices (3 float4 per triangle, eye space), views[view_index], offsets;
+ * Reads tri_vertices (3 float4 per triangle, eye space; the first row's w: its solid's
+ * outward sign, solids.h), views[view_index], offsets;
  * writes depth (as_uint(t), atomic min) and, for the camera, the nearest triangle:
  * raster_nearest packs (depth, triangle) in one 64-bit atomic min and raster_split
  * unpacks it; without 64-bit atomics, raster_resolve re-tests (ties: highest index).
  *
- * One work-item per triangle: it clips the triangle to the view's near side,
+ * One work-item per triangle: it skips a closed solid's face turned away from the view
+ * (solids.h), clips the triangle to the view's near side,
  * projects the polygon, and per pixel row ray-tests the samples in the row's span of
  * the polygon, 8 columns per test (intersect_columns); triangles taller than
  * RASTER_BIG_ROWS go to a second pass with one work-item per RASTER_ROWS_PER_ITEM rows
@@ -12,6 +14,7 @@
  * makes depth exact along the sample ray, and two-sided. Depth buffer layout per view:
  * [height][width][samples]. */
 #include "lighting.h"
+#include "solids.h"
 
 /* Möller–Trumbore, two-sided, edges inclusive with EDGE_SLACK. */
 inline float intersect_triangle(float3 origin, float3 dir, float3 v0, float3 v1, float3 v2)
@@ -357,6 +360,8 @@ inline int misses_every_sample(global const view_t* view, global const float4* t
 #define FOR_EACH_COVERED_SAMPLE(BODY)                                                       \
     int tri = get_global_id(0);                                                             \
     if (tri >= tri_count) return;                                                           \
+    if (faces_away_from_view(views + view_index, tri_vertices[3 * tri], tri_vertices[3 * tri + 1].xyz, \
+                             tri_vertices[3 * tri + 2].xyz)) return;                        \
     if (misses_every_sample(views + view_index, tri_vertices, tri, offsets, sample_count)) return; \
     PROJECT_TRIANGLE(return)                                                                \
     if (y1 - y0 + 1 > RASTER_BIG_ROWS) {                                                    \

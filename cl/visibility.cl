@@ -7,7 +7,9 @@
  * one triangle that touches each texel, or WRITER_MANY), with a capacity the lists of the
  * triangles touching each texel read (touching_head, touching, touching_count) and the
  * list of triangles whose rectangles the split pass takes, with their sizes (big_items,
- * big_count).
+ * big_count). A view from outside every closed solid leaves out the faces they turn
+ * away from it (solids.h): the first blocker of any segment to the light is a face turned
+ * towards the light, and it touches the same texels.
  * visibility_prepare reads frame, views, lights, camera_depth, tri_id,
  * tri_normal, tri_vertex_normals, offsets; writes visible (1 no light reaches the sample,
  * 0 its surface turns away from the light, else pending: the maps or a ray decide) and
@@ -24,6 +26,7 @@
 #include "lighting.h"
 #include "bvh.h"
 #include "lanes.h"
+#include "solids.h"
 
 #define SURFACE_BIAS_TEXELS 1.5f /* depth tolerance of the map test, as in shade.cl */
 /* Shadow rays leave the surface by this much × (|p| + distance to the light): a few
@@ -276,6 +279,11 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
 {
     int tri = item / view_count;
     global const view_t* view = views + first_view + item % view_count;
+    if (faces_away_from_view(view, tri_vertices[3 * tri], tri_vertices[3 * tri + 1].xyz,
+                             tri_vertices[3 * tri + 2].xyz)) {
+        if (rect) *rect = (int4)(0, 0, -1, -1); /* as a triangle outside the view */
+        return;
+    }
     float3 vertex[3], in_view[3];
     float extent = 0.0f;
     for (int k = 0; k < 3; ++k) {

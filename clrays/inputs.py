@@ -106,6 +106,14 @@ def padded_float32(rows: np.ndarray) -> np.ndarray:
     return out
 
 
+def vertex_rows(triangles: np.ndarray, outward: np.ndarray) -> np.ndarray:
+    """(T, 3, 3) triangles as the device's 3T float4 rows, the w of each triangle's first
+    row its `Geometry.outward` sign (cl/solids.h), the others' 0."""
+    rows = padded_float32(triangles.reshape(-1, 3))
+    rows[0::3, 3] = outward
+    return rows
+
+
 def _read_only(array: np.ndarray) -> np.ndarray:
     array.setflags(write=False)
     return array
@@ -149,6 +157,9 @@ def frame_inputs(scene: Scene) -> FrameInputs:
     tan_half = math.tan(math.radians(camera.fov_deg) / 2)
     views = [_view(np.zeros(3), forward, up, tan_half * image.width / image.height, tan_half,
                    image.width, image.height, structs.PROJECTION_PERSPECTIVE, 0)]
+    # A view may skip the faces the closed solids turn away from it where its rays start
+    # outside all of them (cl/solids.h): a directional light's start outside the scene's box.
+    views[0]["cull_back_faces"] = not scene.geometry.inside_a_solid(eye_ws)
     lights, anchors = [], []
     needed = [True]  # the camera view, then one flag per shadow-map view
     n = scene.render.shadow_map
@@ -199,6 +210,9 @@ def frame_inputs(scene: Scene) -> FrameInputs:
                     texels += n * n
                 entry["texel_angle"] = 2.0 / n
         entry["view_count"] = len(views) - entry["first_view"]
+        outside = isinstance(light, DirectionalLight) or not scene.geometry.inside_a_solid(light.position)
+        for view in views[entry["first_view"]:]:
+            view["cull_back_faces"] = outside
         lights.append(entry)
 
     params = np.zeros((), dtype=structs.frame_dtype)
@@ -231,7 +245,7 @@ def frame_inputs(scene: Scene) -> FrameInputs:
         lights=np.array(lights, dtype=structs.light_dtype) if lights else np.zeros(1, structs.light_dtype),
         params=params,
         offsets=sample_offsets(image.spp).astype(np.float32),
-        tri_vertices=padded_float32(tris.reshape(-1, 3)),
+        tri_vertices=vertex_rows(tris, scene.geometry.outward[:carried]),
         tri_normal=tri_normal,
         tri_vertex_normals=vertex_normals,
         tri_albedo=tri_albedo,
@@ -311,7 +325,7 @@ def _light_pass_inputs(inputs: FrameInputs, light_index: int, triangles: int) ->
         light["position"] = 0.0
     geometry = inputs.scene.geometry
     # the vertices around the light: no eye moves them, so a static light's are kept
-    anchored = lambda: _read_only(padded_float32((geometry.triangles[:triangles] - anchor).reshape(-1, 3)))
+    anchored = lambda: _read_only(vertex_rows(geometry.triangles[:triangles] - anchor, geometry.outward[:triangles]))
     vertices = geometry.kept(("anchored", triangles, anchor.tobytes()), anchored, most=ANCHORED_KEPT)
     return replace(
         inputs,

@@ -114,7 +114,7 @@ view_dtype = np.dtype([
     ("scale_x", np.float32), ("scale_y", np.float32),
     ("width", np.int32), ("height", np.int32),
     ("projection", np.int32), ("depth_offset", np.int32),
-    ("_pad0", np.int32), ("_pad1", np.int32),
+    ("cull_back_faces", np.int32), ("_pad1", np.int32),
 ])
 
 light_dtype = np.dtype([

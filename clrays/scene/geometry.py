@@ -100,6 +100,37 @@ def plane_triangles(center, normal, size: float, segments: int) -> np.ndarray:
     return np.concatenate([tri_a, tri_b])
 
 
+def closed_outward(vertices: np.ndarray, faces: np.ndarray) -> int:
+    """+1 where the faces close a solid wound counter-clockwise seen from outside, so that
+    (b - a) x (c - a) points out of it; -1 where all are wound the other way; 0 for an open
+    surface, one wound inconsistently or not a manifold (an edge of more than two faces),
+    or one of no volume. Vertices are one where their coordinates are equal, so an STL
+    file's repeated corners join. Closed means every edge a -> b of a face is b -> a of
+    exactly one other: the views that skip such a solid's back faces rely on it (docs/design.md
+    §4.1, "Back faces of closed solids")."""
+    v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    if len(f) < 4 or np.any((f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])):
+        return 0
+    unique, joined = np.unique(v, axis=0, return_inverse=True)
+    f = joined.reshape(-1)[f]
+    if np.any((f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])):
+        return 0  # a face with two corners at one point
+    n = np.int64(len(unique))
+    edges = (f * n + np.roll(f, -1, axis=1)).reshape(-1)  # a -> b, as one integer
+    reversed_edges = (np.roll(f, -1, axis=1) * n + f).reshape(-1)
+    ordered = np.sort(edges)
+    if np.any(ordered[1:] == ordered[:-1]) or not np.array_equal(ordered, np.sort(reversed_edges)):
+        return 0
+    a, b, c = unique[f[:, 0]], unique[f[:, 1]], unique[f[:, 2]]
+    centre = unique.mean(axis=0)  # about the solid: the volume's sum cancels less
+    volume = np.einsum("ij,ij->i", a - centre, np.cross(b - centre, c - centre)).sum() / 6.0
+    scale = np.ptp(unique, axis=0).max() ** 3
+    if not (abs(volume) > 1e-9 * scale):
+        return 0
+    return 1 if volume > 0 else -1
+
+
 def flat_normals(triangles: np.ndarray) -> np.ndarray:
     """Each triangle's unit normal (b - a) x (c - a) on all three of its vertices, (T, 3, 3);
     zero for a triangle without area."""
@@ -140,10 +171,11 @@ def smooth_normals(vertices: np.ndarray, faces: np.ndarray, given: np.ndarray | 
     return np.where(missing, flat_normals(v[f]), corners)
 
 
-def load_mesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
+def load_mesh(path: Path) -> tuple[np.ndarray, np.ndarray, int]:
     """Read an OBJ, PLY or STL file with trimesh: (triangles (T, 3, 3), the smooth normal
     at each of their vertices (T, 3, 3), from `smooth_normals` with the file's vertex
-    normals where it has them), the triangles in `spatial_order`.
+    normals where it has them, and `closed_outward` of its faces), the triangles in
+    `spatial_order`.
 
     Raises ValueError with a one-line reason for an unknown suffix, a missing, unreadable
     or corrupt file, something other than a regular file, a file over `MAX_MESH_BYTES`,
@@ -187,7 +219,7 @@ def load_mesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
     if not np.isfinite(tris).all():
         raise ValueError("the file has non-finite vertex coordinates")
     order = spatial_order(tris)
-    return tris[order], smooth_normals(vertices, faces, given)[order]
+    return tris[order], smooth_normals(vertices, faces, given)[order], closed_outward(vertices, faces)
 
 
 #: Bits per axis of spatial_order's Morton code.

@@ -309,9 +309,10 @@ def _transform_parts(node: Node | None) -> tuple[np.ndarray, np.ndarray, np.ndar
     return translate, rotate, _scale(m.get("scale"))
 
 
-# An object's shape in its own frame: triangles (T, 3, 3) and, for a smooth object, the
-# normal at each of their vertices (T, 3, 3); None for a flat one.
-_Shape = tuple[np.ndarray, np.ndarray | None]
+# An object's shape in its own frame: triangles (T, 3, 3); for a smooth object, the normal
+# at each of their vertices (T, 3, 3), None for a flat one; and its outward winding
+# (geometry.closed_outward: +1, -1, or 0 for a surface that closes no solid).
+_Shape = tuple[np.ndarray, np.ndarray | None, int]
 
 
 def _triangles(m: dict[str, Node]) -> _Shape:
@@ -322,27 +323,28 @@ def _triangles(m: dict[str, Node]) -> _Shape:
         if not isinstance(face.value, list) or len(face.value) != 3:
             face.fail("a face: a list of 3 vertex indices [i, j, k]")
         faces.append([integer(i, 0, n - 1) for i in face.value])
-    triangles = primitives.indexed_triangles(vertices, np.array(faces))
-    return triangles[primitives.spatial_order(triangles)], None  # as a mesh file's
+    faces = np.array(faces)
+    triangles = primitives.indexed_triangles(vertices, faces)
+    return triangles[primitives.spatial_order(triangles)], None, primitives.closed_outward(vertices, faces)  # as a mesh file's
 
 
 def _box(m: dict[str, Node]) -> _Shape:
     lo, hi = vec3(m["min"]), vec3(m["max"])
     if not (lo < hi).all():
         m["max"].fail(f"a point above min {show(m['min'])} on every axis")
-    return primitives.box_triangles(lo, hi), None
+    return primitives.box_triangles(lo, hi), None, 1  # closed, wound outward
 
 
 def _sphere(m: dict[str, Node]) -> _Shape:
     keys = OBJECTS["sphere"]
     return primitives.sphere_triangles(vec3(m["center"]), _read(keys["radius"], m["radius"]),
-                                       _read(keys["segments"], m.get("segments"))), None
+                                       _read(keys["segments"], m.get("segments"))), None, 1  # closed, outward
 
 
 def _plane(m: dict[str, Node]) -> _Shape:
     keys = OBJECTS["plane"]
     return primitives.plane_triangles(vec3(m["center"]), direction(m["normal"]), _read(keys["size"], m["size"]),
-                                      _read(keys["segments"], m.get("segments"))), None
+                                      _read(keys["segments"], m.get("segments"))), None, 0
 
 
 def _mesh(m: dict[str, Node], base_dir: Path) -> _Shape:
@@ -353,11 +355,11 @@ def _mesh(m: dict[str, Node], base_dir: Path) -> _Shape:
     path = Path(node.value)
     path = path if path.is_absolute() else base_dir / path
     try:
-        triangles, normals = primitives.load_mesh(path)
+        triangles, normals, outward = primitives.load_mesh(path)
     except (ValueError, OSError) as exc:
         node.fail("a readable mesh file (.obj, .ply or .stl) with triangles",
                   f"{show(node)} ({exc}: {path})")
-    return triangles, normals if smooth else None
+    return triangles, normals if smooth else None, outward
 
 
 def _relief_image(node: Node, base_dir: Path) -> tuple[np.ndarray, Path]:
@@ -443,6 +445,7 @@ class _Object:
     local_normals: np.ndarray | None  # (T, 3, 3) before the transform, for a smooth object
     parts: tuple[np.ndarray, np.ndarray, np.ndarray]  # translate (3,), rotation 3x3, scale (3,)
     relief: relief_images.Relief | None = None  # a relief object's texels, for the pre-warp
+    outward: int = 0  # +1 or -1: a closed, opaque solid and its winding (Geometry.outward); 0: none
 
 
 def _object(node: Node, base_dir: Path) -> _Object:
@@ -451,21 +454,23 @@ def _object(node: Node, base_dir: Path) -> _Object:
     albedo = _read(OBJECT["albedo"], m.get("albedo"))
     opacity = _read(OBJECT["opacity"], m.get("opacity"))
     parts = _transform_parts(m.get("transform"))
-    relief = None
+    relief, outward = None, 0
     if kind == "relief":  # its colours come per triangle from its albedo_map, if it has one
         relief, local, texel_albedo = _relief(m, base_dir)
         local_normals = None
         if texel_albedo is not None:
             albedo = texel_albedo
     else:
-        local, local_normals = _BUILDERS[kind](m, base_dir)
+        local, local_normals, outward = _BUILDERS[kind](m, base_dir)
+    if np.any(opacity < 1.0):  # light passes through: each of its surfaces counts
+        outward = 0
     triangles, normals = local, local_normals
     if "transform" in m:
         matrix = affine(*parts)
         triangles = transform_points(matrix, local)
         if local_normals is not None:
             normals = transform_normals(matrix, local_normals)
-    return _Object(triangles, normals, albedo, opacity, local, local_normals, parts, relief)
+    return _Object(triangles, normals, albedo, opacity, local, local_normals, parts, relief, outward)
 
 
 def _tessellated_count(node: Node) -> int:
@@ -491,7 +496,7 @@ def _check_triangle_count(node: Node, index: int, count: int) -> None:
 def _geometry(node: Node | None, base_dir: Path, rigs: list | None = None) -> Geometry:
     """All objects flattened; `rigs`, when given, receives each object's ObjectRig."""
     tris, albedo, ids = [np.zeros((0, 3, 3))], [np.zeros((0, 3))], [np.zeros(0, np.int32)]
-    opacity = [np.ones((0, 3))]
+    opacity, outward = [np.ones((0, 3))], [np.zeros(0, np.int8)]
     smooth_normals: list[tuple[slice, np.ndarray]] = []
     reliefs: list[relief_images.ReliefRecord] = []
     start = 0
@@ -516,6 +521,7 @@ def _geometry(node: Node | None, base_dir: Path, rigs: list | None = None) -> Ge
         albedo.append(np.broadcast_to(obj.albedo, (count, 3)))
         opacity.append(np.broadcast_to(obj.opacity, (count, 3)))
         ids.append(np.full(count, i, dtype=np.int32))
+        outward.append(np.full(count, obj.outward, dtype=np.int8))
     triangles = np.ascontiguousarray(np.concatenate(tris), dtype=np.float64)
     normals = primitives.flat_normals(triangles)  # once for all objects: per object, it dominated loading
     smooth = np.zeros(len(triangles), bool)
@@ -523,7 +529,8 @@ def _geometry(node: Node | None, base_dir: Path, rigs: list | None = None) -> Ge
         normals[rows], smooth[rows] = object_normals, True
     return Geometry(triangles=triangles, albedo=np.ascontiguousarray(np.concatenate(albedo), dtype=np.float64),
                     object_id=np.concatenate(ids).astype(np.int32), normals=normals, smooth=smooth,
-                    reliefs=tuple(reliefs), opacity=_opacity_or_none(np.concatenate(opacity)))
+                    reliefs=tuple(reliefs), opacity=_opacity_or_none(np.concatenate(opacity)),
+                    outward=np.concatenate(outward))
 
 
 def _opacity_or_none(opacity: np.ndarray) -> np.ndarray | None:

@@ -202,8 +202,15 @@ class Geometry:
     # (T, 3) float64 per-channel opacity in [0, 1] (docs/scene-format.md, translucent objects);
     # None when every triangle is opaque, which is the fast opaque-only path.
     opacity: np.ndarray | None = None
+    # (T,) int8: +1 or -1 where the triangle belongs to a closed, opaque solid, whose outside
+    # (b - a) x (c - a) times it points to; 0 elsewhere (a plane, a relief, an open or
+    # translucent surface). The views that see a solid from outside skip the faces it turns
+    # away (docs/design.md §4.1, "Back faces of closed solids"). None: no solids.
+    outward: np.ndarray | None = None
 
     def __post_init__(self):
+        if self.outward is None:
+            object.__setattr__(self, "outward", np.zeros(len(self.triangles), dtype=np.int8))
         if self.normals is None:
             object.__setattr__(self, "normals", flat_normals(self.triangles))
         if self.smooth is None:
@@ -268,6 +275,36 @@ class Geometry:
         parts += [(pts.min(axis=0), pts.max(axis=0)) for rows in other_rows(self.count, self.reliefs)
                   for pts in [self.triangles[rows].reshape(-1, 3)]]
         return np.min([lo for lo, _ in parts], axis=0), np.max([hi for _, hi in parts], axis=0)
+
+    def inside_a_solid(self, point) -> bool:
+        """Whether `point` lies inside one of the closed solids (`outward`), or too near a
+        solid's surface to tell: a view from there may not skip their back faces. Outside a
+        solid's box is outside it; inside the box, its winding number decides: the solid
+        angle its triangles span seen from `point` over 4π (Van Oosterom and Strackee's
+        formula), 0 outside, ±1 inside, ±1/2 on the surface."""
+        point = np.asarray(point, dtype=np.float64)
+        for rows, lo, hi in self.kept(("solids",), self._solids):
+            margin = 1e-6 * float(np.max(hi - lo))
+            if np.any(point < lo - margin) or np.any(point > hi + margin):
+                continue
+            a, b, c = (self.triangles[rows, k] - point for k in range(3))
+            la, lb, lc = (np.linalg.norm(v, axis=1) for v in (a, b, c))
+            det = np.einsum("ij,ij->i", a, np.cross(b, c))
+            div = la * lb * lc + np.einsum("ij,ij->i", a, b) * lc + np.einsum("ij,ij->i", b, c) * la \
+                + np.einsum("ij,ij->i", c, a) * lb
+            if abs(2.0 * np.arctan2(det, div).sum() / (4.0 * np.pi)) >= 0.25:
+                return True
+        return False
+
+    def _solids(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Per closed solid: its triangles' rows, and its bounds (lo, hi)."""
+        rows = np.flatnonzero(self.outward != 0)
+        solids = []
+        for object_id in np.unique(self.object_id[rows]):
+            own = rows[self.object_id[rows] == object_id]
+            points = self.triangles[own].reshape(-1, 3)
+            solids.append((own, points.min(axis=0), points.max(axis=0)))
+        return solids
 
     def farthest_from(self, point) -> float:
         """Distance from `point` to the farthest triangle vertex (0 without triangles); a

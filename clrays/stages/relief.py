@@ -60,7 +60,7 @@ def place_reliefs(scene: Scene) -> tuple[Scene, tuple[PlacedRelief, ...], int | 
                                + [np.arange(geometry.count)[r.rows] for r in geometry.reliefs])
         geometry = replace(geometry, triangles=geometry.triangles[order], albedo=geometry.albedo[order],
                            object_id=geometry.object_id[order], normals=geometry.normals[order],
-                           smooth=geometry.smooth[order], reliefs=tuple(records),
+                           smooth=geometry.smooth[order], outward=geometry.outward[order], reliefs=tuple(records),
                            opacity=None if geometry.opacity is None else geometry.opacity[order])
     placed = []
     for record in records:

@@ -39,7 +39,7 @@ def test_a_flat_or_single_triangle_list_keeps_its_order():
 def test_a_loaded_mesh_keeps_each_triangle_with_its_normals(tmp_path):
     mesh = trimesh.creation.icosphere(subdivisions=2, radius=1.0)
     write_obj(tmp_path / "ico_vn.obj", mesh.vertices, mesh.faces, normals=mesh.vertices)
-    triangles, normals = load_mesh(tmp_path / "ico_vn.obj")
+    triangles, normals, _ = load_mesh(tmp_path / "ico_vn.obj")
     file_order = mesh.vertices[mesh.faces]
     assert not np.array_equal(triangles, file_order)  # reordered ...
     np.testing.assert_array_equal(triangles, file_order[spatial_order(file_order)])  # ... by spatial_order
