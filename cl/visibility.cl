@@ -191,18 +191,24 @@ inline int row_span(const float3* edge, int edges, int ty, int* first, int* last
     return 1;
 }
 
-/* The writer map beside the bound map: per texel, the one triangle that touches it
- * (WRITER_NONE: none yet), or WRITER_MANY once a second one does (both from
- * clrays/structs.py). A sample whose texel's only writer is its own triangle is lit: no
- * other triangle comes near its segment to the light, which projects into that texel, and
- * a ray skips its own triangle. */
+/* The writer map beside the bound map: per texel, the one convex part whose triangles
+ * touch it (WRITER_NONE: none yet), or WRITER_MANY once a second one does (both from
+ * clrays/structs.py). A sample whose texel's only writer is its own convex part is lit:
+ * no other triangle comes near its segment to the light, which projects into that texel,
+ * and the part lies wholly on the far side of the sample's plane from the light (the
+ * sample's face turns towards it), which the segment leaves at the sample. A part is a
+ * label per triangle, the bits in w of its second vertex row (clrays.inputs.vertex_rows):
+ * a plane's, a box's or a sphere's triangles share one, any other triangle has its own
+ * (Geometry.convex_part). So the seams of a floor's triangles and a box's edges leave
+ * their texels to no other test. */
+ALWAYS_INLINE int convex_part_of(global const float4* tri_vertices, int tri) { return as_int(tri_vertices[3 * tri + 1].w); }
 
-inline void note_writer(global int* texel_writer, int tri)
+inline void note_writer(global int* texel_writer, int part)
 {
     int seen = *texel_writer; /* the read spares the atomics once a texel is decided */
-    if (seen == tri || seen == WRITER_MANY) return;
-    int before = atomic_cmpxchg(texel_writer, WRITER_NONE, tri);
-    if (before != WRITER_NONE && before != tri) atomic_xchg(texel_writer, WRITER_MANY);
+    if (seen == part || seen == WRITER_MANY) return;
+    int before = atomic_cmpxchg(texel_writer, WRITER_NONE, part);
+    if (before != WRITER_NONE && before != part) atomic_xchg(texel_writer, WRITER_MANY);
 }
 
 /* Whether any texel of [x0, x1] in the row at frame address `row` has its read_mask bit:
@@ -331,6 +337,7 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
         big_items[atomic_inc(big_count)] = (int4)(item, y1 - y0 + 1, (y1 - y0 + 1) * (x1 - x0 + 1), 0);
         return;
     }
+    int part = convex_part_of(tri_vertices, tri); /* the writer map's label */
     float3 normal = inline_cross(vertex[1] - vertex[0], vertex[2] - vertex[0]);
     float normal_length = exact_length(normal);
     float3 n = normal_length > 0.0f ? normal / normal_length : (float3)(0.0f);
@@ -379,7 +386,7 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
                 if (bits == 0u) tx += 31 - (at & 31); /* none read to the word's end */
                 if (!(bits & 1u)) continue;
             }
-            note_writer(writer + view->depth_offset + ty * view->width + tx, tri);
+            note_writer(writer + view->depth_offset + ty * view->width + tx, part);
             note_touching(touching_head + view->depth_offset + ty * view->width + tx, tri, touching, touching_count,
                           touching_capacity);
             if (bound[view->depth_offset + ty * view->width + tx] <= floor_bits) continue;
@@ -799,7 +806,7 @@ kernel void visibility_mark_listed(global const int* ray_entries, int ray_count,
 /* The rest of the decision, for the pending samples and lights. Lit: the bound map says no
  * triangle in the texel comes nearer the light than the sample's own depth, less what its
  * own surface may have written there (at most the map's bias); or the writer map says no
- * triangle but the sample's own touches that texel. Shadowed: the 3 × 3 test. Otherwise
+ * triangle but those of the sample's own convex part touches that texel. Shadowed: the 3 × 3 test. Otherwise
  * the entry (sample × light_count + light) stays pending and is listed in ray_entries
  * (ray_count starts at 0) for visibility_rays: the host builds the BVH only when some
  * entry needs a ray (clrays/stages/visibility.py). */
@@ -822,7 +829,7 @@ inline void decide_entry(global const frame_t* frame, global const view_t* views
         return;
     }
     float depth = as_float(read.y), bound_depth = read.x >= 0 ? as_float(bound[read.x]) : 0.0f;
-    if (read.x >= 0 && (depth <= bound_depth || writer[read.x] == tri)) {
+    if (read.x >= 0 && (depth <= bound_depth || writer[read.x] == convex_part_of(tri_vertices, tri))) {
         out[l] = 1.0f;
         return;
     }
@@ -877,7 +884,8 @@ ALWAYS_INLINE int decide_lanes(global const frame_t* frame, global const view_t*
     int_lanes texel = address >= 0, safe = texel ? address : 0;
     int_lanes tri = vload8(0, tri_id + first);
     float_lanes bound_depth = texel ? LOAD_LANES((global const float*)bound, safe) : 0.0f;
-    int_lanes only_own = as_int8(LOAD_LANES((global const float*)writer, safe)) == tri;
+    int_lanes own_part = as_int8(LOAD_LANES((global const float*)tri_vertices, 12 * (tri >= 0 ? tri : 0) + 7));
+    int_lanes only_own = as_int8(LOAD_LANES((global const float*)writer, safe)) == own_part; /* convex_part_of */
     int_lanes lit = pending & ((address == MAP_TEXEL_OUTSIDE) | (texel & ((depth <= bound_depth) | only_own)));
     int_lanes heavy = pending & texel & !lit;
     int_lanes blocked = (int_lanes)(0), slack = (int_lanes)(0);
@@ -942,7 +950,7 @@ ALWAYS_INLINE int decide_lanes(global const frame_t* frame, global const view_t*
 /* The rest of the decision, for the pending samples and lights. Lit: the bound map says no
  * triangle in the texel comes nearer the light than the sample's own depth, less what its
  * own surface may have written there (at most the map's bias); or the writer map says no
- * triangle but the sample's own touches that texel. Shadowed: the 3 × 3 test. Otherwise
+ * triangle but those of the sample's own convex part touches that texel. Shadowed: the 3 × 3 test. Otherwise
  * the entry (sample × light_count + light) stays pending and is listed in ray_entries
  * (ray_count starts at 0) for visibility_rays: the host builds the BVH only when some
  * entry needs a ray (clrays/stages/visibility.py). One work-item per LANES samples

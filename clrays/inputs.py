@@ -106,11 +106,14 @@ def padded_float32(rows: np.ndarray) -> np.ndarray:
     return out
 
 
-def vertex_rows(triangles: np.ndarray, outward: np.ndarray) -> np.ndarray:
-    """(T, 3, 3) triangles as the device's 3T float4 rows, the w of each triangle's first
-    row its `Geometry.outward` sign (cl/solids.h), the others' 0."""
-    rows = padded_float32(triangles.reshape(-1, 3))
-    rows[0::3, 3] = outward
+def vertex_rows(triangles: np.ndarray, geometry, count: int) -> np.ndarray:
+    """The first `count` of (T, 3, 3) triangles as the device's 3T float4 rows; in w, what
+    the kernels know of each triangle besides its corners: in its first row its
+    `Geometry.outward` sign (cl/solids.h), in its second the bits of its int
+    `Geometry.convex_part` label (the writer map's, cl/visibility.cl), in its third 0."""
+    rows = padded_float32(triangles[:count].reshape(-1, 3))
+    rows[0::3, 3] = geometry.outward[:count]
+    rows.view(np.int32)[1::3, 3] = geometry.convex_part[:count]
     return rows
 
 
@@ -245,7 +248,7 @@ def frame_inputs(scene: Scene) -> FrameInputs:
         lights=np.array(lights, dtype=structs.light_dtype) if lights else np.zeros(1, structs.light_dtype),
         params=params,
         offsets=sample_offsets(image.spp).astype(np.float32),
-        tri_vertices=vertex_rows(tris, scene.geometry.outward[:carried]),
+        tri_vertices=vertex_rows(tris, scene.geometry, carried),
         tri_normal=tri_normal,
         tri_vertex_normals=vertex_normals,
         tri_albedo=tri_albedo,
@@ -325,7 +328,7 @@ def _light_pass_inputs(inputs: FrameInputs, light_index: int, triangles: int) ->
         light["position"] = 0.0
     geometry = inputs.scene.geometry
     # the vertices around the light: no eye moves them, so a static light's are kept
-    anchored = lambda: _read_only(vertex_rows(geometry.triangles[:triangles] - anchor, geometry.outward[:triangles]))
+    anchored = lambda: _read_only(vertex_rows(geometry.triangles[:triangles] - anchor, geometry, triangles))
     vertices = geometry.kept(("anchored", triangles, anchor.tobytes()), anchored, most=ANCHORED_KEPT)
     return replace(
         inputs,

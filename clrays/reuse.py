@@ -64,8 +64,10 @@ def scene_digest(scene, *, render: bool = True) -> bytes:
     settings, for references whose own settings are given separately."""
     # Opacity only where some object is translucent, so an opaque-only scene keeps its digest.
     translucent = (scene.geometry.opacity,) if scene.geometry.translucent else ()
+    # What the renderer's kernels know of the triangles besides (clrays.inputs.vertex_rows): not the references'.
+    carried = (scene.geometry.outward, scene.geometry.convex_part) if render else ()
     return digest(scene.image, scene.camera, scene.lights, scene.medium, scene.background,
-                  *geometry_parts(scene.geometry), scene.render if render else None, *translucent)
+                  *geometry_parts(scene.geometry), scene.render if render else None, *translucent, *carried)
 
 
 def geometry_parts(geometry, triangles_only: bool = False) -> tuple:

@@ -115,6 +115,7 @@ class RenderResult:
     # (slices, γ texels) of each epipolar texture the frame used, per light that has one
     textures: tuple[tuple[int, int], ...] = ()
     samples: SampleCounts | None = None  # what epipolar sampling computed, interpolated and fixed up
+    shadow_rays: int | None = None  # exact surface shadows: the entries (sample × light) the maps left to a ray
 
     @property
     def reused(self) -> list[str]:
@@ -166,14 +167,14 @@ class Renderer:
         if self._device is not None:
             self._device.allocated_bytes = 0
         # A frame identical to a kept one: its image, and every stage counts as reused.
-        image, stages, textures, samples = reuse.keep("frame", lambda: digest("frame", scene_digest(scene)),
-                                                      lambda: self._frame(scene, method, reuse, timer, progress))
+        image, stages, textures, samples, rays = reuse.keep("frame", lambda: digest("frame", scene_digest(scene)),
+                                                            lambda: self._frame(scene, method, reuse, timer, progress))
         status = record.status() or {stage: REUSED for stage in stages}
         device_bytes = self._device.allocated_bytes if self._device is not None else 0
         wall_ms = (time.perf_counter() - start) * 1e3
         # A kept frame's image is shared with the cache: the caller gets a copy to change.
         return RenderResult(image.copy() if use_cache else image, method, timer.milliseconds(), wall_ms,
-                            device_bytes, status, timer.host_labels, scene.render, textures, samples)
+                            device_bytes, status, timer.host_labels, scene.render, textures, samples, rays)
 
     def _frame(self, scene: Scene, method: str, reuse: Reuse, timer: StageTimer, progress: bool):
         """(image, stage labels, epipolar texture sizes, sample counts) of one frame: the
@@ -241,7 +242,7 @@ class Renderer:
                     films.add_in_scatter(device, timer, lambda r, s, t, e=epipolar, i=tables, x=texture, y=rectified:
                                          traverse(device, buffers, r, e, i, s, t, x, y))
             reuse.record.note(VOLUME_STAGES[method][-1], COMPUTED)
-        visible = self._visibility(occluders, rastered, keys, reuse, timer)  # visibility: exact surface shadows
+        visible, rays = self._visibility(occluders, rastered, keys, reuse, timer)  # visibility: exact surface shadows
         through = None if layers is None or scene.render.surface_shadows != "exact" else \
             surface_transmittance(device, buffers, rastered, layers, timer)  # (translucent shadows' exact edges)
         # transparency: the films' surfaces and fog composited in front of the opaque samples
@@ -251,7 +252,7 @@ class Renderer:
         reuse.record.note("shade", COMPUTED)
         # The stages that ran: a frame identical to this one counts them reused (not the skipped ones).
         ran = tuple(stage for stage, status in reuse.record.status().items() if status != SKIPPED)
-        return image, ran, tuple(textures), samples
+        return image, ran, tuple(textures), samples, rays
 
     def _films(self, buffers: FrameBuffers, rastered: RasterResult, reuse: Reuse, timer: StageTimer) -> Films | None:
         """The transparency stage's films (clrays.stages.transparency); None, and the stage
@@ -285,13 +286,14 @@ class Renderer:
     def _visibility(self, buffers: FrameBuffers, rastered: RasterResult, keys: StageKeys, reuse: Reuse,
                     timer: StageTimer):
         """The visibility stage: each light's bound map kept while its shadow map is, and the
-        frame's BVH (`_bvh`) when a shadow ray needs it; None unless `render.surface_shadows`
-        is exact (or filtered: then the shadow_filter stage answers instead)."""
+        frame's BVH (`_bvh`) when a shadow ray needs it. Returns (visibility, shadow rays
+        cast); visibility is None unless `render.surface_shadows` is exact (or filtered:
+        then the shadow_filter stage answers instead), and the rays None but for exact."""
         scene = buffers.inputs.scene
         if scene.render.surface_shadows == "filtered" and scene.lights:
-            return self._shadow_filter(buffers, rastered, keys, reuse, timer)
+            return self._shadow_filter(buffers, rastered, keys, reuse, timer), None
         if scene.render.surface_shadows != "exact" or not scene.lights:
-            return None
+            return None, None
         device = self.device
         # The bound maps are drawn only where the camera's samples read them: kept while the
         # light's shadow map, the camera samples and the surfaces' normals are.
@@ -325,7 +327,7 @@ class Renderer:
         image = render_exact(scene, progress=progress).astype(np.float32)
         timer.add_host("exact", (time.perf_counter() - start) * 1e3)
         reuse.record.note("exact", COMPUTED)
-        return image, ("exact",), (), None
+        return image, ("exact",), (), None, None
 
     def _raster(self, buffers: FrameBuffers, keys: StageKeys, reuse: Reuse, timer: StageTimer):
         """The raster stage, each part kept while its inputs are: the camera's depth and
@@ -483,10 +485,11 @@ class StageKeys:
     @cached_property
     def geometry(self) -> bytes:
         """The triangles (a relief's by its texels and placement, clrays.reuse.geometry_parts),
-        which are pre-warped, and how many the device buffers carry."""
+        which are pre-warped, how many the device buffers carry, and what their rows carry
+        besides (the solids' faces a view may skip, the convex parts: clrays.inputs.vertex_rows)."""
         inputs, scene = self.inputs, self.inputs.scene
         geometry = digest(*geometry_parts(scene.geometry, triangles_only=True), inputs.raster_triangles,
-                          len(inputs.tri_vertices))
+                          len(inputs.tri_vertices), scene.geometry.outward, scene.geometry.convex_part)
         if scene.geometry.translucent:  # which triangles are opaque occluders, and what the others let through
             geometry = digest(geometry, scene.geometry.opacity)
         return geometry

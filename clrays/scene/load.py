@@ -496,7 +496,7 @@ def _check_triangle_count(node: Node, index: int, count: int) -> None:
 def _geometry(node: Node | None, base_dir: Path, rigs: list | None = None) -> Geometry:
     """All objects flattened; `rigs`, when given, receives each object's ObjectRig."""
     tris, albedo, ids = [np.zeros((0, 3, 3))], [np.zeros((0, 3))], [np.zeros(0, np.int32)]
-    opacity, outward = [np.ones((0, 3))], [np.zeros(0, np.int8)]
+    opacity, outward, convex_part = [np.ones((0, 3))], [np.zeros(0, np.int8)], [np.zeros(0, np.int32)]
     smooth_normals: list[tuple[slice, np.ndarray]] = []
     reliefs: list[relief_images.ReliefRecord] = []
     start = 0
@@ -522,6 +522,7 @@ def _geometry(node: Node | None, base_dir: Path, rigs: list | None = None) -> Ge
         opacity.append(np.broadcast_to(obj.opacity, (count, 3)))
         ids.append(np.full(count, i, dtype=np.int32))
         outward.append(np.full(count, obj.outward, dtype=np.int8))
+        convex_part.append(start - count + _convex_parts(item, count))
     triangles = np.ascontiguousarray(np.concatenate(tris), dtype=np.float64)
     normals = primitives.flat_normals(triangles)  # once for all objects: per object, it dominated loading
     smooth = np.zeros(len(triangles), bool)
@@ -530,7 +531,17 @@ def _geometry(node: Node | None, base_dir: Path, rigs: list | None = None) -> Ge
     return Geometry(triangles=triangles, albedo=np.ascontiguousarray(np.concatenate(albedo), dtype=np.float64),
                     object_id=np.concatenate(ids).astype(np.int32), normals=normals, smooth=smooth,
                     reliefs=tuple(reliefs), opacity=_opacity_or_none(np.concatenate(opacity)),
-                    outward=np.concatenate(outward))
+                    outward=np.concatenate(outward), convex_part=np.concatenate(convex_part))
+
+
+def _convex_parts(node: Node, count: int) -> np.ndarray:
+    """(count,) int32: each of an object's triangles' convex part, numbered from 0 (the
+    index of its first triangle in the object): a plane, a box or a sphere is one (a
+    sphere's tessellation is the convex hull of its points; a transform keeps them convex),
+    any other object's triangles each their own."""
+    if node.value["type"].value in ("plane", "box", "sphere"):
+        return np.zeros(count, np.int32)
+    return np.arange(count, dtype=np.int32)
 
 
 def _opacity_or_none(opacity: np.ndarray) -> np.ndarray | None:

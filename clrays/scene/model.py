@@ -207,10 +207,17 @@ class Geometry:
     # translucent surface). The views that see a solid from outside skip the faces it turns
     # away (docs/design.md §4.1, "Back faces of closed solids"). None: no solids.
     outward: np.ndarray | None = None
+    # (T,) int32: a label per convex part, the same on the triangles of a plane, a box or a
+    # sphere (each a convex polyhedron), else each triangle's own (its index at loading). No
+    # triangle of a convex part can shadow a point of the part that faces the light, which
+    # the writer map uses (docs/design.md §4.6). None: every triangle its own part.
+    convex_part: np.ndarray | None = None
 
     def __post_init__(self):
         if self.outward is None:
             object.__setattr__(self, "outward", np.zeros(len(self.triangles), dtype=np.int8))
+        if self.convex_part is None:
+            object.__setattr__(self, "convex_part", np.arange(len(self.triangles), dtype=np.int32))
         if self.normals is None:
             object.__setattr__(self, "normals", flat_normals(self.triangles))
         if self.smooth is None:

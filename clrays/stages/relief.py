@@ -61,6 +61,7 @@ def place_reliefs(scene: Scene) -> tuple[Scene, tuple[PlacedRelief, ...], int | 
         geometry = replace(geometry, triangles=geometry.triangles[order], albedo=geometry.albedo[order],
                            object_id=geometry.object_id[order], normals=geometry.normals[order],
                            smooth=geometry.smooth[order], outward=geometry.outward[order], reliefs=tuple(records),
+                           convex_part=geometry.convex_part[order],
                            opacity=None if geometry.opacity is None else geometry.opacity[order])
     placed = []
     for record in records:

@@ -303,8 +303,8 @@ def bound_atlas(device: Device, buffers: FrameBuffers, bounds: list[BoundMap]) -
 
 def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, prepared: Prepared, bound: BoundMap,
                bvh: Callable[[], DeviceBvh], timer: StageTimer, lights: list[BoundMap] | None = None):
-    """float[samples × lights]: 1 where the sample sees the light, 0 where it does not
-    (`prepared.visible`, its pending entries decided). The maps decide first; the entries
+    """(float[samples × lights]: 1 where the sample sees the light, 0 where it does not
+    (`prepared.visible`, its pending entries decided), the shadow rays cast). The maps decide first; the entries
     they leave cast a shadow ray: against the triangles touching their texel where every
     light's BoundMap in `lights` has its lists whole and every ray has a texel, else
     through the BVH, which `bvh()` builds (or gives the one a session kept) only then."""
@@ -318,7 +318,7 @@ def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, pr
         buffers.tri_vertices, buffers.tri_normal, buffers.offsets, prepared.visible, ray_entries, ray_count))
     rays, without_texel = (int(v) for v in device.read(ray_count, 2, np.int32))
     if not rays:
-        return prepared.visible
+        return prepared.visible, 0
     touching = [light.touching for light in lights or ()]
     whole = (touching and all(lists is not None for lists in touching)
              and all(int(device.read(lists.count, 1, np.int32)[0]) <= lists.capacity for lists in touching))
@@ -334,10 +334,10 @@ def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, pr
                 rastered.tri_id, buffers.tri_vertices, buffers.tri_normal, buffers.offsets, prepared.map_read,
                 np.int32(index), np.int32(first), lists.head, lists.nodes, ray_entries, np.int32(rays),
                 prepared.visible))
-        return prepared.visible
+        return prepared.visible, rays
     tree = bvh()
     timer.add("visibility", device.kernel("visibility", "visibility_rays")(
         device.queue, (rays,), None, buffers.params, buffers.views, buffers.lights, rastered.camera_depth,
         rastered.tri_id, buffers.tri_vertices, buffers.tri_normal, buffers.offsets, tree.node_bounds,
         tree.node_children, np.int32(tree.root), ray_entries, np.int32(rays), prepared.visible))
-    return prepared.visible
+    return prepared.visible, rays

@@ -179,6 +179,7 @@ def test_stats_marks_the_host_stages(scene_file, tmp_path):
     assert code == 0, out
     assert re.search(r"^ +integrand +[\d.]+ ms \(host\)", out, re.M), out
     assert re.search(r"^ +traverse +[\d.]+ ms \(device\)", out, re.M), out
+    assert re.search(r"^ +shadows +\d+ shadow rays \(", out, re.M), out  # exact surface shadows, the default
 
 
 def test_help_groups_options_and_commands():

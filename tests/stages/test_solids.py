@@ -17,7 +17,8 @@ from clrays.scene.load import parse_scene
 from clrays.scene.model import DirectionalLight, Geometry
 from clrays.stages.raster import raster
 from conftest import PointLight, grid_plane, make_scene, v3
-from tests.methods.test_surface_shadows import compare, lights, surface_scene
+from clrays.reference.exact import render_exact
+from tests.methods.test_surface_shadows import compare, lights, mismatched_pixels, surface_scene
 
 MESHES = Path(__file__).resolve().parents[2] / "scenes" / "meshes"
 
@@ -99,8 +100,8 @@ def test_a_view_from_inside_a_solid_draws_every_face(renderer, light_inside, eye
     views = frame_inputs(scene).views
     assert views["cull_back_faces"][0] == (not eye_inside)
     assert (views["cull_back_faces"][1:] == (not light_inside)).all()
-    image = renderer.render(scene).image
-    assert np.array_equal(image, renderer.render(_without_solids(scene)).image)
+    image = renderer.render(scene, reuse=False).image
+    assert np.array_equal(image, renderer.render(_without_solids(scene), reuse=False).image)
     if light_inside and eye_inside:
         assert (image.mean(axis=-1) > 0).mean() > 0.9  # lit walls, floor and fog everywhere
 
@@ -192,3 +193,42 @@ def test_exact_surface_shadows_of_solids_match_the_reference(renderer, kind):
     assert frame_inputs(scene).views["cull_back_faces"].all()
     _, _, _, bad_exact, bad_map = compare(renderer, scene, kind)
     assert bad_exact <= 1, f"{kind}: {bad_exact} pixels differ from exact (map: {bad_map})"
+
+
+GRAZING = """
+version: 1
+image: {width: 96, height: 54}
+camera: {position: [0.3, 1.8, 4.5], look_at: [0, 1.0, -6], fov_deg: 60, far: 40}
+lights: [{type: point, position: [-5, 1.2, 6], intensity: 60}]
+medium: {sigma_s: 0.0, sigma_a: 0.0}
+objects:
+  - {type: plane, center: [0, 0, -6], normal: [0, 1, 0], size: 30, segments: 8}
+  - {type: box, min: [-1.2, 0, -1.5], max: [-0.6, 2.5, -0.9]}
+  - {type: box, min: [1.0, 0, -4.5], max: [1.6, 3.0, -3.9], transform: {rotate: {axis: [0, 1, 0], angle_deg: 30}}}
+  - {type: sphere, center: [-1.5, 0.8, -5], radius: 0.8, segments: 24}
+  - {type: mesh, file: meshes/tetrahedron.obj, transform: {translate: [0.5, 0, -2], scale: 0.6}}
+render: {shadow_map: 256}
+"""
+
+
+def test_planes_boxes_and_spheres_are_one_convex_part_each_meshes_a_part_per_triangle():
+    scene = parse_scene(GRAZING, source=Path(__file__).resolve().parents[2] / "scenes" / "grazing.yaml")
+    parts, ids = scene.geometry.convex_part, scene.geometry.object_id
+    assert [len(set(parts[ids == i])) for i in range(5)] == [1, 1, 1, 1, int((ids == 4).sum())]
+    assert len({int(parts[ids == i][0]) for i in range(4)} | set(parts[ids == 4].tolist())) == 4 + (ids == 4).sum()
+
+
+def test_a_convex_part_lit_at_a_grazing_angle_needs_no_shadow_ray_on_its_seams(renderer):
+    """The floor's 128 triangles meet along seams, and the boxes' faces along edges, in
+    texels of the writer map that two triangles touch: as one convex part each, the map says
+    the sample's own part alone touches them, and no shadow ray is cast there. The images
+    are the same as with a part per triangle, and the exact reference's."""
+    scene = parse_scene(GRAZING, source=Path(__file__).resolve().parents[2] / "scenes" / "grazing.yaml")
+    geometry = scene.geometry
+    per_triangle = dataclasses.replace(scene, geometry=dataclasses.replace(
+        geometry, convex_part=np.arange(geometry.count, dtype=np.int32)))
+    joined, apart = renderer.render(scene, reuse=False), renderer.render(per_triangle, reuse=False)
+    print(f"shadow rays: {joined.shadow_rays} with convex parts, {apart.shadow_rays} with a part per triangle")
+    assert joined.shadow_rays < 0.5 * apart.shadow_rays
+    assert np.array_equal(joined.image, apart.image)
+    assert mismatched_pixels(joined.image, render_exact(scene), scene) <= 1
