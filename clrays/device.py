@@ -34,11 +34,12 @@ def kernel_dir() -> Path:
     raise DeviceError("OpenCL kernel sources not found (expected clrays/cl or cl/ beside the package)")
 
 
-def build_options(defines: dict[str, object] | None = None) -> list[str]:
+def build_options(defines: dict[str, object] | None = None, constants: dict[str, str] | None = None) -> list[str]:
     """Compiler options of every kernel build: `-I` on the kernel folder (headers, and
     pyopencl's cache sees their edits), the constants shared with Python as `-D`
-    (`clrays.structs.kernel_defines`), then the stage's own `defines`."""
-    shared = [f"-D{name}={literal}" for name, literal in structs.kernel_defines().items()]
+    (`constants`, by default `clrays.structs.kernel_defines()`), then the stage's own `defines`."""
+    constants = structs.kernel_defines() if constants is None else constants
+    shared = [f"-D{name}={literal}" for name, literal in constants.items()]
     return [f"-I{kernel_dir()}"] + shared + [f"-D{k}={v}" for k, v in sorted((defines or {}).items())]
 
 
@@ -171,6 +172,9 @@ class Device:
         self.queue = cl.CommandQueue(self.context, properties=cl.command_queue_properties.PROFILING_ENABLE)
         self._programs: dict[tuple, object] = {}
         self._kernels: dict[tuple, object] = {}
+        # The shared constants as they are now: every program this device builds later takes
+        # them (a test builds a device with one changed, and changes it back at once).
+        self._constants = structs.kernel_defines()
         self._spread = bool(self.device.type & cl.device_type.CPU)
         self._units = max(int(self.device.max_compute_units), 1)
         self._max_group = max(min(MAX_CPU_GROUP, int(self.device.max_work_group_size)), 1)
@@ -187,7 +191,7 @@ class Device:
         key = (stage, tuple(sorted(defines.items())))
         if key not in self._programs:
             path = kernel_dir() / f"{stage}.cl"
-            options = build_options(defines)
+            options = build_options(defines, self._constants)
             try:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore", self.cl.CompilerWarning)

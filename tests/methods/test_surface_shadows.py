@@ -197,3 +197,31 @@ def test_translation_by_1e4_changes_nothing(renderer, kind):
     error = image_error(there, here, depth_edges(depth_map(scene)))
     print(f"{kind} moved by 1e4: {error}")
     assert error.rmse < 1e-3 and mismatched_pixels(there, here, scene) <= 1
+
+
+@pytest.mark.parametrize("name", ["demo", "behind", "sun"])
+def test_the_maps_shadowed_test_answers_as_shadow_rays(renderer, monkeypatch, name):
+    """Where the lit tests cannot decide, the 3 × 3 test reads the map as shadowed when
+    all nine texels around the sample's own hold a blocker; a device built without it casts
+    a shadow ray for each such sample. The images are the same: around the lookup's texel
+    instead (the point moved off an inclined surface, up to a texel aside), the nine had
+    left lit samples beside the slats' and the window frame's shadow edges outside, and
+    called them shadowed (docs/design.md §4.6)."""
+    from pathlib import Path
+
+    from clrays import structs
+    from clrays.device import Device
+    from clrays.scene.load import load_scene
+    from clrays.session import Renderer
+    from conftest import TEST_DEVICE
+
+    monkeypatch.setitem(structs.KERNEL_CONSTANTS, "VISIBILITY_SHADOWED_TEST", 0)
+    every_ray = Renderer(Device(TEST_DEVICE))
+    monkeypatch.undo()
+    scenes = Path(__file__).resolve().parents[2] / "scenes"
+    scene = load_scene(scenes / f"{name}.yaml", overrides=["image.width=480", "image.height=270",
+                                                           "medium.sigma_s=0", "medium.sigma_a=0"])
+    ours, rays = renderer.render(scene, reuse=False), every_ray.render(scene, reuse=False)
+    assert ours.shadow_rays < rays.shadow_rays  # the test decided some samples
+    differ = np.abs(luminance(ours.image) - luminance(rays.image)) > 1e-4 * np.maximum(luminance(rays.image), 1e-3)
+    assert int(differ.sum()) == 0, f"{name}: {int(differ.sum())} pixels differ from the shadow rays'"
