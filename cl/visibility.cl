@@ -511,20 +511,23 @@ inline float own_surface_slack(global const light_t* light, global const view_t*
 #endif
 
 /* The depth, along the ray of texel centre (tx, ty) of a view, of the plane through p
- * with normal n: where that ray meets the sample's own plane; INFINITY where it does not
- * (behind the origin, or parallel). */
+ * with normal n: where that ray meets the sample's own plane; not positive where it does
+ * not (behind the origin, or parallel: ±INFINITY or NaN). With the view's right, up and
+ * forward orthonormal, a perspective ray's direction forward + x·right + y·up has length
+ * √(1 + x² + y²) and n·direction linear in x and y; an orthographic ray starts at
+ * origin + x·right + y·up. */
 ALWAYS_INLINE float own_plane_depth(global const view_t* view, float3 p, float3 n, int tx, int ty)
 {
+    float num = inline_dot(n, p - view->origin.xyz);
+    float along_right = view->scale_x * inline_dot(n, view->right.xyz);
+    float along_up = view->scale_y * inline_dot(n, view->up.xyz);
+    float along_forward = inline_dot(n, view->forward.xyz);
     float sx = (2.0f * (float)tx + 1.0f) / (float)view->width - 1.0f;
     float sy = 1.0f - (2.0f * (float)ty + 1.0f) / (float)view->height;
-    float3 across = view->right.xyz * (sx * view->scale_x) + view->up.xyz * (sy * view->scale_y);
-    float3 start = view->origin.xyz, dir = view->forward.xyz;
-    if (view->projection == PROJECTION_PERSPECTIVE)
-        dir = inline_normalize(dir + across);
-    else
-        start += across;
-    float t = inline_dot(n, p - start) / inline_dot(n, dir);
-    return t > 0.0f ? t : INFINITY; /* (a NaN, n·dir = 0 with p on the ray, also leaves INFINITY) */
+    float across_x = along_right * sx, across_y = along_up * sy;
+    if (view->projection != PROJECTION_PERSPECTIVE) return (num - across_x - across_y) / along_forward;
+    float spread = 1.0f + (sx * view->scale_x) * (sx * view->scale_x) + (sy * view->scale_y) * (sy * view->scale_y);
+    return num * inline_sqrt(spread) / (along_forward + across_x + across_y);
 }
 
 /* Whether the map says the sample is shadowed: every centre of the 3×3 texels around the
@@ -552,7 +555,8 @@ ALWAYS_INLINE int blocked_all_around(global const light_t* light, global const v
             float stored = shadow_texel(view, shadow_depth, tx + i, ty + j);
             if (depth <= stored + tolerance) return 0;
             int cx = inline_clamp_int(tx + i, 0, view->width - 1), cy = inline_clamp_int(ty + j, 0, view->height - 1);
-            if (stored + tolerance >= own_plane_depth(view, p, n, cx, cy)) return 0;
+            float own = own_plane_depth(view, p, n, cx, cy);
+            if (own > 0.0f && stored + tolerance >= own) return 0;
         }
     return 1;
 }
@@ -964,28 +968,30 @@ ALWAYS_INLINE int decide_lanes(global const frame_t* frame, global const view_t*
         float_lanes tolerance = SURFACE_BIAS_TEXELS * size;
         int_lanes tx = int_of_lanes(texel_x), ty = int_of_lanes(texel_y);
         blocked = VISIBILITY_SHADOWED_TEST ? heavy & projects : (int_lanes)(0);
-        /* own_plane_depth, each lane's own plane (p, n), the same operations */
-        float_lanes own_offset = nx * px + ny * py + nz * pz;
+        /* own_plane_depth, each lane's own plane (p, n), the same operations; its terms
+         * along a row and a column of texels once for the three of each */
+        float_lanes num = nx * (px - v.origin_x) + ny * (py - v.origin_y) + nz * (pz - v.origin_z);
+        float_lanes along_right = v.scale_x * (nx * v.right_x + ny * v.right_y + nz * v.right_z);
+        float_lanes along_up = v.scale_y * (nx * v.up_x + ny * v.up_y + nz * v.up_z);
+        float_lanes along_forward = nx * v.forward_x + ny * v.forward_y + nz * v.forward_z;
+        float_lanes across_x[3], across_y[3], spread_x[3], spread_y[3];
+        int_lanes cxs[3], cys[3];
+        for (int k = 0; k < 3; ++k) {
+            cxs[k] = clamp_lanes_of_lanes(tx + k - 1, v.width), cys[k] = clamp_lanes_of_lanes(ty + k - 1, v.height);
+            float_lanes sx = (2.0f * float_of_lanes(cxs[k]) + 1.0f) / float_of_lanes(v.width) - 1.0f;
+            float_lanes sy = 1.0f - (2.0f * float_of_lanes(cys[k]) + 1.0f) / float_of_lanes(v.height);
+            across_x[k] = along_right * sx, across_y[k] = along_up * sy;
+            spread_x[k] = (sx * v.scale_x) * (sx * v.scale_x), spread_y[k] = (sy * v.scale_y) * (sy * v.scale_y);
+        }
         int perspective = light->type != LIGHT_DIRECTIONAL;
-        for (int j = -1; j <= 1; ++j)
-            for (int i = -1; i <= 1; ++i) {
-                int_lanes cx = clamp_lanes_of_lanes(tx + i, v.width), cy = clamp_lanes_of_lanes(ty + j, v.height);
-                float_lanes stored = LOAD_LANES((global const float*)shadow_depth, v.depth_offset + cy * v.width + cx);
-                float_lanes sx = (2.0f * float_of_lanes(cx) + 1.0f) / float_of_lanes(v.width) - 1.0f;
-                float_lanes sy = 1.0f - (2.0f * float_of_lanes(cy) + 1.0f) / float_of_lanes(v.height);
-                float_lanes ax = v.right_x * (sx * v.scale_x) + v.up_x * (sy * v.scale_y);
-                float_lanes ay = v.right_y * (sx * v.scale_x) + v.up_y * (sy * v.scale_y);
-                float_lanes az = v.right_z * (sx * v.scale_x) + v.up_z * (sy * v.scale_y);
-                float_lanes ox = v.origin_x, oy = v.origin_y, oz = v.origin_z;
-                float_lanes rx = v.forward_x, ry = v.forward_y, rz = v.forward_z;
-                if (perspective) {
-                    rx += ax, ry += ay, rz += az;
-                    float_lanes inverse = 1.0f / sqrt_lanes(squared_length_lanes(rx, ry, rz));
-                    rx *= inverse, ry *= inverse, rz *= inverse;
-                } else {
-                    ox += ax, oy += ay, oz += az;
-                }
-                float_lanes t = (own_offset - (nx * ox + ny * oy + nz * oz)) / (nx * rx + ny * ry + nz * rz);
+        for (int j = 0; j < 3; ++j)
+            for (int i = 0; i < 3; ++i) {
+                float_lanes stored = LOAD_LANES((global const float*)shadow_depth,
+                                                v.depth_offset + cys[j] * v.width + cxs[i]);
+                float_lanes t = perspective
+                                    ? num * sqrt_lanes(1.0f + spread_x[i] + spread_y[j])
+                                          / (along_forward + across_x[i] + across_y[j])
+                                    : (num - across_x[i] - across_y[j]) / along_forward;
                 int_lanes own_plane = (t > 0.0f) & (stored + tolerance >= t);
                 blocked &= !(lookup_depth <= stored + tolerance) & !own_plane;
             }
