@@ -412,23 +412,28 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
 
 /* Before the bound passes, with a read_mask: only the texels read get their starting
  * values (bound DEPTH_EMPTY, writer WRITER_NONE, unless clear_maps is 0; the touching
- * lists' heads -1), as only they are drawn and read; one
- * work-item per word of the mask over the light's texels [first, first + texels) (frame
- * addresses; the light's own maps are at address - first). */
+ * lists' heads -1), as only they are drawn and read; one work-item per VISIBILITY_CLEAR_WORDS words
+ * of the mask over the light's texels [first, first + texels) (frame addresses; the light's
+ * own maps are at address - first). A work-item per word was mostly its own overhead: a
+ * cube's mask is 196k words, few of them with a bit set. */
 kernel void visibility_clear(global const uint* read_mask, int first, int texels, int clear_maps, global uint* bound,
                              global int* writer, global int* touching_head, int touching_capacity)
 {
-    int word = (first >> 5) + get_global_id(0);
-    uint bits = read_mask[word];
-    /* only the set bits, lowest first (__builtin_ctz is an instruction, not a library call) */
-    for (; bits != 0u; bits &= bits - 1u) {
-        int at = 32 * word + __builtin_ctz(bits);
-        if (at >= first && at < first + texels) {
-            if (clear_maps) {
-                bound[at - first] = DEPTH_EMPTY;
-                writer[at - first] = WRITER_NONE;
+    int first_word = first >> 5, last_word = (first + texels - 1) >> 5;
+    int begin = first_word + get_global_id(0) * VISIBILITY_CLEAR_WORDS;
+    int end = min(begin + VISIBILITY_CLEAR_WORDS, last_word + 1);
+    for (int word = begin; word < end; ++word) {
+        uint bits = read_mask[word];
+        /* only the set bits, lowest first (__builtin_ctz is an instruction, not a library call) */
+        for (; bits != 0u; bits &= bits - 1u) {
+            int at = 32 * word + __builtin_ctz(bits);
+            if (at >= first && at < first + texels) {
+                if (clear_maps) {
+                    bound[at - first] = DEPTH_EMPTY;
+                    writer[at - first] = WRITER_NONE;
+                }
+                if (touching_capacity > 0) touching_head[at - first] = -1;
             }
-            if (touching_capacity > 0) touching_head[at - first] = -1;
         }
     }
 }

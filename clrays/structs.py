@@ -81,13 +81,15 @@ RASTER_ANY_TEXELS = 256
 # or skip the triangles whose recorded rectangle holds no texel read (cl/visibility.cl).
 VISIBILITY_PENDING = -1.0
 RECTS_NONE, RECTS_RECORD, RECTS_FILTER = 0, 1, 2
+# Words of the read mask (32 texels each) one visibility_clear work-item takes.
+VISIBILITY_CLEAR_WORDS = 32
 
 #: Every constant above by its C name: the `-D` options of every kernel build.
 KERNEL_CONSTANTS = {
     name: value for name, value in dict(globals()).items()
     if name.startswith(("PROJECTION_", "LIGHT_", "PHASE_", "INTEGRAND_", "TRAVERSAL_", "RASTER_", "SURFACE_SHADOWS_",
                          "TEXTURE_WRAP_", "SHADOW_FILTER_", "WRITER_", "STEP_SPACING_", "RECTS_"))
-    or name in ("DEPTH_EMPTY", "SIN_BETA_MIN", "VISIBILITY_PENDING")
+    or name in ("DEPTH_EMPTY", "SIN_BETA_MIN", "VISIBILITY_PENDING", "VISIBILITY_CLEAR_WORDS")
 }
 
 

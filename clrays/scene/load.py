@@ -325,7 +325,8 @@ def _triangles(m: dict[str, Node]) -> _Shape:
         faces.append([integer(i, 0, n - 1) for i in face.value])
     faces = np.array(faces)
     triangles = primitives.indexed_triangles(vertices, faces)
-    return triangles[primitives.spatial_order(triangles)], None, primitives.closed_outward(vertices, faces)  # as a mesh file's
+    order = primitives.spatial_order(triangles)  # as a mesh file's
+    return triangles[order], None, primitives.closed_outward(vertices, faces)
 
 
 def _box(m: dict[str, Node]) -> _Shape:

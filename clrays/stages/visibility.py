@@ -183,8 +183,8 @@ def visibility_bound(device: Device, buffers: FrameBuffers, light_index: int, ti
         # drawing them).
         words = (first + inputs.shadow_texels - 1) // 32 - first // 32 + 1
         timer.add("visibility", device.kernel("visibility", "visibility_clear")(
-            device.queue, (words,), None, prepared.read_mask, np.int32(first), np.int32(inputs.shadow_texels),
-            np.int32(1), bound, writer, lists[0], lists[3]))
+            device.queue, (-(-words // structs.VISIBILITY_CLEAR_WORDS),), None, prepared.read_mask,
+            np.int32(first), np.int32(inputs.shadow_texels), np.int32(1), bound, writer, lists[0], lists[3]))
     # A frame too large for lists now may list its rays' texels later (ray_lists): the
     # rectangles let that pass skip the triangles that touch none of them.
     rects = {} if prepared is not None and touching is None else None
@@ -263,8 +263,8 @@ def ray_lists(device: Device, buffers: FrameBuffers, prepared: Prepared, ray_ent
             light_words = (first + light.texels - 1) // 32 - first // 32 + 1
             # the lists' heads only: the maps keep their values, which the passes write again
             timer.add("visibility", device.kernel("visibility", "visibility_clear")(
-                device.queue, (light_words,), None, mask, np.int32(first), np.int32(light.texels), np.int32(0),
-                light.bound, light.writer, touching.head, np.int32(capacity)))
+                device.queue, (-(-light_words // structs.VISIBILITY_CLEAR_WORDS),), None, mask, np.int32(first),
+                np.int32(light.texels), np.int32(0), light.bound, light.writer, touching.head, np.int32(capacity)))
             _bound_passes(device, light_inputs, first, light.bound, light.writer, mask, arguments, timer,
                           light.rects, filter_rects=light.rects is not None)
         lists.append(touching)
