@@ -12,10 +12,9 @@
  * towards the light, and it touches the same texels.
  * visibility_prepare reads frame, views, lights, camera_depth, tri_id,
  * tri_normal, tri_vertex_normals, offsets; writes visible (1 no light reaches the sample,
- * 0 its surface turns away from the light, else pending: the maps or a ray decide) and
+ * 0 its surface turns away from the light, else pending: the maps or a ray decide),
  * map_read (per sample and light, the bound map's texel its lit test reads and its depth
- * there); visibility_mark reads map_read, writes read_mask (a bit per texel read): the
- * bound passes draw only those.
+ * there) and read_mask (a bit per texel read): the bound passes draw only those.
  * visibility reads frame, views, lights, shadow_depth, bound, writer, map_read, camera_depth, tri_id,
  * tri_vertices, tri_normal, offsets; writes visible where the maps decide a pending entry
  * (float per sample and light, [sample][light]; 0 where the surface turns away from the
@@ -274,7 +273,7 @@ inline void note_touching(global int* head, int tri, global int2* touching, vola
  * A triangle thinner than a texel, which the centre-sampled map may miss, is still here.
  * The same texels get the triangle in the writer map (note_writer).
  * With a read_mask (masked ≠ 0), only the texels that a camera sample's lit test reads are
- * drawn (visibility_mark): those whose bit it has, at the texel's address + mask_offset
+ * drawn (mark_read): those whose bit it has, at the texel's address + mask_offset
  * (the frame's address of the light's texel 0). No sample reads the others, and only they
  * hold starting values (visibility_clear). */
 inline void bound_triangle(global const float4* tri_vertices, global const view_t* views, int first_view,
@@ -613,21 +612,30 @@ ALWAYS_INLINE float3 shadow_ray_start(global const light_t* light, float3 p, flo
     return p + side * (SHADOW_RAY_OFFSET_REL * (exact_length(p) + to_light_distance));
 }
 
+/* A texel that a lit test reads gets its bit in read_mask (32 texels a word, by address;
+ * starts at 0): the bound passes draw only those. */
+ALWAYS_INLINE void mark_read(global uint* read_mask, int address)
+{
+    if (address < 0) return;
+    global uint* word = read_mask + (address >> 5);
+    uint bit = 1u << (address & 31);
+    if (!(*word & bit)) atomic_or(word, bit); /* the read spares most atomics */
+}
+
 /* The part of the decision that needs no bound map, before it is drawn, one work-item per
- * sample and light (no loop, no atomics: straight-line code, which the CPU device can run
- * several work-items at once in vector lanes): visible gets 1 where no light arrives (or
+ * sample and light: visible gets 1 where no light arrives (or
  * the eye is in the lamp), 0 where the surface turns away from the light, else
  * VISIBILITY_PENDING; map_read gets the texel of the
  * bound and writer maps that the lit test reads (the point the shadow ray leaves from,
  * projected: its address, or MAP_TEXEL_*) and the point's depth there. The texel is
  * given for every sample not turned away, whatever the light's power and the medium, so
- * the texels read (visibility_mark) follow the geometry with its shading normals (which
+ * the texels read (mark_read) follow the geometry with its shading normals (which
  * turn a surface away and offset the ray's start), the camera and the light's place alone,
  * which is what a kept bound map is keyed on (clrays/session.py). */
 inline void prepare_entry(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                           global const uint* camera_depth, global const int* tri_id, global const float4* tri_normal,
                           global const float4* tri_vertex_normals, global const float2* offsets,
-                          global float* visible, global int2* map_read, int sample, int l)
+                          global float* visible, global int2* map_read, global uint* read_mask, int sample, int l)
 {
     int entry = sample * frame->light_count + l;
     visible[entry] = 1.0f;
@@ -654,6 +662,7 @@ inline void prepare_entry(global const frame_t* frame, global const view_t* view
             address = view->depth_offset + (int)texel.y * view->width + (int)texel.x;
     }
     map_read[entry] = (int2)(address, as_int(depth));
+    mark_read(read_mask, address);
     if (reaches) visible[entry] = VISIBILITY_PENDING;
 }
 
@@ -684,7 +693,7 @@ ALWAYS_INLINE int prepare_lanes(global const frame_t* frame, global const view_t
                                 int l, global const uint* camera_depth, global const int* tri_id,
                                 global const float4* tri_normal, global const float4* tri_vertex_normals,
                                 global const float2* offsets, int first, global float* visible,
-                                global int2* map_read)
+                                global int2* map_read, global uint* read_mask)
 {
     int_lanes sample = first + (int_lanes)(0, 1, 2, 3, 4, 5, 6, 7);
     /* camera_surface_point */
@@ -790,6 +799,7 @@ ALWAYS_INLINE int prepare_lanes(global const frame_t* frame, global const view_t
         int entry = (first + k) * frame->light_count + l;
         visible[entry] = answer[k];
         map_read[entry] = (int2)(read_address[k], read_depth[k]);
+        mark_read(read_mask, read_address[k]);
     }
     return 1;
 }
@@ -803,7 +813,8 @@ ALWAYS_INLINE int prepare_lanes(global const frame_t* frame, global const view_t
 kernel void visibility_prepare(global const frame_t* frame, global const view_t* views,
                                global const light_t* lights, global const uint* camera_depth, global const int* tri_id,
                                global const float4* tri_normal, global const float4* tri_vertex_normals,
-                               global const float2* offsets, global float* visible, global int2* map_read)
+                               global const float2* offsets, global float* visible, global int2* map_read,
+                               global uint* read_mask)
 {
     int first = get_global_id(0) * LANES, l = get_global_id(1);
     int samples = frame->width * frame->height * frame->spp;
@@ -812,29 +823,16 @@ kernel void visibility_prepare(global const frame_t* frame, global const view_t*
 #ifndef PREPARE_ONE_BY_ONE
     if (first + LANES <= samples && views->projection == PROJECTION_PERSPECTIVE
         && prepare_lanes(frame, views, light, l, camera_depth, tri_id, tri_normal, tri_vertex_normals, offsets, first,
-                         visible, map_read))
+                         visible, map_read, read_mask))
         return;
 #endif
     for (int k = 0; k < LANES && first + k < samples; ++k)
         prepare_entry(frame, views, lights, camera_depth, tri_id, tri_normal, tri_vertex_normals, offsets, visible,
-                      map_read, first + k, l);
-}
-
-/* The texels that the lit tests read: map_read's addresses get their bit in read_mask
- * (32 texels a word, by address; starts at 0). */
-kernel void visibility_mark(global const int2* map_read, int entries, global uint* read_mask)
-{
-    int entry = get_global_id(0);
-    if (entry >= entries) return;
-    int address = map_read[entry].x;
-    if (address < 0) return;
-    global uint* word = read_mask + (address >> 5);
-    uint bit = 1u << (address & 31);
-    if (!(*word & bit)) atomic_or(word, bit); /* the read spares most atomics */
+                      map_read, read_mask, first + k, l);
 }
 
 /* The texels of the entries left to a shadow ray (clrays/stages/visibility.py ray_lists):
- * their addresses get their bit in read_mask, as visibility_mark's. */
+ * their addresses get their bit in read_mask, as visibility_prepare's. */
 kernel void visibility_mark_listed(global const int* ray_entries, int ray_count, global const int2* map_read,
                                    global uint* read_mask)
 {

@@ -118,15 +118,13 @@ def visibility_prepare(device: Device, buffers: FrameBuffers, rastered: RasterRe
     entries = inputs.samples * lights
     visible = device.buffer(nbytes=4 * entries)
     map_read = device.buffer(nbytes=8 * entries)
-    timer.add("visibility", device.kernel("visibility", "visibility_prepare")(
-        device.queue, (-(-inputs.samples // PREPARE_LANES), lights), None, buffers.params, buffers.views,
-        buffers.lights, rastered.camera_depth, rastered.tri_id, buffers.tri_normal,
-        buffers.tri_vertex_normals, buffers.offsets, visible, map_read))
     words = max((inputs.shadow_texels + 31) // 32, 1)
     read_mask = device.buffer(nbytes=4 * words)
     device.fill(read_mask, np.uint32(0), 4 * words, timer, "visibility")
-    timer.add("visibility", device.kernel("visibility", "visibility_mark")(
-        device.queue, (entries,), None, map_read, np.int32(entries), read_mask))
+    timer.add("visibility", device.kernel("visibility", "visibility_prepare")(
+        device.queue, (-(-inputs.samples // PREPARE_LANES), lights), None, buffers.params, buffers.views,
+        buffers.lights, rastered.camera_depth, rastered.tri_id, buffers.tri_normal,
+        buffers.tri_vertex_normals, buffers.offsets, visible, map_read, read_mask))
     return Prepared(visible, map_read, read_mask)
 
 

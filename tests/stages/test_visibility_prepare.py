@@ -24,7 +24,7 @@ SCENES = Path(__file__).resolve().parents[2] / "scenes"
 
 
 def _prepared(device, scene, defines):
-    """(visible, map_read) of visibility_prepare built with `defines`."""
+    """(visible, map_read, read_mask) of visibility_prepare built with `defines`."""
     buffers = upload(device, frame_inputs(scene))
     timer = StageTimer()
     rastered = raster(device, buffers, timer)
@@ -33,10 +33,13 @@ def _prepared(device, scene, defines):
     lights = max(len(scene.lights), 1)
     entries = inputs.samples * lights
     visible, map_read = device.buffer(nbytes=4 * entries), device.buffer(nbytes=8 * entries)
+    words = max((inputs.shadow_texels + 31) // 32, 1)
+    read_mask = device.buffer(np.zeros(words, np.uint32))
     kernel(device.queue, (-(-inputs.samples // stage.PREPARE_LANES), lights), None, buffers.params, buffers.views,
            buffers.lights, rastered.camera_depth, rastered.tri_id, buffers.tri_normal, buffers.tri_vertex_normals,
-           buffers.offsets, visible, map_read)
-    return device.read(visible, entries, np.float32), device.read(map_read, (entries, 2), np.int32)
+           buffers.offsets, visible, map_read, read_mask)
+    return (device.read(visible, entries, np.float32), device.read(map_read, (entries, 2), np.int32),
+            device.read(read_mask, words, np.uint32))
 
 
 #: Off PoCL: units in the last place a sample's depth may differ by, and the share of samples
@@ -52,6 +55,7 @@ def _same(device, scene):
     np.testing.assert_array_equal(lanes[0].view(np.int32), one_by_one[0].view(np.int32))
     if TEST_ON_POCL:
         np.testing.assert_array_equal(lanes[1], one_by_one[1])
+        np.testing.assert_array_equal(lanes[2], one_by_one[2])  # the same texels marked read
         return lanes
     texel, texel_alone = lanes[1][:, 0], one_by_one[1][:, 0]
     other = texel != texel_alone
@@ -66,7 +70,7 @@ def _same(device, scene):
 @pytest.mark.parametrize("name", ["demo", "bunny", "behind", "sun"])
 def test_bench_scenes(device, name):
     scene = load_scene(SCENES / f"{name}.yaml", overrides=["image.width=160", "image.height=90"])
-    visible, _ = _same(device, scene)
+    visible, _, _ = _same(device, scene)
     assert (visible == structs.VISIBILITY_PENDING).any()  # the lanes answered some samples with a texel
 
 
@@ -114,5 +118,5 @@ def test_a_frame_narrower_than_the_lanes(device):
     # 5 pixels wide: a run of 8 samples spans rows, so the lanes divide per lane (cl/lanes.h
     # sample_pixel_lanes); the answers must still be prepare_entry's.
     scene = make_scene(_triangles(), [LIGHTS["point"]], width=5, height=7, shadow_map=64)
-    visible, _ = _same(device, scene)
+    visible, _, _ = _same(device, scene)
     assert (visible == structs.VISIBILITY_PENDING).any() or (visible == 0.0).any()

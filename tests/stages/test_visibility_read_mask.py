@@ -1,5 +1,5 @@
 """The visibility stage draws its bound and writer maps only at the texels that a camera
-sample's lit test reads (visibility_prepare's map_read, visibility_mark's read_mask;
+sample's lit test reads (visibility_prepare's map_read and read_mask;
 docs/design.md §4.6): at every one of them both maps must hold what drawing the whole
 map gives, for every light of a frame (the second light's texels sit after the first's)."""
 import numpy as np
