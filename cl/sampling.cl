@@ -273,17 +273,25 @@ ALWAYS_INLINE int radiance_breaks(float3 a, float3 b, float threshold)
     return inline_fabs(la - lb) > threshold * inline_fmax(la, lb);
 }
 
+/* What line_scatter and line_refine_fill know of a line sample (`state`, a byte each). */
+#define LINE_LEFT 0     /* not computed (yet): interpolated by the fill */
+#define LINE_COMPUTED 1 /* computed by line_scatter, or on a slice that misses the screen */
+#define LINE_REFINED 2  /* computed by the refine */
+
 /* Per run of line samples from a `step`-th one to the next (the last run: to the line's
- * last sample too): each sample's radiance times radiance_scale (w = 1) where it is
- * needed, else w = 0. A work-item per run, not per sample: most samples are not needed,
- * and the run's ends bound line_refine_fill's work-item too. */
+ * last sample too): each sample's radiance times radiance_scale where it is needed (state
+ * LINE_COMPUTED), else 0 (LINE_LEFT); w holds the sample's distance, where gather reads it
+ * with the radiance (line's distances are then not read there but for a spot light's
+ * weights). A work-item per run, not per sample: most samples are not needed, and the
+ * run's ends bound line_refine_fill's work-item too. */
 kernel void line_scatter(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                          global const epipolar_t* ep, global const float2* tree,
                          global const integrand_t* integrand, global const float* tables,
                          global const textured_integrand_t* textured, global const float* texture_basis,
                          global const float* texture_prefix, global const float2* ranges,
                          global const float4* sides, global const float2* line, int n, global const int* lengths,
-                         int step, float threshold, global float4* radiance, global uint* counts RECTIFIED_LAYER_ARGS)
+                         int step, float threshold, global float4* radiance, global uchar* state,
+                         global uint* counts RECTIFIED_LAYER_ARGS)
 {
     row_texture_t texture = {textured, texture_basis, texture_prefix};
     ATTACH_RECTIFIED_LAYERS(texture) /* translucent objects only (translucent_walk.h) */
@@ -294,38 +302,41 @@ kernel void line_scatter(global const frame_t* frame, global const view_t* views
     int end = first + step >= length - 1 ? length : first + step;
     global const float2* samples = line + i * n;
     for (int j = first; j < end; ++j) {
-        float4 result = (float4)(0.0f);
+        float4 result = (float4)(0.0f, 0.0f, 0.0f, samples[j].x);
+        uchar known = LINE_LEFT;
         if (samples[j].x < 0.0f) {
-            result.w = 1.0f; /* the slice does not cross the screen: nothing reads it */
+            known = LINE_COMPUTED; /* the slice does not cross the screen: nothing reads it */
         } else if (line_sample_needed(samples, j, length, step, threshold)) {
             result.xyz = line_sample_radiance(frame, lights, ep, tree, integrand, tables, &texture, ranges, sides,
                                               samples[j].x, i, j, length, counts);
-            result.w = 1.0f;
+            known = LINE_COMPUTED;
         }
         radiance[i * n + j] = result;
+        state[i * n + j] = known;
     }
 }
 
 /* Per run of line samples between two `step`-th ones (which line_scatter computed, as it
- * did the line's last): first refine, then fill, in place in `radiance`.
+ * did the line's last): first refine, then fill, in place in `radiance` (its w, the
+ * distance, kept).
  * - Refine: a sample line_scatter left is computed too where the samples line_scatter
  *   computed either side differ by more than 4 × the threshold (a shadow edge crosses the
  *   line between them), so that the fill draws no straight line across it. Not 1 ×: over
  *   `step` samples the light's own falloff often changes radiance by a few percent, and
  *   refining on it walked many more samples for no error gained on the bench scenes. A
- *   refined sample is marked w = 2, so that every decision sees line_scatter's samples
- *   (w = 1) only.
- * - Fill: each sample still not computed (w = 0) is linear in j between the computed
- *   samples either side; it keeps w = 0, so the next fill skips it.
- * The run's ends are computed (w = 1) and stay as they are: the work-items of the runs on
- * either side read them, and write only inside their own runs. */
+ *   refined sample is marked LINE_REFINED, so that every decision sees line_scatter's
+ *   samples (LINE_COMPUTED) only.
+ * - Fill: each sample still LINE_LEFT is linear in j between the computed samples either
+ *   side; it stays LINE_LEFT, so the next fill skips it.
+ * The run's ends are computed and stay as they are: the work-items of the runs on either
+ * side read them, and write only inside their own runs. */
 kernel void line_refine_fill(global const frame_t* frame, global const light_t* lights, global const epipolar_t* ep,
                              global const float2* tree, global const integrand_t* integrand,
                              global const float* tables, global const textured_integrand_t* textured,
                              global const float* texture_basis, global const float* texture_prefix,
                              global const float2* ranges, global const float4* sides, global const float2* line,
                              int n, global const int* lengths, int step, float threshold,
-                             global float4* radiance, global uint* counts RECTIFIED_LAYER_ARGS)
+                             global float4* radiance, global uchar* state, global uint* counts RECTIFIED_LAYER_ARGS)
 {
     row_texture_t texture = {textured, texture_basis, texture_prefix};
     ATTACH_RECTIFIED_LAYERS(texture) /* translucent objects only (translucent_walk.h) */
@@ -335,24 +346,26 @@ kernel void line_refine_fill(global const frame_t* frame, global const light_t* 
     int last = inline_min(first + step, length - 1); /* the run's computed ends */
     if (first >= length - 1) return;
     global float4* samples = radiance + i * n;
+    global uchar* known = state + i * n;
     for (int j = first + 1; j < last; ++j) {
-        if (samples[j].w != 0.0f) continue;
+        if (known[j] != LINE_LEFT) continue;
         int left = j - 1, right = j + 1;
-        while (samples[left].w != 1.0f) --left;
-        while (samples[right].w != 1.0f) ++right;
+        while (known[left] != LINE_COMPUTED) --left;
+        while (known[right] != LINE_COMPUTED) ++right;
         if (radiance_breaks(samples[left].xyz, samples[right].xyz, 4.0f * threshold)) {
             float3 computed = line_sample_radiance(frame, lights, ep, tree, integrand, tables, &texture, ranges, sides,
                                                    line[i * n + j].x, i, j, length, counts);
-            samples[j] = (float4)(computed, 2.0f);
+            samples[j].xyz = computed;
+            known[j] = LINE_REFINED;
         }
     }
     for (int j = first + 1; j < last; ++j) {
-        if (samples[j].w != 0.0f) continue;
+        if (known[j] != LINE_LEFT) continue;
         int left = j - 1, right = j + 1;
-        while (samples[left].w == 0.0f) --left;
-        while (samples[right].w == 0.0f) ++right;
+        while (known[left] == LINE_LEFT) --left;
+        while (known[right] == LINE_LEFT) ++right;
         float t = (float)(j - left) / (float)(right - left);
-        samples[j] = (float4)(mix(samples[left].xyz, samples[right].xyz, t), 0.0f);
+        samples[j].xyz = mix(samples[left].xyz, samples[right].xyz, t);
     }
 }
 
@@ -412,9 +425,14 @@ ALWAYS_INLINE int_lanes slice_line(global const float* ranges, global const floa
     float_lanes f = hi > lo ? clamped * float_of_lanes(length - 1) : 0.0f;
     int_lanes j = min_lanes(int_of_lanes(f), length - 2);
     float_lanes s = f - float_of_lanes(j);
-    int_lanes at = i * n + j; /* line: (distance, weight) at 2·at, the next at 2·at + 2; radiance: 4·at, 4·at + 4 */
-    float_lanes a_distance = LOAD_LANES(line, 2 * at), a_weight = LOAD_LANES(line, 2 * at + 1);
-    float_lanes b_distance = LOAD_LANES(line, 2 * at + 2), b_weight = LOAD_LANES(line, 2 * at + 3);
+    int_lanes at = i * n + j; /* radiance: (r, g, b, distance) at 4·at, the next at 4·at + 4; line: weight at 2·at + 1 */
+    /* the distances from radiance's w, beside the colour; line's weights for a spot light only */
+    float_lanes a_distance = LOAD_LANES(radiance, 4 * at + 3), b_distance = LOAD_LANES(radiance, 4 * at + 7);
+#if SAMPLING_LIGHT == LIGHT_SPOT
+    float_lanes a_weight = LOAD_LANES(line, 2 * at + 1), b_weight = LOAD_LANES(line, 2 * at + 3);
+#else
+    float_lanes a_weight = 0.0f, b_weight = 0.0f; /* not compared: own_weight < 0 below */
+#endif
     float_lanes ra = LOAD_LANES(radiance, 4 * at), ga = LOAD_LANES(radiance, 4 * at + 1);
     float_lanes ba = LOAD_LANES(radiance, 4 * at + 2), rb = LOAD_LANES(radiance, 4 * at + 4);
     float_lanes gb = LOAD_LANES(radiance, 4 * at + 5), bb = LOAD_LANES(radiance, 4 * at + 6);

@@ -187,7 +187,8 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
     sides = device.buffer(slice_sides(epipolar.params), writable=False)
     lengths = device.buffer(line_lengths(inputs.scene, epipolar.params, ranges, n), writable=False)
     line = device.buffer(nbytes=8 * slices * n)  # (distance, lit extent) per line sample
-    radiance = device.buffer(nbytes=16 * slices * n)
+    radiance = device.buffer(nbytes=16 * slices * n)  # (r, g, b times radiance_scale, distance) per line sample
+    state = device.buffer(nbytes=slices * n)  # per line sample: left, computed or refined (cl/sampling.cl LINE_*)
     counts = device.buffer(np.zeros(2, dtype=np.uint32))
     samples, n32 = inputs.samples, np.int32(n)
     light = inputs.scene.lights[int(epipolar.params["light_index"])]
@@ -206,10 +207,10 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
     runs = -(-(n - 1) // int(step))  # the runs between every step-th line sample
     run("line_scatter", (runs, slices), None, buffers.params, buffers.views, buffers.lights,
         epipolar.buffer, epipolar.tree, integrand.params, integrand.data, texture.params, texture.basis,
-        texture.prefix, ranges_buffer, sides, line, n32, lengths, step, threshold, radiance, counts, *walked)
+        texture.prefix, ranges_buffer, sides, line, n32, lengths, step, threshold, radiance, state, counts, *walked)
     run("line_refine_fill", (runs, slices), None, buffers.params, buffers.lights, epipolar.buffer, epipolar.tree,
         integrand.params, integrand.data, texture.params, texture.basis, texture.prefix, ranges_buffer, sides, line,
-        n32, lengths, step, threshold, radiance, counts, *walked)
+        n32, lengths, step, threshold, radiance, state, counts, *walked)
     fixup_flags = device.buffer(nbytes=samples)  # per camera sample: a bit per slice fix_up walks
     run("gather", (-(-samples // LANES),), None, buffers.params, buffers.views, buffers.lights,
         epipolar.buffer, rastered.camera_depth, buffers.offsets, ranges_buffer, line, radiance, n32, lengths, threshold,
