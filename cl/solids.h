@@ -14,7 +14,9 @@
  * points out of its solid, −1 where it points in, 0 for a triangle of no solid, which is
  * never skipped. Only a face clearly turned away is: within BACK_FACE_MARGIN of edge-on
  * (the cosine between its normal and the ray), float32 rounding could flip the sign, and
- * keeping a back face never changes a result. */
+ * keeping a back face never changes a result. Nor is a sliver (twice its area under
+ * BACK_FACE_SLIVER of its longest edge squared), whose float32 normal may point anywhere
+ * within far more than that margin. */
 #ifndef CLRAYS_SOLIDS_H
 #define CLRAYS_SOLIDS_H
 
@@ -22,17 +24,21 @@
 #include "inline_math.h"
 
 #define BACK_FACE_MARGIN 1e-4f
+#define BACK_FACE_SLIVER 0.01f
 
 /* Whether the view may skip the triangle (a, b, c) (a.w: its outward sign): a solid's face
  * turned away from the view's origin (perspective), or along its rays (orthographic). */
 ALWAYS_INLINE int faces_away_from_view(global const view_t* view, float4 a, float3 b, float3 c)
 {
     if (!view->cull_back_faces || a.w == 0.0f) return 0;
-    float3 normal = a.w * inline_cross(b - a.xyz, c - a.xyz);
+    float3 ab = b - a.xyz, ac = c - a.xyz, bc = c - b;
+    float3 normal = a.w * inline_cross(ab, ac);
     float3 along = view->projection == PROJECTION_PERSPECTIVE ? a.xyz - view->origin.xyz : view->forward.xyz;
     float cosine = inline_dot(normal, along); /* times |normal|·|along| */
-    return cosine > 0.0f
-           && cosine * cosine > BACK_FACE_MARGIN * BACK_FACE_MARGIN * inline_dot(normal, normal) * inline_dot(along, along);
+    float squared = inline_dot(normal, normal);
+    float longest = inline_fmax(inline_dot(ab, ab), inline_fmax(inline_dot(ac, ac), inline_dot(bc, bc)));
+    return cosine > 0.0f && squared >= BACK_FACE_SLIVER * BACK_FACE_SLIVER * longest * longest
+           && cosine * cosine > BACK_FACE_MARGIN * BACK_FACE_MARGIN * squared * inline_dot(along, along);
 }
 
 #endif

@@ -199,8 +199,20 @@ inline int row_span(const float3* edge, int edges, int ty, int* first, int* last
  * label per triangle, the bits in w of its second vertex row (clrays.inputs.vertex_rows):
  * a plane's, a box's or a sphere's triangles share one, any other triangle has its own
  * (Geometry.convex_part). So the seams of a floor's triangles and a box's edges leave
- * their texels to no other test. */
+ * their texels to no other test. A box's or a sphere's label has CONVEX_OUTSIDE_ONLY:
+ * the argument holds for a point of its outside, which its winding faces; seen from
+ * inside (a room, a dome) the sample's face turns towards a light beyond the far wall,
+ * which the same part blocks. */
 ALWAYS_INLINE int convex_part_of(global const float4* tri_vertices, int tri) { return as_int(tri_vertices[3 * tri + 1].w); }
+
+/* Whether the writer map's `writer`, at a sample on triangle `tri` seen along `dir`, is
+ * the sample's own part alone, with the sample on a side of it that the part cannot shadow. */
+ALWAYS_INLINE int only_own_part(global const float4* tri_vertices, global const float4* tri_normal, int tri,
+                                int writer, float3 dir)
+{
+    int part = convex_part_of(tri_vertices, tri);
+    return writer == part && (!(part & CONVEX_OUTSIDE_ONLY) || inline_dot(tri_normal[tri].xyz, dir) < 0.0f);
+}
 
 inline void note_writer(global int* texel_writer, int part)
 {
@@ -871,13 +883,17 @@ inline void decide_entry(global const frame_t* frame, global const view_t* views
         return;
     }
     float depth = as_float(read.y), bound_depth = read.x >= 0 ? as_float(bound[read.x]) : 0.0f;
-    if (read.x >= 0 && (depth <= bound_depth || writer[read.x] == convex_part_of(tri_vertices, tri))) {
+    if (read.x >= 0 && depth <= bound_depth) {
         out[l] = 1.0f;
         return;
     }
     if (read.x >= 0) {
         float3 p, dir, n;
         camera_surface_point(frame, views, camera_depth, tri_id, tri_normal, offsets, sample, &p, &dir, &n);
+        if (only_own_part(tri_vertices, tri_normal, tri, writer[read.x], dir)) {
+            out[l] = 1.0f;
+            return;
+        }
         /* Lit when depth ≤ bound + min(bias, slack), both ≥ 0: the slack's trigonometry
          * only within the bias (same answer as computing it first). */
         if (depth <= bound_depth + SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth)) {
@@ -926,8 +942,19 @@ ALWAYS_INLINE int decide_lanes(global const frame_t* frame, global const view_t*
     int_lanes texel = address >= 0, safe = texel ? address : 0;
     int_lanes tri = vload8(0, tri_id + first);
     float_lanes bound_depth = texel ? LOAD_LANES((global const float*)bound, safe) : 0.0f;
-    int_lanes own_part = as_int8(LOAD_LANES((global const float*)tri_vertices, 12 * (tri >= 0 ? tri : 0) + 7));
-    int_lanes only_own = as_int8(LOAD_LANES((global const float*)writer, safe)) == own_part; /* convex_part_of */
+    /* only_own_part: the own part alone; a solid's, seen from its outside */
+    int_lanes safe_tri = tri >= 0 ? tri : 0;
+    int_lanes own_part = as_int8(LOAD_LANES((global const float*)tri_vertices, 12 * safe_tri + 7));
+    int_lanes only_own = pending & texel & (as_int8(LOAD_LANES((global const float*)writer, safe)) == own_part);
+    int_lanes outside_only = only_own & ((own_part & CONVEX_OUTSIDE_ONLY) != 0);
+    if (any_lanes(outside_only)) {
+        float_lanes dx, dy, dz;
+        camera_ray_lanes(frame, views, offsets, sample, &dx, &dy, &dz);
+        global const float* normals = (global const float*)tri_normal;
+        float_lanes front = LOAD_LANES(normals, 4 * safe_tri) * dx + LOAD_LANES(normals, 4 * safe_tri + 1) * dy
+                            + LOAD_LANES(normals, 4 * safe_tri + 2) * dz;
+        only_own &= !outside_only | (front < 0.0f);
+    }
     int_lanes lit = pending & ((address == MAP_TEXEL_OUTSIDE) | (texel & ((depth <= bound_depth) | only_own)));
     int_lanes heavy = pending & texel & !lit;
     int_lanes blocked = (int_lanes)(0), slack = (int_lanes)(0);

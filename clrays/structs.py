@@ -47,6 +47,9 @@ DEPTH_EMPTY = np.uint32(0x7F800000)  # as_uint(+inf): a depth buffer's texel whe
 
 WRITER_NONE = -1  # the visibility stage's writer map: no triangle touches this texel
 WRITER_MANY = -2  # two or more do (else the one triangle's index)
+# Geometry.convex_part's flag of a solid's part (a box, a sphere): its triangles cannot shadow
+# a point of its outside only, which (b - a) x (c - a) faces (cl/visibility.cl).
+CONVEX_OUTSIDE_ONLY = 1 << 30
 
 # A point or spot light is a lamp: a ball of radius LAMP_RADIUS_REL × the scene's size around
 # it holds no medium (clrays.reference.radiometry says why and what it changes); the radius
@@ -88,7 +91,7 @@ VISIBILITY_CLEAR_WORDS = 32
 KERNEL_CONSTANTS = {
     name: value for name, value in dict(globals()).items()
     if name.startswith(("PROJECTION_", "LIGHT_", "PHASE_", "INTEGRAND_", "TRAVERSAL_", "RASTER_", "SURFACE_SHADOWS_",
-                         "TEXTURE_WRAP_", "SHADOW_FILTER_", "WRITER_", "STEP_SPACING_", "RECTS_"))
+                         "TEXTURE_WRAP_", "SHADOW_FILTER_", "WRITER_", "STEP_SPACING_", "RECTS_", "CONVEX_"))
     or name in ("DEPTH_EMPTY", "SIN_BETA_MIN", "VISIBILITY_PENDING", "VISIBILITY_CLEAR_WORDS")
 }
 

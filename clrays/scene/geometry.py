@@ -101,34 +101,60 @@ def plane_triangles(center, normal, size: float, segments: int) -> np.ndarray:
 
 
 def closed_outward(vertices: np.ndarray, faces: np.ndarray) -> int:
-    """+1 where the faces close a solid wound counter-clockwise seen from outside, so that
-    (b - a) x (c - a) points out of it; -1 where all are wound the other way; 0 for an open
-    surface, one wound inconsistently or not a manifold (an edge of more than two faces),
-    or one of no volume. Vertices are one where their coordinates are equal, so an STL
-    file's repeated corners join. Closed means every edge a -> b of a face is b -> a of
-    exactly one other: the views that skip such a solid's back faces rely on it (docs/design.md
-    §4.1, "Back faces of closed solids")."""
+    """+1 where the faces close solids wound counter-clockwise seen from outside, so that
+    (b - a) x (c - a) points out of them; -1 where all are wound the other way; 0 for an
+    open surface, one wound inconsistently or not a manifold (an edge of more than two
+    faces), parts wound opposite ways (an inverted cube inside another), or a part of no
+    volume. Vertices are one where their coordinates are equal, so an STL file's repeated
+    corners join. Closed means every edge a -> b of a face is b -> a of exactly one other:
+    the views that skip such a solid's back faces rely on it (docs/design.md §4.1, "Back
+    faces of closed solids"). A surface that turns inside out through itself is not seen."""
     v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
     f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
-    if len(f) < 4 or np.any((f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])):
+    if len(f) < 4:
         return 0
     unique, joined = np.unique(v, axis=0, return_inverse=True)
     f = joined.reshape(-1)[f]
     if np.any((f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])):
         return 0  # a face with two corners at one point
     n = np.int64(len(unique))
-    edges = (f * n + np.roll(f, -1, axis=1)).reshape(-1)  # a -> b, as one integer
+    edges = (f * n + np.roll(f, -1, axis=1)).reshape(-1)  # a -> b, as one integer; edge k is face k // 3's
     reversed_edges = (np.roll(f, -1, axis=1) * n + f).reshape(-1)
-    ordered = np.sort(edges)
-    if np.any(ordered[1:] == ordered[:-1]) or not np.array_equal(ordered, np.sort(reversed_edges)):
+    order = np.argsort(edges)
+    ordered = edges[order]
+    if np.any(ordered[1:] == ordered[:-1]):
         return 0
+    found = np.minimum(np.searchsorted(ordered, reversed_edges), len(ordered) - 1)
+    if not np.array_equal(ordered[found], reversed_edges):  # (the edges unique: each reverse once)
+        return 0
+    # the face across each edge (its reverse's), then the connected parts, each named by
+    # its least face: every pair of neighbours joins their parts' names (the larger name
+    # takes the smaller), and every name then follows its chain to the end, until nothing
+    # changes (a few rounds)
+    face, across = np.arange(len(edges)) // 3, order[found] // 3
+    part = np.arange(len(f))
+    while True:
+        mine, theirs = part[face], part[across]
+        joined_parts = part.copy()
+        np.minimum.at(joined_parts, np.maximum(mine, theirs), np.minimum(mine, theirs))
+        while True:
+            root = joined_parts[joined_parts]
+            if np.array_equal(root, joined_parts):
+                break
+            joined_parts = root
+        if np.array_equal(joined_parts, part):
+            break
+        part = joined_parts
     a, b, c = unique[f[:, 0]], unique[f[:, 1]], unique[f[:, 2]]
     centre = unique.mean(axis=0)  # about the solid: the volume's sum cancels less
-    volume = np.einsum("ij,ij->i", a - centre, np.cross(b - centre, c - centre)).sum() / 6.0
+    volume = np.einsum("ij,ij->i", a - centre, np.cross(b - centre, c - centre)) / 6.0
+    volumes = np.bincount(part, weights=volume)[np.unique(part)]
     scale = np.ptp(unique, axis=0).max() ** 3
-    if not (abs(volume) > 1e-9 * scale):
+    if not np.all(np.abs(volumes) > 1e-9 * scale):
         return 0
-    return 1 if volume > 0 else -1
+    if np.all(volumes > 0):
+        return 1
+    return -1 if np.all(volumes < 0) else 0
 
 
 def flat_normals(triangles: np.ndarray) -> np.ndarray:

@@ -24,6 +24,7 @@ import numpy as np
 from . import geometry as primitives
 from . import relief as relief_images
 from ..errors import SceneError
+from ..structs import CONVEX_OUTSIDE_ONLY
 from .animation import Animation, Key, ObjectRig, Track
 from .files import FileRefused, read_regular_file
 from .fields import (ANIMATION, CAMERA, FORMAT_VERSION, IMAGE, LIGHTS, MAX_IMAGE_PIXELS, MEDIUM, OBJECT, OBJECTS,
@@ -523,7 +524,7 @@ def _geometry(node: Node | None, base_dir: Path, rigs: list | None = None) -> Ge
         opacity.append(np.broadcast_to(obj.opacity, (count, 3)))
         ids.append(np.full(count, i, dtype=np.int32))
         outward.append(np.full(count, obj.outward, dtype=np.int8))
-        convex_part.append(start - count + _convex_parts(item, count))
+        convex_part.append((start - count) | _convex_parts(item, count))
     triangles = np.ascontiguousarray(np.concatenate(tris), dtype=np.float64)
     normals = primitives.flat_normals(triangles)  # once for all objects: per object, it dominated loading
     smooth = np.zeros(len(triangles), bool)
@@ -537,11 +538,16 @@ def _geometry(node: Node | None, base_dir: Path, rigs: list | None = None) -> Ge
 
 def _convex_parts(node: Node, count: int) -> np.ndarray:
     """(count,) int32: each of an object's triangles' convex part, numbered from 0 (the
-    index of its first triangle in the object): a plane, a box or a sphere is one (a
-    sphere's tessellation is the convex hull of its points; a transform keeps them convex),
-    any other object's triangles each their own."""
-    if node.value["type"].value in ("plane", "box", "sphere"):
+    index of its first triangle in the object): a plane is one, and a box or a sphere one
+    flagged CONVEX_OUTSIDE_ONLY (a solid's triangles cannot shadow a point of its outside,
+    where their winding faces; from inside, its far side does); any other object's
+    triangles each their own. A sphere's tessellation is the convex hull of its points, and
+    a transform (its scale is positive) keeps either of them convex."""
+    kind = node.value["type"].value
+    if kind == "plane":
         return np.zeros(count, np.int32)
+    if kind in ("box", "sphere"):
+        return np.full(count, CONVEX_OUTSIDE_ONLY, np.int32)
     return np.arange(count, dtype=np.int32)
 
 

@@ -290,10 +290,10 @@ class Geometry:
         angle its triangles span seen from `point` over 4π (Van Oosterom and Strackee's
         formula), 0 outside, ±1 inside, ±1/2 on the surface."""
         point = np.asarray(point, dtype=np.float64)
-        for rows, lo, hi in self.kept(("solids",), self._solids):
-            margin = 1e-6 * float(np.max(hi - lo))
-            if np.any(point < lo - margin) or np.any(point > hi + margin):
-                continue
+        solids, lo, hi = self.kept(("solids",), self._solids)
+        margin = 1e-6 * np.max(hi - lo, axis=1, keepdims=True) if len(solids) else 0.0
+        near = np.flatnonzero(np.all((point >= lo - margin) & (point <= hi + margin), axis=1))
+        for rows in (solids[k] for k in near):
             a, b, c = (self.triangles[rows, k] - point for k in range(3))
             la, lb, lc = (np.linalg.norm(v, axis=1) for v in (a, b, c))
             det = np.einsum("ij,ij->i", a, np.cross(b, c))
@@ -303,15 +303,18 @@ class Geometry:
                 return True
         return False
 
-    def _solids(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
-        """Per closed solid: its triangles' rows, and its bounds (lo, hi)."""
+    def _solids(self) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
+        """The closed solids: each one's triangles' rows, and their bounds lo, hi (S, 3)."""
         rows = np.flatnonzero(self.outward != 0)
-        solids = []
-        for object_id in np.unique(self.object_id[rows]):
-            own = rows[self.object_id[rows] == object_id]
-            points = self.triangles[own].reshape(-1, 3)
-            solids.append((own, points.min(axis=0), points.max(axis=0)))
-        return solids
+        rows = rows[np.argsort(self.object_id[rows], kind="stable")]  # each object's rows together
+        starts = np.flatnonzero(np.diff(self.object_id[rows], prepend=-1))
+        solids = np.split(rows, starts[1:]) if len(rows) else []
+        corners = self.triangles[rows].reshape(-1, 9)  # per row, its three points
+        lo = np.minimum.reduceat(np.minimum(np.minimum(corners[:, 0:3], corners[:, 3:6]), corners[:, 6:9]), starts) \
+            if len(rows) else np.zeros((0, 3))
+        hi = np.maximum.reduceat(np.maximum(np.maximum(corners[:, 0:3], corners[:, 3:6]), corners[:, 6:9]), starts) \
+            if len(rows) else np.zeros((0, 3))
+        return solids, lo, hi
 
     def farthest_from(self, point) -> float:
         """Distance from `point` to the farthest triangle vertex (0 without triangles); a

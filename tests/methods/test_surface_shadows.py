@@ -199,7 +199,7 @@ def test_translation_by_1e4_changes_nothing(renderer, kind):
     assert error.rmse < 1e-3 and mismatched_pixels(there, here, scene) <= 1
 
 
-@pytest.mark.parametrize("name", ["demo", "behind", "sun"])
+@pytest.mark.parametrize("name", ["demo", "bunny", "behind", "sun"])
 def test_the_maps_shadowed_test_answers_as_shadow_rays(renderer, monkeypatch, name):
     """Where the lit tests cannot decide, the 3 × 3 test reads the map as shadowed when
     all nine texels around the sample's own hold a blocker; a device built without it casts

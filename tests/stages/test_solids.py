@@ -36,6 +36,16 @@ def test_boxes_spheres_and_closed_meshes_are_solids_wound_outward():
         assert load_mesh(MESHES / name)[2] == 1, name
 
 
+def test_parts_wound_opposite_ways_are_no_solid():
+    """A cube with an inverted cube inside it (a hollow, wound as a cavity would not be:
+    both outward's opposite) closes every edge, but its parts' volumes have opposite signs."""
+    outer, inner = box_triangles([0, 0, 0], [3, 3, 3]), box_triangles([1, 1, 1], [2, 2, 2])
+    assert closed_outward(*_indexed(np.concatenate([outer, inner[:, ::-1]]))) == 0
+    apart = box_triangles([5, 0, 0], [6, 1, 1])
+    assert closed_outward(*_indexed(np.concatenate([outer, apart]))) == 1
+    assert closed_outward(*_indexed(np.concatenate([outer, apart])[:, ::-1])) == -1
+
+
 def test_a_solid_wound_inward_is_minus_one_and_open_or_torn_surfaces_are_none():
     vertices, faces = _indexed(box_triangles([0, 0, 0], [1, 1, 1]))
     assert closed_outward(vertices, faces[:, ::-1]) == -1
@@ -215,6 +225,8 @@ def test_planes_boxes_and_spheres_are_one_convex_part_each_meshes_a_part_per_tri
     scene = parse_scene(GRAZING, source=Path(__file__).resolve().parents[2] / "scenes" / "grazing.yaml")
     parts, ids = scene.geometry.convex_part, scene.geometry.object_id
     assert [len(set(parts[ids == i])) for i in range(5)] == [1, 1, 1, 1, int((ids == 4).sum())]
+    outside_only = [bool(parts[ids == i][0] & structs.CONVEX_OUTSIDE_ONLY) for i in range(5)]
+    assert outside_only == [False, True, True, True, False]  # a box's or a sphere's: a solid's
     assert len({int(parts[ids == i][0]) for i in range(4)} | set(parts[ids == 4].tolist())) == 4 + (ids == 4).sum()
 
 
@@ -232,3 +244,28 @@ def test_a_convex_part_lit_at_a_grazing_angle_needs_no_shadow_ray_on_its_seams(r
     assert joined.shadow_rays < 0.5 * apart.shadow_rays
     assert np.array_equal(joined.image, apart.image)
     assert mismatched_pixels(joined.image, render_exact(scene), scene) <= 1
+
+
+@pytest.mark.parametrize("light", ["{type: directional, direction: [0.3, -1, 0.2], irradiance: 3}",
+                                   "{type: point, position: [0.5, 9, 0.3], intensity: 300}"])
+@pytest.mark.parametrize("room", ["{type: box, min: [-4, 0, -4], max: [4, 5, 4]}",
+                                  "{type: sphere, center: [0, 0, 0], radius: 4.5, segments: 24}"])
+def test_inside_a_closed_room_lit_from_outside_every_surface_is_dark(renderer, light, room):
+    """Seen from inside a box or a sphere, a floor's face turns towards a light outside,
+    beyond the ceiling, which the same convex part is: the writer map's own-part test must
+    not call it lit (it holds for the part's outside only)."""
+    scene = parse_scene(f"""
+version: 1
+image: {{width: 32, height: 18}}
+camera: {{position: [0, 2, 3], look_at: [0, 0.5, -3], fov_deg: 70, far: 40}}
+lights: [{light}]
+medium: {{sigma_s: 0.0, sigma_a: 0.0}}
+objects:
+  - {room}
+  - {{type: plane, center: [0, 0.01, 0], normal: [0, 1, 0], size: 6}}
+  - {{type: box, min: [-1, 0, -1], max: [1, 1.5, 1]}}
+render: {{shadow_map: 64}}
+""")
+    image = renderer.render(scene, reuse=False).image
+    assert float(render_exact(scene).max()) == 0.0
+    assert float(image.max()) == 0.0, f"{int((image.max(axis=-1) > 0).sum())} pixels lit in a closed room"
