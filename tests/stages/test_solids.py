@@ -8,16 +8,15 @@ import numpy as np
 import pytest
 
 from clrays import structs
-from clrays.device import StageTimer
-from clrays.inputs import frame_inputs, upload
+from clrays.inputs import frame_inputs
+from clrays.reference.exact import render_exact
 from clrays.reference.geometry import raycast
 from clrays.scene.camera import primary_rays
 from clrays.scene.geometry import box_triangles, closed_outward, load_mesh, sphere_triangles
 from clrays.scene.load import parse_scene
 from clrays.scene.model import DirectionalLight, Geometry
-from clrays.stages.raster import raster
 from conftest import PointLight, grid_plane, make_scene, v3
-from clrays.reference.exact import render_exact
+from test_raster import _rasterized  # (buffers, camera depth, nearest triangle, shadow maps)
 from tests.methods.test_surface_shadows import compare, lights, mismatched_pixels, surface_scene
 
 MESHES = Path(__file__).resolve().parents[2] / "scenes" / "meshes"
@@ -114,16 +113,6 @@ def test_a_view_from_inside_a_solid_draws_every_face(renderer, light_inside, eye
     assert np.array_equal(image, renderer.render(_without_solids(scene), reuse=False).image)
     if light_inside and eye_inside:
         assert (image.mean(axis=-1) > 0).mean() > 0.9  # lit walls, floor and fog everywhere
-
-
-def _rasterized(device, scene):
-    buffers = upload(device, frame_inputs(scene))
-    result = raster(device, buffers, StageTimer())
-    samples = buffers.inputs.samples
-    depth = device.read(result.camera_depth, samples, np.uint32).view(np.float32)
-    tri = device.read(result.tri_id, samples, np.int32)
-    shadow = device.read(result.shadow_depth, buffers.inputs.shadow_texels, np.uint32).view(np.float32)
-    return buffers, depth, tri, shadow
 
 
 def _texel_rays(view, origin):
