@@ -425,7 +425,7 @@ ALWAYS_INLINE int_lanes slice_line(global const float* ranges, global const floa
     float_lanes f = hi > lo ? clamped * float_of_lanes(length - 1) : 0.0f;
     int_lanes j = min_lanes(int_of_lanes(f), length - 2);
     float_lanes s = f - float_of_lanes(j);
-    int_lanes at = i * n + j; /* radiance: (r, g, b, distance) at 4·at, the next at 4·at + 4; line: weight at 2·at + 1 */
+    int_lanes at = i * n + j; /* radiance (r, g, b, distance): 4·at, the next 4·at + 4; line's weight: 2·at + 1 */
     /* the distances from radiance's w, beside the colour; line's weights for a spot light only */
     float_lanes a_distance = LOAD_LANES(radiance, 4 * at + 3), b_distance = LOAD_LANES(radiance, 4 * at + 7);
 #if SAMPLING_LIGHT == LIGHT_SPOT

@@ -203,7 +203,10 @@ inline int row_span(const float3* edge, int edges, int ty, int* first, int* last
  * the argument holds for a point of its outside, which its winding faces; seen from
  * inside (a room, a dome) the sample's face turns towards a light beyond the far wall,
  * which the same part blocks. */
-ALWAYS_INLINE int convex_part_of(global const float4* tri_vertices, int tri) { return as_int(tri_vertices[3 * tri + 1].w); }
+ALWAYS_INLINE int convex_part_of(global const float4* tri_vertices, int tri)
+{
+    return as_int(tri_vertices[3 * tri + 1].w);
+}
 
 /* Whether the writer map's `writer`, at a sample on triangle `tri` seen along `dir`, is
  * the sample's own part alone, with the sample on a side of it that the part cannot shadow. */
@@ -423,9 +426,9 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
 
 /* Before the bound passes, with a read_mask: only the texels read get their starting
  * values (bound DEPTH_EMPTY, writer WRITER_NONE, unless clear_maps is 0; the touching
- * lists' heads -1), as only they are drawn and read; one work-item per VISIBILITY_CLEAR_WORDS words
- * of the mask over the light's texels [first, first + texels) (frame addresses; the light's
- * own maps are at address - first). A work-item per word was mostly its own overhead: a
+ * lists' heads -1), as only they are drawn and read; one work-item per
+ * VISIBILITY_CLEAR_WORDS words of the mask over the light's texels [first, first + texels)
+ * (frame addresses; the light's own maps are at address - first). A work-item per word was mostly its own overhead: a
  * cube's mask is 196k words, few of them with a bit set. */
 kernel void visibility_clear(global const uint* read_mask, int first, int texels, int clear_maps, global uint* bound,
                              global int* writer, global int* touching_head, int touching_capacity)
