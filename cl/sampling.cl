@@ -419,9 +419,14 @@ ALWAYS_INLINE int_lanes slice_line(global const float* ranges, global const floa
                                    int_lanes walk, float_lanes* between, float_lanes* r, float_lanes* g,
                                    float_lanes* b)
 {
-    float_lanes lo = LOAD_LANES(ranges, 2 * i), hi = LOAD_LANES(ranges, 2 * i + 1);
+    float_lanes lo, hi;
+    int_lanes length;
+    if (all_lanes(i == i.s0)) { /* the lanes on one slice: its range and length read once (the same values) */
+        lo = ranges[2 * i.s0], hi = ranges[2 * i.s0 + 1], length = lengths[i.s0];
+    } else {
+        lo = LOAD_LANES(ranges, 2 * i), hi = LOAD_LANES(ranges, 2 * i + 1), length = LOAD_INT_LANES(lengths, i);
+    }
     float_lanes clamped = fmin_lanes(fmax_lanes((q - lo) / (hi - lo), (float_lanes)(0.0f)), (float_lanes)(1.0f));
-    int_lanes length = LOAD_INT_LANES(lengths, i);
     float_lanes f = hi > lo ? clamped * float_of_lanes(length - 1) : 0.0f;
     int_lanes j = min_lanes(int_of_lanes(f), length - 2);
     float_lanes s = f - float_of_lanes(j);
