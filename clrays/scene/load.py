@@ -524,7 +524,7 @@ def _geometry(node: Node | None, base_dir: Path, rigs: list | None = None) -> Ge
         opacity.append(np.broadcast_to(obj.opacity, (count, 3)))
         ids.append(np.full(count, i, dtype=np.int32))
         outward.append(np.full(count, obj.outward, dtype=np.int8))
-        convex_part.append((start - count) | _convex_parts(item, count))
+        convex_part.append((start - count) + _convex_parts(item, count))  # (the flag is above any index)
     triangles = np.ascontiguousarray(np.concatenate(tris), dtype=np.float64)
     normals = primitives.flat_normals(triangles)  # once for all objects: per object, it dominated loading
     smooth = np.zeros(len(triangles), bool)

@@ -13,7 +13,7 @@ from clrays.reference.exact import render_exact
 from clrays.reference.geometry import raycast
 from clrays.scene.camera import primary_rays
 from clrays.scene.geometry import box_triangles, closed_outward, load_mesh, sphere_triangles
-from clrays.scene.load import parse_scene
+from clrays.scene.load import load_scene, parse_scene
 from clrays.scene.model import DirectionalLight, Geometry
 from conftest import PointLight, grid_plane, make_scene, v3
 from test_raster import _rasterized  # (buffers, camera depth, nearest triangle, shadow maps)
@@ -217,6 +217,15 @@ def test_planes_boxes_and_spheres_are_one_convex_part_each_meshes_a_part_per_tri
     outside_only = [bool(parts[ids == i][0] & structs.CONVEX_OUTSIDE_ONLY) for i in range(5)]
     assert outside_only == [False, True, True, True, False]  # a box's or a sphere's: a solid's
     assert len({int(parts[ids == i][0]) for i in range(4)} | set(parts[ids == 4].tolist())) == 4 + (ids == 4).sum()
+
+
+def test_every_triangle_of_a_mesh_is_a_part_of_its_own():
+    """The bunny's 75 408 triangles follow the floor's 128: each its own label, none
+    another object's (a label is the object's first row plus the triangle's index in it)."""
+    geometry = load_scene(MESHES.parent / "bunny.yaml").geometry
+    bunny = geometry.convex_part[geometry.object_id == 1]
+    assert len(np.unique(bunny)) == len(bunny) == 75408
+    assert not np.isin(bunny, geometry.convex_part[geometry.object_id == 0]).any()
 
 
 def test_a_convex_part_lit_at_a_grazing_angle_needs_no_shadow_ray_on_its_seams(renderer):
