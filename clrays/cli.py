@@ -359,8 +359,7 @@ def _print_stats(result) -> None:
         click.echo(f"  samples    {counts.computed} line samples computed; camera samples: {counts.interpolated} "
                    f"interpolated, {counts.fixed_up} fixed up (walked their own rays)")
     if result.shadow_rays is not None:
-        pending = result.shadow_rays
-        click.echo(f"  shadows    {pending} shadow rays (surface samples × lights the maps left undecided)")
+        click.echo(f"  shadows    {result.shadow_rays} shadow rays (surface samples × lights the maps left undecided)")
     click.echo(f"  device memory {result.device_bytes / 2**20:.1f} MiB")
 
 

@@ -177,8 +177,8 @@ class Renderer:
                             device_bytes, status, timer.host_labels, scene.render, textures, samples, rays)
 
     def _frame(self, scene: Scene, method: str, reuse: Reuse, timer: StageTimer, progress: bool):
-        """(image, stage labels, epipolar texture sizes, sample counts) of one frame: the
-        pipeline of the module docstring."""
+        """(image, stage labels, epipolar texture sizes, sample counts, shadow rays) of one
+        frame: the pipeline of the module docstring."""
         if method == "exact":
             return self._exact(scene, reuse, timer, progress)
         device = self.device

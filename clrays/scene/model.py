@@ -178,7 +178,8 @@ class Render:
     sampling: str = "epipolar"  # one of SAMPLINGS
     line_samples: int | None = None  # epipolar: samples along each slice's line
     initial_step: int | None = None  # epipolar: every initial_step-th line sample walks its row
-    refine_threshold: float = 0.02  # epipolar: relative change in distance (spot light: or unshadowed radiance) that is a break
+    # epipolar: relative change in distance (a spot light's: or unshadowed radiance) that is a break
+    refine_threshold: float = 0.02
     relief: str = "prewarp"  # one of RELIEF_MODES
     translucent_layers: int = 4  # translucent surfaces per light texel, nearest the light first
     transparency: Transparency | None = None  # translucent surfaces: None takes Transparency()'s defaults
@@ -208,9 +209,10 @@ class Geometry:
     # away (docs/design.md §4.1, "Back faces of closed solids"). None: no solids.
     outward: np.ndarray | None = None
     # (T,) int32: a label per convex part, the same on the triangles of a plane, a box or a
-    # sphere (each a convex polyhedron), else each triangle's own (its index at loading). No
-    # triangle of a convex part can shadow a point of the part that faces the light, which
-    # the writer map uses (docs/design.md §4.6). None: every triangle its own part.
+    # sphere (each a convex polyhedron; a box's and a sphere's with CONVEX_OUTSIDE_ONLY),
+    # else each triangle's own (its index at loading). No triangle of a convex part can
+    # shadow a point of the part that faces the light (a solid's: from outside), which the
+    # writer map uses (docs/design.md §4.6). None: every triangle its own part.
     convex_part: np.ndarray | None = None
 
     def __post_init__(self):
@@ -306,15 +308,14 @@ class Geometry:
     def _solids(self) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
         """The closed solids: each one's triangles' rows, and their bounds lo, hi (S, 3)."""
         rows = np.flatnonzero(self.outward != 0)
+        if not len(rows):
+            return [], np.zeros((0, 3)), np.zeros((0, 3))
         rows = rows[np.argsort(self.object_id[rows], kind="stable")]  # each object's rows together
         starts = np.flatnonzero(np.diff(self.object_id[rows], prepend=-1))
-        solids = np.split(rows, starts[1:]) if len(rows) else []
-        corners = self.triangles[rows].reshape(-1, 9)  # per row, its three points
-        lo = np.minimum.reduceat(np.minimum(np.minimum(corners[:, 0:3], corners[:, 3:6]), corners[:, 6:9]), starts) \
-            if len(rows) else np.zeros((0, 3))
-        hi = np.maximum.reduceat(np.maximum(np.maximum(corners[:, 0:3], corners[:, 3:6]), corners[:, 6:9]), starts) \
-            if len(rows) else np.zeros((0, 3))
-        return solids, lo, hi
+        corners = self.triangles[rows]  # (rows, 3, 3)
+        lo = np.minimum.reduceat(corners.min(axis=1), starts)
+        hi = np.maximum.reduceat(corners.max(axis=1), starts)
+        return np.split(rows, starts[1:]), lo, hi
 
     def farthest_from(self, point) -> float:
         """Distance from `point` to the farthest triangle vertex (0 without triangles); a
