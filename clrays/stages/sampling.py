@@ -189,7 +189,6 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
     line = device.buffer(nbytes=8 * slices * n)  # (distance, lit extent) per line sample
     radiance = device.buffer(nbytes=16 * slices * n)  # (r, g, b times radiance_scale, distance) per line sample
     state = device.buffer(nbytes=slices * n)  # per line sample: left, computed or refined (cl/sampling.cl LINE_*)
-    counts = device.buffer(np.zeros(2, dtype=np.uint32))
     samples, n32 = inputs.samples, np.int32(n)
     light = inputs.scene.lights[int(epipolar.params["light_index"])]
     traversal = {"TRAVERSAL": TRAVERSALS.index(render.traversal), "LANES": LANES, "FIXUP_BLOCK": FIXUP_BLOCK,
@@ -205,18 +204,19 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
     run("line_samples", (-(-n // LANES), slices), None, buffers.params, buffers.views, buffers.lights, epipolar.buffer,
         rastered.camera_depth, ranges_buffer, sides, n32, lengths, line)
     runs = -(-(n - 1) // int(step))  # the runs between every step-th line sample
+    walks = device.buffer(nbytes=2 * runs * slices)  # per run: its line samples that walked their row
     run("line_scatter", (runs, slices), None, buffers.params, buffers.views, buffers.lights,
         epipolar.buffer, epipolar.tree, integrand.params, integrand.data, texture.params, texture.basis,
-        texture.prefix, ranges_buffer, sides, line, n32, lengths, step, threshold, radiance, state, counts, *walked)
+        texture.prefix, ranges_buffer, sides, line, n32, lengths, step, threshold, radiance, state, walks, *walked)
     run("line_refine_fill", (runs, slices), None, buffers.params, buffers.lights, epipolar.buffer, epipolar.tree,
         integrand.params, integrand.data, texture.params, texture.basis, texture.prefix, ranges_buffer, sides, line,
-        n32, lengths, step, threshold, radiance, state, counts, *walked)
+        n32, lengths, step, threshold, radiance, state, walks, *walked)
     fixup_flags = device.buffer(nbytes=samples)  # per camera sample: a bit per slice fix_up walks
     run("gather", (-(-samples // LANES),), None, buffers.params, buffers.views, buffers.lights,
         epipolar.buffer, rastered.camera_depth, buffers.offsets, ranges_buffer, line, radiance, n32, lengths, threshold,
         np.float32(epipole_sin(inputs.scene, light)), np.int32(samples), np.int32(overwrite), scatter, fixup_flags)
     fixups, fixed_up = fixup_list(device, fixup_flags, samples, run)
-    computed = int(device.read(counts, 2, np.uint32)[0])
+    computed = int(device.read(walks, runs * slices, np.uint16).sum(dtype=np.int64))
     if fixed_up:
         run("fix_up", (fixed_up,), None, buffers.params, buffers.views, buffers.lights, epipolar.buffer,
             epipolar.tree, integrand.params, integrand.data, rastered.camera_depth, buffers.offsets, texture.params,
