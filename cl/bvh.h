@@ -5,6 +5,7 @@
 #ifndef CLRAYS_BVH_H
 #define CLRAYS_BVH_H
 #include "common.h"
+#include "inline_math.h"
 
 /* Deep enough for any LBVH of 30-bit Morton codes plus 32 tie-break bits. */
 #define BVH_STACK 96
@@ -14,10 +15,12 @@
 inline int ray_meets_box(float3 origin, float3 inv_dir, float t_max, float4 lo, float4 hi)
 {
     float3 t0 = (lo.xyz - origin) * inv_dir, t1 = (hi.xyz - origin) * inv_dir;
-    float3 near3 = fmin(t0, t1), far3 = fmax(t0, t1);
-    /* fmax/fmin drop a NaN (origin on a slab of a flat box with dir parallel to it). */
-    float near = fmax(fmax(near3.x, near3.y), fmax(near3.z, 0.0f));
-    float far = fmin(fmin(far3.x, far3.y), fmin(far3.z, t_max));
+    /* fmax/fmin drop a NaN (origin on a slab of a flat box with dir parallel to it); written
+     * out (inline_math.h), as the library's are calls in the walk's innermost loop. */
+    float near_x = inline_fmin(t0.x, t1.x), near_y = inline_fmin(t0.y, t1.y), near_z = inline_fmin(t0.z, t1.z);
+    float far_x = inline_fmax(t0.x, t1.x), far_y = inline_fmax(t0.y, t1.y), far_z = inline_fmax(t0.z, t1.z);
+    float near = inline_fmax(inline_fmax(near_x, near_y), inline_fmax(near_z, 0.0f));
+    float far = inline_fmin(inline_fmin(far_x, far_y), inline_fmin(far_z, t_max));
     return near <= far;
 }
 

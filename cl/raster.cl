@@ -404,10 +404,14 @@ inline int misses_every_sample(global const view_t* view, global const float4* t
  * the triangle misses holds INFINITY, whose bits are DEPTH_EMPTY, the largest depth). */
 #define DEPTH_MIN_LANES(depth)                                                              \
     if (sample_count == 1 && first + RASTER_LANES <= view->width) {                        \
-        global uint* run = depth + view->depth_offset + y * view->width + first;           \
-        vstore8(min(vload8(0, run), as_uint8(lanes)), 0, run);                              \
+        global uint8_at_uint* run = (global uint8_at_uint*)(depth + view->depth_offset + y * view->width + first); \
+        *run = min(*run, as_uint8(lanes));                                                  \
         continue;                                                                           \
     }
+
+/* A uint8 aligned as its elements are, as vload8 and vstore8 take it: a plain vector load
+ * or store, where PoCL's vload8 is a library call. */
+typedef uint8 __attribute__((aligned(4))) uint8_at_uint;
 
 /* The stored depths only ever decrease, so a depth that does not beat the one read now
  * cannot win the atomic later: the plain read skips most atomics where triangles overlap. */

@@ -84,7 +84,7 @@ ALWAYS_INLINE float_lanes exact_length_lanes(vec_lanes v)
     float_lanes squared = squared_length_lanes(v.x, v.y, v.z);
     float_lanes out = sqrt_lanes(squared);
     int_lanes rare = !((squared >= 1.17549435e-38f) & (squared <= 3.40282347e38f));
-    if (any(rare))
+    if (any_lanes(rare))
         for (int k = 0; k < LANES; ++k)
             if (rare[k]) out[k] = length(lane_of(v, k));
     return out;
@@ -173,7 +173,7 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
      * read their buffers at the first pixel's samples. */
     int width = frame->width;
     int_lanes x = (int_lanes)(first % width) + (int_lanes)(0, 1, 2, 3, 4, 5, 6, 7), y = (int_lanes)(first / width);
-    for (int_lanes past = x >= width; any(past); past = x >= width) {
+    for (int_lanes past = x >= width; any_lanes(past); past = x >= width) {
         x = past ? x - width : x;
         y = past ? y + 1 : y;
     }
@@ -225,7 +225,7 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
             float_lanes smooth;
             vec_lanes n = gather_xyz(tri_normal, safe_tri, &smooth);
             vec_lanes shading = n;
-            if (any(smooth != 0.0f))
+            if (any_lanes(smooth != 0.0f))
                 shading = select_lanes(smooth != 0.0f,
                                        smooth_normal_lanes(tri_vertices, tri_vertex_normals, safe_tri, origin, dir, n), n);
             int_lanes facing_away = dot_vec_lanes(n, dir) > 0.0f; /* two-sided: face the camera */
@@ -266,7 +266,7 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                     }
                 float_lanes cosine = dot_vec_lanes(shading, to_light);
                 int_lanes lit = !background & !((cosine <= 0.0f) | (incident.x + incident.y + incident.z == 0.0f));
-                if (!any(lit)) continue;
+                if (!any_lanes(lit)) continue;
                 float_lanes visible = 1.0f;
                 if (eye_in_lamp(light, frame->lamp_radius))
                     visible = 1.0f;
