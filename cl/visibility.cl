@@ -2,11 +2,11 @@
  * segment to the light is clear, else 0. The shadow map decides where its neighbourhood
  * is unanimous; the other samples cast a shadow ray through the BVH, or in a frame of few
  * samples against the triangles touching their texel (docs/design.md §4, visibility).
- * visibility_bound, visibility_bound_split read tri_vertices, views; write bound (a lower
- * bound of the depth of every triangle that touches each texel, atomic min), writer (the
+ * visibility_bound, visibility_bound_rows read tri_vertices, views; write bound (a lower
+ * bound of the depth of every triangle that touches each texel, a min), writer (the
  * one triangle that touches each texel, or WRITER_MANY), with a capacity the lists of the
  * triangles touching each texel read (touching_head, touching, touching_count) and the
- * list of triangles whose rectangles the split pass takes, with their sizes (big_items,
+ * list of triangles whose rectangles the rows pass takes, with their rows (big_items,
  * big_count). A view from outside every closed solid leaves out the faces they turn
  * away from it (solids.h): the first blocker of any segment to the light is a face turned
  * towards the light, and it touches the same texels.
@@ -225,6 +225,13 @@ inline void note_writer(global int* texel_writer, int part)
     if (before != WRITER_NONE && before != part) atomic_xchg(texel_writer, WRITER_MANY);
 }
 
+/* note_writer where no other work-item writes the texel meanwhile (visibility_bound_rows). */
+inline void note_owned_writer(global int* texel_writer, int part)
+{
+    int seen = *texel_writer;
+    if (seen != part && seen != WRITER_MANY) *texel_writer = seen == WRITER_NONE ? part : WRITER_MANY;
+}
+
 /* Whether any texel of [x0, x1] in the row at frame address `row` has its read_mask bit:
  * a word of 32 texels at a time. */
 inline int row_is_read(global const uint* read_mask, int row, int x0, int x1)
@@ -293,9 +300,9 @@ inline void note_touching(global int* head, int tri, global int2* touching, vola
  * hold starting values (visibility_clear). */
 inline void bound_triangle(global const float4* tri_vertices, global const view_t* views, int first_view,
                            int view_count, global uint* bound, global int* writer, int masked,
-                           global const uint* read_mask, int mask_offset, TOUCHING_ARGS, int item, int row_first,
-                           int row_step, int small_rows, global int4* big_items, volatile global int* big_count,
-                           global int4* rect)
+                           global const uint* read_mask, int mask_offset, TOUCHING_ARGS, int item, int row_begin,
+                           int row_end, int owned, int small_rows, global int4* big_items,
+                           volatile global int* big_count, global int4* rect)
 {
     int tri = item / view_count;
     global const view_t* view = views + first_view + item % view_count;
@@ -343,12 +350,13 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
     int x1 = inline_min((int)inline_floor(inline_fmin(hi.x, (float)view->width + 2.0f)) + 1, view->width - 1);
     int y1 = inline_min((int)inline_floor(inline_fmin(hi.y, (float)view->height + 2.0f)) + 1, view->height - 1);
     if (rect) *rect = (int4)(x0, y0, x1, y1);
-    if (x0 > x1 || y0 + row_first > y1) return; /* outside the view, or no row for this item */
+    int first_row = inline_max(y0, row_begin), last_row = inline_min(y1, row_end - 1);
+    if (x0 > x1 || first_row > last_row) return; /* outside the view, or no row for this item */
     /* no sample reads its rectangle: nothing to draw */
     if (masked && small_rows > 0 && !rectangle_is_read(view, read_mask, mask_offset, x0, y0, x1, y1, small_rows))
         return;
-    if (small_rows > 0 && y1 - y0 + 1 > small_rows) { /* many rows: the split pass takes it */
-        big_items[atomic_inc(big_count)] = (int4)(item, y1 - y0 + 1, (y1 - y0 + 1) * (x1 - x0 + 1), 0);
+    if (small_rows > 0 && y1 - y0 + 1 > small_rows) { /* many rows: the rows pass takes them */
+        big_items[atomic_inc(big_count)] = (int4)(item, y0, y1, 0);
         return;
     }
     int part = convex_part_of(tri_vertices, tri); /* the writer map's label */
@@ -388,7 +396,7 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
     int corner_x = n_view.x * n_forward > 0.0f, corner_y = n_view.y * n_forward < 0.0f;
     float3 edge[8];
     int edges = polygon_edges(corner, corners, edge);
-    for (int ty = y0 + row_first; ty <= y1; ty += row_step) {
+    for (int ty = first_row; ty <= last_row; ++ty) {
         int first = x0, last = x1;
         if (!row_span(edge, edges, ty, &first, &last)) continue;
         float y_centre = (1.0f - (2.0f * (float)ty + 1.0f) * inverse_height) * view->scale_y;
@@ -402,7 +410,10 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
                 if (bits == 0u) tx += 31 - (at & 31); /* none read to the word's end */
                 if (!(bits & 1u)) continue;
             }
-            note_writer(writer + view->depth_offset + ty * view->width + tx, part);
+            if (owned)
+                note_owned_writer(writer + view->depth_offset + ty * view->width + tx, part);
+            else
+                note_writer(writer + view->depth_offset + ty * view->width + tx, part);
             note_touching(touching_head + view->depth_offset + ty * view->width + tx, tri, touching, touching_count,
                           touching_capacity);
             if (bound[view->depth_offset + ty * view->width + tx] <= floor_bits) continue;
@@ -421,7 +432,12 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
             }
             depth = inline_fmax(depth - BOUND_MARGIN_REL * inline_fabs(depth) - BOUND_MARGIN_REL * extent, 0.0f);
             global uint* texel = bound + view->depth_offset + ty * view->width + tx;
-            if (as_uint(depth) < *texel) atomic_min(texel, as_uint(depth)); /* the read spares most atomics */
+            if (as_uint(depth) < *texel) { /* the read spares most atomics */
+                if (owned)
+                    *texel = as_uint(depth);
+                else
+                    atomic_min(texel, as_uint(depth));
+            }
         }
     }
 }
@@ -456,13 +472,13 @@ kernel void visibility_clear(global const uint* read_mask, int first, int texels
 
 /* Two passes, because a triangle's rectangle may hold a few texels or a whole face:
  * visibility_bound takes one work-item per triangle and view and does the rectangles of
- * up to `small_rows` rows at once, listing the others in big_items with their rows and
- * texels; visibility_bound_split then spreads each listed rectangle's rows over as many
- * work-items of its dimension 1 as give each about BOUND_SPLIT_TEXELS texels of it (at
- * least a row each, at most its global size). Each work-item projects and clips the
- * triangle again, which a rectangle of ten rows spread over sixteen work-items did
- * sixteen times for a row each (demo's sphere: 1639 triangles on one cube face). */
-#define BOUND_SPLIT_TEXELS 64
+ * up to `small_rows` rows at once, listing the others in big_items with their rows;
+ * visibility_bound_rows then gives each work-item VISIBILITY_BOUND_ROWS_PER_ITEM rows of the view,
+ * which it draws for every listed triangle in the list's order. Only that work-item
+ * writes those rows in this pass, so its updates are plain stores, not atomics: spread
+ * over the rows of each triangle instead, demo.yaml's floor and walls spent about 40 % of
+ * the pass in them (bench/RESULTS.md, "Fewer calls"). A triangle is projected and clipped
+ * once per block of rows it covers. */
 kernel void visibility_bound(global const float4* tri_vertices, int count, global const view_t* views,
                              int first_view, int view_count, global uint* bound, global int* writer,
                              int masked, global const uint* read_mask, int mask_offset, TOUCHING_ARGS,
@@ -481,22 +497,23 @@ kernel void visibility_bound(global const float4* tri_vertices, int count, globa
             return;
     }
     bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, masked, read_mask, mask_offset,
-                   TOUCHING_PASS, item, 0, 1, small_rows, big_items, big_count,
+                   TOUCHING_PASS, item, 0, INT_MAX, 0, small_rows, big_items, big_count,
                    rect_mode == RECTS_RECORD ? rects + item : 0);
 }
 
-kernel void visibility_bound_split(global const float4* tri_vertices, global const view_t* views, int first_view,
-                                   int view_count, global uint* bound, global int* writer,
-                                   int masked, global const uint* read_mask, int mask_offset, TOUCHING_ARGS,
-                                   global const int4* big_items, global const int* big_count)
+kernel void visibility_bound_rows(global const float4* tri_vertices, global const view_t* views, int first_view,
+                                  int view_count, global uint* bound, global int* writer,
+                                  int masked, global const uint* read_mask, int mask_offset, TOUCHING_ARGS,
+                                  global const int4* big_items, int big_count)
 {
-    int index = get_global_id(0);
-    if (index >= *big_count) return;
-    int4 big = big_items[index]; /* (item, its rows, its texels) */
-    int steps = min(min((int)get_global_size(1), big.y), (big.z + BOUND_SPLIT_TEXELS - 1) / BOUND_SPLIT_TEXELS);
-    if ((int)get_global_id(1) >= steps) return;
-    bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, masked, read_mask, mask_offset,
-                   TOUCHING_PASS, big.x, get_global_id(1), steps, 0, 0, 0, 0);
+    int row_begin = get_global_id(0) * VISIBILITY_BOUND_ROWS_PER_ITEM, row_end = row_begin + VISIBILITY_BOUND_ROWS_PER_ITEM;
+    if (row_begin >= views[first_view].height) return;
+    for (int index = 0; index < big_count; ++index) {
+        int4 big = big_items[index]; /* (item, its first row, its last row) */
+        if (big.y >= row_end || big.z < row_begin) continue;
+        bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, masked, read_mask, mask_offset,
+                       TOUCHING_PASS, big.x, row_begin, row_end, 1, 0, 0, 0, 0);
+    }
 }
 
 /* How far the sample's own triangle (plane through p with unit normal n, largest distance

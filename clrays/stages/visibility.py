@@ -37,11 +37,10 @@ from .raster import RasterResult
 
 #: `visibility_bound` does a triangle's texel rectangle of up to this many rows in one
 #: work-item (most triangles of a fine mesh: one item each, no idle ones) and leaves
-#: taller ones to `visibility_bound_split`, which gives each at most BOUND_ROW_SPLIT
-#: work-items (cl/visibility.cl's BOUND_SPLIT_TEXELS of its rectangle each), each taking
-#: every n-th row (a floor's rectangle can be a whole face).
+#: taller ones to `visibility_bound_rows`, whose work-items each own
+#: structs.VISIBILITY_BOUND_ROWS_PER_ITEM rows of the view (a floor's rectangle can be a
+#: whole face).
 BOUND_SMALL_ROWS = 8
-BOUND_ROW_SPLIT = 16
 
 #: A frame of at most TOUCHING_ENTRIES samples × lights (a 64×64 thumbnail) has the bound
 #: passes list, per texel read, the triangles touching it, in up to
@@ -206,12 +205,12 @@ def _bound_passes(device: Device, inputs: FrameInputs, first: int, bound, writer
     masked = np.int32(read_mask is not None)
     read_mask = read_mask if read_mask is not None else device.buffer(nbytes=4)
     first_pass = device.kernel("visibility", "visibility_bound")
-    split_pass = device.kernel("visibility", "visibility_bound_split")
+    rows_pass = device.kernel("visibility", "visibility_bound_rows")
     # Only the cube faces the frame can read (`view_needed`, as raster.shadow does): no
     # sample projects into the others, so their texels are never asked for.
     drawn = [int(view) for view in np.flatnonzero(inputs.view_needed[1:]) + 1]
     # Every view's first pass, then one wait for all their lists; then the host orders a
-    # view's list while the device runs the split pass of the view before (each view has
+    # view's list while the device runs the rows pass of the view before (each view has
     # texels of its own, and a texel's values do not depend on the order of the passes).
     big = {}  # view → (its list of big items, their count)
     for view in drawn:
@@ -232,9 +231,11 @@ def _bound_passes(device: Device, inputs: FrameInputs, first: int, bound, writer
     items = device.read_all([(big[view][0], (int(listed[view][0]), 4)) for view in views_listed], np.int32)
     for view, listed_items in zip(views_listed, items):
         ordered = device.buffer(nearest_first(listed_items, inputs, view), writable=False)  # (copied, no wait)
-        timer.add("visibility", split_pass(
-            device.queue, (len(listed_items), BOUND_ROW_SPLIT), None, vertices, views, np.int32(view), np.int32(1),
-            bound, writer, masked, read_mask, np.int32(first), *lists, ordered, big[view][1]))
+        height = int(inputs.views[view]["height"])
+        timer.add("visibility", rows_pass(
+            device.queue, (-(-height // structs.VISIBILITY_BOUND_ROWS_PER_ITEM),), None, vertices, views,
+            np.int32(view), np.int32(1), bound, writer, masked, read_mask, np.int32(first), *lists, ordered,
+            np.int32(len(listed_items))))
 
 
 def ray_lists(device: Device, buffers: FrameBuffers, prepared: Prepared, ray_entries, rays: int,
@@ -272,7 +273,7 @@ def ray_lists(device: Device, buffers: FrameBuffers, prepared: Prepared, ray_ent
 
 
 def nearest_first(items: np.ndarray, inputs: FrameInputs, view: int) -> np.ndarray:
-    """The split pass's list (rows of item, rows, texels) ordered by the distance of each
+    """The rows pass's list (item, first row, last row) ordered by the distance of each
     item's centroid from the view (orthographic: its depth), nearest first. The result is
     the same in any order; in this one a far floor under nearer triangles mostly finds
     their bounds already below its own nearest depth and skips its texel maths
