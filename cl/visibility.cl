@@ -654,12 +654,15 @@ ALWAYS_INLINE float3 shadow_ray_start(global const light_t* light, float3 p, flo
 
 /* A texel that a lit test reads gets its bit in read_mask (32 texels a word, by address;
  * starts at 0): the bound passes draw only those. */
+ALWAYS_INLINE void mark_read_bits(global uint* read_mask, int word_index, uint bits)
+{
+    global uint* word = read_mask + word_index;
+    if (bits & ~*word) atomic_or(word, bits); /* the read spares most atomics */
+}
+
 ALWAYS_INLINE void mark_read(global uint* read_mask, int address)
 {
-    if (address < 0) return;
-    global uint* word = read_mask + (address >> 5);
-    uint bit = 1u << (address & 31);
-    if (!(*word & bit)) atomic_or(word, bit); /* the read spares most atomics */
+    if (address >= 0) mark_read_bits(read_mask, address >> 5, 1u << (address & 31));
 }
 
 /* The part of the decision that needs no bound map, before it is drawn, one work-item per
@@ -839,7 +842,17 @@ ALWAYS_INLINE int prepare_lanes(global const frame_t* frame, global const view_t
         int entry = (first + k) * frame->light_count + l;
         visible[entry] = answer[k];
         map_read[entry] = (int2)(read_address[k], read_depth[k]);
-        mark_read(read_mask, read_address[k]);
+    }
+    /* Where every lane reads a texel of one mask word (neighbouring samples often do, as on
+     * demo's floor), their bits go in at once; else lane by lane. */
+    int_lanes word = read_address >> 5, reads = read_address >= 0;
+    if (reads.s0 && all_lanes(!reads | (word == word.s0))) {
+        uint8 bits = reads ? (uint8)(1u) << as_uint8(read_address & 31) : (uint8)(0u);
+        uint4 halves = bits.lo | bits.hi;
+        uint2 quarters = halves.lo | halves.hi;
+        mark_read_bits(read_mask, word.s0, quarters.x | quarters.y);
+    } else {
+        for (int k = 0; k < LANES; ++k) mark_read(read_mask, read_address[k]);
     }
     return 1;
 }
