@@ -71,10 +71,13 @@ kernel void rectify_bounds(global const frame_t* frame, global const view_t* vie
         q_max = inline_fmax(q_max, q_beta_max[k]);
         g_max = inline_fmax(g_max, gamma_max[k]);
     }
-    /* Non-negative floats order like their bit patterns, so uint atomics reduce them. */
-    atomic_min(bounds + 0, as_uint(q_min));
-    atomic_max(bounds + 1, as_uint(q_max));
-    atomic_max(bounds + 2, as_uint(g_max));
+    /* Non-negative floats order like their bit patterns, so uint atomics reduce them. Every
+     * work-item updates the same three words: a plain read first spares the atomics that
+     * would not change them (most, once a few work-items are done), and the cores' contest
+     * for the words' cache line. */
+    if (as_uint(q_min) < bounds[0]) atomic_min(bounds + 0, as_uint(q_min));
+    if (as_uint(q_max) > bounds[1]) atomic_max(bounds + 1, as_uint(q_max));
+    if (as_uint(g_max) > bounds[2]) atomic_max(bounds + 2, as_uint(g_max));
 }
 
 
