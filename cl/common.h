@@ -137,7 +137,7 @@ typedef struct {
     int n_gamma;
     int rank;         /* svd terms */
     int light_type;   /* LIGHT_* */
-    int _pad0;
+    int grey;         /* table: one plane of unit amplitude, times amplitude per channel */
     int _pad1;
     int _pad2;
 } integrand_t;

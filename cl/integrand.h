@@ -10,6 +10,8 @@
  * Rows sit at β = beta_min + (beta_max - beta_min)·sin²(πt/2), t uniform in [0, 1].
  *
  *   table:  tables = F[channel][n_beta][n_gamma]                          (bilinear)
+ *           grey (every channel the same σt): F[1][n_beta][n_gamma] of unit amplitude,
+ *           each channel's segment that times its amplitude
  *   svd:    tables = B[channel][rank][n_beta], then P[channel][rank][n_gamma]
  *           F ≈ Σ B_i(β)·P_i(x)                                            (linear)
  *   analytic: closed forms (directional light; isotropic point light with σt = 0). */
@@ -128,7 +130,11 @@ inline float3 segment_radiance(global const integrand_t* in, global const float*
     float3 x0 = row_coordinate(in, r->delta, r->sin_beta, gamma0);
     float3 x1 = row_coordinate(in, r->delta, r->sin_beta, gamma1);
     float3 difference;
-    if (in->mode == INTEGRAND_TABLE) {
+    if (in->mode == INTEGRAND_TABLE && in->grey) { /* the channels differ by their amplitude alone */
+        float unit = table_lookup(tables, in->n_beta, in->n_gamma, j, fj, x1.x)
+                   - table_lookup(tables, in->n_beta, in->n_gamma, j, fj, x0.x);
+        difference = in->amplitude.xyz * unit;
+    } else if (in->mode == INTEGRAND_TABLE) {
         size_t plane = (size_t)in->n_beta * in->n_gamma;
         difference.x = table_lookup(tables, in->n_beta, in->n_gamma, j, fj, x1.x)
                      - table_lookup(tables, in->n_beta, in->n_gamma, j, fj, x0.x);

@@ -2,7 +2,9 @@
  * float32 (docs/design.md §4.4; docs/integrand.md has the integrand and its error).
  *
  * The table is float[3][n_beta][n_gamma]: F of each channel at β row j and column
- * x_k = k/(n_gamma - 1), F(·, 0) = 0. integrand_cells integrates K over each cell with
+ * x_k = k/(n_gamma - 1), F(·, 0) = 0; for a grey medium (`grey`: every channel the same
+ * σt) float[1][n_beta][n_gamma], the host passing an amplitude of 1 (integrand.h
+ * multiplies each channel's by its own). integrand_cells integrates K over each cell with
  * QUAD_NODES-point Gauss–Legendre (the host builder's rule), LANES cells per work-item;
  * integrand_prefix replaces a point row's last cell by panels halving towards the ray's point
  * at infinity and sums the cells in compensated (Kahan) float32.
@@ -90,6 +92,7 @@ kernel void integrand_cells(global const float4* rows, int point, float4 amplitu
     global float* out = table + (size_t)j * n_gamma + 1;
     for (int lane = 0; lane < LANES && first + lane < cells; ++lane) {
         out[first + lane] = sum.r[lane] * (0.5f * h);
+        if (grey) continue; /* one plane */
         out[plane + first + lane] = sum.g[lane] * (0.5f * h);
         out[2 * plane + first + lane] = sum.b[lane] * (0.5f * h);
     }
@@ -101,7 +104,7 @@ kernel void integrand_cells(global const float4* rows, int point, float4 amplitu
 kernel void integrand_prefix(global const float4* rows, int point, float4 amplitude, float4 sigma_t, float d_el,
                              float g, int grey, int n_gamma, global float* table)
 {
-    int j = get_global_id(0), cells = n_gamma - 1;
+    int j = get_global_id(0), cells = n_gamma - 1, channels = grey ? 1 : 3;
     size_t plane = (size_t)get_global_size(0) * n_gamma;
     global float* row_table = table + (size_t)j * n_gamma;
     if (point) {
@@ -123,9 +126,9 @@ kernel void integrand_prefix(global const float4* rows, int point, float4 amplit
                 last[0] += sum.r[lane] * half_width[lane], last[1] += sum.g[lane] * half_width[lane], last[2] += sum.b[lane] * half_width[lane];
             }
         }
-        for (int c = 0; c < 3; ++c) row_table[c * plane + cells] = last[c];
+        for (int c = 0; c < channels; ++c) row_table[c * plane + cells] = last[c];
     }
-    for (int c = 0; c < 3; ++c) {
+    for (int c = 0; c < channels; ++c) {
         global float* f = row_table + c * plane;
         float total = 0.0f, carry = 0.0f;
         f[0] = 0.0f;

@@ -610,19 +610,29 @@ def table_rows(tables: IntegrandTables) -> np.ndarray:
     return rows.astype(np.float32)
 
 
+def grey_table(tables: IntegrandTables) -> bool:
+    """Whether the device builds the `table` mode's F as one plane of unit amplitude: every
+    channel has the same σt (and row end), so the channels' tables differ by their amplitude
+    alone, which a segment multiplies in (cl/integrand.h). A third of the build, and a
+    segment looks up one channel where it looked up three."""
+    return tables.mode == "table" and _shared_channel(tables.constants) is not None
+
+
 def device_table(device: Device, tables: IntegrandTables, timer: StageTimer | None = None) -> object:
-    """The `table` mode's prefix rows F(β_j, x_k), (3, n_beta, n_gamma) float32, built on the
-    device (cl/integrand_build.cl): the same rule as `_prefix_rows`, in float32, with a
+    """The `table` mode's prefix rows F(β_j, x_k), (3, n_beta, n_gamma) float32, or for a
+    `grey_table` (1, n_beta, n_gamma) of unit amplitude, built on the device
+    (cl/integrand_build.cl): the same rule as `_prefix_rows`, in float32, with a
     compensated running sum. The cells are independent, so the device takes them all at
     once where the host would loop over chunks of rows (docs/design.md §4.4)."""
     c = tables.constants
     point = int(tables.light_kind == "point")
-    grey = int(_shared_channel(c) is not None)
-    amplitude, sigma_t = structs.float4(c[:, C_AMPLITUDE]), structs.float4(c[:, C_SIGMA_T])
+    grey = int(grey_table(tables))
+    amplitude = structs.float4(np.ones(3) if grey else c[:, C_AMPLITUDE])
+    sigma_t = structs.float4(c[:, C_SIGMA_T])
     d_el, g = np.float32(c[0, C_D_EL]), np.float32(c[0, C_G])
     n_beta, n_gamma = tables.n_beta, tables.n_gamma
     rows = device.buffer(table_rows(tables), writable=False)
-    table = device.buffer(nbytes=4 * 3 * n_beta * n_gamma)
+    table = device.buffer(nbytes=4 * (1 if grey else 3) * n_beta * n_gamma)
     cells = device.kernel("integrand_build", "integrand_cells", TABLE_BUILD_DEFINES)
     prefix = device.kernel("integrand_build", "integrand_prefix", TABLE_BUILD_DEFINES)
     events = [
@@ -649,10 +659,16 @@ class DeviceIntegrand:
     @property
     def tables(self) -> IntegrandTables:
         if self._tables.mode == "table" and self._tables.prefix is None:
-            t = self._tables
-            prefix = self._device.read(self.data, (3, t.n_beta, t.n_gamma), np.float32)
-            self._tables = replace(t, prefix=prefix.astype(np.float64))
+            self._tables = replace(self._tables, prefix=read_device_table(self._device, self.data, self._tables))
         return self._tables
+
+
+def read_device_table(device: Device, table, tables: IntegrandTables) -> np.ndarray:
+    """(3, n_beta, n_gamma) float64: the table `device_table` built, each channel's plane
+    (a grey table's one plane times each channel's amplitude)."""
+    planes = 1 if grey_table(tables) else 3
+    built = device.read(table, (planes, tables.n_beta, tables.n_gamma), np.float32).astype(np.float64)
+    return tables.constants[:, C_AMPLITUDE, None, None] * built if planes == 1 else built
 
 
 def integrand(device: Device, scene, light, epipolar, timer: StageTimer) -> DeviceIntegrand:
@@ -695,6 +711,7 @@ def pack_integrand(tables: IntegrandTables) -> tuple[np.ndarray, np.ndarray]:
     params["mode"] = _MODE_IDS[tables.mode]
     params["n_beta"], params["n_gamma"], params["rank"] = tables.n_beta, tables.n_gamma, tables.rank
     params["light_type"] = structs.LIGHT_DIRECTIONAL if tables.light_kind == "directional" else structs.LIGHT_POINT
+    params["grey"] = tables.prefix is None and grey_table(tables)  # device_table's one plane
     if tables.mode == "table":
         data = tables.prefix.ravel() if tables.prefix is not None else np.zeros(1)  # None: built on the device
     elif tables.mode == "svd":
