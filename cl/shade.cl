@@ -214,7 +214,7 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
         int_lanes background = (tri < 0) | (distance > frame->far);
         distance = background ? frame->far : distance;
         vec_lanes surface = splat_lanes(frame->background.xyz);
-        if (!all(background)) {
+        if (!all_lanes(background)) {
             int some_tri = 0; /* a triangle of the lanes that see one: the others read it, unused */
             for (int k = LANES - 1; k >= 0; --k)
                 if (!background[k]) some_tri = tri[k];
