@@ -7,7 +7,9 @@
  * with surface_shadows filtered), light_textures and texels (a light's texture,
  * docs/light-textures.md), and with translucent objects the translucency stage's layers
  * (translucency.h); writes image (one
- * float4 per pixel, linear rgb).
+ * float4 per pixel, linear rgb). With one sample per pixel, image is scatter's own buffer
+ * (clrays/stages/shade.py): each work-item reads its samples' in-scattering before it
+ * writes their pixels, and no other reads them.
  *
  * Each work-item shades LANES (8) neighbouring pixels as float8 vectors (lanes.h), with the
  * built-ins written out (inline_math.h): PoCL would run one pixel at a time, each dot,

@@ -401,7 +401,9 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
     # The one-pass raster (devices with 64-bit atomics) also keeps a packed depth–triangle
     # key per sample while it runs; counted always, so the check errs on the safe side.
     sizes = [("camera depth and triangle ids (64-bit)", 8 * samples), ("packed raster keys (64-bit)", 8 * samples),
-             ("in-scattering", 16 * samples), ("image", 16 * pixels)]
+             ("in-scattering", 16 * samples)]
+    if scene.image.spp > 1:  # (with one sample per pixel the image takes the in-scattering's buffer)
+        sizes.append(("image", 16 * pixels))
     for index, (first, count) in enumerate(inputs.light_views):
         views = inputs.views[first:first + count]
         sizes.append((f"shadow map of light {index}", 4 * int((views["width"] * views["height"]).sum())))
