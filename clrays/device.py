@@ -161,6 +161,21 @@ class _Launcher:
         return getattr(self._kernel, name)
 
 
+#: On a CPU device a buffer is the process's own memory, and a frame frees its large
+#: buffers and the next allocates them again: each time as fresh pages, faulted in inside
+#: the kernels that first write them (demo.yaml at 1280×720: about 10 000 faults a frame,
+#: most in visibility_clear, the fills and gather). Buffers of at least POOLED_BYTES with
+#: no host data come instead from a pool (pyopencl.tools.MemoryPool) that keeps the buffers
+#: a frame lets go of for the next frame's: the kernels that first write a frame's buffers
+#: took 1.25× as long without it on demo, 1.11× on behind (docs/design.md §4.5, "Cost on
+#: PoCL"). Every buffer a kernel reads is written first in its frame, as on any device,
+#: whose fresh buffers hold whatever was there.
+POOLED_BYTES = 1 << 16
+#: What the pool may hold unused after a frame, in units of that frame's device bytes;
+#: beyond it the pool lets all of it go (a sequence whose sizes change).
+POOL_HELD_FRAMES = 2
+
+
 class Device:
     """Context, profiling queue and a cache of built stage programs for one device."""
 
@@ -176,6 +191,10 @@ class Device:
         # them (a test builds a device with one changed, and changes it back at once).
         self._constants = structs.kernel_defines()
         self._spread = bool(self.device.type & cl.device_type.CPU)
+        self._pool = None
+        if self._spread:
+            from pyopencl.tools import ImmediateAllocator, MemoryPool
+            self._pool = MemoryPool(ImmediateAllocator(self.queue))
         self._units = max(int(self.device.max_compute_units), 1)
         self._max_group = max(min(MAX_CPU_GROUP, int(self.device.max_work_group_size)), 1)
         self._local_sizes: dict[tuple, tuple] = {}
@@ -221,8 +240,12 @@ class Device:
             self._local_sizes[global_size] = spread_local_size(global_size, self._units, self._max_group)
         return self._local_sizes[global_size]
 
-    def buffer(self, array: np.ndarray | None = None, nbytes: int | None = None, writable: bool = True):
-        """A device buffer, filled from `array` or of `nbytes` uninitialised bytes."""
+    def buffer(self, array: np.ndarray | None = None, nbytes: int | None = None, writable: bool = True,
+               pooled: bool = True):
+        """A device buffer, filled from `array` or of `nbytes` uninitialised bytes. On a CPU
+        device a large one of `nbytes` comes from the pool (POOLED_BYTES) unless not
+        `pooled`: a buffer the host maps (read_in_place) must not go back to the pool while
+        the mapped array lives."""
         mf = self.cl.mem_flags
         flags = mf.READ_WRITE if writable else mf.READ_ONLY
         if array is not None:
@@ -233,7 +256,19 @@ class Device:
                 return self.cl.Buffer(self.context, flags, 16)
             return self.cl.Buffer(self.context, flags | mf.COPY_HOST_PTR, hostbuf=array)
         self.allocated_bytes += nbytes
+        if self._pool is not None and pooled and nbytes >= POOLED_BYTES:
+            return self._pool.allocate(int(nbytes))
         return self.cl.Buffer(self.context, flags, max(int(nbytes), 16))
+
+    def pool_bytes(self) -> tuple[int, int] | None:
+        """(bytes the pool has allocated, bytes of them in use); None without a pool."""
+        return None if self._pool is None else (self._pool.managed_bytes, self._pool.active_bytes)
+
+    def end_frame(self, frame_bytes: int) -> None:
+        """After a frame of `frame_bytes` device bytes: the pool lets go of the buffers it
+        holds unused when they are more than POOL_HELD_FRAMES such frames."""
+        if self._pool is not None and self._pool.managed_bytes - self._pool.active_bytes > POOL_HELD_FRAMES * frame_bytes:
+            self._pool.free_held()
 
     def fill(self, buffer, value: np.ndarray, nbytes: int, timer: StageTimer | None = None, label: str = "fill"):
         """The first `nbytes` of `buffer` set to `value` (a 4- or 8-byte numpy scalar) over

@@ -83,7 +83,7 @@ class InScatter:
 
     def __init__(self, device: Device, samples: int):
         self.device, self.samples = device, samples
-        self.buffer = device.buffer(nbytes=16 * samples)
+        self.buffer = device.buffer(nbytes=16 * samples, pooled=False)  # (shade's image may take it over)
         self.holds_values = False  # zeros, or a stage's values in every sample
 
     def adding(self):
@@ -171,6 +171,8 @@ class Renderer:
                                                             lambda: self._frame(scene, method, reuse, timer, progress))
         status = record.status() or {stage: REUSED for stage in stages}
         device_bytes = self._device.allocated_bytes if self._device is not None else 0
+        if self._device is not None:
+            self._device.end_frame(device_bytes)
         wall_ms = (time.perf_counter() - start) * 1e3
         # A kept frame's image is shared with the cache: the caller gets a copy to change.
         return RenderResult(image.copy() if use_cache else image, method, timer.milliseconds(), wall_ms,
