@@ -171,6 +171,15 @@ class _Launcher:
 #: PoCL"). Every buffer a kernel reads is written first in its frame, as on any device,
 #: whose fresh buffers hold whatever was there.
 POOLED_BYTES = 1 << 16
+class _Holding:
+    """An array's memory, and what must live as long as it: numpy keeps this object as the
+    base of the array it makes from it (and so of every view of that)."""
+
+    def __init__(self, array: np.ndarray, owner):
+        self.__array_interface__ = array.__array_interface__
+        self._array, self._owner = array, owner
+
+
 #: What the pool may hold unused after a frame, in units of that frame's device bytes;
 #: beyond it the pool lets all of it go (a sequence whose sizes change).
 POOL_HELD_FRAMES = 2
@@ -240,12 +249,9 @@ class Device:
             self._local_sizes[global_size] = spread_local_size(global_size, self._units, self._max_group)
         return self._local_sizes[global_size]
 
-    def buffer(self, array: np.ndarray | None = None, nbytes: int | None = None, writable: bool = True,
-               pooled: bool = True):
-        """A device buffer, filled from `array` or of `nbytes` uninitialised bytes. On a CPU
-        device a large one of `nbytes` comes from the pool (POOLED_BYTES) unless not
-        `pooled`: a buffer the host maps (read_in_place) must not go back to the pool while
-        the mapped array lives."""
+    def buffer(self, array: np.ndarray | None = None, nbytes: int | None = None, writable: bool = True):
+        """A device buffer, filled from `array` or of `nbytes` uninitialised bytes; on a CPU
+        device a large one of `nbytes` comes from the pool (POOLED_BYTES)."""
         mf = self.cl.mem_flags
         flags = mf.READ_WRITE if writable else mf.READ_ONLY
         if array is not None:
@@ -256,7 +262,7 @@ class Device:
                 return self.cl.Buffer(self.context, flags, 16)
             return self.cl.Buffer(self.context, flags | mf.COPY_HOST_PTR, hostbuf=array)
         self.allocated_bytes += nbytes
-        if self._pool is not None and pooled and nbytes >= POOLED_BYTES:
+        if self._pool is not None and nbytes >= POOLED_BYTES:
             return self._pool.allocate(int(nbytes))
         return self.cl.Buffer(self.context, flags, max(int(nbytes), 16))
 
@@ -313,10 +319,11 @@ class Device:
         """A buffer the frame is done with, as an array: on a CPU device the buffer's own
         memory, mapped, which is the host's (no copy: a 1280×720 image's 14.7 MB took
         3–5 ms to copy, and its fresh pages to fault in); on another device a read. The
-        buffer lives as long as the array."""
+        buffer lives as long as the array (and any view of it): a pooled one goes back to
+        the pool only then."""
         if not self._spread:
             return self.read(buffer, shape, dtype)
         flags = self.cl.map_flags.READ | self.cl.map_flags.WRITE  # (the caller may write to its image)
         array, event = self.cl.enqueue_map_buffer(self.queue, buffer, flags, 0, shape, dtype)
         event.wait()
-        return array
+        return np.asarray(_Holding(array, buffer))

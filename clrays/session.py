@@ -83,7 +83,7 @@ class InScatter:
 
     def __init__(self, device: Device, samples: int):
         self.device, self.samples = device, samples
-        self.buffer = device.buffer(nbytes=16 * samples, pooled=False)  # (shade's image may take it over)
+        self.buffer = device.buffer(nbytes=16 * samples)
         self.holds_values = False  # zeros, or a stage's values in every sample
 
     def adding(self):

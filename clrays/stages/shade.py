@@ -25,7 +25,7 @@ def shade(device: Device, buffers: FrameBuffers, rastered: RasterResult, scatter
     # With one sample per pixel each work-item writes its pixels where it read their
     # in-scattering, and nothing reads that after: the image takes the buffer over, which
     # spares a frame 16 bytes a pixel of fresh memory (on a CPU device, its page faults).
-    out = scatter if image.spp == 1 else device.buffer(nbytes=16 * pixels, pooled=False)
+    out = scatter if image.spp == 1 else device.buffer(nbytes=16 * pixels)
     if visible is None:
         visible = device.buffer(nbytes=4)  # never read: the map decides
     # A scene with translucent objects: the light's transmittance per surface sample (translucency stage).
