@@ -477,8 +477,10 @@ kernel void visibility_clear(global const uint* read_mask, int first, int texels
  * which it draws for every listed triangle in the list's order. Only that work-item
  * writes those rows in this pass, so its updates are plain stores, not atomics: spread
  * over the rows of each triangle instead, demo.yaml's floor and walls spent about 40 % of
- * the pass in them (bench/RESULTS.md, "Fewer calls"). A triangle is projected and clipped
- * once per block of rows it covers. */
+ * the pass in them (docs/design.md §4.6). A triangle is projected and clipped once per
+ * block of rows it covers. A launch draws one view (view_count 1), whose height bounds
+ * the rows; a row block is drawn for a listed triangle where its rows [y0, y1], as the
+ * first pass found them, meet the block (bound_triangle clips again to the same rows). */
 kernel void visibility_bound(global const float4* tri_vertices, int count, global const view_t* views,
                              int first_view, int view_count, global uint* bound, global int* writer,
                              int masked, global const uint* read_mask, int mask_offset, TOUCHING_ARGS,

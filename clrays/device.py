@@ -7,6 +7,7 @@ CPU device.
 """
 from __future__ import annotations
 
+import collections
 import os
 import warnings
 from dataclasses import dataclass, field
@@ -180,9 +181,12 @@ class _Holding:
         self._array, self._owner = array, owner
 
 
-#: What the pool may hold unused after a frame, in units of that frame's device bytes;
-#: beyond it the pool lets all of it go (a sequence whose sizes change).
+#: What the pool may hold unused after a frame, in units of the largest frame's device
+#: bytes among the last POOL_WINDOW frames; beyond it the pool lets all of it go (a
+#: sequence whose sizes fall). A frame the cache answers, or one that reuses most stages,
+#: allocates little, and must not empty the pool the next full frame takes from.
 POOL_HELD_FRAMES = 2
+POOL_WINDOW = 8
 
 
 class Device:
@@ -204,6 +208,7 @@ class Device:
         if self._spread:
             from pyopencl.tools import ImmediateAllocator, MemoryPool
             self._pool = MemoryPool(ImmediateAllocator(self.queue))
+            self._recent_frame_bytes = collections.deque(maxlen=POOL_WINDOW)
         self._units = max(int(self.device.max_compute_units), 1)
         self._max_group = max(min(MAX_CPU_GROUP, int(self.device.max_work_group_size)), 1)
         self._local_sizes: dict[tuple, tuple] = {}
@@ -271,9 +276,13 @@ class Device:
         return None if self._pool is None else (self._pool.managed_bytes, self._pool.active_bytes)
 
     def end_frame(self, frame_bytes: int) -> None:
-        """After a frame of `frame_bytes` device bytes: the pool lets go of the buffers it
-        holds unused when they are more than POOL_HELD_FRAMES such frames."""
-        if self._pool is not None and self._pool.managed_bytes - self._pool.active_bytes > POOL_HELD_FRAMES * frame_bytes:
+        """After a frame that allocated `frame_bytes` device bytes: the pool lets go of the
+        buffers it holds unused when they are more than POOL_HELD_FRAMES of the largest of
+        the last POOL_WINDOW frames."""
+        if self._pool is None:
+            return
+        self._recent_frame_bytes.append(frame_bytes)
+        if self._pool.managed_bytes - self._pool.active_bytes > POOL_HELD_FRAMES * max(self._recent_frame_bytes):
             self._pool.free_held()
 
     def fill(self, buffer, value: np.ndarray, nbytes: int, timer: StageTimer | None = None, label: str = "fill"):

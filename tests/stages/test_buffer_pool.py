@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from clrays.device import POOL_HELD_FRAMES, Device
+from clrays.device import POOL_HELD_FRAMES, POOL_WINDOW, Device
 from clrays.scene.load import load_scene
 from clrays.session import Renderer
 from conftest import TEST_DEVICE
@@ -54,9 +54,23 @@ def test_a_kept_image_survives_later_frames(pooled_renderer):
     np.testing.assert_array_equal(first, kept)
 
 
+def test_the_pool_keeps_its_buffers_through_cached_frames():
+    """A frame the cache answers allocates nothing, and must not empty the pool that the
+    next full frame takes from."""
+    renderer = Renderer(Device(TEST_DEVICE), reuse=True)
+    if renderer.device.pool_bytes() is None:
+        pytest.skip("only a CPU device pools its buffers")
+    scene = _scene("demo")
+    renderer.render(scene)
+    managed = renderer.device.pool_bytes()[0]
+    assert renderer.render(scene).device_bytes == 0  # the cache's frame
+    assert renderer.device.pool_bytes()[0] == managed
+
+
 def test_the_pool_lets_go_of_a_larger_frames_buffers(pooled_renderer):
     pooled_renderer.render(_scene("demo", 640, 360))
     large = pooled_renderer.device.pool_bytes()[0]
-    small = pooled_renderer.render(_scene("demo", 64, 36))
+    for _ in range(POOL_WINDOW):  # until the large frame leaves the window
+        small = pooled_renderer.render(_scene("demo", 64, 36))
     managed, active = pooled_renderer.device.pool_bytes()
     assert managed - active <= POOL_HELD_FRAMES * small.device_bytes < large

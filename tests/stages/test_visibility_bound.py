@@ -92,7 +92,7 @@ def test_bound_and_writer_maps_hold_every_triangle_they_must(device, kind):
 
 
 def test_a_frame_without_big_triangles_asks_for_no_empty_wait(renderer):
-    """No view lists a triangle for the split passes (a small sphere on a 64² map): the
+    """No view lists a triangle for the rows pass (a small sphere on a 64² map): the
     host then waits for no read at all. OpenCL refuses an empty wait list
     (CL_INVALID_VALUE, PoCL and NVIDIA alike), and every frame of small triangles failed."""
     from clrays.scene.geometry import sphere_triangles
