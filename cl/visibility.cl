@@ -473,7 +473,7 @@ kernel void visibility_clear(global const uint* read_mask, int first, int texels
 /* Two passes, because a triangle's rectangle may hold a few texels or a whole face:
  * visibility_bound takes one work-item per triangle and view and does the rectangles of
  * up to `small_rows` rows at once, listing the others in big_items with their rows;
- * visibility_bound_rows then gives each work-item VISIBILITY_BOUND_ROWS_PER_ITEM rows of the view,
+ * visibility_bound_rows then gives each work-item `rows_per_item` rows of the view,
  * which it draws for every listed triangle in the list's order. Only that work-item
  * writes those rows in this pass, so its updates are plain stores, not atomics: spread
  * over the rows of each triangle instead, demo.yaml's floor and walls spent about 40 % of
@@ -506,9 +506,9 @@ kernel void visibility_bound(global const float4* tri_vertices, int count, globa
 kernel void visibility_bound_rows(global const float4* tri_vertices, global const view_t* views, int first_view,
                                   int view_count, global uint* bound, global int* writer,
                                   int masked, global const uint* read_mask, int mask_offset, TOUCHING_ARGS,
-                                  global const int4* big_items, int big_count)
+                                  global const int4* big_items, int big_count, int rows_per_item)
 {
-    int row_begin = get_global_id(0) * VISIBILITY_BOUND_ROWS_PER_ITEM, row_end = row_begin + VISIBILITY_BOUND_ROWS_PER_ITEM;
+    int row_begin = get_global_id(0) * rows_per_item, row_end = row_begin + rows_per_item;
     if (row_begin >= views[first_view].height) return;
     for (int index = 0; index < big_count; ++index) {
         int4 big = big_items[index]; /* (item, its first row, its last row) */

@@ -215,6 +215,10 @@ class Device:
         self.allocated_bytes = 0
 
     @property
+    def is_cpu(self) -> bool:
+        return self._spread
+
+    @property
     def name(self) -> str:
         return f"{self.device.platform.name.strip()} / {self.device.name.strip()}"
 

@@ -86,17 +86,13 @@ VISIBILITY_PENDING = -1.0
 RECTS_NONE, RECTS_RECORD, RECTS_FILTER = 0, 1, 2
 # Words of the read mask (32 texels each) one visibility_clear work-item takes.
 VISIBILITY_CLEAR_WORDS = 32
-# visibility_bound_rows gives each work-item this many consecutive rows of the view, of
-# every listed triangle, as raster's second pass does (RASTER_ROWS_PER_ITEM).
-VISIBILITY_BOUND_ROWS_PER_ITEM = 16
 
 #: Every constant above by its C name: the `-D` options of every kernel build.
 KERNEL_CONSTANTS = {
     name: value for name, value in dict(globals()).items()
     if name.startswith(("PROJECTION_", "LIGHT_", "PHASE_", "INTEGRAND_", "TRAVERSAL_", "RASTER_", "SURFACE_SHADOWS_",
                          "TEXTURE_WRAP_", "SHADOW_FILTER_", "WRITER_", "STEP_SPACING_", "RECTS_", "CONVEX_"))
-    or name in ("DEPTH_EMPTY", "SIN_BETA_MIN", "VISIBILITY_PENDING", "VISIBILITY_CLEAR_WORDS",
-                "VISIBILITY_BOUND_ROWS_PER_ITEM")
+    or name in ("DEPTH_EMPTY", "SIN_BETA_MIN", "VISIBILITY_PENDING", "VISIBILITY_CLEAR_WORDS")
 }
 
 

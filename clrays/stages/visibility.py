@@ -37,10 +37,13 @@ from .raster import RasterResult
 
 #: `visibility_bound` does a triangle's texel rectangle of up to this many rows in one
 #: work-item (most triangles of a fine mesh: one item each, no idle ones) and leaves
-#: taller ones to `visibility_bound_rows`, whose work-items each own
-#: structs.VISIBILITY_BOUND_ROWS_PER_ITEM rows of the view (a floor's rectangle can be a
-#: whole face).
+#: taller ones to `visibility_bound_rows`, whose work-items each own consecutive rows of
+#: the view (a floor's rectangle can be a whole face).
 BOUND_SMALL_ROWS = 8
+#: Rows per work-item of `visibility_bound_rows`: on a CPU device 16, so that a listed
+#: triangle is projected and clipped once per 16 rows and each core has dozens of
+#: work-items per face; elsewhere 1, a work-item per row (a GPU wants thousands of them).
+BOUND_ROWS_PER_ITEM_CPU = 16
 
 #: A frame of at most TOUCHING_ENTRIES samples × lights (a 64×64 thumbnail) has the bound
 #: passes list, per texel read, the triangles touching it, in up to
@@ -206,6 +209,7 @@ def _bound_passes(device: Device, inputs: FrameInputs, first: int, bound, writer
     read_mask = read_mask if read_mask is not None else device.buffer(nbytes=4)
     first_pass = device.kernel("visibility", "visibility_bound")
     rows_pass = device.kernel("visibility", "visibility_bound_rows")
+    rows_per_item = BOUND_ROWS_PER_ITEM_CPU if device.is_cpu else 1
     # Only the cube faces the frame can read (`view_needed`, as raster.shadow does): no
     # sample projects into the others, so their texels are never asked for.
     drawn = [int(view) for view in np.flatnonzero(inputs.view_needed[1:]) + 1]
@@ -233,9 +237,9 @@ def _bound_passes(device: Device, inputs: FrameInputs, first: int, bound, writer
         ordered = device.buffer(nearest_first(listed_items, inputs, view), writable=False)  # (copied, no wait)
         height = int(inputs.views[view]["height"])
         timer.add("visibility", rows_pass(
-            device.queue, (-(-height // structs.VISIBILITY_BOUND_ROWS_PER_ITEM),), None, vertices, views,
-            np.int32(view), np.int32(1), bound, writer, masked, read_mask, np.int32(first), *lists, ordered,
-            np.int32(len(listed_items))))
+            device.queue, (-(-height // rows_per_item),), None, vertices, views, np.int32(view), np.int32(1), bound,
+            writer, masked, read_mask, np.int32(first), *lists, ordered, np.int32(len(listed_items)),
+            np.int32(rows_per_item)))
 
 
 def ray_lists(device: Device, buffers: FrameBuffers, prepared: Prepared, ray_entries, rays: int,

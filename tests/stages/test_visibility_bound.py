@@ -101,3 +101,26 @@ def test_a_frame_without_big_triangles_asks_for_no_empty_wait(renderer):
     scene = make_scene(ball, [PointLight(v3(0.5, 4.0, 0.5), np.full(3, 30.0))], width=32, height=18, shadow_map=64)
     image = renderer.render(scene, reuse=False).image
     assert np.isfinite(image).all() and image.max() > 0
+
+
+@pytest.mark.parametrize("rows_per_item", [1, 3])
+def test_the_rows_pass_draws_the_same_maps_whatever_rows_a_work_item_owns(device, monkeypatch, rows_per_item):
+    """A GPU's rows pass takes a row per work-item, a CPU's 16 (BOUND_ROWS_PER_ITEM_CPU;
+    on a CPU test device the constant changes both): every texel's bound is a minimum and
+    its writer one part or many, so the maps are the same bits however the rows are dealt
+    out (3: blocks that end inside a triangle)."""
+    import clrays.stages.visibility as visibility_stage
+
+    scene = make_scene(_triangles(), [LIGHTS["point"]], shadow_map=48)
+    buffers = upload(device, frame_inputs(scene))
+    texels = light_pass_inputs(buffers.inputs, 0).shadow_texels
+
+    def maps():
+        drawn = visibility_bound(device, buffers, 0, StageTimer())
+        return device.read(drawn.bound, texels, np.uint32), device.read(drawn.writer, texels, np.int32)
+
+    bound, writer = maps()
+    monkeypatch.setattr(visibility_stage, "BOUND_ROWS_PER_ITEM_CPU", rows_per_item)
+    other_bound, other_writer = maps()
+    np.testing.assert_array_equal(other_bound, bound)
+    np.testing.assert_array_equal(other_writer, writer)
