@@ -31,7 +31,8 @@ typedef struct {
 
 /* K of a point (or spot) light's row at u = 1 - x, per channel: amplitude·ρ(cos(β+γ))·
  * exp(-σt·d_el·(sinβ + sinγ)/sin(β+γ)) / d_el with the half-angle forms of
- * clrays/stages/integrand.py _row_integrand; a grey medium (`grey`) takes one exp. */
+ * clrays/stages/integrand.py _row_integrand; a grey medium's one plane (`grey`) takes the
+ * first channel's alone. */
 ALWAYS_INLINE rgb_lanes point_integrand(float_lanes u, float4 row, float4 amplitude, float4 sigma_t, float d_el, float g,
                                         int grey)
 {
@@ -47,7 +48,7 @@ ALWAYS_INLINE rgb_lanes point_integrand(float_lanes u, float4 row, float4 amplit
     float_lanes red = exp(-(sigma_t.x * d_el) * ratio) / falloff * scale;
     rgb_lanes k;
     if (grey) {
-        k.r = red * amplitude.x, k.g = red * amplitude.y, k.b = red * amplitude.z;
+        k.r = k.g = k.b = red * amplitude.x; /* g and b not stored */
     } else {
         k.r = red * amplitude.x;
         k.g = exp(-(sigma_t.y * d_el) * ratio) / falloff * (scale * amplitude.y);
@@ -56,11 +57,17 @@ ALWAYS_INLINE rgb_lanes point_integrand(float_lanes u, float4 row, float4 amplit
     return k;
 }
 
-/* K of a directional row at x: amplitude·ρ(cos β)·exp(-σt·x·s_end). */
-ALWAYS_INLINE rgb_lanes directional_integrand(float_lanes x, float4 row, float4 amplitude, float4 sigma_t, float4 s_end)
+/* K of a directional row at x: amplitude·ρ(cos β)·exp(-σt·x·s_end); a grey medium's one
+ * plane (`grey`) takes the first channel's alone. */
+ALWAYS_INLINE rgb_lanes directional_integrand(float_lanes x, float4 row, float4 amplitude, float4 sigma_t, float4 s_end,
+                                              int grey)
 {
     rgb_lanes k;
     k.r = amplitude.x * row.z * exp(-sigma_t.x * (x * s_end.x));
+    if (grey) {
+        k.g = k.b = k.r; /* not stored */
+        return k;
+    }
     k.g = amplitude.y * row.z * exp(-sigma_t.y * (x * s_end.y));
     k.b = amplitude.z * row.z * exp(-sigma_t.z * (x * s_end.z));
     return k;
@@ -84,7 +91,7 @@ kernel void integrand_cells(global const float4* rows, int point, float4 amplitu
             float_lanes u = ((float)cells - centre - 0.5f * nodes[n]) * h;
             value = point_integrand(u, row, amplitude, sigma_t, d_el, g, grey);
         } else {
-            value = directional_integrand((centre + 0.5f * nodes[n]) * h, row, amplitude, sigma_t, s_end);
+            value = directional_integrand((centre + 0.5f * nodes[n]) * h, row, amplitude, sigma_t, s_end, grey);
         }
         sum.r += value.r * weights[n], sum.g += value.g * weights[n], sum.b += value.b * weights[n];
     }
