@@ -9,8 +9,8 @@
  * (solids.h), clips the triangle to the view's near side,
  * projects the polygon, and per pixel row ray-tests the samples in the row's span of
  * the polygon, 8 columns per test (intersect_columns); triangles taller than
- * RASTER_BIG_ROWS go to a second pass with one work-item per RASTER_ROWS_PER_ITEM rows
- * of the view, which owns them (`*_rows`). The ray test (not interpolation)
+ * RASTER_BIG_ROWS go to a second pass with one work-item per block of RASTER_ROWS_PER_ITEM
+ * rows (and, on a GPU, a few dozen columns) of the view, which owns it (`*_rows`). The ray test (not interpolation)
  * makes depth exact along the sample ray, and two-sided. Depth buffer layout per view:
  * [height][width][samples]. */
 #include "lighting.h"
@@ -324,16 +324,18 @@ inline int misses_every_sample(global const view_t* view, global const float4* t
     int y1 = MIN_INT(CEIL_INT(FMIN(bottom, (float)view->height)), view->height - 1);        \
     triangle_test_t test = triangle_test(view, v0, v1, v2);
 
-/* Every sample of row y that the triangle may cover, RASTER_LANES columns per ray test;
- * BODY sees idx, t and tri for each sample the triangle covers. A row whose strip
+/* Every sample of row y in columns [column_lo, column_hi] that the triangle may cover,
+ * RASTER_LANES columns per ray test; BODY sees idx, t and tri for each sample the
+ * triangle covers. A row whose strip
  * [y, y + 1] lies wholly above or below the polygon is skipped before row_span, which
  * would find it empty: no corner lies in the strip, and no edge reaches it (the products
  * of its sign test are at least 2^-48, no underflow to 0, except for the strip [0, 1]
  * below a polygon that ends a hair above y = 0, which row_span is left to decide). */
-#define COVERED_SAMPLES_OF_ROW(y, BODY, LANES_BODY)                                         \
+#define COVERED_SAMPLES_OF_ROW(y, column_lo, column_hi, BODY, LANES_BODY)                  \
     if (!((float)(y + 1) < top || ((float)y > bottom && y > 0))) {                          \
         int x0, x1;                                                                         \
-        if (row_span(corner, count, y, view->width, &x0, &x1))                              \
+        if (row_span(corner, count, y, view->width, &x0, &x1)                               \
+            && (x0 = max(x0, column_lo)) <= (x1 = min(x1, column_hi)))                      \
             for (int s = 0; s < sample_count; ++s) {                                        \
                 float2 offset = offsets[s];                                                 \
                 for (int first = x0; first <= x1; first += RASTER_LANES) {                 \
@@ -352,8 +354,25 @@ inline int misses_every_sample(global const view_t* view, global const float4* t
             }                                                                               \
     }
 
+/* Whether a triangle of rows [y0, y1] has a texel rectangle of more than RASTER_BIG_SAMPLES
+ * pixels: a GPU lists these too (clrays/stages/raster.py), where one work-item drawing a
+ * wall seen edge-on, 32 rows by a whole face, held up the pass (demo's pass 1 took 12 ms
+ * on an H200). */
+#ifndef RASTER_BIG_SAMPLES
+#define RASTER_BIG_SAMPLES 0 /* 0: the rows alone decide (a CPU) */
+#endif
+inline int big_rectangle(const float2 corner[4], int count, int y0, int y1)
+{
+    float left = corner[0].x, right = corner[0].x;
+    for (int k = 1; k < count; ++k) {
+        left = corner[k].x < left ? corner[k].x : left;
+        right = corner[k].x > right ? corner[k].x : right;
+    }
+    return (right - left + 2.0f) * (float)(y1 - y0 + 1) > (float)RASTER_BIG_SAMPLES;
+}
+
 /* Pass 1, one work-item per triangle: it visits every covered sample of its rows, unless
- * it spans more than RASTER_BIG_ROWS rows; then it lists itself in `big` as (triangle,
+ * it spans more than RASTER_BIG_ROWS rows (or, on a GPU, RASTER_BIG_SAMPLES pixels); then it lists itself in `big` as (triangle,
  * first row, last row) (while there is room) for pass 2, so a floor plane does not keep
  * one work-item busy for the whole view. The samples are the same either way, and every
  * update is a min (or max) that does not depend on the order, so is the depth map. */
@@ -364,27 +383,32 @@ inline int misses_every_sample(global const view_t* view, global const float4* t
                              tri_vertices[3 * tri + 2].xyz)) return;                        \
     if (misses_every_sample(views + view_index, tri_vertices, tri, offsets, sample_count)) return; \
     PROJECT_TRIANGLE(return)                                                                \
-    if (y1 - y0 + 1 > RASTER_BIG_ROWS) {                                                    \
+    if (y1 - y0 + 1 > RASTER_BIG_ROWS || (RASTER_BIG_SAMPLES > 0 && big_rectangle(corner, count, y0, y1))) { \
         uint slot = atomic_inc(big_count);                                                  \
         if (slot < RASTER_BIG_TRIANGLES) { vstore3((int3)(tri, y0, y1), slot, big); return; } \
     }                                                                                       \
-    for (int y = y0; y <= y1; ++y) COVERED_SAMPLES_OF_ROW(y, BODY, )
+    for (int y = y0; y <= y1; ++y) COVERED_SAMPLES_OF_ROW(y, 0, view->width - 1, BODY, )
 
-/* Pass 2, one work-item per RASTER_ROWS_PER_ITEM rows of the view: it draws its rows of
- * every triangle pass 1 listed. Pass 1 has finished, and no other work-item touches these
- * rows, so the updates need no atomics (OWNED_BODY), and a run of RASTER_LANES samples of
- * one row can be read, updated and written as one vector (LANES_BODY). */
+/* Pass 2, one work-item per block of RASTER_ROWS_PER_ITEM rows by `columns_per_item`
+ * columns of the view (a CPU device: whole rows; a GPU: a few dozen columns, for work-items
+ * enough): it draws its block of every triangle pass 1 listed. Pass 1 has finished, and no
+ * other work-item touches these samples, so the updates need no atomics (OWNED_BODY), and a
+ * run of RASTER_LANES samples of one row inside the block can be read, updated and written
+ * as one vector (LANES_BODY). */
 #define FOR_EACH_COVERED_SAMPLE_OF_OWNED_ROWS(OWNED_BODY, LANES_BODY)                        \
     int row0 = get_global_id(0) * RASTER_ROWS_PER_ITEM;                                     \
-    if (row0 >= views[view_index].height) return;                                           \
+    int column0 = get_global_id(1) * columns_per_item;                                      \
+    if (row0 >= views[view_index].height || column0 >= views[view_index].width) return;    \
     int row1 = min(row0 + RASTER_ROWS_PER_ITEM, views[view_index].height) - 1;              \
+    int column1 = min(column0 + columns_per_item, views[view_index].width) - 1;             \
     for (int listed = 0; listed < big_count; ++listed) {                                    \
         int3 entry = vload3(listed, big);                                                   \
         if (entry.z < row0 || entry.y > row1) continue;                                     \
         int tri = entry.x;                                                                  \
         PROJECT_TRIANGLE(continue)                                                          \
         int last_row = min(row1, y1);                                                       \
-        for (int y = max(row0, y0); y <= last_row; ++y) COVERED_SAMPLES_OF_ROW(y, OWNED_BODY, LANES_BODY) \
+        for (int y = max(row0, y0); y <= last_row; ++y)                                     \
+            COVERED_SAMPLES_OF_ROW(y, column0, column1, OWNED_BODY, LANES_BODY)             \
     }
 
 #define RASTER_ARGS global const float4* tri_vertices, int tri_count, global const view_t* views, \
@@ -392,7 +416,8 @@ inline int misses_every_sample(global const view_t* view, global const float4* t
                     global uint* big_count, global int* big
 
 #define RASTER_ROWS_ARGS global const float4* tri_vertices, global const view_t* views, int view_index, \
-                         global const float2* offsets, int sample_count, global const int* big, int big_count
+                         global const float2* offsets, int sample_count, global const int* big, int big_count, \
+                         int columns_per_item
 
 /* Each pass-1 kernel `name` has a pass-2 twin `name_rows`. */
 #define RASTER_KERNELS(name, TARGET, BODY, OWNED_BODY, LANES_BODY)                          \
@@ -400,10 +425,11 @@ inline int misses_every_sample(global const view_t* view, global const float4* t
     kernel void name##_rows(RASTER_ROWS_ARGS, TARGET) { FOR_EACH_COVERED_SAMPLE_OF_OWNED_ROWS(OWNED_BODY, LANES_BODY) }
 
 /* Pass 2's depth update of a whole run of RASTER_LANES columns, with one sample per pixel
- * and the run inside the row: the stored depths and the run's as one vector min (a lane
- * the triangle misses holds INFINITY, whose bits are DEPTH_EMPTY, the largest depth). */
+ * and the run inside the work-item's block: the stored depths and the run's as one vector
+ * min (a lane the triangle misses holds INFINITY, whose bits are DEPTH_EMPTY, the largest
+ * depth). */
 #define DEPTH_MIN_LANES(depth)                                                              \
-    if (sample_count == 1 && first + RASTER_LANES <= view->width) {                        \
+    if (sample_count == 1 && first + RASTER_LANES <= column1 + 1) {                        \
         global uint8_at_uint* run = (global uint8_at_uint*)(depth + view->depth_offset + y * view->width + first); \
         *run = min(*run, as_uint8(lanes));                                                  \
         continue;                                                                           \

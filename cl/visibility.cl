@@ -301,7 +301,8 @@ inline void note_touching(global int* head, int tri, global int2* touching, vola
 inline void bound_triangle(global const float4* tri_vertices, global const view_t* views, int first_view,
                            int view_count, global uint* bound, global int* writer, int masked,
                            global const uint* read_mask, int mask_offset, TOUCHING_ARGS, int item, int row_begin,
-                           int row_end, int owned, int small_rows, global int4* big_items,
+                           int row_end, int column_begin, int column_end, int owned, int small_rows,
+                           global int4* big_items,
                            volatile global int* big_count, global int4* rect)
 {
     int tri = item / view_count;
@@ -351,12 +352,13 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
     int y1 = inline_min((int)inline_floor(inline_fmin(hi.y, (float)view->height + 2.0f)) + 1, view->height - 1);
     if (rect) *rect = (int4)(x0, y0, x1, y1);
     int first_row = inline_max(y0, row_begin), last_row = inline_min(y1, row_end - 1);
-    if (x0 > x1 || first_row > last_row) return; /* outside the view, or no row for this item */
+    int first_column = inline_max(x0, column_begin), last_column = inline_min(x1, column_end - 1);
+    if (first_column > last_column || first_row > last_row) return; /* outside the view, or not this item's texels */
     /* no sample reads its rectangle: nothing to draw */
     if (masked && small_rows > 0 && !rectangle_is_read(view, read_mask, mask_offset, x0, y0, x1, y1, small_rows))
         return;
     if (small_rows > 0 && y1 - y0 + 1 > small_rows) { /* many rows: the rows pass takes them */
-        big_items[atomic_inc(big_count)] = (int4)(item, y0, y1, 0);
+        big_items[atomic_inc(big_count)] = (int4)(item, y0, y1, x0 | x1 << 16); /* a view is at most 8192 wide */
         return;
     }
     int part = convex_part_of(tri_vertices, tri); /* the writer map's label */
@@ -397,7 +399,7 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
     float3 edge[8];
     int edges = polygon_edges(corner, corners, edge);
     for (int ty = first_row; ty <= last_row; ++ty) {
-        int first = x0, last = x1;
+        int first = first_column, last = last_column;
         if (!row_span(edge, edges, ty, &first, &last)) continue;
         float y_centre = (1.0f - (2.0f * (float)ty + 1.0f) * inverse_height) * view->scale_y;
         float row_dot = n_view.z + n_view.y * y_centre, row_length2 = 1.0f + y_centre * y_centre;
@@ -473,14 +475,15 @@ kernel void visibility_clear(global const uint* read_mask, int first, int texels
 /* Two passes, because a triangle's rectangle may hold a few texels or a whole face:
  * visibility_bound takes one work-item per triangle and view and does the rectangles of
  * up to `small_rows` rows at once, listing the others in big_items with their rows;
- * visibility_bound_rows then gives each work-item `rows_per_item` rows of the view,
- * which it draws for every listed triangle in the list's order. Only that work-item
- * writes those rows in this pass, so its updates are plain stores, not atomics: spread
- * over the rows of each triangle instead, demo.yaml's floor and walls spent about 40 % of
- * the pass in them (docs/design.md §4.6). A triangle is projected and clipped once per
- * block of rows it covers. A launch draws one view (view_count 1), whose height bounds
- * the rows; a row block is drawn for a listed triangle where its rows [y0, y1], as the
- * first pass found them, meet the block (bound_triangle clips again to the same rows). */
+ * visibility_bound_rows then gives each work-item a block of the view, `rows_per_item`
+ * rows by `columns_per_item` columns, which it draws for every listed triangle in the
+ * list's order. Only that work-item writes those texels in this pass, so its updates are
+ * plain stores, not atomics: spread over the rows of each triangle instead, demo.yaml's
+ * floor and walls spent about 40 % of the pass in them (docs/design.md §4.6). A triangle
+ * is projected and clipped once per block it covers. A launch draws one view
+ * (view_count 1), whose size bounds the blocks; a block is drawn for a listed triangle
+ * where the texel rectangle the first pass found for it (rows [y0, y1], columns
+ * [x0, x1]) meets the block (bound_triangle clips again to the same texels). */
 kernel void visibility_bound(global const float4* tri_vertices, int count, global const view_t* views,
                              int first_view, int view_count, global uint* bound, global int* writer,
                              int masked, global const uint* read_mask, int mask_offset, TOUCHING_ARGS,
@@ -499,22 +502,25 @@ kernel void visibility_bound(global const float4* tri_vertices, int count, globa
             return;
     }
     bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, masked, read_mask, mask_offset,
-                   TOUCHING_PASS, item, 0, INT_MAX, 0, small_rows, big_items, big_count,
+                   TOUCHING_PASS, item, 0, INT_MAX, 0, INT_MAX, 0, small_rows, big_items, big_count,
                    rect_mode == RECTS_RECORD ? rects + item : 0);
 }
 
 kernel void visibility_bound_rows(global const float4* tri_vertices, global const view_t* views, int first_view,
                                   int view_count, global uint* bound, global int* writer,
                                   int masked, global const uint* read_mask, int mask_offset, TOUCHING_ARGS,
-                                  global const int4* big_items, int big_count, int rows_per_item)
+                                  global const int4* big_items, int big_count, int rows_per_item,
+                                  int columns_per_item)
 {
     int row_begin = get_global_id(0) * rows_per_item, row_end = row_begin + rows_per_item;
-    if (row_begin >= views[first_view].height) return;
+    int column_begin = get_global_id(1) * columns_per_item, column_end = column_begin + columns_per_item;
+    if (row_begin >= views[first_view].height || column_begin >= views[first_view].width) return;
     for (int index = 0; index < big_count; ++index) {
-        int4 big = big_items[index]; /* (item, its first row, its last row) */
-        if (big.y >= row_end || big.z < row_begin) continue;
+        int4 big = big_items[index]; /* (item, its first row, its last row, its first column | its last << 16) */
+        if (big.y >= row_end || big.z < row_begin || (big.w & 0xffff) >= column_end || big.w >> 16 < column_begin)
+            continue;
         bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, masked, read_mask, mask_offset,
-                       TOUCHING_PASS, big.x, row_begin, row_end, 1, 0, 0, 0, 0);
+                       TOUCHING_PASS, big.x, row_begin, row_end, column_begin, column_end, 1, 0, 0, 0, 0);
     }
 }
 

@@ -29,25 +29,53 @@ def _launch(device: Device, buffers: FrameBuffers, name: str, defines: dict | No
     count = buffers.inputs.tri_vertices.shape[0] // 3
     if buffers.inputs.raster_triangles is not None:  # the reliefs' triangles, last, are pre-warped instead
         count = buffers.inputs.raster_triangles
-    heights = [int(buffers.inputs.views[view]["height"]) for view in view_indices]
+    sizes = [(int(buffers.inputs.views[view]["height"]), int(buffers.inputs.views[view]["width"]))
+             for view in view_indices]
     raster_passes(device, "raster", name, defines, buffers.tri_vertices, count, buffers.views, view_indices,
-                  heights, offsets, sample_count, target, timer)
+                  sizes, offsets, sample_count, target, timer)
+
+
+#: The columns a work-item of a raster rows pass owns on a device other than a CPU: with
+#: whole rows a 1024² face had 256 work-items, too few for a GPU (demo's shadow-map rows
+#: pass took 13 ms on an H200). A multiple of RASTER_LANES, so that a run of lanes stays
+#: inside its block where the block starts on a run.
+RASTER_ROWS_COLUMNS_GPU = 32
+#: On a device other than a CPU, pass 1 lists a triangle whose texel rectangle holds more
+#: pixels than this as well as one taller than RASTER_BIG_ROWS: a wall seen edge-on can be
+#: 32 rows by a whole face, one GPU work-item's worth of a frame (cl/raster.cl,
+#: big_rectangle). A CPU's cores run many work-items each and keep the rows alone.
+RASTER_BIG_SAMPLES_GPU = 1024
+
+
+def raster_rows_columns(device: Device, width: int) -> int:
+    """Columns of a `width`-wide view per work-item of a rows pass: a CPU's cores take whole
+    rows, which projects each listed triangle once per block of rows."""
+    return width if device.is_cpu else RASTER_ROWS_COLUMNS_GPU
+
+
+def raster_big_samples(device: Device) -> int:
+    """The pixels of a triangle's rectangle past which pass 1 lists it; 0: only its rows count."""
+    return 0 if device.is_cpu else RASTER_BIG_SAMPLES_GPU
 
 
 def raster_passes(device: Device, program: str, name: str, defines: dict | None, vertices, count: int, views,
-                  view_indices: list[int], view_heights: list[int], offsets, sample_count: int, target: tuple,
+                  view_indices: list[int], view_sizes: list[tuple[int, int]], offsets, sample_count: int, target: tuple,
                   timer: StageTimer, stage: str = "raster") -> None:
     """The two passes of one raster kernel (cl/raster.cl's RASTER_KERNELS, built in
-    `program`) over `count` triangles for each view of `view_indices` (`view_heights`
-    rows): `name`, one work-item per triangle, lists the triangles taller than
+    `program`) over `count` triangles for each view of `view_indices` (`view_sizes`:
+    (rows, columns)): `name`, one work-item per triangle, lists the triangles taller than
     RASTER_BIG_ROWS with their rows; `name_rows` draws those with one work-item per
-    RASTER_ROWS_PER_ITEM rows of the view, which owns its rows (docs/design.md §4.1).
+    block of RASTER_ROWS_PER_ITEM rows by `raster_rows_columns` columns of the view, which
+    owns its block (docs/design.md §4.1).
     Every view's first pass runs before the host waits, once, for all their lists: a wait
     per cube face left the device idle six times a frame. (The views have texels of their
     own, and every update is a min or a max, which no order changes.)"""
     if count == 0 or not view_indices:
         return
     capacity = min(count, structs.RASTER_BIG_TRIANGLES)  # a triangle lists itself at most once
+    big_samples = raster_big_samples(device)
+    if big_samples:
+        defines = {**(defines or {}), "RASTER_BIG_SAMPLES": big_samples}
     first_pass = device.kernel(program, name, defines)
     lists = []  # per view: its count of big triangles, and their (triangle, first row, last row)
     for view_index in view_indices:
@@ -56,12 +84,13 @@ def raster_passes(device: Device, program: str, name: str, defines: dict | None,
                                     np.int32(view_index), offsets, np.int32(sample_count), *lists[-1], *target))
     counts = device.read_all([(big_count, 1) for big_count, _ in lists], np.uint32)
     rows_pass = device.kernel(program, f"{name}_rows", defines)
-    for view_index, height, listed, (_, big) in zip(view_indices, view_heights, counts, lists):
+    for view_index, (height, width), listed, (_, big) in zip(view_indices, view_sizes, counts, lists):
         if listed[0]:
+            columns = raster_rows_columns(device, width)
             timer.add(stage, rows_pass(
-                device.queue, (-(-height // structs.RASTER_ROWS_PER_ITEM),), None, vertices, views,
-                np.int32(view_index), offsets, np.int32(sample_count), big, np.int32(min(int(listed[0]), capacity)),
-                *target))
+                device.queue, (-(-height // structs.RASTER_ROWS_PER_ITEM), -(-width // columns)), None, vertices,
+                views, np.int32(view_index), offsets, np.int32(sample_count), big,
+                np.int32(min(int(listed[0]), capacity)), np.int32(columns), *target))
 
 
 def _rasterize(device: Device, buffers: FrameBuffers, view_indices: list[int], offsets, sample_count: int,

@@ -110,14 +110,14 @@ def _translucent_pass_inputs(inputs: FrameInputs, light_index: int) -> tuple[Fra
     return replace(light_inputs, tri_vertices=np.ascontiguousarray(vertices), raster_triangles=None), clear
 
 
-def _launch(device: Device, name: str, defines: dict, vertices, count: int, views, view_index: int, view_height: int,
+def _launch(device: Device, name: str, defines: dict, vertices, count: int, views, view_index: int, view_size: tuple[int, int],
             target: tuple, timer: StageTimer) -> None:
     """Both passes of one raster kernel (clrays.stages.raster.raster_passes), built in the
     translucency program, over the translucent triangles: one sample per texel, at its centre."""
     from .raster import raster_passes  # raster imports this module (opaque_occluders)
 
     centre = device.buffer(np.array([[0.5, 0.5]], dtype=np.float32), writable=False)
-    raster_passes(device, "translucency", name, defines, vertices, count, views, [view_index], [view_height], centre,
+    raster_passes(device, "translucency", name, defines, vertices, count, views, [view_index], [view_size], centre,
                   1, target, timer, stage="translucency")
 
 
@@ -151,10 +151,10 @@ def translucency(device: Device, buffers: FrameBuffers, timer: StageTimer) -> La
             device.fill(depth, structs.DEPTH_EMPTY, 4 * texels, timer, "translucency")
             device.fill(tri, np.int32(-1), 4 * texels, timer, "translucency")
             for view in np.flatnonzero(light_inputs.view_needed[1:]) + 1:
-                height = int(light_inputs.views[view]["height"])
-                _launch(device, "translucency_peel", defines, vertices, triangles, views, int(view), height,
+                size = int(light_inputs.views[view]["height"]), int(light_inputs.views[view]["width"])
+                _launch(device, "translucency_peel", defines, vertices, triangles, views, int(view), size,
                         (depth, previous), timer)
-                _launch(device, "raster_resolve", defines, vertices, triangles, views, int(view), height, (depth, tri),
+                _launch(device, "raster_resolve", defines, vertices, triangles, views, int(view), size, (depth, tri),
                         timer)
             flag = device.buffer(np.zeros(1, np.uint32))
             device.kernel("translucency", "raster_any", defines)(

@@ -40,10 +40,18 @@ from .raster import RasterResult
 #: taller ones to `visibility_bound_rows`, whose work-items each own consecutive rows of
 #: the view (a floor's rectangle can be a whole face).
 BOUND_SMALL_ROWS = 8
-#: Rows per work-item of `visibility_bound_rows`: on a CPU device 16, so that a listed
-#: triangle is projected and clipped once per 16 rows and each core has dozens of
-#: work-items per face; elsewhere 1, a work-item per row (a GPU wants thousands of them).
+#: The block of a view that one work-item of `visibility_bound_rows` owns: on a CPU device
+#: 16 whole rows, so that a listed triangle is projected and clipped once per 16 rows and
+#: each core has dozens of work-items per face; elsewhere a row's 32 columns (a GPU wants
+#: tens of thousands of work-items: with whole rows, 1024 per face, demo's bound passes
+#: took 18 ms on an H200).
 BOUND_ROWS_PER_ITEM_CPU = 16
+BOUND_COLUMNS_PER_ITEM_GPU = 32
+
+
+def rows_pass_block(device: Device, width: int) -> tuple[int, int]:
+    """(rows, columns) of a view `width` texels wide that a work-item of the rows pass owns."""
+    return (BOUND_ROWS_PER_ITEM_CPU, width) if device.is_cpu else (1, BOUND_COLUMNS_PER_ITEM_GPU)
 
 #: A frame of at most TOUCHING_ENTRIES samples × lights (a 64×64 thumbnail) has the bound
 #: passes list, per texel read, the triangles touching it, in up to
@@ -209,7 +217,6 @@ def _bound_passes(device: Device, inputs: FrameInputs, first: int, bound, writer
     read_mask = read_mask if read_mask is not None else device.buffer(nbytes=4)
     first_pass = device.kernel("visibility", "visibility_bound")
     rows_pass = device.kernel("visibility", "visibility_bound_rows")
-    rows_per_item = BOUND_ROWS_PER_ITEM_CPU if device.is_cpu else 1
     # Only the cube faces the frame can read (`view_needed`, as raster.shadow does): no
     # sample projects into the others, so their texels are never asked for.
     drawn = [int(view) for view in np.flatnonzero(inputs.view_needed[1:]) + 1]
@@ -235,11 +242,12 @@ def _bound_passes(device: Device, inputs: FrameInputs, first: int, bound, writer
     items = device.read_all([(big[view][0], (int(listed[view][0]), 4)) for view in views_listed], np.int32)
     for view, listed_items in zip(views_listed, items):
         ordered = device.buffer(nearest_first(listed_items, inputs, view), writable=False)  # (copied, no wait)
-        height = int(inputs.views[view]["height"])
+        height, width = int(inputs.views[view]["height"]), int(inputs.views[view]["width"])
+        rows, columns = rows_pass_block(device, width)
         timer.add("visibility", rows_pass(
-            device.queue, (-(-height // rows_per_item),), None, vertices, views, np.int32(view), np.int32(1), bound,
-            writer, masked, read_mask, np.int32(first), *lists, ordered, np.int32(len(listed_items)),
-            np.int32(rows_per_item)))
+            device.queue, (-(-height // rows), -(-width // columns)), None, vertices, views, np.int32(view),
+            np.int32(1), bound, writer, masked, read_mask, np.int32(first), *lists, ordered,
+            np.int32(len(listed_items)), np.int32(rows), np.int32(columns)))
 
 
 def ray_lists(device: Device, buffers: FrameBuffers, prepared: Prepared, ray_entries, rays: int,

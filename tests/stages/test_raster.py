@@ -1,5 +1,6 @@
 """Stage raster against a float64 numpy ray cast of the same rays."""
 import numpy as np
+import pytest
 
 from clrays.scene.camera import primary_rays
 from clrays.reference.geometry import raycast
@@ -133,6 +134,27 @@ def test_rows_per_work_item_give_the_same_maps(device, monkeypatch):
         _, depth_rows, tri_rows, shadow_rows = _rasterized(Device(TEST_DEVICE), scene)
         assert np.array_equal(depth, depth_rows) and np.array_equal(tri, tri_rows), f"{rows} rows per item"
         assert np.array_equal(shadow, shadow_rows), f"{rows} rows per item"
+
+
+@pytest.mark.parametrize("spp", [1, 2])
+@pytest.mark.parametrize("columns, big_samples", [(32, 1024), (13, 64), (8, 0)])
+def test_gpu_blocks_give_the_same_maps(device, monkeypatch, spp, columns, big_samples):
+    # A GPU's pass 2 gives a work-item a block of columns (raster_rows_columns), where a
+    # CPU's takes whole rows, and its pass 1 lists wide triangles too (raster_big_samples):
+    # the maps must be the same bits either way, with one sample per pixel (the vector runs,
+    # which must stay inside the block: 13 columns end blocks mid-run) and two.
+    import clrays.stages.raster as raster_stage
+
+    scene = _scene(spp=spp, shadow_map=256)
+    _, depth, tri, shadow = _rasterized(device, scene)
+    widths = []
+    monkeypatch.setattr(raster_stage, "raster_rows_columns", lambda device, width: widths.append(width) or columns)
+    monkeypatch.setattr(raster_stage, "raster_big_samples", lambda device: big_samples)
+    _, depth_blocks, tri_blocks, shadow_blocks = _rasterized(device, scene)
+    assert widths, "the scene lists triangles for pass 2"
+    assert np.array_equal(depth, depth_blocks) and np.array_equal(tri, tri_blocks)
+    assert np.array_equal(shadow, shadow_blocks)
+
 
 # Every view sample ray-tested twice: by intersect_columns (RASTER_LANES columns at once, the
 # path the raster kernels take) and by the one-sample view_ray + intersect_triangle.

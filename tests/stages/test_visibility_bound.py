@@ -103,12 +103,12 @@ def test_a_frame_without_big_triangles_asks_for_no_empty_wait(renderer):
     assert np.isfinite(image).all() and image.max() > 0
 
 
-@pytest.mark.parametrize("rows_per_item", [1, 3])
-def test_the_rows_pass_draws_the_same_maps_whatever_rows_a_work_item_owns(device, monkeypatch, rows_per_item):
-    """A GPU's rows pass takes a row per work-item, a CPU's 16 (BOUND_ROWS_PER_ITEM_CPU;
-    on a CPU test device the constant changes both): every texel's bound is a minimum and
-    its writer one part or many, so the maps are the same bits however the rows are dealt
-    out (3: blocks that end inside a triangle)."""
+@pytest.mark.parametrize("rows, columns", [(1, 0), (3, 0), (1, 32), (3, 5)])
+def test_the_rows_pass_draws_the_same_maps_whatever_block_a_work_item_owns(device, monkeypatch, rows, columns):
+    """A CPU's rows pass gives a work-item 16 whole rows, a GPU's 32 columns of one row
+    (rows_pass_block): every texel's bound is a minimum and its writer one part or many,
+    so the maps are the same bits however the texels are dealt out (3 and 5: blocks that
+    end inside a triangle; columns 0: whole rows)."""
     import clrays.stages.visibility as visibility_stage
 
     scene = make_scene(_triangles(), [LIGHTS["point"]], shadow_map=48)
@@ -120,7 +120,9 @@ def test_the_rows_pass_draws_the_same_maps_whatever_rows_a_work_item_owns(device
         return device.read(drawn.bound, texels, np.uint32), device.read(drawn.writer, texels, np.int32)
 
     bound, writer = maps()
-    monkeypatch.setattr(visibility_stage, "BOUND_ROWS_PER_ITEM_CPU", rows_per_item)
+    blocks = []
+    monkeypatch.setattr(visibility_stage, "rows_pass_block",
+                        lambda device, width: blocks.append(width) or (rows, columns or width))
     other_bound, other_writer = maps()
-    np.testing.assert_array_equal(other_bound, bound)
+    assert blocks, "the scene has triangles taller than the first pass's rows"
     np.testing.assert_array_equal(other_writer, writer)
