@@ -28,6 +28,33 @@ typedef int8 int_lanes;
     ((type)((pointer)[(index).s0], (pointer)[(index).s1], (pointer)[(index).s2], (pointer)[(index).s3],     \
             (pointer)[(index).s4], (pointer)[(index).s5], (pointer)[(index).s6], (pointer)[(index).s7]))
 #define LOAD_LANES(pointer, index) GATHER_LANES(float_lanes, pointer, index)
+
+/* A float8 aligned as its elements are: 8 consecutive floats in one plain load, where
+ * PoCL's vload8 is a library call. */
+typedef float8 __attribute__((aligned(4))) float8_at_float;
+
+/* For each lane, the 8 floats at pointer + 4·index (two float4 records, one after the
+ * other), as 8 vectors of lanes: out[k] holds float k of every lane's run. One vector
+ * load per lane and a transpose, where LOAD_LANES would take 8 scalar loads per lane. */
+ALWAYS_INLINE void load_runs_of_8(global const float* pointer, int_lanes index, float_lanes out[8])
+{
+    float8 p0 = *(global const float8_at_float*)(pointer + 4 * index.s0);
+    float8 p1 = *(global const float8_at_float*)(pointer + 4 * index.s1);
+    float8 p2 = *(global const float8_at_float*)(pointer + 4 * index.s2);
+    float8 p3 = *(global const float8_at_float*)(pointer + 4 * index.s3);
+    float8 p4 = *(global const float8_at_float*)(pointer + 4 * index.s4);
+    float8 p5 = *(global const float8_at_float*)(pointer + 4 * index.s5);
+    float8 p6 = *(global const float8_at_float*)(pointer + 4 * index.s6);
+    float8 p7 = *(global const float8_at_float*)(pointer + 4 * index.s7);
+    out[0] = (float8)(p0.s0, p1.s0, p2.s0, p3.s0, p4.s0, p5.s0, p6.s0, p7.s0);
+    out[1] = (float8)(p0.s1, p1.s1, p2.s1, p3.s1, p4.s1, p5.s1, p6.s1, p7.s1);
+    out[2] = (float8)(p0.s2, p1.s2, p2.s2, p3.s2, p4.s2, p5.s2, p6.s2, p7.s2);
+    out[3] = (float8)(p0.s3, p1.s3, p2.s3, p3.s3, p4.s3, p5.s3, p6.s3, p7.s3);
+    out[4] = (float8)(p0.s4, p1.s4, p2.s4, p3.s4, p4.s4, p5.s4, p6.s4, p7.s4);
+    out[5] = (float8)(p0.s5, p1.s5, p2.s5, p3.s5, p4.s5, p5.s5, p6.s5, p7.s5);
+    out[6] = (float8)(p0.s6, p1.s6, p2.s6, p3.s6, p4.s6, p5.s6, p6.s6, p7.s6);
+    out[7] = (float8)(p0.s7, p1.s7, p2.s7, p3.s7, p4.s7, p5.s7, p6.s7, p7.s7);
+}
 #define LOAD_INT_LANES(pointer, index) GATHER_LANES(int_lanes, pointer, index)
 
 ALWAYS_INLINE float_lanes float_of_lanes(int_lanes x) { return __builtin_convertvector(x, float_lanes); }

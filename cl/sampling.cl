@@ -436,15 +436,15 @@ ALWAYS_INLINE int_lanes slice_line(global const float* ranges, global const floa
     float_lanes s = f - float_of_lanes(j);
     int_lanes at = i * n + j; /* radiance (r, g, b, distance): 4·at, the next 4·at + 4; line's weight: 2·at + 1 */
     /* the distances from radiance's w, beside the colour; line's weights for a spot light only */
-    float_lanes a_distance = LOAD_LANES(radiance, 4 * at + 3), b_distance = LOAD_LANES(radiance, 4 * at + 7);
+    float_lanes run[8]; /* (r, g, b, distance) of samples j and j + 1 */
+    load_runs_of_8(radiance, at, run);
+    float_lanes a_distance = run[3], b_distance = run[7];
 #if SAMPLING_LIGHT == LIGHT_SPOT
     float_lanes a_weight = LOAD_LANES(line, 2 * at + 1), b_weight = LOAD_LANES(line, 2 * at + 3);
 #else
     float_lanes a_weight = 0.0f, b_weight = 0.0f; /* not compared: own_weight < 0 below */
 #endif
-    float_lanes ra = LOAD_LANES(radiance, 4 * at), ga = LOAD_LANES(radiance, 4 * at + 1);
-    float_lanes ba = LOAD_LANES(radiance, 4 * at + 2), rb = LOAD_LANES(radiance, 4 * at + 4);
-    float_lanes gb = LOAD_LANES(radiance, 4 * at + 5), bb = LOAD_LANES(radiance, 4 * at + 6);
+    float_lanes ra = run[0], ga = run[1], ba = run[2], rb = run[4], gb = run[5], bb = run[6];
     *between = mix_lanes(a_distance, b_distance, s);
     /* not a spot light (own_weight < 0): the weight is not compared */
     float_lanes between_weight = own_weight < 0.0f ? own_weight : mix_lanes(a_weight, b_weight, s);
