@@ -1,7 +1,8 @@
 """How fast this machine is now: its memory bandwidth and one core's speed, to take beside a stage table.
 
-A copy of 200 MB (memory bandwidth, which a frame's kernels lean on) and a pure-Python
-loop (one core's speed), each alone and on both cores at once; medians over a few repeats.
+A copy of 200 MB (memory bandwidth), random reads over 32 MB (what a shadow map's or a
+line's scattered reads wait for: a cube face is 4 MB) and a pure-Python loop (one core's
+speed), each alone and on both cores at once; medians over a few repeats.
 
     .venv/bin/python bench/machine_speed.py
 
@@ -19,6 +20,8 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 
 COPY_FLOATS = 50_000_000  # 200 MB each way
+RANDOM_FLOATS = 8 << 20  # 32 MB
+RANDOM_READS = 4_000_000
 LOOP_COUNT = 5_000_000
 
 
@@ -33,6 +36,19 @@ def copy_gbps(repeats: int) -> float:
         np.copyto(target, source)
         times.append(time.perf_counter() - start)
     return 2 * source.nbytes / statistics.median(times) / 1e9
+
+
+def random_read_ns(repeats: int) -> float:
+    """Nanoseconds per read of RANDOM_READS floats at random places in RANDOM_FLOATS."""
+    values = np.ones(RANDOM_FLOATS, np.float32)
+    places = np.random.default_rng(1).integers(0, RANDOM_FLOATS, RANDOM_READS)
+    values.take(places)
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        values.take(places)
+        times.append(time.perf_counter() - start)
+    return statistics.median(times) / RANDOM_READS * 1e9
 
 
 def loop_ms(repeats: int) -> float:
@@ -52,12 +68,14 @@ def main() -> None:
     args = parser.parse_args()
     if args.repeats < 1:
         parser.error(f"--repeats: expected a positive count, got {args.repeats}")
-    alone_copy, alone_loop = copy_gbps(args.repeats), loop_ms(args.repeats)
+    probes = (("copy", copy_gbps, "{:.1f} GB/s"), ("random reads", random_read_ns, "{:.1f} ns"),
+              ("loop", loop_ms, "{:.0f} ms"))
     with ProcessPoolExecutor(2) as pool:
-        both_copy = list(pool.map(copy_gbps, [args.repeats] * 2))
-        both_loop = list(pool.map(loop_ms, [args.repeats] * 2))
-    print(f"copy: {alone_copy:.1f} GB/s alone, {both_copy[0]:.1f} + {both_copy[1]:.1f} GB/s on two cores")
-    print(f"loop: {alone_loop:.0f} ms alone, {both_loop[0]:.0f} and {both_loop[1]:.0f} ms on two cores")
+        for name, probe, form in probes:
+            alone = probe(args.repeats)
+            both = list(pool.map(probe, [args.repeats] * 2))
+            print(f"{name}: {form.format(alone)} alone, {form.format(both[0])} and {form.format(both[1])} "
+                  f"on two cores at once")
 
 
 if __name__ == "__main__":
