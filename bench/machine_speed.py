@@ -7,8 +7,8 @@ speed), each alone and on both cores at once; medians over a few repeats.
     .venv/bin/python bench/machine_speed.py
 
 The same tree's 1280×720 frame has read up to 1.4× apart within an hour on the 2-core
-bench machine (bench/RESULTS.md, "Column blocks on a GPU, line samples in one load"):
-these figures, taken beside a table, say what the machine offered then.
+bench machine (bench/RESULTS.md, "Column blocks on a GPU, fewer and earlier loads on a
+CPU"): these figures, taken beside a table, say what the machine offered then.
 """
 from __future__ import annotations
 

@@ -87,29 +87,16 @@ kernel void rectify_bounds(global const frame_t* frame, global const view_t* vie
  * texel 0 at γ = 0: the eye's own light ray (through the eye, the same for every slice). A
  * ray straight away from the light (β → π) spans only γ < SIN_BETA_MIN·s, far less than
  * half a texel, and its visibility is that ray's.
- *
- * One work-item per LANES texels of a slice, as float8 (lanes.h, docs/design.md §4.5): the
- * operations of view_project, light_view_index and shadow_texel (lighting.h) in their order,
- * so S is the same bits as one texel per work-item. */
-kernel void rectify(global const view_t* views, global const light_t* lights,
-                    global const uint* shadow_depth, global const epipolar_t* epipolar,
-                    global const float4* slice_sides, global const float4* texel_angles, global float2* tree)
+ */
+/* Where LANES texels of a slice read the shadow map (rectify's first half): each lane's
+ * index into shadow_depth, and whether its light ray meets the map there (else the lane
+ * reads the view's texel 0, unused). */
+ALWAYS_INLINE int_lanes rectify_lookup(global const view_t* views, global const light_t* light,
+                                       global const epipolar_t* ep, float3 r, float_lanes gamma,
+                                       float_lanes cos_gamma, float_lanes sin_gamma, int_lanes* meets)
 {
-    int first = get_global_id(0) * LANES, slice = get_global_id(1);
-    global const epipolar_t* ep = epipolar;
-    int n = ep->gamma_samples;
-    if (first >= n || slice >= ep->slices) return;
-    global const light_t* light = lights + ep->light_index;
-    /* lanes past the last texel compute the last one again, and store nothing */
-    int_lanes texel = min_lanes(first + (int_lanes)(0, 1, 2, 3, 4, 5, 6, 7), (int_lanes)(n - 1));
-    global const float* angles = (global const float*)texel_angles;
-    float_lanes gamma = LOAD_LANES(angles, 4 * texel), cos_gamma = LOAD_LANES(angles, 4 * texel + 1),
-                sin_gamma = LOAD_LANES(angles, 4 * texel + 2);
-    float3 r = slice_sides[slice].xyz;
-    float_lanes stored = INFINITY, blocker_beta;
     if (light->type == LIGHT_DIRECTIONAL) {
-        /* Light ray: γ·r + t·ω. The orthographic map stores depth along -ω from its
-         * origin o, so the blocker sits at t_b = -(depth + o·(-ω)); S = atan2(γ, t_b). */
+        /* Light ray: γ·r + t·ω. */
         global const view_t* view = views + light->first_view;
         float3 origin = view->origin.xyz;
         /* two statements, as view_project's p - origin: no fused multiply-add */
@@ -124,51 +111,105 @@ kernel void rectify(global const view_t* views, global const light_t* lights,
                            & texel_y < (float)view->height;
         int_lanes tx = clamp_int_lanes(int_of_lanes(texel_x), 0, view->width - 1);
         int_lanes ty = clamp_int_lanes(int_of_lanes(texel_y), 0, view->height - 1);
-        int_lanes index = inside ? view->depth_offset + ty * view->width + tx : view->depth_offset;
-        float_lanes depth = LOAD_LANES((global const float*)shadow_depth, index);
-        stored = inside ? depth : stored;
+        *meets = inside;
+        return inside ? view->depth_offset + ty * view->width + tx : view->depth_offset;
+    }
+    /* Light ray from l at angle γ to l → e, in slice α. */
+    float3 axis = ep->axis.xyz;
+    float_lanes dir_x = -axis.x * cos_gamma + r.x * sin_gamma;
+    float_lanes dir_y = -axis.y * cos_gamma + r.y * sin_gamma;
+    float_lanes dir_z = -axis.z * cos_gamma + r.z * sin_gamma;
+    /* Spot lights: outside the cone the map has no texel and the ray counts as
+     * unblocked; traverse clips each eye ray to the cone analytically, so the
+     * cone's edge is exact rather than a texel wide. */
+    float3 l = light->position.xyz;
+    float_lanes px = l.x + dir_x, py = l.y + dir_y, pz = l.z + dir_z;
+    /* view_project, perspective (a spot light's view or a cube face). The lanes of a
+     * spot light, and most lanes of a point light, share one view: its fields are then
+     * read once, not gathered per lane (the same values, so the same bits). */
+    view_lanes_t v = views_of_lanes(views, light_view_index_lanes(light, px, py, pz));
+    float_lanes qx = px - v.origin_x, qy = py - v.origin_y, qz = pz - v.origin_z;
+    float_lanes x = dot_lanes_of_lanes(qx, qy, qz, v.right_x, v.right_y, v.right_z);
+    float_lanes y = dot_lanes_of_lanes(qx, qy, qz, v.up_x, v.up_y, v.up_z);
+    float_lanes z = dot_lanes_of_lanes(qx, qy, qz, v.forward_x, v.forward_y, v.forward_z);
+    int_lanes width = v.width, height = v.height;
+    float_lanes sx = x / (z * v.scale_x);
+    float_lanes sy = y / (z * v.scale_y);
+    float_lanes texel_x = (sx + 1.0f) * 0.5f * float_of_lanes(width);
+    float_lanes texel_y = (1.0f - sy) * 0.5f * float_of_lanes(height);
+    /* shadow_texel: truncated, then clamped to the map */
+    int_lanes tx = min_lanes(max_lanes(int_of_lanes(texel_x), (int_lanes)(0)), width - 1);
+    int_lanes ty = min_lanes(max_lanes(int_of_lanes(texel_y), (int_lanes)(0)), height - 1);
+    int_lanes in_front = !(z <= 0.0f);
+    *meets = in_front;
+    return v.depth_offset + (in_front ? ty * width + tx : 0);
+}
+
+/* The blocker's β of LANES texels from the depths their lookups read (rectify's second
+ * half): π where the light ray meets no occluder. */
+ALWAYS_INLINE float_lanes rectify_beta(global const view_t* views, global const light_t* light,
+                                       global const epipolar_t* ep, float_lanes gamma, float_lanes cos_gamma,
+                                       float_lanes sin_gamma, float_lanes depth, int_lanes meets)
+{
+    float_lanes stored = meets ? depth : (float_lanes)(INFINITY);
+    if (light->type == LIGHT_DIRECTIONAL) {
+        /* The orthographic map stores depth along -ω from its origin o, so the blocker sits
+         * at t_b = -(depth + o·(-ω)); S = atan2(γ, t_b). */
+        global const view_t* view = views + light->first_view;
         float t_offset = dot(view->origin.xyz, view->forward.xyz);
         float_lanes t_blocker = -(stored + t_offset);
-        blocker_beta = stored == INFINITY ? PI_F : atan2_approx_lanes(gamma, t_blocker);
-    } else {
-        /* Light ray from l at angle γ to l → e, in slice α. */
-        float3 axis = ep->axis.xyz;
-        float_lanes dir_x = -axis.x * cos_gamma + r.x * sin_gamma;
-        float_lanes dir_y = -axis.y * cos_gamma + r.y * sin_gamma;
-        float_lanes dir_z = -axis.z * cos_gamma + r.z * sin_gamma;
-        /* Spot lights: outside the cone the map has no texel and the ray counts as
-         * unblocked; traverse clips each eye ray to the cone analytically, so the
-         * cone's edge is exact rather than a texel wide. */
-        float3 l = light->position.xyz;
-        float_lanes px = l.x + dir_x, py = l.y + dir_y, pz = l.z + dir_z;
-        /* view_project, perspective (a spot light's view or a cube face). The lanes of a
-         * spot light, and most lanes of a point light, share one view: its fields are then
-         * read once, not gathered per lane (the same values, so the same bits). */
-        view_lanes_t v = views_of_lanes(views, light_view_index_lanes(light, px, py, pz));
-        float_lanes qx = px - v.origin_x, qy = py - v.origin_y, qz = pz - v.origin_z;
-        float_lanes x = dot_lanes_of_lanes(qx, qy, qz, v.right_x, v.right_y, v.right_z);
-        float_lanes y = dot_lanes_of_lanes(qx, qy, qz, v.up_x, v.up_y, v.up_z);
-        float_lanes z = dot_lanes_of_lanes(qx, qy, qz, v.forward_x, v.forward_y, v.forward_z);
-        int_lanes width = v.width, height = v.height;
-        float_lanes sx = x / (z * v.scale_x);
-        float_lanes sy = y / (z * v.scale_y);
-        float_lanes texel_x = (sx + 1.0f) * 0.5f * float_of_lanes(width);
-        float_lanes texel_y = (1.0f - sy) * 0.5f * float_of_lanes(height);
-        /* shadow_texel: truncated, then clamped to the map */
-        int_lanes tx = min_lanes(max_lanes(int_of_lanes(texel_x), (int_lanes)(0)), width - 1);
-        int_lanes ty = min_lanes(max_lanes(int_of_lanes(texel_y), (int_lanes)(0)), height - 1);
-        int_lanes in_front = !(z <= 0.0f);
-        int_lanes index = v.depth_offset + (in_front ? ty * width + tx : 0);
-        float_lanes depth = LOAD_LANES((global const float*)shadow_depth, index);
-        stored = in_front ? depth : stored;
-        blocker_beta = stored == INFINITY ? PI_F : atan2_approx_lanes(stored * sin_gamma, ep->d_el - stored * cos_gamma);
+        return stored == INFINITY ? PI_F : atan2_approx_lanes(gamma, t_blocker);
     }
-    global float* row = (global float*)(tree + (size_t)slice * 2 * n);
+    return stored == INFINITY ? PI_F : atan2_approx_lanes(stored * sin_gamma, ep->d_el - stored * cos_gamma);
+}
+
+/* Level 0 of a row, (min, max) = (β, β), for the texels from `first` on. */
+ALWAYS_INLINE void store_level0(global float* row, int first, int n, float_lanes blocker_beta)
+{
+    if (first >= n) return;
     if (first + LANES <= n) {
-        /* level 0 holds (min, max) = (β, β): each lane twice, in one store */
+        /* each lane twice, in one store */
         *(global float16*)(row + 2 * first) = __builtin_shufflevector(blocker_beta, blocker_beta, 0, 8, 1, 9, 2, 10, 3, 11,
                                                                      4, 12, 5, 13, 6, 14, 7, 15);
     } else {
         for (int k = 0; first + k < n; ++k) row[2 * (first + k)] = row[2 * (first + k) + 1] = blocker_beta[k];
     }
+}
+
+/* One work-item per RECTIFY_BATCHES·LANES texels of a slice, as float8 batches (lanes.h,
+ * docs/design.md §4.5): the operations of view_project, light_view_index and shadow_texel
+ * (lighting.h) in their order, so S is the same bits as one texel per work-item. Every
+ * batch finds its texels before any reads the map: the reads miss the cache (a cube face
+ * is 4 MB), and more of them at once wait about as long as 8. */
+kernel void rectify(global const view_t* views, global const light_t* lights,
+                    global const uint* shadow_depth, global const epipolar_t* epipolar,
+                    global const float4* slice_sides, global const float4* texel_angles, global float2* tree)
+{
+    int first = get_global_id(0) * RECTIFY_BATCHES * LANES, slice = get_global_id(1);
+    global const epipolar_t* ep = epipolar;
+    int n = ep->gamma_samples;
+    if (first >= n || slice >= ep->slices) return;
+    global const light_t* light = lights + ep->light_index;
+    global const float* angles = (global const float*)texel_angles;
+    float3 r = slice_sides[slice].xyz;
+    float_lanes gamma[RECTIFY_BATCHES], cos_gamma[RECTIFY_BATCHES], sin_gamma[RECTIFY_BATCHES];
+    float_lanes depth[RECTIFY_BATCHES];
+    int_lanes index[RECTIFY_BATCHES], meets[RECTIFY_BATCHES];
+    /* unrolled: the batches' vectors stay in registers, not a private array in memory */
+#pragma unroll
+    for (int b = 0; b < RECTIFY_BATCHES; ++b) {
+        /* lanes past the last texel compute the last one again, and store nothing */
+        int_lanes texel = min_lanes(first + b * LANES + (int_lanes)(0, 1, 2, 3, 4, 5, 6, 7), (int_lanes)(n - 1));
+        gamma[b] = LOAD_LANES(angles, 4 * texel);
+        cos_gamma[b] = LOAD_LANES(angles, 4 * texel + 1);
+        sin_gamma[b] = LOAD_LANES(angles, 4 * texel + 2);
+        index[b] = rectify_lookup(views, light, ep, r, gamma[b], cos_gamma[b], sin_gamma[b], &meets[b]);
+    }
+#pragma unroll
+    for (int b = 0; b < RECTIFY_BATCHES; ++b) depth[b] = LOAD_LANES((global const float*)shadow_depth, index[b]);
+    global float* row = (global float*)(tree + (size_t)slice * 2 * n);
+#pragma unroll
+    for (int b = 0; b < RECTIFY_BATCHES; ++b)
+        store_level0(row, first + b * LANES, n,
+                     rectify_beta(views, light, ep, gamma[b], cos_gamma[b], sin_gamma[b], depth[b], meets[b]));
 }

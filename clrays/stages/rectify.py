@@ -22,6 +22,12 @@ from ..scene.model import DirectionalLight
 # Camera samples (rectify_bounds) and texels (rectify) one work-item computes at a time, as
 # float8 lanes (cl/lanes.h).
 LANES = 8
+# Batches of LANES texels one rectify work-item computes on a CPU device, every batch's
+# shadow-map reads issued before any is used: the reads miss the cache, and a core waits
+# on 64 of them at once about as long as on 8 (bench/RESULTS.md, "Column blocks on a GPU,
+# fewer and earlier loads on a CPU"). A GPU hides the wait with other work-items, and keeps
+# one batch each.
+RECTIFY_BATCHES_CPU = 8
 # Camera samples one rectify_bounds work-item reduces, LANES at a time (cl/rectify.cl); a
 # multiple of LANES.
 BOUNDS_CHUNK = 64
@@ -29,6 +35,16 @@ BOUNDS_CHUNK = 64
 # neighbouring shadow-map texels, so a group that sweeps across slices, rather than along
 # one slice's row, finds them in cache (PoCL runs a group's work-items in turn).
 SLICES_PER_GROUP = 64
+
+
+def rectify_batches(device: Device) -> int:
+    """Batches of LANES texels per rectify work-item."""
+    return RECTIFY_BATCHES_CPU if device.is_cpu else 1
+
+
+def _defines(device: Device) -> dict:
+    """The rectify program's build constants, one build for both its kernels."""
+    return {"BOUNDS_CHUNK": BOUNDS_CHUNK, "LANES": LANES, "RECTIFY_BATCHES": rectify_batches(device)}
 
 
 @dataclass
@@ -150,18 +166,19 @@ def rectify(device: Device, buffers: FrameBuffers, rastered: RasterResult, light
             timer: StageTimer) -> Epipolar | None:
     """Build S[α, γ] for one light; None when no visible ray has any extent in γ."""
     scene = buffers.inputs.scene
+    light = scene.lights[light_index]
     params = epipolar_frame(scene, buffers, light_index)
     frame_buffer = device.buffer(params.reshape(1))
     bounds = np.array([structs.DEPTH_EMPTY, 0, 0, 0], dtype=np.uint32)
     bounds_buffer = device.buffer(bounds)
     samples = buffers.inputs.samples
-    event = device.kernel("rectify", "rectify_bounds", {"BOUNDS_CHUNK": BOUNDS_CHUNK, "LANES": LANES})(
+    event = device.kernel("rectify", "rectify_bounds", _defines(device))(
         device.queue, (-(-samples // BOUNDS_CHUNK),), None, buffers.params, buffers.views, buffers.lights,
         frame_buffer, rastered.camera_depth, buffers.offsets, bounds_buffer)
     timer.add("rectify", event)
     q_beta_min, q_beta_max, gamma = device.read(bounds_buffer, 4, np.uint32)[:3].view(np.float32).astype(float)
     beta_min, beta_max = angle_of_pseudo(q_beta_min), angle_of_pseudo(q_beta_max)
-    gamma_max = gamma if isinstance(scene.lights[light_index], DirectionalLight) else angle_of_pseudo(gamma)
+    gamma_max = gamma if isinstance(light, DirectionalLight) else angle_of_pseudo(gamma)
     # float32(π) is 9e-8 above π: a ray pointing straight away from the light (the
     # anti-epipole on a pixel centre) would put β past the integrand's [0, π].
     beta_min, beta_max = min(beta_min, math.pi), min(beta_max, math.pi)
@@ -175,8 +192,9 @@ def rectify(device: Device, buffers: FrameBuffers, rastered: RasterResult, light
     sides = device.buffer(slice_sides(params), writable=False)
     angles = device.buffer(texel_angles(params), writable=False)
     group = min(SLICES_PER_GROUP, slices)
-    event = device.kernel("rectify", "rectify", {"BOUNDS_CHUNK": BOUNDS_CHUNK, "LANES": LANES})(
-        device.queue, (-(-n // LANES), -(-slices // group) * group), (1, group), buffers.views, buffers.lights,
-        rastered.shadow_depth, frame_buffer, sides, angles, tree)
+    defines = _defines(device)
+    event = device.kernel("rectify", "rectify", defines)(
+        device.queue, (-(-n // (defines["RECTIFY_BATCHES"] * LANES)), -(-slices // group) * group), (1, group),
+        buffers.views, buffers.lights, rastered.shadow_depth, frame_buffer, sides, angles, tree)
     timer.add("rectify", event)
     return Epipolar(params, frame_buffer, tree, float(beta_min), float(beta_max), float(gamma_max))

@@ -164,6 +164,21 @@ def test_rectify_matches_numpy_walk_of_the_shadow_map(device, kind):
 
 
 @pytest.mark.parametrize("kind", LIGHTS)
+@pytest.mark.parametrize("batches", [1, 3])
+def test_rectify_batches_give_the_same_texture(device, monkeypatch, kind, batches):
+    # A CPU's rectify work-item takes 8 batches of 8 texels, a GPU's one (rectify_batches):
+    # the texture must be the same bits however many (3: an item's last batches past the
+    # row's end, whose lanes compute the last texel again and store nothing).
+    import clrays.stages.rectify as rectify_stage
+
+    scene = _scene(LIGHTS[kind])
+    _, _, _, level0 = _rectified(device, scene)
+    monkeypatch.setattr(rectify_stage, "rectify_batches", lambda device: batches)
+    _, _, _, other = _rectified(device, scene)
+    assert np.array_equal(level0.view(np.uint32), other.view(np.uint32))
+
+
+@pytest.mark.parametrize("kind", LIGHTS)
 def test_bounds_match_numpy_over_the_camera_samples(device, kind):
     # rectify_bounds reduces pseudo-angles (tan(θ/2), 2 - cot(θ/2)) on the device and the
     # host takes the arc tangent of the extremes: the β range and γ_max must be those of
