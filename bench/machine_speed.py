@@ -1,8 +1,9 @@
 """How fast this machine is now: its memory bandwidth and one core's speed, to take beside a stage table.
 
-A copy of 200 MB (memory bandwidth), random reads over 32 MB (what a shadow map's or a
-line's scattered reads wait for: a cube face is 4 MB) and a pure-Python loop (one core's
-speed), each alone and on both cores at once; medians over a few repeats.
+A copy of 200 MB (memory bandwidth), random reads over 32 MB (numpy's `take`: the rate of
+independent scattered reads, as a frame's shadow-map and line reads are; a cube face is
+4 MB) and a pure-Python loop (one core's speed), each alone and on both cores at once;
+medians over a few repeats.
 
     .venv/bin/python bench/machine_speed.py
 
@@ -39,7 +40,8 @@ def copy_gbps(repeats: int) -> float:
 
 
 def random_read_ns(repeats: int) -> float:
-    """Nanoseconds per read of RANDOM_READS floats at random places in RANDOM_FLOATS."""
+    """Nanoseconds per read of RANDOM_READS floats at random places in RANDOM_FLOATS (with
+    the index array streamed in and the result written out)."""
     values = np.ones(RANDOM_FLOATS, np.float32)
     places = np.random.default_rng(1).integers(0, RANDOM_FLOATS, RANDOM_READS)
     values.take(places)

@@ -72,9 +72,9 @@ SIN_BETA_MIN = 1e-9
 # RASTER_BIG_TRIANGLES of them per launch, the rest draw their own rows.
 RASTER_BIG_ROWS = 32
 RASTER_BIG_TRIANGLES = 1 << 16
-# The second pass gives each work-item this many consecutive rows of the view, of every
-# listed triangle: it owns them (no atomics), and the clipping and projection it repeats
-# per triangle are paid once per group of rows.
+# The second pass gives each work-item this many consecutive rows of the view (whole on a
+# CPU device, 32 columns of them elsewhere), of every listed triangle: it owns them (no
+# atomics), and the clipping and projection it repeats per triangle are paid once per block.
 RASTER_ROWS_PER_ITEM = 4
 # raster_any (is a map empty?) reads this many texels per work-item, a multiple of 16.
 RASTER_ANY_TEXELS = 256

@@ -64,7 +64,8 @@ def raster_passes(device: Device, program: str, name: str, defines: dict | None,
     """The two passes of one raster kernel (cl/raster.cl's RASTER_KERNELS, built in
     `program`) over `count` triangles for each view of `view_indices` (`view_sizes`:
     (rows, columns)): `name`, one work-item per triangle, lists the triangles taller than
-    RASTER_BIG_ROWS with their rows; `name_rows` draws those with one work-item per
+    RASTER_BIG_ROWS (on a GPU, or wider than `raster_big_samples` pixels) with their rows;
+    `name_rows` draws those with one work-item per
     block of RASTER_ROWS_PER_ITEM rows by `raster_rows_columns` columns of the view, which
     owns its block (docs/design.md §4.1).
     Every view's first pass runs before the host waits, once, for all their lists: a wait

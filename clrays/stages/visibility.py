@@ -37,8 +37,8 @@ from .raster import RasterResult
 
 #: `visibility_bound` does a triangle's texel rectangle of up to this many rows in one
 #: work-item (most triangles of a fine mesh: one item each, no idle ones) and leaves
-#: taller ones to `visibility_bound_rows`, whose work-items each own consecutive rows of
-#: the view (a floor's rectangle can be a whole face).
+#: taller ones to `visibility_bound_rows`, whose work-items each own a block of the view
+#: (a floor's rectangle can be a whole face).
 BOUND_SMALL_ROWS = 8
 #: The block of a view that one work-item of `visibility_bound_rows` owns: on a CPU device
 #: 16 whole rows, so that a listed triangle is projected and clipped once per 16 rows and
@@ -243,6 +243,9 @@ def _bound_passes(device: Device, inputs: FrameInputs, first: int, bound, writer
     for view, listed_items in zip(views_listed, items):
         ordered = device.buffer(nearest_first(listed_items, inputs, view), writable=False)  # (copied, no wait)
         height, width = int(inputs.views[view]["height"]), int(inputs.views[view]["width"])
+        # the first pass packs a triangle's first and last column in 16 bits each
+        # (big_items' w; shadow maps are at most 8192 wide, clrays.scene.fields)
+        assert width < 1 << 15, f"a view {width} texels wide"
         rows, columns = rows_pass_block(device, width)
         timer.add("visibility", rows_pass(
             device.queue, (-(-height // rows), -(-width // columns)), None, vertices, views, np.int32(view),

@@ -141,8 +141,10 @@ def test_rows_per_work_item_give_the_same_maps(device, monkeypatch):
 def test_gpu_blocks_give_the_same_maps(device, monkeypatch, spp, columns, big_samples):
     # A GPU's pass 2 gives a work-item a block of columns (raster_rows_columns), where a
     # CPU's takes whole rows, and its pass 1 lists wide triangles too (raster_big_samples):
-    # the maps must be the same bits either way, with one sample per pixel (the vector runs,
-    # which must stay inside the block: 13 columns end blocks mid-run) and two.
+    # the maps must be the same bits either way, with one sample per pixel (the vector runs;
+    # 13 columns end blocks mid-run) and two. This checks that the blocks clip the rows and
+    # together cover them: a run that strays into the next block writes the same minimum,
+    # and PoCL runs work-items in turn, so an overlap is not seen here.
     import clrays.stages.raster as raster_stage
 
     scene = _scene(spp=spp, shadow_map=256)

@@ -168,7 +168,9 @@ def test_rectify_matches_numpy_walk_of_the_shadow_map(device, kind):
 def test_rectify_batches_give_the_same_texture(device, monkeypatch, kind, batches):
     # A CPU's rectify work-item takes 8 batches of 8 texels, a GPU's one (rectify_batches):
     # the texture must be the same bits however many (3: an item's last batches past the
-    # row's end, whose lanes compute the last texel again and store nothing).
+    # row's end, whose lanes compute the last texel again and store nothing). A row is a
+    # power of two of texels, at least 16 (epipolar_frame), so a batch lies wholly in it or
+    # wholly past it.
     import clrays.stages.rectify as rectify_stage
 
     scene = _scene(LIGHTS[kind])

@@ -108,7 +108,9 @@ def test_the_rows_pass_draws_the_same_maps_whatever_block_a_work_item_owns(devic
     """A CPU's rows pass gives a work-item 16 whole rows, a GPU's 32 columns of one row
     (rows_pass_block): every texel's bound is a minimum and its writer one part or many,
     so the maps are the same bits however the texels are dealt out (3 and 5: blocks that
-    end inside a triangle; columns 0: whole rows)."""
+    end inside a triangle; columns 0: whole rows). This checks that the blocks clip each
+    triangle to them and together cover it; a texel written by two work-items would give
+    the same values too, and PoCL runs work-items in turn, so overlap is not seen here."""
     import clrays.stages.visibility as visibility_stage
 
     scene = make_scene(_triangles(), [LIGHTS["point"]], shadow_map=48)
@@ -125,4 +127,5 @@ def test_the_rows_pass_draws_the_same_maps_whatever_block_a_work_item_owns(devic
                         lambda device, width: blocks.append(width) or (rows, columns or width))
     other_bound, other_writer = maps()
     assert blocks, "the scene has triangles taller than the first pass's rows"
+    np.testing.assert_array_equal(other_bound, bound)
     np.testing.assert_array_equal(other_writer, writer)
