@@ -6,8 +6,8 @@
  * bound of the depth of every triangle that touches each texel, a min), writer (the
  * one triangle that touches each texel, or WRITER_MANY), with a capacity the lists of the
  * triangles touching each texel read (touching_head, touching, touching_count) and the
- * list of triangles whose rectangles the rows pass takes, with their rows (big_items,
- * big_count). A view from outside every closed solid leaves out the faces they turn
+ * list of triangles whose rectangles the rows pass takes, with their rows and columns
+ * (big_items, big_count). A view from outside every closed solid leaves out the faces they turn
  * away from it (solids.h): the first blocker of any segment to the light is a face turned
  * towards the light, and it touches the same texels.
  * visibility_prepare reads frame, views, lights, camera_depth, tri_id,
@@ -302,8 +302,7 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
                            int view_count, global uint* bound, global int* writer, int masked,
                            global const uint* read_mask, int mask_offset, TOUCHING_ARGS, int item, int row_begin,
                            int row_end, int column_begin, int column_end, int owned, int small_rows,
-                           global int4* big_items,
-                           volatile global int* big_count, global int4* rect)
+                           global int4* big_items, volatile global int* big_count, global int4* rect)
 {
     int tri = item / view_count;
     global const view_t* view = views + first_view + item % view_count;
@@ -899,11 +898,7 @@ kernel void visibility_mark_listed(global const int* ray_entries, int ray_count,
 {
     int item = get_global_id(0);
     if (item >= ray_count) return;
-    int address = map_read[ray_entries[item]].x;
-    if (address < 0) return;
-    global uint* word = read_mask + (address >> 5);
-    uint bit = 1u << (address & 31);
-    if (!(*word & bit)) atomic_or(word, bit);
+    mark_read(read_mask, map_read[ray_entries[item]].x);
 }
 
 /* The rest of the decision, for the pending samples and lights. Lit: the bound map says no

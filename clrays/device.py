@@ -172,6 +172,8 @@ class _Launcher:
 #: PoCL"). Every buffer a kernel reads is written first in its frame, as on any device,
 #: whose fresh buffers hold whatever was there.
 POOLED_BYTES = 1 << 16
+
+
 class _Holding:
     """An array's memory, and what must live as long as it: numpy keeps this object as the
     base of the array it makes from it (and so of every view of that)."""

@@ -64,10 +64,10 @@ def raster_passes(device: Device, program: str, name: str, defines: dict | None,
     """The two passes of one raster kernel (cl/raster.cl's RASTER_KERNELS, built in
     `program`) over `count` triangles for each view of `view_indices` (`view_sizes`:
     (rows, columns)): `name`, one work-item per triangle, lists the triangles taller than
-    RASTER_BIG_ROWS (on a GPU, or wider than `raster_big_samples` pixels) with their rows;
-    `name_rows` draws those with one work-item per
-    block of RASTER_ROWS_PER_ITEM rows by `raster_rows_columns` columns of the view, which
-    owns its block (docs/design.md §4.1).
+    RASTER_BIG_ROWS (on a GPU, also those whose rectangle holds more than
+    `raster_big_samples` pixels) with their rows; `name_rows` draws those with one
+    work-item per block of RASTER_ROWS_PER_ITEM rows by `raster_rows_columns` columns of
+    the view, which owns its block (docs/design.md §4.1).
     Every view's first pass runs before the host waits, once, for all their lists: a wait
     per cube face left the device idle six times a frame. (The views have texels of their
     own, and every update is a min or a max, which no order changes.)"""

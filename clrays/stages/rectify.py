@@ -166,7 +166,6 @@ def rectify(device: Device, buffers: FrameBuffers, rastered: RasterResult, light
             timer: StageTimer) -> Epipolar | None:
     """Build S[α, γ] for one light; None when no visible ray has any extent in γ."""
     scene = buffers.inputs.scene
-    light = scene.lights[light_index]
     params = epipolar_frame(scene, buffers, light_index)
     frame_buffer = device.buffer(params.reshape(1))
     bounds = np.array([structs.DEPTH_EMPTY, 0, 0, 0], dtype=np.uint32)
@@ -178,7 +177,7 @@ def rectify(device: Device, buffers: FrameBuffers, rastered: RasterResult, light
     timer.add("rectify", event)
     q_beta_min, q_beta_max, gamma = device.read(bounds_buffer, 4, np.uint32)[:3].view(np.float32).astype(float)
     beta_min, beta_max = angle_of_pseudo(q_beta_min), angle_of_pseudo(q_beta_max)
-    gamma_max = gamma if isinstance(light, DirectionalLight) else angle_of_pseudo(gamma)
+    gamma_max = gamma if isinstance(scene.lights[light_index], DirectionalLight) else angle_of_pseudo(gamma)
     # float32(π) is 9e-8 above π: a ray pointing straight away from the light (the
     # anti-epipole on a pixel centre) would put β past the integrand's [0, π].
     beta_min, beta_max = min(beta_min, math.pi), min(beta_max, math.pi)

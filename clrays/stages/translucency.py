@@ -110,8 +110,8 @@ def _translucent_pass_inputs(inputs: FrameInputs, light_index: int) -> tuple[Fra
     return replace(light_inputs, tri_vertices=np.ascontiguousarray(vertices), raster_triangles=None), clear
 
 
-def _launch(device: Device, name: str, defines: dict, vertices, count: int, views, view_index: int, view_size: tuple[int, int],
-            target: tuple, timer: StageTimer) -> None:
+def _launch(device: Device, name: str, defines: dict, vertices, count: int, views, view_index: int,
+            view_size: tuple[int, int], target: tuple, timer: StageTimer) -> None:
     """Both passes of one raster kernel (clrays.stages.raster.raster_passes), built in the
     translucency program, over the translucent triangles: one sample per texel, at its centre."""
     from .raster import raster_passes  # raster imports this module (opaque_occluders)
