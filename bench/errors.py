@@ -48,6 +48,9 @@ def main() -> None:
         except ClraysError as exc:
             sys.exit(f"errors.py: {exc}")
         error = references.error(scene, EXACT, renderer.render(scene).image, pixels)
+        if not error.pixels:  # every pixel of a tiny image on a depth edge or dark
+            print(f"| {name} | — | — (no pixel left to compare) |", flush=True)
+            continue
         print(f"| {name} | {100 * error.rmse:.4f} | {100 * error.p99:.4f} |", flush=True)
 
 

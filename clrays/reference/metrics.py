@@ -7,6 +7,7 @@ the same pixel differently there, so its error says nothing about the method).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -82,11 +83,15 @@ class ImageError:
 
 def image_error(image: np.ndarray, reference: np.ndarray, exclude: np.ndarray | None = None,
                 floor: float = 0.01) -> ImageError:
-    """Relative luminance error of `image` against `reference` (module docstring)."""
+    """Relative luminance error of `image` against `reference` (module docstring); NaN, over
+    0 pixels, where no pixel is left to compare (a thumbnail whose few pixels all lie on
+    depth edges)."""
     lum, ref = luminance(image), luminance(reference)
     mask = ref >= floor * ref.mean()
     if exclude is not None:
         mask &= ~exclude
+    if not mask.any():
+        return ImageError(math.nan, math.nan, math.nan, 0)
     relative = np.abs(lum[mask] - ref[mask]) / ref[mask]
     rmse = float(np.sqrt(np.mean((lum[mask] - ref[mask]) ** 2)) / ref[mask].mean())
     return ImageError(float(relative.mean()), float(np.percentile(relative, 99)), rmse, int(mask.sum()))

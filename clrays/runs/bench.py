@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import ClraysError
 from ..image_io import make_folder
 from ..session import Renderer
 from ..scene.costs import with_derived_sizes
@@ -251,6 +252,9 @@ def run(scene_paths=DEFAULT_SCENES, resolutions=((640, 360),), repeats: int = 5,
                                                                  build not in built)
             built.add(build)
             error = references.error(scene, EXACT, result.image, subset)
+            if not error.pixels:  # (a thumbnail: its few pixels all dark or on depth edges)
+                raise ClraysError(f"{path} at {image.width}x{image.height}: no pixel is left to compare against "
+                                  f"exact (each is dark or on a depth edge); bench it at a larger -r")
             point = BenchPoint(Path(path).stem, f"{image.width}x{image.height}", method, label, frame_ms, spread,
                                error.rmse, error.p99, error.mean, result.device_bytes / 2**20, stage_ms,
                                os.getloadavg()[0], cpu_ms)

@@ -163,3 +163,27 @@ def test_reference_cache_keeps_exact_on_pixels_on_disk(tmp_path, monkeypatch, de
     coarser = replace(scene, render=replace(scene.render, slices=64))  # exact reads no render setting
     np.testing.assert_array_equal(fresh.radiance(coarser, EXACT, pixels), on_pixels)
     assert fresh.error(scene, EXACT, whole, pixels).rmse < 1e-6
+
+
+def test_an_error_with_no_pixel_left_to_compare_is_nan_not_a_crash():
+    # A 16×9 sun.yaml leaves no pixel once its depth edges and dark pixels are out: the
+    # error is NaN over 0 pixels, which the bench scripts print as such, not a traceback.
+    from clrays.reference.metrics import image_error
+
+    image = np.ones((3, 4, 3), np.float32)
+    error = image_error(image, image, exclude=np.ones((3, 4), bool))
+    assert error.pixels == 0 and np.isnan([error.mean, error.p99, error.rmse]).all()
+    kept = image_error(image * 1.1, image)
+    assert kept.pixels == 12 and kept.rmse == pytest.approx(0.1, rel=1e-5)
+
+
+def test_bench_of_a_thumbnail_with_nothing_to_compare_says_so_in_one_line(tmp_path):
+    sun = DEMO.parent / "sun.yaml"
+    result = CliRunner().invoke(main, ["bench", str(sun), "-r", "16x9", "--volume-only", "--repeats", "1",
+                                       "--no-progress", "--cache", str(tmp_path / "cache"), "--out",
+                                       str(tmp_path / "out")])
+    assert result.exit_code == 1, result.output
+    message = result.output.strip().splitlines()[-1]
+    assert message.startswith("clrays: error:") and "no pixel is left to compare" in message
+    assert "Traceback" not in result.output
+    assert not list((tmp_path / "out").glob("*")), "nothing written"
