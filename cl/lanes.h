@@ -57,6 +57,28 @@ ALWAYS_INLINE void load_runs_of_8(global const float* pointer, int_lanes index, 
 }
 #define LOAD_INT_LANES(pointer, index) GATHER_LANES(int_lanes, pointer, index)
 
+typedef int8 __attribute__((aligned(4))) int8_at_int;
+typedef uchar8 __attribute__((aligned(1))) uchar8_at_uchar;
+/* pointer[first + k] on lane k: where the lanes' indices are known to run on by one (a
+ * work-item's consecutive samples), one plain vector load, where LOAD_LANES takes 8 scalar
+ * loads and inserts, and PoCL's vload8 is a library call. */
+ALWAYS_INLINE float_lanes load_run(global const float* pointer, int first)
+{
+    return *(global const float8_at_float*)(pointer + first);
+}
+ALWAYS_INLINE int_lanes load_int_run(global const int* pointer, int first)
+{
+    return *(global const int8_at_int*)(pointer + first);
+}
+/* The pairs pointer[2·(first + k)], pointer[2·(first + k) + 1] on lane k, as two vectors:
+ * two vector loads and a transpose. */
+ALWAYS_INLINE void load_pairs_run(global const float* pointer, int first, float_lanes* even, float_lanes* odd)
+{
+    float_lanes a = load_run(pointer, 2 * first), b = load_run(pointer, 2 * first + 8);
+    *even = (float_lanes)(a.s0, a.s2, a.s4, a.s6, b.s0, b.s2, b.s4, b.s6);
+    *odd = (float_lanes)(a.s1, a.s3, a.s5, a.s7, b.s1, b.s3, b.s5, b.s7);
+}
+
 ALWAYS_INLINE float_lanes float_of_lanes(int_lanes x) { return __builtin_convertvector(x, float_lanes); }
 ALWAYS_INLINE int_lanes int_of_lanes(float_lanes x) { return __builtin_convertvector(x, int_lanes); }
 ALWAYS_INLINE float_lanes fabs_lanes(float_lanes x) { return as_float8(as_uint8(x) & 0x7fffffffu); }

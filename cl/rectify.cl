@@ -55,7 +55,9 @@ kernel void rectify_bounds(global const frame_t* frame, global const view_t* vie
         int_lanes sample = min_lanes(group + (int_lanes)(0, 1, 2, 3, 4, 5, 6, 7), (int_lanes)(samples - 1));
         float_lanes dx, dy, dz;
         camera_ray_lanes(frame, views, offsets, sample, &dx, &dy, &dz);
-        float_lanes s = fmin_lanes(LOAD_LANES((global const float*)camera_depth, sample), (float_lanes)(far));
+        float_lanes depth = group + LANES <= samples ? load_run((global const float*)camera_depth, group)
+                                                     : LOAD_LANES((global const float*)camera_depth, sample);
+        float_lanes s = fmin_lanes(depth, (float_lanes)(far));
         float_lanes cos_beta = dot_lanes(dx, dy, dz, axis.x, axis.y, axis.z);
         float_lanes sin_beta = cross_length_lanes(dx, dy, dz, axis.x, axis.y, axis.z);
         float_lanes q_beta = pseudo_angle_lanes(cos_beta, sin_beta);

@@ -214,6 +214,14 @@ kernel void line_samples(global const frame_t* frame, global const view_t* views
 #else
     float_lanes weight = 0.0f; /* read for a spot light only (line_sample_needed, slice_line) */
 #endif
+    if (count == LANES) { /* two stores of four (distance, weight) pairs each */
+        global float8_at_float* pairs = (global float8_at_float*)out;
+        pairs[0] = (float_lanes)(distance.s0, weight.s0, distance.s1, weight.s1, distance.s2, weight.s2, distance.s3,
+                                 weight.s3);
+        pairs[1] = (float_lanes)(distance.s4, weight.s4, distance.s5, weight.s5, distance.s6, weight.s6, distance.s7,
+                                 weight.s7);
+        return;
+    }
     for (int lane = 0; lane < count; ++lane) out[lane] = (float2)(distance[lane], weight[lane]);
 }
 
@@ -496,7 +504,10 @@ kernel void gather(global const frame_t* frame, global const view_t* views, glob
     int_lanes sample = min_lanes(first + (int_lanes)(0, 1, 2, 3, 4, 5, 6, 7), (int_lanes)(samples - 1));
     float_lanes dx, dy, dz; /* camera_ray (walk.h), a perspective and an orthographic view alike */
     camera_ray_lanes(frame, views, offsets, sample, &dx, &dy, &dz);
-    float_lanes distance = fmin_lanes(LOAD_LANES((global const float*)camera_depth, sample), (float_lanes)(frame->far));
+    int run = first + LANES <= samples; /* samples first, first + 1, ...: their buffers read and written as runs */
+    float_lanes depth = run ? load_run((global const float*)camera_depth, first)
+                            : LOAD_LANES((global const float*)camera_depth, sample);
+    float_lanes distance = fmin_lanes(depth, (float_lanes)(frame->far));
     float3 axis = ep->axis.xyz, u = ep->u.xyz, w = ep->w.xyz;
     float_lanes alpha = atan2_approx_lanes(dot_lanes(dx, dy, dz, w.x, w.y, w.z), dot_lanes(dx, dy, dz, u.x, u.y, u.z));
     int_lanes i0, i1;
@@ -537,6 +548,16 @@ kernel void gather(global const frame_t* frame, global const view_t* views, glob
     float_lanes red = (w0 * r0 + w1 * r1) / scale, green = (w0 * g0 + w1 * g1) / scale;
     float_lanes blue = (w0 * b0 + w1 * b1) / scale;
     int_lanes flags = (from0 ? 0 : 1) | (from1 ? 0 : 2);
+    if (run) { /* four stores of two samples' (r, g, b, 0) each, one of the 8 flags */
+        global float8_at_float* out = (global float8_at_float*)(scatter + first);
+        float_lanes pairs[4] = {(float_lanes)(red.s0, green.s0, blue.s0, 0.0f, red.s1, green.s1, blue.s1, 0.0f),
+                                (float_lanes)(red.s2, green.s2, blue.s2, 0.0f, red.s3, green.s3, blue.s3, 0.0f),
+                                (float_lanes)(red.s4, green.s4, blue.s4, 0.0f, red.s5, green.s5, blue.s5, 0.0f),
+                                (float_lanes)(red.s6, green.s6, blue.s6, 0.0f, red.s7, green.s7, blue.s7, 0.0f)};
+        for (int k = 0; k < 4; ++k) out[k] = overwrite ? pairs[k] : out[k] + pairs[k];
+        *(global uchar8_at_uchar*)(fixup_flags + first) = __builtin_convertvector(flags, uchar8);
+        return;
+    }
     /* Through private arrays, not red[k]: NVIDIA's compiler emits invalid PTX (a `selp` of
      * mismatched operands) for a lane picked by a loop index and narrowed to uchar. */
     float reds[LANES], greens[LANES], blues[LANES];

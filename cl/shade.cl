@@ -66,6 +66,18 @@ ALWAYS_INLINE vec_lanes gather_xyz(global const float4* array, int_lanes index, 
     return out;
 }
 
+/* records[first + k].xyz on lane k, for a run of consecutive samples: four vector loads of
+ * two records each and a transpose, where gather_xyz takes 8 loads and 24 inserts. */
+ALWAYS_INLINE vec_lanes xyz_run(global const float4* records, int first)
+{
+    global const float* p = (global const float*)(records + first);
+    float_lanes a = load_run(p, 0), b = load_run(p, 8), c = load_run(p, 16), d = load_run(p, 24);
+    vec_lanes out = {(float_lanes)(a.s0, a.s4, b.s0, b.s4, c.s0, c.s4, d.s0, d.s4),
+                     (float_lanes)(a.s1, a.s5, b.s1, b.s5, c.s1, c.s5, d.s1, d.s5),
+                     (float_lanes)(a.s2, a.s6, b.s2, b.s6, c.s2, c.s6, d.s2, d.s6)};
+    return out;
+}
+
 /* exp of each lane: PoCL's float8 exp gives each lane the bits its float3 exp gives each
  * component, checked on all 2^32 inputs (bench/RESULTS.md, "shade in lanes"). */
 ALWAYS_INLINE float_lanes exp_lanes(float_lanes x) { return exp(x); }
@@ -180,6 +192,9 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
         y = past ? y + 1 : y;
     }
     float_lanes x_f = float_of_lanes(x), y_f = float_of_lanes(y);
+    /* One sample per pixel and every lane inside: the lanes' samples are first, first + 1, ...,
+     * and their buffers are read and written as runs. */
+    int run = frame->spp == 1 && all_lanes(inside);
     float3 sigma_t = frame->sigma_t.xyz;
     int light_count = frame->light_count;
     int map_test = frame->surface_shadows != SURFACE_SHADOWS_EXACT && frame->surface_shadows != SURFACE_SHADOWS_FILTERED;
@@ -209,9 +224,14 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
         }
         float_lanes distance;
         int_lanes tri;
-        for (int k = 0; k < LANES; ++k) {
-            distance[k] = as_float(camera_depth[sample[k]]);
-            tri[k] = tri_id[sample[k]];
+        if (run) {
+            distance = load_run((global const float*)camera_depth, first);
+            tri = load_int_run(tri_id, first);
+        } else {
+            for (int k = 0; k < LANES; ++k) {
+                distance[k] = as_float(camera_depth[sample[k]]);
+                tri[k] = tri_id[sample[k]];
+            }
         }
         int_lanes background = (tri < 0) | (distance > frame->far);
         distance = background ? frame->far : distance;
@@ -273,7 +293,8 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                 if (eye_in_lamp(light, frame->lamp_radius))
                     visible = 1.0f;
                 else if (!map_test)
-                    visible = LOAD_LANES(visible_exact, sample * light_count + l);
+                    visible = run && light_count == 1 ? load_run(visible_exact, first)
+                                                      : LOAD_LANES(visible_exact, sample * light_count + l);
                 else
                     for (int k = 0; k < LANES; ++k)
                         if (lit[k])
@@ -308,7 +329,8 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                                  albedo.z * irradiance.z * M_1_PI_F};
             surface = select_lanes(background, surface, lambert);
         }
-        vec_lanes in_scatter = gather_xyz(scatter, sample, 0), to_eye = attenuation_lanes(sigma_t, distance);
+        vec_lanes in_scatter = run ? xyz_run(scatter, first) : gather_xyz(scatter, sample, 0);
+        vec_lanes to_eye = attenuation_lanes(sigma_t, distance);
 #ifdef SHADE_TRANSPARENCY
         vec_lanes through = gather_xyz(transmittance, sample, 0), front = gather_xyz(in_front, sample, 0);
         total.x += through.x * (surface.x * to_eye.x + in_scatter.x) + front.x;
@@ -321,6 +343,15 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
 #endif
     }
     float spp = (float)frame->spp;
+    if (run) { /* four stores of two pixels each */
+        float_lanes r = total.x / spp, g = total.y / spp, b = total.z / spp;
+        global float8_at_float* out = (global float8_at_float*)(image + first);
+        out[0] = (float_lanes)(r.s0, g.s0, b.s0, 1.0f, r.s1, g.s1, b.s1, 1.0f);
+        out[1] = (float_lanes)(r.s2, g.s2, b.s2, 1.0f, r.s3, g.s3, b.s3, 1.0f);
+        out[2] = (float_lanes)(r.s4, g.s4, b.s4, 1.0f, r.s5, g.s5, b.s5, 1.0f);
+        out[3] = (float_lanes)(r.s6, g.s6, b.s6, 1.0f, r.s7, g.s7, b.s7, 1.0f);
+        return;
+    }
     for (int k = 0; k < LANES; ++k)
         if (inside[k]) image[pixel[k]] = (float4)(total.x[k] / spp, total.y[k] / spp, total.z[k] / spp, 1.0f);
 }

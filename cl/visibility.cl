@@ -737,6 +737,26 @@ ALWAYS_INLINE int_lanes light_project_lanes(global const view_t* views, global c
     return perspective ? !(z <= 0.0f) : (int_lanes)(-1);
 }
 
+/* What prepare_lanes writes for LANES consecutive samples and light l: each entry's
+ * answer and the texel (address, depth bits) its lit test reads. With one light the entries
+ * are the samples, and the stores are runs. */
+ALWAYS_INLINE void store_prepared(global const frame_t* frame, int first, int l, float_lanes answer,
+                                  int_lanes address, int_lanes depth, global float* visible, global int2* map_read)
+{
+    if (frame->light_count == 1) {
+        *(global float8_at_float*)(visible + first) = answer;
+        global int8_at_int* reads = (global int8_at_int*)(map_read + first);
+        reads[0] = (int_lanes)(address.s0, depth.s0, address.s1, depth.s1, address.s2, depth.s2, address.s3, depth.s3);
+        reads[1] = (int_lanes)(address.s4, depth.s4, address.s5, depth.s5, address.s6, depth.s6, address.s7, depth.s7);
+        return;
+    }
+    for (int k = 0; k < LANES; ++k) {
+        int entry = (first + k) * frame->light_count + l;
+        visible[entry] = answer[k];
+        map_read[entry] = (int2)(address[k], depth[k]);
+    }
+}
+
 /* prepare_entry on LANES consecutive samples at once; 0, having written nothing, where a
  * lane needs a path written only there (visibility_prepare). */
 ALWAYS_INLINE int prepare_lanes(global const frame_t* frame, global const view_t* views, global const light_t* light,
@@ -747,15 +767,11 @@ ALWAYS_INLINE int prepare_lanes(global const frame_t* frame, global const view_t
 {
     int_lanes sample = first + (int_lanes)(0, 1, 2, 3, 4, 5, 6, 7);
     /* camera_surface_point */
-    float_lanes distance = as_float8(vload8(0, camera_depth + first));
-    int_lanes tri = vload8(0, tri_id + first);
+    float_lanes distance = load_run((global const float*)camera_depth, first);
+    int_lanes tri = load_int_run(tri_id, first);
     int_lanes surface = (tri >= 0) & !(distance > frame->far);
     if (!any_lanes(surface)) { /* the sky, or past far: lit, no texel */
-        for (int k = 0; k < LANES; ++k) {
-            int entry = (first + k) * frame->light_count + l;
-            visible[entry] = 1.0f;
-            map_read[entry] = (int2)(MAP_TEXEL_NONE, 0);
-        }
+        store_prepared(frame, first, l, 1.0f, MAP_TEXEL_NONE, 0, visible, map_read);
         return 1;
     }
     int_lanes own = surface ? tri : 0;
@@ -812,11 +828,7 @@ ALWAYS_INLINE int prepare_lanes(global const frame_t* frame, global const view_t
         }
     int_lanes turned = !(facing > margin) & ((flat_w == 0.0f) | !vertex_lit);
     if (!any_lanes(surface & !turned)) { /* nothing to project: no surface, or turned away */
-        for (int k = 0; k < LANES; ++k) {
-            int entry = (first + k) * frame->light_count + l;
-            visible[entry] = surface[k] && reaches[k] ? 0.0f : 1.0f;
-            map_read[entry] = (int2)(MAP_TEXEL_NONE, 0);
-        }
+        store_prepared(frame, first, l, (surface & reaches) ? 0.0f : 1.0f, MAP_TEXEL_NONE, 0, visible, map_read);
         return 1;
     }
     /* shadow_ray_start */
@@ -845,11 +857,7 @@ ALWAYS_INLINE int prepare_lanes(global const frame_t* frame, global const view_t
     float_lanes answer = (surface & reaches) ? when_reached : (float_lanes)(1.0f);
     int_lanes read_address = (surface & !turned) ? address : (int_lanes)(MAP_TEXEL_NONE);
     int_lanes read_depth = (surface & !turned) ? as_int8(depth) : (int_lanes)(0);
-    for (int k = 0; k < LANES; ++k) {
-        int entry = (first + k) * frame->light_count + l;
-        visible[entry] = answer[k];
-        map_read[entry] = (int2)(read_address[k], read_depth[k]);
-    }
+    store_prepared(frame, first, l, answer, read_address, read_depth, visible, map_read);
     /* Where every lane reads a texel of one mask word (neighbouring samples often do, as on
      * demo's floor), their bits go in at once; else lane by lane. */
     int_lanes word = read_address >> 5, reads = read_address >= 0;
@@ -977,14 +985,21 @@ ALWAYS_INLINE int decide_lanes(global const frame_t* frame, global const view_t*
     global const light_t* light = lights + l;
     int light_count = frame->light_count;
     int_lanes sample = first + (int_lanes)(0, 1, 2, 3, 4, 5, 6, 7), entry = sample * light_count + l;
-    float_lanes answer = LOAD_LANES(visible, entry);
+    int runs = light_count == 1; /* the entries are the samples: runs of loads */
+    float_lanes answer = runs ? load_run(visible, first) : LOAD_LANES(visible, entry);
     int_lanes pending = answer == VISIBILITY_PENDING;
     if (!any_lanes(pending)) return 1;
-    global const int* reads = (global const int*)map_read;
-    int_lanes address = as_int8(LOAD_LANES((global const float*)reads, 2 * entry));
-    float_lanes depth = LOAD_LANES((global const float*)reads, 2 * entry + 1);
+    global const float* reads = (global const float*)map_read;
+    float_lanes address_bits, depth;
+    if (runs) {
+        load_pairs_run(reads, first, &address_bits, &depth);
+    } else {
+        address_bits = LOAD_LANES(reads, 2 * entry);
+        depth = LOAD_LANES(reads, 2 * entry + 1);
+    }
+    int_lanes address = as_int8(address_bits);
     int_lanes texel = address >= 0, safe = texel ? address : 0;
-    int_lanes tri = vload8(0, tri_id + first);
+    int_lanes tri = load_int_run(tri_id, first);
     float_lanes bound_depth = texel ? LOAD_LANES((global const float*)bound, safe) : 0.0f;
     /* only_own_part: the own part alone; a solid's, seen from its outside */
     int_lanes safe_tri = tri >= 0 ? tri : 0;
@@ -1004,7 +1019,7 @@ ALWAYS_INLINE int decide_lanes(global const frame_t* frame, global const view_t*
     int_lanes blocked = (int_lanes)(0), slack = (int_lanes)(0);
     if (any_lanes(heavy)) {
         /* camera_surface_point */
-        float_lanes distance = as_float8(vload8(0, camera_depth + first));
+        float_lanes distance = load_run((global const float*)camera_depth, first);
         float_lanes dx, dy, dz;
         camera_ray_lanes(frame, views, offsets, sample, &dx, &dy, &dz);
         float3 eye = views->origin.xyz;
@@ -1069,6 +1084,18 @@ ALWAYS_INLINE int decide_lanes(global const frame_t* frame, global const view_t*
                 int_lanes own_plane = (t > 0.0f) & (stored + tolerance >= t);
                 blocked &= !(lookup_depth <= stored + tolerance) & !own_plane;
             }
+    }
+    if (runs && !any_lanes(slack)) { /* the answers as one run of stores; the lanes left listed in turn */
+        float_lanes decided = lit ? 1.0f : (blocked ? 0.0f : answer);
+        *(global float8_at_float*)(visible + first) = pending ? decided : answer;
+        int_lanes listed = pending & !lit & !blocked;
+        if (any_lanes(listed))
+            for (int k = 0; k < LANES; ++k) {
+                if (!listed[k]) continue;
+                ray_entries[atomic_inc(ray_count)] = entry[k];
+                if (!texel[k]) atomic_inc(ray_count + 1); /* no texel: only the BVH can answer it */
+            }
+        return 1;
     }
     for (int k = 0; k < LANES; ++k) {
         if (!pending[k]) continue;
