@@ -218,8 +218,16 @@ ALWAYS_INLINE void camera_ray_lanes(global const frame_t* frame, global const vi
     int_lanes column, row, sub;
     sample_pixel_lanes(frame, sample, &column, &row, &sub);
     global const float* offset = (global const float*)offsets;
-    float_lanes sx = 2.0f * (float_of_lanes(column) + LOAD_LANES(offset, 2 * sub)) / (float)views->width - 1.0f;
-    float_lanes sy = 1.0f - 2.0f * (float_of_lanes(row) + LOAD_LANES(offset, 2 * sub + 1)) / (float)views->height;
+    float_lanes offset_x, offset_y;
+    if (frame->spp == 1) { /* every lane's offset is the one sample's: read once */
+        offset_x = offset[0];
+        offset_y = offset[1];
+    } else {
+        offset_x = LOAD_LANES(offset, 2 * sub);
+        offset_y = LOAD_LANES(offset, 2 * sub + 1);
+    }
+    float_lanes sx = 2.0f * (float_of_lanes(column) + offset_x) / (float)views->width - 1.0f;
+    float_lanes sy = 1.0f - 2.0f * (float_of_lanes(row) + offset_y) / (float)views->height;
     float3 forward = views->forward.xyz, right = views->right.xyz, up = views->up.xyz;
     *dx = forward.x;
     *dy = forward.y;
