@@ -1,10 +1,24 @@
 /* fill — a buffer set to one 4- or 8-byte pattern, repeated in `pattern`, by every core
  * (Device.fill on a CPU device, where the driver's own fill runs on one thread). One
  * work-item per FILL_VECTORS vectors of 16 bytes; the host fills the tail past the last
- * whole vector. */
+ * whole vector.
+ *
+ * The stores are non-temporal where the compiler has them: a frame's cube map (25 MB at
+ * 1280×720) is far larger than a core's cache, so a plain store would first read each line
+ * it writes. The fill took 0.41–0.45 of its time, and the raster passes that then read the
+ * map lost less than that (bench/RESULTS.md, "Runs of samples"). */
+#if defined(__has_builtin)
+#if __has_builtin(__builtin_nontemporal_store)
+#define STREAM_STORE(value, pointer) __builtin_nontemporal_store(value, pointer)
+#endif
+#endif
+#ifndef STREAM_STORE
+#define STREAM_STORE(value, pointer) (*(pointer) = (value))
+#endif
+
 kernel void fill_vectors(global uint4* out, uint4 pattern, int vectors)
 {
     int first = get_global_id(0) * FILL_VECTORS;
     int last = min(first + FILL_VECTORS, vectors);
-    for (int i = first; i < last; ++i) out[i] = pattern;
+    for (int i = first; i < last; ++i) STREAM_STORE(pattern, out + i);
 }
