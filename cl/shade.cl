@@ -56,25 +56,19 @@ ALWAYS_INLINE vec_lanes select_lanes(int_lanes condition, vec_lanes a, vec_lanes
 ALWAYS_INLINE vec_lanes gather_xyz(global const float4* array, int_lanes index, float_lanes* w)
 {
     vec_lanes out;
-    for (int k = 0; k < LANES; ++k) {
-        float4 a = array[index[k]];
-        out.x[k] = a.x;
-        out.y[k] = a.y;
-        out.z[k] = a.z;
-        if (w) (*w)[k] = a.w;
-    }
+    float_lanes unused;
+    gather_records(array, index, &out.x, &out.y, &out.z, w ? w : &unused);
     return out;
 }
 
 /* records[first + k].xyz on lane k, for a run of consecutive samples: four vector loads of
- * two records each and a transpose, where gather_xyz takes 8 loads and 24 inserts. */
+ * two records each and the transpose. */
 ALWAYS_INLINE vec_lanes xyz_run(global const float4* records, int first)
 {
     global const float* p = (global const float*)(records + first);
-    float_lanes a = load_run(p, 0), b = load_run(p, 8), c = load_run(p, 16), d = load_run(p, 24);
-    vec_lanes out = {(float_lanes)(a.s0, a.s4, b.s0, b.s4, c.s0, c.s4, d.s0, d.s4),
-                     (float_lanes)(a.s1, a.s5, b.s1, b.s5, c.s1, c.s5, d.s1, d.s5),
-                     (float_lanes)(a.s2, a.s6, b.s2, b.s6, c.s2, c.s6, d.s2, d.s6)};
+    float_lanes a = load_run(p, 0), b = load_run(p, 8), c = load_run(p, 16), d = load_run(p, 24), unused;
+    vec_lanes out;
+    transpose_records(a.lo, a.hi, b.lo, b.hi, c.lo, c.hi, d.lo, d.hi, &out.x, &out.y, &out.z, &unused);
     return out;
 }
 
