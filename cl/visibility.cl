@@ -779,9 +779,9 @@ ALWAYS_INLINE int prepare_lanes(global const frame_t* frame, global const view_t
     camera_ray_lanes(frame, views, offsets, sample, &dx, &dy, &dz);
     float3 eye = views->origin.xyz;
     float_lanes px = eye.x + distance * dx, py = eye.y + distance * dy, pz = eye.z + distance * dz;
-    global const float* normals = (global const float*)tri_normal;
-    float_lanes nx = LOAD_LANES(normals, 4 * own), ny = LOAD_LANES(normals, 4 * own + 1),
-                nz = LOAD_LANES(normals, 4 * own + 2);
+    float_lanes nx, ny, nz, flat_w; /* the triangle's normal; w: 0 flat, else smooth */
+    gather_records(tri_normal, own, &nx, &ny, &nz, &flat_w);
+    float_lanes own_x = nx, own_y = ny, own_z = nz;
     int_lanes facing_away = dot_lanes_of_lanes(nx, ny, nz, dx, dy, dz) > 0.0f;
     nx = facing_away ? -nx : nx, ny = facing_away ? -ny : ny, nz = facing_away ? -nz : nz;
     /* light_reaches, where no exp is needed to know */
@@ -815,16 +815,13 @@ ALWAYS_INLINE int prepare_lanes(global const frame_t* frame, global const view_t
     /* turned_away */
     const float margin = -1e-4f;
     float_lanes facing = dot_lanes_of_lanes(nx, ny, nz, lx, ly, lz);
-    float_lanes flat_w = LOAD_LANES(normals, 4 * own + 3);
-    float_lanes side = dot_lanes_of_lanes(nx, ny, nz, LOAD_LANES(normals, 4 * own), LOAD_LANES(normals, 4 * own + 1),
-                                          LOAD_LANES(normals, 4 * own + 2)) >= 0.0f ? 1.0f : -1.0f;
+    float_lanes side = dot_lanes_of_lanes(nx, ny, nz, own_x, own_y, own_z) >= 0.0f ? 1.0f : -1.0f;
     int_lanes vertex_lit = (int_lanes)(0);
-    global const float* vertex_normals = (global const float*)tri_vertex_normals;
     if (any_lanes(surface & !(facing > margin) & flat_w != 0.0f)) /* a smooth triangle's vertex normals decide */
         for (int k = 0; k < 3; ++k) {
-            int_lanes at = 4 * (3 * own + k);
-            vertex_lit |= side * dot_lanes_of_lanes(LOAD_LANES(vertex_normals, at), LOAD_LANES(vertex_normals, at + 1),
-                                                    LOAD_LANES(vertex_normals, at + 2), lx, ly, lz) > margin;
+            float_lanes vx, vy, vz, unused;
+            gather_records(tri_vertex_normals, 3 * own + k, &vx, &vy, &vz, &unused);
+            vertex_lit |= side * dot_lanes_of_lanes(vx, vy, vz, lx, ly, lz) > margin;
         }
     int_lanes turned = !(facing > margin) & ((flat_w == 0.0f) | !vertex_lit);
     if (!any_lanes(surface & !turned)) { /* nothing to project: no surface, or turned away */
@@ -1009,9 +1006,9 @@ ALWAYS_INLINE int decide_lanes(global const frame_t* frame, global const view_t*
     if (any_lanes(outside_only)) {
         float_lanes dx, dy, dz;
         camera_ray_lanes(frame, views, offsets, sample, &dx, &dy, &dz);
-        global const float* normals = (global const float*)tri_normal;
-        float_lanes front = LOAD_LANES(normals, 4 * safe_tri) * dx + LOAD_LANES(normals, 4 * safe_tri + 1) * dy
-                            + LOAD_LANES(normals, 4 * safe_tri + 2) * dz;
+        float_lanes fx, fy, fz, unused;
+        gather_records(tri_normal, safe_tri, &fx, &fy, &fz, &unused);
+        float_lanes front = fx * dx + fy * dy + fz * dz;
         only_own &= !outside_only | (front < 0.0f);
     }
     int_lanes lit = pending & ((address == MAP_TEXEL_OUTSIDE) | (texel & ((depth <= bound_depth) | only_own)));
@@ -1025,9 +1022,8 @@ ALWAYS_INLINE int decide_lanes(global const frame_t* frame, global const view_t*
         float3 eye = views->origin.xyz;
         float_lanes px = eye.x + distance * dx, py = eye.y + distance * dy, pz = eye.z + distance * dz;
         int_lanes own = heavy ? tri : 0;
-        global const float* normals = (global const float*)tri_normal;
-        float_lanes nx = LOAD_LANES(normals, 4 * own), ny = LOAD_LANES(normals, 4 * own + 1),
-                    nz = LOAD_LANES(normals, 4 * own + 2);
+        float_lanes nx, ny, nz, unused;
+        gather_records(tri_normal, own, &nx, &ny, &nz, &unused);
         int_lanes facing_away = dot_lanes_of_lanes(nx, ny, nz, dx, dy, dz) > 0.0f;
         nx = facing_away ? -nx : nx, ny = facing_away ? -ny : ny, nz = facing_away ? -nz : nz;
         float_lanes bias_size = light->type == LIGHT_DIRECTIONAL ? (float_lanes)(light->texel_angle)
