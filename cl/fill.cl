@@ -5,8 +5,8 @@
  *
  * The stores are non-temporal where the compiler has them: a frame's cube map (25 MB at
  * 1280×720) is far larger than a core's cache, so a plain store would first read each line
- * it writes. The fill took 0.41–0.45 of its time, and the raster passes that then read the
- * map lost less than that (bench/RESULTS.md, "Runs of samples"). */
+ * it writes. The fill took 0.36–0.54 of its time, and the raster passes that then read the
+ * map lost less than that (docs/design.md §4.5, "Cost on PoCL"). */
 #if defined(__has_builtin)
 #if __has_builtin(__builtin_nontemporal_store)
 #define STREAM_STORE(value, pointer) __builtin_nontemporal_store(value, pointer)
