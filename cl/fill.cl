@@ -15,10 +15,20 @@
 #ifndef STREAM_STORE
 #define STREAM_STORE(value, pointer) (*(pointer) = (value))
 #endif
+/* Streaming stores are weakly ordered on x86: a fence after them, before the kernels that
+ * read the buffer next (with atomics, on other cores) can see it. */
+#define STREAM_FENCE()
+#if defined(__has_builtin)
+#if __has_builtin(__builtin_nontemporal_store) && __has_builtin(__builtin_ia32_sfence)
+#undef STREAM_FENCE
+#define STREAM_FENCE() __builtin_ia32_sfence()
+#endif
+#endif
 
 kernel void fill_vectors(global uint4* out, uint4 pattern, int vectors)
 {
     int first = get_global_id(0) * FILL_VECTORS;
     int last = min(first + FILL_VECTORS, vectors);
     for (int i = first; i < last; ++i) STREAM_STORE(pattern, out + i);
+    STREAM_FENCE();
 }

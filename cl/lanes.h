@@ -82,7 +82,7 @@ ALWAYS_INLINE void load_pairs_run(global const float* pointer, int first, float_
 /* Eight float4 records as vectors of their x, y, z and w over the lanes: the records side
  * by side in pairs, interleaved, then picked, which compiles to a few shuffles. Picked
  * component by component (out.x[k] = record.x), the same transpose was 32 inserts: shade
- * took 0.73–0.78 of its time with this. */
+ * took 0.71–0.83 of its time with this (docs/design.md §4.5, "Cost on PoCL"). */
 ALWAYS_INLINE void transpose_records(float4 r0, float4 r1, float4 r2, float4 r3, float4 r4, float4 r5, float4 r6,
                                      float4 r7, float_lanes* x, float_lanes* y, float_lanes* z, float_lanes* w)
 {
