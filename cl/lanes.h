@@ -86,7 +86,8 @@ ALWAYS_INLINE void load_pairs_run(global const float* pointer, int first, float_
 ALWAYS_INLINE void transpose_records(float4 r0, float4 r1, float4 r2, float4 r3, float4 r4, float4 r5, float4 r6,
                                      float4 r7, float_lanes* x, float_lanes* y, float_lanes* z, float_lanes* w)
 {
-    float_lanes a = (float_lanes)(r0, r4), b = (float_lanes)(r1, r5), c = (float_lanes)(r2, r6), d = (float_lanes)(r3, r7);
+    float_lanes a = (float_lanes)(r0, r4), b = (float_lanes)(r1, r5);
+    float_lanes c = (float_lanes)(r2, r6), d = (float_lanes)(r3, r7);
     float_lanes ab_lo = (float_lanes)(a.s0, b.s0, a.s1, b.s1, a.s4, b.s4, a.s5, b.s5);
     float_lanes cd_lo = (float_lanes)(c.s0, d.s0, c.s1, d.s1, c.s4, d.s4, c.s5, d.s5);
     float_lanes ab_hi = (float_lanes)(a.s2, b.s2, a.s3, b.s3, a.s6, b.s6, a.s7, b.s7);
