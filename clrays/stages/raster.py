@@ -58,6 +58,14 @@ def raster_big_samples(device: Device) -> int:
     return 0 if device.is_cpu else RASTER_BIG_SAMPLES_GPU
 
 
+def raster_defines(device: Device, defines: dict | None = None) -> dict | None:
+    """`defines` for a program built from cl/raster.cl on `device`, with RASTER_BIG_SAMPLES
+    where the device lists wide triangles: every kernel of the program takes the same, so
+    the program is built once."""
+    big_samples = raster_big_samples(device)
+    return {**(defines or {}), "RASTER_BIG_SAMPLES": big_samples} if big_samples else defines
+
+
 def raster_passes(device: Device, program: str, name: str, defines: dict | None, vertices, count: int, views,
                   view_indices: list[int], view_sizes: list[tuple[int, int]], offsets, sample_count: int, target: tuple,
                   timer: StageTimer, stage: str = "raster") -> None:
@@ -74,9 +82,7 @@ def raster_passes(device: Device, program: str, name: str, defines: dict | None,
     if count == 0 or not view_indices:
         return
     capacity = min(count, structs.RASTER_BIG_TRIANGLES)  # a triangle lists itself at most once
-    big_samples = raster_big_samples(device)
-    if big_samples:
-        defines = {**(defines or {}), "RASTER_BIG_SAMPLES": big_samples}
+    defines = raster_defines(device, defines)
     first_pass = device.kernel(program, name, defines)
     lists = []  # per view: its count of big triangles, and their (triangle, first row, last row)
     for view_index in view_indices:
@@ -117,7 +123,7 @@ def raster_camera(device: Device, buffers: FrameBuffers, timer: StageTimer) -> t
         device.fill(nearest, np.uint64((int(structs.DEPTH_EMPTY) << 32) | 0xFFFFFFFF), 8 * samples, timer, "raster")
         _launch(device, buffers, "raster_nearest", defines, [0], buffers.offsets, spp, (nearest,), timer)
         reliefs.map("relief_map_nearest", defines, buffers.views, inputs.views, 0, buffers.offsets, spp, (nearest,))
-        timer.add("raster", device.kernel("raster", "raster_split", defines)(
+        timer.add("raster", device.kernel("raster", "raster_split", raster_defines(device, defines))(
             device.queue, (samples,), None, nearest, np.int32(samples), camera_depth, tri_id))
         return camera_depth, tri_id
     device.fill(camera_depth, structs.DEPTH_EMPTY, 4 * samples, timer, "raster")
@@ -169,7 +175,7 @@ def raster_shadow_map(device: Device, buffers: FrameBuffers, light_index: int, t
         # does the next stages' set-up while the device answers (it waited for the flag,
         # then built the epipolar frame, the device idle meanwhile).
         flag = device.buffer(np.zeros(1, np.uint32))
-        device.kernel("raster", "raster_any")(device.queue, (-(-texels // structs.RASTER_ANY_TEXELS),), None, depth,
+        device.kernel("raster", "raster_any", raster_defines(device))(device.queue, (-(-texels // structs.RASTER_ANY_TEXELS),), None, depth,
                                               np.int32(shadow_map.texels), flag)
         seen = np.zeros(1, np.uint32)
         shadow_map.flag = (seen, device.cl.enqueue_copy(device.queue, seen, flag, is_blocking=False))

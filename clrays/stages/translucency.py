@@ -126,7 +126,9 @@ def translucency(device: Device, buffers: FrameBuffers, timer: StageTimer) -> La
     Peeling stops at the first layer that is empty everywhere in a light's map."""
     inputs = buffers.inputs
     count = inputs.scene.render.translucent_layers
-    defines = {"TRANSLUCENT_LAYERS": count}  # one build of cl/translucency.cl for all its kernels
+    # one build of cl/translucency.cl for its kernels (on a GPU its raster passes add
+    # RASTER_BIG_SAMPLES, clrays.stages.raster.raster_defines: a second build)
+    defines = {"TRANSLUCENT_LAYERS": count}
     stride = max(inputs.shadow_texels, 1)
     layer_depth = device.buffer(nbytes=4 * count * stride)
     layer_clear = device.buffer(nbytes=8 * count * stride)
