@@ -10,9 +10,9 @@
  * projects the polygon, and per pixel row ray-tests the samples in the row's span of
  * the polygon, 8 columns per test (intersect_columns); triangles taller than
  * RASTER_BIG_ROWS go to a second pass with one work-item per block of RASTER_ROWS_PER_ITEM
- * rows (and, on a GPU, a few dozen columns) of the view, which owns it (`*_rows`). The ray test (not interpolation)
- * makes depth exact along the sample ray, and two-sided. Depth buffer layout per view:
- * [height][width][samples]. */
+ * rows (and, on a GPU, a few dozen columns) of the view, which owns it (`*_rows`). The
+ * ray test (not interpolation) makes depth exact along the sample ray, and two-sided.
+ * Depth buffer layout per view: [height][width][samples]. */
 #include "lighting.h"
 #include "solids.h"
 
@@ -374,8 +374,9 @@ inline int big_rectangle(const float2 corner[4], int count, int y0, int y1)
 /* Pass 1, one work-item per triangle: it visits every covered sample of its rows, unless
  * it spans more than RASTER_BIG_ROWS rows (or, on a GPU, RASTER_BIG_SAMPLES pixels); then
  * it lists itself in `big` as (triangle, first row, last row) (while there is room) for
- * pass 2, so a floor plane does not keep one work-item busy for the whole view. The samples are the same either way, and every
- * update is a min (or max) that does not depend on the order, so is the depth map. */
+ * pass 2, so a floor plane does not keep one work-item busy for the whole view. The
+ * samples are the same either way, and every update is a min (or max) that does not
+ * depend on the order, so is the depth map. */
 #define FOR_EACH_COVERED_SAMPLE(BODY)                                                       \
     int tri = get_global_id(0);                                                             \
     if (tri >= tri_count) return;                                                           \

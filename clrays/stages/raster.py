@@ -175,8 +175,8 @@ def raster_shadow_map(device: Device, buffers: FrameBuffers, light_index: int, t
         # does the next stages' set-up while the device answers (it waited for the flag,
         # then built the epipolar frame, the device idle meanwhile).
         flag = device.buffer(np.zeros(1, np.uint32))
-        device.kernel("raster", "raster_any", raster_defines(device))(device.queue, (-(-texels // structs.RASTER_ANY_TEXELS),), None, depth,
-                                              np.int32(shadow_map.texels), flag)
+        device.kernel("raster", "raster_any", raster_defines(device))(
+            device.queue, (-(-texels // structs.RASTER_ANY_TEXELS),), None, depth, np.int32(shadow_map.texels), flag)
         seen = np.zeros(1, np.uint32)
         shadow_map.flag = (seen, device.cl.enqueue_copy(device.queue, seen, flag, is_blocking=False))
     return shadow_map
