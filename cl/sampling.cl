@@ -35,6 +35,7 @@
 #include "walk.h"
 #include "atan2_approx.h"
 #include "lanes.h"
+#include "spot_wedge.h"
 
 /* The light's type (LIGHT_*): gather computes a camera sample's unshadowed weight for a
  * spot light only, and its work-items run as one vector loop for the others. */
@@ -85,73 +86,6 @@ ALWAYS_INLINE float3 line_direction(global const epipolar_t* ep, global const fl
 ALWAYS_INLINE float radiance_scale(global const light_t* light, float sin_beta)
 {
     return light->type == LIGHT_DIRECTIONAL ? 1.0f : inline_fmax(sin_beta, SIN_BETA_MIN);
-}
-
-/* A 2-sort of each lane: (a, b) into (smaller, larger). */
-ALWAYS_INLINE void sort_pair_lanes(float_lanes* a, float_lanes* b)
-{
-    float_lanes smaller = *a < *b ? *a : *b, larger = *a < *b ? *b : *a;
-    *a = smaller;
-    *b = larger;
-}
-
-/* The unshadowed weight of each lane's ray along d up to distance: what it would gather
- * if nothing cast a shadow, without the medium's attenuation and phase, and without the
- * factor 1/sin β of a point or spot light (which `radiance_scale` takes out of the
- * radiance exactly): the γ it sweeps, divided by d_el, for a point or spot light (only the
- * part inside a spot light's cone), the lit length for a directional light. It breaks
- * where the in-scattering breaks: at the ray's end (an edge) and at a spot light's cone.
- *
- * The cone is spot_interval's (lighting.h), lane by lane: spot_interval sorts its cuts 0,
- * far and up to three roots, clamped to [0, far], and tests the pieces between
- * neighbours; here an absent root is far, which adds only empty pieces (far, far) that the
- * test skips, and the three roots are sorted by a network: the same pieces, so the same
- * interval, the same bits. */
-ALWAYS_INLINE float_lanes unshadowed_weight_lanes(global const epipolar_t* ep, global const light_t* light,
-                                                  float_lanes dx, float_lanes dy, float_lanes dz,
-                                                  float_lanes distance)
-{
-    if (light->type == LIGHT_DIRECTIONAL) return distance - 0.0f;
-    float_lanes begin = 0.0f, end = distance;
-    int_lanes lit = (int_lanes)(-1);
-    if (light->type == LIGHT_SPOT) {
-        float3 l = light->position.xyz, k = light->direction.xyz;
-        float c2 = light->cos_cone * light->cos_cone;
-        float_lanes a1 = dot_lanes(dx, dy, dz, k.x, k.y, k.z), vl = dot_lanes(dx, dy, dz, l.x, l.y, l.z);
-        float a0 = -inline_dot(l, k);
-        float_lanes qa = a1 * a1 - c2, qb = 2.0f * (a1 * a0 + c2 * vl);
-        float qc = a0 * a0 - c2 * inline_dot(l, l);
-        float_lanes disc = qb * qb - 4.0f * qa * qc;
-        int_lanes two_roots = (disc >= 0.0f) & (qa != 0.0f), one_root = !two_roots & (qa == 0.0f) & (qb != 0.0f);
-        float_lanes q = -0.5f * (qb + copysign_lanes(sqrt_lanes(disc), qb)); /* numerically stable pair of roots */
-        float_lanes cut1 = two_roots ? q / qa : (one_root ? -qc / qb : distance);
-        float_lanes cut2 = (two_roots & (q != 0.0f)) ? qc / q : distance;
-        float_lanes cut3 = a1 != 0.0f ? -a0 / a1 : distance;
-        cut1 = fmin_lanes(fmax_lanes(cut1, (float_lanes)(0.0f)), distance);
-        cut2 = fmin_lanes(fmax_lanes(cut2, (float_lanes)(0.0f)), distance);
-        cut3 = fmin_lanes(fmax_lanes(cut3, (float_lanes)(0.0f)), distance);
-        sort_pair_lanes(&cut1, &cut2);
-        sort_pair_lanes(&cut2, &cut3);
-        sort_pair_lanes(&cut1, &cut2);
-        float_lanes cuts[5] = {0.0f, cut1, cut2, cut3, distance};
-        lit = (int_lanes)(0);
-        for (int i = 0; i < 4; ++i) {
-            float_lanes mid = 0.5f * (cuts[i] + cuts[i + 1]);
-            float_lanes wx = mid * dx - l.x, wy = mid * dy - l.y, wz = mid * dz - l.z;
-            int_lanes inside = (cuts[i + 1] > cuts[i])
-                               & (dot_lanes(wx, wy, wz, k.x, k.y, k.z) >= light->cos_cone * length_lanes(wx, wy, wz));
-            begin = (inside & !lit) ? cuts[i] : begin;
-            end = inside ? cuts[i + 1] : end;
-            lit |= inside;
-        }
-    }
-    float3 axis = ep->axis.xyz;
-    float_lanes cos_beta = dot_lanes(dx, dy, dz, axis.x, axis.y, axis.z);
-    float_lanes sin_beta =
-        fmax_lanes(cross_length_lanes(dx, dy, dz, axis.x, axis.y, axis.z), (float_lanes)(SIN_BETA_MIN));
-    float_lanes gamma_begin = begin > 0.0f ? atan2_approx_lanes(begin * sin_beta, ep->d_el - begin * cos_beta) : 0.0f;
-    float_lanes gamma_end = atan2_approx_lanes(end * sin_beta, ep->d_el - end * cos_beta);
-    return lit ? (gamma_end - gamma_begin) / ep->d_el : 0.0f;
 }
 
 /* Per LANES line samples of a slice: (distance, unshadowed weight): where each lands (the
@@ -210,7 +144,10 @@ kernel void line_samples(global const frame_t* frame, global const view_t* views
     float_lanes depth = LOAD_LANES((global const float*)camera_depth, (row * frame->width + column) * frame->spp);
     float_lanes distance = in_front ? fmin_lanes(depth, (float_lanes)(frame->far)) : (float_lanes)(frame->far);
 #if SAMPLING_LIGHT == LIGHT_SPOT
-    float_lanes weight = unshadowed_weight_lanes(ep, lights + ep->light_index, dx, dy, dz, distance);
+    /* every sample of the slice lies in its half-plane: one wedge for them all */
+    float2 wedge = slice_wedge(ep, lights + ep->light_index, side);
+    float_lanes weight = weight_in_wedge_lanes(ep, (float_lanes)(wedge.x), (float_lanes)(wedge.y), along * inverse,
+                                               across * inverse, distance);
 #else
     float_lanes weight = 0.0f; /* read for a spot light only (line_sample_needed, slice_line) */
 #endif
@@ -520,7 +457,7 @@ kernel void gather(global const frame_t* frame, global const view_t* views, glob
     global const light_t* light = lights + ep->light_index;
     float_lanes own_weight = -1.0f;
 #if SAMPLING_LIGHT == LIGHT_SPOT
-    own_weight = unshadowed_weight_lanes(ep, light, dx, dy, dz, distance);
+    own_weight = spot_weight_lanes(ep, light, dx, dy, dz, cos_beta, sin_beta, distance);
 #endif
     float_lanes scale = /* radiance_scale */
         light->type == LIGHT_DIRECTIONAL ? (float_lanes)(1.0f) : fmax_lanes(sin_beta, (float_lanes)(SIN_BETA_MIN));
