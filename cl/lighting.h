@@ -5,6 +5,7 @@
 #define CLRAYS_LIGHTING_H
 #include "common.h"
 #include "inline_math.h"
+#include "atan2_approx.h"
 
 #define INV_FOUR_PI 0.0795774715459476679f
 
@@ -116,8 +117,48 @@ inline float3 light_incident(global const light_t* light, float3 sigma_t, float3
     return light->power.xyz * exp(-sigma_t * d) / fmax(d2, 1e-30f);
 }
 
+/* A spot light's cone in a half-plane through the eye and the light (docs/design.md §4.5,
+ * "A spot light's cone as a wedge"). The cone's apex is the light, which lies in every
+ * such half-plane. With side s (unit, normal to the axis a from the eye to the light), the
+ * light's ray at angle γ from the ray back to the eye, turned towards s, lies inside the
+ * cone where cos γ·x + sin γ·y ≥ c: (x, y) = (-a·k, s·k) is the cone's axis k seen in the
+ * half-plane and c its cos_cone. Those are the γ within δ of φ = atan2(y, x), with
+ * cos δ = c/r, r = |(x, y)|: one wedge (φ - δ, φ + δ), empty (δ = 0) where r < c. x, y and
+ * c scaled by one positive factor give the same wedge. sin δ comes from r² - c², 0 where
+ * r < |c| (δ = π for a c < 0, which the loader's 90° at most leaves only as rounding).
+ * A camera ray's lit part is then [0, γ_end] within the wedge, with no cuts along the ray:
+ * where a ray passes near the apex the cone's quadric has two nearly equal roots, which
+ * float32 finds far apart (spot_interval: up to a third of a pixel's in-scattering off
+ * next to the bunny's lamp), while φ and δ do not depend on the ray's t at all. */
+ALWAYS_INLINE float2 lit_wedge(float x, float y, float c)
+{
+    float phi = atan2_approx(y, x), delta = atan2_approx(inline_sqrt(inline_fmax(x * x + y * y - c * c, 0.0f)), c);
+    return (float2)(phi - delta, phi + delta);
+}
+
+/* Below this sin β a ray's own half-plane is lost in the rounding of its float32 direction
+ * (about 1e-7 rad): the ray passes the light within a lamp's radius or so. */
+#define WEDGE_SIN_BETA_MIN 1e-6f
+
+/* The lit wedge of the half-plane of the ray along dir (unit; sin β = |dir × a|, not
+ * clamped). Its side is (dir - cos β·a)/sin β, so x and c are taken times sin β and y is
+ * dir·k⊥, with k⊥ = k - (a·k)·a the cone axis's part normal to a: no division, and no
+ * difference of dir·k and cos β·(a·k), which loses y where the ray nearly meets the light
+ * (a cone aimed along the axis, whose y is 0, read 5e-4 off in a pixel beside its light).
+ * A ray on the axis itself (below WEDGE_SIN_BETA_MIN) lies in every half-plane, and its
+ * points are at γ = 0 or π, whose test does not depend on the side: the half-plane of
+ * `normal`, any unit vector normal to the axis, stands for it. */
+ALWAYS_INLINE float2 ray_wedge(global const light_t* light, float3 axis, float3 normal, float3 dir, float sin_beta)
+{
+    float3 k = light->direction.xyz;
+    float axis_along = inline_dot(axis, k);
+    float3 k_normal = k - axis_along * axis;
+    if (!(sin_beta > WEDGE_SIN_BETA_MIN)) return lit_wedge(-axis_along, inline_dot(normal, k_normal), light->cos_cone);
+    return lit_wedge(-axis_along * sin_beta, inline_dot(dir, k_normal), light->cos_cone * sin_beta);
+}
+
 /* The part [s0, s1] of the eye ray s·dir, s ∈ [0, far], inside a spot light's cone
- * (|angle to the axis| ≤ cone, on the light's side). For a half-angle ≤ 90° the cone
+ * (|angle to the axis| ≤ cone, on the light's side), for raymarch's steps, which are in s. For a half-angle ≤ 90° the cone
  * is convex, so this is one interval; returns 0 when the ray misses it. The candidate
  * ends are the roots of (w·k)² = cos²·|w|² (w = p - l), the apex plane and the ray's
  * ends; the pieces between them are tested at their midpoints. */

@@ -95,7 +95,8 @@ ALWAYS_INLINE float radiance_scale(global const light_t* light, float sin_beta)
  * and view_project (lighting.h), in the same order (lanes.h). */
 kernel void line_samples(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                          global const epipolar_t* ep, global const uint* camera_depth, global const float2* ranges,
-                         global const float4* sides, int n, global const int* lengths, global float2* line)
+                         global const float4* sides, int n, global const int* lengths, global float2* line,
+                         global float2* wedges)
 {
     int first = get_global_id(0) * LANES, i = get_global_id(1);
     if (i >= ep->slices) return;
@@ -144,8 +145,10 @@ kernel void line_samples(global const frame_t* frame, global const view_t* views
     float_lanes depth = LOAD_LANES((global const float*)camera_depth, (row * frame->width + column) * frame->spp);
     float_lanes distance = in_front ? fmin_lanes(depth, (float_lanes)(frame->far)) : (float_lanes)(frame->far);
 #if SAMPLING_LIGHT == LIGHT_SPOT
-    /* every sample of the slice lies in its half-plane: one wedge for them all */
+    /* every sample of the slice lies in its half-plane: one wedge for them all, kept for
+     * line_scatter's and line_refine_fill's walks */
     float2 wedge = slice_wedge(ep, lights + ep->light_index, side);
+    if (first == 0) wedges[i] = wedge;
     float_lanes weight = weight_in_wedge_lanes(ep, (float_lanes)(wedge.x), (float_lanes)(wedge.y), along * inverse,
                                                across * inverse, distance);
 #else
@@ -189,13 +192,25 @@ ALWAYS_INLINE int line_sample_needed(global const float2* line, int j, int n, in
 #endif
 }
 
+/* The lit wedge of slice i's half-plane, which line_samples kept for a spot light: every
+ * line sample of the slice lies in it (spot_wedge.h). Unread for the other lights. */
+ALWAYS_INLINE float2 line_wedge(global const float2* wedges, int i)
+{
+#if SAMPLING_LIGHT == LIGHT_SPOT
+    return wedges[i];
+#else
+    return (float2)(0.0f);
+#endif
+}
+
 /* The radiance of line sample j of slice i, times radiance_scale: its own walk along
- * row i (0 where its ray has no extent); `walked` counts the walks. */
+ * row i (0 where its ray has no extent); `walked` counts the walks. A spot light's cone
+ * is the slice's wedge (line_wedge). */
 inline float3 line_sample_radiance(global const frame_t* frame, global const light_t* lights,
                                    global const epipolar_t* ep, global const float2* tree,
                                    global const integrand_t* integrand, global const float* tables,
                                    const row_texture_t* texture, global const float2* ranges,
-                                   global const float4* sides, float distance, int i, int j, int n,
+                                   global const float4* sides, float2 wedge, float distance, int i, int j, int n,
                                    uint* walked)
 {
     float q, sin_beta;
@@ -203,7 +218,11 @@ inline float3 line_sample_radiance(global const frame_t* frame, global const lig
     float3 dir = line_direction(ep, sides, i, q, &sin_beta);
     ray_span_t span;
     global const light_t* light = lights + ep->light_index;
+#if SAMPLING_LIGHT == LIGHT_SPOT
+    if (!ray_span_in_wedge(ep, frame, integrand, dir, distance, wedge, &span)) return (float3)(0.0f);
+#else
     if (!ray_span(ep, light, frame, integrand, dir, distance, &span)) return (float3)(0.0f);
+#endif
     ++*walked;
     return radiance_scale(light, sin_beta) * row_radiance(ep, tree, i, &span, integrand, tables, frame, texture);
 }
@@ -235,8 +254,9 @@ kernel void line_scatter(global const frame_t* frame, global const view_t* views
                          global const integrand_t* integrand, global const float* tables,
                          global const textured_integrand_t* textured, global const float* texture_basis,
                          global const float* texture_prefix, global const float2* ranges,
-                         global const float4* sides, global const float2* line, int n, global const int* lengths,
-                         int step, float threshold, global float4* radiance, global uchar* state,
+                         global const float4* sides, global const float2* wedges, global const float2* line, int n,
+                         global const int* lengths, int step, float threshold, global float4* radiance,
+                         global uchar* state,
                          global ushort* walked RECTIFIED_LAYER_ARGS)
 {
     row_texture_t texture = {textured, texture_basis, texture_prefix};
@@ -246,6 +266,7 @@ kernel void line_scatter(global const frame_t* frame, global const view_t* views
     int first = run * step, length = lengths[i];
     uint walks = 0;
     int end = first >= length - 1 ? first : (first + step >= length - 1 ? length : first + step);
+    float2 wedge = line_wedge(wedges, i);
     global const float2* samples = line + i * n;
     for (int j = first; j < end; ++j) {
         float4 result = (float4)(0.0f, 0.0f, 0.0f, samples[j].x);
@@ -254,7 +275,7 @@ kernel void line_scatter(global const frame_t* frame, global const view_t* views
             known = LINE_COMPUTED; /* the slice does not cross the screen: nothing reads it */
         } else if (line_sample_needed(samples, j, length, step, threshold)) {
             result.xyz = line_sample_radiance(frame, lights, ep, tree, integrand, tables, &texture, ranges, sides,
-                                              samples[j].x, i, j, length, &walks);
+                                              wedge, samples[j].x, i, j, length, &walks);
             known = LINE_COMPUTED;
         }
         radiance[i * n + j] = result;
@@ -281,8 +302,8 @@ kernel void line_refine_fill(global const frame_t* frame, global const light_t* 
                              global const float2* tree, global const integrand_t* integrand,
                              global const float* tables, global const textured_integrand_t* textured,
                              global const float* texture_basis, global const float* texture_prefix,
-                             global const float2* ranges, global const float4* sides, global const float2* line,
-                             int n, global const int* lengths, int step, float threshold,
+                             global const float2* ranges, global const float4* sides, global const float2* wedges,
+                             global const float2* line, int n, global const int* lengths, int step, float threshold,
                              global float4* radiance, global uchar* state, global ushort* walked RECTIFIED_LAYER_ARGS)
 {
     row_texture_t texture = {textured, texture_basis, texture_prefix};
@@ -295,6 +316,7 @@ kernel void line_refine_fill(global const frame_t* frame, global const light_t* 
     global float4* samples = radiance + i * n;
     global uchar* known = state + i * n;
     uint walks = 0;
+    float2 wedge = line_wedge(wedges, i);
     for (int j = first + 1; j < last; ++j) {
         if (known[j] != LINE_LEFT) continue;
         int left = j - 1, right = j + 1;
@@ -302,7 +324,7 @@ kernel void line_refine_fill(global const frame_t* frame, global const light_t* 
         while (known[right] != LINE_COMPUTED) ++right;
         if (radiance_breaks(samples[left].xyz, samples[right].xyz, 4.0f * threshold)) {
             float3 computed = line_sample_radiance(frame, lights, ep, tree, integrand, tables, &texture, ranges, sides,
-                                                   line[i * n + j].x, i, j, length, &walks);
+                                                   wedge, line[i * n + j].x, i, j, length, &walks);
             samples[j].xyz = computed;
             known[j] = LINE_REFINED;
         }

@@ -1,34 +1,19 @@
-/* spot_wedge.h — a spot light's unshadowed weight of a camera ray, from the wedge its cone
- * cuts in the ray's half-plane (docs/design.md §4.5, "A spot light's weight by its wedge").
+/* spot_wedge.h — a spot light's unshadowed weight of camera rays, 8 at a time (lanes.h),
+ * from the wedge its cone cuts in each ray's half-plane (lighting.h's lit_wedge;
+ * docs/design.md §4.5, "A spot light's cone as a wedge").
  *
  * The unshadowed weight of a ray up to its end is what it would gather if nothing cast a
  * shadow, without the medium's attenuation and phase, and without the factor 1/sin β that
  * `radiance_scale` (sampling.cl) takes out of the radiance exactly: the γ it sweeps inside
  * the cone, divided by d_el. It breaks where the in-scattering breaks: at the ray's end (an
  * edge) and at the cone. The sampling kernels compute it for a spot light only: a point or
- * directional light's weights differ where the distances do, which they compare already.
- *
- * The cone's apex is the light, which lies in every half-plane through the eye and the
- * light. In such a half-plane, with side s (unit, normal to the axis a from the eye to the
- * light), the light's ray at angle γ from the ray back to the eye, turned towards s, lies
- * inside the cone where cos γ·x + sin γ·y ≥ c: (x, y) = (-a·k, s·k) is the cone's axis k seen
- * in the half-plane and c its cos_cone. Those are the γ within δ of φ = atan2(y, x), with
- * cos δ = c/r and r = |(x, y)|: one wedge, empty (δ = 0) where r < c. */
+ * directional light's weights differ where the distances do, which they compare already. */
 #ifndef CLRAYS_SPOT_WEDGE_H
 #define CLRAYS_SPOT_WEDGE_H
 
 #include "common.h"
+#include "lighting.h"
 #include "lanes.h"
-
-/* The wedge (φ - δ, φ + δ) of the cone axis (x, y) in a half-plane and cos_cone c; x, y and
- * c scaled by one positive factor give the same wedge. sin δ from r² - c² (0 where r < |c|:
- * δ = 0, or π for a cone wider than a half-turn's c < 0, which the loader's 90° at most
- * leaves only as rounding). */
-ALWAYS_INLINE float2 lit_wedge(float x, float y, float c)
-{
-    float phi = atan2_approx(y, x), delta = atan2_approx(inline_sqrt(inline_fmax(x * x + y * y - c * c, 0.0f)), c);
-    return (float2)(phi - delta, phi + delta);
-}
 
 /* lit_wedge on each lane. */
 ALWAYS_INLINE void lit_wedge_lanes(float_lanes x, float_lanes y, float_lanes c, float_lanes* lo, float_lanes* hi)
@@ -61,17 +46,20 @@ ALWAYS_INLINE float_lanes weight_in_wedge_lanes(global const epipolar_t* ep, flo
 }
 
 /* The weight of each lane's ray d (unit; cos β = d·a, sin β = |d × a|) up to distance, in
- * its own half-plane, whose side is (d - cos β·a)/sin β: x, y and c are taken times sin β,
- * which needs no division and gives the same wedge. */
+ * its own half-plane: ray_wedge (lighting.h) on each lane. */
 ALWAYS_INLINE float_lanes spot_weight_lanes(global const epipolar_t* ep, global const light_t* light,
                                             float_lanes dx, float_lanes dy, float_lanes dz, float_lanes cos_beta,
                                             float_lanes sin_beta, float_lanes distance)
 {
     float3 k = light->direction.xyz;
     float axis_along = inline_dot(ep->axis.xyz, k);
+    float3 k_normal = k - axis_along * ep->axis.xyz;
+    int_lanes own_side = sin_beta > WEDGE_SIN_BETA_MIN; /* else on the axis: u's half-plane */
+    float_lanes scale = own_side ? sin_beta : 1.0f;
+    float_lanes y = own_side ? dot_lanes(dx, dy, dz, k_normal.x, k_normal.y, k_normal.z)
+                             : (float_lanes)(inline_dot(ep->u.xyz, k_normal));
     float_lanes lo, hi;
-    lit_wedge_lanes(-axis_along * sin_beta, dot_lanes(dx, dy, dz, k.x, k.y, k.z) - cos_beta * axis_along,
-                    light->cos_cone * sin_beta, &lo, &hi);
+    lit_wedge_lanes(-axis_along * scale, y, light->cos_cone * scale, &lo, &hi);
     return weight_in_wedge_lanes(ep, lo, hi, cos_beta, sin_beta, distance);
 }
 

@@ -105,36 +105,65 @@ ALWAYS_INLINE float ray_beta(global const epipolar_t* ep, float3 dir, float* sin
     return inline_fmin(atan2_approx(*sin_beta, *cos_beta), nextafter(M_PI_F, 0.0f));
 }
 
-/* The γ extent of the ray along dir up to distance; 0 when it has none (it misses a
- * spot light's cone, or has no extent in γ). */
-inline int ray_span(global const epipolar_t* ep, global const light_t* light, global const frame_t* frame,
-                    global const integrand_t* integrand, float3 dir, float distance, ray_span_t* span)
+/* What ray_span leaves to the rest once the lit γ [span->gamma_begin, span->gamma_end] is
+ * set, from depths [begin, end] along the ray: the lamp's chord and the integrand's row. */
+ALWAYS_INLINE int finish_span(global const epipolar_t* ep, global const frame_t* frame,
+                              global const integrand_t* integrand, int directional, float beta, float sin_beta,
+                              float cos_beta, float begin, float end, ray_span_t* span)
 {
-    float sin_beta, cos_beta;
-    float beta = ray_beta(ep, dir, &sin_beta, &cos_beta);
-    float begin = 0.0f, end = distance;
-    if (light->type == LIGHT_SPOT && !spot_interval(light, dir, distance, &begin, &end))
-        return 0; /* the ray never enters the cone */
-    int directional = light->type == LIGHT_DIRECTIONAL;
-    /* A ray from the eye (begin 0, all but a spot light's) starts at γ = atan2(+0, d_el) = +0:
-     * no arc tangent for it, the same value. */
-    span->gamma_begin = directional ? begin * sin_beta
-                                    : (begin > 0.0f ? atan2_approx(begin * sin_beta, ep->d_el - begin * cos_beta) : 0.0f);
-    span->gamma_end = directional ? end * sin_beta : atan2_approx(end * sin_beta, ep->d_el - end * cos_beta);
     if (!(span->gamma_end > span->gamma_begin)) return 0;
     /* The lamp (lighting.h): a ray that passes within its radius of a point or spot light
      * leaves out the chord inside it, as exact does; this keeps a ray through the light
-     * finite. For every other ray the chord is empty. */
+     * finite. For every other ray the chord is empty. Its ends are kept within the lit γ
+     * (a spot light's lit part is known in γ, not in depth). */
     span->gamma_lamp0 = span->gamma_lamp1 = span->gamma_end;
     float radius = frame->lamp_radius, miss = ep->d_el * sin_beta;
     if (!directional && miss < radius) {
         float closest = ep->d_el * cos_beta, half_chord = inline_sqrt(radius * radius - miss * miss);
         float s0 = inline_clamp(closest - half_chord, begin, end), s1 = inline_clamp(closest + half_chord, begin, end);
-        span->gamma_lamp0 = atan2_approx(s0 * sin_beta, ep->d_el - s0 * cos_beta);
-        span->gamma_lamp1 = atan2_approx(s1 * sin_beta, ep->d_el - s1 * cos_beta);
+        span->gamma_lamp0 = inline_clamp(atan2_approx(s0 * sin_beta, ep->d_el - s0 * cos_beta), span->gamma_begin,
+                                         span->gamma_end);
+        span->gamma_lamp1 = inline_clamp(atan2_approx(s1 * sin_beta, ep->d_el - s1 * cos_beta), span->gamma_begin,
+                                         span->gamma_end);
     }
     span->ray = integrand_row(integrand, beta, sin_beta, cos_beta);
     return 1;
+}
+
+/* ray_span of a spot light's ray, its half-plane's lit wedge (lo, hi) of γ given
+ * (lighting.h's lit_wedge): [0, γ_end] within the wedge, or within the wedge a turn later
+ * (a wedge is at most a half-turn wide around a φ in (-π, π]: no other turn meets [0, π)). */
+inline int ray_span_in_wedge(global const epipolar_t* ep, global const frame_t* frame,
+                             global const integrand_t* integrand, float3 dir, float distance, float2 wedge,
+                             ray_span_t* span)
+{
+    float sin_beta, cos_beta;
+    float beta = ray_beta(ep, dir, &sin_beta, &cos_beta);
+    float gamma_end = atan2_approx(distance * sin_beta, ep->d_el - distance * cos_beta);
+    if (!(inline_fmin(gamma_end, wedge.y) > inline_fmax(wedge.x, 0.0f))) wedge += 2.0f * M_PI_F;
+    span->gamma_begin = inline_fmax(wedge.x, 0.0f);
+    span->gamma_end = inline_fmin(gamma_end, wedge.y);
+    return finish_span(ep, frame, integrand, 0, beta, sin_beta, cos_beta, 0.0f, distance, span);
+}
+
+/* The γ extent of the ray along dir up to distance; 0 when it has none (it misses a
+ * spot light's cone, or has no extent in γ). A spot light's cone is the wedge of the ray's
+ * own half-plane (sin β not clamped there: the wedge's x and y must scale alike). */
+inline int ray_span(global const epipolar_t* ep, global const light_t* light, global const frame_t* frame,
+                    global const integrand_t* integrand, float3 dir, float distance, ray_span_t* span)
+{
+    if (light->type == LIGHT_SPOT) {
+        float3 axis = ep->axis.xyz;
+        float2 wedge = ray_wedge(light, axis, ep->u.xyz, dir, inline_length(inline_cross(dir, axis)));
+        return ray_span_in_wedge(ep, frame, integrand, dir, distance, wedge, span);
+    }
+    float sin_beta, cos_beta;
+    float beta = ray_beta(ep, dir, &sin_beta, &cos_beta);
+    int directional = light->type == LIGHT_DIRECTIONAL;
+    /* The ray from the eye starts at γ = atan2(+0, d_el) = +0: no arc tangent for it. */
+    span->gamma_begin = 0.0f;
+    span->gamma_end = directional ? distance * sin_beta : atan2_approx(distance * sin_beta, ep->d_el - distance * cos_beta);
+    return finish_span(ep, frame, integrand, directional, beta, sin_beta, cos_beta, 0.0f, distance, span);
 }
 
 /* The two slices whose centres bracket the angle α, and the weight t of the second. The

@@ -187,6 +187,7 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
     sides = device.buffer(slice_sides(epipolar.params), writable=False)
     lengths = device.buffer(line_lengths(inputs.scene, epipolar.params, ranges, n), writable=False)
     line = device.buffer(nbytes=8 * slices * n)  # (distance, lit extent) per line sample
+    wedges = device.buffer(nbytes=8 * slices)  # a spot light's lit wedge of γ per slice (cl/spot_wedge.h)
     radiance = device.buffer(nbytes=16 * slices * n)  # (r, g, b times radiance_scale, distance) per line sample
     state = device.buffer(nbytes=slices * n)  # per line sample: left, computed or refined (cl/sampling.cl LINE_*)
     samples, n32 = inputs.samples, np.int32(n)
@@ -202,15 +203,16 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
         timer.add("traverse", event)  # the traverse stage, sampled
 
     run("line_samples", (-(-n // LANES), slices), None, buffers.params, buffers.views, buffers.lights, epipolar.buffer,
-        rastered.camera_depth, ranges_buffer, sides, n32, lengths, line)
+        rastered.camera_depth, ranges_buffer, sides, n32, lengths, line, wedges)
     runs = -(-(n - 1) // int(step))  # the runs between every step-th line sample
     walks = device.buffer(nbytes=2 * runs * slices)  # per run: its line samples that walked their row
     run("line_scatter", (runs, slices), None, buffers.params, buffers.views, buffers.lights,
         epipolar.buffer, epipolar.tree, integrand.params, integrand.data, texture.params, texture.basis,
-        texture.prefix, ranges_buffer, sides, line, n32, lengths, step, threshold, radiance, state, walks, *walked)
+        texture.prefix, ranges_buffer, sides, wedges, line, n32, lengths, step, threshold, radiance, state, walks,
+        *walked)
     run("line_refine_fill", (runs, slices), None, buffers.params, buffers.lights, epipolar.buffer, epipolar.tree,
-        integrand.params, integrand.data, texture.params, texture.basis, texture.prefix, ranges_buffer, sides, line,
-        n32, lengths, step, threshold, radiance, state, walks, *walked)
+        integrand.params, integrand.data, texture.params, texture.basis, texture.prefix, ranges_buffer, sides, wedges,
+        line, n32, lengths, step, threshold, radiance, state, walks, *walked)
     fixup_flags = device.buffer(nbytes=samples)  # per camera sample: a bit per slice fix_up walks
     run("gather", (-(-samples // LANES),), None, buffers.params, buffers.views, buffers.lights,
         epipolar.buffer, rastered.camera_depth, buffers.offsets, ranges_buffer, line, radiance, n32, lengths, threshold,
