@@ -124,16 +124,27 @@ inline float3 light_incident(global const light_t* light, float3 sigma_t, float3
  * cone where cos γ·x + sin γ·y ≥ c: (x, y) = (-a·k, s·k) is the cone's axis k seen in the
  * half-plane and c its cos_cone. Those are the γ within δ of φ = atan2(y, x), with
  * cos δ = c/r, r = |(x, y)|: one wedge (φ - δ, φ + δ), empty (δ = 0) where r < c. x, y and
- * c scaled by one positive factor give the same wedge. sin δ comes from r² - c², 0 where
- * r < |c| (δ = π for a c < 0, which the loader's 90° at most leaves only as rounding).
+ * c scaled by one positive factor give the same wedge. c is taken as at least 0 (a
+ * half-angle of at most 90°, as the loader allows), so δ ≤ π/2 and the wedge is at most a
+ * half-turn: lit_sweep's one turn of it is all that meets a ray.
  * A camera ray's lit part is then [0, γ_end] within the wedge, with no cuts along the ray:
  * where a ray passes near the apex the cone's quadric has two nearly equal roots, which
  * float32 finds far apart (spot_interval: up to a third of a pixel's in-scattering off
  * next to the bunny's lamp), while φ and δ do not depend on the ray's t at all. */
 ALWAYS_INLINE float2 lit_wedge(float x, float y, float c)
 {
+    c = inline_fmax(c, 0.0f);
     float phi = atan2_approx(y, x), delta = atan2_approx(inline_sqrt(inline_fmax(x * x + y * y - c * c, 0.0f)), c);
     return (float2)(phi - delta, phi + delta);
+}
+
+/* The lit part [begin, end] of a ray's sweep [0, γ_end] (empty where end ≤ begin): within
+ * the wedge, or within the wedge a turn later. A wedge is at most a half-turn wide around a
+ * φ in [-π, π], so no other turn meets [0, π), and the two never both do. */
+ALWAYS_INLINE float2 lit_sweep(float gamma_end, float2 wedge)
+{
+    if (!(inline_fmin(gamma_end, wedge.y) > inline_fmax(wedge.x, 0.0f))) wedge += 2.0f * M_PI_F;
+    return (float2)(inline_fmax(wedge.x, 0.0f), inline_fmin(gamma_end, wedge.y));
 }
 
 /* Below this sin β a ray's own half-plane is lost in the rounding of its float32 direction
@@ -141,13 +152,13 @@ ALWAYS_INLINE float2 lit_wedge(float x, float y, float c)
 #define WEDGE_SIN_BETA_MIN 1e-6f
 
 /* The lit wedge of the half-plane of the ray along dir (unit; sin β = |dir × a|, not
- * clamped). Its side is (dir - cos β·a)/sin β, so x and c are taken times sin β and y is
- * dir·k⊥, with k⊥ = k - (a·k)·a the cone axis's part normal to a: no division, and no
- * difference of dir·k and cos β·(a·k), which loses y where the ray nearly meets the light
- * (a cone aimed along the axis, whose y is 0, read 5e-4 off in a pixel beside its light).
- * A ray on the axis itself (below WEDGE_SIN_BETA_MIN) lies in every half-plane, and its
- * points are at γ = 0 or π, whose test does not depend on the side: the half-plane of
- * `normal`, any unit vector normal to the axis, stands for it. */
+ * clamped). Its side is (dir - cos β·a)/sin β, so x and c are taken times sin β, and y as
+ * dir·k⊥ = sin β·(s·k), with k⊥ = k - (a·k)·a the cone axis's part normal to a: no
+ * division. Either way y carries the float32 direction's own rounding, about 1e-7 absolute:
+ * φ is good to about 1e-7/sin β, a thousandth of a radian a ten-thousandth of a radian from
+ * the light. A ray on the axis itself (below WEDGE_SIN_BETA_MIN) lies in every half-plane,
+ * and its points are at γ = 0 or π, whose test does not depend on the side: the half-plane
+ * of `normal`, any unit vector normal to the axis, stands for it. */
 ALWAYS_INLINE float2 ray_wedge(global const light_t* light, float3 axis, float3 normal, float3 dir, float sin_beta)
 {
     float3 k = light->direction.xyz;
@@ -158,8 +169,9 @@ ALWAYS_INLINE float2 ray_wedge(global const light_t* light, float3 axis, float3 
 }
 
 /* The part [s0, s1] of the eye ray s·dir, s ∈ [0, far], inside a spot light's cone
- * (|angle to the axis| ≤ cone, on the light's side), for raymarch's steps, which are in s. For a half-angle ≤ 90° the cone
- * is convex, so this is one interval; returns 0 when the ray misses it. The candidate
+ * (|angle to the axis| ≤ cone, on the light's side), for raymarch's steps, which are in
+ * s. For a half-angle ≤ 90° the cone is convex, so this is one interval; returns 0 when
+ * the ray misses it. The candidate
  * ends are the roots of (w·k)² = cos²·|w|² (w = p - l), the apex plane and the ray's
  * ends; the pieces between them are tested at their midpoints. */
 ALWAYS_INLINE int spot_interval(global const light_t* light, float3 dir, float far, float* s0, float* s1)

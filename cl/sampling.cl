@@ -100,6 +100,12 @@ kernel void line_samples(global const frame_t* frame, global const view_t* views
 {
     int first = get_global_id(0) * LANES, i = get_global_id(1);
     if (i >= ep->slices) return;
+#if SAMPLING_LIGHT == LIGHT_SPOT
+    /* every sample of the slice lies in its half-plane: one wedge for them all, kept for
+     * line_scatter's and line_refine_fill's walks (written for every slice, read or not) */
+    float2 wedge = slice_wedge(ep, lights + ep->light_index, sides[i].xyz);
+    if (first == 0) wedges[i] = wedge;
+#endif
     int samples = lengths[i];
     if (first >= samples) return;
     int count = min(LANES, samples - first); /* the lanes that store */
@@ -145,10 +151,6 @@ kernel void line_samples(global const frame_t* frame, global const view_t* views
     float_lanes depth = LOAD_LANES((global const float*)camera_depth, (row * frame->width + column) * frame->spp);
     float_lanes distance = in_front ? fmin_lanes(depth, (float_lanes)(frame->far)) : (float_lanes)(frame->far);
 #if SAMPLING_LIGHT == LIGHT_SPOT
-    /* every sample of the slice lies in its half-plane: one wedge for them all, kept for
-     * line_scatter's and line_refine_fill's walks */
-    float2 wedge = slice_wedge(ep, lights + ep->light_index, side);
-    if (first == 0) wedges[i] = wedge;
     float_lanes weight = weight_in_wedge_lanes(ep, (float_lanes)(wedge.x), (float_lanes)(wedge.y), along * inverse,
                                                across * inverse, distance);
 #else

@@ -18,6 +18,7 @@
 /* lit_wedge on each lane. */
 ALWAYS_INLINE void lit_wedge_lanes(float_lanes x, float_lanes y, float_lanes c, float_lanes* lo, float_lanes* hi)
 {
+    c = fmax_lanes(c, (float_lanes)(0.0f));
     float_lanes phi = atan2_approx_lanes(y, x);
     float_lanes delta = atan2_approx_lanes(sqrt_lanes(fmax_lanes(x * x + y * y - c * c, (float_lanes)(0.0f))), c);
     *lo = phi - delta;
@@ -32,17 +33,17 @@ ALWAYS_INLINE float2 slice_wedge(global const epipolar_t* ep, global const light
 }
 
 /* The weight of each lane's ray (cos β, sin β with the axis) up to distance, its half-plane's
- * wedge [lo, hi]: the γ of [0, γ_end] inside the wedge or the wedge a turn later, over
- * d_el. A wedge has φ in (-π, π] and is at most a half-turn wide (up to rounding), so no
- * other turn of it meets [0, π). Where the ray misses the cone it is 0 exactly. */
+ * wedge [lo, hi]: the part of [0, γ_end] within it (lit_sweep on each lane), over d_el.
+ * Where the ray misses the cone it is 0 exactly. */
 ALWAYS_INLINE float_lanes weight_in_wedge_lanes(global const epipolar_t* ep, float_lanes lo, float_lanes hi,
                                                 float_lanes cos_beta, float_lanes sin_beta, float_lanes distance)
 {
     float_lanes gamma_end = atan2_approx_lanes(distance * sin_beta, ep->d_el - distance * cos_beta);
     float_lanes zero = 0.0f;
-    float_lanes first = fmin_lanes(gamma_end, hi) - fmax_lanes(lo, zero);
-    float_lanes second = fmin_lanes(gamma_end, hi + 2.0f * M_PI_F) - fmax_lanes(lo + 2.0f * M_PI_F, zero);
-    return (fmax_lanes(first, zero) + fmax_lanes(second, zero)) / ep->d_el;
+    int_lanes next_turn = !(fmin_lanes(gamma_end, hi) > fmax_lanes(lo, zero));
+    lo = next_turn ? lo + 2.0f * M_PI_F : lo;
+    hi = next_turn ? hi + 2.0f * M_PI_F : hi;
+    return fmax_lanes(fmin_lanes(gamma_end, hi) - fmax_lanes(lo, zero), zero) / ep->d_el;
 }
 
 /* The weight of each lane's ray d (unit; cos β = d·a, sin β = |d × a|) up to distance, in

@@ -105,22 +105,23 @@ ALWAYS_INLINE float ray_beta(global const epipolar_t* ep, float3 dir, float* sin
     return inline_fmin(atan2_approx(*sin_beta, *cos_beta), nextafter(M_PI_F, 0.0f));
 }
 
-/* What ray_span leaves to the rest once the lit γ [span->gamma_begin, span->gamma_end] is
- * set, from depths [begin, end] along the ray: the lamp's chord and the integrand's row. */
+/* What ray_span leaves to the rest once the lit γ [span->gamma_begin, span->gamma_end] of
+ * the ray up to `distance` is set: the lamp's chord and the integrand's row. */
 ALWAYS_INLINE int finish_span(global const epipolar_t* ep, global const frame_t* frame,
                               global const integrand_t* integrand, int directional, float beta, float sin_beta,
-                              float cos_beta, float begin, float end, ray_span_t* span)
+                              float cos_beta, float distance, ray_span_t* span)
 {
     if (!(span->gamma_end > span->gamma_begin)) return 0;
     /* The lamp (lighting.h): a ray that passes within its radius of a point or spot light
      * leaves out the chord inside it, as exact does; this keeps a ray through the light
      * finite. For every other ray the chord is empty. Its ends are kept within the lit γ
-     * (a spot light's lit part is known in γ, not in depth). */
+     * (γ grows along the ray: the same as keeping them within the lit depths). */
     span->gamma_lamp0 = span->gamma_lamp1 = span->gamma_end;
     float radius = frame->lamp_radius, miss = ep->d_el * sin_beta;
     if (!directional && miss < radius) {
         float closest = ep->d_el * cos_beta, half_chord = inline_sqrt(radius * radius - miss * miss);
-        float s0 = inline_clamp(closest - half_chord, begin, end), s1 = inline_clamp(closest + half_chord, begin, end);
+        float s0 = inline_clamp(closest - half_chord, 0.0f, distance);
+        float s1 = inline_clamp(closest + half_chord, 0.0f, distance);
         span->gamma_lamp0 = inline_clamp(atan2_approx(s0 * sin_beta, ep->d_el - s0 * cos_beta), span->gamma_begin,
                                          span->gamma_end);
         span->gamma_lamp1 = inline_clamp(atan2_approx(s1 * sin_beta, ep->d_el - s1 * cos_beta), span->gamma_begin,
@@ -130,20 +131,18 @@ ALWAYS_INLINE int finish_span(global const epipolar_t* ep, global const frame_t*
     return 1;
 }
 
-/* ray_span of a spot light's ray, its half-plane's lit wedge (lo, hi) of γ given
- * (lighting.h's lit_wedge): [0, γ_end] within the wedge, or within the wedge a turn later
- * (a wedge is at most a half-turn wide around a φ in (-π, π]: no other turn meets [0, π)). */
+/* ray_span of a spot light's ray, its half-plane's lit wedge of γ given (lighting.h's
+ * lit_wedge): the part of [0, γ_end] within it (lit_sweep). */
 inline int ray_span_in_wedge(global const epipolar_t* ep, global const frame_t* frame,
                              global const integrand_t* integrand, float3 dir, float distance, float2 wedge,
                              ray_span_t* span)
 {
     float sin_beta, cos_beta;
     float beta = ray_beta(ep, dir, &sin_beta, &cos_beta);
-    float gamma_end = atan2_approx(distance * sin_beta, ep->d_el - distance * cos_beta);
-    if (!(inline_fmin(gamma_end, wedge.y) > inline_fmax(wedge.x, 0.0f))) wedge += 2.0f * M_PI_F;
-    span->gamma_begin = inline_fmax(wedge.x, 0.0f);
-    span->gamma_end = inline_fmin(gamma_end, wedge.y);
-    return finish_span(ep, frame, integrand, 0, beta, sin_beta, cos_beta, 0.0f, distance, span);
+    float2 lit = lit_sweep(atan2_approx(distance * sin_beta, ep->d_el - distance * cos_beta), wedge);
+    span->gamma_begin = lit.x;
+    span->gamma_end = lit.y;
+    return finish_span(ep, frame, integrand, 0, beta, sin_beta, cos_beta, distance, span);
 }
 
 /* The γ extent of the ray along dir up to distance; 0 when it has none (it misses a
@@ -163,7 +162,7 @@ inline int ray_span(global const epipolar_t* ep, global const light_t* light, gl
     /* The ray from the eye starts at γ = atan2(+0, d_el) = +0: no arc tangent for it. */
     span->gamma_begin = 0.0f;
     span->gamma_end = directional ? distance * sin_beta : atan2_approx(distance * sin_beta, ep->d_el - distance * cos_beta);
-    return finish_span(ep, frame, integrand, directional, beta, sin_beta, cos_beta, 0.0f, distance, span);
+    return finish_span(ep, frame, integrand, directional, beta, sin_beta, cos_beta, distance, span);
 }
 
 /* The two slices whose centres bracket the angle α, and the weight t of the second. The

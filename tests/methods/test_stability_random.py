@@ -185,7 +185,9 @@ def walk_in_float64(scene, epipolar, tables, rows, depth) -> np.ndarray:
     float64: β and γ from float64 rays, the same slice blend, the same texel scan of the
     device's rectified rows (the tree walk equals the scan: test_minmax), the same lamp
     chord, and `integrand.segment_radiance` (the kernel's lookups, float64) on float64
-    tables. Returns (samples, 3) in-scattered radiance."""
+    tables. A spot light's cone is met along the ray in depth (`cone_interval`), where the
+    kernel takes it as a wedge of γ: in float64 the two agree. Returns (samples, 3)
+    in-scattered radiance."""
     light = scene.lights[0]
     params = epipolar.params
     axis, u, w = (params[name][:3].astype(np.float64) for name in ("axis", "u", "w"))
