@@ -106,6 +106,35 @@ ALWAYS_INLINE void gather_records(global const float4* records, int_lanes index,
                       records[index.s5], records[index.s6], records[index.s7], x, y, z, w);
 }
 
+/* records[first + k] on lane k, for a run of 8 consecutive records: four vector loads of
+ * two records each and transpose_records. */
+ALWAYS_INLINE void load_records_run(global const float4* records, int first, float_lanes* x, float_lanes* y,
+                                    float_lanes* z, float_lanes* w)
+{
+    global const float* p = (global const float*)(records + first);
+    float_lanes a = load_run(p, 0), b = load_run(p, 8), c = load_run(p, 16), d = load_run(p, 24);
+    transpose_records(a.lo, a.hi, b.lo, b.hi, c.lo, c.hi, d.lo, d.hi, x, y, z, w);
+}
+
+/* The other way: lane k's (x, y, z, w) as record k of a run, two records to each of the
+ * four vectors in `pairs` (to store at records + first as float8_at_float). */
+ALWAYS_INLINE void records_of_lanes(float_lanes x, float_lanes y, float_lanes z, float_lanes w, float_lanes pairs[4])
+{
+    pairs[0] = (float_lanes)(x.s0, y.s0, z.s0, w.s0, x.s1, y.s1, z.s1, w.s1);
+    pairs[1] = (float_lanes)(x.s2, y.s2, z.s2, w.s2, x.s3, y.s3, z.s3, w.s3);
+    pairs[2] = (float_lanes)(x.s4, y.s4, z.s4, w.s4, x.s5, y.s5, z.s5, w.s5);
+    pairs[3] = (float_lanes)(x.s6, y.s6, z.s6, w.s6, x.s7, y.s7, z.s7, w.s7);
+}
+
+/* load_pairs_run's inverse: lane k's (even, odd) stored at pointer[2·(first + k)] and the
+ * float after it, as two vector stores. */
+ALWAYS_INLINE void store_pairs_run(global float* pointer, int first, float_lanes even, float_lanes odd)
+{
+    global float8_at_float* out = (global float8_at_float*)(pointer + 2 * first);
+    out[0] = (float_lanes)(even.s0, odd.s0, even.s1, odd.s1, even.s2, odd.s2, even.s3, odd.s3);
+    out[1] = (float_lanes)(even.s4, odd.s4, even.s5, odd.s5, even.s6, odd.s6, even.s7, odd.s7);
+}
+
 ALWAYS_INLINE float_lanes float_of_lanes(int_lanes x) { return __builtin_convertvector(x, float_lanes); }
 ALWAYS_INLINE int_lanes int_of_lanes(float_lanes x) { return __builtin_convertvector(x, int_lanes); }
 ALWAYS_INLINE float_lanes fabs_lanes(float_lanes x) { return as_float8(as_uint8(x) & 0x7fffffffu); }

@@ -192,7 +192,6 @@ kernel void rectify(global const view_t* views, global const light_t* lights,
     int n = ep->gamma_samples;
     if (first >= n || slice >= ep->slices) return;
     global const light_t* light = lights + ep->light_index;
-    global const float* angles = (global const float*)texel_angles; /* (γ, cos γ, sin γ, 0) per texel */
     float3 r = slice_sides[slice].xyz;
     float_lanes gamma[RECTIFY_BATCHES], cos_gamma[RECTIFY_BATCHES], sin_gamma[RECTIFY_BATCHES];
     float_lanes depth[RECTIFY_BATCHES];
@@ -204,11 +203,8 @@ kernel void rectify(global const view_t* views, global const light_t* lights,
         int start = first + b * LANES;
         int_lanes texel = min_lanes(start + (int_lanes)(0, 1, 2, 3, 4, 5, 6, 7), (int_lanes)(n - 1));
         float_lanes unused;
-        if (start + LANES <= n) { /* the texels' records one after another: four loads of two, transposed */
-            float_lanes p0 = load_run(angles, 4 * start), p1 = load_run(angles, 4 * start + 8);
-            float_lanes p2 = load_run(angles, 4 * start + 16), p3 = load_run(angles, 4 * start + 24);
-            transpose_records(p0.lo, p0.hi, p1.lo, p1.hi, p2.lo, p2.hi, p3.lo, p3.hi, &gamma[b], &cos_gamma[b],
-                              &sin_gamma[b], &unused);
+        if (start + LANES <= n) { /* the texels' records one after another */
+            load_records_run(texel_angles, start, &gamma[b], &cos_gamma[b], &sin_gamma[b], &unused);
         } else {
             gather_records(texel_angles, texel, &gamma[b], &cos_gamma[b], &sin_gamma[b], &unused);
         }

@@ -157,11 +157,7 @@ kernel void line_samples(global const frame_t* frame, global const view_t* views
     float_lanes weight = 0.0f; /* read for a spot light only (line_sample_needed, slice_line) */
 #endif
     if (count == LANES) { /* two stores of four (distance, weight) pairs each */
-        global float8_at_float* pairs = (global float8_at_float*)out;
-        pairs[0] = (float_lanes)(distance.s0, weight.s0, distance.s1, weight.s1, distance.s2, weight.s2, distance.s3,
-                                 weight.s3);
-        pairs[1] = (float_lanes)(distance.s4, weight.s4, distance.s5, weight.s5, distance.s6, weight.s6, distance.s7,
-                                 weight.s7);
+        store_pairs_run((global float*)out, 0, distance, weight);
         return;
     }
     for (int lane = 0; lane < count; ++lane) out[lane] = (float2)(distance[lane], weight[lane]);
@@ -511,10 +507,8 @@ kernel void gather(global const frame_t* frame, global const view_t* views, glob
     int_lanes flags = (from0 ? 0 : 1) | (from1 ? 0 : 2);
     if (run) { /* four stores of two samples' (r, g, b, 0) each, one of the 8 flags */
         global float8_at_float* out = (global float8_at_float*)(scatter + first);
-        float_lanes pairs[4] = {(float_lanes)(red.s0, green.s0, blue.s0, 0.0f, red.s1, green.s1, blue.s1, 0.0f),
-                                (float_lanes)(red.s2, green.s2, blue.s2, 0.0f, red.s3, green.s3, blue.s3, 0.0f),
-                                (float_lanes)(red.s4, green.s4, blue.s4, 0.0f, red.s5, green.s5, blue.s5, 0.0f),
-                                (float_lanes)(red.s6, green.s6, blue.s6, 0.0f, red.s7, green.s7, blue.s7, 0.0f)};
+        float_lanes pairs[4];
+        records_of_lanes(red, green, blue, 0.0f, pairs);
         for (int k = 0; k < 4; ++k) out[k] = overwrite ? pairs[k] : out[k] + pairs[k];
         *(global uchar8_at_uchar*)(fixup_flags + first) = __builtin_convertvector(flags, uchar8);
         return;

@@ -61,17 +61,6 @@ ALWAYS_INLINE vec_lanes gather_xyz(global const float4* array, int_lanes index, 
     return out;
 }
 
-/* records[first + k].xyz on lane k, for a run of consecutive samples: four vector loads of
- * two records each and the transpose. */
-ALWAYS_INLINE vec_lanes xyz_run(global const float4* records, int first)
-{
-    global const float* p = (global const float*)(records + first);
-    float_lanes a = load_run(p, 0), b = load_run(p, 8), c = load_run(p, 16), d = load_run(p, 24), unused;
-    vec_lanes out;
-    transpose_records(a.lo, a.hi, b.lo, b.hi, c.lo, c.hi, d.lo, d.hi, &out.x, &out.y, &out.z, &unused);
-    return out;
-}
-
 /* exp of each lane: PoCL's float8 exp gives each lane the bits its float3 exp gives each
  * component, checked on all 2^32 inputs (bench/RESULTS.md, "shade in lanes"). */
 ALWAYS_INLINE float_lanes exp_lanes(float_lanes x) { return exp(x); }
@@ -323,7 +312,12 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                                  albedo.z * irradiance.z * M_1_PI_F};
             surface = select_lanes(background, surface, lambert);
         }
-        vec_lanes in_scatter = run ? xyz_run(scatter, first) : gather_xyz(scatter, sample, 0);
+        vec_lanes in_scatter;
+        float_lanes unused;
+        if (run)
+            load_records_run(scatter, first, &in_scatter.x, &in_scatter.y, &in_scatter.z, &unused);
+        else
+            in_scatter = gather_xyz(scatter, sample, 0);
         vec_lanes to_eye = attenuation_lanes(sigma_t, distance);
 #ifdef SHADE_TRANSPARENCY
         vec_lanes through = gather_xyz(transmittance, sample, 0), front = gather_xyz(in_front, sample, 0);
@@ -338,12 +332,10 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
     }
     float spp = (float)frame->spp;
     if (run) { /* four stores of two pixels each */
-        float_lanes r = total.x / spp, g = total.y / spp, b = total.z / spp;
+        float_lanes pairs[4];
+        records_of_lanes(total.x / spp, total.y / spp, total.z / spp, 1.0f, pairs);
         global float8_at_float* out = (global float8_at_float*)(image + first);
-        out[0] = (float_lanes)(r.s0, g.s0, b.s0, 1.0f, r.s1, g.s1, b.s1, 1.0f);
-        out[1] = (float_lanes)(r.s2, g.s2, b.s2, 1.0f, r.s3, g.s3, b.s3, 1.0f);
-        out[2] = (float_lanes)(r.s4, g.s4, b.s4, 1.0f, r.s5, g.s5, b.s5, 1.0f);
-        out[3] = (float_lanes)(r.s6, g.s6, b.s6, 1.0f, r.s7, g.s7, b.s7, 1.0f);
+        for (int k = 0; k < 4; ++k) out[k] = pairs[k];
         return;
     }
     for (int k = 0; k < LANES; ++k)

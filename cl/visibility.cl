@@ -745,9 +745,7 @@ ALWAYS_INLINE void store_prepared(global const frame_t* frame, int first, int l,
 {
     if (frame->light_count == 1) {
         *(global float8_at_float*)(visible + first) = answer;
-        global int8_at_int* reads = (global int8_at_int*)(map_read + first);
-        reads[0] = (int_lanes)(address.s0, depth.s0, address.s1, depth.s1, address.s2, depth.s2, address.s3, depth.s3);
-        reads[1] = (int_lanes)(address.s4, depth.s4, address.s5, depth.s5, address.s6, depth.s6, address.s7, depth.s7);
+        store_pairs_run((global float*)map_read, first, as_float8(address), as_float8(depth));
         return;
     }
     for (int k = 0; k < LANES; ++k) {
