@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-device test-slow bench info clean
+.PHONY: demo test test-device test-slow bench info intel-cpu clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -24,8 +24,19 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(BIN)/python -m pytest
 
-test-device: $(STAMP)
-	@test -n "$(DEVICE)" || { echo "usage: make test-device DEVICE=<spec, e.g. nvidia or 1:0>"; exit 2; }
+# DEVICE=Intel (any case) first installs Intel's CPU runtime, the `intel-cpu` extra (about
+# 800 MB); clrays registers it with the OpenCL loader itself.
+INTEL_STAMP := $(VENV)/.intel-cpu
+NEEDS_INTEL := $(if $(findstring intel,$(shell echo '$(DEVICE)' | tr 'A-Z' 'a-z')),$(INTEL_STAMP))
+
+$(INTEL_STAMP): $(STAMP)
+	$(BIN)/python -m pip install -q -e '.[test,bench,distributed,video,intel-cpu]'
+	touch $(INTEL_STAMP)
+
+intel-cpu: $(INTEL_STAMP)
+
+test-device: $(STAMP) $(NEEDS_INTEL)
+	@test -n "$(DEVICE)" || { echo "usage: make test-device DEVICE=<spec, e.g. nvidia, Intel or 1:0>"; exit 2; }
 	CLRAYS_TEST_DEVICE='$(DEVICE)' $(BIN)/python -m pytest
 
 test-slow: $(STAMP)

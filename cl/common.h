@@ -25,6 +25,17 @@
 #error "the constants of clrays/structs.py are missing: build with clrays.device.build_options()"
 #endif
 
+/* On the line before a kernel that Intel's CPU compiler must run one work-item at a time.
+ * Its implicit vectorizer (several work-items in the lanes of one vector) garbles the float3
+ * that walk.h's row walk carries out of its loop: the radiance lands in other colour
+ * channels and work-items (its 2026.2 release; docs/design.md §4.5, "Other CPU runtimes").
+ * Other compilers do not know the attribute, and build these kernels as before. */
+#ifdef cl_intel_vec_len_hint
+#define NOT_ACROSS_WORK_ITEMS __attribute__((intel_vec_len_hint(1)))
+#else
+#define NOT_ACROSS_WORK_ITEMS
+#endif
+
 /* Barycentric slack of every camera-ray triangle test (Möller–Trumbore, edges inclusive):
  * float32 rounding, fused or not, can put a ray through an edge two triangles share outside
  * both; a relative 1e-5 overlap closes such cracks (the depth test, or a same-surface merge,

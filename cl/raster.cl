@@ -319,7 +319,8 @@ inline int misses_every_sample(global const view_t* view, global const float4* t
     int count = projected_polygon(view, v0, v1, v2, corner);                                \
     if (count < 3) EXIT;                                                                    \
     float top = INFINITY, bottom = -INFINITY;                                               \
-    for (int k = 0; k < count; ++k) { top = FMIN(top, corner[k].y); bottom = FMAX(bottom, corner[k].y); } \
+    for (int k = 0; k < 4; ++k) /* (a fixed count: Intel's CPU compiler crashed on `k < count`) */ \
+        if (k < count) { top = FMIN(top, corner[k].y); bottom = FMAX(bottom, corner[k].y); } \
     int y0 = MAX_INT(FLOOR_INT(FMAX(top, -1.0f)) - 1, 0);                                   \
     int y1 = MIN_INT(CEIL_INT(FMIN(bottom, (float)view->height)), view->height - 1);        \
     triangle_test_t test = triangle_test(view, v0, v1, v2);
@@ -480,22 +481,17 @@ kernel void raster_split(global const ulong* nearest, int samples, global uint* 
 
 /* Whether any texel of a depth buffer holds a depth (map_is_empty): a flag set on the
  * device, so the host reads 4 bytes instead of the whole map. One work-item per
- * RASTER_ANY_TEXELS texels (clrays/structs.py), read as vectors of 16; once the flag is
- * set, the work-items after it read nothing more (a map with any occluder is the usual
- * case, and a stale 0 only means one more scan). */
+ * RASTER_ANY_TEXELS texels (clrays/structs.py); once the flag is set, the work-items after
+ * it read nothing more (a map with any occluder is the usual case, and a stale 0 only means
+ * one more scan). A plain loop, which compilers vectorize themselves: PoCL 3.0 on a CPU
+ * with AVX-512 miscompiled the uint16 reduction this was (the flag set on an empty map),
+ * and the loop is as fast (docs/design.md §4.5, "Wide vectors"). */
 kernel void raster_any(global const uint* depth, int texels, volatile global uint* any)
 {
     int first = get_global_id(0) * RASTER_ANY_TEXELS;
     if (first >= texels || *any) return;
-    if (first + RASTER_ANY_TEXELS <= texels) {
-        uint16 seen = (uint16)(0u);
-        for (int k = 0; k < RASTER_ANY_TEXELS / 16; ++k) seen |= vload16(0, depth + first + 16 * k) ^ DEPTH_EMPTY;
-        uint8 half_seen = seen.lo | seen.hi;
-        uint4 quarter = half_seen.lo | half_seen.hi;
-        uint2 eighth = quarter.lo | quarter.hi;
-        if ((eighth.x | eighth.y) != 0u) *any = 1u;
-        return;
-    }
-    for (int i = first; i < texels; ++i)
-        if (depth[i] != DEPTH_EMPTY) *any = 1u;
+    int end = min(first + RASTER_ANY_TEXELS, texels);
+    uint seen = 0u;
+    for (int i = first; i < end; ++i) seen |= depth[i] ^ DEPTH_EMPTY;
+    if (seen != 0u) *any = 1u;
 }

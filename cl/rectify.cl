@@ -170,9 +170,9 @@ ALWAYS_INLINE void store_level0(global float* row, int first, int n, float_lanes
 {
     if (first >= n) return;
     if (first + LANES <= n) {
-        /* each lane twice, in one store */
-        *(global float16*)(row + 2 * first) = __builtin_shufflevector(blocker_beta, blocker_beta, 0, 8, 1, 9, 2, 10, 3, 11,
-                                                                     4, 12, 5, 13, 6, 14, 7, 15);
+        /* each lane twice, as two float8 stores: no 16-wide vector, which PoCL 3.0
+         * miscompiled on a CPU with AVX-512 (docs/design.md §4.5, "Wide vectors") */
+        store_pairs_run(row, first, blocker_beta, blocker_beta);
     } else {
         for (int k = 0; first + k < n; ++k) row[2 * (first + k)] = row[2 * (first + k) + 1] = blocker_beta[k];
     }

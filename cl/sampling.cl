@@ -247,6 +247,7 @@ ALWAYS_INLINE int radiance_breaks(float3 a, float3 b, float threshold)
  * with the radiance (line's distances are then not read there but for a spot light's
  * weights). A work-item per run, not per sample: most samples are not needed, and the
  * run's ends bound line_refine_fill's work-item too. */
+NOT_ACROSS_WORK_ITEMS
 kernel void line_scatter(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                          global const epipolar_t* ep, global const float2* tree,
                          global const integrand_t* integrand, global const float* tables,
@@ -296,6 +297,7 @@ kernel void line_scatter(global const frame_t* frame, global const view_t* views
  *   side; it stays LINE_LEFT, so the next fill skips it.
  * The run's ends are computed and stay as they are: the work-items of the runs on either
  * side read them, and write only inside their own runs. */
+NOT_ACROSS_WORK_ITEMS
 kernel void line_refine_fill(global const frame_t* frame, global const light_t* lights, global const epipolar_t* ep,
                              global const float2* tree, global const integrand_t* integrand,
                              global const float* tables, global const textured_integrand_t* textured,
@@ -450,6 +452,7 @@ inline float3 gather_ray(global const frame_t* frame, global const view_t* views
  * first light's, into a buffer not cleared); flag the sample in `fixup_flags` (a bit per slice)
  * for fix_up where a slice cannot interpolate. No walk and no atomic here: vector
  * arithmetic, a load per lane where the lanes read different slices. */
+NOT_ACROSS_WORK_ITEMS
 kernel void gather(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                    global const epipolar_t* ep, global const uint* camera_depth, global const float2* offsets,
                    global const float2* ranges, global const float2* line, global const float4* radiance, int n,
@@ -552,6 +555,7 @@ kernel void fixup_list(int samples, global const uchar* fixup_flags, global cons
 
 /* Per listed camera sample: walk the rows of the slices it could not interpolate, as
  * traverse does, and add them with their weights. */
+NOT_ACROSS_WORK_ITEMS
 kernel void fix_up(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                    global const epipolar_t* ep, global const float2* tree, global const integrand_t* integrand,
                    global const float* tables, global const uint* camera_depth, global const float2* offsets,

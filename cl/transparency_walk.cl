@@ -54,6 +54,7 @@ inline void fog_pieces(global const epipolar_t* ep, global const light_t* light,
     }
 }
 
+NOT_ACROSS_WORK_ITEMS
 kernel void transparency_walk(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                               global const epipolar_t* epipolar, global const float2* tree,
                               global const integrand_t* integrand, global const float* tables,

@@ -7,6 +7,7 @@
  * (docs/light-textures.md); adds into scatter (float4 per camera sample). */
 #include "walk.h"
 
+NOT_ACROSS_WORK_ITEMS
 kernel void traverse(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                      global const epipolar_t* epipolar, global const float2* tree,
                      global const integrand_t* integrand, global const float* tables,

@@ -101,6 +101,7 @@ inline float3 moments_rows(global const epipolar_t* ep, global const prefix_t* r
     return radiance;
 }
 
+NOT_ACROSS_WORK_ITEMS
 kernel void volume_moments_scatter(global const frame_t* frame, global const view_t* views,
                                    global const light_t* lights, global const epipolar_t* epipolar,
                                    global const prefix_t* prefix, global const integrand_t* integrand,

@@ -18,6 +18,7 @@ from typing import Callable
 import click
 from click.core import ParameterSource
 
+from . import device as device_settings
 from .device import list_devices, select_device
 from .errors import ClraysError, DeviceError, OutputError
 from .image_io import check_finite, check_folder, check_output_path, make_folder, write_image
@@ -47,6 +48,8 @@ def _set_debug(context: click.Context, parameter, value: bool) -> None:
     """--debug, given to the group or to a command: kept in `ctx.obj`, which they share."""
     settings = context.ensure_object(dict)
     settings["debug"] = settings.get("debug", False) or value
+    if value:  # and the OpenCL compiler's own output, which is otherwise kept out of the terminal
+        device_settings.show_compiler_output = True
 
 
 class Option(click.Option):
@@ -130,7 +133,7 @@ class Clrays(click.Group):
 def device_option():
     return option("--device", envvar="CLRAYS_DEVICE", show_envvar=True, metavar="P:D|NAME", group=DEVICE,
                   help="OpenCL device: 'P:D' or a name substring (see `clrays info`). Default: the first GPU, "
-                       "else the first CPU device.")
+                       "else PoCL's CPU device.")
 
 
 def method_option():
@@ -684,8 +687,10 @@ def info(context, device: str | None) -> None:
         if device is None or not devices:
             raise
         chosen = None  # list them anyway: they are what the spec should name
+    # One mark: a runtime loaded twice can hand out the same device handle on two platforms.
+    chosen_at = next(((p, d) for p, d, _, dev in devices if dev == chosen), None)
     for p, d, platform, dev in devices:
-        mark = "*" if dev == chosen else " "
+        mark = "*" if (p, d) == chosen_at else " "
         memory = dev.global_mem_size / 2**30
         doubles = "fp64" if dev.double_fp_config else "no fp64"
         click.echo(f"{mark} {p}:{d}  {platform.name.strip()} / {dev.name.strip()}  "

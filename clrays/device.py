@@ -2,21 +2,26 @@
 
 Device choice: `--device` or `CLRAYS_DEVICE` (an index like `0:1` for platform 0,
 device 1, or a case-insensitive substring of the platform's name or vendor or the
-device's name, such as `pocl` or `nvidia`); by default the first GPU, else the first
-CPU device.
+device's name, such as `pocl`, `intel` or `nvidia`); by default the first GPU, else
+PoCL's CPU device, else the first device.
 """
 from __future__ import annotations
 
 import collections
+import contextlib
+import hashlib
 import os
+import sys
+import tempfile
 import warnings
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
-from . import structs
+from . import runtimes, structs
 from .errors import DeviceError
 
 
@@ -44,7 +49,55 @@ def build_options(defines: dict[str, object] | None = None, constants: dict[str,
     return [f"-I{kernel_dir()}"] + shared + [f"-D{k}={v}" for k, v in sorted((defines or {}).items())]
 
 
+def _stderr_line(text: str) -> None:
+    print(text, file=sys.stderr, flush=True)
+
+
+#: Where a Device says, once, that it is building kernels no earlier run on this device
+#: built (about 10–15 s on a CPU): one line on stderr by default; None says nothing.
+build_notice: Callable[[str], None] | None = _stderr_line
+#: Whether the OpenCL compiler's own output ("1 warning generated." and the like) reaches
+#: stderr; the CLI's --debug sets it. Otherwise it is kept out of the terminal.
+show_compiler_output = False
+
+
+@contextlib.contextmanager
+def _compiler_output():
+    """What the OpenCL compiler writes to stderr (file descriptor 2) while the block runs,
+    held back (a file), unless `show_compiler_output`: PoCL's clang prints its diagnostics'
+    count there itself, past Python's warnings. Yields a function that returns the text."""
+    if show_compiler_output:
+        yield lambda: ""
+        return
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError):  # no descriptor 2 to redirect
+        yield lambda: ""
+        return
+    with tempfile.TemporaryFile() as sink:
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield lambda: (sink.seek(0), sink.read().decode(errors="replace"))[1]
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+
+
+def _kernels_digest(device) -> str:
+    """What decides whether this device has built these kernels before: the device and its
+    driver, the kernel sources and the shared constants."""
+    digest = hashlib.sha256()
+    for text in (device.platform.name, device.platform.version, device.name, device.driver_version,
+                 repr(sorted(structs.kernel_defines().items()))):
+        digest.update(text.encode() + b"\0")
+    for path in sorted(kernel_dir().glob("*.[ch]*")):
+        digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    return digest.hexdigest()[:24]
+
+
 def _import_cl():
+    runtimes.register()  # before the ICD loader's first call, which reads its vendors once
     try:
         import pyopencl as cl
     except ImportError as exc:  # pragma: no cover - install problem
@@ -53,20 +106,25 @@ def _import_cl():
 
 
 def list_devices() -> list[tuple[int, int, object, object]]:
-    """(platform index, device index, platform, device) for every OpenCL device."""
+    """(platform index, device index, platform, device) for every OpenCL device, each once:
+    a runtime the loader finds twice (PoCL's wheel and the system's copy of the same
+    build) shows two platforms alike in every name and version, and only the first counts."""
     cl = _import_cl()
     try:
         platforms = cl.get_platforms()
     except cl.Error as exc:
         raise DeviceError(f"no OpenCL platform found ({exc}); install pocl-binary-distribution") from exc
-    found = []
+    found, seen = [], set()
     for p_index, platform in enumerate(platforms):
         try:
             devices = platform.get_devices()
         except cl.Error:
             continue
         for d_index, device in enumerate(devices):
-            found.append((p_index, d_index, platform, device))
+            identity = (platform.name, platform.version, d_index, device.name, device.version, device.driver_version)
+            if identity not in seen:
+                seen.add(identity)
+                found.append((p_index, d_index, platform, device))
     return found
 
 
@@ -78,8 +136,11 @@ def select_device(spec: str | None = None):
     if not devices:
         raise DeviceError("no OpenCL device found; install pocl-binary-distribution for the CPU device")
     if spec is None:
+        # The loader's order of runtimes is its own: PoCL, which the suite and its golden
+        # images are for, comes before another CPU runtime (`--device intel` picks Intel's).
         gpus = [d for d in devices if d[3].type & cl.device_type.GPU]
-        return (gpus or devices)[0][3]
+        pocl = [d for d in devices if "pocl" in d[2].vendor.lower()]
+        return (gpus or pocl or devices)[0][3]
     if ":" in spec and all(part.isdigit() for part in spec.split(":", 1)):
         p, d = (int(part) for part in spec.split(":", 1))
         for entry in devices:
@@ -215,6 +276,7 @@ class Device:
         self._max_group = max(min(MAX_CPU_GROUP, int(self.device.max_work_group_size)), 1)
         self._local_sizes: dict[tuple, tuple] = {}
         self.allocated_bytes = 0
+        self._announced = False
 
     @property
     def is_cpu(self) -> bool:
@@ -231,13 +293,32 @@ class Device:
         if key not in self._programs:
             path = kernel_dir() / f"{stage}.cl"
             options = build_options(defines, self._constants)
+            marker = self._first_build()
             try:
-                with warnings.catch_warnings():
+                with warnings.catch_warnings(), _compiler_output():
                     warnings.simplefilter("ignore", self.cl.CompilerWarning)
                     self._programs[key] = self.cl.Program(self.context, path.read_text()).build(options=options)
             except self.cl.RuntimeError as exc:
                 raise DeviceError(f"{path}: build failed with options {' '.join(options)}:\n{exc}") from exc
+            if marker is not None:
+                with contextlib.suppress(OSError):
+                    marker.parent.mkdir(parents=True, exist_ok=True)
+                    marker.touch()
         return self._programs[key]
+
+    def _first_build(self) -> Path | None:
+        """At this Device's first build: announce it (build_notice) when no earlier run has
+        built these kernels for this device, and return the marker file that says one has
+        (to touch once the build succeeds); else None. The driver caches the binaries."""
+        if self._announced:
+            return None
+        self._announced = True
+        marker = runtimes.cache_root() / "built" / _kernels_digest(self.device)
+        if marker.exists():
+            return None
+        if build_notice is not None:
+            build_notice(f"building OpenCL kernels for {self.name} (first run, cached after)")
+        return marker
 
     def kernel(self, stage: str, name: str, defines: dict[str, object] | None = None):
         """The kernel `name` of `cl/<stage>.cl`, retrieved once and reused."""

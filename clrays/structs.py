@@ -76,7 +76,7 @@ RASTER_BIG_TRIANGLES = 1 << 16
 # CPU device, 32 columns of them elsewhere), of every listed triangle: it owns them (no
 # atomics), and the clipping and projection it repeats per triangle are paid once per block.
 RASTER_ROWS_PER_ITEM = 4
-# raster_any (is a map empty?) reads this many texels per work-item, a multiple of 16.
+# raster_any (is a map empty?) reads this many texels per work-item.
 RASTER_ANY_TEXELS = 256
 
 # visibility: the value of a sample and light that visibility_prepare leaves to the maps

@@ -1,0 +1,79 @@
+"""The OpenCL runtimes clrays finds (clrays/runtimes.py, `clrays info`) and what the first
+run on a device prints."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from clrays import runtimes
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def _clrays(*args: str, env: dict[str, str]) -> subprocess.CompletedProcess:
+    """`clrays ARGS` in a fresh process: the ICD loader reads its vendors once per process."""
+    clean = {k: v for k, v in os.environ.items() if k not in ("OCL_ICD_VENDORS", "CLRAYS_DEVICE")}
+    return subprocess.run([sys.executable, "-m", "clrays.cli", *args], capture_output=True, text=True,
+                          env={**clean, **env}, cwd=REPO, timeout=600)
+
+
+def test_a_pip_runtime_joins_the_systems_vendors(tmp_path, monkeypatch):
+    system = tmp_path / "system"
+    system.mkdir()
+    (system / "vendor.icd").write_text("libvendor.so\n")
+    library = tmp_path / "lib" / "libintelocl.so"
+    monkeypatch.setenv("OPENCL_VENDOR_PATH", str(system))
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    entries = runtimes._vendor_entries([library])
+    assert entries == {"vendor.icd": "libvendor.so\n", "clrays-libintelocl.icd": f"{library}\n"}
+    folder = runtimes._write_vendors(entries)
+    assert {path.name: path.read_text() for path in folder.iterdir()} == entries
+    assert runtimes._write_vendors(entries) == folder  # the same list: the same folder, untouched
+
+
+def test_the_users_own_vendors_win(monkeypatch):
+    monkeypatch.setattr(runtimes, "_registered", False)
+    monkeypatch.setattr(runtimes, "pip_runtime_libraries", lambda: [Path("/nowhere/libintelocl.so")])
+    monkeypatch.setenv("OCL_ICD_VENDORS", "/the/users/vendors")
+    runtimes.register()
+    assert os.environ["OCL_ICD_VENDORS"] == "/the/users/vendors"
+
+
+def test_a_runtime_registered_twice_is_listed_once_with_one_default(tmp_path):
+    # PoCL's library named a second time (as a system-wide PoCL of the same build would be):
+    # the loader then reports two platforms alike in every name and version.
+    import pyopencl
+
+    library = next((Path(pyopencl.__file__).parent / ".libs").glob("libpocl*.so*"), None)
+    if library is None:
+        pytest.skip("this pyopencl carries no PoCL library of its own")
+    vendors = tmp_path / "vendors"
+    vendors.mkdir()
+    (vendors / "pocl-again.icd").write_text(f"{library}\n")
+    run = _clrays("info", env={"OCL_ICD_VENDORS": str(vendors)})
+    assert run.returncode == 0, run.stderr
+    devices = [line for line in run.stdout.splitlines() if "/" in line and "CUs" in line]
+    pocl = [line for line in devices if "Portable Computing Language" in line]
+    assert len(pocl) == 1, run.stdout
+    assert sum(line.startswith("*") for line in devices) == 1, run.stdout
+
+
+def test_the_first_run_says_it_builds_and_keeps_the_compiler_quiet(tmp_path):
+    env = {"XDG_CACHE_HOME": str(tmp_path / "cache"), "POCL_CACHE_DIR": str(tmp_path / "pocl"),
+           "CLRAYS_DEVICE": "Portable Computing Language"}
+    render = ("render", "scenes/demo.yaml", "-o", str(tmp_path / "d.png"), "--set", "image.width=16",
+              "--set", "image.height=9")
+    first = _clrays(*render, env=env)
+    assert first.returncode == 0, first.stderr
+    lines = first.stderr.splitlines()
+    notices = [line for line in lines if line.startswith("building OpenCL kernels for ")]
+    assert len(notices) == 1, first.stderr
+    assert notices[0].startswith("building OpenCL kernels for Portable Computing Language / ")
+    assert notices[0].endswith(" (first run, cached after)")
+    assert not any("generated" in line for line in lines), first.stderr
+    again = _clrays(*render, env=env)
+    assert again.returncode == 0 and "building OpenCL kernels" not in again.stderr, again.stderr
