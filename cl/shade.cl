@@ -21,7 +21,7 @@
 #include "translucency.h"
 #include "lanes.h"
 
-#define SURFACE_BIAS_TEXELS 1.5f /* depth tolerance of the surface shadow test */
+/* SURFACE_BIAS_TEXELS, the surface shadow test's depth tolerance: clrays/structs.py (-D). */
 
 /* A scene with translucent objects builds shade with SHADE_TRANSPARENCY: the transparency stage's
  * T(D) and the light of the layers in front of each sample (docs/design.md, translucent surfaces:

@@ -103,10 +103,8 @@ kernel void translucency_rectify(global const view_t* views, global const light_
  * Reads frame, views, lights, layers, camera_depth, tri_id, tri_normal, offsets, the
  * translucent triangles (eye space), their clear and BVH; writes surface_through
  * (float4 per sample and light). Opaque occluders are the visibility stage's. */
-#ifndef SHADOW_RAY_OFFSET_REL
-#define SHADOW_RAY_OFFSET_REL 2e-6f /* visibility.cl's: the shadow ray leaves the surface */
-#endif
-#define SURFACE_BIAS_TEXELS 1.5f /* shade.cl's depth tolerance of the surface lookups */
+/* SHADOW_RAY_OFFSET_REL and SURFACE_BIAS_TEXELS: visibility.cl's and shade.cl's, from
+ * clrays/structs.py (-D). */
 
 /* The product of (1 − α) of every translucent triangle but `skip` that crosses
  * origin + t·dir, t ∈ (0, t_max): bvh_occluded's walk, visiting every hit. */

@@ -29,7 +29,7 @@
 #else
 #define WALKED_FOG_ARG
 #endif
-#define SURFACE_BIAS_TEXELS 1.5f /* as shade.cl's surface shadow test */
+/* SURFACE_BIAS_TEXELS: shade.cl's surface shadow test's, from clrays/structs.py (-D). */
 
 /* Möller–Trumbore, two-sided, edges inclusive with EDGE_SLACK (common.h): the distance along
  * the ray, +inf for a miss. */

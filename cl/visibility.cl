@@ -27,10 +27,8 @@
 #include "lanes.h"
 #include "solids.h"
 
-#define SURFACE_BIAS_TEXELS 1.5f /* depth tolerance of the map test, as in shade.cl */
-/* Shadow rays leave the surface by this much × (|p| + distance to the light): a few
- * hundred float32 ulps of the sample's coordinates. */
-#define SHADOW_RAY_OFFSET_REL 2e-6f
+/* SURFACE_BIAS_TEXELS, the map test's depth tolerance, and SHADOW_RAY_OFFSET_REL, how far
+ * a shadow ray leaves its surface, come from clrays/structs.py (-D). */
 /* Bounds are shrunk by this relative margin against float32 rounding of the bound itself. */
 #define BOUND_MARGIN_REL 1e-5f
 /* VISIBILITY_PENDING (clrays/structs.py): visible's value, between visibility_prepare and

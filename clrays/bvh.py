@@ -235,7 +235,7 @@ def box_pad(scene_lo: np.ndarray, scene_hi: np.ndarray) -> float:
 def occluded_by_bvh(bvh: Bvh, triangles: np.ndarray, origin, target) -> bool:
     """Host walk of the BVH for one segment origin → target (float64): whether any
     triangle crosses it. For tests of the device walk; slow in Python."""
-    from .reference.geometry import raycast
+    from .physics.geometry import raycast
 
     tri = np.asarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
     origin, target = np.asarray(origin, float), np.asarray(target, float)

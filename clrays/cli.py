@@ -612,7 +612,7 @@ Examples:
         help="Mesh file: .ply, .obj or .stl, in world space (the object's transform applied).")
 def relief_to_mesh(scene: Path, index, overrides, output: Path) -> None:
     """Write a relief object of SCENE as its height-field triangles (two per texel cell)."""
-    from .scene.relief import relief_to_mesh as convert
+    from .runs.relief_mesh import relief_to_mesh as convert
 
     check_folder(output)
     index, count = convert(scene, output, index, overrides)

@@ -96,8 +96,13 @@ def _kernels_digest(device) -> str:
     return digest.hexdigest()[:24]
 
 
-def _import_cl():
-    runtimes.register()  # before the ICD loader's first call, which reads its vendors once
+def _import_cl(pip_runtimes: bool = False):
+    """pyopencl; with `pip_runtimes`, the OpenCL runtimes pip installed (clrays.runtimes) made
+    visible first, which works only before the ICD loader's first call (it reads its list of
+    runtimes once per process). Only a named device needs them: Intel's runtime costs a
+    process about 100 MB once loaded, and the default device is a GPU or PoCL's."""
+    if pip_runtimes:
+        runtimes.register()
     try:
         import pyopencl as cl
     except ImportError as exc:  # pragma: no cover - install problem
@@ -105,11 +110,12 @@ def _import_cl():
     return cl
 
 
-def list_devices() -> list[tuple[int, int, object, object]]:
+def list_devices(pip_runtimes: bool = True) -> list[tuple[int, int, object, object]]:
     """(platform index, device index, platform, device) for every OpenCL device, each once:
     a runtime the loader finds twice (PoCL's wheel and the system's copy of the same
-    build) shows two platforms alike in every name and version, and only the first counts."""
-    cl = _import_cl()
+    build) shows two platforms alike in every name and version, and only the first counts.
+    `pip_runtimes`: as `_import_cl`'s, on the process's first query."""
+    cl = _import_cl(pip_runtimes)
     try:
         platforms = cl.get_platforms()
     except cl.Error as exc:
@@ -129,10 +135,13 @@ def list_devices() -> list[tuple[int, int, object, object]]:
 
 
 def select_device(spec: str | None = None):
-    """The device named by `spec` (or CLRAYS_DEVICE), else the first GPU, else the first device."""
-    cl = _import_cl()
+    """The device named by `spec` (or CLRAYS_DEVICE), else the first GPU, else PoCL's CPU
+    device, else the first device."""
     spec = spec if spec is not None else os.environ.get("CLRAYS_DEVICE") or None
-    devices = list_devices()
+    # The default device and one named as PoCL need no runtime pip installed beside it.
+    pip_runtimes = spec is not None and not any(name in spec.lower() for name in ("pocl", "portable"))
+    cl = _import_cl(pip_runtimes)
+    devices = list_devices(pip_runtimes)
     if not devices:
         raise DeviceError("no OpenCL device found; install pocl-binary-distribution for the CPU device")
     if spec is None:

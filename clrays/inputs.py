@@ -16,7 +16,7 @@ from . import structs
 from .scene.camera import camera_basis, sample_offsets
 from .device import Device
 from .errors import ClraysError
-from .reference.radiometry import effective_far, lamp_radius
+from .physics.radiometry import effective_far, lamp_radius
 from .scene.costs import with_derived_sizes
 from .stages.cube_faces import sampled_cube_faces
 from .stages.light_texture import pack_light_textures
@@ -339,3 +339,26 @@ def _light_pass_inputs(inputs: FrameInputs, light_index: int, triangles: int) ->
         shadow_texels=texels,
         light_anchor_ws=anchor.reshape(1, 3),
     )
+
+
+def see_through(geometry) -> np.ndarray:
+    """(T,) bool: the triangles that let some light through (any channel of opacity < 1)."""
+    return np.any(geometry.opacity_or_ones() < 1.0, axis=1)
+
+
+def opaque_occluders(inputs: FrameInputs) -> FrameInputs:
+    """`inputs` with every translucent triangle collapsed onto its first vertex: a triangle
+    of no area, which no ray meets, so the shadow maps, bound maps and the BVH see the
+    opaque occluders only while every triangle keeps its index. Unchanged for an
+    opaque-only scene."""
+    geometry = inputs.scene.geometry
+    if not geometry.translucent:
+        return inputs
+    clear = see_through(geometry)
+    triangles = geometry.triangles.copy()
+    triangles[clear] = triangles[clear][:, :1]
+    vertices = inputs.tri_vertices.reshape(-1, 3, 4).copy()
+    carried = clear[:len(vertices)]  # a relief's rows, listed last, may not be carried (clrays.scene.relief_frame)
+    vertices[carried] = vertices[carried][:, :1]
+    scene = replace(inputs.scene, geometry=replace(geometry, triangles=triangles))
+    return replace(inputs, scene=scene, tri_vertices=vertices.reshape(-1, 4))

@@ -8,54 +8,14 @@ result is the result the stage would compute again, and reuse never changes an i
 """
 from __future__ import annotations
 
-import dataclasses
-import hashlib
 from collections import OrderedDict
-from pathlib import PurePath
 from typing import Any, Callable
 
-import numpy as np
+from .digest import digest
+from .scene.relief_frame import other_rows, relief_digest_parts
 
 #: A stage's outcome in one frame, as `RenderResult.stage_status` reports it.
 COMPUTED, REUSED, SKIPPED = "computed", "reused", "skipped"
-
-
-def digest(*parts: Any) -> bytes:
-    """16-byte BLAKE2b of the parts (module docstring); `None` and tuples nest."""
-    h = hashlib.blake2b(digest_size=16)
-    _feed(h, parts)
-    return h.digest()
-
-
-def _feed(h, value: Any) -> None:
-    if isinstance(value, np.ndarray):
-        array = np.ascontiguousarray(value)
-        h.update(f"a{array.dtype.str}{array.shape}".encode())
-        h.update(array.tobytes())
-    elif isinstance(value, (bytes, bytearray)):
-        h.update(b"b%d:" % len(value) + bytes(value))
-    elif isinstance(value, (bool, int, float, str, type(None), np.generic, PurePath)):
-        text = repr(value.item() if isinstance(value, np.generic) else value)
-        h.update(f"{type(value).__name__}:{text};".encode())
-    elif isinstance(value, (tuple, list)):
-        h.update(b"(%d" % len(value))
-        for item in value:
-            _feed(h, item)
-        h.update(b")")
-    elif isinstance(value, dict):
-        h.update(b"{%d" % len(value))
-        for key in sorted(value, key=repr):
-            _feed(h, key)
-            _feed(h, value[key])
-        h.update(b"}")
-    elif dataclasses.is_dataclass(value) and not isinstance(value, type):
-        h.update(type(value).__name__.encode() + b"<")
-        for f in dataclasses.fields(value):
-            h.update(f.name.encode() + b"=")
-            _feed(h, getattr(value, f.name))
-        h.update(b">")
-    else:
-        raise TypeError(f"cannot digest a {type(value).__name__}")
 
 
 def scene_digest(scene, *, render: bool = True) -> bytes:
@@ -78,8 +38,6 @@ def geometry_parts(geometry, triangles_only: bool = False) -> tuple:
         if triangles_only:
             return (geometry.triangles,)
         return geometry.triangles, geometry.albedo, geometry.normals, geometry.smooth
-    from .scene.relief_frame import other_rows, relief_digest_parts
-
     albedo = None if triangles_only else geometry.albedo
     parts = [relief_digest_parts(record, geometry.triangles, albedo) for record in geometry.reliefs]
     parts += [(rows.start, geometry.triangles[rows]) if triangles_only else

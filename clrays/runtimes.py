@@ -6,7 +6,9 @@ the intel-opencl-rt package) puts `libintelocl.so` in the environment's `lib/`, 
 loader looks. So, unless the user has set OCL_ICD_VENDORS themselves, clrays points it at a
 vendors folder of its own: the system's `.icd` files, and one naming that library. The
 loader reads OCL_ICD_VENDORS once, at its first call, so `register()` runs before
-pyopencl's first platform query (clrays.device).
+pyopencl's first platform query (clrays.device), and only where a device other than the
+default or PoCL is named, or `clrays info` lists them all: once loaded, Intel's runtime
+holds about 100 MB of the process.
 
 The library's own dependencies (libimf, libsvml, TBB) sit beside it, where its RUNPATH
 ($ORIGIN) finds them: no LD_LIBRARY_PATH is needed.

@@ -40,18 +40,18 @@ import numpy as np
 from .device import Device, StageTimer
 from .errors import ClraysError
 from .inputs import FrameBuffers, FrameInputs, frame_inputs, upload
-from .reference.radiometry import effective_far
+from .physics.radiometry import effective_far
 from .reuse import COMPUTED, REUSED, SKIPPED, Reuse, StageCache, StageRecord, digest, geometry_parts, scene_digest
 from .scene.costs import with_derived_sizes
 from .scene.model import METHODS, Render, Scene
 from .stages.integrand import integrand, integrand_table_size
 from .stages.lamp import eye_in_lamp, lamp_in_scatter
 from .stages.light_texture import light_texture
-from .reference.light_texture import textured
+from .physics.light_texture import textured
 from .stages.minmax import minmax
 from .stages.raster import RasterResult, ShadowMap, map_is_empty, raster_camera, raster_shadow_map, shadow_atlas
 from .stages.raymarch import raymarch
-from .stages.rectify import Epipolar, rectify
+from .stages.rectify import Epipolar, rectify, tree_gamma_samples
 from .stages.sampling import SampleCounts, epipolar_sampling
 from .stages.shade import shade
 from .stages.shadow_filter import depth_ranges, frame_filter, shadow_filter, shadow_filter_moments
@@ -412,7 +412,7 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
     if len(inputs.light_views) > 1:
         sizes.append(("shadow maps of all lights together", 4 * inputs.shadow_texels))
     if scene.render.method in ("minmax", "moments") and np.any(scene.medium.sigma_s > 0):
-        gamma_samples = 1 << max(int(np.ceil(np.log2(scene.render.gamma_samples))), 1)
+        gamma_samples = tree_gamma_samples(scene.render.gamma_samples)
         tree = 8 * scene.render.slices * 2 * gamma_samples
         sizes += [(f"min-max tree of light {index}", tree) for index in range(len(scene.lights))]
         if scene.render.sampling == "epipolar":  # per line sample: (distance, weight) and radiance, one light at a time
@@ -439,7 +439,7 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
         layers = scene.render.translucent_layers
         sizes.append(("translucent layers", 12 * layers * inputs.shadow_texels))
         if scene.render.method == "minmax":
-            texels = scene.render.slices * (1 << max(int(np.ceil(np.log2(scene.render.gamma_samples))), 1))
+            texels = scene.render.slices * tree_gamma_samples(scene.render.gamma_samples)
             sizes.append(("rectified translucent layers of one light", 12 * layers * texels))
         if scene.render.surface_shadows == "exact":
             sizes.append(("surface transmittance", 16 * samples * len(scene.lights)))

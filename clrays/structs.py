@@ -52,14 +52,14 @@ WRITER_MANY = -2  # two or more do (else the one triangle's index)
 CONVEX_OUTSIDE_ONLY = 1 << 30
 
 # A point or spot light is a lamp: a ball of radius LAMP_RADIUS_REL × the scene's size around
-# it holds no medium (clrays.reference.radiometry says why and what it changes); the radius
+# it holds no medium (clrays.physics.radiometry says why and what it changes); the radius
 # reaches the device per frame, in frame_t.lamp_radius.
 LAMP_RADIUS_REL = 1e-6
 
 # Rays that hit nothing end at camera.far, but no further than this optical depth of the
 # least attenuating channel (e^-40 ≈ 4e-18: nothing a float32 radiance keeps) nor than
 # FAR_DEVICE_MAX scene units, where squared distances still fit a float32
-# (clrays.reference.radiometry.effective_far).
+# (clrays.physics.radiometry.effective_far).
 FAR_OPTICAL_DEPTH = 40.0
 FAR_DEVICE_MAX = 1e18
 
@@ -79,6 +79,13 @@ RASTER_ROWS_PER_ITEM = 4
 # raster_any (is a map empty?) reads this many texels per work-item.
 RASTER_ANY_TEXELS = 256
 
+# The depth tolerance, in texels of a shadow map, of every surface point's test against it
+# (shade, visibility, transparency and translucency: one test, one tolerance).
+SURFACE_BIAS_TEXELS = 1.5
+# Shadow rays leave the surface by this much × (|p| + distance to the light): a few hundred
+# float32 ulps of the sample's coordinates (visibility's rays, translucency's transmittance).
+SHADOW_RAY_OFFSET_REL = 2e-6
+
 # visibility: the value of a sample and light that visibility_prepare leaves to the maps
 # or a ray; and visibility_bound's rect_mode: none, record each triangle's texel rectangle,
 # or skip the triangles whose recorded rectangle holds no texel read (cl/visibility.cl).
@@ -92,7 +99,8 @@ KERNEL_CONSTANTS = {
     name: value for name, value in dict(globals()).items()
     if name.startswith(("PROJECTION_", "LIGHT_", "PHASE_", "INTEGRAND_", "TRAVERSAL_", "RASTER_", "SURFACE_SHADOWS_",
                          "TEXTURE_WRAP_", "SHADOW_FILTER_", "WRITER_", "STEP_SPACING_", "RECTS_", "CONVEX_"))
-    or name in ("DEPTH_EMPTY", "SIN_BETA_MIN", "VISIBILITY_PENDING", "VISIBILITY_CLEAR_WORDS")
+    or name in ("DEPTH_EMPTY", "SIN_BETA_MIN", "VISIBILITY_PENDING", "VISIBILITY_CLEAR_WORDS", "SURFACE_BIAS_TEXELS",
+                "SHADOW_RAY_OFFSET_REL")
 }
 
 

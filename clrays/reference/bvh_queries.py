@@ -29,8 +29,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..bvh import Bvh, build_bvh
-from .geometry import (_SHADOW_OFFSET_REL, _T_MIN_REL, _lit_from_clips, _ray_range, _scale, dot)
-from .radiometry import lamp_interval, light_position, propagation_direction
+from ..physics.geometry import (_SHADOW_OFFSET_REL, _T_MIN_REL, _lit_from_clips, _ray_range, _scale, dot,
+                                shadow_rays_blocked)
+from ..physics.radiometry import lamp_interval, light_position
 from ..scene.model import Light
 
 #: Box padding, relative to the scene's coordinate scale (module docstring).
@@ -152,24 +153,7 @@ class SceneBvh:
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         if len(self.triangles) == 0 or len(points) == 0:
             return np.zeros(len(points), dtype=bool)
-        lpos = light_position(light)
-        to_light = -propagation_direction(light, points)
-        offset = eps * _scale(self.triangles, points, lpos if lpos is not None else 0.0)
-        if normals is None:
-            start = points + offset * to_light
-        else:
-            nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
-            nrm = nrm / np.linalg.norm(nrm, axis=1, keepdims=True)
-            side = np.where(dot(nrm, to_light) >= 0, 1.0, -1.0)
-            start = points + (offset * side)[:, None] * nrm
-        if lpos is None:
-            t, _ = self.raycast(start, to_light)
-        else:
-            d = lpos - start
-            dist = np.linalg.norm(d, axis=1)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                t, _ = self.raycast(start, d / dist[:, None], t_max=dist)
-        return np.isfinite(t)
+        return shadow_rays_blocked(self.triangles, points, light, normals, eps, self.raycast)
 
     # --- lit sets -------------------------------------------------------------------------
 

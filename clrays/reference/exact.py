@@ -42,14 +42,14 @@ import time
 
 import numpy as np
 
-from . import radiometry
+from ..physics import radiometry
 from ..scene.camera import primary_rays, sample_offsets
-from .geometry import (BUDGET_BYTES, CLIP_PAIR_BYTES, dot, lit_intervals, occluded, raycast, shadow_halfspaces,
-                       triangle_normals)
+from ..physics.geometry import (BUDGET_BYTES, CLIP_PAIR_BYTES, dot, lit_intervals, occluded, raycast, shading_normals,
+                                shadow_halfspaces, triangle_normals)
 from .bvh_queries import SceneBvh
-from .light_texture import light_texture, textured, textured_in_scatter
+from ..physics.light_texture import light_texture, textured, textured_in_scatter
 from .translucency import TranslucentQueries, translucent_radiance
-from .radiometry import in_scatter_segments, light_incident, propagation_direction, rgb
+from ..physics.radiometry import in_scatter_segments, light_incident, propagation_direction, rgb
 from ..scene.model import Scene
 
 
@@ -69,34 +69,6 @@ def estimate_seconds(scene: Scene, pixels: int | None = None) -> float:
     lights at SECONDS_PER_RAY_LIGHT."""
     pixels = scene.image.width * scene.image.height if pixels is None else pixels
     return pixels * scene.image.spp * max(len(scene.lights), 1) * SECONDS_PER_RAY_LIGHT
-
-
-def _shading_normals(geometry, tri: np.ndarray, ids: np.ndarray, x: np.ndarray, face: np.ndarray) -> np.ndarray:
-    """Unit shading normals at hit points x on triangles `ids`: the face normal `face`, or on
-    a smooth triangle its vertex normals weighted by the barycentric coordinates of x
-    (clamped to the triangle, as the device does), falling back to `face` where they cancel."""
-    shading = face.copy()
-    smooth = np.flatnonzero(np.asarray(geometry.smooth)[ids])
-    if len(smooth) == 0:
-        return shading
-    corners = tri[ids[smooth]]
-    v0, e1, e2 = corners[:, 0], corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
-    rel = x[smooth] - v0
-    d11, d12, d22 = dot(e1, e1), dot(e1, e2), dot(e2, e2)
-    r1, r2 = dot(rel, e1), dot(rel, e2)
-    denom = d11 * d22 - d12 * d12
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u = np.clip((d22 * r1 - d12 * r2) / denom, 0.0, 1.0)
-        v = np.clip((d11 * r2 - d12 * r1) / denom, 0.0, 1.0)
-    over = u + v > 1.0
-    u[over], v[over] = u[over] / (u + v)[over], v[over] / (u + v)[over]
-    vertex_normals = np.asarray(geometry.normals, dtype=np.float64)[ids[smooth]]
-    n = (1.0 - u - v)[:, None] * vertex_normals[:, 0] + u[:, None] * vertex_normals[:, 1] \
-        + v[:, None] * vertex_normals[:, 2]
-    length = np.linalg.norm(n, axis=1)
-    good = np.isfinite(length) & (length > 0.0) & (denom > 0.0)
-    shading[smooth[good]] = n[good] / length[good, None]
-    return shading
 
 
 class AllTriangles:
@@ -135,7 +107,7 @@ def _radiance(scene: Scene, eye: np.ndarray, dirs: np.ndarray, prepared, quad: d
         x = eye + t[hits, None] * dirs[hits]
         nrm = triangle_normals(tri[idx[hits]])
         nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
-        shading = _shading_normals(scene.geometry, tri, idx[hits], x, nrm)
+        shading = shading_normals(scene.geometry, tri, idx[hits], x, nrm)
         # Two-sided: the face normal that faces the camera, and the shading normal with it.
         facing = np.where(dot(nrm, dirs[hits]) > 0, -1.0, 1.0)[:, None]
         nrm *= facing
@@ -155,7 +127,7 @@ def _radiance(scene: Scene, eye: np.ndarray, dirs: np.ndarray, prepared, quad: d
         for light, halfspaces in prepared:
             ray, a, b = queries.lit_intervals(eye, dirs, D, light, halfspaces,
                                               lamp_radius=radiometry.lamp_radius(scene))
-            if textured(light):  # cut at the texture's texel centres (clrays.reference.light_texture)
+            if textured(light):  # cut at the texture's texel centres (clrays.physics.light_texture)
                 seg = textured_in_scatter(light, medium, eye, dirs[ray], a, b)
             else:
                 seg = in_scatter_segments(light, medium, eye, dirs[ray], a, b, **quad)

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..scene.camera import primary_rays
-from .radiometry import effective_far
+from ..physics.radiometry import effective_far
 from ..scene.model import Scene
 
 _LUMINANCE = np.array([0.2126, 0.7152, 0.0722])

@@ -29,11 +29,12 @@ import math
 
 import numpy as np
 
-from . import radiometry
+from ..physics import radiometry
 from .bvh_queries import SceneBvh, _clip_pairs
-from .geometry import _SHADOW_OFFSET_REL, _T_MIN_REL, _ray_range, _scale, dot, shadow_halfspaces, triangle_normals
-from .light_texture import light_texture, textured, textured_in_scatter
-from .radiometry import (in_scatter_segments, light_incident, light_position, propagation_direction, rgb)
+from ..physics.geometry import (_SHADOW_OFFSET_REL, _T_MIN_REL, _ray_range, _scale, dot, shading_normals,
+                                shadow_halfspaces, triangle_normals)
+from ..physics.light_texture import light_texture, textured, textured_in_scatter
+from ..physics.radiometry import (in_scatter_segments, light_incident, light_position, propagation_direction, rgb)
 from ..scene.model import Light, Scene
 
 
@@ -231,13 +232,12 @@ def _surface_radiance(scene: Scene, queries: TranslucentQueries, prepared, x, di
     """albedo/π × irradiance (M, 3) at hit points x of rays `dirs` on scene triangles
     `tri_index`: `exact._radiance`'s surface term with the light's transmittance in place
     of its binary shadow ray."""
-    from .exact import _shading_normals
 
     tri = np.asarray(scene.geometry.triangles, dtype=np.float64).reshape(-1, 3, 3)
     sigma_t = rgb(scene.medium.sigma_s) + rgb(scene.medium.sigma_a)
     nrm = triangle_normals(tri[tri_index])
     nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
-    shading = _shading_normals(scene.geometry, tri, tri_index, x, nrm)
+    shading = shading_normals(scene.geometry, tri, tri_index, x, nrm)
     facing = np.where(dot(nrm, dirs) > 0, -1.0, 1.0)[:, None]
     nrm *= facing
     shading *= facing

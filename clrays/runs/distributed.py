@@ -174,7 +174,7 @@ def render_point_task(item, *, folder: str, exposure: float, against, reuse: boo
     """Render one sweep point on a worker, write its image and return its results.csv row:
     item = (point, scene, image name, scene digest), as `run_sweep` lists them."""
     from .references import ReferenceCache
-    from .sweep import REFERENCES, render_point
+    from .point import REFERENCES, render_point
 
     point, scene, name, digest_hex = item
     with _session_lock:

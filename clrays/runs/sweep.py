@@ -31,28 +31,21 @@ from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 import yaml
 
 from ..errors import ClraysError, OutputError
-from ..image_io import check_finite, make_folder, read_srgb8, write_atomic, write_image
+from ..image_io import make_folder, read_srgb8, write_atomic
 from ..inputs import frame_inputs
-from ..session import Renderer, RenderResult, StageKeys
+from ..session import Renderer, StageKeys
 from ..reuse import digest, scene_digest
 from ..scene.model import Scene
 from ..scene.load import load_scene
+from .point import ERROR_COLUMNS, REFERENCE_COLUMNS, REFERENCES, SweepPoint, render_point
 from .progress import Progress
 from .references import ReferenceCache, parse_reference
 
 RESULTS = "results.csv"
 CONTACT_SHEET = "contact_sheet.png"
-#: The sweep folder's cache of reference images (`clrays.runs.references`).
-REFERENCES = ".references"
 IMAGE_FORMATS = ("png", "exr", "npy")
 #: Stage columns of results.csv, in pipeline order (other labels follow, sorted).
 STAGES = ("raster", "rectify", "minmax", "integrand", "traverse", "raymarch", "shade")
-#: The error columns of results.csv, in percent (as the contact sheet shows them): mean
-#: and 99th percentile of the relative luminance error, relative RMSE (`ImageError`).
-ERROR_COLUMNS = ("error_mean_pct", "error_p99_pct", "error_rmse_pct")
-#: Host time a point spent on the reference image and on the depth-edge map that the error
-#: leaves out (`ReferenceCache.last_ms`): empty where an earlier point had computed them.
-REFERENCE_COLUMNS = ("reference_ms", "edges_ms")
 
 
 @dataclass(frozen=True)
@@ -61,20 +54,6 @@ class Axis:
 
     key: str
     values: tuple[str, ...]
-
-
-@dataclass(frozen=True)
-class SweepPoint:
-    index: int  # position in the product, first axis slowest
-    settings: tuple[tuple[str, str], ...]  # (key, value text) per axis
-
-    @property
-    def overrides(self) -> list[str]:
-        return [f"{key}={value}" for key, value in self.settings]
-
-    @property
-    def label(self) -> str:
-        return " ".join(self.overrides)
 
 
 def split_values(text: str) -> list[str]:
@@ -217,55 +196,6 @@ def _write_rows(path: Path, rows: list[dict[str, str]], axes: Sequence[Axis]) ->
             writer.writerows(rows)
 
     write_atomic(path, write)
-
-
-def _row(point: SweepPoint, image_name: str, result: RenderResult, digest_hex: str, error, reference,
-         warmup_ms: float = 0.0, reference_ms: dict[str, float] | None = None) -> dict:
-    """A results.csv row. `warmup_ms`: the untimed render before this point's (`_warm_up`);
-    `reference_ms`: the host time of the reference and its depth-edge map, where this
-    point computed them (REFERENCE_COLUMNS)."""
-    row = {"index": str(point.index), "image": image_name, **dict(point.settings), "method": result.method,
-           "wall_ms": f"{result.wall_ms:.2f}", "device_ms": f"{result.device_ms:.2f}",
-           "warmup_ms": f"{warmup_ms:.2f}",
-           "reused": " ".join(s for s, v in result.stage_status.items() if v == "reused"),
-           "computed": " ".join(s for s, v in result.stage_status.items() if v == "computed"),
-           "scene_digest": digest_hex}
-    row.update({f"{stage}_ms": f"{ms:.2f}" for stage, ms in result.stage_ms.items()})
-    row.update({column: f"{reference_ms[column]:.2f}" for column in REFERENCE_COLUMNS if column in (reference_ms or {})})
-    if error is not None:
-        row.update({"reference": reference, "error_pixels": str(error.pixels),
-                    **{column: f"{100 * value:.6g}" for column, value in
-                       zip(ERROR_COLUMNS, (error.mean, error.p99, error.rmse))}})
-    return row
-
-
-def _warm_up(renderer: Renderer, scene: Scene, warmed: set) -> float:
-    """Render `scene` once, untimed and keeping nothing, if no earlier point ran its kernels
-    (method, traversal, integrand, light types): opening the device, building the programs
-    and the device's first launches are the session's cost, not a point's, and would
-    otherwise make the first point look several times slower than the rest. Returns the
-    milliseconds spent (0 when nothing was new), reported as warmup_ms."""
-    render = scene.render
-    kind = (render.method, render.traversal, render.integrand, tuple(type(light).__name__ for light in scene.lights))
-    if render.method == "exact" or kind in warmed:
-        return 0.0
-    warmed.add(kind)
-    start = time.perf_counter()
-    renderer.render(scene, reuse=False)
-    return (time.perf_counter() - start) * 1e3
-
-
-def render_point(renderer: Renderer, references: ReferenceCache | None, against, point: SweepPoint, scene: Scene,
-                 folder: Path, name: str, digest_hex: str, exposure: float, warmed: set) -> dict[str, str]:
-    """Render one point (after a warm-up if its kernels are new to this session, `_warm_up`),
-    write its image (atomically) and return its results.csv row; in this process or on a
-    dask worker (`clrays.runs.distributed`), each with its own `warmed` set."""
-    warmup_ms = _warm_up(renderer, scene, warmed)
-    result = renderer.render(scene)
-    write_image(folder / name, check_finite(result.image, point.label), exposure)
-    error = references.error(scene, against, result.image) if references else None
-    return _row(point, name, result, digest_hex, error, against.name if against else None, warmup_ms,
-                references.last_ms if references else {})
 
 
 def run_sweep(path: str | Path, spec, out_dir: str | Path, *, overrides: Sequence[str] = (),

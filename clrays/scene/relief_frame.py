@@ -19,6 +19,7 @@ from typing import Iterator
 
 import numpy as np
 
+from ..digest import digest
 from .relief import ReliefRecord, world_frame
 
 #: World placements kept per relief: a still relief needs one, a sweep that moves it revisits a few,
@@ -83,8 +84,6 @@ def relief_digest_parts(record: ReliefRecord, triangles: np.ndarray, albedo: np.
     alone), its first triangle's albedo (the object's albedo when it has no albedo map).
     Its normals are its triangles' face normals."""
     if "digest" not in record.memo:
-        from ..reuse import digest
-
         relief = record.relief
         record.memo["digest"] = digest("relief", relief.frame, relief.displacement, relief.solid, relief.albedo,
                                        record.rows.stop - record.rows.start, record.handles, record.handle_points)

@@ -21,7 +21,7 @@ import math
 
 import numpy as np
 
-from ..reference.radiometry import effective_far
+from ..physics.radiometry import effective_far
 from ..scene.camera import camera_basis, half_extents
 
 #: The six faces' axes, in view order: (axis index, sign).

@@ -55,7 +55,7 @@ import numpy as np
 from .. import structs
 from ..device import Device, StageTimer
 from ..errors import ClraysError
-from ..reference.radiometry import effective_far
+from ..physics.radiometry import effective_far
 from ..scene.model import INTEGRAND_MODES, DirectionalLight, Phase
 from ..structs import SIN_BETA_MIN
 

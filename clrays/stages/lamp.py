@@ -9,8 +9,8 @@ import numpy as np
 
 from ..device import Device, StageTimer
 from ..inputs import FrameBuffers
-from ..reference.light_texture import textured, textured_in_scatter
-from ..reference.radiometry import effective_far, in_scatter_segments, lamp_radius
+from ..physics.light_texture import textured, textured_in_scatter
+from ..physics.radiometry import effective_far, in_scatter_segments, lamp_radius
 from ..scene.camera import primary_rays
 from ..scene.model import DirectionalLight
 from .raster import RasterResult
@@ -31,10 +31,10 @@ def lamp_in_scatter(device: Device, buffers: FrameBuffers, rastered: RasterResul
     Epipolar coordinates need an eye–light axis, which d_el → 0 takes away; and they are not
     needed: every point the eye sees, the light sees too, so nothing visible is shadowed.
     What is left is the unshadowed integral of each sample ray over [where it leaves the
-    lamp, its depth] (within the cone for a spot light), which `reference.geometry.lit_intervals` and
+    lamp, its depth] (within the cone for a spot light), which `physics.geometry.lit_intervals` and
     `radiometry.in_scatter_segments` give in float64 on the host. The configuration is rare
     and the cost is one quadrature per sample, like `exact` without occluders."""
-    from ..reference.geometry import lit_intervals
+    from ..physics.geometry import lit_intervals
 
     start = time.perf_counter()
     scene, samples = buffers.inputs.scene, buffers.inputs.samples

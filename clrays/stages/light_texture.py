@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .. import structs
-from ..reference.light_texture import texture_frame, textured
+from ..physics.light_texture import texture_frame, textured
 from ..scene.model import DirectionalLight, SpotLight
 from .integrand import SVD_RELATIVE_CUTOFF, SVD_SAMPLES, _beta_nodes, integrand_exact
 

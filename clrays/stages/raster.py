@@ -11,9 +11,8 @@ import numpy as np
 
 from .. import structs
 from ..device import Device, StageTimer
-from ..inputs import FrameBuffers, light_pass_inputs
+from ..inputs import FrameBuffers, light_pass_inputs, opaque_occluders
 from .relief import ReliefDrawer
-from .translucency import opaque_occluders
 
 
 @dataclass

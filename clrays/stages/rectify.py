@@ -111,6 +111,12 @@ def slice_fan(scene, axis: np.ndarray, u: np.ndarray, w: np.ndarray) -> tuple[fl
     return float(start - margin), float(min(span + 2 * margin, 2 * math.pi)), False
 
 
+def tree_gamma_samples(requested: int) -> int:
+    """The γ texels of a row of the epipolar texture and its min-max tree: `render.gamma_samples`
+    rounded up to a power of two, at least 2 (the tree halves the row at every level)."""
+    return 1 << max(int(math.ceil(math.log2(requested))), 1)
+
+
 def epipolar_frame(scene, buffers: FrameBuffers, light_index: int) -> np.ndarray:
     """epipolar_t for one light, without the ranges that need the depth map."""
     light = scene.lights[light_index]
@@ -124,7 +130,7 @@ def epipolar_frame(scene, buffers: FrameBuffers, light_index: int) -> np.ndarray
     u, w = slice_basis(axis)
     alpha_min, span, full = slice_fan(scene, axis, u, w)
     slices = scene.render.slices
-    gamma_samples = 1 << max(int(math.ceil(math.log2(scene.render.gamma_samples))), 1)
+    gamma_samples = tree_gamma_samples(scene.render.gamma_samples)
     params["axis"], params["u"], params["w"] = structs.float4(axis), structs.float4(u), structs.float4(w)
     params["d_el"] = d_el
     params["alpha_min"], params["alpha_step"], params["slices"] = alpha_min, span / slices, slices

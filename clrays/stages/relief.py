@@ -16,7 +16,7 @@ import numpy as np
 
 from .. import structs
 from ..device import Device, StageTimer
-from ..reference.prewarp import Viewer, epipole, prewarp_coefficients, segment_order
+from ..physics.prewarp import Viewer, epipole, prewarp_coefficients, segment_order
 from ..scene.model import Scene
 from ..scene.relief import ReliefFrame, ReliefRecord, world_frame
 

@@ -24,7 +24,8 @@ import numpy as np
 from .. import structs
 from ..device import Device, StageTimer
 from ..errors import ClraysError
-from ..inputs import FrameBuffers, FrameInputs, light_pass_inputs
+from ..inputs import FrameBuffers, FrameInputs, light_pass_inputs, opaque_occluders, see_through
+from .raster import raster_passes
 
 
 @dataclass
@@ -43,29 +44,6 @@ class Layers:
     def args(self) -> tuple:
         """The kernel arguments of TRANSLUCENCY_ARGS, appended after a kernel's own."""
         return self.depth, self.clear, np.int32(self.stride)
-
-
-def see_through(geometry) -> np.ndarray:
-    """(T,) bool: the triangles that let some light through (any channel of opacity < 1)."""
-    return np.any(geometry.opacity_or_ones() < 1.0, axis=1)
-
-
-def opaque_occluders(inputs: FrameInputs) -> FrameInputs:
-    """`inputs` with every translucent triangle collapsed onto its first vertex: a triangle
-    of no area, which no ray meets, so the shadow maps, bound maps and the BVH see the
-    opaque occluders only while every triangle keeps its index. Unchanged for an
-    opaque-only scene."""
-    geometry = inputs.scene.geometry
-    if not geometry.translucent:
-        return inputs
-    clear = see_through(geometry)
-    triangles = geometry.triangles.copy()
-    triangles[clear] = triangles[clear][:, :1]
-    vertices = inputs.tri_vertices.reshape(-1, 3, 4).copy()
-    carried = clear[:len(vertices)]  # a relief's rows, listed last, may not be carried (clrays.scene.relief_frame)
-    vertices[carried] = vertices[carried][:, :1]
-    scene = replace(inputs.scene, geometry=replace(geometry, triangles=triangles))
-    return replace(inputs, scene=scene, tri_vertices=vertices.reshape(-1, 4))
 
 
 def opaque_occluder_buffers(device: Device, buffers: FrameBuffers) -> FrameBuffers:
@@ -114,8 +92,6 @@ def _launch(device: Device, name: str, defines: dict, vertices, count: int, view
             view_size: tuple[int, int], target: tuple, timer: StageTimer) -> None:
     """Both passes of one raster kernel (clrays.stages.raster.raster_passes), built in the
     translucency program, over the translucent triangles: one sample per texel, at its centre."""
-    from .raster import raster_passes  # raster imports this module (opaque_occluders)
-
     centre = device.buffer(np.array([[0.5, 0.5]], dtype=np.float32), writable=False)
     raster_passes(device, "translucency", name, defines, vertices, count, views, [view_index], [view_size], centre,
                   1, target, timer, stage="translucency")

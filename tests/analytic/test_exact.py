@@ -1,6 +1,6 @@
 """The `exact` reference renderer against independent references.
 
-The references here share nothing with clrays.reference.exact / clrays.reference.radiometry except the pixel
+The references here share nothing with clrays.reference.exact / clrays.physics.radiometry except the pixel
 rays (`camera.primary_rays`, the one definition of pixel rays): they integrate the
 model of docs/design.md §1 in the ray parameter s with scipy's adaptive `quad`, evaluate the
 light, phase function and visibility with their own code, and find the discontinuities
@@ -21,11 +21,11 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from clrays.reference import geometry
+from clrays.physics import geometry
 from clrays.scene.camera import primary_rays
 from clrays.reference.exact import render_exact
-from clrays.reference.geometry import lit_intervals, raycast
-from clrays.reference.radiometry import cone_interval, in_scatter_segments, phase
+from clrays.physics.geometry import lit_intervals, raycast
+from clrays.physics.radiometry import cone_interval, in_scatter_segments, phase
 from clrays.scene.model import (Camera, DirectionalLight, Geometry, Image, Medium, Phase, PointLight, Render, Scene,
                           SpotLight)
 

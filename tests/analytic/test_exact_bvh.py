@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from clrays.reference import geometry, radiometry
+from clrays.physics import geometry, radiometry
 from clrays.reference.bvh_queries import SceneBvh
 from clrays.reference.exact import render_exact
 from clrays.scene.camera import primary_rays

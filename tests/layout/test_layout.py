@@ -79,7 +79,7 @@ def test_a_build_without_the_constants_fails_with_the_reason(device):
 def test_modules_that_name_a_constant_use_this_value():
     """The host code outside clrays.structs that repeats a constant (the float64 reference,
     the integrand tables, the traversal's index into TRAVERSALS) agrees with it."""
-    from clrays.reference import radiometry
+    from clrays.physics import radiometry
     from clrays.stages import integrand
 
     assert radiometry.LAMP_RADIUS_REL == structs.LAMP_RADIUS_REL

@@ -16,11 +16,12 @@ from clrays import Renderer, structs
 from clrays.device import StageTimer
 from clrays.inputs import frame_inputs, upload
 from clrays.reference.metrics import depth_edges, depth_map, image_error
-from clrays.reference.prewarp import Viewer, prewarp_two_pass
+from clrays.physics.prewarp import Viewer, prewarp_two_pass
 from clrays.scene.camera import primary_rays
 from clrays.scene.costs import with_derived_sizes
 from clrays.scene.load import load_scene
-from clrays.scene.relief import Relief, relief_frame, relief_record, relief_to_mesh
+from clrays.runs.relief_mesh import relief_to_mesh
+from clrays.scene.relief import Relief, relief_frame, relief_record
 from clrays.stages.raster import raster_camera
 from clrays.stages.relief import PlacedRelief, ReliefDrawer
 

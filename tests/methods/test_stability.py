@@ -20,7 +20,7 @@ import pytest
 from clrays.scene.camera import camera_basis, half_extents, primary_rays
 from clrays.reference.metrics import depth_edges, depth_map, image_error, luminance
 from clrays.scene.geometry import box_triangles, sphere_triangles
-from clrays.reference.radiometry import in_scatter_unoccluded, lamp_radius, phase
+from clrays.physics.radiometry import in_scatter_unoccluded, lamp_radius, phase
 from conftest import TEST_ON_POCL, DirectionalLight, Phase, PointLight, SpotLight, grid_plane, make_scene, v3
 
 METHODS = ("minmax", "raymarch", "exact")

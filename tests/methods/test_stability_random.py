@@ -20,7 +20,7 @@ from clrays.stages.integrand import segment_radiance
 from clrays.reference.metrics import depth_edges, depth_map, image_error
 from clrays.stages.minmax import minmax
 from clrays.stages.integrand import integrand
-from clrays.reference.radiometry import cone_interval, lamp_radius
+from clrays.physics.radiometry import cone_interval, lamp_radius
 from clrays.stages.raster import raster
 from clrays.stages.rectify import rectify
 from clrays.stages.traverse import traverse

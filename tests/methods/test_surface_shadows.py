@@ -15,7 +15,7 @@ import pytest
 
 from clrays.bvh import build_bvh, occluded_by_bvh
 from clrays.reference.exact import render_exact
-from clrays.reference.geometry import raycast
+from clrays.physics.geometry import raycast
 from clrays.reference.metrics import depth_edges, depth_map, image_error, luminance
 from clrays.scene.geometry import box_triangles
 from conftest import DirectionalLight, PointLight, SpotLight, grid_plane, make_scene, v3

@@ -11,9 +11,9 @@ import pytest
 
 import clrays
 from clrays.reference.exact import render_exact
-from clrays.reference.geometry import occluded, raycast
+from clrays.physics.geometry import occluded, raycast
 from clrays.reference.metrics import depth_edges, depth_map, image_error
-from clrays.reference.radiometry import effective_far, lamp_radius, light_position
+from clrays.physics.radiometry import effective_far, lamp_radius, light_position
 from clrays.reference.translucency import TranslucentQueries, film_pixels
 from clrays.scene.camera import primary_rays
 from clrays.scene.load import load_scene, parse_scene
@@ -167,7 +167,7 @@ def test_exact_lit_pieces_match_a_product_per_point():
     for k in np.flatnonzero(np.any(clear > 0, axis=1)):
         hit, _ = raycast(x, to_light / dist[:, None], tri[k:k + 1], t_max=dist)
         expected[np.isfinite(hit)] *= clear[k]
-    from clrays.reference.radiometry import in_spot_cone
+    from clrays.physics.radiometry import in_spot_cone
     expected[~in_spot_cone(light, x)] = 0.0
     # The pieces' transmittance at each point (0 where no piece holds it).
     got = np.zeros((len(x), 3))

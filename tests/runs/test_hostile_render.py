@@ -15,7 +15,7 @@ from PIL import Image
 
 from clrays import load_scene
 from clrays.errors import OutputError
-from clrays.reference.radiometry import effective_far, lamp_radius
+from clrays.physics.radiometry import effective_far, lamp_radius
 from conftest import run_cli as run
 
 # A closed room: every camera ray hits a wall, so camera.far bounds nothing.

@@ -77,3 +77,15 @@ def test_the_first_run_says_it_builds_and_keeps_the_compiler_quiet(tmp_path):
     assert not any("generated" in line for line in lines), first.stderr
     again = _clrays(*render, env=env)
     assert again.returncode == 0 and "building OpenCL kernels" not in again.stderr, again.stderr
+
+
+def test_a_default_device_loads_no_pip_runtime():
+    # Intel's runtime costs a process about 100 MB once the loader opens it; the default
+    # device is a GPU or PoCL's, so only another named device (or `clrays info`) opens it.
+    clean = {k: v for k, v in os.environ.items() if k not in ("OCL_ICD_VENDORS", "CLRAYS_DEVICE")}
+    for spec in ("None", "'pocl'", "'Portable Computing Language'"):
+        shown = subprocess.run([sys.executable, "-c", f"import os; from clrays.device import Device; Device({spec}); "
+                                "print(os.environ.get('OCL_ICD_VENDORS'))"], capture_output=True, text=True,
+                               env=clean, cwd=REPO, timeout=300)
+        assert shown.returncode == 0, shown.stderr
+        assert shown.stdout.strip() == "None", spec

@@ -11,7 +11,7 @@ from PIL import Image
 
 from clrays.errors import ClraysError, SceneError
 from clrays.scene.load import load_scene
-from clrays.scene.relief import relief_to_mesh
+from clrays.runs.relief_mesh import relief_to_mesh
 
 SCENE = """version: 1
 image: {{width: 16, height: 12}}

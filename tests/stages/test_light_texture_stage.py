@@ -10,7 +10,7 @@ import pytest
 
 from clrays.device import StageTimer
 from clrays.inputs import frame_inputs, upload
-from clrays.reference.light_texture import light_texture as host_texture
+from clrays.physics.light_texture import light_texture as host_texture
 from clrays.scene.model import LightTexture
 from clrays.stages.integrand import integrand, integrand_exact
 from clrays.stages.light_texture import gamma_basis, light_texture

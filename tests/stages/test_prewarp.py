@@ -1,4 +1,4 @@
-"""The relief pre-warp in numpy (clrays.reference.prewarp) against the geometry it stands
+"""The relief pre-warp in numpy (clrays.physics.prewarp) against the geometry it stands
 for: the equations put each texel on the viewer's ray, the occlusion-compatible order
 picks what a z-buffer picks, and the two 1D passes see what rays cast through the
 height-field triangles see (docs/design.md, "Relief objects")."""
@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from clrays.reference.geometry import raycast
-from clrays.reference.prewarp import (Viewer, epipole, prewarp_coefficients, prewarp_positions, prewarp_two_pass,
+from clrays.physics.geometry import raycast
+from clrays.physics.prewarp import (Viewer, epipole, prewarp_coefficients, prewarp_positions, prewarp_two_pass,
                                       splat_in_order, splat_zbuffer)
 from clrays.scene.relief import relief_frame, relief_triangles
 

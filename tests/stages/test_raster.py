@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from clrays.scene.camera import primary_rays
-from clrays.reference.geometry import raycast
+from clrays.physics.geometry import raycast
 from clrays.inputs import frame_inputs, upload
 from clrays.device import StageTimer
 from clrays.scene.geometry import box_triangles, sphere_triangles

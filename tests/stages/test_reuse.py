@@ -136,15 +136,15 @@ def test_identical_frame_is_kept_whole(renderer):
 def test_a_frame_that_keeps_nothing_digests_nothing(device, monkeypatch):
     """Without reuse no key is made: digesting a mesh costs milliseconds a frame (bench/RESULTS.md,
     host stages); the image is the one a keeping session renders."""
-    import clrays.reuse
+    import clrays.digest
 
     scene = make_scene(_slats(), lights=[PointLight(v3(0.3, 5, -0.5), np.full(3, 60.0)),
                                          DirectionalLight(v3(0.2, -1, 0.1) / np.linalg.norm([0.2, -1, 0.1]),
                                                           np.full(3, 2.0))], **SMALL)
     kept = Renderer(device).render(scene).image
     fed = []
-    feed = clrays.reuse._feed
-    monkeypatch.setattr(clrays.reuse, "_feed", lambda h, value: fed.append(1) or feed(h, value))
+    feed = clrays.digest._feed
+    monkeypatch.setattr(clrays.digest, "_feed", lambda h, value: fed.append(1) or feed(h, value))
     image = Renderer(device, reuse=False).render(scene).image
     assert not fed
     np.testing.assert_array_equal(image, kept)

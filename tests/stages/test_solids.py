@@ -10,7 +10,7 @@ import pytest
 from clrays import structs
 from clrays.inputs import frame_inputs
 from clrays.reference.exact import render_exact
-from clrays.reference.geometry import raycast
+from clrays.physics.geometry import raycast
 from clrays.scene.camera import primary_rays
 from clrays.scene.geometry import box_triangles, closed_outward, load_mesh, sphere_triangles
 from clrays.scene.load import load_scene, parse_scene

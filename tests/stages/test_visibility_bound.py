@@ -9,7 +9,7 @@ import pytest
 from clrays import structs
 from clrays.device import StageTimer
 from clrays.inputs import frame_inputs, light_pass_inputs, upload
-from clrays.reference.geometry import raycast
+from clrays.physics.geometry import raycast
 from clrays.scene.geometry import box_triangles
 from clrays.stages.visibility import visibility_bound
 from conftest import DirectionalLight, PointLight, SpotLight, grid_plane, make_scene, v3

@@ -1,5 +1,6 @@
-"""Geometry of the float64 references: ray casts against every triangle, shadow rays,
-and the exact lit set of a ray (docs/design.md §4, `exact`).
+"""Geometry in float64: ray casts against every triangle, shadow rays, the exact lit set of
+a ray (docs/design.md §4, `exact`; the lamp stage takes it for the eye in the lamp) and the
+shading normals at a hit.
 
 A triangle's shadow volume is convex (the region beyond its plane inside the three
 planes through the light — or parallel to a directional light — and each edge), so it
@@ -114,6 +115,12 @@ def occluded(points, light: Light, triangles, normals=None, eps: float = _SHADOW
     tri = np.asarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
     if len(tri) == 0 or len(points) == 0:
         return np.zeros(len(points), dtype=bool)
+    return shadow_rays_blocked(tri, points, light, normals, eps, lambda start, d, **k: raycast(start, d, tri, **k))
+
+
+def shadow_rays_blocked(tri: np.ndarray, points: np.ndarray, light: Light, normals, eps: float, cast) -> np.ndarray:
+    """`occluded`'s answer with the ray cast `cast(start, unit directions, t_max=...)` →
+    (t, index) of one's choice: every triangle here, a BVH's (clrays.reference.bvh_queries)."""
     lpos = light_position(light)
     to_light = -propagation_direction(light, points)
     offset = eps * _scale(tri, points, lpos if lpos is not None else 0.0)
@@ -125,12 +132,12 @@ def occluded(points, light: Light, triangles, normals=None, eps: float = _SHADOW
         side = np.where(dot(nrm, to_light) >= 0, 1.0, -1.0)
         start = points + (offset * side)[:, None] * nrm
     if lpos is None:
-        t, _ = raycast(start, to_light, tri)
+        t, _ = cast(start, to_light)
     else:
         d = lpos - start
         dist = np.linalg.norm(d, axis=1)
         with np.errstate(invalid="ignore", divide="ignore"):
-            t, _ = raycast(start, d / dist[:, None], tri, t_max=dist)
+            t, _ = cast(start, d / dist[:, None], t_max=dist)
     return np.isfinite(t)
 
 
@@ -273,3 +280,31 @@ def lit_intervals(origins, dirs, D, light: Light, triangles, halfspaces=None, la
     if not rays:
         return np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros(0)
     return np.concatenate(rays), np.concatenate(a_all), np.concatenate(b_all)
+
+
+def shading_normals(geometry, tri: np.ndarray, ids: np.ndarray, x: np.ndarray, face: np.ndarray) -> np.ndarray:
+    """Unit shading normals at hit points x on triangles `ids`: the face normal `face`, or on
+    a smooth triangle its vertex normals weighted by the barycentric coordinates of x
+    (clamped to the triangle, as the device does), falling back to `face` where they cancel."""
+    shading = face.copy()
+    smooth = np.flatnonzero(np.asarray(geometry.smooth)[ids])
+    if len(smooth) == 0:
+        return shading
+    corners = tri[ids[smooth]]
+    v0, e1, e2 = corners[:, 0], corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+    rel = x[smooth] - v0
+    d11, d12, d22 = dot(e1, e1), dot(e1, e2), dot(e2, e2)
+    r1, r2 = dot(rel, e1), dot(rel, e2)
+    denom = d11 * d22 - d12 * d12
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = np.clip((d22 * r1 - d12 * r2) / denom, 0.0, 1.0)
+        v = np.clip((d11 * r2 - d12 * r1) / denom, 0.0, 1.0)
+    over = u + v > 1.0
+    u[over], v[over] = u[over] / (u + v)[over], v[over] / (u + v)[over]
+    vertex_normals = np.asarray(geometry.normals, dtype=np.float64)[ids[smooth]]
+    n = (1.0 - u - v)[:, None] * vertex_normals[:, 0] + u[:, None] * vertex_normals[:, 1] \
+        + v[:, None] * vertex_normals[:, 2]
+    length = np.linalg.norm(n, axis=1)
+    good = np.isfinite(length) & (length > 0.0) & (denom > 0.0)
+    shading[smooth[good]] = n[good] / length[good, None]
+    return shading

@@ -1,4 +1,6 @@
-"""The relief pre-warp in numpy, the yardstick of the device's (docs/design.md, "Relief objects").
+"""The relief pre-warp in numpy (docs/design.md, "Relief objects"): the viewer's coefficients
+and the segment order that the relief stage hands the device, and the warp itself, the
+yardstick of the device's.
 
 Three pieces, each a plain transcription of the equations of docs/design.md, "Relief objects":
 

@@ -1,4 +1,5 @@
-"""Radiometry shared by the reference renderers (numpy, float64, vectorised).
+"""Radiometry, in numpy float64 (vectorised): what the stages set up for the device (the lamp,
+the effective far, light positions and cones) and the references integrate.
 
 Every method in clrays computes the same single-scattering model (docs/design.md §1), per
 RGB channel, with σt = σs + σa:
