@@ -1,23 +1,18 @@
 """A render session and the frame it runs, stage by stage (docs/design.md §4):
 
-    raster → rectify → minmax → integrand → traverse → visibility → shade  (method `minmax`)
+    raster → translucency → transparency → volume → visibility → shade
 
-(`traverse` samples along epipolar lines with `render.sampling: epipolar`, the default,
-and walks every camera sample's rows with `pixel`.)
-    raster → raymarch → visibility → shade                                 (method `raymarch`)
-    raster → rectify → integrand → volume_moments → visibility → shade     (method `moments`)
+    volume, by method:  minmax    per light: rectify → minmax → integrand → light_texture → traverse
+                        moments   per light: rectify → integrand → volume_moments
+                        raymarch  raymarch, every light at once
 
-(A scene with translucent objects adds `transparency` after raster: the layers in front of
-the opaque depth, the fog up to each, their composite, which shade reads; docs/design.md,
-translucent surfaces: the camera side.
-`visibility` runs with `render.surface_shadows: exact`, the default; `shadow_filter`
-takes its place with `surface_shadows: filtered`; a textured light adds `light_texture`
-between integrand and traverse, docs/light-textures.md; a scene with translucent
-objects adds `translucency` after raster: each light's translucent layers, which
-raymarch, traverse and shade look up, docs/design.md "Translucent occluders".)
-
-`Renderer._frame` is that figure, one line per stage. The `exact` reference runs on
-the host in float64 instead (clrays.reference.exact).
+`Renderer._frame` is that figure, one line per stage. A stage with nothing to do in a frame
+returns at once: translucency (the light side of translucent objects) and transparency
+(their films before the camera) in an opaque scene and the volume without a medium, each
+recorded as skipped, and light_texture for an untextured light. `traverse` samples along epipolar
+lines (`render.sampling: epipolar`, the default) or walks every camera sample's rows
+(`pixel`); `shadow_filter` answers for visibility with `render.surface_shadows: filtered`.
+The `exact` reference renders on the host in float64 instead (clrays.reference.exact).
 
 A `Renderer` keeps the built kernels and the stage results of recent frames (device
 buffers, integrand tables) and re-runs a stage only when what it reads changed
@@ -128,6 +123,26 @@ class RenderResult:
         return sum(ms for label, ms in self.stage_ms.items() if label not in self.host_stages)
 
 
+@dataclass
+class Frame:
+    """What the stages of one frame hand each other (Renderer._frame), filled in stage by stage."""
+
+    scene: Scene
+    method: str
+    buffers: FrameBuffers
+    keys: "StageKeys"
+    reuse: Reuse
+    timer: StageTimer
+    occluders: FrameBuffers  # `buffers` with the opaque triangles alone (visibility's shadow rays)
+    rastered: RasterResult | None = None
+    maps: list[ShadowMap] = field(default_factory=list)
+    layers: object = None  # each light's translucent layers (stages/translucency.py), or None
+    films: Films | None = None  # the camera's translucent films (stages/transparency.py), or None
+    in_scatter: InScatter | None = None
+    textures: list[tuple[int, int]] = field(default_factory=list)  # (slices, γ texels) per light with a texture
+    samples: SampleCounts | None = None  # what epipolar sampling computed, summed over the lights
+
+
 class Renderer:
     """Renders scenes on one OpenCL device: a session that keeps built kernels and, with
     `reuse` (default), recent stage results (`cache_entries` per stage and light)."""
@@ -180,81 +195,121 @@ class Renderer:
 
     def _frame(self, scene: Scene, method: str, reuse: Reuse, timer: StageTimer, progress: bool):
         """(image, stage labels, epipolar texture sizes, sample counts, shadow rays) of one
-        frame: the pipeline of the module docstring."""
+        frame: the pipeline of the module docstring, one line per stage."""
         if method == "exact":
             return self._exact(scene, reuse, timer, progress)
-        device = self.device
+        frame = self._upload(scene, method, reuse, timer)  # the scene in eye space, packed into device structs
+        frame.rastered, frame.maps = self._raster(frame.buffers, frame.keys, reuse, timer)  # raster: depths, maps
+        frame.layers = self._translucency(frame.buffers, frame.keys, reuse, timer)  # translucency: light side
+        frame.films = self._films(frame.buffers, frame.rastered, reuse, timer)  # transparency: camera side
+        frame.in_scatter = InScatter(self.device, frame.buffers.inputs.samples)  # in-scattering per camera sample
+        VOLUME_METHODS[method](self, frame)  # raymarch; or per light rectify → minmax → integrand → traverse
+        visible, rays = self._visibility(frame.occluders, frame.rastered, frame.keys, reuse, timer)  # visibility
+        image = self._shade(frame, visible)  # shade: surfaces, attenuation, + in-scattering
+        # The stages that ran: a frame identical to this one counts them reused (not the skipped ones).
+        ran = tuple(stage for stage, status in reuse.record.status().items() if status != SKIPPED)
+        return image, ran, tuple(frame.textures), frame.samples, rays
+
+    def _upload(self, scene: Scene, method: str, reuse: Reuse, timer: StageTimer) -> "Frame":
+        """The frame's inputs checked against the device and uploaded, with their stage keys."""
         inputs = frame_inputs(scene)
         if not self._cull_faces:
             inputs = replace(inputs, view_needed=np.ones_like(inputs.view_needed))
-        check_device_memory(device, inputs)
+        check_device_memory(self.device, inputs)
         refuse_translucency(scene, method)  # (moments: no transmittance term)
-        buffers = upload(device, inputs)  # the scene in eye space, packed into device structs
-        keys = StageKeys(buffers.inputs)
-        occluders = opaque_occluder_buffers(device, buffers)  # (translucent triangles block no shadow ray)
-        rastered, maps = self._raster(buffers, keys, reuse, timer)  # raster: camera depth and ids, shadow maps
-        layers = self._translucency(buffers, keys, reuse, timer)  # translucency: layers nearest each light
-        films = self._films(buffers, rastered, reuse, timer)  # transparency: translucent films before the opaque depth
-        textures, samples = [], None
-        in_scatter = InScatter(device, buffers.inputs.samples)  # in-scattered radiance per camera sample
-        if not np.any(scene.medium.sigma_s > 0):
-            reuse.skip(*VOLUME_STAGES[method])  # no medium: no volume stages at all
-        elif method == "raymarch":
-            reuse.record.note("raymarch", COMPUTED)
-            # raymarch: the brute-force reference
-            raymarch(device, buffers, rastered, in_scatter.adding(), timer, layers)
-            if films is not None and films.walked is not None:  # MBOIT: one weighted march per sample with films
-                transparency_march(device, buffers, rastered, films, timer, layers)
-            elif films is not None:  # and up to each translucent film
-                films.add_in_scatter(device, timer, lambda r, s, t: raymarch(device, buffers, r, s, t, layers))
+        buffers = upload(self.device, inputs)
+        occluders = opaque_occluder_buffers(self.device, buffers)  # (translucent triangles block no shadow ray)
+        return Frame(scene, method, buffers, StageKeys(buffers.inputs), reuse, timer, occluders)
+
+    def _raymarch_volume(self, frame: "Frame") -> None:
+        """Method raymarch's volume stage, the brute-force reference: every light at once."""
+        if self._no_medium(frame):
+            return
+        device, buffers, timer, layers = self.device, frame.buffers, frame.timer, frame.layers
+        frame.reuse.record.note("raymarch", COMPUTED)
+        raymarch(device, buffers, frame.rastered, frame.in_scatter.adding(), timer, layers)
+        self._films_in_scatter(frame, lambda r, s, t: raymarch(device, buffers, r, s, t, layers),
+                               lambda: transparency_march(device, buffers, frame.rastered, frame.films, timer, layers))
+
+    def _epipolar_volume(self, frame: "Frame") -> None:
+        """The volume stages of methods minmax and moments, light by light."""
+        if self._no_medium(frame):
+            return
+        for index, light in enumerate(frame.scene.lights):
+            if eye_in_lamp(frame.scene, light):  # d_el → 0: no epipolar frame, nothing visible is shadowed
+                self._lamp_in_scatter(frame, light)
+            else:
+                self._light_volume(frame, index, light)
+        frame.reuse.record.note(VOLUME_STAGES[frame.method][-1], COMPUTED)
+
+    def _no_medium(self, frame: "Frame") -> bool:
+        """Whether the scene has no medium: then no volume stage runs at all."""
+        if np.any(frame.scene.medium.sigma_s > 0):
+            return False
+        frame.reuse.skip(*VOLUME_STAGES[frame.method])
+        return True
+
+    def _lamp_in_scatter(self, frame: "Frame", light) -> None:
+        """A light whose lamp holds the eye: its in-scattering on the host (stages/lamp.py)."""
+        device, buffers = self.device, frame.buffers
+        lamp_in_scatter(device, buffers, frame.rastered, light, frame.in_scatter.adding(), frame.timer)
+        self._films_in_scatter(frame, lambda r, s, t: lamp_in_scatter(device, buffers, r, light, s, t))
+
+    def _light_volume(self, frame: "Frame", index: int, light) -> None:
+        """One light's rectify → minmax → integrand → traverse (or volume_moments)."""
+        device, buffers, keys, reuse, timer = self.device, frame.buffers, frame.keys, frame.reuse, frame.timer
+        epipolar = self._rectify(buffers, frame.rastered, frame.maps, keys, index, reuse, timer)  # rectify: S[α, γ]
+        if epipolar is None:  # no visible ray has any extent in γ
+            return
+        frame.textures.append((int(epipolar.params["slices"]), int(epipolar.params["gamma_samples"])))
+        if frame.method == "minmax":
+            self._minmax(epipolar, reuse, timer)  # minmax: the 1D min-max mipmap of every row
+        tables = reuse.stage("integrand", lambda: keys.integrand(index, epipolar),  # integrand: lit run → radiance
+                             lambda: integrand(device, frame.scene, light, epipolar, timer), per_light=True)
+        if frame.method == "moments":  # volume_moments: prefix sums of moments, one reconstruction per ray
+            volume_moments(device, buffers, frame.rastered, epipolar, tables, frame.in_scatter.adding(), timer)
+            return
+        texture = reuse.stage("light_texture", lambda: keys.light_texture(index, epipolar),  # T·Γ_i prefix sums
+                              lambda: light_texture(device, buffers, index, epipolar, tables, timer),
+                              per_light=True) if textured(light) else None
+        rectified = None if frame.layers is None else \
+            rectify_layers(device, buffers, frame.layers, epipolar, timer)  # (translucent layers in α, γ)
+        if frame.scene.render.sampling == "epipolar" and not epipolar.unshadowed:  # traverse: walk the trees
+            counts = epipolar_sampling(device, buffers, frame.rastered, epipolar, tables, *frame.in_scatter.writing(),
+                                       timer, texture, rectified)
+            frame.samples = counts if frame.samples is None else frame.samples + counts
+        else:  # per camera sample; and a light that casts no shadow, whose 16 slices are too few to sample
+            traverse(device, buffers, frame.rastered, epipolar, tables, frame.in_scatter.adding(), timer, texture,
+                     rectified)
+        self._films_in_scatter(frame, lambda r, s, t: traverse(device, buffers, r, epipolar, tables, s, t, texture,
+                                                               rectified),
+                               lambda: transparency_walk(device, buffers, frame.films, epipolar, tables, timer, texture,
+                                                         rectified))
+
+    def _films_in_scatter(self, frame: "Frame", per_film, weighted=None) -> None:
+        """The in-scattering a volume stage just added for the camera samples, added for the
+        translucent films too: by MBOIT's one weighted walk where the films have it (and the
+        stage has one, `weighted`), else by the same stage run up to each film (`per_film`)."""
+        films = frame.films
+        if films is None:
+            return
+        if films.walked is not None and weighted is not None:
+            weighted()
         else:
-            for index, light in enumerate(scene.lights):
-                if eye_in_lamp(scene, light):  # d_el → 0: no epipolar frame, nothing visible is shadowed
-                    lamp_in_scatter(device, buffers, rastered, light, in_scatter.adding(), timer)
-                    if films is not None:
-                        films.add_in_scatter(device, timer, lambda r, s, t, light=light: lamp_in_scatter(
-                            device, buffers, r, light, s, t))
-                    continue
-                epipolar = self._rectify(buffers, rastered, maps, keys, index, reuse, timer)  # rectify: S[α, γ]
-                if epipolar is None:  # no visible ray has any extent in γ
-                    continue
-                textures.append((int(epipolar.params["slices"]), int(epipolar.params["gamma_samples"])))
-                if method == "minmax":
-                    self._minmax(epipolar, reuse, timer)  # minmax: the 1D min-max mipmap of every row
-                tables = reuse.stage("integrand", lambda: keys.integrand(index, epipolar),  # integrand: lit run → radiance
-                                     lambda: integrand(device, scene, light, epipolar, timer), per_light=True)
-                if method == "moments":  # volume_moments: prefix sums of moments, one reconstruction per ray
-                    volume_moments(device, buffers, rastered, epipolar, tables, in_scatter.adding(), timer)
-                    continue
-                texture = reuse.stage("light_texture", lambda: keys.light_texture(index, epipolar),  # texture: T·Γ_i prefix sums
-                                      lambda: light_texture(device, buffers, index, epipolar, tables, timer),
-                                      per_light=True) if textured(light) else None
-                rectified = None if layers is None else \
-                    rectify_layers(device, buffers, layers, epipolar, timer)  # (translucent layers in α, γ)
-                if scene.render.sampling == "epipolar" and not epipolar.unshadowed:  # traverse: walk the trees
-                    counts = epipolar_sampling(device, buffers, rastered, epipolar, tables, *in_scatter.writing(),
-                                               timer, texture, rectified)
-                    samples = counts if samples is None else samples + counts
-                else:  # per camera sample; and a light that casts no shadow, whose 16 slices are too few to sample
-                    traverse(device, buffers, rastered, epipolar, tables, in_scatter.adding(), timer, texture,
-                             rectified)
-                if films is not None and films.walked is not None:  # MBOIT: one weighted walk per sample with films
-                    transparency_walk(device, buffers, films, epipolar, tables, timer, texture, rectified)
-                elif films is not None:  # each translucent film's own rays walk the same trees
-                    films.add_in_scatter(device, timer, lambda r, s, t, e=epipolar, i=tables, x=texture, y=rectified:
-                                         traverse(device, buffers, r, e, i, s, t, x, y))
-            reuse.record.note(VOLUME_STAGES[method][-1], COMPUTED)
-        visible, rays = self._visibility(occluders, rastered, keys, reuse, timer)  # visibility: exact surface shadows
-        through = None if layers is None or scene.render.surface_shadows != "exact" else \
+            films.add_in_scatter(self.device, frame.timer, per_film)
+
+    def _shade(self, frame: "Frame", visible):
+        """The shade stage, with what translucent objects add before it: the exact edges of
+        their shadows on surfaces, and the camera's films composited in front of the opaque
+        samples."""
+        device, buffers, rastered, layers, timer = self.device, frame.buffers, frame.rastered, frame.layers, frame.timer
+        through = None if layers is None or frame.scene.render.surface_shadows != "exact" else \
             surface_transmittance(device, buffers, rastered, layers, timer)  # (translucent shadows' exact edges)
-        # transparency: the films' surfaces and fog composited in front of the opaque samples
-        transparency = None if films is None else composite(device, buffers, rastered, films, timer, layers)
-        image = shade(device, buffers, rastered, in_scatter.adding(), timer, visible, layers,  # shade: surfaces,
-                      through, transparency)                                                # attenuation, + scatter
-        reuse.record.note("shade", COMPUTED)
-        # The stages that ran: a frame identical to this one counts them reused (not the skipped ones).
-        ran = tuple(stage for stage, status in reuse.record.status().items() if status != SKIPPED)
-        return image, ran, tuple(textures), samples, rays
+        transparency = None if frame.films is None else composite(device, buffers, rastered, frame.films, timer, layers)
+        image = shade(device, buffers, rastered, frame.in_scatter.adding(), timer, visible, layers, through,
+                      transparency)
+        frame.reuse.record.note("shade", COMPUTED)
+        return image
 
     def _films(self, buffers: FrameBuffers, rastered: RasterResult, reuse: Reuse, timer: StageTimer) -> Films | None:
         """The transparency stage's films (clrays.stages.transparency); None, and the stage
@@ -392,6 +447,11 @@ class Renderer:
             return
         minmax(self.device, epipolar, timer)
         reuse.record.note("minmax", COMPUTED)
+
+
+#: Each method's volume stages (`exact` renders on the host instead: Renderer._exact).
+VOLUME_METHODS = {"minmax": Renderer._epipolar_volume, "moments": Renderer._epipolar_volume,
+                  "raymarch": Renderer._raymarch_volume}
 
 
 def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
