@@ -207,7 +207,7 @@ ALWAYS_INLINE float2 line_wedge(global const float2* wedges, int i)
 inline float3 line_sample_radiance(global const frame_t* frame, global const light_t* lights,
                                    global const epipolar_t* ep, global const float2* tree,
                                    global const integrand_t* integrand, global const float* tables,
-                                   const row_texture_t* texture, global const float2* ranges,
+                                   const walk_features_t* features, global const float2* ranges,
                                    global const float4* sides, float2 wedge, float distance, int i, int j, int n,
                                    uint* walked)
 {
@@ -222,7 +222,7 @@ inline float3 line_sample_radiance(global const frame_t* frame, global const lig
     if (!ray_span(ep, light, frame, integrand, dir, distance, &span)) return (float3)(0.0f);
 #endif
     ++*walked;
-    return radiance_scale(light, sin_beta) * row_radiance(ep, tree, i, &span, integrand, tables, frame, texture);
+    return radiance_scale(light, sin_beta) * row_radiance(ep, tree, i, &span, integrand, tables, frame, features);
 }
 
 ALWAYS_INLINE float luminance(float3 c) { return inline_dot(c, (float3)(0.2126f, 0.7152f, 0.0722f)); }
@@ -250,16 +250,14 @@ ALWAYS_INLINE int radiance_breaks(float3 a, float3 b, float threshold)
 NOT_ACROSS_WORK_ITEMS
 kernel void line_scatter(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                          global const epipolar_t* ep, global const float2* tree,
-                         global const integrand_t* integrand, global const float* tables,
-                         global const textured_integrand_t* textured, global const float* texture_basis,
-                         global const float* texture_prefix, global const float2* ranges,
+                         global const integrand_t* integrand, global const float* tables, global const float2* ranges,
                          global const float4* sides, global const float2* wedges, global const float2* line, int n,
                          global const int* lengths, int step, float threshold, global float4* radiance,
                          global uchar* state,
-                         global ushort* walked RECTIFIED_LAYER_ARGS)
+                         global ushort* walked WALK_FEATURE_ARGS)
 {
-    row_texture_t texture = {textured, texture_basis, texture_prefix};
-    ATTACH_RECTIFIED_LAYERS(texture) /* translucent objects only (translucent_walk.h) */
+    walk_features_t features;
+    ATTACH_WALK_FEATURES(features) /* a light texture, translucent layers (walk_features.h) */
     int run = get_global_id(0), i = get_global_id(1);
     if (i >= ep->slices) return;
     int first = run * step, length = lengths[i];
@@ -273,7 +271,7 @@ kernel void line_scatter(global const frame_t* frame, global const view_t* views
         if (samples[j].x < 0.0f) {
             known = LINE_COMPUTED; /* the slice does not cross the screen: nothing reads it */
         } else if (line_sample_needed(samples, j, length, step, threshold)) {
-            result.xyz = line_sample_radiance(frame, lights, ep, tree, integrand, tables, &texture, ranges, sides,
+            result.xyz = line_sample_radiance(frame, lights, ep, tree, integrand, tables, &features, ranges, sides,
                                               wedge, samples[j].x, i, j, length, &walks);
             known = LINE_COMPUTED;
         }
@@ -300,14 +298,13 @@ kernel void line_scatter(global const frame_t* frame, global const view_t* views
 NOT_ACROSS_WORK_ITEMS
 kernel void line_refine_fill(global const frame_t* frame, global const light_t* lights, global const epipolar_t* ep,
                              global const float2* tree, global const integrand_t* integrand,
-                             global const float* tables, global const textured_integrand_t* textured,
-                             global const float* texture_basis, global const float* texture_prefix,
+                             global const float* tables,
                              global const float2* ranges, global const float4* sides, global const float2* wedges,
                              global const float2* line, int n, global const int* lengths, int step, float threshold,
-                             global float4* radiance, global uchar* state, global ushort* walked RECTIFIED_LAYER_ARGS)
+                             global float4* radiance, global uchar* state, global ushort* walked WALK_FEATURE_ARGS)
 {
-    row_texture_t texture = {textured, texture_basis, texture_prefix};
-    ATTACH_RECTIFIED_LAYERS(texture) /* translucent objects only (translucent_walk.h) */
+    walk_features_t features;
+    ATTACH_WALK_FEATURES(features) /* a light texture, translucent layers (walk_features.h) */
     int run = get_global_id(0), i = get_global_id(1);
     if (i >= ep->slices) return;
     int length = lengths[i], first = run * step;
@@ -323,7 +320,7 @@ kernel void line_refine_fill(global const frame_t* frame, global const light_t* 
         while (known[left] != LINE_COMPUTED) --left;
         while (known[right] != LINE_COMPUTED) ++right;
         if (radiance_breaks(samples[left].xyz, samples[right].xyz, 4.0f * threshold)) {
-            float3 computed = line_sample_radiance(frame, lights, ep, tree, integrand, tables, &texture, ranges, sides,
+            float3 computed = line_sample_radiance(frame, lights, ep, tree, integrand, tables, &features, ranges, sides,
                                                    wedge, line[i * n + j].x, i, j, length, &walks);
             samples[j].xyz = computed;
             known[j] = LINE_REFINED;
@@ -558,14 +555,12 @@ kernel void fixup_list(int samples, global const uchar* fixup_flags, global cons
 NOT_ACROSS_WORK_ITEMS
 kernel void fix_up(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                    global const epipolar_t* ep, global const float2* tree, global const integrand_t* integrand,
-                   global const float* tables, global const uint* camera_depth, global const float2* offsets,
-                   global const textured_integrand_t* textured, global const float* texture_basis,
-                   global const float* texture_prefix, global const uint* fixups, int count, global float4* scatter RECTIFIED_LAYER_ARGS)
+                   global const float* tables, global const uint* camera_depth, global const float2* offsets, global const uint* fixups, int count, global float4* scatter WALK_FEATURE_ARGS)
 {
     int k = get_global_id(0);
     if (k >= count) return;
-    row_texture_t texture = {textured, texture_basis, texture_prefix};
-    ATTACH_RECTIFIED_LAYERS(texture) /* translucent objects only (translucent_walk.h) */
+    walk_features_t features;
+    ATTACH_WALK_FEATURES(features) /* a light texture, translucent layers (walk_features.h) */
     uint entry = fixups[k];
     int sample = entry >> 2;
     float distance, t;
@@ -574,7 +569,7 @@ kernel void fix_up(global const frame_t* frame, global const view_t* views, glob
     ray_span_t span;
     if (!ray_span(ep, lights + ep->light_index, frame, integrand, dir, distance, &span)) return;
     float3 walked = (float3)(0.0f);
-    if (entry & 1) walked += (1.0f - t) * row_radiance(ep, tree, i0, &span, integrand, tables, frame, &texture);
-    if (entry & 2) walked += t * row_radiance(ep, tree, i1, &span, integrand, tables, frame, &texture);
+    if (entry & 1) walked += (1.0f - t) * row_radiance(ep, tree, i0, &span, integrand, tables, frame, &features);
+    if (entry & 2) walked += t * row_radiance(ep, tree, i1, &span, integrand, tables, frame, &features);
     scatter[sample] += (float4)(walked, 0.0f);
 }

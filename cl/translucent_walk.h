@@ -13,12 +13,7 @@
 
 #include "translucency.h"
 
-/* The kernel arguments of the rectified layers, and how a kernel hands them to its walks. */
-#define RECTIFIED_LAYER_ARGS , global const float* layer_beta, global const uint2* layer_clear, global const int* layer_rows
-#define ATTACH_RECTIFIED_LAYERS(texture)                                                                  \
-    (texture).layer_beta = layer_beta;                                                                 \
-    (texture).layer_clear = layer_clear;                                                               \
-    (texture).layer_rows = layer_rows;
+/* (Its kernel arguments, RECTIFIED_LAYER_ARGS, are declared in walk_features.h.) */
 
 /* The transmittance of ray β at rectified texel `position` of a row's layers. */
 inline float3 texel_transmittance(global const float* beta_row, global const uint2* clear_row, int position, float beta)
@@ -35,7 +30,7 @@ inline float3 walk_row_translucent(global const epipolar_t* ep, global const flo
                                    global const float* beta_row, global const uint2* clear_row,
                                    const integrand_row_t* ray, float gamma_begin, float gamma_end,
                                    global const integrand_t* in, global const float* tables,
-                                   global const frame_t* frame, const row_texture_t* texture,
+                                   global const frame_t* frame, const walk_features_t* features,
                                    global const float* row_prefix)
 {
     float beta = ray->beta;
@@ -52,7 +47,7 @@ inline float3 walk_row_translucent(global const epipolar_t* ep, global const flo
             continue;
         }
         if (run_start >= 0)
-            radiance += run_through * run_radiance(in, tables, frame, ray, texture, row_prefix, ep->gamma_step,
+            radiance += run_through * run_radiance(in, tables, frame, ray, features, row_prefix, ep->gamma_step,
                                                    fmax(run_start * ep->gamma_step, gamma_begin),
                                                    fmin(run_end * ep->gamma_step, gamma_end));
         run_start = lit ? position : -1;
@@ -60,14 +55,11 @@ inline float3 walk_row_translucent(global const epipolar_t* ep, global const flo
         run_through = through;
     }
     if (run_start >= 0)
-        radiance += run_through * run_radiance(in, tables, frame, ray, texture, row_prefix, ep->gamma_step,
+        radiance += run_through * run_radiance(in, tables, frame, ray, features, row_prefix, ep->gamma_step,
                                                fmax(run_start * ep->gamma_step, gamma_begin),
                                                fmin(run_end * ep->gamma_step, gamma_end));
     return radiance;
 }
 
-#else
-#define RECTIFIED_LAYER_ARGS
-#define ATTACH_RECTIFIED_LAYERS(texture)
 #endif
 #endif

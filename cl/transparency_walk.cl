@@ -4,9 +4,9 @@
  * moments (mboit.h), along the lit runs of the two min-max rows nearest the sample
  * (traverse.cl's walk), each run split at WALK_PIECES + 1 pieces of the ray and each piece
  * weighted by T − T(D) at its middle (walk.h's weighted run_radiance).
- * Reads frame, views, lights, epipolar, tree, integrand, tables, offsets, the light texture's
- * tables, walk_samples (the samples with films), film_depth, film_tri (transparency.cl's
- * gather), tri_opacity; adds into walked_fog (float4 per camera sample).
+ * Reads frame, views, lights, epipolar, tree, integrand, tables, offsets, walk_samples (the
+ * samples with films), film_depth, film_tri (transparency.cl's gather), tri_opacity, and the
+ * walk's features (walk_features.h); adds into walked_fog (float4 per camera sample).
  *
  *   along the ray:  eye |— piece 0: 1 − T(D) —| nearest film |— 1 … WALK_PIECES —| farthest film
  *   the pieces between the films even in warped depth; behind the farthest the weight is 0. */
@@ -35,22 +35,22 @@ inline float depth_gamma(global const epipolar_t* ep, int directional, float sin
     return directional ? s * sin_beta : atan2(s * sin_beta, ep->d_el - s * cos_beta);
 }
 
-/* The pieces of the ray and the fog's weight over each, into texture. */
+/* The pieces of the ray and the fog's weight over each, into the walk's features. */
 inline void fog_pieces(global const epipolar_t* ep, global const light_t* light, float3 dir,
-                       const film_moments_t* films, float2 depth_range, float moment_bias, row_texture_t* texture)
+                       const film_moments_t* films, float2 depth_range, float moment_bias, walk_features_t* features)
 {
     float sin_beta, cos_beta;
     ray_beta(ep, dir, &sin_beta, &cos_beta);
     int directional = light->type == LIGHT_DIRECTIONAL;
-    texture->piece_gamma[0] = -INFINITY;
-    texture->piece_weight[0] = (float4)(1.0f - exp(-films->b0), 0.0f);
+    features->piece_gamma[0] = -INFINITY;
+    features->piece_weight[0] = (float4)(1.0f - exp(-films->b0), 0.0f);
     for (int j = 0; j <= WALK_PIECES; ++j) {
         float s = depth_between(films->nearest, films->farthest, (float)j / (float)WALK_PIECES);
-        texture->piece_gamma[j + 1] = depth_gamma(ep, directional, sin_beta, cos_beta, s);
+        features->piece_gamma[j + 1] = depth_gamma(ep, directional, sin_beta, cos_beta, s);
     }
     for (int j = 1; j <= WALK_PIECES; ++j) {
         float middle = depth_between(films->nearest, films->farthest, ((float)j - 0.5f) / (float)WALK_PIECES);
-        texture->piece_weight[j] = (float4)(fog_weight(films, middle, depth_range, moment_bias), 0.0f);
+        features->piece_weight[j] = (float4)(fog_weight(films, middle, depth_range, moment_bias), 0.0f);
     }
 }
 
@@ -58,12 +58,11 @@ NOT_ACROSS_WORK_ITEMS
 kernel void transparency_walk(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                               global const epipolar_t* epipolar, global const float2* tree,
                               global const integrand_t* integrand, global const float* tables,
-                              global const float2* offsets, global const textured_integrand_t* textured,
-                              global const float* texture_basis, global const float* texture_prefix,
+                              global const float2* offsets,
                               global const int* walk_samples, int walk_count, int slots,
                               global const uint* film_depth, global const int* film_tri,
                               global const float4* tri_opacity, float2 depth_range, float moment_bias,
-                              global float4* walked_fog RECTIFIED_LAYER_ARGS)
+                              global float4* walked_fog WALK_FEATURE_ARGS)
 {
     int index = get_global_id(0);
     if (index >= walk_count) return;
@@ -79,10 +78,10 @@ kernel void transparency_walk(global const frame_t* frame, global const view_t* 
     int i0, i1;
     float t;
     nearest_slices(ep, dir, &i0, &i1, &t);
-    row_texture_t texture = {textured, texture_basis, texture_prefix};
-    ATTACH_RECTIFIED_LAYERS(texture) /* translucent occluders (translucent_walk.h) */
-    fog_pieces(ep, light, dir, &films, depth_range, moment_bias, &texture);
-    float3 near0 = row_radiance(ep, tree, i0, &span, integrand, tables, frame, &texture);
-    float3 near1 = row_radiance(ep, tree, i1, &span, integrand, tables, frame, &texture);
+    walk_features_t features;
+    ATTACH_WALK_FEATURES(features) /* a light texture, translucent layers (walk_features.h) */
+    fog_pieces(ep, light, dir, &films, depth_range, moment_bias, &features);
+    float3 near0 = row_radiance(ep, tree, i0, &span, integrand, tables, frame, &features);
+    float3 near1 = row_radiance(ep, tree, i1, &span, integrand, tables, frame, &features);
     walked_fog[sample] += (float4)(mix(near0, near1, t), 0.0f);
 }

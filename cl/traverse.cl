@@ -2,18 +2,16 @@
  * the min-max tree rows of the two slices nearest the sample's α over its γ extent,
  * integrate the lit runs with the integrand tables, blend the two slices
  * (docs/design.md §4.5 "traverse"; the walk itself is in walk.h).
- * Reads frame, views, lights, epipolar, tree, integrand, tables, camera_depth,
- * offsets, and for a textured light textured, texture_basis, texture_prefix
- * (docs/light-textures.md); adds into scatter (float4 per camera sample). */
+ * Reads frame, views, lights, epipolar, tree, integrand, tables, camera_depth, offsets,
+ * and the walk's features (walk_features.h: a light texture, translucent layers); adds
+ * into scatter (float4 per camera sample). */
 #include "walk.h"
 
 NOT_ACROSS_WORK_ITEMS
 kernel void traverse(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                      global const epipolar_t* epipolar, global const float2* tree,
                      global const integrand_t* integrand, global const float* tables,
-                     global const uint* camera_depth, global const float2* offsets,
-                     global const textured_integrand_t* textured, global const float* texture_basis,
-                     global const float* texture_prefix, global float4* scatter RECTIFIED_LAYER_ARGS)
+                     global const uint* camera_depth, global const float2* offsets, global float4* scatter WALK_FEATURE_ARGS)
 {
     int sample = get_global_id(0);
     if (sample >= frame->width * frame->height * frame->spp) return;
@@ -25,9 +23,9 @@ kernel void traverse(global const frame_t* frame, global const view_t* views, gl
     int i0, i1;
     float t;
     nearest_slices(ep, dir, &i0, &i1, &t);
-    row_texture_t texture = {textured, texture_basis, texture_prefix};
-    ATTACH_RECTIFIED_LAYERS(texture) /* translucent objects only (translucent_walk.h) */
-    float3 near0 = row_radiance(ep, tree, i0, &span, integrand, tables, frame, &texture);
-    float3 near1 = row_radiance(ep, tree, i1, &span, integrand, tables, frame, &texture);
+    walk_features_t features;
+    ATTACH_WALK_FEATURES(features) /* a light texture, translucent layers (walk_features.h) */
+    float3 near0 = row_radiance(ep, tree, i0, &span, integrand, tables, frame, &features);
+    float3 near1 = row_radiance(ep, tree, i1, &span, integrand, tables, frame, &features);
     scatter[sample] += (float4)(mix(near0, near1, t), 0.0f);
 }

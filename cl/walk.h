@@ -10,41 +10,28 @@
 #include "light_texture.h"
 #include "minmax.h"
 #include "inline_math.h"
+#include "walk_features.h"
 
 /* TRAVERSAL_TREE and TRAVERSAL_SCAN come from clrays/structs.py (-D). */
 #ifndef TRAVERSAL
 #define TRAVERSAL TRAVERSAL_TREE
 #endif
 
-/* A light's texture along the rows (light_texture.h, docs/light-textures.md): its
- * parameters (`textured->textured` is 0 for an untextured light), the γ basis, and the
- * prefix sums, one block per slice. */
-typedef struct {
-    global const textured_integrand_t* textured;
-    global const float* basis;
-    global const float* prefix;
-#ifdef TRANSLUCENT_LAYERS /* the rectified translucent layers (translucent_walk.h) */
-    global const float* layer_beta;
-    global const uint2* layer_clear;
-    global const int* layer_rows;
-#endif
-#ifdef TRANSPARENCY_WEIGHTED_WALK /* the fog's weight along the ray in pieces (transparency_walk.cl) */
-    float piece_gamma[WALK_PIECES + 2];
-    float4 piece_weight[WALK_PIECES + 1];
-#endif
-} row_texture_t;
-
 /* A lit run's radiance: the integrand tables' segment, times the light's texture along
  * this row when it has one. */
 inline float3 unweighted_run_radiance(global const integrand_t* in, global const float* tables,
                                       global const frame_t* frame, const integrand_row_t* ray,
-                                      const row_texture_t* texture, global const float* row_prefix, float gamma_step,
+                                      const walk_features_t* features, global const float* row_prefix, float gamma_step,
                                       float gamma0, float gamma1)
 {
     float3 untextured = segment_radiance(in, tables, frame, ray, gamma0, gamma1);
-    if (!texture->textured->textured || !(gamma1 > gamma0)) return untextured;
-    return textured_run_radiance(texture->textured, texture->basis, row_prefix, gamma_step, ray, untextured, gamma0,
+#ifdef LIGHT_TEXTURE
+    if (!features->textured->textured || !(gamma1 > gamma0)) return untextured;
+    return textured_run_radiance(features->textured, features->basis, row_prefix, gamma_step, ray, untextured, gamma0,
                                  gamma1);
+#else
+    return untextured;
+#endif
 }
 
 #ifdef TRANSPARENCY_WEIGHTED_WALK
@@ -52,15 +39,15 @@ inline float3 unweighted_run_radiance(global const integrand_t* in, global const
  * each piece's part weighted by the fog's weight there, T(s) − T(D) (docs/design.md, the
  * camera side). Piece j is [piece_gamma[j], piece_gamma[j + 1]). */
 inline float3 run_radiance(global const integrand_t* in, global const float* tables, global const frame_t* frame,
-                           const integrand_row_t* ray, const row_texture_t* texture, global const float* row_prefix,
+                           const integrand_row_t* ray, const walk_features_t* features, global const float* row_prefix,
                            float gamma_step, float gamma0, float gamma1)
 {
     float3 radiance = (float3)(0.0f);
     for (int j = 0; j <= WALK_PIECES; ++j) {
-        float begin = fmax(gamma0, texture->piece_gamma[j]), end = fmin(gamma1, texture->piece_gamma[j + 1]);
+        float begin = fmax(gamma0, features->piece_gamma[j]), end = fmin(gamma1, features->piece_gamma[j + 1]);
         if (end > begin)
-            radiance += texture->piece_weight[j].xyz
-                        * unweighted_run_radiance(in, tables, frame, ray, texture, row_prefix, gamma_step, begin, end);
+            radiance += features->piece_weight[j].xyz
+                        * unweighted_run_radiance(in, tables, frame, ray, features, row_prefix, gamma_step, begin, end);
     }
     return radiance;
 }
@@ -203,7 +190,7 @@ inline void nearest_slices(global const epipolar_t* ep, float3 dir, int* i0, int
  * one and climb while its index is even. TRAVERSAL_SCAN reads every texel. */
 inline float3 walk_row(global const epipolar_t* ep, global const float2* row, const integrand_row_t* ray,
                        float gamma_begin, float gamma_end, global const integrand_t* in,
-                       global const float* tables, global const frame_t* frame, const row_texture_t* texture,
+                       global const float* tables, global const frame_t* frame, const walk_features_t* features,
                        global const float* row_prefix)
 {
     float beta = ray->beta;
@@ -233,7 +220,7 @@ inline float3 walk_row(global const epipolar_t* ep, global const float2* row, co
             if (run_start < 0) run_start = position;
             run_end = position + size;
         } else if (run_start >= 0) {
-            radiance += run_radiance(in, tables, frame, ray, texture, row_prefix, ep->gamma_step,
+            radiance += run_radiance(in, tables, frame, ray, features, row_prefix, ep->gamma_step,
                                      inline_fmax(run_start * ep->gamma_step, gamma_begin),
                                      inline_fmin(run_end * ep->gamma_step, gamma_end));
             run_start = -1;
@@ -241,7 +228,7 @@ inline float3 walk_row(global const epipolar_t* ep, global const float2* row, co
         position += size;
     }
     if (run_start >= 0)
-        radiance += run_radiance(in, tables, frame, ray, texture, row_prefix, ep->gamma_step,
+        radiance += run_radiance(in, tables, frame, ray, features, row_prefix, ep->gamma_step,
                                  inline_fmax(run_start * ep->gamma_step, gamma_begin),
                                  inline_fmin(run_end * ep->gamma_step, gamma_end));
     return radiance;
@@ -252,29 +239,33 @@ inline float3 walk_row(global const epipolar_t* ep, global const float2* row, co
 /* The radiance of a ray's lit runs along slice i's row, the lamp's chord left out. */
 inline float3 row_radiance(global const epipolar_t* ep, global const float2* tree, int i, const ray_span_t* span,
                            global const integrand_t* in, global const float* tables, global const frame_t* frame,
-                           const row_texture_t* texture)
+                           const walk_features_t* features)
 {
     global const float2* row = tree + (size_t)i * 2 * (size_t)ep->gamma_samples;
-    size_t prefix_stride = texture->textured->textured
-                               ? (size_t)3 * (texture->textured->rank + 1) * (ep->gamma_samples + 1) : 0;
-    global const float* row_prefix = texture->prefix + i * prefix_stride;
+#ifdef LIGHT_TEXTURE
+    size_t prefix_stride = features->textured->textured
+                               ? (size_t)3 * (features->textured->rank + 1) * (ep->gamma_samples + 1) : 0;
+    global const float* row_prefix = features->prefix + i * prefix_stride;
+#else
+    global const float* row_prefix = 0; /* (read only for a textured light) */
+#endif
 #ifdef TRANSLUCENT_LAYERS /* a row that translucent layers cross: texel by texel (translucent_walk.h) */
-    if (texture->layer_rows[i]) {
+    if (features->layer_rows[i]) {
         size_t layers_at = (size_t)i * ep->gamma_samples * TRANSLUCENT_LAYERS;
-        global const float* beta_row = texture->layer_beta + layers_at;
-        global const uint2* clear_row = texture->layer_clear + layers_at;
+        global const float* beta_row = features->layer_beta + layers_at;
+        global const uint2* clear_row = features->layer_clear + layers_at;
         float3 radiance = walk_row_translucent(ep, row, beta_row, clear_row, &span->ray, span->gamma_begin,
-                                               span->gamma_lamp0, in, tables, frame, texture, row_prefix);
+                                               span->gamma_lamp0, in, tables, frame, features, row_prefix);
         if (span->gamma_lamp1 < span->gamma_end)
             radiance += walk_row_translucent(ep, row, beta_row, clear_row, &span->ray, span->gamma_lamp1,
-                                             span->gamma_end, in, tables, frame, texture, row_prefix);
+                                             span->gamma_end, in, tables, frame, features, row_prefix);
         return radiance;
     }
 #endif
-    float3 radiance = walk_row(ep, row, &span->ray, span->gamma_begin, span->gamma_lamp0, in, tables, frame, texture,
+    float3 radiance = walk_row(ep, row, &span->ray, span->gamma_begin, span->gamma_lamp0, in, tables, frame, features,
                                row_prefix);
     if (span->gamma_lamp1 < span->gamma_end)
-        radiance += walk_row(ep, row, &span->ray, span->gamma_lamp1, span->gamma_end, in, tables, frame, texture,
+        radiance += walk_row(ep, row, &span->ray, span->gamma_lamp1, span->gamma_end, in, tables, frame, features,
                              row_prefix);
     return radiance;
 }

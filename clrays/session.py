@@ -39,6 +39,7 @@ from .physics.radiometry import effective_far
 from .reuse import COMPUTED, REUSED, SKIPPED, Reuse, StageCache, StageRecord, digest, geometry_parts, scene_digest
 from .scene.costs import with_derived_sizes
 from .scene.model import METHODS, Render, Scene
+from .stages.features import walk_features
 from .stages.integrand import integrand, integrand_table_size
 from .stages.lamp import eye_in_lamp, lamp_in_scatter
 from .stages.light_texture import light_texture
@@ -269,22 +270,20 @@ class Renderer:
         if frame.method == "moments":  # volume_moments: prefix sums of moments, one reconstruction per ray
             volume_moments(device, buffers, frame.rastered, epipolar, tables, frame.in_scatter.adding(), timer)
             return
-        texture = reuse.stage("light_texture", lambda: keys.light_texture(index, epipolar),  # T·Γ_i prefix sums
-                              lambda: light_texture(device, buffers, index, epipolar, tables, timer),
-                              per_light=True) if textured(light) else None
-        rectified = None if frame.layers is None else \
-            rectify_layers(device, buffers, frame.layers, epipolar, timer)  # (translucent layers in α, γ)
+        features = walk_features(  # what the walks carry (stages/features.py, cl/walk_features.h)
+            reuse.stage("light_texture", lambda: keys.light_texture(index, epipolar),  # light_texture: T·Γ_i sums
+                        lambda: light_texture(device, buffers, index, epipolar, tables, timer),
+                        per_light=True) if textured(light) else None,
+            None if frame.layers is None else rectify_layers(device, buffers, frame.layers, epipolar, timer))
         if frame.scene.render.sampling == "epipolar" and not epipolar.unshadowed:  # traverse: walk the trees
             counts = epipolar_sampling(device, buffers, frame.rastered, epipolar, tables, *frame.in_scatter.writing(),
-                                       timer, texture, rectified)
+                                       timer, features)
             frame.samples = counts if frame.samples is None else frame.samples + counts
         else:  # per camera sample; and a light that casts no shadow, whose 16 slices are too few to sample
-            traverse(device, buffers, frame.rastered, epipolar, tables, frame.in_scatter.adding(), timer, texture,
-                     rectified)
-        self._films_in_scatter(frame, lambda r, s, t: traverse(device, buffers, r, epipolar, tables, s, t, texture,
-                                                               rectified),
-                               lambda: transparency_walk(device, buffers, frame.films, epipolar, tables, timer, texture,
-                                                         rectified))
+            traverse(device, buffers, frame.rastered, epipolar, tables, frame.in_scatter.adding(), timer, features)
+        self._films_in_scatter(frame, lambda r, s, t: traverse(device, buffers, r, epipolar, tables, s, t, features),
+                               lambda: transparency_walk(device, buffers, frame.films, epipolar, tables, timer,
+                                                         features))
 
     def _films_in_scatter(self, frame: "Frame", per_film, weighted=None) -> None:
         """The in-scattering a volume stage just added for the camera samples, added for the

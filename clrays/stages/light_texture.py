@@ -137,18 +137,20 @@ def gamma_basis(light_kind, medium, power, d_el, beta_min, beta_max, gamma_step,
 
 @dataclass
 class TextureTables:
-    """One textured light's tables on the device, as traverse reads them."""
+    """One textured light's tables on the device, as the row walks read them: a feature of
+    the walk (clrays/stages/features.py, cl/walk_features.h's LIGHT_TEXTURE)."""
 
     params: object  # textured_integrand_t
     basis: object  # float[]: B, then P (cl/light_texture.h)
     prefix: object  # float[slices][3][rank + 1][n + 1]
     rank: int
 
+    def defines(self) -> dict:
+        return {"LIGHT_TEXTURE": 1}
 
-def untextured_tables(device: Device) -> TextureTables:
-    """What traverse gets for a light without a texture: textured = 0, nothing to read."""
-    params = np.zeros(1, dtype=structs.textured_integrand_dtype)
-    return TextureTables(device.buffer(params, writable=False), device.buffer(nbytes=4), device.buffer(nbytes=4), 0)
+    def args(self) -> tuple:
+        """The kernel arguments of LIGHT_TEXTURE_ARGS."""
+        return self.params, self.basis, self.prefix
 
 
 def light_texture(device: Device, buffers: FrameBuffers, light_index: int, epipolar: Epipolar,

@@ -21,7 +21,7 @@ from ..inputs import FrameBuffers
 from ..scene.model import TRAVERSALS, DirectionalLight, SpotLight
 from ..scene.camera import camera_basis, half_extents
 from .integrand import DeviceIntegrand
-from .light_texture import TextureTables, untextured_tables
+from .features import WalkFeature, feature_args, feature_defines
 from .raster import RasterResult
 from .rectify import Epipolar, poles_on_screen, slice_sides
 
@@ -171,13 +171,11 @@ FIXUP_BLOCK = 1024
 
 def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterResult, epipolar: Epipolar,
                       integrand: DeviceIntegrand, scatter, overwrite: bool, timer: StageTimer,
-                      texture: TextureTables | None = None, layers=None) -> SampleCounts:
+                      features: tuple[WalkFeature, ...] = ()) -> SampleCounts:
     """Add one light's in-scattered radiance into `scatter` (float4 per camera sample), or
     with `overwrite` write it there (gather writes every sample: no clear needed before);
-    `texture`: the light's texture tables (stage light_texture; None: an untextured light);
-    `layers`: its rectified translucent layers (stage translucency; None: an opaque-only scene),
-    which the kernels that walk rows take last."""
-    texture = texture if texture is not None else untextured_tables(device)
+    `features`: what the walks carry (clrays/stages/features.py), which the kernels that walk
+    rows take last."""
     inputs = buffers.inputs
     render = inputs.scene.render
     slices, n = int(epipolar.params["slices"]), render.line_samples
@@ -194,9 +192,7 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
     light = inputs.scene.lights[int(epipolar.params["light_index"])]
     traversal = {"TRAVERSAL": TRAVERSALS.index(render.traversal), "LANES": LANES, "FIXUP_BLOCK": FIXUP_BLOCK,
                  "SAMPLING_LIGHT": structs.LIGHT_SPOT if isinstance(light, SpotLight) else structs.LIGHT_POINT}
-    walked = ()  # the walking kernels' trailing arguments
-    if layers is not None:
-        traversal, walked = {**traversal, **layers.defines()}, layers.args()
+    traversal, walked = feature_defines(features, traversal), feature_args(features)
 
     def run(name, global_size, local_size, *args):
         event = device.kernel("sampling", name, traversal)(device.queue, global_size, local_size, *args)
@@ -207,12 +203,11 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
     runs = -(-(n - 1) // int(step))  # the runs between every step-th line sample
     walks = device.buffer(nbytes=2 * runs * slices)  # per run: its line samples that walked their row
     run("line_scatter", (runs, slices), None, buffers.params, buffers.views, buffers.lights,
-        epipolar.buffer, epipolar.tree, integrand.params, integrand.data, texture.params, texture.basis,
-        texture.prefix, ranges_buffer, sides, wedges, line, n32, lengths, step, threshold, radiance, state, walks,
-        *walked)
+        epipolar.buffer, epipolar.tree, integrand.params, integrand.data, ranges_buffer, sides, wedges, line, n32,
+        lengths, step, threshold, radiance, state, walks, *walked)
     run("line_refine_fill", (runs, slices), None, buffers.params, buffers.lights, epipolar.buffer, epipolar.tree,
-        integrand.params, integrand.data, texture.params, texture.basis, texture.prefix, ranges_buffer, sides, wedges,
-        line, n32, lengths, step, threshold, radiance, state, walks, *walked)
+        integrand.params, integrand.data, ranges_buffer, sides, wedges, line, n32, lengths, step, threshold, radiance,
+        state, walks, *walked)
     fixup_flags = device.buffer(nbytes=samples)  # per camera sample: a bit per slice fix_up walks
     run("gather", (-(-samples // LANES),), None, buffers.params, buffers.views, buffers.lights,
         epipolar.buffer, rastered.camera_depth, buffers.offsets, ranges_buffer, line, radiance, n32, lengths, threshold,
@@ -221,8 +216,8 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
     computed = int(device.read(walks, runs * slices, np.uint16).sum(dtype=np.int64))
     if fixed_up:
         run("fix_up", (fixed_up,), None, buffers.params, buffers.views, buffers.lights, epipolar.buffer,
-            epipolar.tree, integrand.params, integrand.data, rastered.camera_depth, buffers.offsets, texture.params,
-            texture.basis, texture.prefix, fixups, np.int32(fixed_up), scatter, *walked)
+            epipolar.tree, integrand.params, integrand.data, rastered.camera_depth, buffers.offsets, fixups,
+            np.int32(fixed_up), scatter, *walked)
     return SampleCounts(computed, samples - fixed_up, fixed_up)
 
 

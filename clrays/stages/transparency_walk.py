@@ -12,7 +12,7 @@ from ..device import Device, StageTimer
 from ..inputs import FrameBuffers
 from ..scene.model import TRAVERSALS
 from .integrand import DeviceIntegrand
-from .light_texture import TextureTables, untextured_tables
+from .features import WalkFeature, feature_args, feature_defines
 from .raster import RasterResult
 from .raymarch import raymarch
 from .rectify import Epipolar
@@ -39,22 +39,16 @@ def _film_args(buffers: FrameBuffers, films: Films) -> tuple:
 
 
 def transparency_walk(device: Device, buffers: FrameBuffers, films: Films, epipolar: Epipolar,
-                      integrand: DeviceIntegrand, timer: StageTimer, texture: TextureTables | None = None,
-                      layers=None) -> None:
+                      integrand: DeviceIntegrand, timer: StageTimer, features: tuple[WalkFeature, ...] = ()) -> None:
     """Add one light's weighted fog into `films.walked` for the samples with films, walking the
-    min-max rows as traverse does; `texture`, `layers` as for traverse."""
+    min-max rows as traverse does; `features` as for traverse."""
     if not films.walk_count:
         return
-    texture = texture if texture is not None else untextured_tables(device)
     defines = {"TRAVERSAL": TRAVERSALS.index(buffers.inputs.scene.render.traversal), **_walk_defines(buffers)}
-    extra = ()
-    if layers is not None:
-        defines.update(layers.defines())
-        extra = layers.args()
-    timer.add(FOG_LABEL, device.kernel("transparency_walk", "transparency_walk", defines)(
+    timer.add(FOG_LABEL, device.kernel("transparency_walk", "transparency_walk", feature_defines(features, defines))(
         device.queue, (films.walk_count,), None, buffers.params, buffers.views, buffers.lights, epipolar.buffer,
-        epipolar.tree, integrand.params, integrand.data, buffers.offsets, texture.params, texture.basis,
-        texture.prefix, *_film_args(buffers, films), films.walked, *extra))
+        epipolar.tree, integrand.params, integrand.data, buffers.offsets, *_film_args(buffers, films), films.walked,
+        *feature_args(features)))
 
 
 def transparency_march(device: Device, buffers: FrameBuffers, rastered: RasterResult, films: Films,

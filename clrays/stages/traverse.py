@@ -6,23 +6,19 @@ from ..device import Device, StageTimer
 from ..inputs import FrameBuffers
 from ..scene.model import TRAVERSALS
 from .integrand import DeviceIntegrand
-from .light_texture import TextureTables, untextured_tables
+from .features import WalkFeature, feature_args, feature_defines
 from .raster import RasterResult
 from .rectify import Epipolar
 
 
 def traverse(device: Device, buffers: FrameBuffers, rastered: RasterResult, epipolar: Epipolar,
-             integrand: DeviceIntegrand, scatter, timer: StageTimer,
-             texture: TextureTables | None = None, layers=None) -> None:
+             integrand: DeviceIntegrand, scatter, timer: StageTimer, features: tuple[WalkFeature, ...] = ()) -> None:
     """Add one light's in-scattered radiance into `scatter` (float4 per camera sample);
-    `texture`: the light's texture tables (stage light_texture; None: an untextured light);
-    `layers`: its rectified translucent layers (stage translucency; None: an opaque-only scene)."""
-    texture = texture if texture is not None else untextured_tables(device)
+    `features`: what the walk carries (clrays/stages/features.py: the light's texture, its
+    rectified translucent layers), in `walk_features`'s order."""
     traversal = TRAVERSALS.index(buffers.inputs.scene.render.traversal)  # TRAVERSAL 0: tree, 1: scan
-    defines, extra = ({"TRAVERSAL": traversal}, ()) if layers is None else \
-        ({"TRAVERSAL": traversal, **layers.defines()}, layers.args())
-    kernel = device.kernel("traverse", "traverse", defines)
+    kernel = device.kernel("traverse", "traverse", feature_defines(features, {"TRAVERSAL": traversal}))
     event = kernel(device.queue, (buffers.inputs.samples,), None, buffers.params, buffers.views, buffers.lights,
                    epipolar.buffer, epipolar.tree, integrand.params, integrand.data, rastered.camera_depth,
-                   buffers.offsets, texture.params, texture.basis, texture.prefix, scatter, *extra)
+                   buffers.offsets, scatter, *feature_args(features))
     timer.add("traverse", event)

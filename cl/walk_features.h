@@ -1,0 +1,67 @@
+/* walk_features.h — what a row walk (walk.h) may carry besides the tree and the integrand:
+ * each feature is built only where its stage ran, and declares here, once, its kernel
+ * arguments and how a kernel hands them to its walks (docs/design.md §4.5, "Features of
+ * the walk"; the host side is clrays/stages/features.py).
+ *
+ *   LIGHT_TEXTURE        a textured light's tables (stage light_texture,
+ *                        docs/light-textures.md): its integrand in γ and the prefix sums
+ *   TRANSLUCENT_LAYERS   the light's translucent layers rectified along the rows (stage
+ *                        translucency, translucent_walk.h), K of them per texel
+ *   TRANSPARENCY_WEIGHTED_WALK  MBOIT's fog weight along the ray, in pieces (the kernel
+ *                        fills them itself: transparency_walk.cl)
+ *
+ * A walking kernel takes WALK_FEATURE_ARGS after its own arguments, in this order: light
+ * texture, then translucent layers; `walk_features_t features; ATTACH_WALK_FEATURES(features)`
+ * hands them on. Without a feature its arguments and members are not there at all, and the
+ * kernel is the one it was before the feature existed. */
+#ifndef CLRAYS_WALK_FEATURES_H
+#define CLRAYS_WALK_FEATURES_H
+
+#include "common.h"
+
+typedef struct {
+    int none; /* (a struct needs a member when no feature is built) */
+#ifdef LIGHT_TEXTURE
+    global const textured_integrand_t* textured;
+    global const float* basis;  /* the γ basis */
+    global const float* prefix; /* the prefix sums, one block per slice */
+#endif
+#ifdef TRANSLUCENT_LAYERS
+    global const float* layer_beta;
+    global const uint2* layer_clear;
+    global const int* layer_rows;
+#endif
+#ifdef TRANSPARENCY_WEIGHTED_WALK
+    float piece_gamma[WALK_PIECES + 2];
+    float4 piece_weight[WALK_PIECES + 1];
+#endif
+} walk_features_t;
+
+#ifdef LIGHT_TEXTURE
+#define LIGHT_TEXTURE_ARGS                                                                                    \
+    , global const textured_integrand_t* textured, global const float* texture_basis,                         \
+        global const float* texture_prefix
+#define ATTACH_LIGHT_TEXTURE(features)                                                                       \
+    (features).textured = textured;                                                                           \
+    (features).basis = texture_basis;                                                                         \
+    (features).prefix = texture_prefix;
+#else
+#define LIGHT_TEXTURE_ARGS
+#define ATTACH_LIGHT_TEXTURE(features)
+#endif
+
+#ifdef TRANSLUCENT_LAYERS
+#define RECTIFIED_LAYER_ARGS , global const float* layer_beta, global const uint2* layer_clear, global const int* layer_rows
+#define ATTACH_RECTIFIED_LAYERS(features)                                                                    \
+    (features).layer_beta = layer_beta;                                                                       \
+    (features).layer_clear = layer_clear;                                                                     \
+    (features).layer_rows = layer_rows;
+#else
+#define RECTIFIED_LAYER_ARGS
+#define ATTACH_RECTIFIED_LAYERS(features)
+#endif
+
+#define WALK_FEATURE_ARGS LIGHT_TEXTURE_ARGS RECTIFIED_LAYER_ARGS
+#define ATTACH_WALK_FEATURES(features) ATTACH_LIGHT_TEXTURE(features) ATTACH_RECTIFIED_LAYERS(features)
+
+#endif
