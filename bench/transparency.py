@@ -29,14 +29,16 @@ sys.path.insert(0, str(REPO))
 
 from clrays.reference import metrics  # noqa: E402
 from clrays.scene.load import load_scene  # noqa: E402
+import clrays.session  # noqa: E402
 from clrays.session import Renderer  # noqa: E402
 from clrays.stages import transparency_walk  # noqa: E402
+from clrays.stages.transparency import translucent_films  # noqa: E402
 
 PEELING = (1, 2, 4, 8)
 REFERENCE = "peel 8"
 
 
-PER_FILM = "moments per film"  # MBOIT's composite with the fog run up to each film (Renderer._weighted_walk off)
+PER_FILM = "moments per film"  # MBOIT's composite with the fog run up to each film (weighted_walk=False)
 
 
 def configurations(sweep: bool, per_film: bool = False, pieces: tuple[int, ...] = ()) -> dict[str, str]:
@@ -90,8 +92,11 @@ def main() -> None:
     renderer = Renderer(reuse=False)
     pieces = transparency_walk.WALK_PIECES
 
+    def per_film(*arguments, **settings):  # the fog run up to each film, not in MBOIT's one walk
+        return translucent_films(*arguments, **settings, weighted_walk=False)
+
     def render(label, scene, method):
-        renderer._weighted_walk = label != PER_FILM
+        clrays.session.translucent_films = per_film if label == PER_FILM else translucent_films
         transparency_walk.WALK_PIECES = int(label.split()[1]) if label.endswith(" pieces") else pieces
         return renderer.render(scene, method)
 

@@ -230,32 +230,3 @@ def box_pad(scene_lo: np.ndarray, scene_hi: np.ndarray) -> float:
     largest extent plus its largest |coordinate|."""
     scene_lo, scene_hi = np.asarray(scene_lo, np.float64), np.asarray(scene_hi, np.float64)
     return float(BOX_PAD_REL * (np.max(scene_hi - scene_lo) + max(-scene_lo.min(), scene_hi.max())))
-
-
-def occluded_by_bvh(bvh: Bvh, triangles: np.ndarray, origin, target) -> bool:
-    """Host walk of the BVH for one segment origin → target (float64): whether any
-    triangle crosses it. For tests of the device walk; slow in Python."""
-    from .physics.geometry import raycast
-
-    tri = np.asarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
-    origin, target = np.asarray(origin, float), np.asarray(target, float)
-    d = target - origin
-    if bvh.root < 0:
-        candidates = list(range(len(tri)))
-    else:
-        candidates, stack = [], [0]
-        lo, hi = bvh.node_bounds[0::2, :3].astype(float), bvh.node_bounds[1::2, :3].astype(float)
-        while stack:
-            node = stack.pop()
-            with np.errstate(divide="ignore", invalid="ignore"):
-                t0, t1 = (lo[node] - origin) / d, (hi[node] - origin) / d
-            near = np.nanmax(np.minimum(t0, t1))
-            far = np.nanmin(np.maximum(t0, t1))
-            if near > min(far, 1.0) or far < 0:
-                continue
-            for child in bvh.node_children[node]:
-                (candidates.append(-child - 1) if child < 0 else stack.append(int(child)))
-    if not candidates:
-        return False
-    t, _ = raycast(origin, d, tri[candidates], t_max=1.0)
-    return bool(np.isfinite(t[0]))

@@ -153,9 +153,6 @@ class Renderer:
         self._device_spec = device if isinstance(device, str) else None
         self.reuse = reuse
         self.cache = StageCache(cache_entries)
-        self._skip_unshadowed = True  # tests switch it off to compare against the full path
-        self._cull_faces = True  # the same: raster every cube face, also those the frame cannot read
-        self._weighted_walk = True  # the same: MBOIT's fog by the in-scatter runs per film instead of one walk
 
     @property
     def device(self) -> Device:
@@ -214,8 +211,6 @@ class Renderer:
     def _upload(self, scene: Scene, method: str, reuse: Reuse, timer: StageTimer) -> "Frame":
         """The frame's inputs checked against the device and uploaded, with their stage keys."""
         inputs = frame_inputs(scene)
-        if not self._cull_faces:
-            inputs = replace(inputs, view_needed=np.ones_like(inputs.view_needed))
         check_device_memory(self.device, inputs)
         refuse_translucency(scene, method)  # (moments: no transmittance term)
         buffers = upload(self.device, inputs)
@@ -317,7 +312,7 @@ class Renderer:
             reuse.skip("transparency")
             return None
         reuse.record.note("transparency", COMPUTED)
-        return translucent_films(self.device, buffers, rastered, timer, self._weighted_walk)
+        return translucent_films(self.device, buffers, rastered, timer)
 
     def _translucency(self, buffers: FrameBuffers, keys: StageKeys, reuse: Reuse, timer: StageTimer):
         """The translucency stage, kept while the shadow maps' inputs and the layer count
@@ -418,7 +413,7 @@ class Renderer:
         device, key = self.device, lambda: keys.trees(index)
         # A textured light keeps its full texture size: the texture is rectified on its rows.
         # So does a light with translucent layers: its texture carries their transmittance.
-        if self._skip_unshadowed and not textured(buffers.inputs.scene.lights[index]) \
+        if not textured(buffers.inputs.scene.lights[index]) \
                 and not buffers.inputs.scene.geometry.translucent and map_is_empty(device, maps[index]):
             render = buffers.inputs.scene.render
             small = replace(buffers.inputs.scene, render=replace(render, slices=UNSHADOWED_SIZE,

@@ -126,17 +126,3 @@ def shadow_filter(device: Device, buffers: FrameBuffers, rastered: RasterResult,
                    np.float32(chosen.moment_bias), visible)
     timer.add("shadow_filter", event)
     return visible
-
-
-def reconstruct(device: Device, filter_type: str, moments: np.ndarray, depth: np.ndarray,
-                moment_bias: float) -> np.ndarray:
-    """The device's reconstruction `filter_type` (a moment filter) of (N, 4) moments at N
-    normalised depths: float32 visibility, for the tests against clrays.reference.moments."""
-    moments = np.ascontiguousarray(moments, dtype=np.float32)
-    depth = np.ascontiguousarray(depth, dtype=np.float32)
-    count = len(depth)
-    out = device.buffer(nbytes=4 * max(count, 1))
-    kernel = device.kernel("shadow_filter", "shadow_filter_reconstruct", {"SHADOW_FILTER": FILTER_CODES[filter_type]})
-    kernel(device.queue, (max(count, 1),), None, device.buffer(moments, writable=False),
-           device.buffer(depth, writable=False), np.int32(count), np.float32(moment_bias), out)
-    return device.read(out, (max(count, 1),), np.float32)[:count]

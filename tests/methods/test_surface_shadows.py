@@ -13,12 +13,40 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from clrays.bvh import build_bvh, occluded_by_bvh
+from clrays.bvh import build_bvh
 from clrays.reference.exact import render_exact
 from clrays.physics.geometry import raycast
 from clrays.reference.metrics import depth_edges, depth_map, image_error, luminance
 from clrays.scene.geometry import box_triangles
 from conftest import DirectionalLight, PointLight, SpotLight, grid_plane, make_scene, v3
+
+
+def occluded_by_bvh(bvh, triangles: np.ndarray, origin, target) -> bool:
+    """Host walk of the BVH for one segment origin → target (float64): whether any
+    triangle crosses it: the device walk's yardstick, slow in Python."""
+    tri = np.asarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
+    origin, target = np.asarray(origin, float), np.asarray(target, float)
+    d = target - origin
+    if bvh.root < 0:
+        candidates = list(range(len(tri)))
+    else:
+        candidates, stack = [], [0]
+        lo, hi = bvh.node_bounds[0::2, :3].astype(float), bvh.node_bounds[1::2, :3].astype(float)
+        while stack:
+            node = stack.pop()
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t0, t1 = (lo[node] - origin) / d, (hi[node] - origin) / d
+            near = np.nanmax(np.minimum(t0, t1))
+            far = np.nanmin(np.maximum(t0, t1))
+            if near > min(far, 1.0) or far < 0:
+                continue
+            for child in bvh.node_children[node]:
+                (candidates.append(-child - 1) if child < 0 else stack.append(int(child)))
+    if not candidates:
+        return False
+    t, _ = raycast(origin, d, tri[candidates], t_max=1.0)
+    return bool(np.isfinite(t[0]))
+
 
 
 def unit(*xs) -> np.ndarray:

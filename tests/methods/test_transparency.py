@@ -14,6 +14,7 @@ from clrays.reference.exact import render_exact
 from clrays.reference.metrics import depth_edges, depth_map, image_error
 from clrays.reference.translucency import film_pixels
 from clrays.scene.load import load_scene, parse_scene
+from clrays.stages.transparency import translucent_films
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -53,6 +54,12 @@ def test_an_opaque_scene_skips_the_stage(renderer):
     assert result.stage_status["transparency"] == "skipped" and "transparency" not in result.stage_ms
 
 
+def _films_run_per_film(*args, **kwargs):
+    """translucent_films with MBOIT's fog run up to each film, as peeling's, not in its one
+    weighted walk: the path the tests compare that walk with."""
+    return translucent_films(*args, **kwargs, weighted_walk=False)
+
+
 def small_row(*overrides):
     return load_scene(ROOT / "scenes" / "glass_row.yaml",
                       overrides=["image.width=64", "image.height=36", *overrides])
@@ -88,7 +95,7 @@ def test_peeling_every_layer_is_the_sorted_composite(renderer, monkeypatch, meth
     (more layers than the scene has). MBOIT's fog runs up to each film here, as peeling's, not
     in its one walk, so that its films carry their L(0, z_k)."""
     spy = CompositeSpy(monkeypatch)
-    monkeypatch.setattr(renderer, "_weighted_walk", False)
+    monkeypatch.setattr(clrays.session, "translucent_films", _films_run_per_film)
     black = [f"objects.{i}.albedo=0" for i in range(2, 7)]
     renderer.render(small_row(*black, "render.transparency={type: moments}"), method, reuse=False)
     renderer.render(small_row(*black, "render.transparency={type: depth_peeling, layers: 8}"), method, reuse=False)
@@ -159,7 +166,7 @@ def test_moments_one_walk_is_the_per_film_composite(renderer, monkeypatch, metho
     black = [f"objects.{i}.albedo=0" for i in range(2, 7)]
     scene = small_row(*black, "render.transparency={type: moments}")
     walked = renderer.render(scene, method, reuse=False)
-    monkeypatch.setattr(renderer, "_weighted_walk", False)
+    monkeypatch.setattr(clrays.session, "translucent_films", _films_run_per_film)
     per_film = renderer.render(scene, method, reuse=False)
     walk, runs = spy.frames
     films = (runs["tri"] >= 0).any(axis=0)

@@ -14,10 +14,25 @@ from clrays.inputs import frame_inputs, upload
 from clrays.reference import moments as reference
 from clrays.scene.model import DirectionalLight, ShadowFilter, SpotLight
 from clrays.stages.raster import RasterResult, raster_shadow_map, shadow_atlas
-from clrays.stages.shadow_filter import depth_ranges, reconstruct, shadow_filter_moments
+from clrays.stages.shadow_filter import FILTER_CODES, depth_ranges, shadow_filter_moments
 from conftest import grid_plane, make_scene, v3
 
 MOMENT_BIAS = ShadowFilter.moment_bias  # the default, 3e-6
+
+
+def reconstruct(device, filter_type: str, moments: np.ndarray, depth: np.ndarray, moment_bias: float) -> np.ndarray:
+    """The device's reconstruction `filter_type` (a moment filter) of (N, 4) moments at N
+    normalised depths: float32 visibility, against clrays.reference.moments's."""
+    moments = np.ascontiguousarray(moments, dtype=np.float32)
+    depth = np.ascontiguousarray(depth, dtype=np.float32)
+    count = len(depth)
+    out = device.buffer(nbytes=4 * max(count, 1))
+    kernel = device.kernel("shadow_filter", "shadow_filter_reconstruct", {"SHADOW_FILTER": FILTER_CODES[filter_type]})
+    kernel(device.queue, (max(count, 1),), None, device.buffer(moments, writable=False),
+           device.buffer(depth, writable=False), np.int32(count), np.float32(moment_bias), out)
+    return device.read(out, (max(count, 1),), np.float32)[:count]
+
+
 RECONSTRUCTIONS = {"vsm": lambda b, z: reference.vsm_visibility(b, z, MOMENT_BIAS),
                    "msm_hamburger": lambda b, z: reference.msm_hamburger_visibility(b, z, MOMENT_BIAS),
                    "msm_hausdorff": lambda b, z: reference.msm_hausdorff_visibility(b, z, MOMENT_BIAS)}
