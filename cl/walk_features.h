@@ -39,26 +39,23 @@ typedef struct {
 
 #ifdef LIGHT_TEXTURE
 #define LIGHT_TEXTURE_ARGS                                                                                    \
-    , global const textured_integrand_t* textured, global const float* texture_basis,                         \
-        global const float* texture_prefix
-#define ATTACH_LIGHT_TEXTURE(features)                                                                       \
-    (features).textured = textured;                                                                           \
-    (features).basis = texture_basis;                                                                         \
-    (features).prefix = texture_prefix;
-#else
-#define LIGHT_TEXTURE_ARGS
-#define ATTACH_LIGHT_TEXTURE(features)
+    , global const textured_integrand_t* textured, global const float* texture_basis, global const float* texture_prefix
+#define ATTACH_LIGHT_TEXTURE(f) (f).textured = textured; (f).basis = texture_basis; (f).prefix = texture_prefix;
 #endif
-
 #ifdef TRANSLUCENT_LAYERS
-#define RECTIFIED_LAYER_ARGS , global const float* layer_beta, global const uint2* layer_clear, global const int* layer_rows
-#define ATTACH_RECTIFIED_LAYERS(features)                                                                    \
-    (features).layer_beta = layer_beta;                                                                       \
-    (features).layer_clear = layer_clear;                                                                     \
-    (features).layer_rows = layer_rows;
-#else
+#define RECTIFIED_LAYER_ARGS                                                                                  \
+    , global const float* layer_beta, global const uint2* layer_clear, global const int* layer_rows
+#define ATTACH_RECTIFIED_LAYERS(f)                                                                            \
+    (f).layer_beta = layer_beta; (f).layer_clear = layer_clear; (f).layer_rows = layer_rows;
+#endif
+/* A feature not built: no arguments, nothing to hand on. */
+#ifndef LIGHT_TEXTURE_ARGS
+#define LIGHT_TEXTURE_ARGS
+#define ATTACH_LIGHT_TEXTURE(f)
+#endif
+#ifndef RECTIFIED_LAYER_ARGS
 #define RECTIFIED_LAYER_ARGS
-#define ATTACH_RECTIFIED_LAYERS(features)
+#define ATTACH_RECTIFIED_LAYERS(f)
 #endif
 
 #define WALK_FEATURE_ARGS LIGHT_TEXTURE_ARGS RECTIFIED_LAYER_ARGS

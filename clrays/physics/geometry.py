@@ -47,6 +47,24 @@ def triangle_normals(triangles: np.ndarray) -> np.ndarray:
     return np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
 
 
+def triangle_hits(o, d, p0, e1, e2, d_length, n_length) -> tuple[np.ndarray, np.ndarray]:
+    """Möller–Trumbore for rays (o, d) against triangles (p0, e1, e2), broadcast: (t, whether
+    the ray meets the triangle within its edges). `d_length`, `n_length`: |d| and |e1 × e2|,
+    which make a grazing ray (|cos| < 1e-14 against the plane) a miss: its u, v, t are noise."""
+    pvec = np.cross(d, e2)
+    det = dot(pvec, e1)  # = -d·n
+    ok = np.abs(det) > 1e-14 * d_length * n_length
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # only where not ok
+        inv = 1.0 / det
+        tvec = o - p0
+        u = dot(tvec, pvec) * inv
+        qvec = np.cross(tvec, e1)
+        v = dot(d, qvec) * inv
+        t = dot(e2, qvec) * inv
+        ok &= (u >= 0) & (v >= 0) & (u + v <= 1)  # u + v is inf - inf where det = 0 (masked already)
+    return t, ok
+
+
 def raycast(origins, dirs, triangles, t_max=np.inf, t_min=None) -> tuple[np.ndarray, np.ndarray]:
     """First hits of rays o + t·d against triangles, Möller–Trumbore in float64.
 
@@ -80,19 +98,8 @@ def raycast(origins, dirs, triangles, t_max=np.inf, t_min=None) -> tuple[np.ndar
     for r in range(0, n, rc):
         o, d = origins[r:r + rc, None, :], dirs[r:r + rc, None, :]
         for k in range(0, len(tri), tc):
-            ke1, ke2, kp0 = e1[None, k:k + tc], e2[None, k:k + tc], p0[None, k:k + tc]
-            pvec = np.cross(d, ke2)
-            det = dot(pvec, ke1)  # = -d·n
-            # Grazing rays (|cos| < 1e-14 against the plane) are misses: their u, v, t are noise.
-            ok = np.abs(det) > 1e-14 * dir_len[r:r + rc, None] * n_len[None, k:k + tc]
-            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # only where not ok
-                inv = 1.0 / det
-                tvec = o - kp0
-                u = dot(tvec, pvec) * inv
-                qvec = np.cross(tvec, ke1)
-                v = dot(d, qvec) * inv
-                t = dot(ke2, qvec) * inv
-                ok &= (u >= 0) & (v >= 0) & (u + v <= 1)  # u + v is inf - inf where det = 0 (masked already)
+            t, ok = triangle_hits(o, d, p0[None, k:k + tc], e1[None, k:k + tc], e2[None, k:k + tc],
+                                  dir_len[r:r + rc, None], n_len[None, k:k + tc])
             ok &= (t > t_min[r:r + rc, None]) & (t < t_max[r:r + rc, None])
             t = np.where(ok, t, np.inf)
             j = np.argmin(t, axis=1)

@@ -30,7 +30,7 @@ import numpy as np
 
 from ..bvh import Bvh, build_bvh
 from ..physics.geometry import (_SHADOW_OFFSET_REL, _T_MIN_REL, _lit_from_clips, _ray_range, _scale, dot,
-                                shadow_rays_blocked)
+                                shadow_rays_blocked, triangle_hits)
 from ..physics.radiometry import lamp_interval, light_position
 from ..scene.model import Light
 
@@ -108,19 +108,8 @@ class SceneBvh:
         tri = self.triangles[tri_index]
         p0 = tri[:, 0]
         e1, e2 = tri[:, 1] - p0, tri[:, 2] - p0
-        o, d = origins[ray], dirs[ray]
         n_len = np.linalg.norm(np.cross(e1, e2), axis=1)
-        pvec = np.cross(d, e2)
-        det = dot(pvec, e1)
-        ok = np.abs(det) > 1e-14 * np.linalg.norm(dirs, axis=1)[ray] * n_len
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # only where not ok
-            inv = 1.0 / det
-            tvec = o - p0
-            u = dot(tvec, pvec) * inv
-            qvec = np.cross(tvec, e1)
-            v = dot(d, qvec) * inv
-            t = dot(e2, qvec) * inv
-            ok &= (u >= 0) & (v >= 0) & (u + v <= 1)
+        t, ok = triangle_hits(origins[ray], dirs[ray], p0, e1, e2, np.linalg.norm(dirs, axis=1)[ray], n_len)
         ok &= (t > t_min[ray]) & (t < t_max[ray])
         return np.where(ok, t, np.inf)
 
