@@ -110,7 +110,7 @@ def vertex_rows(triangles: np.ndarray, geometry, count: int) -> np.ndarray:
     """The first `count` of (T, 3, 3) triangles as the device's 3T float4 rows; in w, what
     the kernels know of each triangle besides its corners: in its first row its
     `Geometry.outward` sign (cl/solids.h), in its second the bits of its int
-    `Geometry.convex_part` label (the writer map's, cl/visibility.cl), in its third 0."""
+    `Geometry.convex_part` label (the writer map's, cl/visibility.h), in its third 0."""
     rows = padded_float32(triangles[:count].reshape(-1, 3))
     rows[0::3, 3] = geometry.outward[:count]
     rows.view(np.int32)[1::3, 3] = geometry.convex_part[:count]

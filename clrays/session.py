@@ -555,7 +555,7 @@ class StageKeys:
     @cached_property
     def surfaces(self) -> bytes:
         """visibility's bound maps: the triangles with their shading normals, which decide the
-        texels the camera's samples read (cl/visibility.cl visibility_prepare)."""
+        texels the camera's samples read (cl/visibility_prepare.cl)."""
         return digest("surfaces", *geometry_parts(self.inputs.scene.geometry))
 
     @cached_property

@@ -48,7 +48,7 @@ DEPTH_EMPTY = np.uint32(0x7F800000)  # as_uint(+inf): a depth buffer's texel whe
 WRITER_NONE = -1  # the visibility stage's writer map: no triangle touches this texel
 WRITER_MANY = -2  # two or more do (else the one triangle's index)
 # Geometry.convex_part's flag of a solid's part (a box, a sphere): its triangles cannot shadow
-# a point of its outside only, which (b - a) x (c - a) faces (cl/visibility.cl).
+# a point of its outside only, which (b - a) x (c - a) faces (cl/visibility.h).
 CONVEX_OUTSIDE_ONLY = 1 << 30
 
 # A point or spot light is a lamp: a ball of radius LAMP_RADIUS_REL × the scene's size around
@@ -88,7 +88,7 @@ SHADOW_RAY_OFFSET_REL = 2e-6
 
 # visibility: the value of a sample and light that visibility_prepare leaves to the maps
 # or a ray; and visibility_bound's rect_mode: none, record each triangle's texel rectangle,
-# or skip the triangles whose recorded rectangle holds no texel read (cl/visibility.cl).
+# or skip the triangles whose recorded rectangle holds no texel read (cl/visibility_bound.cl).
 VISIBILITY_PENDING = -1.0
 RECTS_NONE, RECTS_RECORD, RECTS_FILTER = 0, 1, 2
 # Words of the read mask (32 texels each) one visibility_clear work-item takes.

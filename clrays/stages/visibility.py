@@ -1,5 +1,6 @@
 """Stage visibility: exact hard shadows on surfaces (`render.surface_shadows: exact`).
-Host side of `cl/visibility.cl` and `cl/bvh.h` (docs/design.md §4, visibility).
+Host side of `cl/visibility*.cl` (one file per kernel family, cl/visibility.h) and `cl/bvh.h`
+(docs/design.md §4, visibility).
 
 Per camera sample and light, the shadow map answers where its neighbourhood is
 unanimous: lit where a conservative bound map (every triangle that touches a texel,
@@ -115,7 +116,7 @@ class Prepared:
     texel of the bound and writer maps that a pending one's lit test reads, and a bit
     per texel read (the bound passes draw only those)."""
 
-    visible: object  # float[samples × lights]: 1, 0 or pending (cl/visibility.cl VISIBILITY_PENDING*)
+    visible: object  # float[samples × lights]: 1, 0 or pending (cl/visibility.h, VISIBILITY_PENDING*)
     map_read: object  # int2[samples × lights]: texel address (or MAP_TEXEL_*), as_int(depth)
     read_mask: object  # uint per 32 texels of the frame's shadow maps, by address: a bit per texel read
 
@@ -131,7 +132,7 @@ def visibility_prepare(device: Device, buffers: FrameBuffers, rastered: RasterRe
     words = max((inputs.shadow_texels + 31) // 32, 1)
     read_mask = device.buffer(nbytes=4 * words)
     device.fill(read_mask, np.uint32(0), 4 * words, timer, "visibility")
-    timer.add("visibility", device.kernel("visibility", "visibility_prepare")(
+    timer.add("visibility", device.kernel("visibility_prepare", "visibility_prepare")(
         device.queue, (-(-inputs.samples // PREPARE_LANES), lights), None, buffers.params, buffers.views,
         buffers.lights, rastered.camera_depth, rastered.tri_id, buffers.tri_normal,
         buffers.tri_vertex_normals, buffers.offsets, visible, map_read, read_mask))
@@ -140,7 +141,7 @@ def visibility_prepare(device: Device, buffers: FrameBuffers, rastered: RasterRe
 
 @dataclass
 class TouchingLists:
-    """One light's lists, per texel read, of the triangles touching it (cl/visibility.cl
+    """One light's lists, per texel read, of the triangles touching it (cl/visibility_bound.cl
     note_touching): what a shadow ray from a sample in that texel tests instead of the BVH."""
 
     head: object  # int per texel of the light's maps: first node, -1 none
@@ -190,7 +191,7 @@ def visibility_bound(device: Device, buffers: FrameBuffers, light_index: int, ti
         # touched (on a CPU device, filling a fresh 1024² cube's two maps costs more than
         # drawing them).
         words = (first + inputs.shadow_texels - 1) // 32 - first // 32 + 1
-        timer.add("visibility", device.kernel("visibility", "visibility_clear")(
+        timer.add("visibility", device.kernel("visibility_bound", "visibility_clear")(
             device.queue, (-(-words // structs.VISIBILITY_CLEAR_WORDS),), None, prepared.read_mask,
             np.int32(first), np.int32(inputs.shadow_texels), np.int32(1), bound, writer, lists[0], lists[3]))
     # A frame too large for lists now may list its rays' texels later (ray_lists): the
@@ -215,8 +216,8 @@ def _bound_passes(device: Device, inputs: FrameInputs, first: int, bound, writer
     views = device.buffer(inputs.views, writable=False)
     masked = np.int32(read_mask is not None)
     read_mask = read_mask if read_mask is not None else device.buffer(nbytes=4)
-    first_pass = device.kernel("visibility", "visibility_bound")
-    rows_pass = device.kernel("visibility", "visibility_bound_rows")
+    first_pass = device.kernel("visibility_bound", "visibility_bound")
+    rows_pass = device.kernel("visibility_bound", "visibility_bound_rows")
     # Only the cube faces the frame can read (`view_needed`, as raster.shadow does): no
     # sample projects into the others, so their texels are never asked for.
     drawn = [int(view) for view in np.flatnonzero(inputs.view_needed[1:]) + 1]
@@ -263,7 +264,7 @@ def ray_lists(device: Device, buffers: FrameBuffers, prepared: Prepared, ray_ent
     words = max((inputs.shadow_texels + 31) // 32, 1)
     mask = device.buffer(nbytes=4 * words)
     device.fill(mask, np.uint32(0), 4 * words, timer, "visibility")
-    timer.add("visibility", device.kernel("visibility", "visibility_mark_listed")(
+    timer.add("visibility", device.kernel("visibility_prepare", "visibility_mark_listed")(
         device.queue, (rays,), None, ray_entries, np.int32(rays), prepared.map_read, mask))
     capacity = TOUCHING_NODES_PER_ENTRY * rays
     lists = []
@@ -276,7 +277,7 @@ def ray_lists(device: Device, buffers: FrameBuffers, prepared: Prepared, ray_ent
         if light.texels:
             light_words = (first + light.texels - 1) // 32 - first // 32 + 1
             # the lists' heads only: the maps keep their values, which the passes write again
-            timer.add("visibility", device.kernel("visibility", "visibility_clear")(
+            timer.add("visibility", device.kernel("visibility_bound", "visibility_clear")(
                 device.queue, (-(-light_words // structs.VISIBILITY_CLEAR_WORDS),), None, mask, np.int32(first),
                 np.int32(light.texels), np.int32(0), light.bound, light.writer, touching.head, np.int32(capacity)))
             _bound_passes(device, light_inputs, first, light.bound, light.writer, mask, arguments, timer,
@@ -343,14 +344,14 @@ def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, pr
         for index, lists in enumerate(touching):
             # this frame's address of the light's texel 0 (a kept map's lists are by the light's own addresses)
             first = int(inputs.views[inputs.light_views[index][0]]["depth_offset"])
-            timer.add("visibility", device.kernel("visibility", "visibility_rays_listed")(
+            timer.add("visibility", device.kernel("visibility_rays", "visibility_rays_listed")(
                 device.queue, (rays,), None, buffers.params, buffers.views, buffers.lights, rastered.camera_depth,
                 rastered.tri_id, buffers.tri_vertices, buffers.tri_normal, buffers.offsets, prepared.map_read,
                 np.int32(index), np.int32(first), lists.head, lists.nodes, ray_entries, np.int32(rays),
                 prepared.visible))
         return prepared.visible, rays
     tree = bvh()
-    timer.add("visibility", device.kernel("visibility", "visibility_rays")(
+    timer.add("visibility", device.kernel("visibility_rays", "visibility_rays")(
         device.queue, (rays,), None, buffers.params, buffers.views, buffers.lights, rastered.camera_depth,
         rastered.tri_id, buffers.tri_vertices, buffers.tri_normal, buffers.offsets, tree.node_bounds,
         tree.node_children, np.int32(tree.root), ray_entries, np.int32(rays), prepared.visible))

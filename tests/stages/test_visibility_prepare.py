@@ -28,7 +28,7 @@ def _prepared(device, scene, defines):
     buffers = upload(device, frame_inputs(scene))
     timer = StageTimer()
     rastered = raster(device, buffers, timer)
-    kernel = device.kernel("visibility", "visibility_prepare", defines)
+    kernel = device.kernel("visibility_prepare", "visibility_prepare", defines)
     inputs = buffers.inputs
     lights = max(len(scene.lights), 1)
     entries = inputs.samples * lights
