@@ -1,4 +1,4 @@
-"""`moments` against `minmax` at one size, timed in the same run, and both against `exact`
+"""`volume_moments` against `minmax` at one size, timed in the same run, and both against `exact`
 on the bench's fixed pixel subset (bench/RESULTS.md, "The moments method"):
 
     .venv/bin/python bench/moments_method.py demo bunny behind sun --size 1280x720
@@ -25,7 +25,7 @@ from clrays.runs.bench import error_pixels  # noqa: E402
 from clrays.scene.load import load_scene  # noqa: E402
 from clrays.session import Renderer  # noqa: E402
 
-METHODS = ("minmax", "moments")
+METHODS = ("minmax", "volume_moments")
 
 
 def write_images(folder: Path, name: str, minmax, moments) -> None:
@@ -75,10 +75,10 @@ def main() -> None:
                              statistics.median(r.device_ms for r in results),
                              statistics.median(r.stage_ms.get("traverse", r.stage_ms.get("volume_moments", 0.0))
                                                for r in results), error)
-        (mw, md, mt, me), (ow, od, ot, oe) = cells["minmax"], cells["moments"]
+        (mw, md, mt, me), (ow, od, ot, oe) = cells["minmax"], cells["volume_moments"]
         if args.images:
             images = {method: results[-1].image for method, results in runs.items()}
-            write_images(args.images, name, images["minmax"], images["moments"])
+            write_images(args.images, name, images["minmax"], images["volume_moments"])
         print(f"| {name} | {mw:.0f} | {ow:.0f} | {ow / mw:.2f} | {md:.0f} | {od:.0f} | {od / md:.2f} | {mt:.0f} "
               f"| {ot:.0f} | {100 * me.rmse:.2f} / {100 * me.p99:.1f} | {100 * oe.rmse:.2f} / {100 * oe.p99:.1f} |",
               flush=True)

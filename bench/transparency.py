@@ -44,15 +44,15 @@ PER_FILM = "moments per film"  # MBOIT's composite with the fog run up to each f
 def configurations(sweep: bool, per_film: bool = False, pieces: tuple[int, ...] = ()) -> dict[str, str]:
     """label → render.transparency override."""
     runs = {f"peel {k}": f"{{type: depth_peeling, layers: {k}}}" for k in PEELING}
-    runs["moments"] = "{type: moments}"  # the defaults: log warp, the measured moment_bias
+    runs["moments"] = "{type: mboit}"  # the defaults: log warp, the measured moment_bias
     if per_film:
-        runs[PER_FILM] = "{type: moments}"
+        runs[PER_FILM] = "{type: mboit}"
     for count in pieces:
-        runs[f"moments {count} pieces"] = "{type: moments}"
+        runs[f"moments {count} pieces"] = "{type: mboit}"
     if sweep:
         for warp in ("none", "log"):
             for bias in (0.0, 5e-5, 5e-4, 5e-3, 2e-2, 5e-2):
-                runs[f"moments {warp} {bias:g}"] = f"{{type: moments, warp: {warp}, moment_bias: {bias}}}"
+                runs[f"moments {warp} {bias:g}"] = f"{{type: mboit, warp: {warp}, moment_bias: {bias}}}"
     return runs
 
 

@@ -31,7 +31,7 @@ from .runs.video import DEFAULT_CRF, video_encoder_options
 from .runs.sweep import axes_from, format_table, run_sweep
 from .scene.fields import unread_render_keys
 from .scene.load import load_scene
-from .scene.model import METHODS, SHADOW_FILTERS
+from .scene.model import METHODS, RENAMED_METHODS, SHADOW_FILTERS
 from .session import Renderer
 
 #: Option sections of a command's --help, in this order (then any other, then "Other").
@@ -136,9 +136,14 @@ def device_option():
                        "else PoCL's CPU device.")
 
 
+def _method(context: click.Context, parameter, value: str | None) -> str | None:
+    return RENAMED_METHODS.get(value, value)  # a former name reads as the method's own
+
+
 def method_option():
-    return option("--method", type=click.Choice(METHODS), metavar="METHOD", group=SCENE,
-                  help=f"Override render.method: {', '.join(METHODS)}.")
+    return option("--method", type=click.Choice((*METHODS, *RENAMED_METHODS)), metavar="METHOD", group=SCENE,
+                  callback=_method, help=f"Override render.method: {', '.join(METHODS)} (`moments`, the former "
+                                         f"name of volume_moments, reads as it).")
 
 
 def overrides_option(text: str, metavar: str = "KEY.PATH=VALUE", group: str = SCENE):

@@ -38,7 +38,7 @@ from .inputs import FrameBuffers, FrameInputs, frame_inputs, upload
 from .physics.radiometry import effective_far
 from .reuse import COMPUTED, REUSED, SKIPPED, Reuse, StageCache, StageRecord, digest, geometry_parts, scene_digest
 from .scene.costs import with_derived_sizes
-from .scene.model import METHODS, Render, Scene
+from .scene.model import METHODS, RENAMED_METHODS, Render, Scene
 from .stages.features import walk_features
 from .stages.integrand import integrand, integrand_table_size
 from .stages.lamp import eye_in_lamp, lamp_in_scatter
@@ -67,7 +67,7 @@ UNSHADOWED_SIZE = 16
 
 #: Stage labels of the volume stages of each method, as timings and statuses name them.
 VOLUME_STAGES = {"minmax": ("rectify", "minmax", "integrand", "traverse"), "raymarch": ("raymarch",),
-                 "moments": ("rectify", "integrand", "volume_moments")}
+                 "volume_moments": ("rectify", "integrand", "volume_moments")}
 
 
 class InScatter:
@@ -168,7 +168,7 @@ class Renderer:
                reuse: bool | None = None) -> RenderResult:
         """Render one frame. `method` overrides `scene.render.method`; `reuse` overrides
         the session's `reuse` for this frame (False: compute every stage, keep nothing)."""
-        method = method or scene.render.method
+        method = RENAMED_METHODS.get(method, method) or scene.render.method
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r}; expected one of {', '.join(METHODS)}")
         # Sizes the scene leaves unset follow its image; resolved before any stage key is taken.
@@ -212,7 +212,7 @@ class Renderer:
         """The frame's inputs checked against the device and uploaded, with their stage keys."""
         inputs = frame_inputs(scene)
         check_device_memory(self.device, inputs)
-        refuse_translucency(scene, method)  # (moments: no transmittance term)
+        refuse_translucency(scene, method)  # (volume_moments: no transmittance term)
         buffers = upload(self.device, inputs)
         occluders = opaque_occluder_buffers(self.device, buffers)  # (translucent triangles block no shadow ray)
         return Frame(scene, method, buffers, StageKeys(buffers.inputs), reuse, timer, occluders)
@@ -228,7 +228,7 @@ class Renderer:
                                lambda: transparency_march(device, buffers, frame.rastered, frame.films, timer, layers))
 
     def _epipolar_volume(self, frame: "Frame") -> None:
-        """The volume stages of methods minmax and moments, light by light."""
+        """The volume stages of methods minmax and volume_moments, light by light."""
         if self._no_medium(frame):
             return
         for index, light in enumerate(frame.scene.lights):
@@ -262,7 +262,7 @@ class Renderer:
             self._minmax(epipolar, reuse, timer)  # minmax: the 1D min-max mipmap of every row
         tables = reuse.stage("integrand", lambda: keys.integrand(index, epipolar),  # integrand: lit run → radiance
                              lambda: integrand(device, frame.scene, light, epipolar, timer), per_light=True)
-        if frame.method == "moments":  # volume_moments: prefix sums of moments, one reconstruction per ray
+        if frame.method == "volume_moments":  # prefix sums of moments, one reconstruction per ray
             volume_moments(device, buffers, frame.rastered, epipolar, tables, frame.in_scatter.adding(), timer)
             return
         features = walk_features(  # what the walks carry (stages/features.py, cl/walk_features.h)
@@ -365,8 +365,9 @@ class Renderer:
         """The shadow_filter stage: the blurred moment maps kept while the shadow maps and the
         filter's type and radius are, then the visibility of every camera sample."""
         device, chosen = self.device, frame_filter(buffers.inputs)
-        key = lambda: digest("moments", tuple(keys.shadow), chosen.type, chosen.radius, depth_ranges(buffers.inputs))
-        maps = reuse.keep("shadow_filter.moments", key, lambda: shadow_filter_moments(device, buffers, rastered, timer))
+        key = lambda: digest("moment_shadow_maps", tuple(keys.shadow), chosen.type, chosen.radius,
+                             depth_ranges(buffers.inputs))
+        maps = reuse.keep("shadow_filter.moment_maps", key, lambda: shadow_filter_moments(device, buffers, rastered, timer))
         reuse.record.note("shadow_filter", COMPUTED)
         return shadow_filter(device, buffers, rastered, maps, timer)
 
@@ -444,7 +445,7 @@ class Renderer:
 
 
 #: Each method's volume stages (`exact` renders on the host instead: Renderer._exact).
-VOLUME_METHODS = {"minmax": Renderer._epipolar_volume, "moments": Renderer._epipolar_volume,
+VOLUME_METHODS = {"minmax": Renderer._epipolar_volume, "volume_moments": Renderer._epipolar_volume,
                   "raymarch": Renderer._raymarch_volume}
 
 
@@ -465,7 +466,7 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
         sizes.append((f"shadow map of light {index}", 4 * int((views["width"] * views["height"]).sum())))
     if len(inputs.light_views) > 1:
         sizes.append(("shadow maps of all lights together", 4 * inputs.shadow_texels))
-    if scene.render.method in ("minmax", "moments") and np.any(scene.medium.sigma_s > 0):
+    if scene.render.method in ("minmax", "volume_moments") and np.any(scene.medium.sigma_s > 0):
         gamma_samples = tree_gamma_samples(scene.render.gamma_samples)
         tree = 8 * scene.render.slices * 2 * gamma_samples
         sizes += [(f"min-max tree of light {index}", tree) for index in range(len(scene.lights))]
@@ -479,7 +480,7 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
                   for index, light in enumerate(scene.lights) if textured(light)]
     if inputs.texels is not None and any(textured(light) for light in scene.lights):
         sizes.append(("light textures", 16 * len(inputs.texels)))
-        if scene.render.method == "moments":  # double prefix sums, the larger case (volume_moments.py)
+        if scene.render.method == "volume_moments":  # double prefix sums, the larger case (volume_moments.py)
             prefix = 32 * scene.render.slices * (gamma_samples + 1)
             sizes.append(("moment prefix sums of one light", prefix))
     if scene.render.surface_shadows == "exact" and scene.lights:  # visibility's bound and writer maps, every light's
@@ -498,13 +499,13 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
         if scene.render.surface_shadows == "exact":
             sizes.append(("surface transmittance", 16 * samples * len(scene.lights)))
     if scene.geometry.translucent:  # the transparency stage's films (transparency.py): depth, triangle, fog per slot
-        # Peeling's layers bound its slots; moments gather every film a ray meets, counted here as at
+        # Peeling's layers bound its slots; MBOIT gathers every film a ray meets, counted here as at
         # most 64 (the most layers peeling takes) or the translucent triangles, the fewer.
         settings = transparency_of(scene)
         slots = settings.layers if settings.type == "depth_peeling" else min(len(translucent_triangles(scene)), 64)
         sizes += [("translucent films seen by the camera", 24 * slots * samples),
                   ("films' transmittance and light", 32 * samples)]
-        if settings.type == "moments":  # its weighted walk's sample list and fog (stages/transparency_walk.py)
+        if settings.type == "mboit":  # its weighted walk's sample list and fog (stages/transparency_walk.py)
             sizes.append(("samples with films and their walked fog", 20 * samples))
     if scene.render.surface_shadows == "filtered":  # the moment maps and their blur's scratch (shadow_filter.py)
         sizes += [("moment maps", 16 * inputs.shadow_texels), ("moment maps' blur scratch", 16 * inputs.shadow_texels)]

@@ -11,7 +11,7 @@ For each scene and resolution the sweep renders
 - `minmax` at its defaults and, one parameter at a time, at half the `slices`,
   `gamma_samples` or `shadow_map` (the points that can reach the higher targets for
   less), and at twice the sizes where none of those reaches the lowest target (640×360
-  and smaller whole-image sweeps also try `integrand` and `traversal`); `moments` in
+  and smaller whole-image sweeps also try `integrand` and `traversal`); `volume_moments` in
   `--quick` only (bench/RESULTS.md compares it with minmax on its own);
 
 and records, per point, the frame time (median of `repeats` renders after a warm-up,
@@ -116,7 +116,7 @@ def sweep(scene: Scene, quick: bool = False, volume: bool = False) -> list[tuple
                 ("raymarch", "steps=256 shadow_map=256", {"steps": 256, "shadow_map": 256}),
                 ("minmax", "shadow_map=256", {"shadow_map": 256}),
                 ("minmax", "shadow_map=256 traversal=scan", {"shadow_map": 256, "traversal": "scan"}),
-                ("moments", "shadow_map=256", {"shadow_map": 256})]
+                ("volume_moments", "shadow_map=256", {"shadow_map": 256})]
     defaults = dataclasses.asdict(with_derived_sizes(scene).render)
     label = (f"defaults (slices={defaults['slices']} gamma_samples={defaults['gamma_samples']} "
              f"shadow_map={defaults['shadow_map']})")
@@ -342,7 +342,7 @@ def plot(points: list[BenchPoint], path: Path, targets=RMSE_TARGETS) -> None:
     columns = min(len(groups), 2)
     rows = math.ceil(len(groups) / columns)
     figure, axes = plt.subplots(rows, columns, figsize=(6.5 * columns, 4.8 * rows), squeeze=False)
-    colours = {"raymarch": "tab:orange", "minmax": "tab:blue", "moments": "tab:green"}
+    colours = {"raymarch": "tab:orange", "minmax": "tab:blue", "volume_moments": "tab:green"}
     for axis, key in zip(axes.ravel(), groups):
         group = [p for p in points if (p.scene, p.resolution) == key]
         for method, colour in colours.items():

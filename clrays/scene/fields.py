@@ -14,8 +14,8 @@ from .animation import EASINGS
 from .limits import MAX_LIGHTS, MAX_MESH_BYTES, MAX_OBJECTS, MAX_SCENE_BYTES, MAX_TRIANGLES
 from .costs import (INITIAL_SAMPLES_PER_LINE, MAX_GAMMA_SAMPLES, MAX_INITIAL_STEP, MAX_LINE_SAMPLES, MAX_SHADOW_MAP,
                     MAX_SLICES, MIN_GAMMA_SAMPLES, MIN_INITIAL_STEP, MIN_LINE_SAMPLES, MIN_SHADOW_MAP, MIN_SLICES)
-from .model import (INTEGRAND_MODES, METHODS, NORMALS, RELIEF_MODES, SAMPLINGS, SHADOW_FILTERS, STEP_SPACINGS,
-                    SURFACE_SHADOWS, TEXTURE_WRAPS, TRANSPARENCY_TYPES, TRANSPARENCY_WARPS, TRAVERSALS, Camera,
+from .model import (INTEGRAND_MODES, METHODS, NORMALS, RELIEF_MODES, RENAMED_METHODS, RENAMED_TRANSPARENCY_TYPES,
+                    SAMPLINGS, SHADOW_FILTERS, STEP_SPACINGS, SURFACE_SHADOWS, TEXTURE_WRAPS, TRANSPARENCY_TYPES, TRANSPARENCY_WARPS, TRAVERSALS, Camera,
                     DirectionalLight, Image, Render, ShadowFilter, Transparency)
 from .textures import MAX_TEXTURE_SIDE
 
@@ -54,6 +54,7 @@ class Field:
     shown_default: str = ""
     notes: str = ""
     read_by: tuple[str, ...] = ()  # render keys: the methods that read it (empty: every method)
+    renamed: tuple[tuple[str, str], ...] = ()  # choices: (former name, the choice it reads as)
 
     @property
     def required(self) -> bool:
@@ -252,11 +253,12 @@ ROTATE = Section("objects.transform.rotate", (
           notes="quaternion form"),
 ), rules=("Exactly one form: `axis` with `angle_deg`, `euler_deg` (with `order` or not), or `quaternion`.",))
 
-_RASTER_METHODS = ("minmax", "raymarch", "moments")  # the methods with shadow maps; exact has none
-_EPIPOLAR_METHODS = ("minmax", "moments")  # the methods with a rectified texture and integrand tables
+_RASTER_METHODS = ("minmax", "raymarch", "volume_moments")  # the methods with shadow maps; exact has none
+_EPIPOLAR_METHODS = ("minmax", "volume_moments")  # the methods with a rectified texture and integrand tables
 
 RENDER = Section("render", (
-    Field("method", "string", Render.method, choices=METHODS, notes="volumetric integrator (README: Methods)"),
+    Field("method", "string", Render.method, choices=METHODS, renamed=tuple(RENAMED_METHODS.items()),
+          notes="volumetric integrator (README: Methods); `moments`, its former name, reads as `volume_moments`"),
     Field("steps", "integer", Render.steps, 1, 65536, notes="raymarch samples per pixel ray", read_by=("raymarch",)),
     Field("jitter", "boolean", Render.jitter, notes="raymarch: jitter sample positions (seeded per pixel)",
           read_by=("raymarch",)),
@@ -317,7 +319,7 @@ RENDER = Section("render", (
           notes="translucent objects: how many translucent surfaces each light's map keeps per texel, nearest "
                 "the light first; along a light ray, those beyond that many let it through unattenuated "
                 "([docs/design.md](design.md#translucent-occluders-the-light-side))", read_by=("minmax", "raymarch")),
-    Field("transparency", "mapping or string", shown_default="`{type: moments}`",
+    Field("transparency", "mapping or string", shown_default="`{type: mboit}`",
           notes="[render.transparency](#rendertransparency): how the camera composites "
                 "[translucent objects](#translucent-objects); a string is its `type`. Read only where an "
                 "object has `opacity` below 1", read_by=("minmax", "raymarch")),
@@ -346,19 +348,20 @@ SHADOW_FILTER = Section("render.shadow_filter", (
 
 TRANSPARENCY = Section("render.transparency", (
     Field("type", "string", Transparency.type, choices=TRANSPARENCY_TYPES,
+          renamed=tuple(RENAMED_TRANSPARENCY_TYPES.items()),
           notes="`depth_peeling`: the `layers` nearest translucent surfaces of each camera ray, composited in "
-                "order; `moments`: every one of them, composited with a transmittance reconstructed from 4 power "
+                "order; `mboit`: every one of them, composited with a transmittance reconstructed from 4 power "
                 "moments of the absorbance, in no order "
-                "(MBOIT; [docs/design.md](design.md#translucent-surfaces-the-camera-side)). Left out, the keys "
-                "given name it (`layers`: depth_peeling; `warp`, `moment_bias`: moments); a key the type does "
-                "not read is an error"),
+                "(MBOIT; [docs/design.md](design.md#translucent-surfaces-the-camera-side); `moments`, its former "
+                "name, reads as `mboit`). Left out, the keys given name it (`layers`: depth_peeling; `warp`, "
+                "`moment_bias`: mboit); a key the type does not read is an error"),
     Field("layers", "integer", Transparency.layers, 1, 64,
           notes="`depth_peeling`: layers composited; surfaces behind the last are left out"),
     Field("warp", "string", Transparency.warp, choices=TRANSPARENCY_WARPS,
-          notes="`moments`: the depth coordinate of the moments, linear or logarithmic between the nearest and "
+          notes="`mboit`: the depth coordinate of the moments, linear or logarithmic between the nearest and "
                 "the farthest distance of the translucent objects from the camera"),
     Field("moment_bias", "number", Transparency.moment_bias, 0.0, 0.5,
-          notes="`moments`: how far the normalised moments are pulled towards those of depth 0.5. "
+          notes="`mboit`: how far the normalised moments are pulled towards those of depth 0.5. "
                 "Measured in bench/RESULTS.md"),
 ))
 

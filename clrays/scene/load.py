@@ -59,7 +59,7 @@ def _read(field: Field, node: Node | None) -> Any:
     if field.type == "RGB":
         return rgb(node, field.low, field.high, default=default)
     if field.choices:
-        return choice(node, field.choices, default)
+        return choice(node, field.choices, default, dict(field.renamed))
     raise TypeError(f"{field.key}: a {field.type} has a reader of its own")
 
 
@@ -244,17 +244,17 @@ def _transparency(node: Node | None) -> Transparency | None:
     if node is None:
         return None
     if isinstance(node.value, str):
-        return Transparency(type=choice(node, TRANSPARENCY["type"].choices))
+        return Transparency(type=choice(node, TRANSPARENCY["type"].choices, renamed=dict(TRANSPARENCY["type"].renamed)))
     keys = mapping(node, optional=TRANSPARENCY.optional)
     values = {field.key: _read(field, keys.get(field.key)) for field in TRANSPARENCY.fields}
     # Each type reads keys of its own: they name the type when it is left out, and a key the
     # named type would ignore is a mistake, not a setting.
-    readers = {"layers": "depth_peeling", "warp": "moments", "moment_bias": "moments"}
+    readers = {"layers": "depth_peeling", "warp": "mboit", "moment_bias": "mboit"}
     implied = {readers[key] for key in keys if key in readers}
     if "type" not in keys:
         if len(implied) > 1:
             raise SceneError(f"{node.where}: {node.path}: layers is read by depth_peeling, warp and moment_bias "
-                             f"by moments: add type: depth_peeling or type: moments")
+                             f"by mboit: add type: depth_peeling or type: mboit")
         values["type"] = implied.pop() if implied else Transparency.type
     for key in keys:
         if readers.get(key, values["type"]) != values["type"]:

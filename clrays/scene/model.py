@@ -23,7 +23,7 @@ RGB = np.ndarray
 
 #: The choices of the scene's enumerated fields, written once: the loader, the command
 #: line, the session and the docs read them from here.
-METHODS = ("minmax", "raymarch", "exact", "moments")
+METHODS = ("minmax", "raymarch", "exact", "volume_moments")
 INTEGRAND_MODES = ("table", "svd", "analytic")
 TRAVERSALS = ("tree", "scan")
 # min-max: in-scattering at samples along epipolar lines, interpolated; or walked for every camera sample.
@@ -40,12 +40,17 @@ SHADOW_FILTERS = ("hard", "pcf", "vsm", "msm_hamburger", "msm_hausdorff")
 # Translucent surfaces seen by the camera (`render.transparency.type`, docs/design.md, translucent
 # surfaces: the camera side): the K nearest layers in order, or moment-based order-independent
 # transparency (MBOIT).
-TRANSPARENCY_TYPES = ("depth_peeling", "moments")
+TRANSPARENCY_TYPES = ("depth_peeling", "mboit")
 TRANSPARENCY_WARPS = ("none", "log")  # MBOIT's depth warp before the moments are taken
 PHASE_TYPES = ("isotropic", "hg")
 NORMALS = ("smooth", "flat")  # a mesh's shading normals: interpolated vertex normals, or each face's own
 # How the raster stage draws relief objects: by their pre-warp, or as their triangles (the same surface).
 RELIEF_MODES = ("prewarp", "triangles")
+# "moments" named three features: each has its own name now (the volume method volume_moments,
+# the camera's MBOIT transparency mboit, the moment shadow maps of render.shadow_filter). The
+# old name still reads as before where it was accepted.
+RENAMED_METHODS = {"moments": "volume_moments"}
+RENAMED_TRANSPARENCY_TYPES = {"moments": "mboit"}
 
 
 @dataclass(frozen=True)
@@ -147,14 +152,14 @@ class Transparency:
     """`render.transparency`: how the camera composites translucent surfaces (docs/design.md,
     translucent surfaces: the camera side)."""
 
-    # moments by default: on glass_row within 1.1 % of 8-layer peeling and faster than it (its fog is
+    # MBOIT by default: on glass_row within 1.1 % of 8-layer peeling and faster than it (its fog is
     # one walk per pixel, peeling's one per film; bench/RESULTS.md, docs/design.md).
-    type: str = "moments"  # one of TRANSPARENCY_TYPES
+    type: str = "mboit"  # one of TRANSPARENCY_TYPES
     # The nearest layers composited; those behind them are dropped. Peeling stops where no sample
     # finds another layer, so a frame with fewer films pays for those only.
     layers: int = 8
-    warp: str = "log"  # moments: one of TRANSPARENCY_WARPS
-    # moments: weight pulling the normalised moments towards those of depth 0.5 (cl/moments.h),
+    warp: str = "log"  # mboit: one of TRANSPARENCY_WARPS
+    # mboit: weight pulling the normalised moments towards those of depth 0.5 (cl/moments.h),
     # measured on scenes/glass_row.yaml (bench/RESULTS.md, "Translucent objects: the camera side").
     moment_bias: float = 5e-3
 

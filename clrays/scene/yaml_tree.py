@@ -14,7 +14,7 @@ import gc
 import math
 import re
 from dataclasses import dataclass, field
-from typing import Any, Callable, NoReturn, Sequence
+from typing import Any, Callable, Mapping, NoReturn, Sequence
 
 import numpy as np
 import yaml
@@ -488,10 +488,14 @@ def boolean(node: Node | None, default: bool) -> bool:
     return node.value
 
 
-def choice(node: Node | None, options: Sequence[str], default: str | None = None) -> str:
+def choice(node: Node | None, options: Sequence[str], default: str | None = None,
+           renamed: Mapping[str, str] | None = None) -> str:
+    """One of `options`; a name in `renamed` (an option's former name) reads as the option."""
     if node is None:
         assert default is not None
         return default
+    if isinstance(node.value, str) and renamed and node.value in renamed:
+        return renamed[node.value]
     if node.value not in options or not isinstance(node.value, str):
         node.fail("one of " + ", ".join(repr(o) for o in options))
     return node.value

@@ -56,7 +56,7 @@ def opaque_occluder_buffers(device: Device, buffers: FrameBuffers) -> FrameBuffe
 
 
 def refuse_translucency(scene, method: str) -> None:
-    """A one-line error for what cannot show translucent objects: the `moments` method and
+    """A one-line error for what cannot show translucent objects: the `volume_moments` method and
     relief objects drawn by their pre-warp on the device."""
     geometry = scene.geometry
     if not geometry.translucent:
@@ -64,8 +64,8 @@ def refuse_translucency(scene, method: str) -> None:
     clear = see_through(geometry)
     first = int(geometry.object_id[np.flatnonzero(clear)[0]])
     where = f"{scene.source}: " if scene.source else ""
-    if method == "moments":
-        raise ClraysError(f"{where}render.method: moments does not support translucent objects "
+    if method == "volume_moments":
+        raise ClraysError(f"{where}render.method: volume_moments does not support translucent objects "
                           f"(objects.{first}.opacity); use minmax, raymarch or exact")
     for record in geometry.reliefs if scene.render.relief == "prewarp" else ():
         if clear[record.rows].any():

@@ -4,7 +4,7 @@ surfaces: the camera side). Host side of `cl/transparency.cl`.
 
     layers (peel or gather) → in-scatter up to each layer (the method's own stage) → composite
 
-MBOIT (`moments`) replaces the in-scatter runs up to each layer by one walk of the fog per
+MBOIT (`mboit`) replaces the in-scatter runs up to each layer by one walk of the fog per
 sample that meets films, weighted by its estimated transmittance (stages/transparency_walk.py).
 
 A scene whose objects are all opaque runs none of it: the session skips the stage, and the
@@ -128,7 +128,7 @@ def _layer_args(buffers: FrameBuffers, rastered: RasterResult, translucent, coun
 def translucent_films(device: Device, buffers: FrameBuffers, rastered: RasterResult, timer: StageTimer,
                       weighted_walk: bool = True) -> Films:
     """Each camera sample's translucent hits in front of its opaque depth: the `layers` nearest
-    in order (depth_peeling), or all of them in no order (moments). `weighted_walk` (moments):
+    in order (depth_peeling), or all of them in no order (mboit). `weighted_walk` (mboit):
     list the samples with films for MBOIT's one walk of the fog; False: the in-scatter runs per
     slot, as peeling's (the tests' reference)."""
     inputs = buffers.inputs
@@ -186,7 +186,7 @@ def composite(device: Device, buffers: FrameBuffers, rastered: RasterResult, lay
     inputs = buffers.inputs
     settings = transparency_of(inputs.scene)
     samples = inputs.samples
-    defines = {"TRANSPARENCY_MOMENTS": int(settings.type == "moments"),
+    defines = {"TRANSPARENCY_MOMENTS": int(settings.type == "mboit"),
                "TRANSPARENCY_LOG_WARP": int(settings.warp == "log")}
     light_args = ()
     if light_layers is not None:

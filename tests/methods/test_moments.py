@@ -1,4 +1,4 @@
-"""Method `moments` (docs/design.md §9, the volume): against raymarch where each ray's
+"""Method `volume_moments` (docs/design.md §9, the volume): against raymarch where each ray's
 visibility is a single step, for every light type, and its cost against minmax's."""
 from __future__ import annotations
 
@@ -35,7 +35,7 @@ def single_step_scene(kind: str):
 def test_moments_matches_raymarch_on_a_single_step(renderer, kind):
     scene = single_step_scene(kind)
     reference = renderer.render(scene, "raymarch").image
-    moments = renderer.render(scene, "moments").image
+    moments = renderer.render(scene, "volume_moments").image
     error = image_error(moments, reference)
     assert error.pixels > 500
     # Measured 1.3 / 2.1 / 1.1 % (directional / point / spot; minmax: 0.1-0.2 %): what
@@ -59,5 +59,5 @@ def test_moments_matches_raymarch_where_shafts_alternate(renderer):
                        smooth=None)
     scene = replace(scene, geometry=geometry)
     reference = renderer.render(scene, "raymarch").image
-    error = image_error(renderer.render(scene, "moments").image, reference)
+    error = image_error(renderer.render(scene, "volume_moments").image, reference)
     assert error.rmse < 0.01, error

@@ -240,11 +240,12 @@ def test_reuse_follows_opacity(device):
     np.testing.assert_array_equal(again.image, fresh)
 
 
-def test_moments_refuses_translucent_objects(tmp_path):
+@pytest.mark.parametrize("name", ["volume_moments", "moments"])  # (moments: its former name)
+def test_volume_moments_refuses_translucent_objects(tmp_path, name):
     code, output = run_cli("render", REPO / "scenes" / "glass_pane.yaml", "-o", tmp_path / "m.png",
-                           "--method", "moments")
+                           "--method", name)
     assert code == 1
-    assert "render.method: moments does not support translucent objects (objects.1.opacity)" in output
+    assert "render.method: volume_moments does not support translucent objects (objects.1.opacity)" in output
     assert "Traceback" not in output and len(output.strip().splitlines()) == 1
 
 

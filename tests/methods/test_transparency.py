@@ -31,7 +31,7 @@ objects:
 OPACITY = np.array([0.2, 0.9, 0.5])
 
 
-@pytest.mark.parametrize("kind", ["depth_peeling", "moments"])
+@pytest.mark.parametrize("kind", ["depth_peeling", "mboit"])
 @pytest.mark.parametrize("method", ["minmax", "raymarch"])
 def test_a_pane_blends_over_the_wall(renderer, method, kind):
     """Fog off: opacity · (the pane, were it opaque) + (1 − opacity) · (the wall, with no pane)."""
@@ -97,7 +97,7 @@ def test_peeling_every_layer_is_the_sorted_composite(renderer, monkeypatch, meth
     spy = CompositeSpy(monkeypatch)
     monkeypatch.setattr(clrays.session, "translucent_films", _films_run_per_film)
     black = [f"objects.{i}.albedo=0" for i in range(2, 7)]
-    renderer.render(small_row(*black, "render.transparency={type: moments}"), method, reuse=False)
+    renderer.render(small_row(*black, "render.transparency={type: mboit}"), method, reuse=False)
     renderer.render(small_row(*black, "render.transparency={type: depth_peeling, layers: 8}"), method, reuse=False)
     gathered, peeled = spy.frames
     assert gathered["depth"].shape[0] == 5 and peeled["depth"].shape[0] == 5  # five panes, all met
@@ -130,7 +130,7 @@ def test_moments_come_close_to_eight_layer_peeling(renderer):
     bench/RESULTS.md has the figures at full size; measured here at 64×36: 1.07 % (the fog
     walked once per sample, transparency_walk.cl; 1.07 % too with the fog run up to each film)."""
     peeled = renderer.render(small_row("render.transparency={type: depth_peeling, layers: 8}")).image
-    moments = renderer.render(small_row("render.transparency=moments")).image
+    moments = renderer.render(small_row("render.transparency=mboit")).image
     assert image_error(moments, peeled).rmse < 0.02
 
 
@@ -138,7 +138,7 @@ _EXACT: dict = {}
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("kind", ["depth_peeling", "moments"])
+@pytest.mark.parametrize("kind", ["depth_peeling", "mboit"])
 @pytest.mark.parametrize("method", ["raymarch", "minmax"])
 def test_glass_pane_with_its_film_agrees_with_exact(renderer, method, kind):
     """scenes/glass_pane.yaml at 160×90, the pane seen by the camera included, depth edges out:
@@ -164,7 +164,7 @@ def test_moments_one_walk_is_the_per_film_composite(renderer, monkeypatch, metho
     evaluate the same estimate of T, at the films or along the ray between them."""
     spy = CompositeSpy(monkeypatch)
     black = [f"objects.{i}.albedo=0" for i in range(2, 7)]
-    scene = small_row(*black, "render.transparency={type: moments}")
+    scene = small_row(*black, "render.transparency={type: mboit}")
     walked = renderer.render(scene, method, reuse=False)
     monkeypatch.setattr(clrays.session, "translucent_films", _films_run_per_film)
     per_film = renderer.render(scene, method, reuse=False)
@@ -187,7 +187,7 @@ def test_moments_fog_march_takes_the_scene_step_spacing(renderer, monkeypatch):
     spy = CompositeSpy(monkeypatch)
     black = [f"objects.{i}.albedo=0" for i in range(2, 7)]
     for spacing in ("equiangular", "uniform"):
-        renderer.render(small_row(*black, "render.transparency={type: moments}", "render.steps=4",
+        renderer.render(small_row(*black, "render.transparency={type: mboit}", "render.steps=4",
                                   f"render.step_spacing={spacing}"), "raymarch", reuse=False)
     equiangular, uniform = spy.frames
     films = equiangular["in_front"][..., :3].any(axis=-1)

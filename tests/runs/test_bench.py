@@ -107,7 +107,7 @@ def test_bench_command_writes_csv_plot_and_summary(tmp_path):
                                        str(tmp_path / "cache")])
     assert result.exit_code == 0, result.output
     rows = list(csv.DictReader(open(out / "bench.csv")))
-    assert {r["method"] for r in rows} == {"raymarch", "minmax", "moments"}
+    assert {r["method"] for r in rows} == {"raymarch", "minmax", "volume_moments"}
     assert all(float(r["frame_ms"]) > 0 and 0 <= float(r["rel_rmse"]) < 10 for r in rows)
     assert (out / "bench.png").stat().st_size > 1000
     summary_text = (out / "summary.md").read_text()

@@ -109,7 +109,7 @@ def test_a_key_the_method_does_not_read_gets_a_notice(tmp_path):
     assert "clrays: notice: render.steps = 1024 (read by raymarch only); method minmax ignores it" in out
     assert "render.slices" not in out  # minmax reads it
     code, out = run(*args, "--stats", "--method", "raymarch")
-    assert code == 0 and "render.steps" not in out and "render.slices = 32 (read by minmax and moments only)" in out
+    assert code == 0 and "render.steps" not in out and "render.slices = 32 (read by minmax and volume_moments only)" in out
     code, out = run(*args)
     assert code == 0 and "notice" not in out  # quiet unless asked
 
@@ -118,7 +118,7 @@ def test_unread_keys_come_from_the_field_table():
     from clrays.scene.fields import RENDER
 
     read_by = {field.key: field.read_by for field in RENDER.fields}
-    assert read_by["steps"] == ("raymarch",) and read_by["slices"] == ("minmax", "moments")
+    assert read_by["steps"] == ("raymarch",) and read_by["slices"] == ("minmax", "volume_moments")
     assert read_by["method"] == ()  # every method
     assert "exact" not in read_by["shadow_map"]
 

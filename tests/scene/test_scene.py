@@ -445,7 +445,7 @@ BAD = [
     ({"background": [0, 0]}, r"background: expected a list of 3 numbers"),
     ({"background": "black"}, r"background: expected a number >= 0, got 'black'"),
     # render
-    ({"render": {"method": "pathtrace"}}, r"render\.method: expected one of 'minmax', 'raymarch', 'exact', 'moments', got 'pathtrace'"),
+    ({"render": {"method": "pathtrace"}}, r"render\.method: expected one of 'minmax', 'raymarch', 'exact', 'volume_moments', got 'pathtrace'"),
     ({"render": {"steps": 0}}, r"render\.steps: expected an integer in \[1, 65536\], got 0"),
     ({"render": {"steps": 65537}}, r"render\.steps: expected an integer in \[1, 65536\], got 65537"),
     ({"render": {"steps": 2.5}}, r"render\.steps: expected an integer in \[1, 65536\], got 2\.5"),

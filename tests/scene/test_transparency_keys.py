@@ -19,17 +19,22 @@ def transparency_of(*overrides):
 
 def test_keys_and_defaults():
     assert transparency_of() is None  # left out: Transparency()'s defaults
-    assert Transparency() == Transparency("moments", 8, "log", 5e-3)
-    assert transparency_of("render.transparency=moments") == Transparency(type="moments")
+    assert Transparency() == Transparency("mboit", 8, "log", 5e-3)
+    assert transparency_of("render.transparency=mboit") == Transparency(type="mboit")
     assert transparency_of("render.transparency={type: depth_peeling, layers: 3}").layers == 3
-    assert transparency_of("render.transparency={type: moments, warp: none, moment_bias: 0}") == \
-        Transparency("moments", 8, "none", 0.0)
+    assert transparency_of("render.transparency={type: mboit, warp: none, moment_bias: 0}") == \
+        Transparency("mboit", 8, "none", 0.0)
+
+
+def test_the_former_name_moments_reads_as_mboit():
+    assert transparency_of("render.transparency=moments") == Transparency(type="mboit")
+    assert transparency_of("render.transparency={type: moments, warp: none}") == Transparency("mboit", warp="none")
 
 
 BAD = [
-    ("render.transparency={type: peel}", r"render\.transparency\.type: expected one of 'depth_peeling', 'moments', "
+    ("render.transparency={type: peel}", r"render\.transparency\.type: expected one of 'depth_peeling', 'mboit', "
                                          r"got 'peel'"),
-    ("render.transparency=sorted", r"render\.transparency: expected one of 'depth_peeling', 'moments', got 'sorted'"),
+    ("render.transparency=sorted", r"render\.transparency: expected one of 'depth_peeling', 'mboit', got 'sorted'"),
     ("render.transparency={layers: 0}", r"render\.transparency\.layers: expected an integer in \[1, 64\], got 0"),
     ("render.transparency={layers: 2.5}", r"render\.transparency\.layers: expected an integer in \[1, 64\], got 2\.5"),
     ("render.transparency={warp: linear}", r"render\.transparency\.warp: expected one of 'none', 'log', got 'linear'"),
@@ -50,7 +55,7 @@ def test_bad_values_are_one_line_errors(override, message):
 
 def test_the_command_line_reports_one_line(tmp_path):
     scene = tmp_path / "s.yaml"
-    scene.write_text(SCENE + "render: {transparency: {type: moments, warp: cubic}}\n")
+    scene.write_text(SCENE + "render: {transparency: {type: mboit, warp: cubic}}\n")
     code, out = run_cli("render", str(scene), "-o", str(tmp_path / "x.png"))
     assert code == 1 and "Traceback" not in out
     assert out.strip().splitlines()[-1].endswith("render.transparency.warp: expected one of 'none', 'log', got 'cubic'")
@@ -58,17 +63,22 @@ def test_the_command_line_reports_one_line(tmp_path):
 
 def test_a_key_of_one_type_names_it_when_the_type_is_left_out():
     assert transparency_of("render.transparency={layers: 4}") == Transparency("depth_peeling", 4)
-    assert transparency_of("render.transparency={warp: none}").type == "moments"
+    assert transparency_of("render.transparency={warp: none}").type == "mboit"
 
 
 @pytest.mark.parametrize("override, message", [
-    ("render.transparency={type: moments, layers: 4}",
-     r"render\.transparency\.layers: only depth_peeling reads it, got type moments"),
+    ("render.transparency={type: mboit, layers: 4}",
+     r"render\.transparency\.layers: only depth_peeling reads it, got type mboit"),
     ("render.transparency={type: depth_peeling, moment_bias: 0.01}",
-     r"render\.transparency\.moment_bias: only moments reads it, got type depth_peeling"),
+     r"render\.transparency\.moment_bias: only mboit reads it, got type depth_peeling"),
     ("render.transparency={layers: 4, warp: log}",
-     r"render\.transparency: layers is read by depth_peeling, warp and moment_bias by moments: add type"),
+     r"render\.transparency: layers is read by depth_peeling, warp and moment_bias by mboit: add type"),
 ])
 def test_keys_of_the_other_type_are_one_line_errors(override, message):
     with pytest.raises(SceneError, match=message):
         parse_scene(SCENE, overrides=[override])
+
+
+def test_the_former_method_name_moments_reads_as_volume_moments():
+    assert parse_scene(SCENE, overrides=["render.method=moments"]).render.method == "volume_moments"
+    assert parse_scene(SCENE, overrides=["render.method=volume_moments"]).render.method == "volume_moments"

@@ -44,7 +44,7 @@ FRAMES = {
     "glass_row": ("glass_row", ()), "stained_glass": ("stained_glass", ()), "gobo": ("gobo", ()),
     "lattice": ("lattice", ()),
     "raymarch": ("demo", ("render.method=raymarch", "render.steps=32")),
-    "moments": ("behind", ("render.method=moments",)),
+    "volume_moments": ("behind", ("render.method=volume_moments",)),
     "pixel walk": ("sun", ("render.sampling=pixel",)),
     "4 spp": ("demo", ("image.spp=4",)),
     "filtered": ("behind", ("render.surface_shadows=filtered",)),
