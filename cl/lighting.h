@@ -236,6 +236,16 @@ inline float shadow_texel_size(global const light_t* light, float depth)
     return light->type == LIGHT_DIRECTIONAL ? light->texel_angle : depth * light->texel_angle;
 }
 
+/* The point where a surface point p with unit normal n (turned to the light's side) looks
+ * up the light's shadow map: p moved along n by a texel of the map at p's distance, which
+ * keeps a lit surface from shadowing itself. One offset for every stage that looks a
+ * surface up (shade, visibility, transparency, translucency, shadow_filter); exact_length
+ * is the built-in length's bits, on every path. */
+ALWAYS_INLINE float3 shadow_lookup(global const light_t* light, float3 p, float3 n)
+{
+    return p + n * shadow_texel_size(light, exact_length(p - light->position.xyz));
+}
+
 /* 1 where p sees the light through the shadow map, else 0; averaged over a
  * (2·pcf + 1)² texel footprint when pcf > 0. Points outside the map are lit: a
  * map covers every occluder (cube, cone, or the scene bounds). bias is in texels. */

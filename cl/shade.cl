@@ -142,12 +142,6 @@ ALWAYS_INLINE vec_lanes smooth_normal_lanes(global const float4* tri_vertices, g
     return select_lanes((det != 0.0f) & (n_length > 0.0f), normalised, flat);
 }
 
-/* The shadow lookup point of a surface point: offset along its normal by a texel, which keeps
- * a lit surface from shadowing itself. */
-ALWAYS_INLINE float3 shadow_lookup(global const light_t* light, float3 p, float3 n)
-{
-    return p + n * shadow_texel_size(light, exact_length(p - light->position.xyz));
-}
 
 kernel void shade(global const frame_t* frame, global const view_t* views,
                   global const light_t* lights, global const uint* shadow_depth,

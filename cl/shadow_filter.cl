@@ -169,7 +169,7 @@ kernel void shadow_filter_visibility(global const frame_t* frame, global const v
         float cosine = fabs(dot(n, to_light));
         float slope = fmin(sqrt(fmax(1.0f - cosine * cosine, 0.0f)) / cosine, MAX_BIAS_SLOPE);
         /* The normal offset by a texel of shade's own map test. */
-        float3 lookup = p + n * shadow_texel_size(light, length(p - light->position.xyz));
+        float3 lookup = shadow_lookup(light, p, n);
         out[l] = filtered_visibility(light, views, view_needed, shadow_depth, moments, depth_range[l], lookup, slope,
                                      radius, depth_bias, moment_bias);
     }

@@ -178,7 +178,7 @@ kernel void translucency_surface(global const frame_t* frame, global const view_
         float3 incident = light_incident(light, frame->sigma_t.xyz, p, &to_light);
         if (incident.x + incident.y + incident.z == 0.0f || eye_in_lamp(light, frame->lamp_radius)) continue;
         /* The layers decide where the 3 × 3 texels around the lookup agree (shade's lookup point). */
-        float3 lookup = p + n * shadow_texel_size(light, length(p - light->position.xyz));
+        float3 lookup = shadow_lookup(light, p, n);
         global const view_t* view = views + light_view_index(light, lookup);
         float2 texel;
         float depth;

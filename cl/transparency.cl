@@ -158,7 +158,7 @@ inline float3 surface_radiance(global const frame_t* frame, global const view_t*
         if (cosine <= 0.0f || incident.x + incident.y + incident.z == 0.0f) continue;
         float visible = 1.0f;
         if (!eye_in_lamp(lights + l, frame->lamp_radius)) {
-            float3 lookup = p + n * shadow_texel_size(lights + l, length(p - lights[l].position.xyz));
+            float3 lookup = shadow_lookup(lights + l, p, n);
             visible = shadow_visibility(lights + l, views, shadow_depth, lookup, SURFACE_BIAS_TEXELS, 0);
 #ifdef TRANSLUCENT_LAYERS
             if (visible > 0.0f)

@@ -156,7 +156,7 @@ inline void decide_entry(global const frame_t* frame, global const view_t* views
                 return;
             }
         }
-        float3 lookup = p + n * shadow_texel_size(light, exact_length(p - light->position.xyz));
+        float3 lookup = shadow_lookup(light, p, n);
         if (blocked_all_around(light, views, shadow_depth, lookup, p, n)) {
             out[l] = 0.0f;
             return;
@@ -228,7 +228,7 @@ ALWAYS_INLINE int decide_lanes(global const frame_t* frame, global const view_t*
                                                                  : depth * light->texel_angle;
         slack = heavy & (depth <= bound_depth + SURFACE_BIAS_TEXELS * bias_size); /* decide_entry's, lane by lane */
         heavy &= !slack;
-        /* lookup = p + n · shadow_texel_size(|p - light|), then blocked_all_around */
+        /* lookup = shadow_lookup (lighting.h) lane by lane, then blocked_all_around */
         float3 position = light->position.xyz;
         float_lanes wx = px - position.x, wy = py - position.y, wz = pz - position.z;
         float_lanes w_squared = squared_length_lanes(wx, wy, wz);
