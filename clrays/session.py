@@ -65,6 +65,11 @@ from .stages.visibility import (bound_atlas, bvh_topology_of, upload_bvh, visibi
 #: is π everywhere whatever its size, so it is built at this size (the minimum).
 UNSHADOWED_SIZE = 16
 
+#: Every stage label a frame times, in the order of the figure (the module docstring, with the
+#: labels of a stage's parts after it): results.csv's columns follow it.
+STAGE_ORDER = ("raster", "relief", "translucency", "transparency", "transparency.fog", "rectify", "minmax",
+               "integrand", "light_texture", "traverse", "lamp", "raymarch", "volume_moments", "visibility", "bvh",
+               "shadow_filter", "shade", "exact")
 #: Stage labels of the volume stages of each method, as timings and statuses name them.
 VOLUME_STAGES = {"minmax": ("rectify", "minmax", "integrand", "traverse"), "raymarch": ("raymarch",),
                  "volume_moments": ("rectify", "integrand", "volume_moments")}

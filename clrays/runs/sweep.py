@@ -33,7 +33,7 @@ import yaml
 from ..errors import ClraysError, OutputError
 from ..image_io import make_folder, read_srgb8, write_atomic
 from ..inputs import frame_inputs
-from ..session import Renderer, StageKeys
+from ..session import STAGE_ORDER, Renderer, StageKeys
 from ..reuse import digest, scene_digest
 from ..scene.model import Scene
 from ..scene.load import load_scene
@@ -45,7 +45,7 @@ RESULTS = "results.csv"
 CONTACT_SHEET = "contact_sheet.png"
 IMAGE_FORMATS = ("png", "exr", "npy")
 #: Stage columns of results.csv, in pipeline order (other labels follow, sorted).
-STAGES = ("raster", "rectify", "minmax", "integrand", "traverse", "raymarch", "shade")
+STAGES = STAGE_ORDER
 
 
 @dataclass(frozen=True)
