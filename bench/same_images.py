@@ -1,18 +1,24 @@
 """Images of the bench scenes from one source tree, and whether another tree's are the same
-bit for bit: for a change that must not move the opaque path or depth peeling
-(bench/RESULTS.md, "Translucent objects: the camera side").
+bit for bit: for a change that must not move any image (bench/RESULTS.md, "Translucent
+objects: the camera side", "One frame, one figure").
 
     .venv/bin/python bench/same_images.py --repo ../main --out /tmp/before   # the tree before
     .venv/bin/python bench/same_images.py --out /tmp/after --against /tmp/before
 
-Renders demo, bunny, behind and sun (opaque) and glass_row, glass_pane, stained_glass with
-depth peeling at 1, 4 and 8 layers, each with minmax and raymarch, at 96×54 (every stage
-computed), saves each as .npy in --out, and with --against prints per image whether it is
-identical to the one of the same name there; exits 1 if any is not.
+Renders, at 96×54 with every stage computed: demo, bunny, behind and sun (opaque) with
+minmax, raymarch and volume_moments; glass_row, glass_pane, stained_glass with their default
+transparency (MBOIT) and with depth peeling at 1, 4 and 8 layers, minmax and raymarch; the
+textured lights of gobo and stained_glass and the relief of lattice, minmax and raymarch;
+demo with pixel sampling and bunny with filtered surface shadows; then orbit's first four
+frames as a sequence (one session, stages reused between frames) and a sweep of gobo over
+two σs and two slice counts (one session, reused between points). Saves each as .npy in
+--out, and with --against prints per image whether it is identical to the one of the same
+name there; exits 1 if any is not. Methods go by the names both trees read (`moments`).
 """
 from __future__ import annotations
 
 import argparse
+import itertools
 import sys
 from pathlib import Path
 
@@ -24,15 +30,35 @@ TRANSLUCENT = ("glass_row", "glass_pane", "stained_glass")
 METHODS = ("minmax", "raymarch")
 
 
-def jobs() -> list[tuple[str, str, list[str]]]:
-    """(image name, scene, overrides) of every image."""
-    size = ["image.width=96", "image.height=54"]
-    out = [(f"{scene}_{method}", scene, method, size) for scene in OPAQUE for method in METHODS]
+SIZE = ["image.width=96", "image.height=54"]
+
+
+def jobs() -> list[tuple[str, str, str, list[str]]]:
+    """(image name, scene, method, overrides) of every single frame."""
+    out = [(f"{scene}_{method}", scene, method, SIZE) for scene in OPAQUE for method in (*METHODS, "moments")]
+    out += [(f"{scene}_{method}_default", scene, method, SIZE) for scene in TRANSLUCENT for method in METHODS]
     for layers in (1, 4, 8):
         out += [(f"{scene}_{method}_peel{layers}", scene, method,
-                 [*size, f"render.transparency={{type: depth_peeling, layers: {layers}}}"])
+                 [*SIZE, f"render.transparency={{type: depth_peeling, layers: {layers}}}"])
                 for scene in TRANSLUCENT for method in METHODS]
+    out += [(f"{scene}_{method}", scene, method, SIZE) for scene in ("gobo", "lattice") for method in METHODS]
+    out += [("demo_pixel", "demo", "minmax", [*SIZE, "render.sampling=pixel"]),
+            ("bunny_filtered", "bunny", "minmax", [*SIZE, "render.surface_shadows=filtered"])]
     return out
+
+
+def runs(load_scene, Renderer):
+    """(image name, image) of a sequence and a sweep, each in one session that reuses stages."""
+    session = Renderer()
+    orbit = load_scene(REPO / "scenes" / "orbit.yaml", overrides=SIZE)
+    for frame in range(4):
+        yield f"orbit_frame{frame}", session.render(orbit.animation.scene_at(orbit, frame)).image
+    session = Renderer()
+    for sigma in ("0.05", "0.1"):
+        for slices in ("256", "512"):
+            scene = load_scene(REPO / "scenes" / "gobo.yaml",
+                               overrides=[*SIZE, f"medium.sigma_s={sigma}", f"render.slices={slices}"])
+            yield f"gobo_sweep_{sigma}_{slices}", session.render(scene).image
 
 
 def main() -> int:
@@ -49,8 +75,9 @@ def main() -> int:
     print(f"clrays from {Path(clrays.__file__).parent}")
     args.out.mkdir(parents=True, exist_ok=True)
     renderer, differ = Renderer(reuse=False), 0
-    for name, scene, method, overrides in jobs():
-        image = renderer.render(load_scene(REPO / "scenes" / f"{scene}.yaml", overrides=overrides), method).image
+    frames = ((name, renderer.render(load_scene(REPO / "scenes" / f"{scene}.yaml", overrides=overrides), method).image)
+              for name, scene, method, overrides in jobs())
+    for name, image in itertools.chain(frames, runs(load_scene, Renderer)):
         np.save(args.out / f"{name}.npy", image)
         if args.against is None:
             print(name, flush=True)
