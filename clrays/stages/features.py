@@ -19,7 +19,14 @@ class WalkFeature(Protocol):
 
 def walk_features(texture: WalkFeature | None, layers: WalkFeature | None) -> tuple[WalkFeature, ...]:
     """The features a walk carries, in cl/walk_features.h's order: texture, then layers."""
-    return tuple(feature for feature in (texture, layers) if feature is not None)
+    return present(texture, layers)
+
+
+def present(*features: WalkFeature | None) -> tuple[WalkFeature, ...]:
+    """The features a frame has, in the order given (a kernel's argument groups' order); the
+    same interface serves the kernels that look translucent layers up without walking a row
+    (raymarch, shade, the camera's composite: cl/translucency.h's TRANSLUCENCY_ARGS)."""
+    return tuple(feature for feature in features if feature is not None)
 
 
 def feature_defines(features: tuple[WalkFeature, ...], defines: dict | None = None) -> dict:

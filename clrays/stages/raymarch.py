@@ -6,6 +6,7 @@ from __future__ import annotations
 from ..device import Device, StageTimer
 from ..inputs import FrameBuffers
 from ..scene.model import STEP_SPACINGS
+from .features import feature_args, feature_defines, present
 from .raster import RasterResult
 
 
@@ -17,10 +18,9 @@ def raymarch(device: Device, buffers: FrameBuffers, rastered: RasterResult, scat
     (clrays.stages.transparency_walk), which marches only the samples with films."""
     work_items, label = buffers.inputs.samples, "raymarch"
     # STEP_SPACING 0: equiangular, 1: uniform (clrays.structs.STEP_SPACING_*)
-    defines = {"STEP_SPACING": STEP_SPACINGS.index(buffers.inputs.scene.render.step_spacing)}
-    extra = ()
-    if layers is not None:
-        defines, extra = {**defines, **layers.defines()}, layers.args()
+    features = present(layers)
+    defines = feature_defines(features, {"STEP_SPACING": STEP_SPACINGS.index(buffers.inputs.scene.render.step_spacing)})
+    extra = feature_args(features)
     if walk is not None:
         work_items, walk_defines, walk_args, label = walk
         defines, extra = {**defines, **walk_defines}, (*extra, *walk_args)

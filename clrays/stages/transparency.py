@@ -20,6 +20,7 @@ import numpy as np
 from ..device import Device, StageTimer
 from ..inputs import FrameBuffers
 from ..scene.model import Scene, Transparency
+from .features import feature_args, feature_defines, present
 from .raster import RasterResult
 
 LABEL = "transparency"
@@ -188,10 +189,8 @@ def composite(device: Device, buffers: FrameBuffers, rastered: RasterResult, lay
     samples = inputs.samples
     defines = {"TRANSPARENCY_MOMENTS": int(settings.type == "mboit"),
                "TRANSPARENCY_LOG_WARP": int(settings.warp == "log")}
-    light_args = ()
-    if light_layers is not None:
-        defines.update(light_layers.defines())
-        light_args = light_layers.args()
+    features = present(light_layers)
+    defines, light_args = feature_defines(features, defines), feature_args(features)
     if layers.walked is not None:  # MBOIT's fog, walked once per sample (stages/transparency_walk.py)
         defines["TRANSPARENCY_WEIGHTED_WALK"] = 1
         light_args = (*light_args, layers.walked)
