@@ -27,30 +27,27 @@ from clrays.device import list_devices  # noqa: E402
 TEXELS = structs.RASTER_ANY_TEXELS
 EMPTY = int(structs.kernel_defines()["DEPTH_EMPTY"].rstrip("u"), 16)
 HEAD = f"#define EMPTY {EMPTY}u\n#define T {TEXELS}\n"
+def reduction(width: int, load: str) -> str:
+    """A kernel body that ORs `width`-wide vectors of the texels (each loaded by `load`, a C
+    expression of k), then halves the vector down to one flag."""
+    body = f"\n        uint{width} seen = (uint{width})(0u);\n"
+    body += f"        for (int k = 0; k < T / {width}; ++k) seen |= {load} ^ EMPTY;\n"
+    name, half = "seen", width
+    while half > 2:
+        half //= 2
+        body += f"        uint{half} seen{half} = {name}.lo | {name}.hi;\n"
+        name = f"seen{half}"
+    return body + f"        if (({name}.x | {name}.y) != 0u) *flag = 1u;"
+
+
 VARIANTS = {
     "loop (cl/raster.cl)": """
         uint seen = 0u;
         for (int i = first; i < first + T; ++i) seen |= depth[i] ^ EMPTY;
         if (seen != 0u) *flag = 1u;""",
-    "uint4": """
-        uint4 seen = (uint4)(0u);
-        global const uint4* p = (global const uint4*)(depth + first);
-        for (int k = 0; k < T / 4; ++k) seen |= p[k] ^ EMPTY;
-        uint2 half_seen = seen.lo | seen.hi;
-        if ((half_seen.x | half_seen.y) != 0u) *flag = 1u;""",
-    "vload8": """
-        uint8 seen = (uint8)(0u);
-        for (int k = 0; k < T / 8; ++k) seen |= vload8(0, depth + first + 8 * k) ^ EMPTY;
-        uint4 quarter = seen.lo | seen.hi;
-        uint2 eighth = quarter.lo | quarter.hi;
-        if ((eighth.x | eighth.y) != 0u) *flag = 1u;""",
-    "vload16 (before)": """
-        uint16 seen = (uint16)(0u);
-        for (int k = 0; k < T / 16; ++k) seen |= vload16(0, depth + first + 16 * k) ^ EMPTY;
-        uint8 half_seen = seen.lo | seen.hi;
-        uint4 quarter = half_seen.lo | half_seen.hi;
-        uint2 eighth = quarter.lo | quarter.hi;
-        if ((eighth.x | eighth.y) != 0u) *flag = 1u;""",
+    "uint4": reduction(4, "((global const uint4*)(depth + first))[k]"),
+    "vload8": reduction(8, "vload8(0, depth + first + 8 * k)"),
+    "vload16 (before)": reduction(16, "vload16(0, depth + first + 16 * k)"),
 }
 
 
