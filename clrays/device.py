@@ -150,7 +150,8 @@ def select_device(spec: str | None = None):
         gpus = [d for d in devices if d[3].type & cl.device_type.GPU]
         pocl = [d for d in devices if "pocl" in d[2].vendor.lower()]
         return (gpus or pocl or devices)[0][3]
-    if ":" in spec and all(part.isdigit() for part in spec.split(":", 1)):
+    # (ASCII digits: "²".isdigit() is true, and int() refuses it)
+    if ":" in spec and all(part.isascii() and part.isdigit() for part in spec.split(":", 1)):
         p, d = (int(part) for part in spec.split(":", 1))
         for entry in devices:
             if entry[0] == p and entry[1] == d:

@@ -3,6 +3,11 @@ run's loop reads the same either way."""
 from __future__ import annotations
 
 
+def counted(count: int, noun: str) -> str:
+    """"1 frame", "3 frames": a count and its noun, in the plural where it is not 1."""
+    return f"{count} {noun}{'' if count == 1 else 's'}"
+
+
 class Progress:
     """A bar over `total` items (`unit`, e.g. "frame"), shown only when `enabled`.
 

@@ -27,7 +27,7 @@ from ..image_io import (FORMATS, check_finite, check_folder, check_output_path, 
 from ..reuse import digest, scene_digest
 from ..session import Renderer, RenderResult
 from ..scene.model import Scene
-from .progress import Progress
+from .progress import Progress, counted
 
 VIDEO_FORMATS = (".mp4", ".gif", ".webp")
 
@@ -51,6 +51,8 @@ def parse_frames(text: str | None, available: range, option: str = "--frames") -
     except ValueError:
         raise ClraysError(f"{where}: expected A:B, A:, :B or N (frame numbers), got {text!r}") from None
     if not first <= a <= b <= last:
+        if first == last:  # a still scene: frame 0 alone
+            raise ClraysError(f"{where}: the scene has no animation, so frame {first} alone; got {a}:{b}")
         raise ClraysError(f"{where}: expected frames {first} <= A <= B <= {last} (the scene's frames), "
                           f"got {a}:{b}")
     return range(a, b + 1)
@@ -95,7 +97,7 @@ class SequenceReport:
     def summary(self) -> str:
         per = f", {self.wall_s / len(self.rendered):.2f} s per frame" if self.rendered else ""
         stale = f" ({len(self.stale)} of them replacing frames of a changed scene)" if self.stale else ""
-        return (f"{len(self.rendered)} frames rendered{stale}, {len(self.kept)} already there "
+        return (f"{counted(len(self.rendered), 'frame')} rendered{stale}, {len(self.kept)} already there "
                 f"(of {len(self.paths)}) in {self.wall_s:.1f} s{per}")
 
 

@@ -38,7 +38,7 @@ from ..reuse import digest, scene_digest
 from ..scene.model import Scene
 from ..scene.load import load_scene
 from .point import ERROR_COLUMNS, REFERENCE_COLUMNS, REFERENCES, SweepPoint, render_point
-from .progress import Progress
+from .progress import Progress, counted
 from .references import ReferenceCache, parse_reference
 
 RESULTS = "results.csv"
@@ -163,7 +163,7 @@ class SweepReport:
     wall_s: float = 0.0
 
     def summary(self) -> str:
-        return (f"{len(self.rendered)} points rendered, {len(self.kept)} kept from an earlier run "
+        return (f"{counted(len(self.rendered), 'point')} rendered, {len(self.kept)} kept from an earlier run "
                 f"(of {len(self.rows)}) in {self.wall_s:.1f} s; {self.folder / RESULTS}")
 
 
@@ -174,7 +174,7 @@ def _image_name(point: SweepPoint, count: int, fmt: str) -> str:
 def _read_rows(path: Path) -> dict[int, dict[str, str]]:
     try:
         with open(path, newline="", encoding="utf-8") as f:
-            return {int(row["index"]): row for row in csv.DictReader(f) if row.get("index", "").isdigit()}
+            return {int(row["index"]): row for row in csv.DictReader(f) if row.get("index", "").isascii() and row.get("index", "").isdigit()}
     except (OSError, csv.Error, KeyError, ValueError):
         return {}
 

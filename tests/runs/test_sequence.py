@@ -81,7 +81,7 @@ def test_rerun_skips_finished_frames(tmp_path):
     assert code == 0 and "3 frames rendered, 2 already there (of 5)" in out
     assert (tmp_path / "f_001.npy").stat().st_mtime_ns == before
     code, out = run("sequence", scene, "-o", pattern, "--overwrite", "--frames", "4")
-    assert code == 0 and "1 frames rendered, 0 already there (of 1)" in out
+    assert code == 0 and "1 frame rendered, 0 already there (of 1)" in out
 
 
 def test_python_api_and_reuse_give_the_frames_of_independent_renders(tmp_path, device):
@@ -203,3 +203,10 @@ def test_render_one_frame_of_an_animation(tmp_path, device):
     np.testing.assert_array_equal(np.load(tmp_path / "f3.npy"), expected)
     code, out = run("render", scene, "-o", tmp_path / "f9.npy", "--frame", "9")
     assert code == 1 and "--frame 9: expected frames 0 <= A <= B <= 4" in out
+
+
+def test_a_frame_of_a_still_scene_says_it_has_one(tmp_path):
+    demo = Path(__file__).resolve().parents[2] / "scenes" / "demo.yaml"
+    code, out = run("render", demo, "-o", tmp_path / "x.png", "--frame", "3")
+    assert code == 1 and out.strip().splitlines()[-1].endswith(
+        "--frame 3: the scene has no animation, so frame 0 alone; got 3:3")

@@ -89,11 +89,11 @@ def test_resume_keeps_finished_points_and_redoes_changed_ones(scene_file, tmp_pa
     assert run("sweep", scene_file, "--set", "medium.sigma_s=0.02,0.05", "-o", out)[0] == 0
     first = rows_of(out)
     code, text = run("sweep", scene_file, "--set", "medium.sigma_s=0.02,0.05,0.1", "-o", out)
-    assert code == 0 and "1 points rendered, 2 kept from an earlier run (of 3)" in text
+    assert code == 0 and "1 point rendered, 2 kept from an earlier run (of 3)" in text
     assert rows_of(out)[:2] == first
     (out / "001.png").unlink()
     code, text = run("sweep", scene_file, "--set", "medium.sigma_s=0.02,0.05,0.1", "-o", out)
-    assert "1 points rendered, 2 kept" in text and (out / "001.png").exists()
+    assert "1 point rendered, 2 kept" in text and (out / "001.png").exists()
     # A changed scene (here a fixed override) renders everything again.
     code, text = run("sweep", scene_file, "--set", "medium.sigma_s=0.02,0.05,0.1", "--set", "image.height=20",
                      "-o", out)
