@@ -485,7 +485,7 @@ kernel void raster_split(global const ulong* nearest, int samples, global uint* 
  * it read nothing more (a map with any occluder is the usual case, and a stale 0 only means
  * one more scan). A plain loop, which compilers vectorize themselves: PoCL 3.0 on a CPU
  * with AVX-512 miscompiled the uint16 reduction this was (the flag set on an empty map),
- * and the loop is as fast (docs/design.md §4.5, "Wide vectors"). */
+ * and the loop is as fast on PoCL (docs/design.md §4.5, "Wide vectors"). */
 kernel void raster_any(global const uint* depth, int texels, volatile global uint* any)
 {
     int first = get_global_id(0) * RASTER_ANY_TEXELS;

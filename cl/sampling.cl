@@ -253,8 +253,7 @@ kernel void line_scatter(global const frame_t* frame, global const view_t* views
                          global const integrand_t* integrand, global const float* tables, global const float2* ranges,
                          global const float4* sides, global const float2* wedges, global const float2* line, int n,
                          global const int* lengths, int step, float threshold, global float4* radiance,
-                         global uchar* state,
-                         global ushort* walked WALK_FEATURE_ARGS)
+                         global uchar* state, global ushort* walked WALK_FEATURE_ARGS)
 {
     walk_features_t features;
     ATTACH_WALK_FEATURES(features) /* a light texture, translucent layers (walk_features.h) */
@@ -298,8 +297,8 @@ kernel void line_scatter(global const frame_t* frame, global const view_t* views
 NOT_ACROSS_WORK_ITEMS
 kernel void line_refine_fill(global const frame_t* frame, global const light_t* lights, global const epipolar_t* ep,
                              global const float2* tree, global const integrand_t* integrand,
-                             global const float* tables,
-                             global const float2* ranges, global const float4* sides, global const float2* wedges,
+                             global const float* tables, global const float2* ranges, global const float4* sides,
+                             global const float2* wedges,
                              global const float2* line, int n, global const int* lengths, int step, float threshold,
                              global float4* radiance, global uchar* state, global ushort* walked WALK_FEATURE_ARGS)
 {
@@ -555,7 +554,8 @@ kernel void fixup_list(int samples, global const uchar* fixup_flags, global cons
 NOT_ACROSS_WORK_ITEMS
 kernel void fix_up(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                    global const epipolar_t* ep, global const float2* tree, global const integrand_t* integrand,
-                   global const float* tables, global const uint* camera_depth, global const float2* offsets, global const uint* fixups, int count, global float4* scatter WALK_FEATURE_ARGS)
+                   global const float* tables, global const uint* camera_depth, global const float2* offsets,
+                   global const uint* fixups, int count, global float4* scatter WALK_FEATURE_ARGS)
 {
     int k = get_global_id(0);
     if (k >= count) return;

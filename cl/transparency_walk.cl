@@ -58,8 +58,7 @@ NOT_ACROSS_WORK_ITEMS
 kernel void transparency_walk(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                               global const epipolar_t* epipolar, global const float2* tree,
                               global const integrand_t* integrand, global const float* tables,
-                              global const float2* offsets,
-                              global const int* walk_samples, int walk_count, int slots,
+                              global const float2* offsets, global const int* walk_samples, int walk_count, int slots,
                               global const uint* film_depth, global const int* film_tri,
                               global const float4* tri_opacity, float2 depth_range, float moment_bias,
                               global float4* walked_fog WALK_FEATURE_ARGS)

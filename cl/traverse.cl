@@ -11,7 +11,8 @@ NOT_ACROSS_WORK_ITEMS
 kernel void traverse(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                      global const epipolar_t* epipolar, global const float2* tree,
                      global const integrand_t* integrand, global const float* tables,
-                     global const uint* camera_depth, global const float2* offsets, global float4* scatter WALK_FEATURE_ARGS)
+                     global const uint* camera_depth, global const float2* offsets,
+                     global float4* scatter WALK_FEATURE_ARGS)
 {
     int sample = get_global_id(0);
     if (sample >= frame->width * frame->height * frame->spp) return;

@@ -12,7 +12,6 @@ import contextlib
 import hashlib
 import os
 import sys
-import tempfile
 import warnings
 from dataclasses import dataclass, field
 from importlib import resources
@@ -54,7 +53,7 @@ def _stderr_line(text: str) -> None:
 
 
 #: Where a Device says, once, that it is building kernels no earlier run on this device
-#: built (about 10–15 s on a CPU): one line on stderr by default; None says nothing.
+#: built (about 10 s on a 2-core CPU): one line on stderr by default; None says nothing.
 build_notice: Callable[[str], None] | None = _stderr_line
 #: Whether the OpenCL compiler's own output ("1 warning generated." and the like) reaches
 #: stderr; the CLI's --debug sets it. Otherwise it is kept out of the terminal.
@@ -64,21 +63,21 @@ show_compiler_output = False
 @contextlib.contextmanager
 def _compiler_output():
     """What the OpenCL compiler writes to stderr (file descriptor 2) while the block runs,
-    held back (a file), unless `show_compiler_output`: PoCL's clang prints its diagnostics'
-    count there itself, past Python's warnings. Yields a function that returns the text."""
+    dropped unless `show_compiler_output`: PoCL's clang prints its diagnostics' count there
+    itself, past Python's warnings. (A failed build's log comes with its DeviceError.)"""
     if show_compiler_output:
-        yield lambda: ""
+        yield
         return
     try:
         sys.stderr.flush()
         saved = os.dup(2)
     except (OSError, ValueError):  # no descriptor 2 to redirect
-        yield lambda: ""
+        yield
         return
-    with tempfile.TemporaryFile() as sink:
+    with open(os.devnull, "wb") as sink:
         os.dup2(sink.fileno(), 2)
         try:
-            yield lambda: (sink.seek(0), sink.read().decode(errors="replace"))[1]
+            yield
         finally:
             os.dup2(saved, 2)
             os.close(saved)
@@ -150,8 +149,8 @@ def select_device(spec: str | None = None):
         gpus = [d for d in devices if d[3].type & cl.device_type.GPU]
         pocl = [d for d in devices if "pocl" in d[2].vendor.lower()]
         return (gpus or pocl or devices)[0][3]
-    # (ASCII digits: "²".isdigit() is true, and int() refuses it)
-    if ":" in spec and all(part.isascii() and part.isdigit() for part in spec.split(":", 1)):
+    # (isdecimal, not isdigit: "²".isdigit() is true, and int() refuses it)
+    if ":" in spec and all(part.isdecimal() for part in spec.split(":", 1)):
         p, d = (int(part) for part in spec.split(":", 1))
         for entry in devices:
             if entry[0] == p and entry[1] == d:
@@ -163,7 +162,11 @@ def select_device(spec: str | None = None):
         names = (entry[2].name, entry[2].vendor, entry[3].name)
         if any(needle in name.lower() for name in names):
             return entry[3]
-    raise DeviceError(f"device {spec!r}: no platform name or vendor, or device name, contains it (see `clrays info`)")
+    hint = ""
+    if "intel" in needle and not runtimes.pip_runtime_libraries():
+        hint = "; Intel's CPU runtime installs with pip install 'clrays[intel-cpu]' (make intel-cpu)"
+    raise DeviceError(f"device {spec!r}: no platform name or vendor, or device name, contains it "
+                      f"(see `clrays info`){hint}")
 
 
 @dataclass

@@ -2,9 +2,9 @@
 
     raster → translucency → transparency → volume → visibility → shade
 
-    volume, by method:  minmax    per light: rectify → minmax → integrand → light_texture → traverse
-                        moments   per light: rectify → integrand → volume_moments
-                        raymarch  raymarch, every light at once
+    volume, by method:  minmax          per light: rectify → minmax → integrand → light_texture → traverse
+                        volume_moments  per light: rectify → integrand → volume_moments
+                        raymarch        raymarch, every light at once
 
 `Renderer._frame` is that figure, one line per stage. A stage with nothing to do in a frame
 returns at once: translucency (the light side of translucent objects) and transparency
@@ -136,7 +136,7 @@ class Frame:
     scene: Scene
     method: str
     buffers: FrameBuffers
-    keys: "StageKeys"
+    keys: StageKeys
     reuse: Reuse
     timer: StageTimer
     occluders: FrameBuffers  # `buffers` with the opaque triangles alone (visibility's shadow rays)
@@ -213,7 +213,7 @@ class Renderer:
         ran = tuple(stage for stage, status in reuse.record.status().items() if status != SKIPPED)
         return image, ran, tuple(frame.textures), frame.samples, rays
 
-    def _upload(self, scene: Scene, method: str, reuse: Reuse, timer: StageTimer) -> "Frame":
+    def _upload(self, scene: Scene, method: str, reuse: Reuse, timer: StageTimer) -> Frame:
         """The frame's inputs checked against the device and uploaded, with their stage keys."""
         inputs = frame_inputs(scene)
         check_device_memory(self.device, inputs)
@@ -222,7 +222,7 @@ class Renderer:
         occluders = opaque_occluder_buffers(self.device, buffers)  # (translucent triangles block no shadow ray)
         return Frame(scene, method, buffers, StageKeys(buffers.inputs), reuse, timer, occluders)
 
-    def _raymarch_volume(self, frame: "Frame") -> None:
+    def _raymarch_volume(self, frame: Frame) -> None:
         """Method raymarch's volume stage, the brute-force reference: every light at once."""
         if self._no_medium(frame):
             return
@@ -232,7 +232,7 @@ class Renderer:
         self._films_in_scatter(frame, lambda r, s, t: raymarch(device, buffers, r, s, t, layers),
                                lambda: transparency_march(device, buffers, frame.rastered, frame.films, timer, layers))
 
-    def _epipolar_volume(self, frame: "Frame") -> None:
+    def _epipolar_volume(self, frame: Frame) -> None:
         """The volume stages of methods minmax and volume_moments, light by light."""
         if self._no_medium(frame):
             return
@@ -243,20 +243,20 @@ class Renderer:
                 self._light_volume(frame, index, light)
         frame.reuse.record.note(VOLUME_STAGES[frame.method][-1], COMPUTED)
 
-    def _no_medium(self, frame: "Frame") -> bool:
+    def _no_medium(self, frame: Frame) -> bool:
         """Whether the scene has no medium: then no volume stage runs at all."""
         if np.any(frame.scene.medium.sigma_s > 0):
             return False
         frame.reuse.skip(*VOLUME_STAGES[frame.method])
         return True
 
-    def _lamp_in_scatter(self, frame: "Frame", light) -> None:
+    def _lamp_in_scatter(self, frame: Frame, light) -> None:
         """A light whose lamp holds the eye: its in-scattering on the host (stages/lamp.py)."""
         device, buffers = self.device, frame.buffers
         lamp_in_scatter(device, buffers, frame.rastered, light, frame.in_scatter.adding(), frame.timer)
         self._films_in_scatter(frame, lambda r, s, t: lamp_in_scatter(device, buffers, r, light, s, t))
 
-    def _light_volume(self, frame: "Frame", index: int, light) -> None:
+    def _light_volume(self, frame: Frame, index: int, light) -> None:
         """One light's rectify → minmax → integrand → traverse (or volume_moments)."""
         device, buffers, keys, reuse, timer = self.device, frame.buffers, frame.keys, frame.reuse, frame.timer
         epipolar = self._rectify(buffers, frame.rastered, frame.maps, keys, index, reuse, timer)  # rectify: S[α, γ]
@@ -285,7 +285,7 @@ class Renderer:
                                lambda: transparency_walk(device, buffers, frame.films, epipolar, tables, timer,
                                                          features))
 
-    def _films_in_scatter(self, frame: "Frame", per_film, weighted=None) -> None:
+    def _films_in_scatter(self, frame: Frame, per_film, weighted=None) -> None:
         """The in-scattering a volume stage just added for the camera samples, added for the
         translucent films too: by MBOIT's one weighted walk where the films have it (and the
         stage has one, `weighted`), else by the same stage run up to each film (`per_film`)."""
@@ -297,7 +297,7 @@ class Renderer:
         else:
             films.add_in_scatter(self.device, frame.timer, per_film)
 
-    def _shade(self, frame: "Frame", visible):
+    def _shade(self, frame: Frame, visible):
         """The shade stage, with what translucent objects add before it: the exact edges of
         their shadows on surfaces, and the camera's films composited in front of the opaque
         samples."""

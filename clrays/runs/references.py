@@ -51,7 +51,7 @@ def parse_reference(text: str | None) -> Reference | None:
     method, _, steps = text.strip().partition(":")
     if method == "exact" and not steps:
         return EXACT
-    if method == "raymarch" and steps.strip().isascii() and steps.strip().isdigit() and 1 <= int(steps) <= MAX_STEPS:
+    if method == "raymarch" and steps.strip().isdecimal() and 1 <= int(steps) <= MAX_STEPS:
         return Reference("raymarch", int(steps))
     raise ClraysError(f"--reference {text}: expected exact or raymarch:N (N steps per ray, 1 to {MAX_STEPS}), "
                       f"got {text!r}")

@@ -174,7 +174,7 @@ def _image_name(point: SweepPoint, count: int, fmt: str) -> str:
 def _read_rows(path: Path) -> dict[int, dict[str, str]]:
     try:
         with open(path, newline="", encoding="utf-8") as f:
-            return {int(row["index"]): row for row in csv.DictReader(f) if row.get("index", "").isascii() and row.get("index", "").isdigit()}
+            return {int(row["index"]): row for row in csv.DictReader(f) if row.get("index", "").isdecimal()}
     except (OSError, csv.Error, KeyError, ValueError):
         return {}
 

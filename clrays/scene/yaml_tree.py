@@ -381,7 +381,7 @@ def apply_override(root: Node, text: str) -> None:
                 node = node.value[part]
         elif isinstance(node.value, list):
             n = len(node.value)
-            if not (part.isascii() and part.isdigit()) or int(part) > n or (int(part) == n and not last):
+            if not part.isdecimal() or int(part) > n or (int(part) == n and not last):
                 what = f"a list index in [0, {n - 1}]" if n else "no index (the list is empty)"
                 if last:
                     what += f" or {n} to append" if n else "; set it whole or use 0 to append"

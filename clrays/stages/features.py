@@ -25,7 +25,7 @@ def walk_features(texture: WalkFeature | None, layers: WalkFeature | None) -> tu
 def present(*features: WalkFeature | None) -> tuple[WalkFeature, ...]:
     """The features a frame has, in the order given (a kernel's argument groups' order); the
     same interface serves the kernels that look translucent layers up without walking a row
-    (raymarch, shade, the camera's composite: cl/translucency.h's TRANSLUCENCY_ARGS)."""
+    (raymarch and the camera's composite: cl/translucency.h's TRANSLUCENCY_ARGS)."""
     return tuple(feature for feature in features if feature is not None)
 
 

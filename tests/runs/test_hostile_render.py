@@ -276,15 +276,15 @@ def test_each_readme_python_snippet_defines_what_it_uses():
     (("--device", "²:0"), "device '²:0': no platform name or vendor, or device name, contains it"),
     (("--set", "lights.²=1"), "lights.²: expected a list index in [0, 0] or 1 to append, got '²'"),
 ])
-def test_digits_that_are_not_ascii_are_one_line_errors(tmp_path, arguments, message):
-    # '²'.isdigit() is true and int('²') fails: an index or a device number is ASCII digits.
+def test_superscript_digits_are_one_line_errors(tmp_path, arguments, message):
+    # '²'.isdigit() is true and int('²') fails: an index or a device number takes decimal digits.
     code, out = run("render", Path(__file__).resolve().parents[2] / "scenes" / "demo.yaml", "-o", tmp_path / "x.png",
                     *arguments)
     assert code == 1 and "internal error" not in out and len(out.strip().splitlines()) == 1, out
     assert message in out
 
 
-def test_a_reference_step_count_that_is_not_ascii_is_refused():
+def test_a_reference_step_count_of_superscript_digits_is_refused():
     from clrays.errors import ClraysError
     from clrays.runs.references import parse_reference
 

@@ -89,3 +89,15 @@ def test_a_default_device_loads_no_pip_runtime():
                                env=clean, cwd=REPO, timeout=300)
         assert shown.returncode == 0, shown.stderr
         assert shown.stdout.strip() == "None", spec
+
+
+def test_a_named_runtime_that_is_not_installed_says_how_to_install_it(monkeypatch):
+    from clrays.device import select_device
+    from clrays.errors import DeviceError
+
+    monkeypatch.setattr(runtimes, "pip_runtime_libraries", lambda: [])
+    with pytest.raises(DeviceError, match=r"no platform .* contains it \(see `clrays info`\); Intel's CPU runtime "
+                                          r"installs with pip install 'clrays\[intel-cpu\]'"):
+        select_device("intel-gpu-none")
+    with pytest.raises(DeviceError, match=r"contains it \(see `clrays info`\)$"):
+        select_device("no-such-device")
