@@ -342,7 +342,8 @@ def _show(value: Any, limit: int = 80) -> str:
 def _open(path: Path, file: str) -> _Reader:
     """The JSON document and the GLB's BIN chunk."""
     try:
-        data = read_regular_file(path, MAX_GLTF_BYTES, "simplify the meshes or split the scene")
+        # Room for a .gltf whose buffers are data URIs: base64 takes 4 characters for 3 bytes.
+        data = read_regular_file(path, MAX_GLTF_BYTES // 3 * 4 + (1 << 20), "simplify the meshes or split the scene")
     except FileRefused as exc:
         raise SceneError(f"{file}: cannot read glTF file: {exc}") from None
     binary = None
