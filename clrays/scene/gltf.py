@@ -692,8 +692,12 @@ def _light(reader: _Reader, light: dict, path: str, matrix: np.ndarray, light_sc
     if outer <= 0.0 or math.degrees(outer) > MAX_SPOT_OUTER_DEG:
         reader.fail(f"{path}.spot.outerConeAngle", f"an angle in (0, {math.radians(MAX_SPOT_OUTER_DEG):.4f}] "
                     f"({MAX_SPOT_OUTER_DEG:g}°: the falloff texture spans tan of it, docs/limits.md)", outer)
+    # Inner and outer angles so close that the spec's clamp of 1 / (cos inner − cos outer) to 1000
+    # engages: the falloff is a ring of Δcos = 0.001 at the outer edge, narrower than a texel
+    # of the falloff texture: the hard cone at the outer angle is that edge.
+    hard = math.cos(inner) - math.cos(outer) <= 0.001
     return SpotLight(position=position, direction=direction, cone_deg=math.degrees(outer), intensity=power,
-                     texture=falloff_texture(inner, outer))
+                     texture=None if hard else falloff_texture(inner, outer))
 
 
 def spot_attenuation(cos_angle, inner: float, outer: float):

@@ -536,3 +536,129 @@ def test_a_file_claiming_millions_of_triangles_is_refused_quickly_and_small(tmp_
     seconds, grown_mb = map(float, numbers.split())
     assert "expected at most 2097152 triangles" in message
     assert seconds < 2 and grown_mb < 50, (seconds, grown_mb)
+
+
+# --------------------------------------------------------------------------- an independent exporter
+
+
+YARDSTICK = """
+version: 1
+image: {width: 64, height: 40}
+camera: {position: [1, 3, 8], look_at: [0, 1, 0], up: [0, 1, 0], fov_deg: 45, far: 30}
+lights:
+  - {type: point, position: [-2, 4, 1], intensity: [40, 30, 20]}
+  - {type: spot, position: [1.5, 5, 0.5], direction: [-0.2, -1, -0.1], cone_deg: 25, intensity: 120}
+  - {type: directional, direction: [-0.3, -1, -0.2], irradiance: 0.5}
+medium: {sigma_s: 0.08, sigma_a: 0.01}
+objects:
+  - {type: box, min: [-5, -0.1, -5], max: [5, 0, 5], albedo: 0.6}
+  - type: box
+    min: [-0.5, -0.5, -0.5]
+    max: [0.5, 0.5, 0.5]
+    albedo: [0.8, 0.2, 0.4]
+    transform: {translate: [0.5, 1.2, 0], rotate: {quaternion: QUATERNION}, scale: [1, 0.5, 1.5]}
+"""
+
+
+def _frame_quaternion(forward, up=(0.0, 1.0, 0.0)) -> list[float]:
+    """glTF [x, y, z, w] of the rotation that turns -Z to `forward` (and +Y towards `up`)."""
+    from clrays.scene.transforms import matrix_to_quat
+
+    back = -np.asarray(forward, float) / np.linalg.norm(forward)
+    helper = np.asarray(up, float) if abs(np.dot(back, up)) < 0.99 else np.array([1.0, 0, 0])
+    right = np.cross(helper, back)
+    right /= np.linalg.norm(right)
+    w, x, y, z = matrix_to_quat(np.stack([right, np.cross(back, right), back], axis=1))
+    return [x, y, z, w]
+
+
+def _trimesh_export(tmp_path, rotation_wxyz) -> Path:
+    """The YARDSTICK's geometry as trimesh writes it (a scene graph: a floor, and the box
+    under a group node, each placed by a matrix), then its lights and camera added to the
+    JSON as an exporter of KHR_lights_punctual writes them: lights under a turned and moved
+    parent (quaternions), the camera by a matrix."""
+    import struct
+
+    import trimesh
+
+    def coloured(mesh, rgb):
+        mesh.unmerge_vertices()  # flat faces, as clrays's boxes
+        mesh.visual = trimesh.visual.TextureVisuals(
+            material=trimesh.visual.material.PBRMaterial(baseColorFactor=[*rgb, 1.0]))
+        return mesh
+
+    scene = trimesh.Scene()
+    floor = coloured(trimesh.creation.box(extents=[10, 0.1, 10]), [0.6] * 3)
+    scene.add_geometry(floor, node_name="floor", transform=trimesh.transformations.translation_matrix([0, -0.05, 0]))
+    group = trimesh.transformations.translation_matrix([0.5, 0.2, 0.0])
+    scene.graph.update(frame_to="group", frame_from=scene.graph.base_frame, matrix=group)
+    box_matrix = np.eye(4)
+    box_matrix[:3, :3] = quat_to_matrix(rotation_wxyz) @ np.diag([1, 0.5, 1.5])
+    box_matrix[:3, 3] = [0, 1.0, 0]
+    scene.add_geometry(coloured(trimesh.creation.box(extents=[1, 1, 1]), [0.8, 0.2, 0.4]), node_name="box",
+                       parent_node_name="group", transform=box_matrix)
+    data = scene.export(file_type="glb")
+    json_length = struct.unpack_from("<I", data, 12)[0]
+    document = json.loads(data[20:20 + json_length])
+    binary = data[20 + json_length + 8:]
+
+    document["extensionsUsed"] = ["KHR_lights_punctual"]
+    document["extensions"] = {"KHR_lights_punctual": {"lights": [
+        {"type": "point", "color": [1.0, 0.75, 0.5], "intensity": 40.0},
+        {"type": "spot", "intensity": 120.0, "spot": {"innerConeAngle": math.radians(25),
+                                                      "outerConeAngle": math.radians(25)}},
+        {"type": "directional", "intensity": 0.5}]}}
+    nodes = document["nodes"]
+    parent_q = quaternion([0, 1, 0], 70.0)
+    parent_t = np.array([0.3, 0.5, -0.2])
+    parent_r = quat_to_matrix([parent_q[3], *parent_q[:3]])
+    holder = len(nodes)
+    nodes.append({"name": "lights", "translation": parent_t.tolist(), "rotation": parent_q, "children": []})
+    for index, (position, direction) in enumerate(([[-2, 4, 1], None], [[1.5, 5, 0.5], [-0.2, -1, -0.1]],
+                                                   [[0, 0, 0], [-0.3, -1, -0.2]])):
+        world_rotation = quat_to_matrix(np.roll(_frame_quaternion(direction), 1)) if direction else np.eye(3)
+        local_rotation = parent_r.T @ world_rotation
+        from clrays.scene.transforms import matrix_to_quat
+
+        w, x, y, z = matrix_to_quat(local_rotation)
+        nodes[holder]["children"].append(len(nodes))
+        nodes.append({"translation": (parent_r.T @ (np.array(position, float) - parent_t)).tolist(),
+                      "rotation": [x, y, z, w], "extensions": {"KHR_lights_punctual": {"light": index}}})
+    eye, target = np.array([1.0, 3, 8]), np.array([0.0, 1, 0])
+    camera = np.eye(4)
+    camera[:3, :3] = quat_to_matrix(np.roll(_frame_quaternion(target - eye), 1))
+    camera[:3, 3] = eye
+    document["cameras"] = [{"type": "perspective", "perspective": {"yfov": math.radians(45), "zfar": 30.0,
+                                                                    "znear": 0.1, "aspectRatio": 1.6}}]
+    nodes.append({"name": "eye", "camera": 0, "matrix": camera.T.reshape(-1).tolist()})
+    document["scenes"][0]["nodes"] += [holder, len(nodes) - 1]
+    builder = GltfBuilder()
+    builder.binary = bytearray(binary)
+    path = tmp_path / "exported.glb"
+    path.write_bytes(builder.glb(document))
+    return path
+
+
+@pytest.mark.parametrize("method", ["minmax", "exact"])
+def test_a_scene_exported_by_trimesh_renders_as_its_yaml(tmp_path, method):
+    """A glTF file written by another exporter (trimesh: node hierarchy, matrices, PBR
+    colours; lights and camera added as KHR_lights_punctual and a camera node, with
+    quaternions) renders within 0.5 % relative RMSE of the YAML scene it was made from."""
+    import clrays
+    from clrays.reference.metrics import image_error
+
+    rotation = np.array([math.cos(0.35), 0.3 * math.sin(0.35), math.sin(0.35) * math.sqrt(0.91), 0.0])
+    rotation /= np.linalg.norm(rotation)
+    yaml_scene = parse_scene(YARDSTICK.replace("QUATERNION", json.dumps(rotation.tolist())), tmp_path / "y.yaml")
+    path = _trimesh_export(tmp_path, rotation)
+    gltf_scene = load_scene(path, ["image.width=64", "image.height=40", "medium.sigma_s=0.08",
+                                   "medium.sigma_a=0.01"])
+    for mine, theirs in zip(gltf_scene.lights, yaml_scene.lights):
+        assert mine.type == theirs.type
+        for name in ("position", "direction", "intensity", "irradiance"):
+            if hasattr(theirs, name):
+                np.testing.assert_allclose(getattr(mine, name), getattr(theirs, name), atol=1e-6, err_msg=name)
+    reference = clrays.render(yaml_scene, method=method, reuse=False)
+    image = clrays.render(gltf_scene, method=method, reuse=False)
+    error = image_error(image, reference)
+    assert error.pixels > 1000 and error.rmse < 0.005, error
