@@ -80,8 +80,8 @@ class _Instance:
 
     node: int
     rows: slice  # its triangles in Imported.triangles
-    local: np.ndarray  # (T, 3, 3)
-    local_normals: np.ndarray  # (T, 3, 3) smooth normals
+    local: np.ndarray | None  # (T, 3, 3); None in a file without animation
+    local_normals: np.ndarray | None  # (T, 3, 3) smooth normals; None as `local`
     albedo: np.ndarray  # (3,)
 
 
@@ -570,8 +570,9 @@ def _mean_texture(reader: _Reader, texture_info: dict, path: str) -> np.ndarray:
     return srgb_to_linear(encoded).reshape(-1, 3).mean(axis=0)
 
 
-def _meshes(reader: _Reader, graph: NodeGraph, world: dict[int, np.ndarray]):
-    """Each mesh primitive placed by each node of the scene: (instances, world triangles, normals, outward)."""
+def _meshes(reader: _Reader, graph: NodeGraph, world: dict[int, np.ndarray], animated: bool):
+    """Each mesh primitive placed by each node of the scene: (instances, world triangles, normals,
+    albedo, outward). An instance keeps its own triangles only when the file is `animated`."""
     nodes, meshes = reader.items("nodes"), reader.items("meshes")
     placed = [(index, reader.index(nodes[index], "mesh", f"nodes.{index}", "meshes"))
               for index in graph.order if "mesh" in nodes[index]]
@@ -603,7 +604,8 @@ def _meshes(reader: _Reader, graph: NodeGraph, world: dict[int, np.ndarray]):
             matrix = world[node]
             triangles = transform_points(matrix, local)
             count = len(triangles)
-            instances.append(_Instance(node, slice(start, start + count), local, local_normals, colour))
+            instances.append(_Instance(node, slice(start, start + count), local if animated else None,
+                                       local_normals if animated else None, colour))
             tris.append(triangles)
             normals.append(_world_normals(matrix, local_normals, triangles))
             albedo.append(np.broadcast_to(colour, (count, 3)))
@@ -940,18 +942,19 @@ def import_gltf(path: Path, file: str | None = None, camera: str | None = None, 
     _check_header(reader)
     graph = _graph(reader)
     world = graph.world()
-    instances, tris, normals, albedo, outward = _meshes(reader, graph, world)
+    channels, duration = _channels(reader, graph)
+    instances, tris, normals, albedo, outward = _meshes(reader, graph, world, bool(channels))
     lights, light_nodes = _lights(reader, graph, world, light_scale)
     triangles = np.concatenate(tris) if tris else np.zeros((0, 3, 3))
+    del tris
     if len(triangles):
         bounds = (triangles.reshape(-1, 3).min(axis=0), triangles.reshape(-1, 3).max(axis=0))
     else:
         bounds = (np.full(3, -1.0), np.full(3, 1.0))
     scene_camera, camera_node = _camera(reader, _cameras(reader, graph, world), camera, world, bounds)
-    channels, duration = _channels(reader, graph)
     graph = NodeGraph(graph.parents, graph.order, graph.matrices, graph.trs, channels)
-    object_id = np.concatenate([np.full(len(t), i, np.int32) for i, t in enumerate(tris)]) if tris \
-        else np.zeros(0, np.int32)
+    object_id = np.concatenate([np.full(i.rows.stop - i.rows.start, k, np.int32) for k, i in enumerate(instances)]) \
+        if instances else np.zeros(0, np.int32)
     return Imported(file=file, triangles=triangles,
                     normals=np.concatenate(normals) if normals else np.zeros((0, 3, 3)),
                     albedo=np.concatenate(albedo) if albedo else np.zeros((0, 3)), object_id=object_id,
