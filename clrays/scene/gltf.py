@@ -234,7 +234,7 @@ class _Reader:
             self.fail(f"{path}.byteLength", f"at most the {len(data)} bytes the buffer holds", length)
         self._buffer_bytes += length
         if self._buffer_bytes > MAX_GLTF_BYTES:
-            self.fail(path, f"buffers of at most {MAX_GLTF_BYTES >> 20} MiB in all (docs/limits.md)",
+            self.fail(path, f"buffers of at most {_size(MAX_GLTF_BYTES)} in all (docs/limits.md)",
                       f"{self._buffer_bytes} bytes with this one")
         self._buffers[index] = data[:length]
         return self._buffers[index]
@@ -246,7 +246,7 @@ class _Reader:
                 self.fail(path, "a base64 data URI (data:...;base64,...)", json.dumps(uri))
             # Checked before decoding: a data URI's bytes are 3/4 of its base64 characters.
             if len(payload) > (MAX_GLTF_BYTES // 3 + 1) * 4:
-                self.fail(path, f"a data URI of at most {MAX_GLTF_BYTES >> 20} MiB (docs/limits.md)",
+                self.fail(path, f"a data URI of at most {_size(MAX_GLTF_BYTES)} (docs/limits.md)",
                           f"{len(payload)} base64 characters")
             try:
                 return base64.b64decode(payload, validate=True)
@@ -319,6 +319,10 @@ class _Reader:
             row = int(np.flatnonzero(~np.isfinite(values).all(axis=1))[0])
             self.fail(where, f"finite values for {path}", f"{values[row].tolist()} at element {row}")
         return values[:, 0] if kind == "SCALAR" else values
+
+
+def _size(n: int) -> str:
+    return f"{n / 2**20:g} MiB" if n >= 1 << 20 else f"{n} bytes"
 
 
 def _bounds(lo, hi) -> str:

@@ -662,3 +662,70 @@ def test_a_scene_exported_by_trimesh_renders_as_its_yaml(tmp_path, method):
     image = clrays.render(gltf_scene, method=method, reuse=False)
     error = image_error(image, reference)
     assert error.pixels > 1000 and error.rmse < 0.005, error
+
+
+def test_the_scene_limits_apply_to_gltf_files(tmp_path, monkeypatch):
+    """File size, nodes, placed primitives (objects) and triangles with a YAML scene's own:
+    each refused in one line naming the limit (the limits lowered, so the files stay small)."""
+    b = _lit(GltfBuilder())
+    b.mesh(TRIANGLE, [[0, 1, 2]])
+    for k in range(3):
+        b.node(mesh=0, translation=[k, 0, 0])
+    path = _write(tmp_path, b)
+    monkeypatch.setattr(gltf, "MAX_OBJECTS", 2)
+    with pytest.raises(SceneError, match=r"meshes\.0\.primitives\.0: expected at most 2 placed primitives, each an "
+                                         r"object .*got 3 with this one \(placed by nodes\.3\)"):
+        load_scene(path)
+    monkeypatch.undo()
+    monkeypatch.setattr(gltf, "MAX_GLTF_NODES", 3)
+    with pytest.raises(SceneError, match=r"scene\.glb: nodes: expected at most 3 entries, got 4 entries"):
+        load_scene(path)
+    monkeypatch.undo()
+    monkeypatch.setattr(gltf, "MAX_GLTF_BYTES", 30)
+    with pytest.raises(SceneError, match=r"scene\.glb: buffers\.0: expected buffers of at most 30 bytes in all "
+                                         r"\(docs/limits\.md\), got 48 bytes with this one"):
+        load_scene(path)
+    b.binary += bytes(1 << 20)  # the file itself over the limit (which leaves room for base64 buffers)
+    with pytest.raises(SceneError, match=r"big\.glb: cannot read glTF file: 1\.0 MiB, more than the limit of "
+                                         r"1\.0 MiB"):
+        load_scene(_write(tmp_path, b, "big.glb"))
+    monkeypatch.undo()
+    monkeypatch.setattr(gltf, "MAX_TRIANGLES", 4)
+    text = "version: 1\nimage: {width: 8, height: 8}\ngltf: {file: scene.glb}\nobjects: [{type: box, min: [0, 0, 0], max: [1, 1, 1]}]\n"
+    with pytest.raises(SceneError, match=r"scene\.glb: meshes: expected at most 4 triangles with the scene's own, "
+                                         r"got 15"):
+        parse_scene(text, tmp_path / "y.yaml")
+
+
+@pytest.mark.parametrize("value, pattern", [
+    ("scene.obj", r"gltf\.file: expected a glTF file path \(\.glb or \.gltf\), got 'scene\.obj'"),
+    ("missing.glb", r"missing\.glb: cannot read glTF file: No such file or directory"),
+])
+def test_a_bad_gltf_key_in_yaml(tmp_path, value, pattern):
+    with pytest.raises(SceneError, match=pattern):
+        parse_scene(f"version: 1\nimage: {{width: 8, height: 8}}\ngltf: {{file: {value}}}\n", tmp_path / "y.yaml")
+
+
+def test_animated_nodes_carry_their_lights_and_camera(tmp_path):
+    """A light and the camera under a moving, turning node go with it, frame by frame."""
+    b = GltfBuilder()
+    b.mesh(TRIANGLE, [[0, 1, 2]])
+    b.node(mesh=0)
+    mover = b.node()
+    b.node(mover, extensions=light_ref(b.light(type="spot", intensity=10.0,
+                                                spot={"innerConeAngle": 0.1, "outerConeAngle": 0.5})),
+           translation=[0, 2, 0])
+    b.node(mover, camera=b.camera(math.radians(40)), translation=[0, 0, 5])
+    b.animate(mover, "translation", [0, 1], [[0, 0, 0], [3, 0, 0]])
+    b.animate(mover, "rotation", [0, 1], [quaternion([0, 1, 0], 0), quaternion([0, 1, 0], 90)])
+    scene = load_scene(_write(tmp_path, b), ["gltf.fps=10"])
+    assert (scene.animation.first, scene.animation.last) == (0, 10)
+    end = scene.animation.scene_at(scene, 10)
+    np.testing.assert_allclose(end.lights[0].position, [3, 2, 0], atol=1e-9)
+    np.testing.assert_allclose(end.lights[0].direction, [-1, 0, 0], atol=1e-9)  # -Z turned a quarter about +y
+    np.testing.assert_allclose(end.camera.position, [8, 0, 0], atol=1e-9)
+    np.testing.assert_allclose(end.camera.look_at - end.camera.position, [-1, 0, 0], atol=1e-9)
+    assert end.lights[0].texture is scene.lights[0].texture  # the falloff moves with the light
+    half = scene.animation.scene_at(scene, 5)
+    np.testing.assert_allclose(half.camera.position, [1.5 + 5 * math.sin(math.pi / 4), 0, 5 * math.cos(math.pi / 4)],
+                               atol=1e-9)
