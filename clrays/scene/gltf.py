@@ -26,7 +26,7 @@ import json
 import math
 import struct
 import urllib.parse
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -155,6 +155,7 @@ class _Reader:
         self.file, self.folder, self.binary = file, folder, binary
         self.doc = document
         self._buffers: dict[int, bytes] = {}
+        self._items: dict[str, list] = {}
         self._buffer_bytes = 0
 
     def fail(self, path: str, expected: str, got: Any) -> NoReturn:
@@ -196,21 +197,24 @@ class _Reader:
         return array
 
     def items(self, key: str, limit: int | None = None) -> list:
-        """A top-level array (empty when absent), each entry an object."""
-        items = self.get(self.doc, key, "", "list", [])
+        """A top-level array (empty when absent), each entry an object; checked once."""
+        items = self._items.get(key)
+        if items is None:
+            items = self.get(self.doc, key, "", "list", [])
+            for i, item in enumerate(items):
+                if not isinstance(item, dict):
+                    self.fail(f"{key}.{i}", "an object", item)
+            self._items[key] = items
         if limit is not None and len(items) > limit:
             self.fail(key, f"at most {limit} entries", f"{len(items)} entries")
-        for i, item in enumerate(items):
-            if not isinstance(item, dict):
-                self.fail(f"{key}.{i}", "an object", item)
         return items
 
     def index(self, obj: dict, key: str, path: str, array: str, default: Any = ...) -> int:
         """An index into the top-level array `array`."""
         count = len(self.items(array))
-        value = self.get(obj, key, path, "int", default)
-        if value is default and default is not ...:
-            return value
+        if key not in obj and default is not ...:
+            return default
+        value = self.get(obj, key, path, "int")
         if not 0 <= value < count:
             self.fail(f"{path}.{key}", f"an index into {array} (0 to {count - 1})" if count else
                       f"no index ({array} is empty)", value)
@@ -418,12 +422,18 @@ def _graph(reader: _Reader) -> NodeGraph:
                 reader.fail(f"nodes.{i}.children.{j}", "a node with one parent (a tree, not a graph)",
                             f"node {child}, already a child of node {parents[child] if child != i else i}")
             parents[child] = i
-    for i in range(count):  # a loop of parents has no root: walk up at most `count` steps
-        node, steps = i, 0
-        while parents[node] >= 0:
-            node, steps = int(parents[node]), steps + 1
-            if steps > count:
-                reader.fail(f"nodes.{i}", "a node hierarchy without cycles", f"node {i} is its own ancestor")
+    # A loop of parents has no root. Each node's way up is walked once: it stops at a node
+    # already known to reach a root, so a chain of 65 536 nodes costs 65 536 steps, not their square.
+    reaches_root = np.zeros(count, dtype=bool)
+    for i in range(count):
+        path, on_path, node = [], set(), i
+        while node >= 0 and not reaches_root[node]:
+            if node in on_path:
+                reader.fail(f"nodes.{node}", "a node hierarchy without cycles", f"node {node} is its own ancestor")
+            path.append(node)
+            on_path.add(node)
+            node = int(parents[node])
+        reaches_root[path] = True
     scene_index = reader.get(reader.doc, "scene", "", "int", 0, lo=0)
     scenes = reader.items("scenes")
     if scenes:
@@ -745,7 +755,6 @@ def _cameras(reader: _Reader, graph: NodeGraph, world: dict[int, np.ndarray]) ->
             which = reader.index(nodes[index], "camera", f"nodes.{index}", "cameras")
             names = [name for name in (cameras[which].get("name"), nodes[index].get("name")) if isinstance(name, str)]
             found.append((names, index, cameras[which], f"cameras.{which}"))
-    del cameras
     return found
 
 
@@ -903,14 +912,10 @@ class GltfAnimation(Animation):
         matrix = self._world(frame)[self.camera_node]
         position = matrix[:3, 3].copy()
         forward, up = matrix[:3, :3] @ np.array([0.0, 0.0, -1.0]), matrix[:3, :3] @ np.array([0.0, 1.0, 0.0])
-        from dataclasses import replace
-
         return replace(scene.camera, position=position, look_at=position + forward / np.linalg.norm(forward),
                        up=up / np.linalg.norm(up))
 
     def _lights(self, scene: Scene, frame: float):
-        from dataclasses import replace
-
         lights, world = list(scene.lights), self._world(frame)
         for index, node in self.light_nodes:
             matrix, light = world[node], lights[index]
@@ -922,8 +927,6 @@ class GltfAnimation(Animation):
         return tuple(lights)
 
     def _geometry(self, scene: Scene, frame: float) -> Geometry:
-        from dataclasses import replace
-
         world = self._world(frame)
         triangles, normals = scene.geometry.triangles.copy(), scene.geometry.normals.copy()
         for instance in self.instances:
@@ -971,8 +974,6 @@ def import_gltf(path: Path, file: str | None = None, camera: str | None = None, 
 def merge(scene: Scene, imported: Imported, own_camera: bool, own_animation: bool, fps: float) -> Scene:
     """The scene with the imported meshes and lights after its own, and the file's animation
     unless the scene has one of its own. Checks the limits over both."""
-    from dataclasses import replace
-
     geometry = scene.geometry
     objects = (int(geometry.object_id.max()) + 1 if geometry.count else 0)
     if objects + imported.object_count > MAX_OBJECTS:

@@ -729,3 +729,28 @@ def test_animated_nodes_carry_their_lights_and_camera(tmp_path):
     half = scene.animation.scene_at(scene, 5)
     np.testing.assert_allclose(half.camera.position, [1.5 + 5 * math.sin(math.pi / 4), 0, 5 * math.cos(math.pi / 4)],
                                atol=1e-9)
+
+
+def test_a_deep_chain_of_nodes_loads_and_a_long_cycle_is_refused_quickly(tmp_path):
+    """65 536 nodes, each the child of the last (the most a file may have), with the mesh at
+    the end: placed by the product of all their transforms, within seconds; the same chain
+    closed into a loop is refused (each node's way up is walked once, not once per node)."""
+    import time
+
+    b = _lit(GltfBuilder())
+    b.mesh(TRIANGLE, [[0, 1, 2]])
+    count = gltf.MAX_GLTF_NODES - 1  # and the light's node
+    first = len(b.doc["nodes"])
+    b.doc["nodes"] += [{"children": [first + k + 1], "translation": [0.001, 0, 0]} for k in range(count - 1)]
+    b.doc["nodes"].append({"mesh": 0})
+    b.doc["scenes"][0]["nodes"].append(first)
+    start = time.perf_counter()
+    scene = load_scene(_write(tmp_path, b))
+    assert time.perf_counter() - start < 30  # 5 s measured; a walk per node up the chain would take hours
+    assert scene.geometry.triangles[0, :, 0].min() == pytest.approx(0.001 * (count - 1), rel=1e-6)
+    b.doc["nodes"][-1]["children"] = [first]
+    b.doc["scenes"][0]["nodes"].remove(first)
+    start = time.perf_counter()
+    with pytest.raises(SceneError, match=r"expected a node hierarchy without cycles, got node \d+ is its own ancestor"):
+        load_scene(_write(tmp_path, b, "loop.glb"))
+    assert time.perf_counter() - start < 30  # 5 s measured; a walk per node up the chain would take hours
