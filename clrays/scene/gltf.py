@@ -36,12 +36,14 @@ from ..errors import SceneError
 from . import geometry as primitives
 from .animation import Animation
 from .files import FileRefused, read_regular_file
+from .fields import MAX_POWER
 from .limits import MAX_GLTF_BYTES, MAX_GLTF_NODES, MAX_LIGHTS, MAX_OBJECTS, MAX_TRIANGLES
 from .model import Camera, DirectionalLight, Geometry, Light, LightTexture, PointLight, Scene, SpotLight
 from .textures import MAX_TEXTURE_SIDE, srgb_to_linear
 from .transforms import quat_to_matrix, slerp, transform_normals, transform_points
 
 SUFFIXES = (".glb", ".gltf")
+FLOAT32_MAX = float(np.finfo(np.float32).max)
 GLB_MAGIC = b"glTF"
 _CHUNK_JSON, _CHUNK_BIN = 0x4E4F534A, 0x004E4942
 #: Extensions a file may require: the only one clrays reads. Any other required one is refused by name.
@@ -689,6 +691,9 @@ def _light(reader: _Reader, light: dict, path: str, matrix: np.ndarray, light_sc
     kind = reader.get(light, "type", path, "string")
     colour = reader.numbers(light, "color", path, 3, (1.0, 1.0, 1.0), 0.0)
     power = colour * reader.get(light, "intensity", path, "number", 1.0, lo=0.0) * light_scale
+    if not power.max() <= MAX_POWER:  # as a YAML light's: beyond it float32 radiance overflows
+        reader.fail(f"{path}.intensity", f"a power (intensity × color × light_scale) of at most {MAX_POWER:g}",
+                    f"{power.max():.3g}")
     reader.get(light, "range", path, "number", None, lo=0.0)  # checked, then ignored (docs/scene-format.md)
     position = matrix[:3, 3].copy()
     direction = matrix[:3, :3] @ np.array([0.0, 0.0, -1.0])  # lights shine along their node's -Z
@@ -949,6 +954,10 @@ def import_gltf(path: Path, file: str | None = None, camera: str | None = None, 
     _check_header(reader)
     graph = _graph(reader)
     world = graph.world()
+    for node in graph.order:  # the device works in float32: a product of large transforms must stay in its range
+        if not np.all(np.abs(world[node]) < FLOAT32_MAX):
+            reader.fail(f"nodes.{node}", "a transform that, with its parents', stays finite in float32",
+                        f"a world matrix entry of {float(np.abs(world[node]).max()):.3g}")
     channels, duration = _channels(reader, graph)
     instances, tris, normals, albedo, outward = _meshes(reader, graph, world, bool(channels))
     lights, light_nodes = _lights(reader, graph, world, light_scale)

@@ -10,7 +10,9 @@ frozen dataclasses. Any problem raises `SceneError` with one line, like a compil
     scenes/x.yaml:14:9: lights.0.cone_deg: expected a number in (0, 90], got 120
     --set render.steps=abc: render.steps: expected an integer in [1, 65536], got 'abc'
 
-The full format is documented in docs/scene-format.md.
+A glTF file (.glb, .gltf) is read as the scene `{version: 1, image: ..., gltf: {file: ...}}`
+(clrays.scene.gltf), so the same overrides reach it. The full format is documented in
+docs/scene-format.md.
 """
 from __future__ import annotations
 

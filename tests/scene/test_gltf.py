@@ -460,6 +460,12 @@ HOSTILE = {
                         r"expected at most 16 lights"),
     "too many triangles": (_set("accessors.1.count", 3 * (1 << 21) + 3),
                            r"meshes\.0\.primitives\.0: expected at most 2097152 triangles"),
+    "transform past float32": (_set("nodes.1.scale", [1e39, 1, 1]),
+                               r"nodes\.1: expected a transform that, with its parents', stays finite in float32, "
+                               r"got a world matrix entry of 1e\+39"),
+    "power past float32": (_set("extensions.KHR_lights_punctual.lights.0.intensity", 1e35),
+                           r"lights\.0\.intensity: expected a power \(intensity × color × light_scale\) of at most "
+                           r"1e\+30, got 1e\+35"),
     "spot too wide": (_set("extensions.KHR_lights_punctual.lights.0",
                            {"type": "spot", "spot": {"outerConeAngle": 1.55}}),
                       r"spot\.outerConeAngle: expected an angle in \(0, 1\.4835\]"),
