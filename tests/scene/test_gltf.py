@@ -69,7 +69,7 @@ def test_the_example_is_what_the_tool_writes_and_trimesh_reads_its_geometry():
     other = trimesh.load(ROOT / "scenes" / "colonnade.glb").to_mesh()
     np.testing.assert_allclose(_sorted_triangles(scene.geometry.triangles),
                                _sorted_triangles(other.vertices[other.faces]), atol=2e-6)
-    assert scene.image.width, scene.image.height == gltf.DEFAULT_IMAGE
+    assert (scene.image.width, scene.image.height) == gltf.DEFAULT_IMAGE
 
 
 def test_node_hierarchy_trs_and_matrix(tmp_path):
