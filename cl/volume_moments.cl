@@ -3,7 +3,8 @@
  * volume_moments_prefix reads tree (level 0: the rectified S[α, γ]); writes prefix
  *   ((gamma_samples + 1) moment sums per row, the first 0).
  * volume_moments_scatter reads frame, views, lights, epipolar, prefix, integrand, tables,
- *   camera_depth, offsets; adds into scatter (float4 per camera sample).
+ *   camera_depth, offsets, and a textured light's tables (walk_features.h, LIGHT_TEXTURE);
+ *   adds into scatter (float4 per camera sample).
  *
  *   row α:   S[0]   S[1]   S[2]  ...  S[n-1]          z = beta_depth(S): [β_min, β_max] → [0.05, 0.95]
  *   prefix:  P[0]=0 P[1]   P[2]  ...  P[n]            P[i+1] = P[i] + (z, z², z³, z⁴) of S[i]
@@ -63,6 +64,22 @@ kernel void volume_moments_prefix(global const epipolar_t* ep, global const floa
     }
 }
 
+/* The unshadowed radiance of [g0, g1) of the ray: the integrand's segment, times the light's
+ * texture along each of the two rows (blended as their moments) when the light has one,
+ * as traverse's lit runs (walk.h, docs/light-textures.md). */
+inline float3 chunk_radiance(global const integrand_t* in, global const float* tables, global const frame_t* frame,
+                             const integrand_row_t* ray, const walk_features_t* features,
+                             global const float* texture0, global const float* texture1, float t, float gamma_step,
+                             float g0, float g1)
+{
+#ifdef LIGHT_TEXTURE
+    if (features->textured->textured && g1 > g0)
+        return mix(unweighted_run_radiance(in, tables, frame, ray, features, texture0, gamma_step, g0, g1),
+                   unweighted_run_radiance(in, tables, frame, ray, features, texture1, gamma_step, g0, g1), t);
+#endif
+    return segment_radiance(in, tables, frame, ray, g0, g1);
+}
+
 /* Radiance of [gamma_begin, gamma_end) of ray beta between two rows (weights 1 − t, t):
  * per chunk, the two rows' mean moments blended as traverse blends their radiance, one
  * reconstruction of the lit fraction, times the chunk's unshadowed radiance, which is the
@@ -70,7 +87,8 @@ kernel void volume_moments_prefix(global const epipolar_t* ep, global const floa
 inline float3 moments_rows(global const epipolar_t* ep, global const prefix_t* row0, global const prefix_t* row1,
                            float t, const integrand_row_t* ray, float gamma_begin, float gamma_end,
                            global const integrand_t* in, global const float* tables, global const frame_t* frame,
-                           float receiver, float moment_bias)
+                           float receiver, float moment_bias, const walk_features_t* features,
+                           global const float* texture0, global const float* texture1)
 {
     int n = ep->gamma_samples;
     float3 radiance = (float3)(0.0f);
@@ -92,12 +110,17 @@ inline float3 moments_rows(global const epipolar_t* ep, global const prefix_t* r
             continue;
         }
         if (run_start >= 0.0f) {
-            radiance += segment_radiance(in, tables, frame, ray, run_start, g0);
+            radiance += chunk_radiance(in, tables, frame, ray, features, texture0, texture1, t, ep->gamma_step,
+                                       run_start, g0);
             run_start = -1.0f;
         }
-        if (lit > 0.0f) radiance += lit * segment_radiance(in, tables, frame, ray, g0, g1);
+        if (lit > 0.0f)
+            radiance += lit * chunk_radiance(in, tables, frame, ray, features, texture0, texture1, t, ep->gamma_step,
+                                             g0, g1);
     }
-    if (run_start >= 0.0f) radiance += segment_radiance(in, tables, frame, ray, run_start, gamma_end);
+    if (run_start >= 0.0f)
+        radiance += chunk_radiance(in, tables, frame, ray, features, texture0, texture1, t, ep->gamma_step, run_start,
+                                   gamma_end);
     return radiance;
 }
 
@@ -107,7 +130,7 @@ kernel void volume_moments_scatter(global const frame_t* frame, global const vie
                                    global const prefix_t* prefix, global const integrand_t* integrand,
                                    global const float* tables, global const uint* camera_depth,
                                    global const float2* offsets, float beta_min, float inverse_beta_range,
-                                   float moment_bias, global float4* scatter)
+                                   float moment_bias, global float4* scatter WALK_FEATURE_ARGS)
 {
     int sample = get_global_id(0);
     if (sample >= frame->width * frame->height * frame->spp) return;
@@ -124,10 +147,21 @@ kernel void volume_moments_scatter(global const frame_t* frame, global const vie
     global const prefix_t* row0 = prefix + i0 * stride;
     global const prefix_t* row1 = prefix + i1 * stride;
     float receiver = beta_depth(span.ray.beta, beta_min, inverse_beta_range);
+    walk_features_t features;
+    ATTACH_WALK_FEATURES(features) /* a light texture (walk_features.h) */
+#ifdef LIGHT_TEXTURE
+    size_t texture_stride = features.textured->textured
+                                ? (size_t)3 * (features.textured->rank + 1) * (ep->gamma_samples + 1) : 0;
+    global const float* texture0 = features.prefix + i0 * texture_stride;
+    global const float* texture1 = features.prefix + i1 * texture_stride;
+#else
+    global const float* texture0 = 0; /* (read only for a textured light) */
+    global const float* texture1 = 0;
+#endif
     float3 radiance = moments_rows(ep, row0, row1, t, &span.ray, span.gamma_begin, span.gamma_lamp0, integrand, tables,
-                                   frame, receiver, moment_bias);
+                                   frame, receiver, moment_bias, &features, texture0, texture1);
     if (span.gamma_lamp1 < span.gamma_end)
         radiance += moments_rows(ep, row0, row1, t, &span.ray, span.gamma_lamp1, span.gamma_end, integrand, tables,
-                                 frame, receiver, moment_bias);
+                                 frame, receiver, moment_bias, &features, texture0, texture1);
     scatter[sample] += (float4)(radiance, 0.0f);
 }

@@ -8,6 +8,7 @@ below (`device_option`, `method_option`, ...).
 from __future__ import annotations
 
 import contextlib
+import json
 import math
 import signal
 import sys
@@ -148,6 +149,17 @@ def method_option():
 
 def overrides_option(text: str, metavar: str = "KEY.PATH=VALUE", group: str = SCENE):
     return option("--set", "overrides", multiple=True, metavar=metavar, group=group, help=text)
+
+
+def camera_option():
+    return option("--camera", metavar="NAME", group=SCENE,
+                  help="A glTF scene's camera, by its name or its node's (default: the first); the same as "
+                       "--set gltf.camera=NAME.")
+
+
+def with_camera(overrides, camera: str | None) -> tuple[str, ...]:
+    """The overrides, and `gltf.camera` when --camera names one (JSON-quoted: any name is one YAML string)."""
+    return tuple(overrides) + ((f"gltf.camera={json.dumps(camera)}",) if camera is not None else ())
 
 
 def _finite_exposure(context: click.Context, parameter, value: float) -> float:
@@ -304,6 +316,7 @@ Examples:
 @click.argument("scene", type=click.Path(path_type=Path))
 @method_option()
 @overrides_option("Override a scene field (repeatable), e.g. --set render.steps=1024.")
+@camera_option()
 @option("--frame", type=int, metavar="N", group=SCENE,
         help="Render frame N of the scene's animation (see `clrays sequence`).")
 @option("-o", "--output", required=True, type=click.Path(path_type=Path), group=OUTPUT,
@@ -314,12 +327,12 @@ Examples:
 @progress_option("Progress bar for slow methods (default: on a terminal).")
 @device_option()
 @click.pass_context
-def render(context, scene: Path, method, overrides, frame, output: Path, exposure, stats, verbose, progress,
+def render(context, scene: Path, method, overrides, camera, frame, output: Path, exposure, stats, verbose, progress,
            device) -> None:
-    """Render SCENE (a YAML file) to an image."""
+    """Render SCENE (a YAML file, or glTF: .glb, .gltf) to an image."""
     check_output_path(output)
     check_exposure_applies(exposure, [output])
-    loaded = load_scene(scene, overrides)
+    loaded = load_scene(scene, with_camera(overrides, camera))
     if frame is not None:
         parse_frames(str(frame), scene_frames(loaded), "--frame")
         loaded = loaded.animation.scene_at(loaded, frame) if loaded.animation is not None else loaded
@@ -412,6 +425,7 @@ there, so an interrupted run resumes where it stopped (--overwrite renders all a
         help="Frames A to B, inclusive (also A:, :B or N). Default: the animation's frames.")
 @method_option()
 @overrides_option("Override a scene field (repeatable), e.g. --set animation.fps=12.")
+@camera_option()
 @option("-o", "--output", "pattern", required=True, metavar="PATTERN", group=OUTPUT,
         help="Frame files, with one {} field for the frame number: frames/frame_{:04d}.png "
              "(.png, .exr or .npy; the folder is created).")
@@ -430,7 +444,7 @@ there, so an interrupted run resumes where it stopped (--overwrite renders all a
 @cluster_options
 @device_option()
 @click.pass_context
-def sequence(context, scene, frames, method, overrides, pattern, video, crf, video_options, exposure, overwrite, reuse,
+def sequence(context, scene, frames, method, overrides, camera, pattern, video, crf, video_options, exposure, overwrite, reuse,
              stats, verbose, progress, scheduler, workers, device) -> None:
     """Render the frames of SCENE's animation to numbered images."""
     done = []
@@ -440,6 +454,7 @@ def sequence(context, scene, frames, method, overrides, pattern, video, crf, vid
             check_video_path(video)
             encoder_options = video_encoder_options(video, crf, video_options)
         check_exposure_applies(exposure, [pattern] + ([video] if video is not None else []))
+        overrides = with_camera(overrides, camera)
         loaded = load_scene(scene, overrides)
         chosen = parse_frames(frames, scene_frames(loaded))
         if stats or verbose:
@@ -480,6 +495,7 @@ contact_sheet.png. Re-running the same command keeps the points already done.
 @click.argument("scene", type=click.Path(path_type=Path))
 @overrides_option("A swept key with comma-separated values, or a fixed override with one (repeatable); the "
                   "points are the cartesian product of the swept keys.", metavar="KEY.PATH=V1,V2,...", group=SWEEP)
+@camera_option()
 @option("--reference", metavar="exact|raymarch:N", group=SWEEP,
         help="Measure each point's error against this reference (kept in OUTPUT/.references).")
 @method_option()
@@ -494,12 +510,13 @@ contact_sheet.png. Re-running the same command keeps the points already done.
 @cluster_options
 @device_option()
 @click.pass_context
-def sweep(context, scene, overrides, reference, method, out_dir, image_format, exposure, overwrite, reuse, progress,
+def sweep(context, scene, overrides, camera, reference, method, out_dir, image_format, exposure, overwrite, reuse, progress,
           scheduler, workers, device) -> None:
     """Render SCENE at every combination of the --set values and tabulate the results."""
     done = []
     with _resumable(context, lambda: f"{len(done)} points"):
         _check_scene_file(scene)
+        overrides = with_camera(overrides, camera)
         axes, _ = axes_from(list(overrides))
         parse_reference(reference)
         def on_point(point, row):
@@ -646,6 +663,7 @@ blue: darker), reference_pcf.png, compare.csv and compare.md.
 """)
 @click.argument("scene", type=click.Path(path_type=Path))
 @overrides_option("Override a scene field (repeatable), e.g. --set image.width=320.")
+@camera_option()
 @option("--radius", type=click.IntRange(0, 16), default=2, show_default=True, group=SCENE,
         help="Filter radius in texels, for every filter and the PCF reference.")
 @option("--filters", default=",".join(SHADOW_FILTERS), show_default=True, callback=_filter_names, group=SCENE,
@@ -658,7 +676,7 @@ blue: darker), reference_pcf.png, compare.csv and compare.md.
         help="Folder for the images, heat maps and tables (created).")
 @exposure_option("PNG images")
 @device_option()
-def compare(scene, overrides, radius, filters, repeats, exact_pixels, out_dir, exposure, device) -> None:
+def compare(scene, overrides, camera, radius, filters, repeats, exact_pixels, out_dir, exposure, device) -> None:
     """Compare the surface shadow filters of SCENE with PCF at the same radius.
 
     For each filter: its image, a heat map of its difference from the reference, and its
@@ -667,7 +685,7 @@ def compare(scene, overrides, radius, filters, repeats, exact_pixels, out_dir, e
     from .runs.compare import compare as run_compare, markdown_table
 
     _check_scene_file(scene)
-    loaded = load_scene(scene, overrides)
+    loaded = load_scene(scene, with_camera(overrides, camera))
     rows = run_compare(loaded, out_dir, radius=radius, filters=filters, repeats=repeats, exact_pixels=exact_pixels,
                        renderer=Renderer(device, reuse=False), log=lambda line: click.echo(line, err=True),
                        exposure=exposure)

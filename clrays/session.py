@@ -3,7 +3,7 @@
     raster → translucency → transparency → volume → visibility → shade
 
     volume, by method:  minmax          per light: rectify → minmax → integrand → light_texture → traverse
-                        volume_moments  per light: rectify → integrand → volume_moments
+                        volume_moments  per light: rectify → integrand → light_texture → volume_moments
                         raymarch        raymarch, every light at once
 
 `Renderer._frame` is that figure, one line per stage. A stage with nothing to do in a frame
@@ -267,14 +267,15 @@ class Renderer:
             self._minmax(epipolar, reuse, timer)  # minmax: the 1D min-max mipmap of every row
         tables = reuse.stage("integrand", lambda: keys.integrand(index, epipolar),  # integrand: lit run → radiance
                              lambda: integrand(device, frame.scene, light, epipolar, timer), per_light=True)
+        texture = reuse.stage("light_texture", lambda: keys.light_texture(index, epipolar),  # light_texture: T·Γ_i sums
+                              lambda: light_texture(device, buffers, index, epipolar, tables, timer),
+                              per_light=True) if textured(light) else None
         if frame.method == "volume_moments":  # prefix sums of moments, one reconstruction per ray
-            volume_moments(device, buffers, frame.rastered, epipolar, tables, frame.in_scatter.adding(), timer)
+            volume_moments(device, buffers, frame.rastered, epipolar, tables, frame.in_scatter.adding(), timer,
+                           walk_features(texture, None))
             return
         features = walk_features(  # what the walks carry (stages/features.py, cl/walk_features.h)
-            reuse.stage("light_texture", lambda: keys.light_texture(index, epipolar),  # light_texture: T·Γ_i sums
-                        lambda: light_texture(device, buffers, index, epipolar, tables, timer),
-                        per_light=True) if textured(light) else None,
-            None if frame.layers is None else rectify_layers(device, buffers, frame.layers, epipolar, timer))
+            texture, None if frame.layers is None else rectify_layers(device, buffers, frame.layers, epipolar, timer))
         if frame.scene.render.sampling == "epipolar" and not epipolar.unshadowed:  # traverse: walk the trees
             counts = epipolar_sampling(device, buffers, frame.rastered, epipolar, tables, *frame.in_scatter.writing(),
                                        timer, features)
@@ -485,7 +486,7 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
                   for index, light in enumerate(scene.lights) if textured(light)]
     if inputs.texels is not None and any(textured(light) for light in scene.lights):
         sizes.append(("light textures", 16 * len(inputs.texels)))
-        if scene.render.method == "volume_moments":  # double prefix sums, the larger case (volume_moments.py)
+        if scene.render.method == "volume_moments" and np.any(scene.medium.sigma_s > 0):  # double prefix sums
             prefix = 32 * scene.render.slices * (gamma_samples + 1)
             sizes.append(("moment prefix sums of one light", prefix))
     if scene.render.surface_shadows == "exact" and scene.lights:  # visibility's bound and writer maps, every light's

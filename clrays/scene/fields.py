@@ -97,13 +97,16 @@ def kinds(sections: dict[str, Section]) -> dict[str, tuple[tuple[str, ...], tupl
 TOP = Section("top", (
     Field("version", "integer", REQUIRED, notes=f"must be `{FORMAT_VERSION}` (checked before anything else)"),
     Field("image", "mapping", REQUIRED, notes="[image](#image)"),
-    Field("camera", "mapping", REQUIRED, notes="[camera](#camera)"),
-    Field("lights", "list of mappings", REQUIRED, notes=f"1 to {MAX_LIGHTS} lights; [lights](#lights)"),
+    Field("camera", "mapping", REQUIRED, notes="[camera](#camera); optional with `gltf`"),
+    Field("lights", "list of mappings", REQUIRED, notes=f"1 to {MAX_LIGHTS} lights; [lights](#lights); optional "
+                                                        f"with `gltf`"),
     Field("medium", "mapping", shown_default="no medium: σs = σa = 0, isotropic", notes="[medium](#medium)"),
     Field("background", "RGB", 0.0, low=0.0, notes="radiance of rays that leave the scene"),
     Field("objects", "list of mappings", shown_default="`[]`", notes=f"at most {MAX_OBJECTS}; [objects](#objects)"),
     Field("render", "mapping", shown_default="all defaults", notes="[render](#render)"),
     Field("animation", "mapping", shown_default="a still scene (one frame, 0)", notes="[animation](#animation)"),
+    Field("gltf", "mapping", shown_default="none", notes="a glTF file's meshes, lights, camera and animation; "
+                                                         "[glTF](#gltf-20-scenes)"),
 ), rules=(f"The file is a regular file of at most {MAX_SCENE_BYTES >> 20} MiB, with at most {MAX_LIGHTS} lights, "
           f"{MAX_OBJECTS} objects and {MAX_TRIANGLES} triangles in all (spheres and planes counted before they "
           f"are tessellated): each light keeps its own shadow maps and min-max tree, and large geometry "
@@ -392,7 +395,18 @@ ANIMATION = Section("animation", (
     Field("medium", "list of keys", notes="keys of `sigma_s`, `sigma_a`, `g`"),
 ))
 
+GLTF = Section("gltf", (
+    Field("file", "string", REQUIRED, notes="a `.glb` or `.gltf` file; a relative path starts at the YAML file's "
+                                            "folder"),
+    Field("camera", "string", shown_default="the first camera", notes="the name of the camera (or of its node) "
+          "to look through; `--camera NAME` sets it"),
+    Field("light_scale", "number", 1.0, 0.0, MAX_POWER, notes="multiplies every imported light's power "
+          "(`intensity` × `color`: cd as W/sr, lux as W/m²)"),
+    Field("fps", "number", 24.0, 0.0, 1000.0, low_open=True,
+          notes="frames per second of the file's animation: frame f is at f / fps seconds"),
+))
+
 #: Every section, by the name the docs' markers use, in the order of the format.
 SECTIONS: dict[str, Section] = {section.name: section for section in (
     TOP, IMAGE, CAMERA, *LIGHTS.values(), MEDIUM, *PHASES.values(), OBJECT, *OBJECTS.values(), TRANSFORM,
-    ROTATE, RENDER, SHADOW_FILTER, TRANSPARENCY, ANIMATION)}
+    ROTATE, RENDER, SHADOW_FILTER, TRANSPARENCY, ANIMATION, GLTF)}

@@ -39,3 +39,11 @@ MAX_TRIANGLES = 1 << 21
 #: Objects in one scene: each is read and transformed on its own in Python; meshes carry
 #: any number of triangles in one object.
 MAX_OBJECTS = 4096
+
+#: A glTF file (.glb, .gltf) and, in all, the buffers it reads (.bin files, data URIs, the
+#: GLB's BIN chunk): as a mesh file's, room for `MAX_TRIANGLES` (float32 positions and
+#: normals, 32-bit indices: 60 bytes a triangle at worst, 120 MiB) read as arrays.
+MAX_GLTF_BYTES = MAX_MESH_BYTES
+#: Nodes in a glTF file: each is a Python dict and a 4×4 matrix per pose, and the checks
+#: of the hierarchy walk them all; exported scenes hold hundreds to a few thousand.
+MAX_GLTF_NODES = 65_536

@@ -10,7 +10,9 @@ frozen dataclasses. Any problem raises `SceneError` with one line, like a compil
     scenes/x.yaml:14:9: lights.0.cone_deg: expected a number in (0, 90], got 120
     --set render.steps=abc: render.steps: expected an integer in [1, 65536], got 'abc'
 
-The full format is documented in docs/scene-format.md.
+A glTF file (.glb, .gltf) is read as the scene `{version: 1, image: ..., gltf: {file: ...}}`
+(clrays.scene.gltf), so the same overrides reach it. The full format is documented in
+docs/scene-format.md.
 """
 from __future__ import annotations
 
@@ -22,12 +24,13 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from . import geometry as primitives
+from . import gltf as gltf_files
 from . import relief as relief_images
 from ..errors import SceneError
 from ..structs import CONVEX_OUTSIDE_ONLY
 from .animation import Animation, Key, ObjectRig, Track
 from .files import FileRefused, read_regular_file
-from .fields import (ANIMATION, CAMERA, FORMAT_VERSION, IMAGE, LIGHTS, MAX_IMAGE_PIXELS, MEDIUM, OBJECT, OBJECTS,
+from .fields import (ANIMATION, CAMERA, FORMAT_VERSION, GLTF, IMAGE, LIGHTS, MAX_IMAGE_PIXELS, MEDIUM, OBJECT, OBJECTS,
                      PHASES, QUATERNION_TOLERANCE, RENDER, ROTATE, SHADOW_FILTER, TOP, TRANSFORM, TRANSPARENCY, Field,
                      kinds)
 from .limits import MAX_LIGHTS, MAX_OBJECTS, MAX_SCENE_BYTES, MAX_TRIANGLES
@@ -699,6 +702,11 @@ def _parse(text: str, filename: str, source: Path | str | None, overrides: Seque
         raise SceneError(f"{filename}:1:1: (top level): expected a mapping, got an empty document")
     if not isinstance(root.value, dict):
         root.fail("a mapping")
+    return _scene(root, filename, source, overrides)
+
+
+def _scene(root: Node, filename: str, source: Path | str | None, overrides: Sequence[str]) -> Scene:
+    """The scene of a composed tree, after the overrides."""
     if isinstance(overrides, str):
         overrides = [overrides]
     for override in overrides:
@@ -711,27 +719,69 @@ def _parse(text: str, filename: str, source: Path | str | None, overrides: Seque
     version = top["version"]
     if not isinstance(version.value, int) or isinstance(version.value, bool) or version.value != FORMAT_VERSION:
         version.fail(f"version {FORMAT_VERSION}")
-    m = mapping(root, TOP.required, TOP.optional)
+    # A glTF file may bring the camera and the lights.
+    imports = ("camera", "lights") if "gltf" in top else ()
+    m = mapping(root, tuple(key for key in TOP.required if key not in imports), TOP.optional + imports)
 
     base_dir = Path(source).parent if source is not None else Path.cwd()
+    imported, fps = _gltf(m["gltf"], base_dir, "camera" in m) if "gltf" in m else (None, None)
     rigs: list[ObjectRig] = []
     scene = Scene(  # sections are read (and fail) in the order the format lists them
         image=_image(m["image"]),
-        camera=_camera(m["camera"]),
-        lights=tuple(_light(n, base_dir) for n in _lights(m["lights"])),
+        camera=_camera(m["camera"]) if "camera" in m else imported.camera,
+        lights=tuple(_light(n, base_dir) for n in _lights(m["lights"])) if "lights" in m else (),
         medium=_medium(m.get("medium")),
         background=_read(TOP["background"], m.get("background")),
         geometry=_geometry(m.get("objects"), base_dir, rigs if "animation" in m else None),
         render=_render(m.get("render")),
         source=Path(source) if source is not None else None,
     )
+    if imported is not None:
+        scene = gltf_files.merge(scene, imported, own_camera="camera" in m, own_animation="animation" in m, fps=fps)
     if "animation" in m:
         scene = dataclasses.replace(scene, animation=_animation(m["animation"], scene, rigs))
     return scene
 
 
+def _gltf(node: Node, base_dir: Path, own_camera: bool) -> tuple[gltf_files.Imported, float]:
+    """`gltf: {file, camera, light_scale, fps}`: the file read (clrays.scene.gltf), and its fps."""
+    if isinstance(node.value, dict) and "file" not in node.value and "camera" in node.value:
+        node.fail("a glTF file to take the camera from (`--camera` names a camera of a glTF scene)",
+                  "no gltf.file")
+    m = mapping(node, GLTF.required, GLTF.optional)
+    file = m["file"]
+    if not isinstance(file.value, str) or Path(file.value).suffix.lower() not in gltf_files.SUFFIXES:
+        file.fail("a glTF file path (.glb or .gltf)")
+    camera = None
+    if "camera" in m:
+        if own_camera:
+            m["camera"].fail("no gltf.camera beside the scene's own camera (remove one of them)")
+        if not isinstance(m["camera"].value, (str, int)) or isinstance(m["camera"].value, bool):
+            m["camera"].fail("a camera's name")
+        camera = str(m["camera"].value)
+    path = Path(file.value)
+    path = path if path.is_absolute() else base_dir / path
+    imported = gltf_files.import_gltf(path, str(path), camera, _read(GLTF["light_scale"], m.get("light_scale")))
+    return imported, _read(GLTF["fps"], m.get("fps"))
+
+
+def _load_gltf(path: Path, overrides: Sequence[str]) -> Scene:
+    """A glTF file as the scene `{version: 1, image: DEFAULT_IMAGE, gltf: {file: path}}`, so
+    `--set` reaches the image, medium, render settings and the `gltf` keys alike."""
+    where = str(path)
+    width, height = gltf_files.DEFAULT_IMAGE
+    root = Node({"version": Node(FORMAT_VERSION, where, "version"),
+                 "image": Node({"width": Node(width, where, "image.width"),
+                                "height": Node(height, where, "image.height")}, where, "image"),
+                 "gltf": Node({"file": Node(path.name, where, "gltf.file")}, where, "gltf")}, where, "")
+    return _scene(root, where, path, overrides)
+
+
 def load_scene(path: Path | str, overrides: Sequence[str] = ()) -> Scene:
-    """Read, override (`key.path=value` strings, as from `--set`) and validate a scene file."""
+    """Read, override (`key.path=value` strings, as from `--set`) and validate a scene file:
+    YAML, or glTF 2.0 (.glb, .gltf: clrays.scene.gltf)."""
+    if Path(path).suffix.lower() in gltf_files.SUFFIXES:
+        return _load_gltf(Path(path), overrides)
     try:
         data = read_regular_file(path, MAX_SCENE_BYTES, "put large geometry in a mesh file "
                                                         "(objects: - {type: mesh, file: ...})")

@@ -13,6 +13,7 @@ import numpy as np
 
 from ..device import Device, StageTimer
 from ..inputs import FrameBuffers
+from .features import WalkFeature, feature_args, feature_defines
 from .integrand import DeviceIntegrand
 from .raster import RasterResult
 from .rectify import Epipolar
@@ -34,12 +35,15 @@ def _double_prefix(device: Device) -> bool:
 
 
 def volume_moments(device: Device, buffers: FrameBuffers, rastered: RasterResult, epipolar: Epipolar,
-                   integrand: DeviceIntegrand, scatter, timer: StageTimer, chunks: int = MOMENT_CHUNKS) -> None:
-    """Add one light's in-scattered radiance into `scatter` (float4 per camera sample)."""
+                   integrand: DeviceIntegrand, scatter, timer: StageTimer, features: tuple[WalkFeature, ...] = (),
+                   chunks: int = MOMENT_CHUNKS) -> None:
+    """Add one light's in-scattered radiance into `scatter` (float4 per camera sample); a
+    textured light's tables (`features`, stage light_texture) weight each part's radiance."""
     params = epipolar.params
     slices, gamma_samples = int(params["slices"]), int(params["gamma_samples"])
     double = _double_prefix(device)
     defines = {"PREFIX_DOUBLE": int(double), "MOMENT_CHUNKS": chunks}
+    scatter_defines = feature_defines(features, defines)
     prefix = device.buffer(nbytes=(32 if double else 16) * slices * (gamma_samples + 1))
     # z = (S − β_min) / (β_max − β_min): the visible rays' β range, as wide as [0, 1] can hold it.
     beta_min = np.float32(epipolar.beta_min)
@@ -47,8 +51,8 @@ def volume_moments(device: Device, buffers: FrameBuffers, rastered: RasterResult
     event = device.kernel("volume_moments", "volume_moments_prefix", defines)(
         device.queue, (slices,), None, epipolar.buffer, epipolar.tree, beta_min, inverse_range, prefix)
     timer.add("volume_moments", event)
-    event = device.kernel("volume_moments", "volume_moments_scatter", defines)(
+    event = device.kernel("volume_moments", "volume_moments_scatter", scatter_defines)(
         device.queue, (buffers.inputs.samples,), None, buffers.params, buffers.views, buffers.lights,
         epipolar.buffer, prefix, integrand.params, integrand.data, rastered.camera_depth, buffers.offsets,
-        beta_min, inverse_range, np.float32(VOLUME_MOMENT_BIAS), scatter)
+        beta_min, inverse_range, np.float32(VOLUME_MOMENT_BIAS), scatter, *feature_args(features))
     timer.add("volume_moments", event)

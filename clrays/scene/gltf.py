@@ -1,0 +1,1022 @@
+"""glTF 2.0 scenes (`.glb`, `.gltf` with external `.bin` files or data URIs): meshes,
+`KHR_lights_punctual` lights, a perspective camera and node animations, read into the
+parts of a `clrays.scene.model.Scene` (docs/scene-format.md, "glTF").
+
+    imported = import_gltf(Path("scenes/lantern.glb"), "scenes/lantern.glb")
+
+The JSON and the GLB chunks are read directly with `json` and numpy: every offset, length,
+count and stride is checked against the bytes that hold it before an array is made, so a
+hostile file stops with one line naming the file, the JSON path of the field and its
+value:
+
+    scenes/x.glb: accessors.2.count: expected at most 8 elements in bufferViews.1 (96 bytes, stride 12), got 1000
+
+Units: glTF's metres are scene units; a light's `intensity` (cd for point and spot
+lights, lux for directional ones) times its `color` is clrays's W/sr or W/m², times
+`light_scale`. A spot's cone falloff between `innerConeAngle` and `outerConeAngle` (the
+extension's smooth attenuation) becomes a light texture over the cone, which every method
+reads (docs/light-textures.md).
+"""
+from __future__ import annotations
+
+import base64
+import binascii
+import io
+import json
+import math
+import struct
+import urllib.parse
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, NoReturn
+
+import numpy as np
+
+from ..errors import SceneError
+from . import geometry as primitives
+from .animation import Animation
+from .files import FileRefused, read_regular_file
+from .fields import MAX_POWER
+from .limits import MAX_GLTF_BYTES, MAX_GLTF_NODES, MAX_LIGHTS, MAX_OBJECTS, MAX_TRIANGLES
+from .model import Camera, DirectionalLight, Geometry, Light, LightTexture, PointLight, Scene, SpotLight
+from .textures import MAX_TEXTURE_SIDE, srgb_to_linear
+from .transforms import quat_to_matrix, slerp, transform_normals, transform_points
+
+SUFFIXES = (".glb", ".gltf")
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+GLB_MAGIC = b"glTF"
+_CHUNK_JSON, _CHUNK_BIN = 0x4E4F534A, 0x004E4942
+#: Extensions a file may require: the only one clrays reads. Any other required one is refused by name.
+SUPPORTED_EXTENSIONS = ("KHR_lights_punctual",)
+
+#: componentType -> (numpy little-endian dtype, largest value for `normalized`)
+_COMPONENTS = {5120: ("<i1", 127.0), 5121: ("<u1", 255.0), 5122: ("<i2", 32767.0), 5123: ("<u2", 65535.0),
+               5125: ("<u4", None), 5126: ("<f4", None)}
+_WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+_TRIANGLES, _TRIANGLE_STRIP, _TRIANGLE_FAN = 4, 5, 6
+
+#: Side of the texture that carries a spot's cone falloff: bilinear between texel centres,
+#: it follows the analytic attenuation to within 2e-3 at its kink (the inner cone) and 1e-5
+#: elsewhere (tests/scene/test_gltf.py), at 4 MiB per spot on the device.
+FALLOFF_TEXTURE_SIDE = 512
+#: The widest outer cone whose falloff fits the texture: the texture spans [-tan c, tan c],
+#: which grows without bound towards 90° (docs/limits.md).
+MAX_SPOT_OUTER_DEG = 85.0
+#: How far from 1 a rotation quaternion's norm may be (exporters write float32; it is normalised).
+QUATERNION_TOLERANCE = 1e-3
+
+#: The image of a scene loaded straight from a glTF file (glTF has no image size); `--set image.width=...`.
+DEFAULT_IMAGE = (640, 360)
+#: The default view when the file has no camera: its bounds seen from the front and above,
+#: at the distance where their sphere fills this vertical field of view.
+DEFAULT_VIEW_DIRECTION = np.array([0.0, 0.5, 1.0]) / math.sqrt(1.25)
+DEFAULT_FOV_DEG = 50.0
+
+
+# --------------------------------------------------------------------------- the parts read
+
+
+@dataclass(frozen=True)
+class _Instance:
+    """A mesh primitive placed by a node: its triangles before the node's world matrix."""
+
+    node: int
+    rows: slice  # its triangles in Imported.triangles
+    local: np.ndarray | None  # (T, 3, 3); None in a file without animation
+    local_normals: np.ndarray | None  # (T, 3, 3) smooth normals; None as `local`
+    albedo: np.ndarray  # (3,)
+
+
+@dataclass(frozen=True)
+class _Channel:
+    node: int
+    path: str  # translation, rotation, scale
+    interpolation: str  # LINEAR, STEP, CUBICSPLINE
+    times: np.ndarray  # (K,) seconds
+    values: np.ndarray  # (K, n), or (3K, n) for CUBICSPLINE: in-tangent, value, out-tangent; rotation [w, x, y, z]
+
+
+@dataclass(frozen=True, eq=False)
+class NodeGraph:
+    """The node hierarchy: each node's parent, its static local transform and its TRS
+    (for the channels that replace parts of it), in an order that puts parents first."""
+
+    parents: np.ndarray  # (N,) int, -1 for a root
+    order: tuple[int, ...]  # the scene's nodes, parents before children
+    matrices: tuple[np.ndarray | None, ...]  # a node's `matrix`, or None for TRS
+    trs: tuple[tuple[np.ndarray, np.ndarray, np.ndarray], ...]  # translation, rotation [w, x, y, z], scale
+    channels: tuple[_Channel, ...] = ()
+
+    def world(self, time: float | None = None) -> dict[int, np.ndarray]:
+        """Each node's 4×4 world matrix, at `time` seconds of the animation (None: the static pose)."""
+        trs = [list(parts) for parts in self.trs]
+        if time is not None:
+            for channel in self.channels:
+                trs[channel.node][("translation", "rotation", "scale").index(channel.path)] = _sample(channel, time)
+        world: dict[int, np.ndarray] = {}
+        for index in self.order:
+            local = self.matrices[index]
+            if local is None:
+                translation, rotation, scale = trs[index]
+                local = np.eye(4)
+                local[:3, :3] = quat_to_matrix(rotation) @ np.diag(scale)
+                local[:3, 3] = translation
+            parent = self.parents[index]
+            world[index] = local if parent < 0 else world[parent] @ local
+        return world
+
+
+@dataclass(frozen=True)
+class Imported:
+    """What a glTF file gives a scene: its meshes' triangles, lights, camera and animation."""
+
+    file: str  # as named to the user
+    triangles: np.ndarray  # (T, 3, 3) world space
+    normals: np.ndarray  # (T, 3, 3)
+    albedo: np.ndarray  # (T, 3)
+    object_id: np.ndarray  # (T,) one per instance, from 0
+    outward: np.ndarray  # (T,) int8
+    object_count: int
+    instances: tuple[_Instance, ...]
+    lights: tuple[Light, ...]
+    light_nodes: tuple[int, ...]
+    camera: Camera
+    camera_node: int | None  # None: the default view
+    graph: NodeGraph
+    duration: float | None  # seconds of animation, None without one
+
+
+# --------------------------------------------------------------------------- reading JSON with paths
+
+
+class _Reader:
+    """The document and its buffers, with typed getters that fail in one line naming the
+    file and the JSON path."""
+
+    def __init__(self, file: str, folder: Path, document: Any, binary: bytes | None):
+        self.file, self.folder, self.binary = file, folder, binary
+        self.doc = document
+        self._buffers: dict[int, bytes] = {}
+        self._items: dict[str, list] = {}
+        self._buffer_bytes = 0
+
+    def fail(self, path: str, expected: str, got: Any) -> NoReturn:
+        raise SceneError(f"{self.file}: {path}: expected {expected}, got {_show(got)}")
+
+    def get(self, obj: dict, key: str, path: str, kind: str, default: Any = ..., lo: float | None = None,
+            hi: float | None = None) -> Any:
+        """obj[key] checked to be a `kind` (int, number, string, list, dict, bool) within [lo, hi]."""
+        where = f"{path}.{key}" if path else key
+        if key not in obj:
+            if default is ...:
+                raise SceneError(f"{self.file}: {path or '(top level)'}: missing required key {key!r}")
+            return default
+        value = obj[key]
+        ok = {"int": lambda v: isinstance(v, int) and not isinstance(v, bool),
+              "number": lambda v: isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v),
+              "string": lambda v: isinstance(v, str), "list": lambda v: isinstance(v, list),
+              "dict": lambda v: isinstance(v, dict), "bool": lambda v: isinstance(v, bool)}[kind](value)
+        names = {"int": "an integer", "number": "a finite number", "string": "a string", "list": "a list",
+                 "dict": "an object", "bool": "true or false"}
+        if not ok:
+            self.fail(where, names[kind] + _bounds(lo, hi), value)
+        if (lo is not None and value < lo) or (hi is not None and value > hi):
+            self.fail(where, names[kind] + _bounds(lo, hi), value)
+        return value
+
+    def numbers(self, obj: dict, key: str, path: str, count: int, default: Any = ..., lo: float | None = None,
+                hi: float | None = None) -> np.ndarray:
+        where = f"{path}.{key}"
+        values = self.get(obj, key, path, "list", default)
+        if values is default:
+            return np.asarray(default, dtype=np.float64)
+        if len(values) != count or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                           and math.isfinite(v) for v in values):
+            self.fail(where, f"a list of {count} finite numbers", values)
+        array = np.asarray(values, dtype=np.float64)
+        if (lo is not None and array.min() < lo) or (hi is not None and array.max() > hi):
+            self.fail(where, f"{count} numbers{_bounds(lo, hi)}", values)
+        return array
+
+    def items(self, key: str, limit: int | None = None) -> list:
+        """A top-level array (empty when absent), each entry an object; checked once."""
+        items = self._items.get(key)
+        if items is None:
+            items = self.get(self.doc, key, "", "list", [])
+            for i, item in enumerate(items):
+                if not isinstance(item, dict):
+                    self.fail(f"{key}.{i}", "an object", item)
+            self._items[key] = items
+        if limit is not None and len(items) > limit:
+            self.fail(key, f"at most {limit} entries", f"{len(items)} entries")
+        return items
+
+    def index(self, obj: dict, key: str, path: str, array: str, default: Any = ...) -> int:
+        """An index into the top-level array `array`."""
+        count = len(self.items(array))
+        if key not in obj and default is not ...:
+            return default
+        value = self.get(obj, key, path, "int")
+        if not 0 <= value < count:
+            self.fail(f"{path}.{key}", f"an index into {array} (0 to {count - 1})" if count else
+                      f"no index ({array} is empty)", value)
+        return value
+
+    # ------------------------------------------------------------------ buffers and accessors
+
+    def buffer(self, index: int) -> bytes:
+        if index in self._buffers:
+            return self._buffers[index]
+        path = f"buffers.{index}"
+        buffer = self.items("buffers")[index]
+        length = self.get(buffer, "byteLength", path, "int", lo=1)
+        if "uri" in buffer:
+            data = self._uri(self.get(buffer, "uri", path, "string"), f"{path}.uri")
+        elif index == 0 and self.binary is not None:
+            data = self.binary
+        else:
+            self.fail(path, "a uri (only the first buffer of a .glb may use its BIN chunk)", "no uri")
+        if len(data) < length:
+            self.fail(f"{path}.byteLength", f"at most the {len(data)} bytes the buffer holds", length)
+        self._buffer_bytes += length
+        if self._buffer_bytes > MAX_GLTF_BYTES:
+            self.fail(path, f"buffers of at most {_size(MAX_GLTF_BYTES)} in all (docs/limits.md)",
+                      f"{self._buffer_bytes} bytes with this one")
+        self._buffers[index] = data[:length]
+        return self._buffers[index]
+
+    def _uri(self, uri: str, path: str) -> bytes:
+        if uri.startswith("data:"):
+            head, comma, payload = uri.partition(",")
+            if not comma or not head.endswith(";base64"):
+                self.fail(path, "a base64 data URI (data:...;base64,...)", json.dumps(uri))
+            # Checked before decoding: a data URI's bytes are 3/4 of its base64 characters.
+            if len(payload) > (MAX_GLTF_BYTES // 3 + 1) * 4:
+                self.fail(path, f"a data URI of at most {_size(MAX_GLTF_BYTES)} (docs/limits.md)",
+                          f"{len(payload)} base64 characters")
+            try:
+                return base64.b64decode(payload, validate=True)
+            except (binascii.Error, ValueError) as exc:
+                self.fail(path, "valid base64 data", f"{uri[:40]}... ({exc})")
+        relative = urllib.parse.unquote(uri)
+        parsed = urllib.parse.urlsplit(uri)
+        candidate = (self.folder / relative)
+        if parsed.scheme or relative.startswith(("/", "\\")) or Path(relative).is_absolute() or "\\" in relative:
+            self.fail(path, "a relative file path inside the glTF file's folder", json.dumps(uri))
+        try:
+            resolved, folder = candidate.resolve(), self.folder.resolve()
+        except (OSError, RuntimeError) as exc:
+            self.fail(path, "a file path that resolves", f"{uri!r} ({exc})")
+        if folder != resolved and folder not in resolved.parents:  # `..` or a link that leaves it: refused
+            self.fail(path, "a file inside the glTF file's folder", json.dumps(uri))
+        try:
+            return read_regular_file(resolved, MAX_GLTF_BYTES)
+        except FileRefused as exc:
+            self.fail(path, "a readable buffer file", f"{uri!r} ({exc})")
+
+    def accessor(self, index: int, path: str, types: tuple[str, ...], components: tuple[int, ...]) -> np.ndarray:
+        """Accessor `index` as float64 (count, width) (a SCALAR's (count,)), checked against its view's bytes."""
+        where = f"accessors.{index}"
+        acc = self.items("accessors")[index]
+        kind = self.get(acc, "type", where, "string")
+        if kind not in types:
+            self.fail(f"{where}.type", f"one of {', '.join(types)} for {path}", json.dumps(kind))
+        component = self.get(acc, "componentType", where, "int")
+        if component not in components:
+            self.fail(f"{where}.componentType", f"one of {', '.join(map(str, components))} for {path}", component)
+        if "sparse" in acc:
+            self.fail(f"{where}.sparse", "an accessor without sparse storage (clrays reads dense accessors)",
+                      "a sparse accessor")
+        count = self.get(acc, "count", where, "int", lo=1)
+        width = _WIDTHS[kind]
+        dtype, largest = _COMPONENTS[component]
+        size = np.dtype(dtype).itemsize
+        element = width * size
+        if "bufferView" not in acc:  # all zeros, by the spec; bounded by the same count as a view's
+            if count * element > MAX_GLTF_BYTES:
+                self.fail(f"{where}.count", f"at most {MAX_GLTF_BYTES // element} elements", count)
+            values = np.zeros((count, width))
+        else:
+            view_index = self.index(acc, "bufferView", where, "bufferViews")
+            view_path = f"bufferViews.{view_index}"
+            view = self.items("bufferViews")[view_index]
+            data = self.buffer(self.index(view, "buffer", view_path, "buffers"))
+            view_offset = self.get(view, "byteOffset", view_path, "int", 0, lo=0)
+            view_length = self.get(view, "byteLength", view_path, "int", lo=1)
+            if view_offset + view_length > len(data):
+                self.fail(f"{view_path}.byteLength", f"a view within its buffer's {len(data)} bytes "
+                          f"(byteOffset {view_offset})", view_length)
+            stride = self.get(view, "byteStride", view_path, "int", element, lo=4, hi=252)
+            if stride < element:
+                self.fail(f"{view_path}.byteStride", f"at least the element's {element} bytes", stride)
+            offset = self.get(acc, "byteOffset", where, "int", 0, lo=0)
+            if offset % size:
+                self.fail(f"{where}.byteOffset", f"a multiple of the component's {size} bytes", offset)
+            most = (view_length - offset - element) // stride + 1 if view_length >= offset + element else 0
+            if count > most:
+                self.fail(f"{where}.count", f"at most {most} elements in {view_path} ({view_length} bytes, "
+                          f"byteOffset {offset}, stride {stride})", count)
+            start = view_offset + offset
+            raw = np.ndarray((count, width), dtype=dtype, buffer=data, offset=start, strides=(stride, size))
+            values = raw.astype(np.float64)
+        if largest is not None and self.get(acc, "normalized", where, "bool", False):
+            values = np.maximum(values / largest, -1.0)
+        if not np.isfinite(values).all():
+            row = int(np.flatnonzero(~np.isfinite(values).all(axis=1))[0])
+            self.fail(where, f"finite values for {path}", f"{values[row].tolist()} at element {row}")
+        return values[:, 0] if kind == "SCALAR" else values
+
+
+def _size(n: int) -> str:
+    return f"{n / 2**20:g} MiB" if n >= 1 << 20 else f"{n} bytes"
+
+
+def _bounds(lo, hi) -> str:
+    if lo is not None and hi is not None:
+        return f" in [{lo:g}, {hi:g}]"
+    if lo is not None:
+        return f" >= {lo:g}"
+    return f" <= {hi:g}" if hi is not None else ""
+
+
+def _show(value: Any, limit: int = 80) -> str:
+    """What was found: a description as written, a JSON value (a number, a list) as JSON.
+    A string from the file is passed through json.dumps by the caller, so it shows quoted."""
+    text = value if isinstance(value, str) else json.dumps(value)
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+# --------------------------------------------------------------------------- the file
+
+
+def _open(path: Path, file: str) -> _Reader:
+    """The JSON document and the GLB's BIN chunk."""
+    try:
+        # Room for a .gltf whose buffers are data URIs: base64 takes 4 characters for 3 bytes.
+        data = read_regular_file(path, MAX_GLTF_BYTES // 3 * 4 + (1 << 20), "simplify the meshes or split the scene")
+    except FileRefused as exc:
+        raise SceneError(f"{file}: cannot read glTF file: {exc}") from None
+    binary = None
+    if data[:4] == GLB_MAGIC:
+        if len(data) < 20:
+            raise SceneError(f"{file}: (GLB header): expected a 12-byte header and a JSON chunk, got {len(data)} bytes")
+        _, version, length = struct.unpack_from("<4sII", data, 0)
+        if version != 2:
+            raise SceneError(f"{file}: (GLB header): expected version 2, got {version}")
+        if length != len(data):
+            raise SceneError(f"{file}: (GLB header): expected the file's length, {len(data)} bytes, got {length}")
+        chunks, offset = [], 12
+        while offset < len(data):
+            if offset + 8 > len(data):
+                raise SceneError(f"{file}: (GLB chunk at byte {offset}): expected an 8-byte chunk header, "
+                                 f"got {len(data) - offset} bytes")
+            chunk_length, chunk_type = struct.unpack_from("<II", data, offset)
+            if offset + 8 + chunk_length > len(data):
+                raise SceneError(f"{file}: (GLB chunk at byte {offset}): expected a length within the file's "
+                                 f"{len(data) - offset - 8} remaining bytes, got {chunk_length}")
+            chunks.append((chunk_type, data[offset + 8:offset + 8 + chunk_length]))
+            offset += 8 + chunk_length
+        if not chunks or chunks[0][0] != _CHUNK_JSON:
+            raise SceneError(f"{file}: (GLB chunk at byte 12): expected the JSON chunk first, got "
+                             f"{'none' if not chunks else hex(chunks[0][0])}")
+        text = chunks[0][1]
+        binary = chunks[1][1] if len(chunks) > 1 and chunks[1][0] == _CHUNK_BIN else None
+    else:
+        text = data
+    try:
+        document = json.loads(text.decode("utf-8"), parse_constant=_no_constant)
+    except (UnicodeDecodeError, ValueError, RecursionError) as exc:
+        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise SceneError(f"{file}: (JSON): expected a glTF 2.0 document (JSON or GLB), got {reason[:120]}") from None
+    if not isinstance(document, dict):
+        raise SceneError(f"{file}: (top level): expected a JSON object, got {_show(document)}")
+    return _Reader(file, path.parent, document, binary)
+
+
+def _no_constant(name: str):
+    raise ValueError(f"{name} is not a JSON number")
+
+
+def _check_header(reader: _Reader) -> None:
+    asset = reader.get(reader.doc, "asset", "", "dict")
+    version = reader.get(asset, "version", "asset", "string")
+    if not version.startswith("2."):
+        reader.fail("asset.version", "a glTF 2.x file", json.dumps(version))
+    required = reader.get(reader.doc, "extensionsRequired", "", "list", [])
+    unsupported = [name for name in required if name not in SUPPORTED_EXTENSIONS]
+    if unsupported:
+        reader.fail("extensionsRequired", f"only extensions clrays reads ({', '.join(SUPPORTED_EXTENSIONS)})",
+                    ", ".join(map(str, unsupported)))
+
+
+# --------------------------------------------------------------------------- nodes
+
+
+def _graph(reader: _Reader) -> NodeGraph:
+    nodes = reader.items("nodes", MAX_GLTF_NODES)
+    count = len(nodes)
+    parents = np.full(count, -1, dtype=np.int64)
+    for i, node in enumerate(nodes):
+        for j, child in enumerate(reader.get(node, "children", f"nodes.{i}", "list", [])):
+            if not isinstance(child, int) or isinstance(child, bool) or not 0 <= child < count:
+                reader.fail(f"nodes.{i}.children.{j}", f"a node index (0 to {count - 1})", child)
+            if parents[child] >= 0 or child == i:
+                reader.fail(f"nodes.{i}.children.{j}", "a node with one parent (a tree, not a graph)",
+                            f"node {child}, already a child of node {parents[child] if child != i else i}")
+            parents[child] = i
+    # A loop of parents has no root. Each node's way up is walked once: it stops at a node
+    # already known to reach a root, so a chain of 65 536 nodes costs 65 536 steps, not their square.
+    reaches_root = np.zeros(count, dtype=bool)
+    for i in range(count):
+        path, on_path, node = [], set(), i
+        while node >= 0 and not reaches_root[node]:
+            if node in on_path:
+                reader.fail(f"nodes.{node}", "a node hierarchy without cycles", f"node {node} is its own ancestor")
+            path.append(node)
+            on_path.add(node)
+            node = int(parents[node])
+        reaches_root[path] = True
+    scene_index = reader.get(reader.doc, "scene", "", "int", 0, lo=0)
+    scenes = reader.items("scenes")
+    if scenes:
+        if scene_index >= len(scenes):
+            reader.fail("scene", f"an index into scenes (0 to {len(scenes) - 1})", scene_index)
+        roots = reader.get(scenes[scene_index], "nodes", f"scenes.{scene_index}", "list", [])
+        for j, root in enumerate(roots):
+            if not isinstance(root, int) or isinstance(root, bool) or not 0 <= root < count:
+                reader.fail(f"scenes.{scene_index}.nodes.{j}", f"a node index (0 to {count - 1})", root)
+            if parents[root] >= 0:
+                reader.fail(f"scenes.{scene_index}.nodes.{j}", "a root node (one without a parent)",
+                            f"node {root}, a child of node {parents[root]}")
+    else:  # no scenes: every root node
+        roots = [i for i in range(count) if parents[i] < 0]
+    order, stack, seen = [], list(reversed(roots)), set()
+    children = {i: reader.get(node, "children", f"nodes.{i}", "list", []) for i, node in enumerate(nodes)}
+    while stack:  # depth first, parents before children; iterative, so a deep chain cannot overflow
+        node = stack.pop()
+        if node in seen:
+            continue
+        seen.add(node)
+        order.append(node)
+        stack.extend(reversed(children[node]))
+    matrices, trs = [], []
+    for i, node in enumerate(nodes):
+        path = f"nodes.{i}"
+        translation = reader.numbers(node, "translation", path, 3, (0.0, 0.0, 0.0))
+        rotation = _quaternion(reader, reader.numbers(node, "rotation", path, 4, (0.0, 0.0, 0.0, 1.0)),
+                               f"{path}.rotation")
+        scale = reader.numbers(node, "scale", path, 3, (1.0, 1.0, 1.0))
+        trs.append((translation, rotation, scale))
+        if "matrix" in node:
+            if any(key in node for key in ("translation", "rotation", "scale")):
+                reader.fail(f"{path}.matrix", "a matrix or translation/rotation/scale, not both", "both")
+            matrix = reader.numbers(node, "matrix", path, 16).reshape(4, 4).T  # column-major
+            if not np.allclose(matrix[3], (0.0, 0.0, 0.0, 1.0)):
+                reader.fail(f"{path}.matrix", "an affine matrix (last row 0, 0, 0, 1)", matrix[3].tolist())
+            matrices.append(matrix)
+        else:
+            matrices.append(None)
+    return NodeGraph(parents, tuple(order), tuple(matrices), tuple(trs))
+
+
+def _quaternion(reader: _Reader, xyzw: np.ndarray, path: str) -> np.ndarray:
+    """glTF's [x, y, z, w] as clrays's unit [w, x, y, z]."""
+    norm = float(np.linalg.norm(xyzw))
+    if abs(norm - 1.0) > QUATERNION_TOLERANCE:
+        reader.fail(path, f"a unit quaternion [x, y, z, w] (|q| = 1 within {QUATERNION_TOLERANCE:g})",
+                    f"{xyzw.tolist()} with |q| = {norm:.6g}")
+    x, y, z, w = xyzw / norm
+    return np.array([w, x, y, z])
+
+
+# --------------------------------------------------------------------------- meshes
+
+
+def _primitive_faces(reader: _Reader, primitive: dict, path: str, vertex_count: int) -> np.ndarray | None:
+    """(F, 3) vertex indices of a triangle primitive; None for points and lines (no surface)."""
+    mode = reader.get(primitive, "mode", path, "int", _TRIANGLES, lo=0, hi=6)
+    if mode < _TRIANGLES:
+        return None
+    if "indices" in primitive:
+        index = reader.index(primitive, "indices", path, "accessors")
+        indices = reader.accessor(index, f"{path}.indices", ("SCALAR",), (5121, 5123, 5125))
+        if indices.max() >= vertex_count:
+            reader.fail(f"accessors.{index}", f"vertex indices below the POSITION count {vertex_count}",
+                        int(indices.max()))
+        indices = indices.astype(np.int64)
+    else:
+        indices = np.arange(vertex_count, dtype=np.int64)
+    if mode == _TRIANGLES:
+        usable = len(indices) - len(indices) % 3
+        return indices[:usable].reshape(-1, 3)
+    if len(indices) < 3:
+        return np.zeros((0, 3), np.int64)
+    if mode == _TRIANGLE_STRIP:  # every other triangle flips, to keep the winding
+        k = np.arange(len(indices) - 2)
+        odd = k % 2 == 1
+        return np.stack([indices[k], np.where(odd, indices[k + 2], indices[k + 1]),
+                         np.where(odd, indices[k + 1], indices[k + 2])], axis=1)
+    k = np.arange(1, len(indices) - 1)  # a fan around the first vertex
+    return np.stack([np.full(len(k), indices[0]), indices[k], indices[k + 1]], axis=1)
+
+
+def _triangle_count(reader: _Reader, primitive: dict, path: str) -> int:
+    """A primitive's triangles from its accessor counts alone, before any is read."""
+    mode = primitive.get("mode", _TRIANGLES)
+    if not isinstance(mode, int) or mode < _TRIANGLES:
+        return 0
+    attributes = reader.get(primitive, "attributes", path, "dict")
+    source = primitive["indices"] if "indices" in primitive else attributes.get("POSITION")
+    accessors = reader.items("accessors")
+    if not isinstance(source, int) or isinstance(source, bool) or not 0 <= source < len(accessors):
+        return 0  # reading it fails with its own message
+    count = accessors[source].get("count", 0)
+    count = count if isinstance(count, int) else 0
+    return count // 3 if mode == _TRIANGLES else max(count - 2, 0)
+
+
+def _albedo(reader: _Reader, primitive: dict, path: str) -> np.ndarray:
+    """baseColorFactor's RGB (alpha ignored), times the mean of a base colour texture."""
+    if "material" not in primitive:
+        return np.ones(3)
+    index = reader.index(primitive, "material", path, "materials")
+    where = f"materials.{index}"
+    pbr = reader.get(reader.items("materials")[index], "pbrMetallicRoughness", where, "dict", {})
+    factor = reader.numbers(pbr, "baseColorFactor", f"{where}.pbrMetallicRoughness", 4, (1.0, 1.0, 1.0, 1.0),
+                            0.0, 1.0)[:3]
+    texture = reader.get(pbr, "baseColorTexture", f"{where}.pbrMetallicRoughness", "dict", None)
+    if texture is None:
+        return factor
+    return factor * _mean_texture(reader, texture, f"{where}.pbrMetallicRoughness.baseColorTexture")
+
+
+def _mean_texture(reader: _Reader, texture_info: dict, path: str) -> np.ndarray:
+    """The linear mean colour of a texture's image (PNG or JPEG, sRGB-encoded)."""
+    texture_index = reader.index(texture_info, "index", path, "textures")
+    texture = reader.items("textures")[texture_index]
+    if "source" not in texture:
+        return np.ones(3)  # a texture of an extension's image format: not read
+    image_index = reader.index(texture, "source", f"textures.{texture_index}", "images")
+    where = f"images.{image_index}"
+    image = reader.items("images")[image_index]
+    if "uri" in image:
+        data = reader._uri(reader.get(image, "uri", where, "string"), f"{where}.uri")
+    else:
+        view_index = reader.index(image, "bufferView", where, "bufferViews")
+        view_path = f"bufferViews.{view_index}"
+        view = reader.items("bufferViews")[view_index]
+        buffer = reader.buffer(reader.index(view, "buffer", view_path, "buffers"))
+        offset = reader.get(view, "byteOffset", view_path, "int", 0, lo=0)
+        length = reader.get(view, "byteLength", view_path, "int", lo=1)
+        if offset + length > len(buffer):
+            reader.fail(f"{view_path}.byteLength", f"a view within its buffer's {len(buffer)} bytes", length)
+        data = buffer[offset:offset + length]
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(io.BytesIO(data)) as opened:
+            if opened.format not in ("PNG", "JPEG"):
+                reader.fail(where, "a PNG or JPEG image", opened.format)
+            if max(opened.size) > MAX_TEXTURE_SIDE:  # before decoding: a small file may hold a huge image
+                reader.fail(where, f"an image with sides of at most {MAX_TEXTURE_SIDE} pixels",
+                            f"{opened.size[0]}×{opened.size[1]}")
+            encoded = np.asarray(opened.convert("RGB"), dtype=np.float64) / 255.0
+    except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as exc:
+        reader.fail(where, "a readable PNG or JPEG image", f"({exc})")
+    return srgb_to_linear(encoded).reshape(-1, 3).mean(axis=0)
+
+
+def _meshes(reader: _Reader, graph: NodeGraph, world: dict[int, np.ndarray], animated: bool):
+    """Each mesh primitive placed by each node of the scene: (instances, world triangles, normals,
+    albedo, outward). An instance keeps its own triangles only when the file is `animated`."""
+    nodes, meshes = reader.items("nodes"), reader.items("meshes")
+    placed = [(index, reader.index(nodes[index], "mesh", f"nodes.{index}", "meshes"))
+              for index in graph.order if "mesh" in nodes[index]]
+    total, objects = 0, 0
+    for node, mesh in placed:  # counted before anything is read: a few bytes of JSON may ask for millions
+        for p, primitive in enumerate(reader.get(meshes[mesh], "primitives", f"meshes.{mesh}", "list")):
+            path = f"meshes.{mesh}.primitives.{p}"
+            if not isinstance(primitive, dict):
+                reader.fail(path, "an object", primitive)
+            total += _triangle_count(reader, primitive, path)
+            objects += 1
+            if total > MAX_TRIANGLES:
+                reader.fail(path, f"at most {MAX_TRIANGLES} triangles in the whole scene (docs/limits.md)",
+                            f"{total} with this primitive (placed by nodes.{node})")
+            if objects > MAX_OBJECTS:
+                reader.fail(path, f"at most {MAX_OBJECTS} placed primitives, each an object (docs/limits.md)",
+                            f"{objects} with this one (placed by nodes.{node})")
+    instances, tris, normals, albedo, outward = [], [], [], [], []
+    start, cache = 0, {}
+    for node, mesh in placed:
+        for p, primitive in enumerate(meshes[mesh]["primitives"]):
+            path = f"meshes.{mesh}.primitives.{p}"
+            if (mesh, p) not in cache:
+                cache[(mesh, p)] = _primitive(reader, primitive, path)
+            shape = cache[(mesh, p)]
+            if shape is None:
+                continue
+            local, local_normals, colour, vertices, faces = shape
+            matrix = world[node]
+            triangles = transform_points(matrix, local)
+            count = len(triangles)
+            instances.append(_Instance(node, slice(start, start + count), local if animated else None,
+                                       local_normals if animated else None, colour))
+            tris.append(triangles)
+            normals.append(_world_normals(matrix, local_normals, triangles))
+            albedo.append(np.broadcast_to(colour, (count, 3)))
+            outward.append(np.full(count, primitives.closed_outward(transform_points(matrix, vertices), faces),
+                                   np.int8))
+            start += count
+    return instances, tris, normals, albedo, outward
+
+
+def _primitive(reader: _Reader, primitive: dict, path: str):
+    """(local triangles, their smooth normals, albedo, vertices, faces) in spatial order, or None for no surface."""
+    attributes = reader.get(primitive, "attributes", path, "dict")
+    position = reader.index(attributes, "POSITION", f"{path}.attributes", "accessors")
+    vertices = reader.accessor(position, f"{path}.attributes.POSITION", ("VEC3",), (5126,))
+    faces = _primitive_faces(reader, primitive, path, len(vertices))
+    if faces is None or len(faces) == 0:
+        return None
+    given = None
+    if "NORMAL" in attributes:
+        normal = reader.index(attributes, "NORMAL", f"{path}.attributes", "accessors")
+        given = reader.accessor(normal, f"{path}.attributes.NORMAL", ("VEC3",), (5126,))
+        if len(given) != len(vertices):
+            reader.fail(f"accessors.{normal}.count", f"the POSITION count {len(vertices)}", len(given))
+    triangles = primitives.indexed_triangles(vertices, faces)
+    smooth = primitives.smooth_normals(vertices, faces, given)  # the file's normals, else as for OBJ
+    order = primitives.spatial_order(triangles)
+    return triangles[order], smooth[order], _albedo(reader, primitive, path), vertices, faces
+
+
+def _world_normals(matrix: np.ndarray, local_normals: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Normals through the inverse transpose; a node scaled to nothing (hidden) keeps its faces' normals."""
+    if abs(np.linalg.det(matrix[:3, :3])) < 1e-300:
+        return primitives.flat_normals(triangles)
+    return transform_normals(matrix, local_normals)
+
+
+# --------------------------------------------------------------------------- lights
+
+
+def _lights(reader: _Reader, graph: NodeGraph, world: dict[int, np.ndarray], light_scale: float):
+    extension = reader.get(reader.get(reader.doc, "extensions", "", "dict", {}), "KHR_lights_punctual",
+                           "extensions", "dict", {})
+    definitions = reader.get(extension, "lights", "extensions.KHR_lights_punctual", "list", [])
+    nodes = reader.items("nodes")
+    lights, light_nodes = [], []
+    for index in graph.order:
+        node_ext = reader.get(nodes[index], "extensions", f"nodes.{index}", "dict", {})
+        if "KHR_lights_punctual" not in node_ext:
+            continue
+        path = f"nodes.{index}.extensions.KHR_lights_punctual"
+        ref = reader.get(node_ext, "KHR_lights_punctual", f"nodes.{index}.extensions", "dict")
+        which = reader.get(ref, "light", path, "int")
+        if not 0 <= which < len(definitions) or not isinstance(definitions[which], dict):
+            reader.fail(f"{path}.light", f"an index into extensions.KHR_lights_punctual.lights "
+                        f"(0 to {len(definitions) - 1})" if definitions else "no light (the file defines none)",
+                        which)
+        if len(lights) == MAX_LIGHTS:
+            reader.fail(path, f"at most {MAX_LIGHTS} lights (each keeps its own shadow map and min-max tree)",
+                        f"{len(lights) + 1} with this one")
+        lights.append(_light(reader, definitions[which], f"extensions.KHR_lights_punctual.lights.{which}",
+                             world[index], light_scale))
+        light_nodes.append(index)
+    return lights, light_nodes
+
+
+def _light(reader: _Reader, light: dict, path: str, matrix: np.ndarray, light_scale: float) -> Light:
+    kind = reader.get(light, "type", path, "string")
+    colour = reader.numbers(light, "color", path, 3, (1.0, 1.0, 1.0), 0.0)
+    power = colour * reader.get(light, "intensity", path, "number", 1.0, lo=0.0) * light_scale
+    if not power.max() <= MAX_POWER:  # as a YAML light's: beyond it float32 radiance overflows
+        reader.fail(f"{path}.intensity", f"a power (intensity × color × light_scale) of at most {MAX_POWER:g}",
+                    f"{power.max():.3g}")
+    reader.get(light, "range", path, "number", None, lo=0.0)  # checked, then ignored (docs/scene-format.md)
+    position = matrix[:3, 3].copy()
+    direction = matrix[:3, :3] @ np.array([0.0, 0.0, -1.0])  # lights shine along their node's -Z
+    length = float(np.linalg.norm(direction))
+    if kind == "point":
+        return PointLight(position=position, intensity=power)
+    if kind not in ("spot", "directional"):
+        reader.fail(f"{path}.type", "point, spot or directional", json.dumps(kind))
+    if not length > 0:
+        reader.fail(path, "a light whose node does not scale its -Z axis to nothing", "a zero direction")
+    direction = direction / length
+    if kind == "directional":
+        return DirectionalLight(direction=direction, irradiance=power)
+    spot = reader.get(light, "spot", path, "dict", {})
+    outer = reader.get(spot, "outerConeAngle", f"{path}.spot", "number", math.pi / 4, lo=0.0, hi=math.pi / 2)
+    inner = reader.get(spot, "innerConeAngle", f"{path}.spot", "number", 0.0, lo=0.0, hi=outer)
+    if outer <= 0.0 or math.degrees(outer) > MAX_SPOT_OUTER_DEG:
+        reader.fail(f"{path}.spot.outerConeAngle", f"an angle in (0, {math.radians(MAX_SPOT_OUTER_DEG):.4f}] "
+                    f"({MAX_SPOT_OUTER_DEG:g}°: the falloff texture spans tan of it, docs/limits.md)", outer)
+    # Inner and outer angles so close that the spec's clamp of 1 / (cos inner − cos outer) to 1000
+    # engages: the falloff is a ring of Δcos = 0.001 at the outer edge, narrower than a texel
+    # of the falloff texture: the hard cone at the outer angle is that edge.
+    hard = math.cos(inner) - math.cos(outer) <= 0.001
+    return SpotLight(position=position, direction=direction, cone_deg=math.degrees(outer), intensity=power,
+                     texture=None if hard else falloff_texture(inner, outer))
+
+
+def spot_attenuation(cos_angle, inner: float, outer: float):
+    """KHR_lights_punctual's recommended smooth falloff between the cone angles (radians):
+    clamp(cosθ·scale + offset, 0, 1)² with scale = 1/max(0.001, cos inner − cos outer),
+    offset = −cos outer·scale."""
+    scale = 1.0 / max(0.001, math.cos(inner) - math.cos(outer))
+    offset = -math.cos(outer) * scale
+    return np.clip(np.asarray(cos_angle, dtype=np.float64) * scale + offset, 0.0, 1.0) ** 2
+
+
+_FALLOFF_TEXTURES: dict[tuple[float, float], LightTexture] = {}
+
+
+def falloff_texture(inner: float, outer: float, side: int = FALLOFF_TEXTURE_SIDE) -> LightTexture:
+    """A spot's cone falloff as its light texture: the texture fills [−tan outer, tan outer]²
+    of the plane at distance 1 along the axis (docs/light-textures.md), so texel centre
+    (sx, sy) lies at tanθ = tan(outer)·|(sx, sy)|. One texture per cone pair, shared."""
+    key = (float(inner), float(outer), side)
+    if key not in _FALLOFF_TEXTURES:
+        centres = (np.arange(side) + 0.5) / side * 2.0 - 1.0
+        radius = np.hypot(centres[None, :], centres[:, None]) * math.tan(outer)
+        values = spot_attenuation(1.0 / np.sqrt(1.0 + radius * radius), inner, outer)
+        texels = np.repeat(values[:, :, None], 3, axis=2).astype(np.float32)
+        _FALLOFF_TEXTURES[key] = LightTexture(texels, f"cone falloff {math.degrees(inner):g}° to "
+                                                      f"{math.degrees(outer):g}°")
+    return _FALLOFF_TEXTURES[key]
+
+
+# --------------------------------------------------------------------------- camera
+
+
+def _cameras(reader: _Reader, graph: NodeGraph, world: dict[int, np.ndarray]) -> list[tuple[str, int, dict, str]]:
+    """(name, node, camera definition, its path) for every node of the scene with a camera, in node order."""
+    nodes, cameras = reader.items("nodes"), reader.items("cameras")
+    found = []
+    for index in sorted(graph.order):
+        if "camera" in nodes[index]:
+            which = reader.index(nodes[index], "camera", f"nodes.{index}", "cameras")
+            names = [name for name in (cameras[which].get("name"), nodes[index].get("name")) if isinstance(name, str)]
+            found.append((names, index, cameras[which], f"cameras.{which}"))
+    return found
+
+
+def _camera(reader: _Reader, found, name: str | None, matrix_of: dict[int, np.ndarray],
+            bounds: tuple[np.ndarray, np.ndarray]) -> tuple[Camera, int | None]:
+    if name is not None:
+        chosen = [entry for entry in found if name in entry[0]]
+        if not chosen:
+            names = sorted({n for entry in found for n in entry[0]})
+            raise SceneError(f"{reader.file}: cameras: expected a camera named {name!r} (the camera's or its "
+                             f"node's name), got {', '.join(map(repr, names)) if names else 'no named camera'}")
+        found = chosen
+    if not found:
+        return default_camera(*bounds), None
+    _, node, camera, path = found[0]
+    kind = reader.get(camera, "type", path, "string")
+    if kind != "perspective":
+        reader.fail(f"{path}.type", "a perspective camera (clrays has no orthographic one)", json.dumps(kind))
+    perspective = reader.get(camera, "perspective", path, "dict")
+    yfov = reader.get(perspective, "yfov", f"{path}.perspective", "number", lo=0.0, hi=math.pi)
+    if not 0.0 < yfov < math.pi:
+        reader.fail(f"{path}.perspective.yfov", "an angle in (0, π) radians", yfov)
+    far = reader.get(perspective, "zfar", f"{path}.perspective", "number", None, lo=0.0)
+    if far is not None and far <= 0.0:
+        reader.fail(f"{path}.perspective.zfar", "a distance > 0", far)
+    matrix = matrix_of[node]
+    position = matrix[:3, 3].copy()
+    forward, up = matrix[:3, :3] @ np.array([0.0, 0.0, -1.0]), matrix[:3, :3] @ np.array([0.0, 1.0, 0.0])
+    if not (np.linalg.norm(forward) > 0 and np.linalg.norm(np.cross(forward, up)) > 1e-9 * np.linalg.norm(forward)
+            * np.linalg.norm(up)):
+        reader.fail(f"nodes.{node}", "a camera node whose matrix keeps -Z and +Y apart", "a degenerate matrix")
+    forward = forward / np.linalg.norm(forward)
+    return Camera(position=position, look_at=position + forward, up=up / np.linalg.norm(up),
+                  fov_deg=math.degrees(yfov), far=far if far is not None else Camera.far), node
+
+
+def default_camera(lo: np.ndarray, hi: np.ndarray) -> Camera:
+    """The view of bounds lo..hi without a camera: from the front (+z) and above, looking at
+    their centre from the distance where their bounding sphere fills a 50° vertical field
+    of view; far reaches twice past the sphere."""
+    centre, radius = (lo + hi) / 2.0, max(float(np.linalg.norm(hi - lo)) / 2.0, 1e-3)
+    distance = radius / math.sin(math.radians(DEFAULT_FOV_DEG) / 2.0)
+    return Camera(position=centre + distance * DEFAULT_VIEW_DIRECTION, look_at=centre, up=np.array([0.0, 1.0, 0.0]),
+                  fov_deg=DEFAULT_FOV_DEG, far=2.0 * (distance + radius))
+
+
+# --------------------------------------------------------------------------- animation
+
+
+def _channels(reader: _Reader, graph: NodeGraph) -> tuple[tuple[_Channel, ...], float | None]:
+    channels, end = [], None
+    nodes = reader.items("nodes")
+    for a, animation in enumerate(reader.items("animations")):
+        path = f"animations.{a}"
+        samplers = reader.get(animation, "samplers", path, "list")
+        for c, channel in enumerate(reader.get(animation, "channels", path, "list")):
+            where = f"{path}.channels.{c}"
+            if not isinstance(channel, dict):
+                reader.fail(where, "an object", channel)
+            target = reader.get(channel, "target", where, "dict")
+            target_path = reader.get(target, "path", f"{where}.target", "string")
+            if target_path not in ("translation", "rotation", "scale"):
+                continue  # morph target weights and extensions' paths: not read (docs/scene-format.md)
+            if "node" not in target:
+                continue  # an extension targets something else
+            node = reader.index(target, "node", f"{where}.target", "nodes")
+            if "matrix" in nodes[node]:
+                reader.fail(f"{where}.target.node", "a node with translation/rotation/scale (a matrix cannot be "
+                            "animated)", node)
+            sampler_index = reader.get(channel, "sampler", where, "int")
+            if not 0 <= sampler_index < len(samplers) or not isinstance(samplers[sampler_index], dict):
+                reader.fail(f"{where}.sampler", f"an index into {path}.samplers (0 to {len(samplers) - 1})",
+                            sampler_index)
+            sampler, sampler_path = samplers[sampler_index], f"{path}.samplers.{sampler_index}"
+            interpolation = reader.get(sampler, "interpolation", sampler_path, "string", "LINEAR")
+            if interpolation not in ("LINEAR", "STEP", "CUBICSPLINE"):
+                reader.fail(f"{sampler_path}.interpolation", "LINEAR, STEP or CUBICSPLINE", json.dumps(interpolation))
+            input_index = reader.index(sampler, "input", sampler_path, "accessors")
+            times = reader.accessor(input_index, f"{sampler_path}.input", ("SCALAR",), (5126,))
+            if times.min() < 0 or np.any(np.diff(times) <= 0):
+                reader.fail(f"accessors.{input_index}", "key times >= 0 in increasing order", times[:8].tolist())
+            output_index = reader.index(sampler, "output", sampler_path, "accessors")
+            width = 4 if target_path == "rotation" else 3
+            values = reader.accessor(output_index, f"{sampler_path}.output", ("VEC4" if width == 4 else "VEC3",),
+                                     (5126, 5120, 5121, 5122, 5123) if width == 4 else (5126,))
+            expected = len(times) * (3 if interpolation == "CUBICSPLINE" else 1)
+            if len(values) != expected:
+                reader.fail(f"accessors.{output_index}.count", f"{expected} values for {len(times)} key times "
+                            f"({interpolation})", len(values))
+            if width == 4:
+                keyed = values if interpolation != "CUBICSPLINE" else values[1::3]
+                norms = np.linalg.norm(keyed, axis=1)
+                if np.any(np.abs(norms - 1.0) > QUATERNION_TOLERANCE):
+                    key = int(np.argmax(np.abs(norms - 1.0)))
+                    reader.fail(f"accessors.{output_index}", "unit quaternions [x, y, z, w]",
+                                f"{keyed[key].tolist()} with |q| = {float(norms[key]):.6g} at key {key}")
+                values = values[:, [3, 0, 1, 2]]  # [w, x, y, z], as clrays's quaternions
+            channels.append(_Channel(node, target_path, interpolation, times, values))
+            end = max(end or 0.0, float(times[-1]))
+    return tuple(channels), end
+
+
+def _sample(channel: _Channel, time: float) -> np.ndarray:
+    """A channel's value at `time` seconds: held before the first and after the last key."""
+    times, values, cubic = channel.times, channel.values, channel.interpolation == "CUBICSPLINE"
+    keyed = values[1::3] if cubic else values
+    if time <= times[0]:
+        value = keyed[0]
+    elif time >= times[-1]:
+        value = keyed[-1]
+    else:
+        k = int(np.searchsorted(times, time, side="right")) - 1
+        span = times[k + 1] - times[k]
+        u = (time - times[k]) / span
+        if channel.interpolation == "STEP":
+            value = keyed[k]
+        elif cubic:  # Hermite with the out-tangent of key k and the in-tangent of key k + 1 (glTF appendix C)
+            a, b = keyed[k], keyed[k + 1]
+            out_tangent, in_tangent = values[3 * k + 2] * span, values[3 * (k + 1)] * span
+            u2, u3 = u * u, u * u * u
+            value = ((2 * u3 - 3 * u2 + 1) * a + (u3 - 2 * u2 + u) * out_tangent + (-2 * u3 + 3 * u2) * b
+                     + (u3 - u2) * in_tangent)
+        elif channel.path == "rotation":
+            value = slerp(keyed[k], keyed[k + 1], u)
+        else:
+            value = keyed[k] + (keyed[k + 1] - keyed[k]) * u
+    if channel.path == "rotation":
+        norm = float(np.linalg.norm(value))
+        value = value / norm if norm > 0 else np.array([1.0, 0.0, 0.0, 0.0])
+    return value
+
+
+@dataclass(frozen=True)
+class GltfAnimation(Animation):
+    """A glTF file's node animation, as a clrays animation: frame f is at f / fps seconds.
+    Each frame's node world matrices place the imported meshes, lights and camera; the
+    parts of the scene that did not come from the file keep their own values."""
+
+    graph: NodeGraph = None
+    instances: tuple[_Instance, ...] = ()
+    first_row: int = 0  # the imported triangles' first row in Scene.geometry
+    light_nodes: tuple[tuple[int, int], ...] = ()  # (scene light index, node)
+    camera_node: int | None = None
+    world_cache: dict = field(default_factory=dict, compare=False, repr=False)
+
+    def _world(self, frame: float) -> dict[int, np.ndarray]:
+        if frame not in self.world_cache:
+            self.world_cache.clear()  # frames come one at a time: keep the last
+            self.world_cache[frame] = self.graph.world(self.time(frame))
+        return self.world_cache[frame]
+
+    def _camera(self, scene: Scene, frame: float):
+        if self.camera_node is None:
+            return scene.camera
+        matrix = self._world(frame)[self.camera_node]
+        position = matrix[:3, 3].copy()
+        forward, up = matrix[:3, :3] @ np.array([0.0, 0.0, -1.0]), matrix[:3, :3] @ np.array([0.0, 1.0, 0.0])
+        return replace(scene.camera, position=position, look_at=position + forward / np.linalg.norm(forward),
+                       up=up / np.linalg.norm(up))
+
+    def _lights(self, scene: Scene, frame: float):
+        lights, world = list(scene.lights), self._world(frame)
+        for index, node in self.light_nodes:
+            matrix, light = world[node], lights[index]
+            direction = matrix[:3, :3] @ np.array([0.0, 0.0, -1.0])
+            changes = {} if isinstance(light, DirectionalLight) else {"position": matrix[:3, 3].copy()}
+            if not isinstance(light, PointLight) and np.linalg.norm(direction) > 0:
+                changes["direction"] = direction / np.linalg.norm(direction)
+            lights[index] = replace(light, **changes)
+        return tuple(lights)
+
+    def _geometry(self, scene: Scene, frame: float) -> Geometry:
+        world = self._world(frame)
+        triangles, normals = scene.geometry.triangles.copy(), scene.geometry.normals.copy()
+        for instance in self.instances:
+            rows = slice(instance.rows.start + self.first_row, instance.rows.stop + self.first_row)
+            matrix = world[instance.node]
+            triangles[rows] = transform_points(matrix, instance.local)
+            normals[rows] = _world_normals(matrix, instance.local_normals, triangles[rows])
+        return replace(scene.geometry, triangles=triangles, normals=normals)
+
+
+# --------------------------------------------------------------------------- entry points
+
+
+def import_gltf(path: Path, file: str | None = None, camera: str | None = None, light_scale: float = 1.0) -> Imported:
+    """Read a glTF 2.0 file: `camera` names the camera to take (the first otherwise),
+    `light_scale` multiplies every light's power. `file` names it in messages."""
+    path = Path(path)
+    file = file or str(path)
+    reader = _open(path, file)
+    _check_header(reader)
+    graph = _graph(reader)
+    world = graph.world()
+    for node in graph.order:  # the device works in float32: a product of large transforms must stay in its range
+        if not np.all(np.abs(world[node]) < FLOAT32_MAX):
+            reader.fail(f"nodes.{node}", "a transform that, with its parents', stays finite in float32",
+                        f"a world matrix entry of {float(np.abs(world[node]).max()):.3g}")
+    channels, duration = _channels(reader, graph)
+    instances, tris, normals, albedo, outward = _meshes(reader, graph, world, bool(channels))
+    lights, light_nodes = _lights(reader, graph, world, light_scale)
+    triangles = np.concatenate(tris) if tris else np.zeros((0, 3, 3))
+    del tris
+    if len(triangles):
+        bounds = (triangles.reshape(-1, 3).min(axis=0), triangles.reshape(-1, 3).max(axis=0))
+    else:
+        bounds = (np.full(3, -1.0), np.full(3, 1.0))
+    scene_camera, camera_node = _camera(reader, _cameras(reader, graph, world), camera, world, bounds)
+    graph = NodeGraph(graph.parents, graph.order, graph.matrices, graph.trs, channels)
+    object_id = np.concatenate([np.full(i.rows.stop - i.rows.start, k, np.int32) for k, i in enumerate(instances)]) \
+        if instances else np.zeros(0, np.int32)
+    return Imported(file=file, triangles=triangles,
+                    normals=np.concatenate(normals) if normals else np.zeros((0, 3, 3)),
+                    albedo=np.concatenate(albedo) if albedo else np.zeros((0, 3)), object_id=object_id,
+                    outward=np.concatenate(outward) if outward else np.zeros(0, np.int8),
+                    object_count=len(instances), instances=tuple(instances), lights=tuple(lights),
+                    light_nodes=tuple(light_nodes), camera=scene_camera, camera_node=camera_node, graph=graph,
+                    duration=duration)
+
+
+def merge(scene: Scene, imported: Imported, own_camera: bool, own_animation: bool, fps: float) -> Scene:
+    """The scene with the imported meshes and lights after its own, and the file's animation
+    unless the scene has one of its own. Checks the limits over both."""
+    geometry = scene.geometry
+    objects = (int(geometry.object_id.max()) + 1 if geometry.count else 0)
+    if objects + imported.object_count > MAX_OBJECTS:
+        raise SceneError(f"{imported.file}: meshes: expected at most {MAX_OBJECTS} objects with the scene's own, "
+                         f"got {objects + imported.object_count}")
+    if geometry.count + len(imported.triangles) > MAX_TRIANGLES:
+        raise SceneError(f"{imported.file}: meshes: expected at most {MAX_TRIANGLES} triangles with the scene's "
+                         f"own, got {geometry.count + len(imported.triangles)}")
+    lights = scene.lights + imported.lights
+    if not lights:
+        raise SceneError(f"{imported.file}: extensions.KHR_lights_punctual: expected at least 1 light "
+                         f"(KHR_lights_punctual, or the scene's lights), got none")
+    if len(lights) > MAX_LIGHTS:
+        raise SceneError(f"{imported.file}: extensions.KHR_lights_punctual: expected at most {MAX_LIGHTS} lights "
+                         f"with the scene's own, got {len(lights)}")
+    count = len(imported.triangles)
+    opacity = None if geometry.opacity is None else np.concatenate([geometry.opacity, np.ones((count, 3))])
+    merged = Geometry(
+        triangles=np.ascontiguousarray(np.concatenate([geometry.triangles, imported.triangles]), dtype=np.float64),
+        albedo=np.ascontiguousarray(np.concatenate([geometry.albedo, imported.albedo]), dtype=np.float64),
+        object_id=np.concatenate([geometry.object_id, imported.object_id + objects]).astype(np.int32),
+        normals=np.concatenate([geometry.normals, imported.normals]),
+        smooth=np.concatenate([geometry.smooth, np.ones(count, bool)]),
+        reliefs=geometry.reliefs, opacity=opacity,
+        outward=np.concatenate([geometry.outward, imported.outward]),
+        convex_part=np.concatenate([geometry.convex_part,
+                                    geometry.count + np.arange(count, dtype=np.int32)]).astype(np.int32))
+    scene = replace(scene, lights=lights, geometry=merged,
+                    camera=scene.camera if own_camera else imported.camera)
+    if imported.duration is not None and not own_animation:
+        first_light = len(lights) - len(imported.lights)
+        scene = replace(scene, animation=GltfAnimation(
+            fps=fps, first=0, last=max(int(math.ceil(imported.duration * fps - 1e-9)), 0),
+            graph=imported.graph, instances=imported.instances, first_row=geometry.count,
+            light_nodes=tuple((first_light + i, node) for i, node in enumerate(imported.light_nodes)),
+            camera_node=None if own_camera else imported.camera_node))
+    return scene
