@@ -27,7 +27,7 @@ from .runs import bench as bench_run
 from .runs.references import parse_reference
 from .runs.sequence import (check_pattern, check_video_path, parse_frames, render_sequence, scene_frames,
                             write_video)
-from .runs.video import DEFAULT_CRF, video_encoder_options
+from .runs.video import DEFAULT_CRF, VIDEO_OPTIONS, video_encoder_options
 from .runs.sweep import axes_from, format_table, run_sweep
 from .scene.fields import unread_render_keys
 from .scene.load import load_scene
@@ -230,11 +230,13 @@ def cluster_options(command):
     """--scheduler / --workers: run the frames or points on dask.distributed workers
     (clrays.runs.distributed); without them the run stays in this process and dask is
     not imported."""
-    command = option("--workers", type=click.IntRange(1, 256), metavar="N", group=RUN,
-                     help="Render on a local dask cluster of N worker processes, one OpenCL session each.")(command)
+    command = option("--workers", type=click.IntRange(1), metavar="N", group=RUN,
+                     help="Render on a local dask cluster of N worker processes, one OpenCL session each (at most "
+                          "one per CPU core and ~400 MiB of free memory).")(command)
     return option("--scheduler", metavar="ADDRESS", group=RUN,
-                  help="Render on the workers of a running dask scheduler (tcp://host:8786); each worker uses "
-                       "the device its own CLRAYS_DEVICE names. Output paths must be shared with them.")(command)
+                  help="Render on the workers of a running dask scheduler (tcp://HOST:PORT, 5 s to answer); "
+                       "each worker uses the device its own CLRAYS_DEVICE names. Output paths must be shared with "
+                       "them.")(command)
 
 
 def _executor(scheduler: str | None, workers: int | None, device: str | None):
@@ -420,7 +422,8 @@ there, so an interrupted run resumes where it stopped (--overwrite renders all a
 @option("--crf", type=click.IntRange(0, 51), default=None, metavar="N", group=OUTPUT,
         help=f"MP4 quality: H.264 constant rate factor, lower is better (default {DEFAULT_CRF}).")
 @option("--video-option", "video_options", multiple=True, metavar="KEY=VALUE", group=OUTPUT,
-        help="MP4: an ffmpeg output option (repeatable), e.g. --video-option preset=slow or pix_fmt=yuv444p.")
+        help=f"MP4: an encoding option for ffmpeg (repeatable), e.g. --video-option preset=slow or "
+             f"pix_fmt=yuv444p; KEY is one of {', '.join(VIDEO_OPTIONS)}.")
 @exposure_option("PNG and video")
 @overwrite_option("Render every frame, also those already written.")
 @reuse_option("frames")
