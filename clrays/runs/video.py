@@ -1,5 +1,6 @@
 """MP4 (H.264) from a sequence's frames, through imageio-ffmpeg's own ffmpeg binary, so
-no system ffmpeg is needed (`pip install 'clrays[video]'`).
+no system ffmpeg is needed (`pip install 'clrays[video]'`); and GIF, with pillow, on one
+dithered palette (`write_gif`).
 
 Players want yuv420p, whose chroma is subsampled 2×2, so the frames are padded to even
 width and height (the last row or column repeated). `--crf` and `--video-option
@@ -121,4 +122,45 @@ def write_mp4(frames: Iterable[np.ndarray], out: Path, fps: float, options: dict
                 raise OutputError(f"{out}: ffmpeg exited without writing the video")
 
     write_atomic(out, encode)
+    return out
+
+
+#: Frames of a GIF whose colours choose its palette, at most (evenly spaced).
+GIF_PALETTE_FRAMES = 64
+
+
+def gif_palette(frames: Sequence[np.ndarray]):
+    """One 256-colour palette (a PIL "P" image) for 8-bit sRGB frames (H, W, 3), by median
+    cut over the distinct colours they hold, each counted once rather than once per pixel:
+    a light's small bright glow holds few pixels but many colours, and a palette fitted to
+    the pixels left it a handful of entries, seen as rings (the large dark fog took the rest)."""
+    from PIL import Image
+
+    step = max(1, -(-len(frames) // GIF_PALETTE_FRAMES))
+    colours = np.unique(np.concatenate([np.unique(_packed(frame)) for frame in frames[::step]]))
+    swatch = np.stack([(colours >> 16) & 255, (colours >> 8) & 255, colours & 255], axis=-1).astype(np.uint8)
+    return Image.fromarray(swatch[None], mode="RGB").quantize(256, method=Image.Quantize.MEDIANCUT)
+
+
+def _packed(frame: np.ndarray) -> np.ndarray:
+    """(H, W, 3) uint8 → one int32 per pixel, 0xRRGGBB."""
+    frame = frame.astype(np.int32)
+    return (frame[..., 0] << 16) | (frame[..., 1] << 8) | frame[..., 2]
+
+
+def write_gif(frames: Sequence, out: Path, duration_ms: int) -> Path:
+    """An animated GIF that loops forever of 8-bit sRGB frames (arrays (H, W, 3) or RGB
+    images, all one size), at `out`, atomically: one palette for all frames (`gif_palette`,
+    so colours do not flicker between frames), Floyd–Steinberg dithered onto it, so a
+    smooth gradient stays smooth where 256 colours cannot hold every step."""
+    from PIL import Image
+
+    frames = [np.asarray(frame, dtype=np.uint8) for frame in frames]
+    palette = gif_palette(frames)
+    images = [Image.fromarray(np.ascontiguousarray(frame), mode="RGB").quantize(palette=palette,
+                                                                               dither=Image.Dither.FLOYDSTEINBERG)
+              for frame in frames]
+    write_atomic(out, lambda temporary: images[0].save(temporary, format="GIF", save_all=True,
+                                                       append_images=images[1:], duration=duration_ms, loop=0,
+                                                       optimize=False))
     return out
