@@ -29,6 +29,7 @@ from .runs.sequence import (check_pattern, check_video_path, parse_frames, rende
                             write_video)
 from .runs.video import DEFAULT_CRF, VIDEO_OPTIONS, video_encoder_options
 from .runs.sweep import axes_from, format_table, run_sweep
+from .scene import files as scene_files
 from .scene.fields import unread_render_keys
 from .scene.load import load_scene
 from .scene.model import METHODS, RENAMED_METHODS, SHADOW_FILTERS
@@ -134,6 +135,18 @@ def device_option():
     return option("--device", envvar="CLRAYS_DEVICE", show_envvar=True, metavar="P:D|NAME", group=DEVICE,
                   help="OpenCL device: 'P:D' or a name substring (see `clrays info`). Default: the first GPU, "
                        "else PoCL's CPU device.")
+
+
+def _confine(context: click.Context, parameter, value: bool) -> None:
+    scene_files.confine_scene_files(value)
+    context.call_on_close(lambda: scene_files.confine_scene_files(False))  # for this command alone
+
+
+def confine_option():
+    return option("--confine", is_flag=True, expose_value=False, callback=_confine, group=SCENE,
+                  help=f"Refuse any file the scene names (meshes, relief maps, light textures) outside the scene "
+                       f"file's folder, symbolic links resolved; also {scene_files.CONFINE_ENV}=1. For a service "
+                       f"that renders scenes it receives.")
 
 
 def _method(context: click.Context, parameter, value: str | None) -> str | None:
@@ -304,6 +317,7 @@ Examples:
   clrays render scenes/orbit.yaml -o out/orbit_30.png --frame 30
 """)
 @click.argument("scene", type=click.Path(path_type=Path))
+@confine_option()
 @method_option()
 @overrides_option("Override a scene field (repeatable), e.g. --set render.steps=1024.")
 @option("--frame", type=int, metavar="N", group=SCENE,
@@ -410,6 +424,7 @@ Frames are written atomically: re-running the same command skips the frames alre
 there, so an interrupted run resumes where it stopped (--overwrite renders all again).
 """)
 @click.argument("scene", type=click.Path(path_type=Path))
+@confine_option()
 @option("--frames", metavar="A:B", group=SCENE,
         help="Frames A to B, inclusive (also A:, :B or N). Default: the animation's frames.")
 @method_option()
@@ -481,6 +496,7 @@ per-stage times, reused stages and, with --reference, the error against it in pe
 contact_sheet.png. Re-running the same command keeps the points already done.
 """)
 @click.argument("scene", type=click.Path(path_type=Path))
+@confine_option()
 @overrides_option("A swept key with comma-separated values, or a fixed override with one (repeatable); the "
                   "points are the cartesian product of the swept keys.", metavar="KEY.PATH=V1,V2,...", group=SWEEP)
 @option("--reference", metavar="exact|raymarch:N", group=SWEEP,
@@ -565,6 +581,7 @@ Examples:
   clrays bench scenes/bunny.yaml --targets 1,0.5,0.1  # equal error down to 0.1 %
 """)
 @click.argument("scenes", nargs=-1, type=click.Path(path_type=Path))
+@confine_option()
 @option("-r", "--resolution", "resolutions", multiple=True, default=["640x360"], show_default=True, metavar="WxH",
         callback=_resolutions, group=BENCH, help="WIDTHxHEIGHT to render at (repeatable).")
 @option("--repeats", type=click.IntRange(1, 100), default=5, show_default=True, group=BENCH,
@@ -613,6 +630,7 @@ Examples:
   clrays relief-to-mesh scenes/lattice.yaml -o out/lattice.obj --object 2
 """)
 @click.argument("scene", type=click.Path(path_type=Path))
+@confine_option()
 @option("--object", "index", type=int, default=None, metavar="I", group=SCENE,
         help="The relief to convert: objects.I of the scene (default: the first relief).")
 @overrides_option("Override a scene field (repeatable), e.g. --set objects.0.height=0.1.")
@@ -648,6 +666,7 @@ Writes <filter>.png, <filter>_diff.png (red: brighter than the reference, a ligh
 blue: darker), reference_pcf.png, compare.csv and compare.md.
 """)
 @click.argument("scene", type=click.Path(path_type=Path))
+@confine_option()
 @overrides_option("Override a scene field (repeatable), e.g. --set image.width=320.")
 @option("--radius", type=click.IntRange(0, 16), default=2, show_default=True, group=SCENE,
         help="Filter radius in texels, for every filter and the PCF reference.")
