@@ -575,7 +575,7 @@ def _targets(context, parameter, text: str) -> tuple[float, ...]:
 \b
 Examples:
   clrays bench                                  # every bench scene at 640x360
-  clrays bench scenes/demo.yaml -r 1280x720 -r 640x360 --out bench/out
+  clrays bench scenes/demo.yaml -r 1280x720 -r 640x360 -o bench/out
   clrays bench --repeats 3 --pixels 500         # a quicker, noisier run
   clrays bench scenes/demo.yaml -r 64x36 --quick  # smoke run: does it all work?
   clrays bench scenes/bunny.yaml --targets 1,0.5,0.1  # equal error down to 0.1 %
@@ -593,13 +593,16 @@ Examples:
 @option("--quick", is_flag=True, group=BENCH, help="A handful of points per scene: a smoke run, not results.")
 @option("--volume-only", "volume", is_flag=True, group=BENCH,
         help="Black surfaces: measure the in-scattering's error alone (a smaller sweep).")
-@option("-o", "--out", type=click.Path(file_okay=False, path_type=Path), default=Path("bench/out"),
+@option("-o", "--output", "out", type=click.Path(file_okay=False, path_type=Path), default=Path("bench/out"),
         show_default=True, group=OUTPUT, help="Folder for bench.csv, bench.png, summary.md, machine.json.")
+@option("--out", "out_alias", type=click.Path(file_okay=False, path_type=Path), hidden=True, group=OUTPUT,
+        help="The former name of --output.")
 @option("--cache", type=click.Path(file_okay=False, path_type=Path), default=Path(".cache/clrays"),
         show_default=True, group=OUTPUT, help="Where exact references are cached.")
 @progress_option("Progress bar while an exact reference is computed (default: on a terminal).")
 @device_option()
-def bench(scenes, resolutions, repeats, pixels, targets, quick, volume, out, cache, progress, device) -> None:
+def bench(scenes, resolutions, repeats, pixels, targets, quick, volume, out, out_alias, cache, progress,
+          device) -> None:
     """Time every method and setting against its error versus `exact`.
 
     raymarch's steps are searched (doubled from 8 until the lowest target's relative RMSE,
@@ -608,6 +611,10 @@ def bench(scenes, resolutions, repeats, pixels, targets, quick, volume, out, cac
     Pareto front, and the headline table (speedup of minmax over raymarch at each target,
     by default 5, 1 and 0.5 % error).
     """
+    if out_alias is not None:
+        if click.get_current_context().get_parameter_source("out") is not ParameterSource.DEFAULT:
+            raise click.UsageError("give -o/--output or --out (its former name), not both")
+        out = out_alias
     for folder in (out, cache):  # fail before the sweep, not after it
         make_folder(folder)
     paths = [str(path) for path in scenes] or list(bench_run.DEFAULT_SCENES)
