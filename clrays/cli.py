@@ -200,8 +200,11 @@ def _notice_unread_keys(scene, method: str | None) -> None:
 
 def _estimate_exact(scene, method: str | None, progress) -> object:
     """`exact` runs on the host and can take minutes: say how long up front, and when no
-    bar is shown (stderr not a terminal) report progress as lines. Returns the progress
-    argument for the render."""
+    bar is shown (stderr not a terminal) report progress as lines; `raymarch` at many
+    steps can too, and reports lines once it has run a while (stages/raymarch.py). Returns
+    the progress argument for the render."""
+    if (method or scene.render.method) == "raymarch":
+        return progress or (lambda line: click.echo(f"clrays: {line}", err=True))
     if (method or scene.render.method) != "exact":
         return progress
     seconds = estimate_seconds(scene)
@@ -327,7 +330,8 @@ Examples:
 @exposure_option("PNG only")
 @option("--stats", is_flag=True, group=RUN, help="Print per-stage device times and device memory.")
 @verbose_option()
-@progress_option("Progress bar for slow methods (default: on a terminal).")
+@progress_option("Progress bar for the slow methods, exact and raymarch (default: on a terminal; off one, a "
+                 "line every 10 % of a long frame).")
 @device_option()
 @click.pass_context
 def render(context, scene: Path, method, overrides, frame, output: Path, exposure, stats, verbose, progress,
@@ -444,7 +448,7 @@ there, so an interrupted run resumes where it stopped (--overwrite renders all a
 @reuse_option("frames")
 @option("--stats", is_flag=True, group=RUN, help="Print each frame's time and reused stages, then a summary.")
 @verbose_option()
-@progress_option()
+@progress_option("Progress bar (default: on a terminal; off one, a line per frame rendered).")
 @cluster_options
 @device_option()
 @click.pass_context
@@ -463,11 +467,17 @@ def sequence(context, scene, frames, method, overrides, pattern, video, crf, vid
         if stats or verbose:
             _notice_unread_keys(loaded, method)
 
+        seen = []
+
         def on_frame(frame, path, result):
+            seen.append(frame)
             if result is not None:
                 done.append(result)
                 if stats:
                     click.echo(_frame_line(f"frame {frame}", result))
+                elif not progress:  # no bar (stderr is not a terminal): a line per frame rendered
+                    click.echo(f"clrays: frame {frame}: {result.wall_ms:.0f} ms ({len(seen)} of {len(chosen)})",
+                               err=True)
 
         with _executor(scheduler, workers, device) as executor:
             report = render_sequence(loaded, pattern, chosen, renderer=Renderer(device, reuse=reuse), method=method,
@@ -509,7 +519,7 @@ contact_sheet.png. Re-running the same command keeps the points already done.
 @exposure_option("PNG and contact sheet")
 @overwrite_option("Render every point, also those done by an earlier run.")
 @reuse_option("points")
-@progress_option()
+@progress_option("Progress bar (default: on a terminal; off one, a line per point rendered).")
 @cluster_options
 @device_option()
 @click.pass_context
