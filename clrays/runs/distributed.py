@@ -22,6 +22,7 @@ Output paths must be reachable from the workers (a shared file system on a clust
 """
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import socket
@@ -147,10 +148,8 @@ def _decode_greeting(body: bytes):
         if rest:
             raise ValueError("frames beyond the greeting")
         return loads(frames, deserialize=False)
-    except (ValueError, TypeError, KeyError, IndexError, struct.error) as exc:
-        raise ValueError(f"{type(exc).__name__}: {exc}") from None
-    except Exception as exc:  # noqa: BLE001 - msgpack raises its own types for garbage
-        raise ValueError(f"{type(exc).__name__}: {exc}") from None
+    except Exception as exc:  # noqa: BLE001 - struct, msgpack and dask raise their own types for garbage
+        raise ValueError(_one_line(exc)) from None
 
 
 def _bytes(count: int) -> str:
@@ -208,7 +207,7 @@ class DaskExecutor:
             probe_scheduler(self.scheduler, host, port)
             import dask
 
-            try:
+            try:  # the timeout bounds the client's connection, the setting those it opens while registering
                 with dask.config.set({"distributed.comm.timeouts.connect": f"{CONNECT_TIMEOUT_S}s"}):
                     self.client = distributed.Client(self.scheduler, timeout=CONNECT_TIMEOUT_S)
             except Exception as exc:  # noqa: BLE001 - dask raises many types; the user needs one line
@@ -300,18 +299,16 @@ def _one_line(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
-class _quiet:
-    """Raise a logger's level (and its children's) to CRITICAL for the length of a block."""
-
-    def __init__(self, name: str):
-        self._logger = logging.getLogger(name)
-
-    def __enter__(self):
-        self._level = self._logger.level
-        self._logger.setLevel(logging.CRITICAL)
-
-    def __exit__(self, *exc_info):
-        self._logger.setLevel(self._level)
+@contextlib.contextmanager
+def _quiet(name: str) -> Iterator[None]:
+    """A logger (and its children) at CRITICAL for the length of a block."""
+    logger = logging.getLogger(name)
+    level = logger.level
+    logger.setLevel(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
 
 
 # --------------------------------------------------------------------------- on the workers
