@@ -28,8 +28,9 @@ from .runs import bench as bench_run
 from .runs.references import parse_reference
 from .runs.sequence import (check_pattern, check_video_path, parse_frames, render_sequence, scene_frames,
                             write_video)
-from .runs.video import DEFAULT_CRF, video_encoder_options
+from .runs.video import DEFAULT_CRF, VIDEO_OPTIONS, video_encoder_options
 from .runs.sweep import axes_from, format_table, run_sweep
+from .scene import files as scene_files
 from .scene.fields import unread_render_keys
 from .scene.load import load_scene
 from .scene.model import METHODS, RENAMED_METHODS, SHADOW_FILTERS
@@ -137,6 +138,18 @@ def device_option():
                        "else PoCL's CPU device.")
 
 
+def _confine(context: click.Context, parameter, value: bool) -> None:
+    scene_files.confine_scene_files(value)
+    context.call_on_close(lambda: scene_files.confine_scene_files(False))  # for this command alone
+
+
+def confine_option():
+    return option("--confine", is_flag=True, expose_value=False, callback=_confine, group=SCENE,
+                  help=f"Refuse any file the scene names (meshes, relief maps, light textures) outside the scene "
+                       f"file's folder, symbolic links resolved; also {scene_files.CONFINE_ENV}=1. For a service "
+                       f"that renders scenes it receives.")
+
+
 def _method(context: click.Context, parameter, value: str | None) -> str | None:
     return RENAMED_METHODS.get(value, value)  # a former name reads as the method's own
 
@@ -199,8 +212,11 @@ def _notice_unread_keys(scene, method: str | None) -> None:
 
 def _estimate_exact(scene, method: str | None, progress) -> object:
     """`exact` runs on the host and can take minutes: say how long up front, and when no
-    bar is shown (stderr not a terminal) report progress as lines. Returns the progress
-    argument for the render."""
+    bar is shown (stderr not a terminal) report progress as lines; `raymarch` at many
+    steps can too, and reports lines once it has run a while (stages/raymarch.py). Returns
+    the progress argument for the render."""
+    if (method or scene.render.method) == "raymarch":
+        return progress or (lambda line: click.echo(f"clrays: {line}", err=True))
     if (method or scene.render.method) != "exact":
         return progress
     seconds = estimate_seconds(scene)
@@ -242,11 +258,13 @@ def cluster_options(command):
     """--scheduler / --workers: run the frames or points on dask.distributed workers
     (clrays.runs.distributed); without them the run stays in this process and dask is
     not imported."""
-    command = option("--workers", type=click.IntRange(1, 256), metavar="N", group=RUN,
-                     help="Render on a local dask cluster of N worker processes, one OpenCL session each.")(command)
+    command = option("--workers", type=click.IntRange(1), metavar="N", group=RUN,
+                     help="Render on a local dask cluster of N worker processes, one OpenCL session each (at most "
+                          "one per CPU core and ~400 MiB of free memory).")(command)
     return option("--scheduler", metavar="ADDRESS", group=RUN,
-                  help="Render on the workers of a running dask scheduler (tcp://host:8786); each worker uses "
-                       "the device its own CLRAYS_DEVICE names. Output paths must be shared with them.")(command)
+                  help="Render on the workers of a running dask scheduler (tcp://HOST:PORT, 5 s to answer); "
+                       "each worker uses the device its own CLRAYS_DEVICE names. Output paths must be shared with "
+                       "them.")(command)
 
 
 def _executor(scheduler: str | None, workers: int | None, device: str | None):
@@ -314,6 +332,7 @@ Examples:
   clrays render scenes/orbit.yaml -o out/orbit_30.png --frame 30
 """)
 @click.argument("scene", type=click.Path(path_type=Path))
+@confine_option()
 @method_option()
 @overrides_option("Override a scene field (repeatable), e.g. --set render.steps=1024.")
 @camera_option()
@@ -324,7 +343,8 @@ Examples:
 @exposure_option("PNG only")
 @option("--stats", is_flag=True, group=RUN, help="Print per-stage device times and device memory.")
 @verbose_option()
-@progress_option("Progress bar for slow methods (default: on a terminal).")
+@progress_option("Progress bar for the slow methods, exact and raymarch (default: on a terminal; off one, a "
+                 "line every 10 % of a long frame).")
 @device_option()
 @click.pass_context
 def render(context, scene: Path, method, overrides, camera, frame, output: Path, exposure, stats, verbose, progress,
@@ -421,6 +441,7 @@ Frames are written atomically: re-running the same command skips the frames alre
 there, so an interrupted run resumes where it stopped (--overwrite renders all again).
 """)
 @click.argument("scene", type=click.Path(path_type=Path))
+@confine_option()
 @option("--frames", metavar="A:B", group=SCENE,
         help="Frames A to B, inclusive (also A:, :B or N). Default: the animation's frames.")
 @method_option()
@@ -434,13 +455,14 @@ there, so an interrupted run resumes where it stopped (--overwrite renders all a
 @option("--crf", type=click.IntRange(0, 51), default=None, metavar="N", group=OUTPUT,
         help=f"MP4 quality: H.264 constant rate factor, lower is better (default {DEFAULT_CRF}).")
 @option("--video-option", "video_options", multiple=True, metavar="KEY=VALUE", group=OUTPUT,
-        help="MP4: an ffmpeg output option (repeatable), e.g. --video-option preset=slow or pix_fmt=yuv444p.")
+        help=f"MP4: an encoding option for ffmpeg (repeatable), e.g. --video-option preset=slow or "
+             f"pix_fmt=yuv444p; KEY is one of {', '.join(VIDEO_OPTIONS)}.")
 @exposure_option("PNG and video")
 @overwrite_option("Render every frame, also those already written.")
 @reuse_option("frames")
 @option("--stats", is_flag=True, group=RUN, help="Print each frame's time and reused stages, then a summary.")
 @verbose_option()
-@progress_option()
+@progress_option("Progress bar (default: on a terminal; off one, a line per frame rendered).")
 @cluster_options
 @device_option()
 @click.pass_context
@@ -460,11 +482,17 @@ def sequence(context, scene, frames, method, overrides, camera, pattern, video, 
         if stats or verbose:
             _notice_unread_keys(loaded, method)
 
+        seen = []
+
         def on_frame(frame, path, result):
+            seen.append(frame)
             if result is not None:
                 done.append(result)
                 if stats:
                     click.echo(_frame_line(f"frame {frame}", result))
+                elif not progress:  # no bar (stderr is not a terminal): a line per frame rendered
+                    click.echo(f"clrays: frame {frame}: {result.wall_ms:.0f} ms ({len(seen)} of {len(chosen)})",
+                               err=True)
 
         with _executor(scheduler, workers, device) as executor:
             report = render_sequence(loaded, pattern, chosen, renderer=Renderer(device, reuse=reuse), method=method,
@@ -493,6 +521,7 @@ per-stage times, reused stages and, with --reference, the error against it in pe
 contact_sheet.png. Re-running the same command keeps the points already done.
 """)
 @click.argument("scene", type=click.Path(path_type=Path))
+@confine_option()
 @overrides_option("A swept key with comma-separated values, or a fixed override with one (repeatable); the "
                   "points are the cartesian product of the swept keys.", metavar="KEY.PATH=V1,V2,...", group=SWEEP)
 @camera_option()
@@ -506,7 +535,7 @@ contact_sheet.png. Re-running the same command keeps the points already done.
 @exposure_option("PNG and contact sheet")
 @overwrite_option("Render every point, also those done by an earlier run.")
 @reuse_option("points")
-@progress_option()
+@progress_option("Progress bar (default: on a terminal; off one, a line per point rendered).")
 @cluster_options
 @device_option()
 @click.pass_context
@@ -573,12 +602,13 @@ def _targets(context, parameter, text: str) -> tuple[float, ...]:
 \b
 Examples:
   clrays bench                                  # every bench scene at 640x360
-  clrays bench scenes/demo.yaml -r 1280x720 -r 640x360 --out bench/out
+  clrays bench scenes/demo.yaml -r 1280x720 -r 640x360 -o bench/out
   clrays bench --repeats 3 --pixels 500         # a quicker, noisier run
   clrays bench scenes/demo.yaml -r 64x36 --quick  # smoke run: does it all work?
   clrays bench scenes/bunny.yaml --targets 1,0.5,0.1  # equal error down to 0.1 %
 """)
 @click.argument("scenes", nargs=-1, type=click.Path(path_type=Path))
+@confine_option()
 @option("-r", "--resolution", "resolutions", multiple=True, default=["640x360"], show_default=True, metavar="WxH",
         callback=_resolutions, group=BENCH, help="WIDTHxHEIGHT to render at (repeatable).")
 @option("--repeats", type=click.IntRange(1, 100), default=5, show_default=True, group=BENCH,
@@ -590,13 +620,16 @@ Examples:
 @option("--quick", is_flag=True, group=BENCH, help="A handful of points per scene: a smoke run, not results.")
 @option("--volume-only", "volume", is_flag=True, group=BENCH,
         help="Black surfaces: measure the in-scattering's error alone (a smaller sweep).")
-@option("-o", "--out", type=click.Path(file_okay=False, path_type=Path), default=Path("bench/out"),
+@option("-o", "--output", "out", type=click.Path(file_okay=False, path_type=Path), default=Path("bench/out"),
         show_default=True, group=OUTPUT, help="Folder for bench.csv, bench.png, summary.md, machine.json.")
+@option("--out", "out_alias", type=click.Path(file_okay=False, path_type=Path), hidden=True, group=OUTPUT,
+        help="The former name of --output.")
 @option("--cache", type=click.Path(file_okay=False, path_type=Path), default=Path(".cache/clrays"),
         show_default=True, group=OUTPUT, help="Where exact references are cached.")
 @progress_option("Progress bar while an exact reference is computed (default: on a terminal).")
 @device_option()
-def bench(scenes, resolutions, repeats, pixels, targets, quick, volume, out, cache, progress, device) -> None:
+def bench(scenes, resolutions, repeats, pixels, targets, quick, volume, out, out_alias, cache, progress,
+          device) -> None:
     """Time every method and setting against its error versus `exact`.
 
     raymarch's steps are searched (doubled from 8 until the lowest target's relative RMSE,
@@ -605,6 +638,10 @@ def bench(scenes, resolutions, repeats, pixels, targets, quick, volume, out, cac
     Pareto front, and the headline table (speedup of minmax over raymarch at each target,
     by default 5, 1 and 0.5 % error).
     """
+    if out_alias is not None:
+        if click.get_current_context().get_parameter_source("out") is not ParameterSource.DEFAULT:
+            raise click.UsageError("give -o/--output or --out (its former name), not both")
+        out = out_alias
     for folder in (out, cache):  # fail before the sweep, not after it
         make_folder(folder)
     paths = [str(path) for path in scenes] or list(bench_run.DEFAULT_SCENES)
@@ -627,6 +664,7 @@ Examples:
   clrays relief-to-mesh scenes/lattice.yaml -o out/lattice.obj --object 2
 """)
 @click.argument("scene", type=click.Path(path_type=Path))
+@confine_option()
 @option("--object", "index", type=int, default=None, metavar="I", group=SCENE,
         help="The relief to convert: objects.I of the scene (default: the first relief).")
 @overrides_option("Override a scene field (repeatable), e.g. --set objects.0.height=0.1.")
@@ -662,6 +700,7 @@ Writes <filter>.png, <filter>_diff.png (red: brighter than the reference, a ligh
 blue: darker), reference_pcf.png, compare.csv and compare.md.
 """)
 @click.argument("scene", type=click.Path(path_type=Path))
+@confine_option()
 @overrides_option("Override a scene field (repeatable), e.g. --set image.width=320.")
 @camera_option()
 @option("--radius", type=click.IntRange(0, 16), default=2, show_default=True, group=SCENE,

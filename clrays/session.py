@@ -147,6 +147,7 @@ class Frame:
     in_scatter: InScatter | None = None
     textures: list[tuple[int, int]] = field(default_factory=list)  # (slices, γ texels) per light with a texture
     samples: SampleCounts | None = None  # what epipolar sampling computed, summed over the lights
+    progress: object = None  # of raymarch's march, as Renderer.render's `progress`
 
 
 class Renderer:
@@ -172,7 +173,9 @@ class Renderer:
     def render(self, scene: Scene, method: str | None = None, progress: bool = False,
                reuse: bool | None = None) -> RenderResult:
         """Render one frame. `method` overrides `scene.render.method`; `reuse` overrides
-        the session's `reuse` for this frame (False: compute every stage, keep nothing)."""
+        the session's `reuse` for this frame (False: compute every stage, keep nothing).
+        `progress` (exact and raymarch): True for a tqdm bar, or a function that takes a
+        line of text."""
         method = RENAMED_METHODS.get(method, method) or scene.render.method
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r}; expected one of {', '.join(METHODS)}")
@@ -202,6 +205,7 @@ class Renderer:
         if method == "exact":
             return self._exact(scene, reuse, timer, progress)
         frame = self._upload(scene, method, reuse, timer)  # the scene in eye space, packed into device structs
+        frame.progress = progress
         frame.rastered, frame.maps = self._raster(frame.buffers, frame.keys, reuse, timer)  # raster: depths, maps
         frame.layers = self._translucency(frame.buffers, frame.keys, reuse, timer)  # translucency: light side
         frame.films = self._films(frame.buffers, frame.rastered, reuse, timer)  # transparency: camera side
@@ -228,7 +232,7 @@ class Renderer:
             return
         device, buffers, timer, layers = self.device, frame.buffers, frame.timer, frame.layers
         frame.reuse.record.note("raymarch", COMPUTED)
-        raymarch(device, buffers, frame.rastered, frame.in_scatter.adding(), timer, layers)
+        raymarch(device, buffers, frame.rastered, frame.in_scatter.adding(), timer, layers, progress=frame.progress)
         self._films_in_scatter(frame, lambda r, s, t: raymarch(device, buffers, r, s, t, layers),
                                lambda: transparency_march(device, buffers, frame.rastered, frame.films, timer, layers))
 

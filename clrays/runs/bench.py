@@ -330,9 +330,23 @@ def write_csv(points: list[BenchPoint], path: Path) -> None:
                             + [f"{p.stage_ms.get(s, 0.0):.2f}" for s in stages])
 
 
+#: Colours of the methods the bench runs; a method not listed takes the next free one.
+METHOD_COLOURS = {"raymarch": "tab:orange", "minmax": "tab:blue", "volume_moments": "tab:green"}
+
+
 def plot(points: list[BenchPoint], path: Path, targets=RMSE_TARGETS) -> None:
     """Error against time, log-log, one panel per scene and resolution, one curve per method,
     the Pareto front of all points marked."""
+    import matplotlib.pyplot as plt
+
+    figure = figure_of(points, targets)
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+
+
+def figure_of(points: list[BenchPoint], targets=RMSE_TARGETS):
+    """The matplotlib figure of `plot`. Its legends name the methods a panel has points of,
+    by the names they ran under, and nothing else."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -342,15 +356,18 @@ def plot(points: list[BenchPoint], path: Path, targets=RMSE_TARGETS) -> None:
     columns = min(len(groups), 2)
     rows = math.ceil(len(groups) / columns)
     figure, axes = plt.subplots(rows, columns, figsize=(6.5 * columns, 4.8 * rows), squeeze=False)
-    colours = {"raymarch": "tab:orange", "minmax": "tab:blue", "volume_moments": "tab:green"}
+    methods = list(dict.fromkeys(p.method for p in points))  # in the order they ran
+    spare = (colour for colour in ("tab:red", "tab:purple", "tab:brown", "tab:pink", "tab:olive", "tab:cyan")
+             if colour not in METHOD_COLOURS.values())
+    colours = {method: METHOD_COLOURS.get(method) or next(spare, "tab:gray") for method in methods}
     for axis, key in zip(axes.ravel(), groups):
         group = [p for p in points if (p.scene, p.resolution) == key]
-        for method, colour in colours.items():
+        for method in dict.fromkeys(p.method for p in group):
             mine = sorted((p for p in group if p.method == method), key=lambda p: p.frame_ms)
-            axis.scatter([p.frame_ms for p in mine], [max(p.rmse, 1e-5) for p in mine], s=18, color=colour,
-                         label=method, alpha=0.8)
+            axis.scatter([p.frame_ms for p in mine], [max(p.rmse, 1e-5) for p in mine], s=18,
+                         color=colours[method], label=method, alpha=0.8)
             front = pareto_front(mine)
-            axis.plot([p.frame_ms for p in front], [max(p.rmse, 1e-5) for p in front], color=colour, lw=1.2)
+            axis.plot([p.frame_ms for p in front], [max(p.rmse, 1e-5) for p in front], color=colours[method], lw=1.2)
         overall = pareto_front(group)
         axis.scatter([p.frame_ms for p in overall], [max(p.rmse, 1e-5) for p in overall], s=70,
                      facecolors="none", edgecolors="black", label="Pareto front (all)")
@@ -365,8 +382,7 @@ def plot(points: list[BenchPoint], path: Path, targets=RMSE_TARGETS) -> None:
     for axis in axes.ravel()[len(groups):]:
         axis.set_visible(False)
     figure.tight_layout()
-    figure.savefig(path, dpi=110)
-    plt.close(figure)
+    return figure
 
 
 def machine(device: str | None = None) -> dict:

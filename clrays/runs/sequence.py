@@ -251,7 +251,10 @@ def write_video(paths: list[Path], out: str | Path, fps: float, exposure: float 
                           f"{odd}: {size[0]}×{size[1]}); render them again with --overwrite")
     # Milliseconds per frame; GIF stores centiseconds in 16 bits, so slow rates are clamped.
     duration = int(min(max(round(1000.0 / fps), 1), 655_350))
-    options = {"optimize": False} if out.suffix.lower() == ".gif" else {"lossless": True}
+    if out.suffix.lower() == ".gif":
+        from .video import write_gif
+
+        return write_gif(images, out, duration)
     write_atomic(out, lambda temporary: images[0].save(temporary, save_all=True, append_images=images[1:],
-                                                       duration=duration, loop=0, **options))
+                                                       duration=duration, loop=0, lossless=True))
     return out

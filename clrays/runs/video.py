@@ -1,13 +1,18 @@
 """MP4 (H.264) from a sequence's frames, through imageio-ffmpeg's own ffmpeg binary, so
-no system ffmpeg is needed (`pip install 'clrays[video]'`).
+no system ffmpeg is needed (`pip install 'clrays[video]'`); and GIF, with pillow, on one
+dithered palette (`write_gif`).
 
 Players want yuv420p, whose chroma is subsampled 2×2, so the frames are padded to even
 width and height (the last row or column repeated). `--crf` and `--video-option
-KEY=VALUE` (any ffmpeg output option) override the defaults below.
+KEY=VALUE` override the defaults below; the keys are the encoder's (VIDEO_OPTIONS), none
+that names a file or changes the format, so `f=null` or `y=/elsewhere` cannot make ffmpeg
+write nothing, or something, somewhere else.
 """
 from __future__ import annotations
 
+import contextlib
 import itertools
+import os
 import subprocess
 import tempfile
 from fractions import Fraction
@@ -26,6 +31,22 @@ DEFAULT_CRF = 18
 DEFAULT_OPTIONS = {"pix_fmt": "yuv420p", "preset": "medium", "movflags": "+faststart"}
 
 
+#: The ffmpeg output options `--video-option` may set: H.264 (libx264) rate control,
+#: speed, compatibility and group of pictures, and the MP4's flags. Not `f` (the format:
+#: `f=null` wrote an empty file), nor anything that names a file (`y`, `an`, `vstats_file`,
+#: `passlogfile`, and `x264-params`, whose `stats=` and `dump-yuv=` write files).
+VIDEO_OPTIONS = {
+    "crf": "constant rate factor (as --crf)", "qp": "constant quantizer", "preset": "speed against size",
+    "tune": "e.g. film, animation, grain", "profile:v": "H.264 profile", "level": "H.264 level",
+    "pix_fmt": "e.g. yuv420p, yuv444p", "b:v": "target bit rate", "maxrate": "bit rate cap",
+    "minrate": "bit rate floor", "bufsize": "rate control buffer", "g": "keyframe interval",
+    "keyint_min": "shortest keyframe interval", "bf": "B-frames in a row", "refs": "reference frames",
+    "movflags": "MP4 flags (+faststart)",
+}
+#: Other spellings of the same options.
+VIDEO_OPTION_ALIASES = {"b": "b:v", "profile": "profile:v"}
+
+
 def video_encoder_options(path: Path, crf: int | None, options: Sequence[str]) -> dict[str, str]:
     """The ffmpeg output options (name → value) for `path`: the defaults, `crf`, then
     `options` ("KEY=VALUE"). Empty for GIF and WebP, which take neither."""
@@ -40,6 +61,10 @@ def video_encoder_options(path: Path, crf: int | None, options: Sequence[str]) -
         key = key.strip().lstrip("-")
         if not sep or not key or not value.strip():
             raise OutputError(f"--video-option {text}: expected KEY=VALUE like preset=slow, got {text!r}")
+        key = VIDEO_OPTION_ALIASES.get(key, key)
+        if key not in VIDEO_OPTIONS:
+            raise OutputError(f"--video-option {text}: {key!r} is not an encoding option clrays passes to ffmpeg; "
+                              f"expected one of {', '.join(VIDEO_OPTIONS)}")
         chosen[key] = value.strip()
     return chosen
 
@@ -59,6 +84,10 @@ def write_mp4(frames: Iterable[np.ndarray], out: Path, fps: float, options: dict
         import imageio_ffmpeg
     except ImportError:
         raise OutputError(f"{out}: MP4 needs imageio-ffmpeg: pip install 'clrays[video]'") from None
+    unknown = [key for key in options if key not in VIDEO_OPTIONS]
+    if unknown:  # the library's callers too: no option that names a file or changes the format
+        raise OutputError(f"{out}: {unknown[0]!r} is not an encoding option clrays passes to ffmpeg; "
+                          f"expected one of {', '.join(VIDEO_OPTIONS)}")
     frames = iter(frames)
     first = even_size(next(frames))
     height, width = first.shape[:2]
@@ -80,7 +109,8 @@ def write_mp4(frames: Iterable[np.ndarray], out: Path, fps: float, options: dict
             except BrokenPipeError:
                 pass  # ffmpeg stopped early; its log says why
             finally:
-                encoder.stdin.close()
+                with contextlib.suppress(BrokenPipeError):  # flushing to an ffmpeg that stopped early
+                    encoder.stdin.close()
                 code = encoder.wait()
             if code != 0:
                 log.seek(0)
@@ -88,6 +118,49 @@ def write_mp4(frames: Iterable[np.ndarray], out: Path, fps: float, options: dict
                 # x264 names a bad option on the first line; ffmpeg's own summary comes last.
                 reason = lines[0] if lines else f"exit code {code}"
                 raise OutputError(f"{out}: ffmpeg failed: {reason.strip()}")
+            if not os.path.isfile(temporary) or os.path.getsize(temporary) == 0:  # exit 0 is not enough
+                raise OutputError(f"{out}: ffmpeg exited without writing the video")
 
     write_atomic(out, encode)
+    return out
+
+
+#: Frames of a GIF whose colours choose its palette, at most (evenly spaced).
+GIF_PALETTE_FRAMES = 64
+
+
+def gif_palette(frames: Sequence[np.ndarray]):
+    """One 256-colour palette (a PIL "P" image) for 8-bit sRGB frames (H, W, 3), by median
+    cut over the distinct colours they hold, each counted once rather than once per pixel:
+    a light's small bright glow holds few pixels but many colours, and a palette fitted to
+    the pixels left it a handful of entries, seen as rings (the large dark fog took the rest)."""
+    from PIL import Image
+
+    step = max(1, -(-len(frames) // GIF_PALETTE_FRAMES))
+    colours = np.unique(np.concatenate([np.unique(_packed(frame)) for frame in frames[::step]]))
+    swatch = np.stack([(colours >> 16) & 255, (colours >> 8) & 255, colours & 255], axis=-1).astype(np.uint8)
+    return Image.fromarray(swatch[None], mode="RGB").quantize(256, method=Image.Quantize.MEDIANCUT)
+
+
+def _packed(frame: np.ndarray) -> np.ndarray:
+    """(H, W, 3) uint8 → one int32 per pixel, 0xRRGGBB."""
+    frame = frame.astype(np.int32)
+    return (frame[..., 0] << 16) | (frame[..., 1] << 8) | frame[..., 2]
+
+
+def write_gif(frames: Sequence, out: Path, duration_ms: int) -> Path:
+    """An animated GIF that loops forever of 8-bit sRGB frames (arrays (H, W, 3) or RGB
+    images, all one size), at `out`, atomically: one palette for all frames (`gif_palette`,
+    so colours do not flicker between frames), Floyd–Steinberg dithered onto it, so a
+    smooth gradient stays smooth where 256 colours cannot hold every step."""
+    from PIL import Image
+
+    frames = [np.asarray(frame, dtype=np.uint8) for frame in frames]
+    palette = gif_palette(frames)
+    images = [Image.fromarray(np.ascontiguousarray(frame), mode="RGB").quantize(palette=palette,
+                                                                               dither=Image.Dither.FLOYDSTEINBERG)
+              for frame in frames]
+    write_atomic(out, lambda temporary: images[0].save(temporary, format="GIF", save_all=True,
+                                                       append_images=images[1:], duration=duration_ms, loop=0,
+                                                       optimize=False))
     return out

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .files import FileRefused, read_regular_file
+from .files import FileRefused, missing, read_regular_file
 from .limits import MAX_MESH_BYTES
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl")
@@ -211,7 +211,7 @@ def load_mesh(path: Path) -> tuple[np.ndarray, np.ndarray, int]:
     suffix = path.suffix.lower()
     if suffix not in MESH_SUFFIXES:
         raise ValueError(f"unsupported mesh format {path.suffix or '(no suffix)'!r}")
-    if not path.exists():
+    if missing(path):
         raise ValueError("no such file")
     try:
         data = read_regular_file(path, MAX_MESH_BYTES)

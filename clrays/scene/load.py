@@ -29,7 +29,7 @@ from . import relief as relief_images
 from ..errors import SceneError
 from ..structs import CONVEX_OUTSIDE_ONLY
 from .animation import Animation, Key, ObjectRig, Track
-from .files import FileRefused, read_regular_file
+from .files import FileRefused, read_regular_file, scene_files
 from .fields import (ANIMATION, CAMERA, FORMAT_VERSION, GLTF, IMAGE, LIGHTS, MAX_IMAGE_PIXELS, MEDIUM, OBJECT, OBJECTS,
                      PHASES, QUATERNION_TOLERANCE, RENDER, ROTATE, SHADOW_FILTER, TOP, TRANSFORM, TRANSPARENCY, Field,
                      kinds)
@@ -693,7 +693,8 @@ def _check_camera_path(node: Node, animation: Animation, scene: Scene) -> None:
 def parse_scene(text: str, source: Path | str | None = None, overrides: Sequence[str] = ()) -> Scene:
     """Parse scene YAML text. `source` names the file in messages and its folder is where
     relative mesh paths start (the working directory when None)."""
-    return _parse(text, str(source) if source is not None else "<string>", source, overrides)
+    with scene_files(Path(source).parent if source is not None else Path.cwd()):  # --confine: to that folder
+        return _parse(text, str(source) if source is not None else "<string>", source, overrides)
 
 
 def _parse(text: str, filename: str, source: Path | str | None, overrides: Sequence[str]) -> Scene:
@@ -781,7 +782,8 @@ def load_scene(path: Path | str, overrides: Sequence[str] = ()) -> Scene:
     """Read, override (`key.path=value` strings, as from `--set`) and validate a scene file:
     YAML, or glTF 2.0 (.glb, .gltf: clrays.scene.gltf)."""
     if Path(path).suffix.lower() in gltf_files.SUFFIXES:
-        return _load_gltf(Path(path), overrides)
+        with scene_files(Path(path).parent):  # --confine: its buffer files, to its folder
+            return _load_gltf(Path(path), overrides)
     try:
         data = read_regular_file(path, MAX_SCENE_BYTES, "put large geometry in a mesh file "
                                                         "(objects: - {type: mesh, file: ...})")
@@ -790,7 +792,8 @@ def load_scene(path: Path | str, overrides: Sequence[str] = ()) -> Scene:
         raise SceneError(f"{path}: cannot read scene file: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     except FileRefused as exc:
         raise SceneError(f"{path}: cannot read scene file: {exc}") from None
-    return _parse(text, str(path), path, overrides)
+    with scene_files(Path(path).parent):  # --confine: the files it names, to its folder
+        return _parse(text, str(path), path, overrides)
 
 
 def object_kinds(path: Path | str, overrides: Sequence[str] = ()) -> list[str]:

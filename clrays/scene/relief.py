@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .files import FileRefused, read_regular_file
+from .files import FileRefused, missing, read_regular_file
 from .limits import MAX_MESH_BYTES
 
 IMAGE_SUFFIXES = (".png", ".exr", ".npy")
@@ -71,7 +71,7 @@ def read_image(path: Path) -> np.ndarray:
     suffix = path.suffix.lower()
     if suffix not in IMAGE_SUFFIXES:
         raise ValueError(f"unsupported image format {path.suffix or '(no suffix)'!r}; expected .png, .exr or .npy")
-    if not path.exists():
+    if missing(path):
         raise ValueError("no such file")
     try:
         data = read_regular_file(path, MAX_RELIEF_IMAGE_BYTES)

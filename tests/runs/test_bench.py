@@ -103,7 +103,7 @@ def test_bench_command_writes_csv_plot_and_summary(tmp_path):
     pytest.importorskip("matplotlib")  # the `bench` extra, which `make test` installs
     out = tmp_path / "out"
     result = CliRunner().invoke(main, ["bench", str(DEMO), "-r", "48x27", "--quick", "--repeats", "1",
-                                       "--pixels", "300", "--targets", "5,0.1", "--out", str(out), "--cache",
+                                       "--pixels", "300", "--targets", "5,0.1", "--output", str(out), "--cache",
                                        str(tmp_path / "cache")])
     assert result.exit_code == 0, result.output
     rows = list(csv.DictReader(open(out / "bench.csv")))
@@ -114,6 +114,42 @@ def test_bench_command_writes_csv_plot_and_summary(tmp_path):
     assert "speedup" in summary_text and "| 0.1% |" in summary_text and "| 0.5% |" not in summary_text
     assert json.loads((out / "machine.json").read_text())["targets"] == [0.05, 0.001]
     assert any((tmp_path / "cache").iterdir())  # exact was cached
+
+
+def test_the_figure_names_the_methods_that_ran_and_only_those():
+    # bench.png listed "moments" with no points (the method runs as volume_moments) and left
+    # minmax unlabelled: the legend now comes from the points.
+    pytest.importorskip("matplotlib")
+    import matplotlib.pyplot as plt
+
+    from clrays.runs.bench import figure_of
+
+    points = [_point("raymarch", 100, 0.04), _point("raymarch", 400, 0.009), _point("minmax", 20, 0.008),
+              _point("volume_moments", 15, 0.02), _point("a_new_method", 30, 0.01)]
+    other = [replace(p, scene="t") for p in points if p.method in ("minmax", "raymarch")]
+    figure = figure_of(points + other)
+    try:
+        first, second = (axis for axis in figure.axes if axis.get_visible())
+        for axis, methods in ((first, ["raymarch", "minmax", "volume_moments", "a_new_method"]),
+                              (second, ["raymarch", "minmax"])):
+            labels = [text.get_text() for text in axis.get_legend().get_texts()]
+            assert labels == methods + ["Pareto front (all)"]
+            for collection in axis.collections:  # every labelled series has its points
+                assert len(collection.get_offsets()) > 0, collection.get_label()
+        colours = {c.get_label(): tuple(c.get_facecolor()[0]) for c in first.collections
+                   if c.get_label() != "Pareto front (all)"}
+        assert len(set(colours.values())) == len(colours)  # one colour per method
+    finally:
+        plt.close(figure)
+
+
+def test_bench_takes_output_and_its_former_name_out(tmp_path):
+    for flag in ("-o", "--output", "--out"):
+        result = CliRunner().invoke(main, ["bench", str(tmp_path / "missing.yaml"), flag, str(tmp_path / "o")])
+        assert result.exit_code == 1 and "no such scene file" in result.output, (flag, result.output)
+    result = CliRunner().invoke(main, ["bench", str(DEMO), "-o", str(tmp_path / "a"), "--out", str(tmp_path / "b")])
+    assert result.exit_code == 2 and "give -o/--output or --out (its former name), not both" in result.output
+    assert "--out " not in CliRunner().invoke(main, ["bench", "--help"]).output  # hidden: --output is the name
 
 
 def test_volume_only_skips_the_surface_shadows_it_cannot_show(device):

@@ -3,8 +3,13 @@ PoCL session): the same bytes as in-process, a worker killed mid-run, resume; an
 run that never imports dask or imageio-ffmpeg."""
 from __future__ import annotations
 
+import contextlib
 import csv
+import json
 import os
+import re
+import socket
+import struct
 import subprocess
 import sys
 import threading
@@ -20,7 +25,7 @@ from clrays.session import Renderer
 from test_sequence import write_scene
 
 distributed = pytest.importorskip("distributed")
-from clrays.runs.distributed import DaskExecutor  # noqa: E402
+from clrays.runs.distributed import CONNECT_TIMEOUT_S, DaskExecutor  # noqa: E402
 
 FRAMES = 12
 SMALL = ["image.width=32", "image.height=24"]
@@ -161,12 +166,131 @@ def test_a_plain_render_and_sequence_never_import_dask_or_the_video_encoder(tmp_
     assert "loaded: []" in done.stdout, done.stdout
 
 
-def test_an_unreachable_scheduler_is_one_line(tmp_path, monkeypatch):
-    import clrays.runs.distributed as engine
+# --------------------------------------------------------------------------- connections that fail
+
+class _Server:
+    """A TCP listener on 127.0.0.1 that accepts and then stays silent, or sends `greeting`."""
+
+    def __init__(self, greeting: bytes | None = None):
+        self.socket = socket.create_server(("127.0.0.1", 0))
+        self.address = f"tcp://127.0.0.1:{self.socket.getsockname()[1]}"
+        self.greeting, self.connections = greeting, []
+        threading.Thread(target=self._serve, daemon=True).start()
+
+    def _serve(self):
+        while True:
+            try:
+                connection, _ = self.socket.accept()
+            except OSError:
+                return
+            self.connections.append(connection)
+            if self.greeting is not None:
+                with contextlib.suppress(OSError):
+                    connection.sendall(self.greeting)
+
+    def close(self):
+        for connection in self.connections:
+            connection.close()
+        self.socket.close()
+
+
+def _closed_port() -> str:
+    with socket.create_server(("127.0.0.1", 0)) as probe:
+        return f"tcp://127.0.0.1:{probe.getsockname()[1]}"  # free again once closed
+
+
+_FRESH_PROCESS = """
+import json, sys, time
+from click.testing import CliRunner
+from clrays.cli import main
+
+def peak_mb():  # this process's own high-water mark (ru_maxrss would count the pytest process it came from)
+    with open("/proc/self/status") as status:
+        return next(int(line.split()[1]) for line in status if line.startswith("VmHWM:")) / 1024
+
+results = []
+for args in json.loads(sys.argv[1]):
+    start = time.perf_counter()
+    result = CliRunner().invoke(main, args)
+    results.append([result.exit_code, result.output, time.perf_counter() - start, peak_mb()])
+print(json.dumps(results))
+"""
+
+
+def _in_a_fresh_process(runs: list[list[str]], timeout: float) -> list[tuple[int, str, float, float]]:
+    """Each command line's (exit code, output, seconds, peak MB so far), run one after
+    another by the CLI in one new process."""
+    done = subprocess.run([sys.executable, "-c", _FRESH_PROCESS, json.dumps(runs)], capture_output=True, text=True,
+                          timeout=timeout, env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+    assert done.returncode == 0, done.stderr[-2000:]
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def test_a_scheduler_that_is_not_there_or_not_dask_is_one_line_within_seconds(tmp_path):
+    silent = _Server()
+    # Garbage whose first 8 bytes, read as dask's frame length, claim 3.07 EiB (a MemoryError before).
+    garbage = _Server(struct.pack("<Q", int(3.07 * 2**60)) + b"\xff" * 4096)
+    short_garbage = _Server(struct.pack("<Q", 16) + b"\xff" * 16)  # a length dask would read, then not msgpack
+    cases = [
+        ("garbage", r"--scheduler garbage: expected a dask scheduler address tcp://HOST:PORT"),
+        ("tcp://", r"--scheduler tcp://: expected a dask scheduler address tcp://HOST:PORT"),
+        ("tcp://head:99999", r"the port must be a number in \[1, 65535\], got '99999'"),
+        ("tcp://head:²", r"the port must be a number in \[1, 65535\], got '²'"),
+        ("ucx://head:8786", r"only tcp:// is supported"),
+        (_closed_port(), r"cannot connect: connection refused"),
+        (silent.address, rf"connected, but no dask scheduler greeting within {CONNECT_TIMEOUT_S:g} s"),
+        (garbage.address, r"not a dask scheduler: its greeting claims 3\.07 EiB"),
+        (short_garbage.address, r"not a dask scheduler: its greeting is not dask's"),
+    ]
+    scene = write_scene(tmp_path, 2)
+    try:
+        results = _in_a_fresh_process([["sweep", str(scene), "--set", "render.slices=32,64", "--scheduler", address,
+                                        "-o", str(tmp_path / "sweep")] for address, _ in cases], timeout=180)
+    finally:
+        for server in (silent, garbage, short_garbage):
+            server.close()
+    for (address, pattern), (code, output, seconds, peak_mb) in zip(cases, results):
+        lines = output.strip().splitlines()
+        assert code == 1 and len(lines) == 1, (address, output)
+        assert lines[0].startswith(f"clrays: error: --scheduler {address}") and re.search(pattern, lines[0]), lines[0]
+        assert seconds < 20 and peak_mb < 2000, (address, seconds, peak_mb)
+    assert not (tmp_path / "sweep" / "results.csv").exists()
+
+
+def test_a_running_scheduler_is_reached_through_the_probe(executor):
+    # The module's LocalCluster, reached by its address as an external scheduler is.
+    with DaskExecutor(scheduler=executor._cluster.scheduler_address) as remote:
+        assert len(remote.client.scheduler_info()["workers"]) == 2
+    assert executor.client.scheduler_info()["workers"]  # leaving it closed the client alone, not the cluster
+
+
+def test_more_local_workers_than_the_machine_holds_are_refused_before_any_starts():
+    from clrays.runs.distributed import local_worker_limit
     from conftest import run_cli
 
-    monkeypatch.setattr(engine, "CONNECT_TIMEOUT_S", 2)
-    code, out = run_cli("sweep", write_scene(tmp_path, 2), "--set", "render.slices=32,64",
-                        "--scheduler", "tcp://127.0.0.1:1", "-o", tmp_path / "sweep")
-    assert code == 1 and len(out.strip().splitlines()) == 1, out
-    assert "--scheduler tcp://127.0.0.1:1: cannot connect: Timed out" in out
+    limit, reason = local_worker_limit()
+    asked = [limit + 1] + ([32] if limit < 32 else [])  # 32: once exit 0, with 150 lines of worker tracebacks
+    for workers in asked:
+        start = time.perf_counter()
+        code, out = run_cli("sweep", "scenes/demo.yaml", "--set", "render.slices=32,64", "--workers", workers,
+                            "-o", "/nonexistent/sweep")
+        assert code == 1 and out.strip().splitlines() == [
+            f"clrays: error: --workers {workers}: at most {limit} local workers on this machine ({reason}); "
+            f"use --scheduler for more machines"], out
+        assert time.perf_counter() - start < 5
+
+
+def test_local_workers_shut_down_without_a_word():
+    # A worker's own log (with 32 workers, heartbeats that met the closing scheduler printed
+    # 90 to 150 lines of tracebacks) stays off the terminal; the run's results say what failed.
+    script = (
+        "import logging\n"
+        "from clrays.runs.distributed import DaskExecutor\n"
+        "if __name__ == '__main__':\n"
+        "    with DaskExecutor(workers=1) as executor:\n"
+        "        executor.client.run(lambda: logging.getLogger('distributed.worker').error('a worker complains'))\n"
+        "    print('closed')\n")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120,
+                          env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+    assert done.returncode == 0 and done.stdout == "closed\n", done.stderr[-2000:]
+    assert done.stderr == "", done.stderr[-2000:]

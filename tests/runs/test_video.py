@@ -52,3 +52,43 @@ def test_crf_and_video_options_reach_the_encoder(tmp_path):
     error = text.strip().splitlines()[-1]
     assert code == 1 and text.count("clrays: error") == 1, text
     assert re.search(r"x\.mp4: ffmpeg failed: .*invalid preset 'nonsense'$", error) and not (tmp_path / "x.mp4").exists()
+
+
+@pytest.mark.parametrize("option", ["f=null", "y={elsewhere}", "an={elsewhere}", "vstats_file={elsewhere}",
+                                    "passlogfile={elsewhere}", "x264-params=stats={elsewhere}", "-f=null"])
+def test_only_encoding_options_reach_ffmpeg(tmp_path, option):
+    # f=null wrote a 0-byte a.mp4 with exit 0 and "wrote a.mp4"; y= and an= made ffmpeg write a
+    # second copy at any path, vstats_file= a text file.
+    elsewhere = tmp_path / "elsewhere.mp4"
+    scene = write_scene(tmp_path, 2)
+    code, out = run("sequence", scene, "-o", tmp_path / "f_{}.png", "--video", tmp_path / "a.mp4",
+                    "--video-option", option.format(elsewhere=elsewhere))
+    key = option.partition("=")[0].lstrip("-")
+    lines = out.strip().splitlines()
+    assert code == 1 and len(lines) == 1, out
+    assert re.fullmatch(rf"clrays: error: --video-option .*: '{re.escape(key)}' is not an encoding option clrays "
+                        rf"passes to ffmpeg; expected one of crf, qp, preset, .*, movflags", lines[0]), lines[0]
+    assert not list(tmp_path.glob("*.mp4")) and not list(tmp_path.glob("f_*.png"))  # refused before rendering
+
+
+def test_aliases_and_listed_options_are_accepted():
+    from pathlib import Path
+
+    from clrays.runs.video import video_encoder_options
+
+    chosen = video_encoder_options(Path("a.mp4"), 20, ["b=2M", "profile=high", "tune=animation", "g=12"])
+    assert chosen["b:v"] == "2M" and chosen["profile:v"] == "high" and chosen["crf"] == "20"
+    assert "b" not in chosen and "profile" not in chosen
+
+
+def test_an_encoder_that_writes_nothing_is_an_error_not_a_video(tmp_path, monkeypatch):
+    from clrays.errors import OutputError
+    from clrays.runs.video import write_mp4
+
+    monkeypatch.setattr(imageio_ffmpeg, "get_ffmpeg_exe", lambda: "true")  # exit 0, no file
+    frames = [np.zeros((4, 4, 3), np.uint8)] * 2
+    with pytest.raises(OutputError, match=r"a\.mp4: ffmpeg exited without writing the video$"):
+        write_mp4(frames, tmp_path / "a.mp4", 12, {})
+    assert not list(tmp_path.iterdir())
+    with pytest.raises(OutputError, match=r"'f' is not an encoding option"):  # the library's callers too
+        write_mp4(frames, tmp_path / "a.mp4", 12, {"f": "null"})
