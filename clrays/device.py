@@ -12,6 +12,7 @@ import contextlib
 import hashlib
 import os
 import sys
+import time
 import warnings
 from dataclasses import dataclass, field
 from importlib import resources
@@ -275,6 +276,8 @@ class Device:
         self.context = cl.Context([self.device])
         self.queue = cl.CommandQueue(self.context, properties=cl.command_queue_properties.PROFILING_ENABLE)
         self._programs: dict[tuple, object] = {}
+        #: Milliseconds spent building programs so far: a sweep leaves them out of a point's time.
+        self.build_ms = 0.0
         self._kernels: dict[tuple, object] = {}
         # The shared constants as they are now: every program this device builds later takes
         # them (a test builds a device with one changed, and changes it back at once).
@@ -307,12 +310,15 @@ class Device:
             path = kernel_dir() / f"{stage}.cl"
             options = build_options(defines, self._constants)
             marker = self._first_build()
+            start = time.perf_counter()
             try:
                 with warnings.catch_warnings(), _compiler_output():
                     warnings.simplefilter("ignore", self.cl.CompilerWarning)
                     self._programs[key] = self.cl.Program(self.context, path.read_text()).build(options=options)
             except self.cl.RuntimeError as exc:
                 raise DeviceError(f"{path}: build failed with options {' '.join(options)}:\n{exc}") from exc
+            finally:
+                self.build_ms += (time.perf_counter() - start) * 1e3
             if marker is not None:
                 with contextlib.suppress(OSError):
                     marker.parent.mkdir(parents=True, exist_ok=True)
