@@ -360,6 +360,19 @@ class Device:
             self._local_sizes[global_size] = spread_local_size(global_size, self._units, self._max_group)
         return self._local_sizes[global_size]
 
+    def counted_launch(self, count: int) -> tuple[tuple[int], tuple[int] | None]:
+        """(global size, work-group shape) of a 1-D launch over `count` items whose kernel
+        skips the work-items past `count`, a count that follows the scene (the camera
+        samples a fix-up walk takes). On a CPU device the work-group is the power of two
+        nearest below spread_local_size's aim and the launch is padded to a multiple of it:
+        PoCL compiles a kernel for each work-group size it has not cached (about 450 ms),
+        and a divisor of each count would be a new size at nearly every frame."""
+        if not self._spread:
+            return (max(count, 1),), None
+        aim = max(1, min(count // (GROUPS_PER_UNIT * self._units), self._max_group))
+        group = 1 << (aim.bit_length() - 1)
+        return (-(-max(count, 1) // group) * group,), (group,)
+
     def buffer(self, array: np.ndarray | None = None, nbytes: int | None = None, writable: bool = True):
         """A device buffer, filled from `array` or of `nbytes` uninitialised bytes; on a CPU
         device a large one of `nbytes` comes from the pool (POOLED_BYTES)."""

@@ -158,8 +158,8 @@ class ReferenceCache:
                 raise ValueError(f"a {array.dtype} array of shape {array.shape}, expected {shape}")
             return array
         except (FileRefused, OSError, ValueError, EOFError) as exc:
-            self.notice(f"{path}: unreadable cached reference ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__}); "
-                        f"computing it again")
+            reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            self.notice(f"{path}: unreadable cached reference ({reason}); computing it again")
             return None
 
 

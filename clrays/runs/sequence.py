@@ -243,8 +243,8 @@ def render_sequence(scene: Scene, pattern: str | Path, frames: range | None = No
     frames = scene_frames(scene) if frames is None else frames
     paths = [frame_path(pattern, frame) for frame in frames]
     make_folder(lock_folder(pattern))
-    for path in paths[:1]:
-        check_output_path(path)
+    for path in paths[:1]:  # the others' folders are created as the run reaches them
+        check_output_path(make_folder(path.parent) / path.name)
     renderer = renderer or Renderer()
     report = SequenceReport(paths)
     start = time.perf_counter()

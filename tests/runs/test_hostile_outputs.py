@@ -171,6 +171,49 @@ def test_a_second_sweep_into_a_folder_in_use_is_one_line(tmp_path, held_lock):
     assert not list(folder.glob("*.png"))
 
 
+def test_two_sequences_into_one_folder_leave_each_frame_its_scenes(tmp_path):
+    """Run A, and run B with another --set into the same folder while A runs: B stops at
+    once naming A; after A is stopped, B's frames are B's, as rendered on their own."""
+    scene = animated(tmp_path, 400, 24, 16)
+    env = {**os.environ, "PYTHONPATH": str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    shared, alone = tmp_path / "shared" / "f_{:03d}.npy", tmp_path / "alone" / "f_{:03d}.npy"
+    a = subprocess.Popen([sys.executable, "-m", "clrays.cli", "sequence", str(scene), "-o", str(shared),
+                          "--no-progress"], stderr=subprocess.PIPE, text=True, env=env, cwd=REPO)
+    try:
+        start = time.perf_counter()
+        first = tmp_path / "shared" / "f_000.npy"
+        while not first.exists() and a.poll() is None and time.perf_counter() - start < 60:
+            time.sleep(0.05)
+        code, out = run("sequence", scene, "-o", shared, "--no-progress", "--set", "medium.sigma_s=0.3",
+                        "--frames", "0:3")
+        assert a.poll() is None, "run A ended before run B started: make it longer"
+        assert code == 1 and f"in use by another clrays run (pid {a.pid} on " in one_line(out), out
+    finally:
+        a.send_signal(signal.SIGINT)
+        a.communicate(timeout=60)
+    b = ["--no-progress", "--set", "medium.sigma_s=0.3", "--frames", "0:3"]
+    code, out = run("sequence", scene, "-o", shared, *b)
+    # A's frames there (as many as it wrote) are replaced, none is kept.
+    assert code == 0 and re.search(r"4 frames rendered( \(\d of them replacing frames of a changed scene\))?, "
+                                   r"0 already there", out), out
+    assert run("sequence", scene, "-o", alone, *b)[0] == 0
+    for frame in range(4):
+        np.testing.assert_array_equal(np.load(str(shared).format(frame)), np.load(str(alone).format(frame)))
+
+
+def test_frames_in_folders_of_their_own_lock_the_folder_above(tmp_path):
+    from clrays.image_io import folder_lock
+
+    pattern = tmp_path / "out" / "{:02d}" / "beauty.npy"
+    code, out = run("sequence", animated(tmp_path, 3), "-o", pattern, "--no-progress")
+    assert code == 0, out
+    assert sorted(p.parent.name for p in (tmp_path / "out").glob("*/beauty.npy")) == ["00", "01", "02"]
+    assert all((tmp_path / "out" / f"{n:02d}" / ".clrays-frames.jsonl").exists() for n in range(3))
+    with folder_lock(tmp_path / "out"):
+        code, out = run("sequence", animated(tmp_path, 3), "-o", pattern, "--no-progress")
+        assert code == 1 and "in use by another clrays run" in one_line(out)
+
+
 def test_the_lock_is_released_when_the_run_ends(tmp_path):
     from clrays.image_io import folder_lock
 
@@ -353,7 +396,8 @@ def test_a_large_sweep_starts_at_once(tmp_path):
     start = time.perf_counter()
     process = subprocess.Popen([sys.executable, "-m", "clrays.cli", "sweep", str(scene), "--set",
                                 f"medium.sigma_s={values}", "--set", "lights.0.position=[0.3, 5, -0.5],[0.4, 5, -0.5]",
-                                "--set", "medium.sigma_a=" + ",".join(str(0.001 * n) for n in range(1, 11)), "-o", str(out), "--no-progress"],
+                                "--set", "medium.sigma_a=" + ",".join(str(0.001 * n) for n in range(1, 11)),
+                                "-o", str(out), "--no-progress"],
                                stderr=subprocess.PIPE, text=True, env=env, cwd=REPO)
     images = lambda: [p for p in out.glob("[0-9]*.png")]  # noqa: E731 - not a temporary (.NAME.clrays-...)
     try:
@@ -441,7 +485,8 @@ def test_a_corrupted_reference_is_rendered_again(tmp_path, damage):
     code, out = run(*args, "--overwrite")
     assert code == 0, out
     notices = [line for line in out.splitlines() if "unreadable cached reference" in line]
-    assert len(notices) == 1 and notices[0].startswith(f"clrays: notice: {cached[0]}: unreadable cached reference ("), out
+    assert len(notices) == 1, out
+    assert notices[0].startswith(f"clrays: notice: {cached[0]}: unreadable cached reference ("), out
     assert notices[0].endswith("computing it again"), out
     np.testing.assert_array_equal(np.load(cached[0]), good)  # replaced by the reference, as rendered again
     assert "internal error" not in out
@@ -607,20 +652,46 @@ def test_a_bad_render_creates_no_folder(tmp_path):
     assert code == 1 and not (tmp_path / "new").exists(), out
 
 
-def test_a_points_wall_time_leaves_out_kernel_builds(tmp_path):
+def test_a_points_wall_time_leaves_out_kernel_builds(tmp_path, monkeypatch):
     """wall_ms jumped for some points where the warm-up's kinds did not cover a program
     the point needed; a build during the render is now build_ms, left out of wall_ms."""
-    from clrays.runs.point import SweepPoint, render_point
+    import clrays.runs.point as point
     from clrays.scene.load import load_scene
     from clrays.session import Renderer
 
     scene = load_scene(animated(tmp_path, 1))
     renderer = Renderer()  # a device of its own: it builds every program
-    warmed = {(scene.render.method, scene.render.traversal, scene.render.integrand, ("PointLight",))}
+    monkeypatch.setattr(point, "_warm_up", lambda *args: 0.0)  # a kind the warm-up missed
     start = time.perf_counter()
-    row = render_point(renderer, None, None, SweepPoint(0, ()), scene, tmp_path, "000.npy", "d", 0.0, warmed)
+    row = point.render_point(renderer, None, None, point.SweepPoint(0, ()), scene, tmp_path, "000.npy", "d", 0.0,
+                             set())
     elapsed_ms = (time.perf_counter() - start) * 1e3
-    assert float(row["warmup_ms"]) == 0.0  # the warm-up was skipped: its kind was "seen"
     assert float(row["build_ms"]) > 0 and 0 < float(row["wall_ms"]) < elapsed_ms - float(row["build_ms"])
-    again = render_point(renderer, None, None, SweepPoint(1, ()), scene, tmp_path, "001.npy", "d", 0.0, warmed)
+    again = point.render_point(renderer, None, None, point.SweepPoint(1, ()), scene, tmp_path, "001.npy", "d", 0.0,
+                               set())
     assert float(again["build_ms"]) == 0.0
+
+
+def test_the_warm_up_covers_each_size_on_a_cpu_device(tmp_path, renderer):
+    """On a CPU device PoCL compiles a kernel for each new work-group size, which follow
+    the render's sizes: a first point at 1024 slices took 0.9 s against 0.1 s."""
+    from clrays.runs.point import _warm_up
+    from clrays.scene.load import load_scene
+
+    scene = animated(tmp_path, 1)
+    warmed: set = set()
+    assert _warm_up(renderer, load_scene(scene), warmed) > 0
+    assert _warm_up(renderer, load_scene(scene, ["medium.sigma_s=0.3"]), warmed) == 0.0
+    again = _warm_up(renderer, load_scene(scene, ["render.slices=64"]), warmed)
+    assert (again > 0) == renderer.device.is_cpu
+
+
+def test_counted_launches_use_few_work_group_sizes(device):
+    """The fix-up walks' count follows the scene; a work-group dividing it was a new size
+    (and a PoCL compile of about 450 ms) at nearly every point of a sweep."""
+    launches = [device.counted_launch(count) for count in range(1, 30_000, 7)]
+    assert all(size[0] >= count for size, count in zip((g for g, _ in launches), range(1, 30_000, 7)))
+    if device.is_cpu:
+        groups = {local for _, local in launches}
+        assert len(groups) <= 13 and all(g[0] & (g[0] - 1) == 0 for g in groups)
+        assert all(size[0] % local[0] == 0 for size, local in launches)
