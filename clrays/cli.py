@@ -22,7 +22,8 @@ from click.core import ParameterSource
 from . import device as device_settings
 from .device import list_devices, select_device
 from .errors import ClraysError, DeviceError, OutputError
-from .image_io import check_finite, check_folder, check_output_path, make_folder, write_image
+from .image_io import (check_finite, check_folder, check_name_length, check_output_path, make_folder,
+                       make_output_folder, write_image)
 from .reference.exact import estimate_seconds
 from .runs import bench as bench_run
 from .runs.references import parse_reference
@@ -32,6 +33,7 @@ from .runs.video import DEFAULT_CRF, VIDEO_OPTIONS, video_encoder_options
 from .runs.sweep import axes_from, format_table, run_sweep
 from .scene import files as scene_files
 from .scene.fields import unread_render_keys
+from .scene.limits import MAX_SWEEP_POINTS
 from .scene.load import load_scene
 from .scene.model import METHODS, RENAMED_METHODS, SHADOW_FILTERS
 from .session import Renderer
@@ -339,7 +341,8 @@ Examples:
 @option("--frame", type=int, metavar="N", group=SCENE,
         help="Render frame N of the scene's animation (see `clrays sequence`).")
 @option("-o", "--output", required=True, type=click.Path(path_type=Path), group=OUTPUT,
-        help="Output image: .png (8-bit sRGB), .exr (float RGB) or .npy (float32 linear H×W×3).")
+        help="Output image: .png (8-bit sRGB), .exr (float RGB) or .npy (float32 linear H×W×3); its folder is "
+             "created.")
 @exposure_option("PNG only")
 @option("--stats", is_flag=True, group=RUN, help="Print per-stage device times and device memory.")
 @verbose_option()
@@ -350,9 +353,10 @@ Examples:
 def render(context, scene: Path, method, overrides, camera, frame, output: Path, exposure, stats, verbose, progress,
            device) -> None:
     """Render SCENE (a YAML file, or glTF: .glb, .gltf) to an image."""
-    check_output_path(output)
+    check_output_path(output, folder_exists=False)
     check_exposure_applies(exposure, [output])
     loaded = load_scene(scene, with_camera(overrides, camera))
+    check_output_path(make_output_folder(output))  # created, as every command creates its output's folder
     if frame is not None:
         parse_frames(str(frame), scene_frames(loaded), "--frame")
         loaded = loaded.animation.scene_at(loaded, frame) if loaded.animation is not None else loaded
@@ -448,8 +452,9 @@ there, so an interrupted run resumes where it stopped (--overwrite renders all a
 @overrides_option("Override a scene field (repeatable), e.g. --set animation.fps=12.")
 @camera_option()
 @option("-o", "--output", "pattern", required=True, metavar="PATTERN", group=OUTPUT,
-        help="Frame files, with one {} field for the frame number: frames/frame_{:04d}.png "
-             "(.png, .exr or .npy; the folder is created).")
+        help="Frame files, with one {} field for the frame number in an integer format: "
+             "frames/frame_{:04d}.png (.png, .exr or .npy; the folder is created, and no other run may write "
+             "into it meanwhile).")
 @option("--video", type=click.Path(dir_okay=False, path_type=Path), group=OUTPUT,
         help="Also write the frames as a video: .mp4 (H.264), .gif or .webp (at the animation's fps).")
 @option("--crf", type=click.IntRange(0, 51), default=None, metavar="N", group=OUTPUT,
@@ -518,12 +523,14 @@ Examples:
 \b
 Writes one image per point (000.png, 001.png, ...), results.csv (the parameters, wall and
 per-stage times, reused stages and, with --reference, the error against it in percent) and
-contact_sheet.png. Re-running the same command keeps the points already done.
+contact_sheet.png. Re-running the same command keeps the points already done. wall_ms is
+the render's wall time, less the kernel builds during it (build_ms).
 """)
 @click.argument("scene", type=click.Path(path_type=Path))
 @confine_option()
-@overrides_option("A swept key with comma-separated values, or a fixed override with one (repeatable); the "
-                  "points are the cartesian product of the swept keys.", metavar="KEY.PATH=V1,V2,...", group=SWEEP)
+@overrides_option("A swept key with comma-separated values, or a fixed override with one (repeatable; each key "
+                  f"once); the points are the cartesian product of the swept keys, at most {MAX_SWEEP_POINTS}.",
+                  metavar="KEY.PATH=V1,V2,...", group=SWEEP)
 @camera_option()
 @option("--reference", metavar="exact|raymarch:N", group=SWEEP,
         help="Measure each point's error against this reference (kept in OUTPUT/.references).")
@@ -669,13 +676,14 @@ Examples:
         help="The relief to convert: objects.I of the scene (default: the first relief).")
 @overrides_option("Override a scene field (repeatable), e.g. --set objects.0.height=0.1.")
 @option("-o", "--output", required=True, type=click.Path(path_type=Path), group=OUTPUT,
-        help="Mesh file: .ply, .obj or .stl, in world space (the object's transform applied).")
+        help="Mesh file: .ply, .obj or .stl, in world space (the object's transform applied); its folder is "
+             "created.")
 def relief_to_mesh(scene: Path, index, overrides, output: Path) -> None:
     """Write a relief object of SCENE as its height-field triangles (two per texel cell)."""
     from .runs.relief_mesh import relief_to_mesh as convert
 
-    check_folder(output)
-    index, count = convert(scene, output, index, overrides)
+    check_name_length(output)
+    index, count = convert(scene, check_folder(make_output_folder(output)), index, overrides)
     click.echo(f"objects.{index}: {count} triangles -> {output}")
 
 

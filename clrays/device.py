@@ -12,6 +12,7 @@ import contextlib
 import hashlib
 import os
 import sys
+import time
 import warnings
 from dataclasses import dataclass, field
 from importlib import resources
@@ -275,6 +276,8 @@ class Device:
         self.context = cl.Context([self.device])
         self.queue = cl.CommandQueue(self.context, properties=cl.command_queue_properties.PROFILING_ENABLE)
         self._programs: dict[tuple, object] = {}
+        #: Milliseconds spent building programs so far: a sweep leaves them out of a point's time.
+        self.build_ms = 0.0
         self._kernels: dict[tuple, object] = {}
         # The shared constants as they are now: every program this device builds later takes
         # them (a test builds a device with one changed, and changes it back at once).
@@ -307,12 +310,15 @@ class Device:
             path = kernel_dir() / f"{stage}.cl"
             options = build_options(defines, self._constants)
             marker = self._first_build()
+            start = time.perf_counter()
             try:
                 with warnings.catch_warnings(), _compiler_output():
                     warnings.simplefilter("ignore", self.cl.CompilerWarning)
                     self._programs[key] = self.cl.Program(self.context, path.read_text()).build(options=options)
             except self.cl.RuntimeError as exc:
                 raise DeviceError(f"{path}: build failed with options {' '.join(options)}:\n{exc}") from exc
+            finally:
+                self.build_ms += (time.perf_counter() - start) * 1e3
             if marker is not None:
                 with contextlib.suppress(OSError):
                     marker.parent.mkdir(parents=True, exist_ok=True)
@@ -353,6 +359,19 @@ class Device:
         if global_size not in self._local_sizes:
             self._local_sizes[global_size] = spread_local_size(global_size, self._units, self._max_group)
         return self._local_sizes[global_size]
+
+    def counted_launch(self, count: int) -> tuple[tuple[int], tuple[int] | None]:
+        """(global size, work-group shape) of a 1-D launch over `count` items whose kernel
+        skips the work-items past `count`, a count that follows the scene (the camera
+        samples a fix-up walk takes). On a CPU device the work-group is the power of two
+        nearest below spread_local_size's aim and the launch is padded to a multiple of it:
+        PoCL compiles a kernel for each work-group size it has not cached (about 450 ms),
+        and a divisor of each count would be a new size at nearly every frame."""
+        if not self._spread:
+            return (max(count, 1),), None
+        aim = max(1, min(count // (GROUPS_PER_UNIT * self._units), self._max_group))
+        group = 1 << (aim.bit_length() - 1)
+        return (-(-max(count, 1) // group) * group,), (group,)
 
     def buffer(self, array: np.ndarray | None = None, nbytes: int | None = None, writable: bool = True):
         """A device buffer, filled from `array` or of `nbytes` uninitialised bytes; on a CPU

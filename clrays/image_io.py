@@ -5,18 +5,27 @@
 - `.npy`: float32 H×W×3 linear radiance, nothing applied.
 
 Writes are atomic: a temporary file beside the target, then a rename, so an
-interrupted or failed write never leaves a half-written image. A temporary's name holds
-the host and process id of its writer, so a later write in the folder removes those of a
-process that is gone (SIGKILL leaves no chance to clean up). The folder checks
-(`check_folder`, `make_folder`) run before rendering, so a bad path fails at once.
+interrupted or failed write (Ctrl-C, a full disk) never leaves a half-written image, and
+its error is one line naming the file. A temporary's name holds the host and process id
+of its writer, so a later write in the folder removes those of a process that is gone
+(SIGKILL leaves no chance to clean up). The folder checks (`check_folder`, `make_folder`)
+run before rendering, so a bad path fails at once. A run that writes many files into a
+folder holds its lock (`folder_lock`), so that two runs never write into one folder.
 """
 from __future__ import annotations
 
+import contextlib
+import errno
+import hashlib
 import os
 import re
+import secrets
+import shlex
 import socket
-import tempfile
+import stat
+import sys
 from pathlib import Path
+from typing import Callable, Iterator
 
 import numpy as np
 
@@ -25,8 +34,9 @@ from .errors import ClraysError, OutputError
 FORMATS = (".png", ".exr", ".npy")
 
 
-def check_output_path(path: str | Path) -> Path:
-    """Fail early (before rendering) on an unknown extension or an unwritable folder."""
+def check_output_path(path: str | Path, folder_exists: bool = True) -> Path:
+    """Fail early (before rendering) on an unknown extension or an unwritable folder (with
+    `folder_exists` False, the folder may be missing yet: `make_output_folder` creates it)."""
     path = Path(path)
     check_name_length(path)
     if path.is_dir():
@@ -35,7 +45,7 @@ def check_output_path(path: str | Path) -> Path:
     if suffix not in FORMATS:
         raise OutputError(f"{path}: unknown output extension {path.suffix or '(none)'!r}; "
                           f"expected one of {', '.join(FORMATS)}")
-    return check_folder(path)
+    return check_folder(path) if folder_exists else path
 
 
 def check_name_length(path: Path) -> Path:
@@ -145,37 +155,135 @@ def remove_stale_temporaries(folder: str | Path, again: bool = False) -> list[Pa
     return removed
 
 
+def _temporary_name(path: Path) -> str:
+    """`.NAME.clrays-HOST-PID-XXXX.SUFFIX` beside `path`, with the name cut so that the
+    temporary's stays within NAME_MAX whatever the target's."""
+    return os.path.join(path.parent or ".", f".{path.name[:80]}.clrays-{_host()}-{os.getpid()}-"
+                                            f"{secrets.token_hex(6)}{path.suffix.lower()}")
+
+
+def _create(temporary: str) -> None:
+    # O_EXCL: never another's file; mode 0o666 less the umask, as any new file (not mkstemp's 0600).
+    os.close(os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+
+
 def temporary_beside(path: Path) -> str:
     """A new empty file beside `path` (`.NAME.clrays-HOST-PID-XXXX.SUFFIX`) to write and then
-    rename over it; created with the permissions of any new file (umask), not mkstemp's 0600."""
-    # The name is cut so that the temporary's stays within NAME_MAX whatever the target's.
-    handle, temporary = tempfile.mkstemp(prefix=f".{path.name[:80]}.clrays-{_host()}-{os.getpid()}-",
-                                         suffix=path.suffix.lower(), dir=path.parent or ".")
-    os.close(handle)
-    umask = os.umask(0o022)
-    os.umask(umask)
-    os.chmod(temporary, 0o666 & ~umask)
+    rename over it."""
+    temporary = _temporary_name(path)
+    _create(temporary)
     return temporary
 
 
-def write_atomic(path: Path, write) -> None:
+def file_digest(path: str | Path) -> str | None:
+    """The BLAKE2b of a regular file's bytes (hex), or None when there is no such file
+    (missing, or a FIFO or device, which is never opened for long: O_NONBLOCK)."""
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    except OSError:
+        return None
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            return None
+        h = hashlib.blake2b(digest_size=16)
+        while chunk := os.read(fd, 1 << 20):
+            h.update(chunk)
+        return h.hexdigest()
+    except OSError:
+        return None
+    finally:
+        os.close(fd)
+
+
+def _failure(path: Path, exc: BaseException) -> str:
+    """One line for a failed write; a library's message may name the temporary, so it is cut
+    to its first line, and a full disk or a file-size limit is said as such."""
+    if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
+        return f"{path}: cannot write: {os.strerror(exc.errno)}"
+    text = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+    return f"{path}: cannot write: {(text.strip().splitlines() or [type(exc).__name__])[0]}"
+
+
+def write_atomic(path: Path, write: Callable[[str], None], content_digest: bool = False) -> str | None:
     """Call `write(temporary)` on a file beside `path`, then rename it over `path`: readers
-    see the old file or the whole new one, and a failure leaves nothing behind."""
-    temporary = None
+    see the old file or the whole new one, and a failure or an interrupt (KeyboardInterrupt
+    at any point) leaves nothing behind. An OSError (a full disk) becomes one OutputError
+    naming `path`. With `content_digest`, returns the `file_digest` of what was written,
+    taken from the temporary before the rename (no other writer can have changed it)."""
+    path = Path(path)
+    # Named before it is created, so that the `finally` knows it whenever the interrupt comes.
+    temporary = _temporary_name(path)
     try:
         remove_stale_temporaries(path.parent)
-        temporary = temporary_beside(path)
+        _create(temporary)
         write(temporary)
+        written = file_digest(temporary) if content_digest else None
         os.replace(temporary, path)
+        return written
     except OSError as exc:
-        raise OutputError(f"{path}: cannot write: {exc.strerror or exc}") from exc
+        raise OutputError(_failure(path, exc)) from exc
     finally:
-        if temporary is not None and os.path.exists(temporary):
-            os.unlink(temporary)
+        with contextlib.suppress(OSError):
+            os.unlink(temporary)  # gone after the rename; only ours (the name holds our pid and a random part)
+
+
+def make_output_folder(path: str | Path) -> Path:
+    """Create the folder of output file `path` (and its parents), as every command does."""
+    path = Path(path)
+    make_folder(path.parent if str(path.parent) else Path("."), "the output folder")
+    return path
+
+
+#: The lock file of a folder a run writes into (`folder_lock`).
+LOCK = ".clrays-lock"
+
+
+@contextlib.contextmanager
+def folder_lock(folder: str | Path) -> Iterator[Path]:
+    """Hold `folder`'s lock (an flock on LOCK) while the block runs: a second run into the
+    same folder fails at once with one line naming the first (its pid, host and command),
+    rather than interleaving its files with the first's. The lock goes with the process,
+    also when it is killed; the file stays (removing it would race with a third run)."""
+    folder = Path(folder)
+    path = folder / LOCK
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOFOLLOW", 0),
+                     0o666)
+    except OSError as exc:
+        raise OutputError(f"{path}: cannot lock the folder: {exc.strerror or exc}") from None
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise OutputError(f"{path}: cannot lock the folder: not a regular file; remove it")
+        import fcntl
+
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 512, 0).decode("utf-8", "replace").strip().splitlines()
+            raise OutputError(f"{folder}: in use by another clrays run ({holder[0] if holder else 'unknown'}); "
+                              f"wait for it to end, or write elsewhere") from None
+        except OSError as exc:  # a file system without locks (ENOLCK, EOPNOTSUPP): run unlocked
+            if exc.errno not in (errno.ENOLCK, errno.EOPNOTSUPP, errno.ENOSYS):
+                raise OutputError(f"{path}: cannot lock the folder: {exc.strerror or exc}") from None
+        command = shlex.join(["clrays", *sys.argv[1:]])
+        holder = f"pid {os.getpid()} on {socket.gethostname()}: {command[:300]}\n".encode("utf-8", "replace")
+        with contextlib.suppress(OSError):
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, holder, 0)
+        yield path
+    finally:
+        os.close(fd)  # releases the lock
 
 
 def write_image(path: str | Path, radiance: np.ndarray, exposure: float = 0.0) -> Path:
     """Write (H, W, 3) linear radiance to `path` atomically; returns the path."""
+    write_frame(path, radiance, exposure)
+    return Path(path)
+
+
+def write_frame(path: str | Path, radiance: np.ndarray, exposure: float = 0.0) -> str:
+    """`write_image`, returning the `file_digest` of the bytes written (what a sequence's
+    manifest ties the frame's scene to)."""
     path = check_output_path(path)
     suffix = path.suffix.lower()
     radiance = np.ascontiguousarray(radiance, dtype=np.float32)
@@ -189,13 +297,26 @@ def write_image(path: str | Path, radiance: np.ndarray, exposure: float = 0.0) -
             import OpenEXR
 
             header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-            with OpenEXR.File(header, {"RGB": radiance}) as exr:
-                exr.write(temporary)
+            try:
+                with OpenEXR.File(header, {"RGB": radiance}) as exr:
+                    exr.write(temporary)
+            except RuntimeError as exc:  # OpenEXR reports a failed write (a full disk) so
+                raise OSError(_errno_in(str(exc)), _exr_reason(str(exc))) from exc
         else:
             np.save(temporary, radiance)
 
-    write_atomic(path, write)
-    return path
+    return write_atomic(path, write, content_digest=True)
+
+
+def _errno_in(text: str) -> int | None:
+    """The errno whose message OpenEXR's text holds ("No space left on device"), if any."""
+    return next((code for code in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EIO, errno.EACCES)
+                 if os.strerror(code).lower() in text.lower()), None)
+
+
+def _exr_reason(text: str) -> str:
+    code = _errno_in(text)
+    return os.strerror(code) if code is not None else (text.strip().splitlines() or ["OpenEXR failed"])[0]
 
 
 def read_srgb8(path: str | Path, exposure: float = 0.0) -> np.ndarray:

@@ -333,21 +333,23 @@ def _slim(result):
     return replace(result, image=np.zeros((0, 0, 3), np.float32))
 
 
-def render_frame_task(item: tuple[int, str], *, scene, method: str | None, exposure: float, reuse: bool,
+def render_frame_task(item: tuple[int, str, str], *, scene, method: str | None, exposure: float, reuse: bool,
                       overwrite: bool):
-    """Render one frame of a sequence on a worker and write its file: item = (frame, path).
-    Returns the slimmed RenderResult, or None when the file is there already (a task
-    run again after its worker died, having written it)."""
-    from ..image_io import check_finite, write_image
+    """Render one frame of a sequence on a worker, write its file and its manifest line:
+    item = (frame, path, frame digest). Returns the slimmed RenderResult, or None when the
+    file is there already (a task run again after its worker died, having written it)."""
+    from ..image_io import check_finite, write_frame
+    from .sequence import append_frame_line
 
-    frame, path = item
+    frame, path, frame_digest_hex = item
     path = Path(path)
     if path.exists() and not overwrite:
         return None
     with _session_lock:
         frame_scene = scene.animation.scene_at(scene, frame) if scene.animation is not None else scene
         result = _worker_renderer(reuse).render(frame_scene, method)
-        write_image(path, check_finite(result.image, f"frame {frame}"), exposure)
+        content = write_frame(path, check_finite(result.image, f"frame {frame}"), exposure)
+        append_frame_line(path, frame_digest_hex, content)
     return _slim(result)
 
 

@@ -10,6 +10,9 @@ masks that `clrays.reference.metrics.image_error` leaves out are kept the same w
 """
 from __future__ import annotations
 
+import io
+import os
+import sys
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -21,6 +24,7 @@ from ..errors import ClraysError
 from ..image_io import make_folder, write_atomic
 from ..reference.metrics import ImageError, depth_edges, depth_edges_at, depth_map, image_error
 from ..reuse import StageCache, digest, scene_digest
+from ..scene.files import FileRefused, read_regular_file
 from ..scene.load import MAX_STEPS
 from ..scene.model import Render, Scene
 from ..session import Renderer
@@ -75,11 +79,14 @@ class ReferenceCache:
 
     renderer: renders whole-frame references (default: a new session); they are
     rendered with `reuse=False`, so they neither use nor evict what the renderer keeps
-    for the study's own frames. progress: a progress bar while a reference renders."""
+    for the study's own frames. progress: a progress bar while a reference renders. An
+    entry that cannot be read back (a corrupted file) is computed again and replaced."""
 
     def __init__(self, folder: str | Path, renderer: Renderer | None = None, progress: bool = False,
-                 memory_entries: int = 4):
+                 memory_entries: int = 4, notice: Callable[[str], None] | None = None):
         self.folder = Path(folder)
+        #: Says, in one line, that a kept entry was unreadable and is computed again (default: stderr).
+        self.notice = notice or _stderr_notice
         self.renderer = renderer or Renderer()
         self.progress = progress
         self._memory = StageCache(memory_entries)  # least recently used first out, per kind
@@ -92,14 +99,14 @@ class ReferenceCache:
         as_rendered = reference_scene(scene, reference)
         key = digest(reference, scene_digest(as_rendered), pixels)
         return self._cached(reference.name.replace(":", ""), key,
-                            lambda: self._render(as_rendered, reference, pixels))
+                            lambda: self._render(as_rendered, reference, pixels), _shape(scene, pixels) + (3,))
 
     def edges(self, scene: Scene, pixels: Pixels | None = None) -> np.ndarray:
         """Pixels at depth discontinuities: (H, W), or (N,) on `pixels`."""
         key = digest("edges", scene.camera, scene.image, scene.geometry.triangles, pixels)
         if pixels is None:
-            return self._cached("edges", key, lambda: depth_edges(depth_map(scene)))
-        return self._cached("edges", key, lambda: depth_edges_at(scene, *pixels))
+            return self._cached("edges", key, lambda: depth_edges(depth_map(scene)), _shape(scene, pixels))
+        return self._cached("edges", key, lambda: depth_edges_at(scene, *pixels), _shape(scene, pixels))
 
     def error(self, scene: Scene, reference: Reference, image: np.ndarray, pixels: Pixels | None = None) -> ImageError:
         """`image_error` of a whole rendered frame (H, W, 3) against the reference, depth
@@ -126,17 +133,40 @@ class ReferenceCache:
         image = self.renderer.render(scene, reuse=False, progress=self.progress).image
         return image if pixels is None else image[pixels]
 
-    def _cached(self, kind: str, key: bytes, compute: Callable[[], np.ndarray]) -> np.ndarray:
+    def _cached(self, kind: str, key: bytes, compute: Callable[[], np.ndarray], shape: tuple[int, ...]) -> np.ndarray:
         found, array = self._memory.get(kind, key)
         if found:
             return array
         self._computed = True
         path = self.folder / f"{kind}-{key.hex()[:24]}.npy"
-        if path.exists():
-            array = np.load(path)
-        else:
+        array = self._load(path, shape) if os.path.lexists(path) else None
+        if array is None:
             array = compute()
             make_folder(self.folder, "the reference folder")
             write_atomic(path, lambda temporary: np.save(temporary, array))
         self._memory.put(kind, key, array)
         return array
+
+    def _load(self, path: Path, shape: tuple[int, ...]) -> np.ndarray | None:
+        """A kept entry, or None (with a notice) when it cannot be what was written: not a
+        regular file, not an .npy, or of another shape or type; it is then computed again
+        and replaced."""
+        try:
+            data = read_regular_file(path, int(np.prod(shape)) * 8 + 4096)  # float64 at most, and the header
+            array = np.load(io.BytesIO(data), allow_pickle=False)
+            if array.shape != shape or array.dtype.kind not in "fb" or not np.isfinite(array).all():
+                raise ValueError(f"a {array.dtype} array of shape {array.shape}, expected {shape}")
+            return array
+        except (FileRefused, OSError, ValueError, EOFError) as exc:
+            reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            self.notice(f"{path}: unreadable cached reference ({reason}); computing it again")
+            return None
+
+
+def _shape(scene: Scene, pixels: Pixels | None) -> tuple[int, ...]:
+    """The shape of a reference entry without its channels: the image's, or the pixels'."""
+    return (scene.image.height, scene.image.width) if pixels is None else (len(pixels[0]),)
+
+
+def _stderr_notice(line: str) -> None:
+    print(f"clrays: notice: {line}", file=sys.stderr)

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ClraysError
+from ..image_io import write_atomic
 from ..scene.geometry import MESH_SUFFIXES
 from ..scene.load import load_scene, object_kinds
 
@@ -15,7 +16,8 @@ from ..scene.load import load_scene, object_kinds
 def write_mesh(triangles: np.ndarray, path: Path, albedo: np.ndarray | None = None) -> None:
     """Write triangles (T, 3, 3) as a binary PLY (shared vertices are not merged: two per
     cell, the same floats as the renderer's), or OBJ / STL by suffix; with `albedo` a PLY
-    carries it as a face colour (8-bit), which the loader ignores."""
+    carries it as a face colour (8-bit), which the loader ignores. Written atomically
+    (`clrays.image_io.write_atomic`): a failed write is one OutputError naming `path`."""
     import trimesh
 
     triangles = np.asarray(triangles, float).reshape(-1, 3, 3)
@@ -25,7 +27,8 @@ def write_mesh(triangles: np.ndarray, path: Path, albedo: np.ndarray | None = No
     if albedo is not None and Path(path).suffix.lower() == ".ply":
         mesh.visual.face_colors = np.concatenate(
             [np.round(np.clip(albedo, 0, 1) * 255), np.full((len(albedo), 1), 255)], axis=1).astype(np.uint8)
-    mesh.export(str(path))
+    # Written beside and renamed, as images are: a full disk leaves no partial mesh.
+    write_atomic(Path(path), lambda temporary: mesh.export(temporary, file_type=Path(path).suffix.lower()[1:]))
 
 
 def relief_to_mesh(scene_path: Path | str, output: Path | str, index: int | None = None,

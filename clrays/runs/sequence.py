@@ -4,17 +4,23 @@
     report = render_sequence(scene, "out/orbit/frame_{:04d}.png")
     write_video(report.paths, "out/orbit.gif", fps=scene.animation.fps)
 
-Frames are written atomically (`clrays.image_io.write_image`), so a file that exists is
-a finished frame, and a manifest beside the frames (MANIFEST) holds the digest of the
-scene each was rendered from: running the same sequence again skips the frames whose
-scene is unchanged and renders again those of a changed one (another `--set`, an edited
-file), and an interrupted run loses nothing but the frame it was on. One render session (`Renderer`) renders all
-frames, so what a frame shares with the previous one is not computed again
-(docs/design.md §7).
+Frames are written atomically (`clrays.image_io.write_frame`), and a manifest beside the
+frames (MANIFEST) gets a line per frame written: the digest of the scene it was rendered
+from and the digest of its bytes. Running the same sequence again skips the frames whose
+scene is unchanged and whose file is the one written for it, and renders again those of
+a changed scene (another `--set`, an edited file) or replaced by another writer; an
+interrupted run loses nothing but the frame it was on. A run holds the lock of the folder
+above its frames (`lock_folder`), so a second run into it stops at once. One render
+session (`Renderer`) renders all frames, so what a frame shares with the previous one is
+not computed again (docs/design.md §7).
 """
 from __future__ import annotations
 
+import errno
 import json
+import os
+import re
+import stat
 import string
 import time
 from dataclasses import dataclass, field
@@ -22,9 +28,11 @@ from pathlib import Path
 from typing import Callable
 
 from ..errors import ClraysError, OutputError
-from ..image_io import (FORMATS, check_finite, check_folder, check_output_path, make_folder, read_srgb8,
-                        write_atomic, write_image)
+from ..image_io import (FORMATS, check_finite, check_folder, check_name_length, check_output_path, file_digest,
+                        folder_lock, make_folder, make_output_folder, read_srgb8, write_atomic, write_frame)
 from ..reuse import digest, scene_digest
+from ..scene.files import FileRefused, read_regular_file
+from ..scene.limits import MAX_FRAME_FIELD_WIDTH, MAX_RUN_RECORD_BYTES
 from ..session import Renderer, RenderResult
 from ..scene.model import Scene
 from .progress import Progress, counted
@@ -58,19 +66,44 @@ def parse_frames(text: str | None, available: range, option: str = "--frames") -
     return range(a, b + 1)
 
 
+#: A frame field's format spec: an integer presentation ([[fill]align][sign][#][0][width]
+#: [grouping][type]), the width bounded by MAX_FRAME_FIELD_WIDTH. No precision, no `c`
+#: (frame 0 is a NUL), no nested fields.
+_FRAME_SPEC = re.compile(r"(?:(?P<fill>[^{}/\x00-\x1f\x7f])?[<>=^])?[-+ ]?#?0?(?P<width>\d*)[_,]?[bdoxXn]?")
+#: Characters no frame path should hold: NUL (which no file system takes) and the controls.
+_BAD_CHARACTER = re.compile(r"[\x00-\x1f\x7f]")
+
+
 def check_pattern(pattern: str | Path) -> str:
     """A frame path pattern with exactly one replacement field for the frame number
-    (`{}`, `{:04d}`, `{0:04d}` or `{frame:04d}`) and an image extension."""
+    (`{}`, `{:04d}`, `{0:04d}` or `{frame:04d}`: an integer format of width at most
+    MAX_FRAME_FIELD_WIDTH) and an image extension; checked before anything is formatted."""
     pattern = str(pattern)
     example = "like frames/frame_{:04d}.png"
+    if _BAD_CHARACTER.search(pattern):  # checked first: no message prints one
+        raise OutputError(f"{pattern!r}: expected no NUL or control characters in a frame pattern")
     try:
-        fields = [name for _, name, _, _ in string.Formatter().parse(pattern) if name is not None]
-        if len(fields) != 1:
-            raise OutputError(f"{pattern}: expected one {{}} field for the frame number ({example}), "
-                              f"got {len(fields)} fields")
+        fields = [(name, spec, conversion) for _, name, spec, conversion in string.Formatter().parse(pattern)
+                  if name is not None]
+    except ValueError as exc:
+        raise OutputError(f"{pattern}: expected a frame pattern {example} ({exc})") from None
+    if len(fields) != 1:
+        raise OutputError(f"{pattern}: expected one {{}} field for the frame number ({example}), "
+                          f"got {len(fields)} fields")
+    name, spec, conversion = fields[0]
+    field_text = "{" + name + (f"!{conversion}" if conversion else "") + (f":{spec}" if spec else "") + "}"
+    match = _FRAME_SPEC.fullmatch(spec or "")
+    if name not in ("", "0", "frame") or conversion or match is None:
+        raise OutputError(f"{pattern}: field {field_text!r}: expected a frame pattern {example}: its one field "
+                          f"{{}}, {{0}} or {{frame}}, in an integer format (fill, align, sign, width, grouping; "
+                          f"b, d, o, x, X or n)")
+    if match["width"] and int(match["width"]) > MAX_FRAME_FIELD_WIDTH:
+        raise OutputError(f"{pattern}: field {field_text!r}: expected a width of at most {MAX_FRAME_FIELD_WIDTH}, "
+                          f"got {int(match['width']) if len(match['width']) < 20 else match['width'][:20] + '...'}")
+    try:
         sample = [frame_path(pattern, n) for n in (0, 1)]
-    except (ValueError, IndexError, KeyError) as exc:
-        raise OutputError(f"{pattern}: expected a frame pattern {example} ({type(exc).__name__}: {exc})") from None
+    except ValueError as exc:  # e.g. a sign with `n`
+        raise OutputError(f"{pattern}: field {field_text!r}: {exc}") from None
     if sample[0] == sample[1]:
         raise OutputError(f"{pattern}: expected a different file per frame, got {sample[0]} for frames 0 and 1")
     if Path(pattern).suffix.lower() not in FORMATS or "{" in Path(pattern).suffix:
@@ -81,6 +114,14 @@ def check_pattern(pattern: str | Path) -> str:
 
 def frame_path(pattern: str, frame: int) -> Path:
     return Path(pattern.format(frame, frame=frame))
+
+
+def lock_folder(pattern: str) -> Path:
+    """The folder a sequence locks: the deepest one that holds every frame of `pattern`
+    (the frame number may name folders: `out/{:04d}/beauty.png` locks `out`)."""
+    parts = Path(pattern).parts
+    fixed = next(i for i, part in enumerate(parts) if "{" in part)
+    return Path(*parts[:fixed]) if fixed else Path(".")
 
 
 @dataclass
@@ -101,10 +142,11 @@ class SequenceReport:
                 f"(of {len(self.paths)}) in {self.wall_s:.1f} s{per}")
 
 
-#: Beside the frames, in each folder that holds some: frame file name → the digest of what
-#: its image depends on (`frame_digest`), so that a resumed run can tell a finished frame
-#: from a stale one.
-MANIFEST = ".clrays-frames.json"
+#: Beside the frames, in each folder that holds some: one JSON line per frame written,
+#: {"file": name, "digest": `frame_digest`, "content": `file_digest` of its bytes}, the
+#: last line of a file counting, so that a resumed run can tell a finished frame from a
+#: stale one, or from one another run wrote.
+MANIFEST = ".clrays-frames.jsonl"
 
 
 def frame_digest(frame_scene: Scene, method: str | None, exposure: float, suffix: str) -> str:
@@ -116,26 +158,70 @@ def frame_digest(frame_scene: Scene, method: str | None, exposure: float, suffix
 
 
 class FrameManifest:
-    """The digests of the frames of one folder (MANIFEST), rewritten atomically before each
-    frame file is written: a frame file without an entry, or with another digest, is stale."""
+    """The frames of one folder (MANIFEST): appended a line after each frame file is
+    written, so a frame costs one short write however long the sequence. A frame counts as
+    finished only when its line holds the digest of its scene and the digest of the very
+    bytes in its file: a frame without a line (a run killed between the two), of another
+    scene, or overwritten by another run is rendered again."""
 
     def __init__(self, folder: Path):
         self.path = folder / MANIFEST
-        self.entries: dict[str, str] = {}
+        self.entries: dict[str, tuple[str, str]] = {}  # file name → (frame digest, content digest)
+        text, lines = self._read(), 0
+        for line in text.splitlines():
+            try:
+                entry = json.loads(line)
+                self.entries[str(entry["file"])] = (str(entry["digest"]), str(entry["content"]))
+                lines += 1
+            except (ValueError, TypeError, KeyError):
+                pass  # a line cut short by a crash: its frame counts as stale
+        if (text and not text.endswith("\n")) or lines > 2 * len(self.entries) + 64:
+            self._rewrite()  # a torn last line would join the next, and replaced lines pile up
+
+    def _read(self) -> str:
         try:
-            entries = json.loads(self.path.read_text())
-            if isinstance(entries, dict):
-                self.entries = {str(k): str(v) for k, v in entries.items()}
-        except (OSError, ValueError):
-            pass  # none yet, or unreadable: every frame file there counts as stale
+            return read_regular_file(self.path, MAX_RUN_RECORD_BYTES).decode("utf-8", "replace")
+        except FileRefused as exc:
+            if not os.path.lexists(self.path):
+                return ""
+            raise OutputError(f"{self.path}: cannot read the frame manifest: {exc}; remove it (its frames are "
+                              f"rendered again)") from None
+
+    def _line(self, name: str) -> str:
+        frame_digest_hex, content = self.entries[name]
+        return json.dumps({"file": name, "digest": frame_digest_hex, "content": content}) + "\n"
+
+    def _rewrite(self) -> None:
+        text = "".join(self._line(name) for name in sorted(self.entries))
+        write_atomic(self.path, lambda temporary: Path(temporary).write_text(text, encoding="utf-8"))
 
     def matches(self, path: Path, frame_digest_hex: str) -> bool:
-        return path.exists() and self.entries.get(path.name) == frame_digest_hex
+        entry = self.entries.get(path.name)
+        return entry is not None and entry[0] == frame_digest_hex and file_digest(path) == entry[1]
 
-    def record(self, path: Path, frame_digest_hex: str) -> None:
-        self.entries[path.name] = frame_digest_hex
-        text = json.dumps(self.entries, indent=0, sort_keys=True)
-        write_atomic(self.path, lambda temporary: Path(temporary).write_text(text))
+    def record(self, path: Path, frame_digest_hex: str, content: str | None) -> None:
+        """After `path` is written: `content` is the `file_digest` of what was written."""
+        if content is not None:
+            self.entries[path.name] = (frame_digest_hex, content)
+            append_frame_line(path, frame_digest_hex, content)
+
+
+def append_frame_line(path: Path, frame_digest_hex: str, content: str) -> None:
+    """Append frame `path`'s line to the MANIFEST beside it, once the frame is written (here
+    or on a dask worker): one write of one short line with O_APPEND, whatever the length
+    of the sequence. O_NONBLOCK: a FIFO put there fails, never waits."""
+    manifest = path.parent / MANIFEST
+    line = json.dumps({"file": path.name, "digest": frame_digest_hex, "content": content}) + "\n"
+    try:
+        fd = os.open(manifest, os.O_WRONLY | os.O_APPEND | os.O_CREAT | getattr(os, "O_NONBLOCK", 0), 0o666)
+        try:
+            if not stat.S_ISREG(os.fstat(fd).st_mode):
+                raise OSError(errno.EINVAL, "not a regular file")
+            os.write(fd, line.encode())
+        finally:
+            os.close(fd)
+    except OSError as exc:
+        raise OutputError(f"{manifest}: cannot write: {exc.strerror or exc}") from None
 
 
 def render_sequence(scene: Scene, pattern: str | Path, frames: range | None = None, *,
@@ -146,7 +232,8 @@ def render_sequence(scene: Scene, pattern: str | Path, frames: range | None = No
     """Render `frames` (default: all of the animation) of `scene` to `pattern`.
 
     pattern: a path with one `{}` field for the frame number, e.g. `out/frame_{:04d}.png`
-    (its folders are created). Frames whose file exists are skipped unless `overwrite`.
+    (its folders are created, and the one above them locked for the run: `lock_folder`).
+    Frames whose file exists, of the same scene, are skipped unless `overwrite`.
     renderer: the session to use (default: a new one with reuse). on_frame(frame, path,
     result or None when skipped) is called after each frame. executor: a
     `clrays.runs.distributed.DaskExecutor` to render the frames on its workers instead
@@ -155,65 +242,87 @@ def render_sequence(scene: Scene, pattern: str | Path, frames: range | None = No
     pattern = check_pattern(pattern)
     frames = scene_frames(scene) if frames is None else frames
     paths = [frame_path(pattern, frame) for frame in frames]
-    for folder in dict.fromkeys(path.parent for path in paths):  # the frame number may be in a folder name
-        make_folder(folder)
-    for path in paths[:1]:
-        check_output_path(path)
+    make_folder(lock_folder(pattern))
+    for path in paths[:1]:  # the others' folders are created as the run reaches them
+        check_output_path(make_folder(path.parent) / path.name)
     renderer = renderer or Renderer()
     report = SequenceReport(paths)
-    manifests: dict[Path, FrameManifest] = {}
     start = time.perf_counter()
-
-    def render_here(work):
-        for frame, path in work:
-            frame_scene = scene.animation.scene_at(scene, frame) if scene.animation is not None else scene
-            result = renderer.render(frame_scene, method)
-            write_image(path, check_finite(result.image, f"frame {frame}"), exposure)
-            yield (frame, path), result
-
-    try:
-        with Progress(progress, len(paths), "frame", "sequence") as bar:
-            work = []
-            for frame, path in zip(frames, paths):
-                frame_scene = scene.animation.scene_at(scene, frame) if scene.animation is not None else scene
-                manifest = manifests.setdefault(path.parent, FrameManifest(path.parent))
-                key = frame_digest(frame_scene, method, exposure, path.suffix.lower())
-                if manifest.matches(path, key) and not overwrite:
-                    report.kept.append(frame)
-                    if on_frame:
-                        on_frame(frame, path, None)
-                    bar.advance(f"frame {frame}")
-                    continue
-                if path.exists() and manifest.entries.get(path.name) != key:
-                    # A stale frame goes before its new digest is recorded, and the digest
-                    # before the new file is written (here or by a worker): a kill anywhere
-                    # between leaves no file that a later run could take for finished.
-                    path.unlink()
-                    if not overwrite:
-                        report.stale.append(frame)
-                manifest.record(path, key)
-                work.append((frame, path))
-            if executor is None:
-                outcomes = render_here(work)
-            else:
-                from .distributed import render_frame_task
-
-                outcomes = executor.run(render_frame_task, work, dict(scene=scene, method=method, exposure=exposure,
-                                                                      reuse=renderer.reuse, overwrite=overwrite))
-            for (frame, path), result in outcomes:
-                if result is None:  # written by a worker that died before reporting it
-                    report.kept.append(frame)
-                else:
-                    report.rendered.append(frame)
-                    report.results[frame] = result
-                if on_frame:
-                    on_frame(frame, path, result)
-                bar.advance(f"frame {frame}" + (f", {executor.busy_label()}" if executor and progress else ""))
-    finally:
-        report.wall_s = time.perf_counter() - start
-        report.rendered.sort()
-        report.kept.sort()
+    with folder_lock(lock_folder(pattern)):
+        try:
+            with Progress(progress, len(paths), "frame", "sequence") as bar:
+                _run_frames(scene, frames, paths, renderer, method, exposure, overwrite, progress, on_frame,
+                            executor, report, bar)
+        finally:
+            report.wall_s = time.perf_counter() - start
+            report.rendered.sort()
+            report.kept.sort()
     return report
+
+
+def _run_frames(scene, frames, paths, renderer, method, exposure, overwrite, progress, on_frame, executor,
+                report: SequenceReport, bar: Progress) -> None:
+    """The frames in order, each checked against its folder's manifest just before it is
+    rendered: the first frame starts at once, and the run is linear in the frame count."""
+    manifests: dict[Path, FrameManifest] = {}
+
+    def manifest_of(path: Path) -> FrameManifest:
+        if path.parent not in manifests:
+            make_folder(path.parent)  # the frame number may be in a folder name
+            manifests[path.parent] = FrameManifest(path.parent)
+        return manifests[path.parent]
+
+    def to_render():
+        """(frame, path, frame digest, frame scene) of the frames to render; the others reported as kept."""
+        for frame, path in zip(frames, paths):
+            frame_scene = scene.animation.scene_at(scene, frame) if scene.animation is not None else scene
+            manifest = manifest_of(path)
+            key = frame_digest(frame_scene, method, exposure, path.suffix.lower())
+            if not overwrite and manifest.matches(path, key):
+                report.kept.append(frame)
+                if on_frame:
+                    on_frame(frame, path, None)
+                bar.advance(f"frame {frame}")
+                continue
+            if os.path.lexists(path) and not (overwrite and manifest.matches(path, key)):
+                # A stale frame goes before its new one is rendered (here or by a worker, which
+                # skips a file that is there), so that no kill leaves it to be taken for new.
+                try:
+                    path.unlink()
+                except OSError as exc:
+                    raise OutputError(f"{path}: cannot replace the stale frame: {exc.strerror or exc}") from None
+                if not overwrite:
+                    report.stale.append(frame)
+            yield frame, path, key, frame_scene
+
+    if executor is None:
+        for frame, path, key, frame_scene in to_render():
+            result = renderer.render(frame_scene, method)
+            content = write_frame(path, check_finite(result.image, f"frame {frame}"), exposure)
+            manifest_of(path).record(path, key, content)
+            _done(report, frame, path, result, on_frame, bar, f"frame {frame}")
+        return
+    from .distributed import render_frame_task
+
+    # A worker appends its frame's line itself (`append_frame_line`), also for a frame that
+    # lands after this run was stopped.
+    outcomes = executor.run(render_frame_task, [(frame, path, key) for frame, path, key, _ in to_render()],
+                            dict(scene=scene, method=method, exposure=exposure, reuse=renderer.reuse,
+                                 overwrite=overwrite))
+    for (frame, path, _), result in outcomes:
+        _done(report, frame, path, result, on_frame, bar,
+              f"frame {frame}" + (f", {executor.busy_label()}" if progress else ""))
+
+
+def _done(report: SequenceReport, frame: int, path: Path, result, on_frame, bar: Progress, label: str) -> None:
+    if result is None:  # written by a worker that died before reporting it
+        report.kept.append(frame)
+    else:
+        report.rendered.append(frame)
+        report.results[frame] = result
+    if on_frame:
+        on_frame(frame, path, result)
+    bar.advance(label)
 
 
 def check_video_path(path: str | Path) -> Path:
@@ -222,7 +331,8 @@ def check_video_path(path: str | Path) -> Path:
     if suffix not in VIDEO_FORMATS:
         raise OutputError(f"{path}: unknown video extension {path.suffix or '(none)'!r}; "
                           f"expected one of {', '.join(VIDEO_FORMATS)}")
-    return check_folder(path)
+    check_name_length(path)
+    return check_folder(make_output_folder(path))  # created, as the frames' folders are
 
 
 def write_video(paths: list[Path], out: str | Path, fps: float, exposure: float = 0.0,

@@ -19,8 +19,10 @@ keep the order of the product as given.
 """
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
+import os
 import itertools
 import math
 import time
@@ -31,11 +33,13 @@ from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 import yaml
 
 from ..errors import ClraysError, OutputError
-from ..image_io import make_folder, read_srgb8, write_atomic
+from ..image_io import file_digest, folder_lock, make_folder, read_srgb8, write_atomic
 from ..inputs import frame_inputs
 from ..session import STAGE_ORDER, Renderer, StageKeys
 from ..reuse import digest, scene_digest
 from ..scene.model import Scene
+from ..scene.files import FileRefused, read_regular_file
+from ..scene.limits import MAX_RUN_RECORD_BYTES, MAX_SWEEP_POINTS
 from ..scene.load import load_scene
 from .point import ERROR_COLUMNS, REFERENCE_COLUMNS, REFERENCES, SweepPoint, render_point
 from .progress import Progress, counted
@@ -79,7 +83,10 @@ def split_values(text: str) -> list[str]:
 
 
 def parse_settings(settings: Sequence[str]) -> tuple[list[Axis], list[str]]:
-    """`--set key=v1,v2,...` arguments → (swept axes, fixed overrides); one value is fixed."""
+    """`--set key=v1,v2,...` arguments → (swept axes, fixed overrides); one value is fixed.
+    A key given twice, or a key and one inside it (`medium` and `medium.sigma_s`), is an
+    error: the later would silently replace the earlier, and results.csv would label its
+    points with values they were not rendered with."""
     axes, fixed = [], []
     for text in settings:
         key, sep, value_text = text.partition("=")
@@ -88,24 +95,63 @@ def parse_settings(settings: Sequence[str]) -> tuple[list[Axis], list[str]]:
         values = split_values(value_text)
         if any(not v for v in values):
             raise ClraysError(f"--set {text}: {key.strip()}: expected comma-separated values, got an empty one")
-        if any(a.key == key.strip() for a in axes):
-            raise ClraysError(f"--set {text}: {key.strip()}: expected each key swept once, got it again")
         if len(values) == 1:
             fixed.append(f"{key.strip()}={values[0]}")
         else:
             axes.append(Axis(key.strip(), tuple(values)))
+    check_distinct_keys(list(settings))
     return axes, fixed
 
 
-def axes_from(spec: Mapping[str, Sequence[Any]] | Sequence[str] | Sequence[Axis]) -> tuple[list[Axis], list[str]]:
-    """Axes from a dict {key: [python values]}, `--set` strings, or Axis objects."""
+def _key_parts(setting: str) -> tuple[str, ...]:
+    """A `key.path=...` setting's key as parts, list indices as numbers (`lights.00` is `lights.0`)."""
+    parts = [part.strip() for part in setting.partition("=")[0].split(".")]
+    return tuple(str(int(part)) if part.isdecimal() else part for part in parts)
+
+
+def check_distinct_keys(settings: Sequence[str]) -> None:
+    """Refuse two settings (`key.path=...`) of one key, or of a key and a key inside it."""
+    seen: list[tuple[tuple[str, ...], str]] = []
+    for text in settings:
+        parts = _key_parts(text)
+        for other_parts, other in seen:
+            if parts[:len(other_parts)] == other_parts or other_parts[:len(parts)] == parts:
+                shown = lambda t: t if len(t) <= 60 else t[:57] + "..."  # noqa: E731
+                relation = ("sets the same key as" if parts == other_parts else
+                            "sets a key inside" if len(parts) > len(other_parts) else "sets the key holding")
+                raise ClraysError(f"--set {shown(text)}: {'.'.join(parts)} {relation} --set {shown(other)}; "
+                                  f"the later would replace the earlier: give each key once")
+        seen.append((parts, text))
+
+
+def axes_from(spec: Mapping[str, Sequence[Any]] | Sequence[str] | Sequence[Axis],
+              overrides: Sequence[str] = ()) -> tuple[list[Axis], list[str]]:
+    """Axes from a dict {key: [python values]}, `--set` strings, or Axis objects, and the
+    fixed overrides (`overrides` first); every key once (`check_distinct_keys`), and at
+    most MAX_SWEEP_POINTS points."""
     if isinstance(spec, Mapping):
         text = lambda v: v if isinstance(v, str) else yaml.safe_dump(v, default_flow_style=True).strip()  # noqa: E731
         spec = [Axis(key, tuple(text(v).removesuffix("\n...").strip() for v in values)) for key, values in spec.items()]
     spec = list(spec)
     if all(isinstance(a, Axis) for a in spec):
-        return [a for a in spec if len(a.values) > 1], [f"{a.key}={a.values[0]}" for a in spec if len(a.values) == 1]
-    return parse_settings(spec)
+        axes, fixed = [a for a in spec if len(a.values) > 1], [f"{a.key}={a.values[0]}" for a in spec
+                                                             if len(a.values) == 1]
+    else:
+        axes, fixed = parse_settings(spec)
+    fixed = list(overrides) + fixed
+    check_distinct_keys(fixed + [f"{a.key}={','.join(a.values)}" for a in axes])
+    check_point_count(axes)
+    return axes, fixed
+
+
+def check_point_count(axes: Sequence[Axis]) -> int:
+    """The number of points, refused above MAX_SWEEP_POINTS before anything is built."""
+    count = math.prod(len(a.values) for a in axes)
+    if count > MAX_SWEEP_POINTS:
+        sizes = " × ".join(str(len(a.values)) for a in axes)
+        raise ClraysError(f"--set: {sizes} = {count} points, more than the limit of {MAX_SWEEP_POINTS}; "
+                          f"sweep fewer values (docs/limits.md)")
+    return count
 
 
 def sweep_points(axes: Sequence[Axis]) -> list[SweepPoint]:
@@ -114,41 +160,71 @@ def sweep_points(axes: Sequence[Axis]) -> list[SweepPoint]:
             for i, combo in enumerate(itertools.product(*(a.values for a in axes)))]
 
 
+def stage_keys(scene: Scene) -> tuple[bytes, bytes, bytes]:
+    """The session's keys (`clrays.session.StageKeys`) of a scene's shadow maps, camera
+    raster and min-max trees: points that share one share that stage's result."""
+    keys = StageKeys(frame_inputs(scene))
+    trees = digest(*(keys.trees(index) for index in range(len(scene.lights))))
+    return digest(*keys.shadow), keys.camera, trees
+
+
 def execution_order(points: Sequence[SweepPoint], scenes: Iterable[Scene]) -> list[SweepPoint]:
     """`points` (`scenes`: theirs, in the same order) reordered so that those sharing
     shadow maps, then the camera raster, then the min-max trees run one after another,
     while the session still keeps them; ties keep the order of the product.
 
-    Sharing is decided by the session's own keys (`clrays.session.StageKeys`), not by
-    which keys were swept. The integrand's key also holds the β and γ ranges that rectify
-    finds on the device, so it is not known before a point renders and plays no part."""
+    Sharing is decided by the session's own keys (`stage_keys`), not by which keys were
+    swept. The integrand's key also holds the β and γ ranges that rectify finds on the
+    device, so it is not known before a point renders and plays no part."""
     first_seen: dict[bytes, int] = {}
-    rank = {}
-    for point, scene in zip(points, scenes):
-        keys = StageKeys(frame_inputs(scene))
-        trees = digest(*(keys.trees(index) for index in range(len(scene.lights))))
-        rank[point.index] = tuple(first_seen.setdefault(key, len(first_seen))
-                                  for key in (digest(*keys.shadow), keys.camera, trees))
+    rank = {point.index: tuple(first_seen.setdefault(key, len(first_seen)) for key in stage_keys(scene))
+            for point, scene in zip(points, scenes)}
     return sorted(points, key=lambda point: rank[point.index])
 
 
-def check_values(path: str | Path, axes: Sequence[Axis], fixed: Sequence[str] = ()) -> None:
-    """Load the scene once per swept value, so a bad value fails before any rendering."""
+def axes_execution_order(points: Sequence[SweepPoint], axes: Sequence[Axis],
+                         value_keys: Sequence[Sequence[tuple[bytes, bytes, bytes]]]) -> list[SweepPoint]:
+    """`execution_order` without loading a scene per point: from `value_keys[a][v]`, the
+    `stage_keys` of the scene with axis `a` alone set to its value `v` (`check_values`).
+    An axis changes a stage's key the same way whatever the other axes' values, so a point
+    shares a stage with another when each axis's value gives the same key for it."""
+    classes = []  # per axis, per value: the first value of that axis giving the same key, per stage
+    for keys in value_keys:
+        first: list[dict[bytes, int]] = [{}, {}, {}]
+        classes.append([tuple(first[stage].setdefault(key, len(first[stage])) for stage, key in enumerate(value))
+                        for value in keys])
+    sizes = [len(axis.values) for axis in axes]
+
+    def rank(point: SweepPoint):
+        values, index = [], point.index  # the point's value of each axis, first axis slowest
+        for size in reversed(sizes):
+            index, value = divmod(index, size)
+            values.append(value)
+        values.reverse()
+        return tuple(tuple(classes[a][v][stage] for a, v in enumerate(values)) for stage in range(3)), point.index
+
+    return sorted(points, key=rank)
+
+
+def check_values(path: str | Path, axes: Sequence[Axis],
+                 fixed: Sequence[str] = ()) -> list[list[tuple[bytes, bytes, bytes]]]:
+    """Load the scene once per swept value, so a bad value fails before any rendering;
+    returns the `stage_keys` of each (per axis, per value) for `axes_execution_order`."""
     load_scene(path, list(fixed))
-    for axis in axes:
-        for value in axis.values:
-            load_scene(path, list(fixed) + [f"{axis.key}={value}"])
+    return [[stage_keys(load_scene(path, list(fixed) + [f"{axis.key}={value}"])) for value in axis.values]
+            for axis in axes]
 
 
 def sweep_scenes(path: str | Path, spec, overrides: Sequence[str] = ()) -> Iterator[tuple[SweepPoint, Scene]]:
-    """(point, scene) for every point of the product, in the order of the product.
+    """(point, scene) for every point of the product, in the order of the product; each
+    scene is loaded when its turn comes.
 
     spec: {key: [values]} (Python values), `--set`-style "key=v1,v2" strings, or Axis
     objects. overrides: `key=value` applied to every point first."""
-    axes, fixed = axes_from(spec)
-    check_values(path, axes, list(overrides) + fixed)
+    axes, fixed = axes_from(spec, overrides)
+    check_values(path, axes, fixed)
     for point in sweep_points(axes):
-        yield point, load_scene(path, list(overrides) + fixed + point.overrides)
+        yield point, load_scene(path, fixed + point.overrides)
 
 
 # --------------------------------------------------------------------------- the sweep
@@ -161,10 +237,12 @@ class SweepReport:
     rendered: list[int] = field(default_factory=list)  # points rendered by this run
     kept: list[int] = field(default_factory=list)  # points kept from an earlier run
     wall_s: float = 0.0
+    notes: list[str] = field(default_factory=list)  # what the run left out, e.g. the contact sheet
 
     def summary(self) -> str:
         return (f"{counted(len(self.rendered), 'point')} rendered, {len(self.kept)} kept from an earlier run "
-                f"(of {len(self.rows)}) in {self.wall_s:.1f} s; {self.folder / RESULTS}")
+                f"(of {len(self.rows)}) in {self.wall_s:.1f} s; {self.folder / RESULTS}"
+                + "".join(f"; {note}" for note in self.notes))
 
 
 def _image_name(point: SweepPoint, count: int, fmt: str) -> str:
@@ -172,22 +250,31 @@ def _image_name(point: SweepPoint, count: int, fmt: str) -> str:
 
 
 def _read_rows(path: Path) -> dict[int, dict[str, str]]:
+    """The rows of an earlier run's results.csv: none when it is missing or not a CSV;
+    a FIFO, a device or a file over MAX_RUN_RECORD_BYTES is one line (`read_regular_file`)."""
     try:
-        with open(path, newline="", encoding="utf-8") as f:
-            return {int(row["index"]): row for row in csv.DictReader(f) if row.get("index", "").isdecimal()}
-    except (OSError, csv.Error, KeyError, ValueError):
+        text = read_regular_file(path, MAX_RUN_RECORD_BYTES).decode("utf-8", "replace")
+    except FileRefused as exc:
+        if not os.path.lexists(path):
+            return {}
+        raise OutputError(f"{path}: cannot read the results of an earlier run: {exc}; remove it (its points "
+                          f"are rendered again)") from None
+    try:
+        return {int(row["index"]): row for row in csv.DictReader(io.StringIO(text, newline=""))
+                if (row.get("index") or "").isdecimal() and len(row["index"]) < 10}
+    except (csv.Error, KeyError, ValueError):
         return {}
 
 
 def _write_rows(path: Path, rows: list[dict[str, str]], axes: Sequence[Axis]) -> None:
     stages = [s for s in STAGES if any(f"{s}_ms" in r for r in rows)]
     extra = sorted({k[:-3] for r in rows for k in r if k.endswith("_ms") and k[:-3] not in STAGES
-                    and k not in ("wall_ms", "device_ms", "warmup_ms", *REFERENCE_COLUMNS)})
+                    and k not in ("wall_ms", "device_ms", "warmup_ms", "build_ms", *REFERENCE_COLUMNS)})
     columns = (["index", "image"] + [a.key for a in axes] + ["method", "wall_ms", "device_ms"]
-               + [f"{s}_ms" for s in stages + extra] + ["reused", "computed", "warmup_ms"])
+               + [f"{s}_ms" for s in stages + extra] + ["reused", "computed", "warmup_ms", "build_ms"])
     if any(r.get("reference") for r in rows):
         columns += ["reference", *ERROR_COLUMNS, "error_pixels", *REFERENCE_COLUMNS]
-    columns.append("scene_digest")
+    columns += ["scene_digest", "image_digest"]
 
     def write(temporary: str) -> None:
         with open(temporary, "w", newline="", encoding="utf-8") as f:
@@ -214,10 +301,9 @@ def run_sweep(path: str | Path, spec, out_dir: str | Path, *, overrides: Sequenc
     results.csv is still written here, by the client alone."""
     if image_format not in IMAGE_FORMATS:
         raise ClraysError(f"image format: expected one of {', '.join(IMAGE_FORMATS)}, got {image_format!r}")
-    axes, fixed = axes_from(spec)
+    axes, fixed = axes_from(spec, overrides)
     against = parse_reference(reference)
-    fixed = list(overrides) + fixed
-    check_values(path, axes, fixed)
+    value_keys = check_values(path, axes, fixed)
     folder = make_folder(out_dir, "the sweep folder")
 
     def point_scene(point: SweepPoint) -> Scene:
@@ -227,21 +313,57 @@ def run_sweep(path: str | Path, spec, out_dir: str | Path, *, overrides: Sequenc
     renderer = renderer or Renderer()
     references = ReferenceCache(folder / REFERENCES, renderer, progress) if against else None
     points = sweep_points(axes)
+    report = SweepReport(folder, [])
+    start = time.perf_counter()
+    with folder_lock(folder):
+        try:
+            _run_points(points, axes, value_keys, point_scene, folder, renderer, references, against, exposure,
+                        image_format, overwrite, progress, on_point, executor, report)
+            if contact_sheet and len(report.rows) <= MAX_CONTACT_SHEET_POINTS:
+                write_contact_sheet(folder / CONTACT_SHEET, folder, report.rows, axes, exposure)
+            elif contact_sheet:
+                report.notes.append(f"no {CONTACT_SHEET}: {len(report.rows)} points, more than the "
+                                    f"{MAX_CONTACT_SHEET_POINTS} it shows")
+        finally:
+            report.wall_s = time.perf_counter() - start
+    return report
+
+
+#: results.csv is rewritten at most this often while points finish (and at the end, or
+#: when the run stops): rewriting it whole after every point would make a long sweep's
+#: time grow with the square of its points.
+RESULTS_EVERY_S = 1.0
+#: A contact sheet shows at most this many points (about 150 MB of pixels at 240 wide);
+#: a larger sweep writes none and says so.
+MAX_CONTACT_SHEET_POINTS = 1024
+
+
+def _run_points(points, axes, value_keys, point_scene, folder: Path, renderer, references, against, exposure,
+                image_format, overwrite, progress, on_point, executor, report: SweepReport) -> None:
+    """Every point, in `axes_execution_order`, each scene loaded when its turn comes: the
+    first point renders at once, and memory holds one scene at a time."""
     earlier = {} if overwrite else _read_rows(folder / RESULTS)
     warmed: set = set()
     rows: dict[int, dict[str, str]] = {}
-    report = SweepReport(folder, [])
-    start = time.perf_counter()
-    try:
-        with Progress(progress, len(points), "point", "sweep") as bar:
-            work = []  # (point, image name, scene digest) to render, in execution order
-            for point in execution_order(points, map(point_scene, points)):
+    written = {"at": time.perf_counter(), "pending": False}
+
+    def write_results() -> None:
+        # Rows of an earlier run stay until this run reaches their point, so an
+        # interrupted resume loses nothing.
+        merged = {**{i: row for i, row in earlier.items() if i < len(points)}, **rows}
+        _write_rows(folder / RESULTS, [merged[i] for i in sorted(merged)], axes)
+        written.update(at=time.perf_counter(), pending=False)
+
+    with Progress(progress, len(points), "point", "sweep") as bar:
+        def to_render():
+            """(point, image name, scene digest, scene) of the points to render; the others kept."""
+            for point in axes_execution_order(points, axes, value_keys):
                 scene = point_scene(point)
                 digest_hex = digest(scene_digest(scene), exposure).hex()  # what the point's image depends on
                 name = _image_name(point, len(points), image_format)
                 old = earlier.get(point.index)
                 if (old is not None and old.get("scene_digest") == digest_hex and old.get("image") == name
-                        and (folder / name).exists()
+                        and old.get("image_digest") and file_digest(folder / name) == old["image_digest"]
                         and (against is None or (old.get("reference") == against.name
                                                  and old.get(ERROR_COLUMNS[0])))):
                     rows[point.index] = old
@@ -250,35 +372,34 @@ def run_sweep(path: str | Path, spec, out_dir: str | Path, *, overrides: Sequenc
                         on_point(point, old)
                     bar.advance(point.label[:60])
                 else:
-                    work.append((point, name, digest_hex))
-            if executor is None:
-                # The scene is loaded again here rather than kept in `work`: a sweep of
-                # hundreds of mesh scenes would otherwise hold them all in memory.
-                outcomes = ((item, render_point(renderer, references, against, item[0], point_scene(item[0]), folder,
-                                                *item[1:], exposure, warmed)) for item in work)
-            else:
-                from .distributed import render_point_task
+                    yield point, name, digest_hex, scene
 
-                outcomes = executor.run(render_point_task, [(point, point_scene(point), *rest) for point, *rest in work],
-                                        dict(folder=str(folder), exposure=exposure, against=against,
-                                             reuse=renderer.reuse))
-            for (point, *_), row in outcomes:
+        if executor is None:
+            outcomes = ((point, render_point(renderer, references, against, point, scene, folder, name, digest_hex,
+                                             exposure, warmed)) for point, name, digest_hex, scene in to_render())
+        else:
+            from .distributed import render_point_task
+
+            outcomes = ((point, row) for (point, *_), row in executor.run(
+                render_point_task, [(point, scene, name, digest_hex) for point, name, digest_hex, scene in to_render()],
+                dict(folder=str(folder), exposure=exposure, against=against, reuse=renderer.reuse)))
+        try:
+            for point, row in outcomes:
                 rows[point.index] = row
                 report.rendered.append(point.index)
-                # Rows of an earlier run stay until this run reaches their point, so an
-                # interrupted resume loses nothing.
-                merged = {**{i: row for i, row in earlier.items() if i < len(points)}, **rows}
-                _write_rows(folder / RESULTS, [merged[i] for i in sorted(merged)], axes)
+                written["pending"] = True
+                if time.perf_counter() - written["at"] >= RESULTS_EVERY_S:
+                    write_results()
                 if on_point:
                     on_point(point, rows[point.index])
                 bar.advance(point.label[:60] + (f", {executor.busy_label()}" if executor and progress else ""))
-        report.rows = [rows[i] for i in sorted(rows)]
-        _write_rows(folder / RESULTS, report.rows, axes)
-        if contact_sheet:
-            write_contact_sheet(folder / CONTACT_SHEET, folder, report.rows, axes, exposure)
-    finally:
-        report.wall_s = time.perf_counter() - start
-    return report
+        except BaseException:
+            if written["pending"]:  # the rows of the points done, also when the run is stopped
+                with contextlib.suppress(ClraysError):
+                    write_results()
+            raise
+    report.rows = [rows[i] for i in sorted(rows)]
+    _write_rows(folder / RESULTS, report.rows, axes)
 
 
 # --------------------------------------------------------------------------- contact sheet

@@ -47,3 +47,16 @@ MAX_GLTF_BYTES = MAX_MESH_BYTES
 #: Nodes in a glTF file: each is a Python dict and a 4×4 matrix per pose, and the checks
 #: of the hierarchy walk them all; exported scenes hold hundreds to a few thousand.
 MAX_GLTF_NODES = 65_536
+#: The width of a frame pattern's field (`{:04d}`): a frame number has at most 6 digits,
+#: and `{:0999999999d}` made Python build a 1 GB string (4.8 GB, 25 s) before the file
+#: system refused the name.
+MAX_FRAME_FIELD_WIDTH = 32
+#: Points in one sweep, the product of its axes' lengths, counted before anything is
+#: built: each point is a scene to load and a frame to render, and results.csv is
+#: rewritten as they finish; three axes of 100 values (a million points) rendered nothing
+#: in 2 minutes while memory grew.
+MAX_SWEEP_POINTS = 10_000
+#: A sequence's frame manifest and a sweep's results.csv, read back to resume: a few
+#: hundred bytes a frame or a point, so room for every frame and point many times over;
+#: a link to /dev/zero took 7.5 GB.
+MAX_RUN_RECORD_BYTES = 64 << 20

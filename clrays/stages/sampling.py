@@ -215,7 +215,7 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
     fixups, fixed_up = fixup_list(device, fixup_flags, samples, run)
     computed = int(device.read(walks, runs * slices, np.uint16).sum(dtype=np.int64))
     if fixed_up:
-        run("fix_up", (fixed_up,), None, buffers.params, buffers.views, buffers.lights, epipolar.buffer,
+        run("fix_up", *device.counted_launch(fixed_up), buffers.params, buffers.views, buffers.lights, epipolar.buffer,
             epipolar.tree, integrand.params, integrand.data, rastered.camera_depth, buffers.offsets, fixups,
             np.int32(fixed_up), scatter, *walked)
     return SampleCounts(computed, samples - fixed_up, fixed_up)

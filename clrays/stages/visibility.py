@@ -265,7 +265,7 @@ def ray_lists(device: Device, buffers: FrameBuffers, prepared: Prepared, ray_ent
     mask = device.buffer(nbytes=4 * words)
     device.fill(mask, np.uint32(0), 4 * words, timer, "visibility")
     timer.add("visibility", device.kernel("visibility_prepare", "visibility_mark_listed")(
-        device.queue, (rays,), None, ray_entries, np.int32(rays), prepared.map_read, mask))
+        device.queue, *device.counted_launch(rays), ray_entries, np.int32(rays), prepared.map_read, mask))
     capacity = TOUCHING_NODES_PER_ENTRY * rays
     lists = []
     for index, light in enumerate(bounds):
@@ -345,14 +345,14 @@ def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, pr
             # this frame's address of the light's texel 0 (a kept map's lists are by the light's own addresses)
             first = int(inputs.views[inputs.light_views[index][0]]["depth_offset"])
             timer.add("visibility", device.kernel("visibility_rays", "visibility_rays_listed")(
-                device.queue, (rays,), None, buffers.params, buffers.views, buffers.lights, rastered.camera_depth,
-                rastered.tri_id, buffers.tri_vertices, buffers.tri_normal, buffers.offsets, prepared.map_read,
-                np.int32(index), np.int32(first), lists.head, lists.nodes, ray_entries, np.int32(rays),
-                prepared.visible))
+                device.queue, *device.counted_launch(rays), buffers.params, buffers.views, buffers.lights,
+                rastered.camera_depth, rastered.tri_id, buffers.tri_vertices, buffers.tri_normal, buffers.offsets,
+                prepared.map_read, np.int32(index), np.int32(first), lists.head, lists.nodes, ray_entries,
+                np.int32(rays), prepared.visible))
         return prepared.visible, rays
     tree = bvh()
     timer.add("visibility", device.kernel("visibility_rays", "visibility_rays")(
-        device.queue, (rays,), None, buffers.params, buffers.views, buffers.lights, rastered.camera_depth,
-        rastered.tri_id, buffers.tri_vertices, buffers.tri_normal, buffers.offsets, tree.node_bounds,
-        tree.node_children, np.int32(tree.root), ray_entries, np.int32(rays), prepared.visible))
+        device.queue, *device.counted_launch(rays), buffers.params, buffers.views, buffers.lights,
+        rastered.camera_depth, rastered.tri_id, buffers.tri_vertices, buffers.tri_normal, buffers.offsets,
+        tree.node_bounds, tree.node_children, np.int32(tree.root), ray_entries, np.int32(rays), prepared.visible))
     return prepared.visible, rays

@@ -99,10 +99,11 @@ def test_bad_scene_is_one_line_exit_1_and_no_output(scene_file, tmp_path, edit, 
 
 @pytest.mark.parametrize("target, message", [
     ("out.jpg", "unknown output extension"),
-    ("missing/out.png", "does not exist"),
+    ("blocker/out.png", "cannot create the output folder"),  # a missing folder is created; a file is in the way
     (".", "is a folder"),
 ])
 def test_bad_output_path(scene_file, tmp_path, target, message):
+    (tmp_path / "blocker").write_text("a file, not a folder")
     code, out = run("render", scene_file, "-o", tmp_path / target)
     assert code == 1 and message in out and len(out.strip().splitlines()) == 1
 

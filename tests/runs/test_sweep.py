@@ -16,7 +16,7 @@ from clrays.session import Renderer
 from clrays.runs.references import Reference, parse_reference
 from clrays.runs.sweep import (Axis, execution_order, parse_settings, run_sweep, split_values, sweep_points,
                                sweep_scenes)
-from conftest import run_cli as run
+from conftest import TEST_ON_POCL, run_cli as run
 
 SCENE = """\
 version: 1
@@ -63,7 +63,7 @@ def test_sweep_writes_images_results_and_contact_sheet(scene_file, tmp_path):
         assert 0 <= float(r["error_mean_pct"]) < 20 and float(r["error_mean_pct"]) <= float(r["error_p99_pct"])
         # device_ms: the stages timed by OpenCL events, not the integrand tables or the BVH built on the host.
         device_stages = [float(value) for column, value in r.items() if column.endswith("_ms") and value
-                         and column not in ("wall_ms", "device_ms", "integrand_ms", "warmup_ms",
+                         and column not in ("wall_ms", "device_ms", "integrand_ms", "warmup_ms", "build_ms",
                                             "reference_ms", "edges_ms", "bvh_ms")]
         assert float(r["device_ms"]) == pytest.approx(sum(device_stages), abs=0.05)
     assert any(float(r["integrand_ms"] or 0) > 0 for r in rows)
@@ -78,8 +78,10 @@ def test_sweep_writes_images_results_and_contact_sheet(scene_file, tmp_path):
     assert sorted(line.split(":")[1] for line in lines[:6]) == [f" point {i}" for i in range(6)]
     assert lines[6].startswith("medium.sigma_s")
     # Warm-up (kernel builds, first launches) and the host's reference and depth-edge map
-    # are timed on their own, not in point 0's wall_ms.
-    assert float(rows[0]["warmup_ms"]) > 0 and all(float(r["warmup_ms"]) == 0 for r in rows[1:])
+    # are timed on their own, not in point 0's wall_ms. On PoCL a kernel is compiled for each
+    # new work-group size, which follows render.slices: the first point of 64 slices warms up too.
+    warmed = [int(r["index"]) for r in rows if float(r["warmup_ms"]) > 0]
+    assert warmed == ([0, 1] if TEST_ON_POCL else [0])
     assert float(rows[0]["edges_ms"]) > 0 and not any(r["edges_ms"] for r in rows[1:])
     assert all(float(r["reference_ms"]) > 0 for r in rows[::2])  # the reference ignores slices
 
