@@ -10,6 +10,7 @@ shading, or each triangle's own normal on all three of its vertices for flat sha
 from __future__ import annotations
 
 import io
+import re
 from pathlib import Path
 
 import numpy as np
@@ -197,7 +198,7 @@ def smooth_normals(vertices: np.ndarray, faces: np.ndarray, given: np.ndarray | 
     return np.where(missing, flat_normals(v[f]), corners)
 
 
-def load_mesh(path: Path) -> tuple[np.ndarray, np.ndarray, int]:
+def load_mesh(path: Path, max_triangles: int | None = None) -> tuple[np.ndarray, np.ndarray, int]:
     """Read an OBJ, PLY or STL file with trimesh: (triangles (T, 3, 3), the smooth normal
     at each of their vertices (T, 3, 3), from `smooth_normals` with the file's vertex
     normals where it has them, and `closed_outward` of its faces), the triangles in
@@ -205,7 +206,8 @@ def load_mesh(path: Path) -> tuple[np.ndarray, np.ndarray, int]:
 
     Raises ValueError with a one-line reason for an unknown suffix, a missing, unreadable
     or corrupt file, something other than a regular file, a file over `MAX_MESH_BYTES`,
-    a file without triangles, or non-finite vertices.
+    a file without triangles, or non-finite vertices; and an OBJ whose faces make more
+    than `max_triangles` triangles, counted before trimesh builds them.
     """
     path = Path(path)
     suffix = path.suffix.lower()
@@ -219,6 +221,10 @@ def load_mesh(path: Path) -> tuple[np.ndarray, np.ndarray, int]:
         raise ValueError(str(exc)) from None
     if suffix == ".obj":
         data = _obj_as_utf8(data)
+        if max_triangles is not None and obj_triangle_count(data) > max_triangles:
+            raise MeshTooLarge(obj_triangle_count(data))
+    elif suffix == ".stl":
+        data = _stl_with_true_count(data)
     import trimesh  # slow to import; only scenes with meshes pay for it
 
     try:
@@ -269,6 +275,62 @@ def spatial_order(triangles: np.ndarray) -> np.ndarray:
         for axis in range(3):
             code |= ((cells[:, axis] >> np.uint64(bit)) & np.uint64(1)) << np.uint64(3 * bit + axis)
     return np.argsort(code, kind="stable")
+
+
+class MeshTooLarge(ValueError):
+    """A mesh file whose faces make more triangles than the scene may hold: `count`."""
+
+    def __init__(self, count: int):
+        super().__init__(f"{count} triangles in its faces")
+        self.count = count
+
+
+def _stl_with_true_count(data: bytes) -> bytes:
+    """A binary STL's bytes with the triangle count its size gives: 84 bytes of header and
+    count, then 50 a triangle. Some writers leave the count 0 (they stream the triangles),
+    and a file whose count lies was read by trimesh as ASCII, which failed on a missing
+    module; a file of whole triangles is read as those triangles. An ASCII STL (text that
+    starts with `solid`) is left as it is."""
+    if data[:5].lower() == b"solid":
+        try:
+            data.decode("utf-8")
+            return data
+        except UnicodeDecodeError:
+            pass  # binary, with a header that starts with "solid" (some exporters write that)
+    if len(data) < 84:
+        raise ValueError(f"not a valid STL file ({len(data)} bytes: a binary STL has at least 84)")
+    count, body = int.from_bytes(data[80:84], "little"), len(data) - 84
+    if body % 50:
+        raise ValueError(f"not a valid STL file (a binary STL is 84 bytes and 50 a triangle; this one has "
+                         f"{len(data)} bytes, and its header says {count} triangles)")
+    if count == body // 50:
+        return data
+    return data[:80] + (body // 50).to_bytes(4, "little") + data[84:]
+
+
+def obj_triangle_count(data: bytes) -> int:
+    """The triangles an OBJ's face lines make, counted on its bytes before any is built: a
+    face of n corners is a fan of n - 2. One line of a 22 MB file can name 11 million
+    corners, which trimesh expanded (5 GB) before the loader could count them.
+
+    Every token of a face line after the `f` is a corner, so the count is the tokens of
+    the face lines less 3 per line; positions only (numpy), no token is copied out."""
+    if re.search(rb"(?m)^[ \t]+f[ \t]", data):  # indented faces: counted as the others
+        data = re.sub(rb"(?m)^[ \t]+", b"", data)
+    buffer = np.frombuffer(data, np.uint8)
+    if len(buffer) == 0:
+        return 0
+    starts = np.concatenate([[0], np.flatnonzero(buffer == ord("\n")) + 1])
+    starts = starts[starts < len(buffer) - 1]
+    faces = starts[(buffer[starts] == ord("f")) & ((buffer[starts + 1] == ord(" ")) | (buffer[starts + 1] == ord("\t")))]
+    if len(faces) == 0:
+        return 0
+    ends = np.searchsorted(starts, faces, side="right")
+    ends = np.where(ends < len(starts), starts[np.minimum(ends, len(starts) - 1)], len(buffer))
+    space = buffer <= ord(" ")  # spaces, tabs, line ends: what separates tokens
+    token_starts = np.flatnonzero(~space[1:] & space[:-1]) + 1  # (the first byte of the file is no face's)
+    tokens = np.searchsorted(token_starts, ends) - np.searchsorted(token_starts, faces + 1)
+    return int(np.maximum(tokens - 2, 0).sum())  # tokens after the "f" - 2
 
 
 def _obj_as_utf8(data: bytes) -> bytes:
