@@ -77,6 +77,12 @@ def sphere_triangles(center, radius: float, segments: int) -> np.ndarray:
     return indexed_triangles(pts, faces)
 
 
+def sphere_normals(triangles: np.ndarray, center) -> np.ndarray:
+    """The analytic normal of a sphere around `center` at each vertex of its triangles,
+    (T, 3, 3): smooth shading interpolates them, as it does a mesh's vertex normals."""
+    return _unit_rows(np.asarray(triangles, dtype=np.float64) - np.asarray(center, dtype=np.float64))
+
+
 def plane_basis(normal) -> tuple[np.ndarray, np.ndarray]:
     """Unit tangents (u, v) with u x v = normal (normal must be unit). u is built from the
     world axis least aligned with the normal, so the choice is deterministic."""

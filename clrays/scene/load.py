@@ -388,9 +388,13 @@ def _box(m: dict[str, Node]) -> _Shape:
 
 
 def _sphere(m: dict[str, Node]) -> _Shape:
+    """A sphere's triangles, shaded smooth with its analytic normals (flat, its 48 segments
+    showed as bands across a lit top)."""
     keys = OBJECTS["sphere"]
-    return primitives.sphere_triangles(vec3(m["center"]), _read(keys["radius"], m["radius"]),
-                                       _read(keys["segments"], m.get("segments"))), None, 1  # closed, outward
+    center = _point(m["center"])
+    triangles = primitives.sphere_triangles(center, _read(keys["radius"], m["radius"]),
+                                            _read(keys["segments"], m.get("segments")))
+    return triangles, primitives.sphere_normals(triangles, center), 1  # closed, outward
 
 
 def _plane(m: dict[str, Node]) -> _Shape:
@@ -499,8 +503,8 @@ def _reject_normals_off_meshes(node: Node) -> None:
         return
     kind = node.value["type"].value
     if isinstance(kind, str) and kind in OBJECTS and "normals" not in OBJECTS[kind].optional:
-        node.value["normals"].fail(f"no normals key on a {kind} (only a mesh has vertex normals to interpolate; "
-                                   f"every other object is shaded flat)")
+        node.value["normals"].fail(f"no normals key on a {kind} (only a mesh chooses between its vertex normals "
+                                   f"and flat shading; a sphere is shaded smooth, every other object flat)")
 
 
 @dataclasses.dataclass(frozen=True)

@@ -298,6 +298,13 @@ CASES = [
         d, gobo_light("hot.npy", "1e30")), []),
      r"lights\.0\.intensity: expected a power whose product with the brightest texel \(2e\+37\) is at most 1e\+30 "
      r".*, got 1e\+30$"),
+    ("a directional texture_size of 1e-6 with exact", lambda d: (np.save(d / "t.npy", np.ones((4, 4))) or write(
+        d, HEAD.replace("lights: [{type: point, position: [0, 8, 0], intensity: 100}]",
+                        "lights: [{type: directional, direction: [0.3, -1, 0.2], irradiance: 2, texture: t.npy, "
+                        "texture_size: [1e-6, 1e-6]}]") + "objects: [{type: plane, center: [0, 0, 0], normal: [0, 1, 0], "
+                                                          "size: 20}]\n"), ["--method", "exact"]),
+     r"^clrays: error: exact: the rays cross about [\d.]+e\+\d+ texel centres of a light's texture, more than the "
+     r"8388608 that exact integrates piece by piece .*; use a larger texture_size or another method$"),
     # Image files with another format's content.
     ("a JPEG named .png as a depth map", lambda d: (image_named_png(d, "j.png", "JPEG") and relief(d, "j.png"), []),
      r"objects\.0\.depth_map: expected a readable 2D image .*\(a JPEG image named \.png: "),
