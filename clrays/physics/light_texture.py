@@ -32,8 +32,8 @@ import math
 
 import numpy as np
 
-from ..errors import ClraysError
 from ..scene.model import DirectionalLight, Light, Medium, SpotLight
+from ..scene.textures import TexelCrossingsError
 from .radiometry import phase, rgb
 
 #: Gauss–Legendre nodes per piece between texel-centre crossings (each piece is at most a
@@ -138,7 +138,7 @@ def _wrap(index: np.ndarray, n: int, repeat: bool) -> np.ndarray:
 def bilinear(light: Light, fx, fy, face=None) -> np.ndarray:
     """Texels (N, 3) at texel coordinates (fx, fy) (texel centres on integers) of the image,
     or of cube face `face` (clamped at the face's edges; faces stacked in the texels' rows)."""
-    texels = np.asarray(light.texture.texels, dtype=np.float64)
+    texels = light.texture.texels  # float32: what is gathered is widened, not the whole (400 MB at 4096²)
     width, height = _face_size(light)
     repeat = isinstance(light, DirectionalLight) and light.texture_wrap == "repeat"
     fx = np.clip(fx, -1e9, 1e9)
@@ -170,16 +170,16 @@ def light_texture(light: Light, points) -> np.ndarray:
 def _crossings(f0: np.ndarray, f1: np.ndarray, s_of, limit: int = MAX_TEXEL_CROSSINGS):
     """Where a coordinate monotone along each segment, f0 at its start and f1 at its end,
     crosses an integer: (segment index, s), using s_of(segment, k) for the s where it is k.
-    Counted before any is made: more than `limit` is a ClraysError."""
+    Counted before any is made: more than `limit` is a TexelCrossingsError."""
     lo, hi = np.minimum(f0, f1), np.maximum(f0, f1)
     first = np.ceil(lo)
     counts = np.maximum(np.floor(hi) - first + 1, 0)
     total = float(counts.sum())
     if total > limit:
-        raise ClraysError(f"exact: the rays cross about {total:.3g} texel centres of a light's texture, more than "
-                          f"the {MAX_TEXEL_CROSSINGS} that exact integrates piece by piece (a texture_size far "
-                          f"smaller than the scene tiles it that often); use a larger texture_size or another "
-                          f"method")
+        raise TexelCrossingsError(f"exact: the rays cross about {total:.3g} texel centres of a light's texture, "
+                                  f"more than the {MAX_TEXEL_CROSSINGS} that exact integrates piece by piece (a "
+                                  f"texture_size far smaller than the scene tiles it that often); use a larger "
+                                  f"texture_size or another method")
     count = counts.astype(np.int64)
     segment = np.repeat(np.arange(len(f0)), count)
     k = first[segment] + (np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count))

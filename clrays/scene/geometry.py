@@ -24,7 +24,8 @@ MESH_SUFFIXES = (".obj", ".ply", ".stl")
 def indexed_triangles(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Gather (F, 3) integer faces over (V, 3) vertices into (F, 3, 3) triangles."""
     v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
-    f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    f = np.asarray(faces)
+    f = (f if f.dtype.kind in "iu" else f.astype(np.int64)).reshape(-1, 3)  # any integer type indexes, uncopied
     return v[f]
 
 
@@ -49,6 +50,11 @@ def box_triangles(lo, hi) -> np.ndarray:
 def sphere_triangles(center, radius: float, segments: int) -> np.ndarray:
     """A UV sphere: `segments` slices around the y axis and segments // 2 rings from pole
     to pole, so 2 * segments * (rings - 1) triangles (2208 for 48 segments)."""
+    return indexed_triangles(*sphere_mesh(center, radius, segments))
+
+
+def sphere_mesh(center, radius: float, segments: int) -> tuple[np.ndarray, np.ndarray]:
+    """(points (V, 3), faces (F, 3)) of `sphere_triangles`."""
     if segments < 4:
         raise ValueError(f"a sphere needs at least 4 segments, got {segments}")
     rings = segments // 2
@@ -63,9 +69,9 @@ def sphere_triangles(center, radius: float, segments: int) -> np.ndarray:
 
     # Per slice j, in this order: the north cap's triangle, the south cap's, then two per
     # band between rings r and r + 1 (built as arrays: a 1024-segment sphere has a million).
-    j = np.arange(segments)[:, None]
+    j = np.arange(segments, dtype=np.int32)[:, None]  # (int32: a million triangles' faces are 12 MB, not 24)
     j_next = (j + 1) % segments
-    r = np.arange(rings - 2)[None, :]
+    r = np.arange(rings - 2, dtype=np.int32)[None, :]
     a, b = r * segments + j, r * segments + j_next
     c, d = (r + 1) * segments + j_next, (r + 1) * segments + j
     bands = np.stack([np.stack([a, d, c], axis=-1), np.stack([a, c, b], axis=-1)], axis=2)
@@ -74,13 +80,14 @@ def sphere_triangles(center, radius: float, segments: int) -> np.ndarray:
     north = np.concatenate([np.full_like(j, n_idx), j, j_next], axis=1)[:, None]
     south = np.concatenate([np.full_like(j, s_idx), last + j_next, last + j], axis=1)[:, None]
     faces = np.concatenate([north, south, bands], axis=1).reshape(-1, 3)
-    return indexed_triangles(pts, faces)
+    return pts, faces
 
 
-def sphere_normals(triangles: np.ndarray, center) -> np.ndarray:
-    """The analytic normal of a sphere around `center` at each vertex of its triangles,
-    (T, 3, 3): smooth shading interpolates them, as it does a mesh's vertex normals."""
-    return _unit_rows(np.asarray(triangles, dtype=np.float64) - np.asarray(center, dtype=np.float64))
+def sphere_normals(points: np.ndarray, center) -> np.ndarray:
+    """The exact normal of a sphere around `center` at each of its points (`sphere_mesh`),
+    (V, 3): smooth shading interpolates them across its faces, as it does a mesh's
+    vertex normals."""
+    return _unit_rows(np.asarray(points, dtype=np.float64) - np.asarray(center, dtype=np.float64))
 
 
 def plane_basis(normal) -> tuple[np.ndarray, np.ndarray]:
@@ -328,7 +335,8 @@ def obj_triangle_count(data: bytes) -> int:
         return 0
     starts = np.concatenate([[0], np.flatnonzero(buffer == ord("\n")) + 1])
     starts = starts[starts < len(buffer) - 1]
-    faces = starts[(buffer[starts] == ord("f")) & ((buffer[starts + 1] == ord(" ")) | (buffer[starts + 1] == ord("\t")))]
+    after_f = buffer[starts + 1]
+    faces = starts[(buffer[starts] == ord("f")) & ((after_f == ord(" ")) | (after_f == ord("\t")))]
     if len(faces) == 0:
         return 0
     ends = np.searchsorted(starts, faces, side="right")

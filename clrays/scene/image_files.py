@@ -78,8 +78,8 @@ def exr_shape(path: Path) -> tuple[int, int]:
         with OpenEXR.File(str(path), header_only=True) as exr:
             low, high = exr.header()["dataWindow"]
     except Exception as exc:  # OpenEXR raises bare exceptions for broken files
-        raise ImageFileError(f"not a readable EXR image ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") \
-            from None
+        detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise ImageFileError(f"not a readable EXR image ({detail})") from None
     return int(high[1]) - int(low[1]) + 1, int(high[0]) - int(low[0]) + 1
 
 

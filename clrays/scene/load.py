@@ -28,8 +28,8 @@ from ..structs import CONVEX_OUTSIDE_ONLY
 from .animation import Animation, Key, ObjectRig, Track
 from .files import FileRefused, read_regular_file
 from .fields import (ANIMATION, CAMERA, FORMAT_VERSION, IMAGE, LIGHTS, MAX_IMAGE_PIXELS, MAX_POWER, MEDIUM, OBJECT,
-                     OBJECTS, PHASES, QUATERNION_TOLERANCE, RENDER, ROTATE, SHADOW_FILTER, TOP, TRANSFORM, TRANSPARENCY, Field,
-                     kinds)
+                     OBJECTS, PHASES, QUATERNION_TOLERANCE, RENDER, ROTATE, SHADOW_FILTER, TOP, TRANSFORM,
+                     TRANSPARENCY, Field, kinds)
 from .limits import MAX_COORDINATE, MAX_LIGHTS, MAX_OBJECTS, MAX_SCENE_BYTES, MAX_TRIANGLES
 from .model import (Camera, DirectionalLight, Geometry, Image, Light, LightTexture, Medium, Phase, PointLight, Render,
                     Scene, ShadowFilter, SpotLight, Transparency)
@@ -88,7 +88,7 @@ def _within_float32(node: Node, what: str, points, got: Callable[[float], str] |
     points = np.asarray(points, dtype=np.float64)
     if points.size == 0:
         return
-    largest = float(np.max(np.abs(points)))
+    largest = max(float(points.max()), -float(points.min()))  # no |points| copy: a million triangles are 72 MB
     if not largest <= MAX_COORDINATE:  # (NaN fails too)
         value = largest if not math.isnan(largest) else float("nan")
         node.fail(f"{what} within ±{MAX_COORDINATE:g} (scene units; float32 on the device overflows beyond)",
@@ -203,7 +203,8 @@ def _light(node: Node, base_dir: Path = Path("."), cache: TextureCache | None = 
     size_field = keys["texture_size"]
     size = tuple(numbers(m["texture_size"], 2, "a list of 2 numbers > 0 [width, height]", size_field.low,
                          lo_open=size_field.low_open)) if "texture_size" in m else size_field.default
-    light = DirectionalLight(direction=direction(m["direction"]), irradiance=_power(keys["irradiance"], m["irradiance"]),
+    light = DirectionalLight(direction=direction(m["direction"]),
+                             irradiance=_power(keys["irradiance"], m["irradiance"]),
                              texture=_texture(m.get("texture"), base_dir, cache),
                              texture_size=tuple(float(v) for v in size),
                              texture_wrap=_read(keys["texture_wrap"], m.get("texture_wrap")))
@@ -360,10 +361,30 @@ def _transform_parts(node: Node | None) -> tuple[np.ndarray, np.ndarray, np.ndar
     return translate, rotate, _scale(m.get("scale"))
 
 
+@dataclasses.dataclass(frozen=True)
+class _VertexNormals:
+    """A smooth shape's normals at its points and the faces that index them, spread to
+    each triangle's vertices (F, 3, 3) only as the scene's geometry is assembled: a sphere
+    of a million triangles keeps 12 MB of normals while the others load, not 72."""
+
+    at_points: np.ndarray  # (V, 3) unit
+    faces: np.ndarray  # (F, 3) indices into at_points
+
+    def array(self) -> np.ndarray:
+        return primitives.indexed_triangles(self.at_points, self.faces)
+
+    def transformed(self, matrix: np.ndarray) -> "_VertexNormals":
+        return _VertexNormals(transform_normals(matrix, self.at_points), self.faces)
+
+
+def _normals_array(normals: np.ndarray | _VertexNormals | None) -> np.ndarray | None:
+    return normals.array() if isinstance(normals, _VertexNormals) else normals
+
+
 # An object's shape in its own frame: triangles (T, 3, 3); for a smooth object, the normal
-# at each of their vertices (T, 3, 3), None for a flat one; and its outward winding
-# (geometry.closed_outward: +1, -1, or 0 for a surface that closes no solid).
-_Shape = tuple[np.ndarray, np.ndarray | None, int]
+# at each of their vertices ((T, 3, 3), or _VertexNormals), None for a flat one; and its
+# outward winding (geometry.closed_outward: +1, -1, or 0 for a surface that closes no solid).
+_Shape = tuple[np.ndarray, np.ndarray | _VertexNormals | None, int]
 
 
 def _triangles(m: dict[str, Node]) -> _Shape:
@@ -392,9 +413,10 @@ def _sphere(m: dict[str, Node]) -> _Shape:
     showed as bands across a lit top)."""
     keys = OBJECTS["sphere"]
     center = _point(m["center"])
-    triangles = primitives.sphere_triangles(center, _read(keys["radius"], m["radius"]),
-                                            _read(keys["segments"], m.get("segments")))
-    return triangles, primitives.sphere_normals(triangles, center), 1  # closed, outward
+    points, faces = primitives.sphere_mesh(center, _read(keys["radius"], m["radius"]),
+                                           _read(keys["segments"], m.get("segments")))
+    normals = _VertexNormals(primitives.sphere_normals(points, center), faces)
+    return primitives.indexed_triangles(points, faces), normals, 1  # closed, wound outward
 
 
 def _plane(m: dict[str, Node]) -> _Shape:
@@ -513,11 +535,11 @@ class _Object:
     albedo, and what an animation of it needs (its own triangles and normals, its transform)."""
 
     triangles: np.ndarray  # (T, 3, 3) world space
-    normals: np.ndarray | None  # (T, 3, 3) world space, unit, for a smooth object (else each is the face normal)
+    normals: np.ndarray | _VertexNormals | None  # (T, 3, 3) world space, unit, for a smooth object
     albedo: np.ndarray  # (3,), or (T, 3) for a relief with an albedo_map
     opacity: np.ndarray  # (3,)
     local: np.ndarray  # (T, 3, 3) before the transform
-    local_normals: np.ndarray | None  # (T, 3, 3) before the transform, for a smooth object
+    local_normals: np.ndarray | _VertexNormals | None  # before the transform, for a smooth object
     parts: tuple[np.ndarray, np.ndarray, np.ndarray]  # translate (3,), rotation 3x3, scale (3,)
     relief: relief_images.Relief | None = None  # a relief object's texels, for the pre-warp
     outward: int = 0  # +1 or -1: a closed, opaque solid and its winding (Geometry.outward); 0: none
@@ -546,7 +568,9 @@ def _object(node: Node, base_dir: Path) -> _Object:
         with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused just below
             triangles = transform_points(matrix, local)
         _within_float32(m["transform"], "vertices (after the transform)", triangles)
-        if local_normals is not None:
+        if isinstance(local_normals, _VertexNormals):
+            normals = local_normals.transformed(matrix)
+        elif local_normals is not None:
             normals = transform_normals(matrix, local_normals)
     return _Object(triangles, normals, albedo, opacity, local, local_normals, parts, relief, outward)
 
@@ -588,7 +612,7 @@ def _geometry(node: Node | None, base_dir: Path, rigs: list | None = None) -> Ge
         if rigs is not None:
             translate, rotate, scale = obj.parts
             rigs.append(ObjectRig(obj.local, slice(start, start + count), translate, matrix_to_quat(rotate), scale,
-                                  obj.local_normals))
+                                  _normals_array(obj.local_normals)))
         if obj.normals is not None:
             smooth_normals.append((slice(start, start + count), obj.normals))
         if obj.relief is not None:
@@ -605,7 +629,7 @@ def _geometry(node: Node | None, base_dir: Path, rigs: list | None = None) -> Ge
     normals = primitives.flat_normals(triangles)  # once for all objects: per object, it dominated loading
     smooth = np.zeros(len(triangles), bool)
     for rows, object_normals in smooth_normals:
-        normals[rows], smooth[rows] = object_normals, True
+        normals[rows], smooth[rows] = _normals_array(object_normals), True
     return Geometry(triangles=triangles, albedo=np.ascontiguousarray(np.concatenate(albedo), dtype=np.float64),
                     object_id=np.concatenate(ids).astype(np.int32), normals=normals, smooth=smooth,
                     reliefs=tuple(reliefs), opacity=_opacity_or_none(np.concatenate(opacity)),

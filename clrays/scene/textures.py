@@ -26,6 +26,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..errors import ClraysError
 from .files import FileRefused, read_regular_file
 from .image_files import ImageFileError, image_shape, load_npy, npy_header
 
@@ -40,6 +41,11 @@ MAX_SCENE_TEXTURE_TEXELS = 1 << 25
 #: The largest texel: beyond it float32 sums of texels (bilinear, prefix sums) overflow.
 MAX_TEXEL = float(np.finfo(np.float32).max) / 16
 TEXTURE_FORMATS = (".png", ".exr", ".npy")
+
+
+class TexelCrossingsError(ClraysError):
+    """`exact` would cut its rays at more texel centres of a light's texture than it
+    integrates (clrays.physics.light_texture.MAX_TEXEL_CROSSINGS); one line for the user."""
 
 
 class TextureError(ValueError):

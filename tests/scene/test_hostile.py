@@ -261,8 +261,9 @@ CASES = [
      rf"lights\.0\.texture\.0: .*a texture of 100663296 texels from an image of 4096×4096, more than the "
      rf"{MAX_SCENE_TEXTURE_TEXELS} left"),
     # Values finite in float64 that overflow float32.
-    ("a mesh vertex at 1e39", lambda d: ((d / "far.obj").write_text("v 0 0 0\nv 1e39 0 0\nv 0 1 0\nf 1 2 3\n") and write(
-        d, HEAD + "objects: [{type: mesh, file: far.obj}]\n"), []),
+    ("a mesh vertex at 1e39", lambda d: (
+        (d / "far.obj").write_text("v 0 0 0\nv 1e39 0 0\nv 0 1 0\nf 1 2 3\n")
+        and write(d, HEAD + "objects: [{type: mesh, file: far.obj}]\n"), []),
      re.escape(f"objects.0: expected vertices within ±{MAX_COORDINATE:g} (scene units; float32 on the device "
                f"overflows beyond), got 1e+39") + "$"),
     ("scale: 1e300", lambda d: (write(d, HEAD + "objects: [{type: box, min: [-1, 0, -1], max: [1, 1, 1], "
@@ -274,7 +275,8 @@ CASES = [
      r"objects\.0\.size: expected sizes within ±1e\+12 .*, got \[1e\+300, 1e\+300\]$"),
     ("relief center: [1e30, 0, 0]", lambda d: (relief(d, center="[1e30, 0, 0]"), []),
      r"objects\.0\.center: expected a point within ±1e\+12 .*, got \[1e\+30, 0, 0\]$"),
-    ("relief depth_map of 1e30", lambda d: (np.save(d / "tall.npy", np.full((8, 8), 1e30)) or relief(d, "tall.npy"), []),
+    ("relief depth_map of 1e30",
+     lambda d: (np.save(d / "tall.npy", np.full((8, 8), 1e30)) or relief(d, "tall.npy"), []),
      r"objects\.0: expected vertices within ±1e\+12 .*, got 1e\+30$"),
     ("relief albedo_map of 1e6", lambda d: (np.save(d / "a.npy", np.full((8, 8, 3), 1e6)) or relief(
         d, albedo_map="a.npy"), []),
@@ -283,9 +285,9 @@ CASES = [
     ("relief albedo_map of -1000", lambda d: (np.save(d / "a.npy", np.full((8, 8), -1000.0)) or relief(
         d, albedo_map="a.npy"), []),
      r"objects\.0\.albedo_map: expected albedo texels in \[0, 1\], .*\(-1000 at texel"),
-    ("an animated translate of 1e39", lambda d: (write(d, HEAD + "objects: [{type: box, min: [-1, 0, -1], max: [1, 1, 1]}]\n"
-                                                       "animation: {frames: [0, 2], objects: [{object: 0, keys: [{frame: 0, "
-                                                       "translate: [0, 0, 0]}, {frame: 2, translate: [1e39, 0, 0]}]}]}\n"), []),
+    ("an animated translate of 1e39", lambda d: (write(
+        d, HEAD + "objects: [{type: box, min: [-1, 0, -1], max: [1, 1, 1]}]\nanimation: {frames: [0, 2], objects: "
+        "[{object: 0, keys: [{frame: 0, translate: [0, 0, 0]}, {frame: 2, translate: [1e39, 0, 0]}]}]}\n"), []),
      r"animation\.objects\.0\.keys\.1\.translate: expected a translation of length at most 5e\+11 .*, got "
      r"\[1e\+39, 0, 0\]$"),
     ("an animated scale that takes the vertices past 1e12", lambda d: (write(
