@@ -754,8 +754,8 @@ def _animation(node: Node, scene: Scene, rigs: list[ObjectRig]) -> Animation:
         for name in ("intensity", "irradiance"):
             texture = scene.lights[index].texture
             if name in tracks and texture is not None:
+                brightest = float(texture.texels.max())
                 for key, key_node in zip(tracks[name].keys, nodes[name]):
-                    brightest = float(texture.texels.max())
                     if float(np.max(key.value)) * brightest > MAX_POWER:
                         key_node.fail(f"a power whose product with the brightest texel ({brightest:g}) is at "
                                       f"most {MAX_POWER:g} (beyond it float32 radiance overflows)",

@@ -498,3 +498,15 @@ def test_obj_triangle_count_counts_fans_without_building_them():
     text = b"v 0 0 0\nf 1 2 3\nf 1  2 3 4\r\n\tf 1 2 3 4 5\nf\t1/1/1 2/2/2 3/3/3\n# f 1 2 3 4 5 6\nfoo 1 2 3\nf 1 2 3"
     assert obj_triangle_count(text) == 1 + 2 + 3 + 1 + 1
     assert obj_triangle_count(b"") == 0 and obj_triangle_count(b"v 0 0 0\n") == 0
+
+
+def test_an_animated_power_times_the_brightest_texel_is_checked(tmp_path):
+    from clrays.errors import SceneError
+    from clrays.scene.load import load_scene
+
+    np.save(tmp_path / "hot.npy", np.full((4, 4, 3), 2e20, np.float32))
+    text = gobo_light("hot.npy", "1") + ("animation: {frames: [0, 2], lights: [{light: 0, keys: [{frame: 0, "
+                                         "intensity: 1}, {frame: 2, intensity: 1e20}]}]}\n")
+    with pytest.raises(SceneError, match=r"animation\.lights\.0\.keys\.1\.intensity: expected a power whose product "
+                                         r"with the brightest texel \(2e\+20\) is at most 1e\+30 .*, got 1e\+20$"):
+        load_scene(write(tmp_path, text))
