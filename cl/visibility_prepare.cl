@@ -1,26 +1,20 @@
 /* visibility_prepare — per camera sample and light, what the maps are asked (visibility.h).
  * visibility_prepare reads frame, views, lights, camera_depth, tri_id,
- * tri_normal, tri_vertex_normals, offsets; writes visible (1 no light reaches the sample,
+ * tri_normal, offsets (tri_vertex_normals stays in its signature, unread); writes visible (1 no light reaches the sample,
  * 0 its surface turns away from the light, else pending: the maps or a ray decide),
  * map_read (per sample and light, the bound map's texel its lit test reads and its depth
  * there) and read_mask (a bit per texel read): the bound passes draw only those. */
 #include "visibility.h"
 
-/* Whether shade's cosine for this light is ≤ 0 wherever the sample lies on its triangle,
- * so its visibility is never read: the flat normal n (already facing the camera) turns
- * away from the light and, on a smooth triangle, so does every vertex normal (flipped
- * with n), whose weighted sum is shade's shading normal. The margin keeps the float32
- * rounding of that sum from ever making shade's cosine positive where this says ≤ 0. */
-ALWAYS_INLINE int turned_away(global const float4* tri_normal, global const float4* tri_vertex_normals, int tri,
-                              float3 n, float3 to_light)
+/* Whether the sample's surface turns away from the light: its flat normal n (already
+ * facing the camera) does. An opaque surface is not lit from behind, whatever a smooth
+ * triangle's vertex normals say: were they to decide, a sphere seen from inside took
+ * light through its own wall at the terminator. Its visibility is then never read. The
+ * margin keeps float32 rounding on the lit side. */
+ALWAYS_INLINE int turned_away(float3 n, float3 to_light)
 {
     const float margin = -1e-4f;
-    if (inline_dot(n, to_light) > margin) return 0;
-    if (tri_normal[tri].w == 0.0f) return 1;
-    float side = inline_dot(n, tri_normal[tri].xyz) >= 0.0f ? 1.0f : -1.0f;
-    for (int k = 0; k < 3; ++k)
-        if (side * inline_dot(tri_vertex_normals[3 * tri + k].xyz, to_light) > margin) return 0;
-    return 1;
+    return !(inline_dot(n, to_light) > margin);
 }
 
 /* A texel that a lit test reads gets its bit in read_mask (32 texels a word, by address;
@@ -61,8 +55,8 @@ inline void prepare_entry(global const frame_t* frame, global const view_t* view
     float3 to_light;
     int reaches = light_reaches(light, frame->sigma_t.xyz, p, &to_light)
                   && !eye_in_lamp(light, frame->lamp_radius);
-    if (turned_away(tri_normal, tri_vertex_normals, tri, n, to_light)) {
-        if (reaches) visible[entry] = 0.0f; /* shade weighs this light by a cosine ≤ 0: no map test, no ray */
+    if (turned_away(n, to_light)) {
+        if (reaches) visible[entry] = 0.0f; /* unlit from behind: no map test, no ray */
         return;
     }
     float3 start = shadow_ray_start(light, p, n, to_light);
@@ -120,9 +114,8 @@ ALWAYS_INLINE int prepare_lanes(global const frame_t* frame, global const view_t
     camera_ray_lanes(frame, views, offsets, sample, &dx, &dy, &dz);
     float3 eye = views->origin.xyz;
     float_lanes px = eye.x + distance * dx, py = eye.y + distance * dy, pz = eye.z + distance * dz;
-    float_lanes nx, ny, nz, flat_w; /* the triangle's normal; w: 0 flat, else smooth */
+    float_lanes nx, ny, nz, flat_w; /* the triangle's normal; w: 0 flat, else smooth (unread here) */
     gather_records(tri_normal, own, &nx, &ny, &nz, &flat_w);
-    float_lanes own_x = nx, own_y = ny, own_z = nz;
     int_lanes facing_away = dot_lanes_of_lanes(nx, ny, nz, dx, dy, dz) > 0.0f;
     nx = facing_away ? -nx : nx, ny = facing_away ? -ny : ny, nz = facing_away ? -nz : nz;
     /* light_reaches, where no exp is needed to know */
@@ -156,15 +149,7 @@ ALWAYS_INLINE int prepare_lanes(global const frame_t* frame, global const view_t
     /* turned_away */
     const float margin = -1e-4f;
     float_lanes facing = dot_lanes_of_lanes(nx, ny, nz, lx, ly, lz);
-    float_lanes side = dot_lanes_of_lanes(nx, ny, nz, own_x, own_y, own_z) >= 0.0f ? 1.0f : -1.0f;
-    int_lanes vertex_lit = (int_lanes)(0);
-    if (any_lanes(surface & !(facing > margin) & flat_w != 0.0f)) /* a smooth triangle's vertex normals decide */
-        for (int k = 0; k < 3; ++k) {
-            float_lanes vx, vy, vz, unused;
-            gather_records(tri_vertex_normals, 3 * own + k, &vx, &vy, &vz, &unused);
-            vertex_lit |= side * dot_lanes_of_lanes(vx, vy, vz, lx, ly, lz) > margin;
-        }
-    int_lanes turned = !(facing > margin) & ((flat_w == 0.0f) | !vertex_lit);
+    int_lanes turned = !(facing > margin);
     if (!any_lanes(surface & !turned)) { /* nothing to project: no surface, or turned away */
         store_prepared(frame, first, l, (surface & reaches) ? 0.0f : 1.0f, MAP_TEXEL_NONE, 0, visible, map_read);
         return 1;

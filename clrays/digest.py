@@ -1,6 +1,6 @@
 """The digest every reuse key is made of (clrays.reuse): a BLAKE2b of numbers, strings, numpy
-arrays (dtype, shape and bytes) and dataclasses (field by field), so two digests agree only
-when every part is bit-identical. A module of its own, which imports nothing of clrays, so
+arrays (dtype, shape and bytes) and dataclasses (field by field; one with a `digest_parts`
+method by what that returns), so two digests agree only when every part is bit-identical. A module of its own, which imports nothing of clrays, so
 that the scene's relief records (clrays.scene.relief_frame) digest their texels as the
 stages' keys do."""
 from __future__ import annotations
@@ -41,6 +41,10 @@ def _feed(h, value: Any) -> None:
             _feed(h, key)
             _feed(h, value[key])
         h.update(b"}")
+    elif hasattr(type(value), "digest_parts"):  # an object that names what stands for it (a texture's digest)
+        h.update(type(value).__name__.encode() + b"<")
+        _feed(h, value.digest_parts())
+        h.update(b">")
     elif dataclasses.is_dataclass(value) and not isinstance(value, type):
         h.update(type(value).__name__.encode() + b"<")
         for f in dataclasses.fields(value):

@@ -33,6 +33,7 @@ import math
 import numpy as np
 
 from ..scene.model import DirectionalLight, Light, Medium, SpotLight
+from ..scene.textures import TexelCrossingsError
 from .radiometry import phase, rgb
 
 #: Gauss–Legendre nodes per piece between texel-centre crossings (each piece is at most a
@@ -43,6 +44,11 @@ PIECE_NODES = 8
 PIECE_NODES_DIRECTIONAL = 3
 # Pieces integrated per batch (pieces × nodes × 3 channels float64 temporaries ≈ 50 MB).
 _PIECE_BATCH = 200_000
+#: Texel-centre crossings `exact` cuts the segments of one call at (a batch of camera rays,
+#: both texture axes): about 80 bytes and 2 µs each (measured: 9.0 M crossings, 747 MB
+#: and 21 s at 32×18). A directional light's `texture_size: [1e-6, 1e-6]` asked for
+#: 2.6e10 of them, capped silently at 65536 a segment: 90 s and 5.5 GB (docs/limits.md).
+MAX_TEXEL_CROSSINGS = 1 << 23
 
 
 def textured(light: Light) -> bool:
@@ -132,7 +138,7 @@ def _wrap(index: np.ndarray, n: int, repeat: bool) -> np.ndarray:
 def bilinear(light: Light, fx, fy, face=None) -> np.ndarray:
     """Texels (N, 3) at texel coordinates (fx, fy) (texel centres on integers) of the image,
     or of cube face `face` (clamped at the face's edges; faces stacked in the texels' rows)."""
-    texels = np.asarray(light.texture.texels, dtype=np.float64)
+    texels = light.texture.texels  # float32: what is gathered is widened, not the whole (400 MB at 4096²)
     width, height = _face_size(light)
     repeat = isinstance(light, DirectionalLight) and light.texture_wrap == "repeat"
     fx = np.clip(fx, -1e9, 1e9)
@@ -161,12 +167,20 @@ def light_texture(light: Light, points) -> np.ndarray:
 # --------------------------------------------------------------------------- exact in-scattering
 
 
-def _crossings(f0: np.ndarray, f1: np.ndarray, s_of, limit: int = 1 << 16):
+def _crossings(f0: np.ndarray, f1: np.ndarray, s_of, limit: int = MAX_TEXEL_CROSSINGS):
     """Where a coordinate monotone along each segment, f0 at its start and f1 at its end,
-    crosses an integer: (segment index, s), using s_of(segment, k) for the s where it is k."""
+    crosses an integer: (segment index, s), using s_of(segment, k) for the s where it is k.
+    Counted before any is made: more than `limit` is a TexelCrossingsError."""
     lo, hi = np.minimum(f0, f1), np.maximum(f0, f1)
     first = np.ceil(lo)
-    count = np.clip(np.floor(hi) - first + 1, 0, limit).astype(np.int64)
+    counts = np.maximum(np.floor(hi) - first + 1, 0)
+    total = float(counts.sum())
+    if total > limit:
+        raise TexelCrossingsError(f"exact: the rays cross about {total:.3g} texel centres of a light's texture, "
+                                  f"more than the {MAX_TEXEL_CROSSINGS} that exact integrates piece by piece (a "
+                                  f"texture_size far smaller than the scene tiles it that often); use a larger "
+                                  f"texture_size or another method")
+    count = counts.astype(np.int64)
     segment = np.repeat(np.arange(len(f0)), count)
     k = first[segment] + (np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count))
     return segment, s_of(segment, k)
@@ -211,6 +225,7 @@ def _texel_pieces(origins, dirs, a, b, owner, rows, size):
     vh = np.concatenate([dirs, np.zeros((m, 1))], axis=1)
     d0, d1 = np.einsum("mk,mk->m", rows[:, 2], oh), np.einsum("mk,mk->m", rows[:, 2], vh)
     cuts_segment, cuts_s = [np.arange(m), np.arange(m)], [a, b]
+    crossed = 0  # both axes together: MAX_TEXEL_CROSSINGS
     for axis, n_texels, sign in ((0, size[0], 1.0), (1, size[1], -1.0)):
         # Texel coordinate f(s) = (sign·N(s)/D(s) + 1)·n/2 - ½, N and D linear in s.
         n0, n1 = np.einsum("mk,mk->m", rows[:, axis], oh), np.einsum("mk,mk->m", rows[:, axis], vh)
@@ -226,7 +241,9 @@ def _texel_pieces(origins, dirs, a, b, owner, rows, size):
 
         f_a, f_b = f(a), f(b)
         ok = np.isfinite(f_a) & np.isfinite(f_b)
-        segment, s = _crossings(np.where(ok, f_a, 0.0), np.where(ok, f_b, 0.0), s_of)
+        segment, s = _crossings(np.where(ok, f_a, 0.0), np.where(ok, f_b, 0.0), s_of,
+                                MAX_TEXEL_CROSSINGS - crossed)
+        crossed += len(segment)
         keep = np.isfinite(s) & (s > a[segment]) & (s < b[segment])
         cuts_segment.append(segment[keep])
         cuts_s.append(s[keep])

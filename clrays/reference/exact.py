@@ -53,10 +53,16 @@ from ..physics.radiometry import in_scatter_segments, light_incident, propagatio
 from ..scene.model import Scene
 
 
-#: Seconds per camera ray and light that `exact` on the BVH takes on the 2-core CI-class
-#: machine (measured at 160×90 on demo, sun, behind and bunny: 120–270 µs; the full
-#: 640×360 bunny: 330 µs), for estimates. Candidates grow slowly with the triangle count.
-SECONDS_PER_RAY_LIGHT = 3.0e-4
+#: Seconds per camera ray, light and doubling of the triangle count that `exact` on the
+#: BVH takes on the 2-core CI-class machine, for estimates: a ray's BVH walk grows with
+#: log2 of the triangles, and a directional light's rays cost DIRECTIONAL_RAY_COST of the
+#: others'. Measured at 128×72 and 320×180 on a quiet machine, µs a ray: behind (point,
+#: 380 triangles) 59–63, sun (directional, 2340) 56–59, demo (point, 2456) 102–105, bunny
+#: (spot, 75 536) 135–140, where this estimate is 0.97–1.31× the time taken; a machine
+#: busy with other work took up to twice as long. The former flat 300 µs a ray was 2.1–5.4×
+#: (it announced 69 s for sun's 26.5 s at 640×360).
+SECONDS_PER_RAY_LIGHT_DOUBLING = 9e-6
+DIRECTIONAL_RAY_COST = 0.7
 #: Camera rays per batch on the BVH: the (ray, node) and (ray, triangle) pair arrays of
 #: a batch stay in the tens of MB.
 BVH_CHUNK_RAYS = 4096
@@ -66,9 +72,12 @@ PROGRESS_LINE_PERCENT = 10
 
 def estimate_seconds(scene: Scene, pixels: int | None = None) -> float:
     """Rough run time of `exact` on `pixels` pixels (default: the whole image): rays ×
-    lights at SECONDS_PER_RAY_LIGHT."""
+    Σ over lights of SECONDS_PER_RAY_LIGHT_DOUBLING · log2(triangles) (× DIRECTIONAL_RAY_COST
+    for a directional light)."""
     pixels = scene.image.width * scene.image.height if pixels is None else pixels
-    return pixels * scene.image.spp * max(len(scene.lights), 1) * SECONDS_PER_RAY_LIGHT
+    per_ray = SECONDS_PER_RAY_LIGHT_DOUBLING * math.log2(max(scene.geometry.count, 2))
+    lights = sum(DIRECTIONAL_RAY_COST if light.type == "directional" else 1.0 for light in scene.lights) or 1.0
+    return pixels * scene.image.spp * lights * per_ray
 
 
 class AllTriangles:
@@ -114,7 +123,10 @@ def _radiance(scene: Scene, eye: np.ndarray, dirs: np.ndarray, prepared, quad: d
         shading *= facing
         irradiance = np.zeros((len(hits), 3))
         for light, _ in prepared:
-            cos_l = np.maximum(0.0, -dot(shading, propagation_direction(light, x)))
+            to_light = -propagation_direction(light, x)
+            # Unlit where the surface itself turns away, whatever a smooth normal says (as
+            # cl/visibility_prepare.cl's turned_away): no light through an opaque wall.
+            cos_l = np.where(dot(nrm, to_light) > 0.0, np.maximum(0.0, dot(shading, to_light)), 0.0)
             lin = light_incident(light, x, sigma_t) * cos_l[:, None] * light_texture(light, x)
             lit = np.flatnonzero(np.any(lin > 0, axis=1))
             if len(lit):

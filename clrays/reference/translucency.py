@@ -243,7 +243,9 @@ def _surface_radiance(scene: Scene, queries: TranslucentQueries, prepared, x, di
     shading *= facing
     irradiance = np.zeros((len(x), 3))
     for light, _ in prepared:
-        cos_l = np.maximum(0.0, -dot(shading, propagation_direction(light, x)))
+        to_light = -propagation_direction(light, x)
+        # Unlit where the surface itself turns away (reference/exact.py, turned_away on the device).
+        cos_l = np.where(dot(nrm, to_light) > 0.0, np.maximum(0.0, dot(shading, to_light)), 0.0)
         lin = light_incident(light, x, sigma_t) * cos_l[:, None] * light_texture(light, x)
         lit = np.flatnonzero(np.any(lin > 0, axis=1))
         if len(lit):

@@ -17,7 +17,7 @@ from .costs import (INITIAL_SAMPLES_PER_LINE, MAX_GAMMA_SAMPLES, MAX_INITIAL_STE
 from .model import (INTEGRAND_MODES, METHODS, NORMALS, RELIEF_MODES, RENAMED_METHODS, RENAMED_TRANSPARENCY_TYPES,
                     SAMPLINGS, SHADOW_FILTERS, STEP_SPACINGS, SURFACE_SHADOWS, TEXTURE_WRAPS, TRANSPARENCY_TYPES, TRANSPARENCY_WARPS, TRAVERSALS, Camera,
                     DirectionalLight, Image, Render, ShadowFilter, Transparency)
-from .textures import MAX_TEXTURE_SIDE
+from .textures import MAX_SCENE_TEXTURE_TEXELS, MAX_TEXTURE_SIDE
 
 FORMAT_VERSION = 1
 MAX_IMAGE_PIXELS = 1 << 26
@@ -129,9 +129,10 @@ CAMERA = Section("camera", (
 ))
 
 _POSITION = Field("position", "vec3", REQUIRED, notes="scene units")
-_TEXTURE_FILE = (f"`.png` (sRGB, decoded to linear), `.exr` or `.npy` (linear, shape (H, W) or (H, W, 3)); "
-                 f"sides of at most {MAX_TEXTURE_SIDE} texels, texels finite and >= 0; relative paths start at "
-                 f"the YAML file's folder")
+_TEXTURE_FILE = (f"`.png` (sRGB, decoded to linear), `.exr` or `.npy` (linear, shape (H, W) or (H, W, 3)), its "
+                 f"content of the format its name says; sides of at most {MAX_TEXTURE_SIDE} texels, texels finite "
+                 f"and >= 0, and at most {MAX_SCENE_TEXTURE_TEXELS} texels in all the lights' textures (a file "
+                 f"that several lights name counts once); relative paths start at the YAML file's folder")
 LIGHTS = _typed("lights", {
     "point": (
         _POSITION,
@@ -227,13 +228,13 @@ OBJECTS = _typed("objects", {
         Field("size", "`[w, h]`", REQUIRED, 0.0, low_open=True, rule="both",
               notes="the base rectangle along the image's rows and columns, scene units"),
         Field("depth_map", "string", REQUIRED,
-              rule=f"`.png` (8- or 16-bit), `.exr` or `.npy`, a regular file of at most {MAX_MESH_BYTES >> 20} MiB, "
-                   f"at least 2 × 2 texels",
+              rule=f"`.png` (8- or 16-bit), `.exr` or `.npy`, its content of the format its name says, a regular "
+                   f"file of at most {MAX_MESH_BYTES >> 20} MiB, at least 2 × 2 texels, finite",
               notes="displacement per texel, white (1) is full `height`; an alpha channel of 0 is a hole. "
                     "Relative paths start at the YAML file's folder"),
         Field("height", "number", REQUIRED, 0.0,
               notes="scene units along `normal` for depth 1; 0 is a flat quad (holes still cut)"),
-        Field("albedo_map", "string", shown_default="`albedo` everywhere",
+        Field("albedo_map", "string", shown_default="`albedo` everywhere", rule="texels in [0, 1], as `albedo`",
               notes="colour per texel (`.png`, `.exr`, `.npy`), the depth map's size; its alpha, if any, "
                     "cuts holes too"),
     ),

@@ -10,6 +10,7 @@ shading, or each triangle's own normal on all three of its vertices for flat sha
 from __future__ import annotations
 
 import io
+import re
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +24,8 @@ MESH_SUFFIXES = (".obj", ".ply", ".stl")
 def indexed_triangles(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Gather (F, 3) integer faces over (V, 3) vertices into (F, 3, 3) triangles."""
     v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
-    f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    f = np.asarray(faces)
+    f = (f if f.dtype.kind in "iu" else f.astype(np.int64)).reshape(-1, 3)  # any integer type indexes, uncopied
     return v[f]
 
 
@@ -48,6 +50,11 @@ def box_triangles(lo, hi) -> np.ndarray:
 def sphere_triangles(center, radius: float, segments: int) -> np.ndarray:
     """A UV sphere: `segments` slices around the y axis and segments // 2 rings from pole
     to pole, so 2 * segments * (rings - 1) triangles (2208 for 48 segments)."""
+    return indexed_triangles(*sphere_mesh(center, radius, segments))
+
+
+def sphere_mesh(center, radius: float, segments: int) -> tuple[np.ndarray, np.ndarray]:
+    """(points (V, 3), faces (F, 3)) of `sphere_triangles`."""
     if segments < 4:
         raise ValueError(f"a sphere needs at least 4 segments, got {segments}")
     rings = segments // 2
@@ -62,9 +69,9 @@ def sphere_triangles(center, radius: float, segments: int) -> np.ndarray:
 
     # Per slice j, in this order: the north cap's triangle, the south cap's, then two per
     # band between rings r and r + 1 (built as arrays: a 1024-segment sphere has a million).
-    j = np.arange(segments)[:, None]
+    j = np.arange(segments, dtype=np.int32)[:, None]  # (int32: a million triangles' faces are 12 MB, not 24)
     j_next = (j + 1) % segments
-    r = np.arange(rings - 2)[None, :]
+    r = np.arange(rings - 2, dtype=np.int32)[None, :]
     a, b = r * segments + j, r * segments + j_next
     c, d = (r + 1) * segments + j_next, (r + 1) * segments + j
     bands = np.stack([np.stack([a, d, c], axis=-1), np.stack([a, c, b], axis=-1)], axis=2)
@@ -73,7 +80,14 @@ def sphere_triangles(center, radius: float, segments: int) -> np.ndarray:
     north = np.concatenate([np.full_like(j, n_idx), j, j_next], axis=1)[:, None]
     south = np.concatenate([np.full_like(j, s_idx), last + j_next, last + j], axis=1)[:, None]
     faces = np.concatenate([north, south, bands], axis=1).reshape(-1, 3)
-    return indexed_triangles(pts, faces)
+    return pts, faces
+
+
+def sphere_normals(points: np.ndarray, center) -> np.ndarray:
+    """The exact normal of a sphere around `center` at each of its points (`sphere_mesh`),
+    (V, 3): smooth shading interpolates them across its faces, as it does a mesh's
+    vertex normals."""
+    return _unit_rows(np.asarray(points, dtype=np.float64) - np.asarray(center, dtype=np.float64))
 
 
 def plane_basis(normal) -> tuple[np.ndarray, np.ndarray]:
@@ -197,7 +211,7 @@ def smooth_normals(vertices: np.ndarray, faces: np.ndarray, given: np.ndarray | 
     return np.where(missing, flat_normals(v[f]), corners)
 
 
-def load_mesh(path: Path) -> tuple[np.ndarray, np.ndarray, int]:
+def load_mesh(path: Path, max_triangles: int | None = None) -> tuple[np.ndarray, np.ndarray, int]:
     """Read an OBJ, PLY or STL file with trimesh: (triangles (T, 3, 3), the smooth normal
     at each of their vertices (T, 3, 3), from `smooth_normals` with the file's vertex
     normals where it has them, and `closed_outward` of its faces), the triangles in
@@ -205,7 +219,8 @@ def load_mesh(path: Path) -> tuple[np.ndarray, np.ndarray, int]:
 
     Raises ValueError with a one-line reason for an unknown suffix, a missing, unreadable
     or corrupt file, something other than a regular file, a file over `MAX_MESH_BYTES`,
-    a file without triangles, or non-finite vertices.
+    a file without triangles, or non-finite vertices; and an OBJ whose faces make more
+    than `max_triangles` triangles, counted before trimesh builds them.
     """
     path = Path(path)
     suffix = path.suffix.lower()
@@ -219,6 +234,10 @@ def load_mesh(path: Path) -> tuple[np.ndarray, np.ndarray, int]:
         raise ValueError(str(exc)) from None
     if suffix == ".obj":
         data = _obj_as_utf8(data)
+        if max_triangles is not None and obj_triangle_count(data) > max_triangles:
+            raise MeshTooLarge(obj_triangle_count(data))
+    elif suffix == ".stl":
+        data = _stl_with_true_count(data)
     import trimesh  # slow to import; only scenes with meshes pay for it
 
     try:
@@ -269,6 +288,63 @@ def spatial_order(triangles: np.ndarray) -> np.ndarray:
         for axis in range(3):
             code |= ((cells[:, axis] >> np.uint64(bit)) & np.uint64(1)) << np.uint64(3 * bit + axis)
     return np.argsort(code, kind="stable")
+
+
+class MeshTooLarge(ValueError):
+    """A mesh file whose faces make more triangles than the scene may hold: `count`."""
+
+    def __init__(self, count: int):
+        super().__init__(f"{count} triangles in its faces")
+        self.count = count
+
+
+def _stl_with_true_count(data: bytes) -> bytes:
+    """A binary STL's bytes with the triangle count its size gives: 84 bytes of header and
+    count, then 50 a triangle. Some writers leave the count 0 (they stream the triangles),
+    and a file whose count lies was read by trimesh as ASCII, which failed on a missing
+    module; a file of whole triangles is read as those triangles. An ASCII STL (text that
+    starts with `solid`) is left as it is."""
+    if data[:5].lower() == b"solid":
+        try:
+            data.decode("utf-8")
+            return data
+        except UnicodeDecodeError:
+            pass  # binary, with a header that starts with "solid" (some exporters write that)
+    if len(data) < 84:
+        raise ValueError(f"not a valid STL file ({len(data)} bytes: a binary STL has at least 84)")
+    count, body = int.from_bytes(data[80:84], "little"), len(data) - 84
+    if body % 50:
+        raise ValueError(f"not a valid STL file (a binary STL is 84 bytes and 50 a triangle; this one has "
+                         f"{len(data)} bytes, and its header says {count} triangles)")
+    if count == body // 50:
+        return data
+    return data[:80] + (body // 50).to_bytes(4, "little") + data[84:]
+
+
+def obj_triangle_count(data: bytes) -> int:
+    """The triangles an OBJ's face lines make, counted on its bytes before any is built: a
+    face of n corners is a fan of n - 2. One line of a 22 MB file can name 11 million
+    corners, which trimesh expanded (5 GB) before the loader could count them.
+
+    Every token of a face line after the `f` is a corner, so the count is the tokens of
+    the face lines less 3 per line; positions only (numpy), no token is copied out."""
+    if re.search(rb"(?m)^[ \t]+f[ \t]", data):  # indented faces: counted as the others
+        data = re.sub(rb"(?m)^[ \t]+", b"", data)
+    buffer = np.frombuffer(data, np.uint8)
+    if len(buffer) == 0:
+        return 0
+    starts = np.concatenate([[0], np.flatnonzero(buffer == ord("\n")) + 1])
+    starts = starts[starts < len(buffer) - 1]
+    after_f = buffer[starts + 1]
+    faces = starts[(buffer[starts] == ord("f")) & ((after_f == ord(" ")) | (after_f == ord("\t")))]
+    if len(faces) == 0:
+        return 0
+    ends = np.searchsorted(starts, faces, side="right")
+    ends = np.where(ends < len(starts), starts[np.minimum(ends, len(starts) - 1)], len(buffer))
+    space = buffer <= ord(" ")  # spaces, tabs, line ends: what separates tokens
+    token_starts = np.flatnonzero(~space[1:] & space[:-1]) + 1  # (the first byte of the file is no face's)
+    tokens = np.searchsorted(token_starts, ends) - np.searchsorted(token_starts, faces + 1)
+    return int(np.maximum(tokens - 2, 0).sum())  # tokens after the "f" - 2
 
 
 def _obj_as_utf8(data: bytes) -> bytes:

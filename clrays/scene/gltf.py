@@ -37,7 +37,7 @@ from . import geometry as primitives
 from .animation import Animation
 from .files import FileRefused, read_regular_file
 from .fields import MAX_POWER
-from .limits import MAX_GLTF_BYTES, MAX_GLTF_NODES, MAX_LIGHTS, MAX_OBJECTS, MAX_TRIANGLES
+from .limits import MAX_COORDINATE, MAX_GLTF_BYTES, MAX_GLTF_NODES, MAX_LIGHTS, MAX_OBJECTS, MAX_TRIANGLES
 from .model import Camera, DirectionalLight, Geometry, Light, LightTexture, PointLight, Scene, SpotLight
 from .textures import MAX_TEXTURE_SIDE, srgb_to_linear
 from .transforms import quat_to_matrix, slerp, transform_normals, transform_points
@@ -945,6 +945,17 @@ class GltfAnimation(Animation):
 # --------------------------------------------------------------------------- entry points
 
 
+def _check_coordinates(reader: "_Reader", triangles: np.ndarray, lights, camera) -> None:
+    """World-space vertices, light positions and the camera within ±MAX_COORDINATE, as a
+    YAML scene's (docs/limits.md): float32 on the device overflows in the products beyond."""
+    for what, points in (("meshes", triangles), ("lights", [getattr(light, "position", np.zeros(3)) for light in lights]),
+                         ("cameras", [camera.position] if camera is not None else [])):
+        largest = float(np.abs(np.asarray(points, dtype=np.float64)).max(initial=0.0))
+        if not largest <= MAX_COORDINATE:
+            reader.fail(what, f"world-space coordinates within ±{MAX_COORDINATE:g} (float32 on the device overflows "
+                              "beyond)", f"{largest:.3g}")
+
+
 def import_gltf(path: Path, file: str | None = None, camera: str | None = None, light_scale: float = 1.0) -> Imported:
     """Read a glTF 2.0 file: `camera` names the camera to take (the first otherwise),
     `light_scale` multiplies every light's power. `file` names it in messages."""
@@ -968,6 +979,7 @@ def import_gltf(path: Path, file: str | None = None, camera: str | None = None, 
     else:
         bounds = (np.full(3, -1.0), np.full(3, 1.0))
     scene_camera, camera_node = _camera(reader, _cameras(reader, graph, world), camera, world, bounds)
+    _check_coordinates(reader, triangles, lights, scene_camera)
     graph = NodeGraph(graph.parents, graph.order, graph.matrices, graph.trs, channels)
     object_id = np.concatenate([np.full(i.rows.stop - i.rows.start, k, np.int32) for k, i in enumerate(instances)]) \
         if instances else np.zeros(0, np.int32)

@@ -60,3 +60,10 @@ MAX_SWEEP_POINTS = 10_000
 #: hundred bytes a frame or a point, so room for every frame and point many times over;
 #: a link to /dev/zero took 7.5 GB.
 MAX_RUN_RECORD_BYTES = 64 << 20
+#: The largest coordinate, in scene units, of any point the device sees: vertices after
+#: their transforms (every frame of an animation), the camera, the lights. float64 on the
+#: host, the scene reaches the kernels as float32 (largest 3.4e38), where a ray–triangle
+#: test multiplies three coordinates (an edge, the cross of another with the ray, the ray
+#: origin): 1e12 cubed is 1e36, so sums of such products stay finite. A vertex at 1e39
+#: became infinite, and `scale: 1e300` rendered broken geometry with exit 0.
+MAX_COORDINATE = 1e12

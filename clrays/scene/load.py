@@ -30,13 +30,13 @@ from ..errors import SceneError
 from ..structs import CONVEX_OUTSIDE_ONLY
 from .animation import Animation, Key, ObjectRig, Track
 from .files import FileRefused, read_regular_file, scene_files
-from .fields import (ANIMATION, CAMERA, FORMAT_VERSION, GLTF, IMAGE, LIGHTS, MAX_IMAGE_PIXELS, MEDIUM, OBJECT, OBJECTS,
-                     PHASES, QUATERNION_TOLERANCE, RENDER, ROTATE, SHADOW_FILTER, TOP, TRANSFORM, TRANSPARENCY, Field,
-                     kinds)
-from .limits import MAX_LIGHTS, MAX_OBJECTS, MAX_SCENE_BYTES, MAX_TRIANGLES
+from .fields import (ANIMATION, CAMERA, FORMAT_VERSION, GLTF, IMAGE, LIGHTS, MAX_IMAGE_PIXELS, MAX_POWER, MEDIUM,
+                     OBJECT, OBJECTS, PHASES, QUATERNION_TOLERANCE, RENDER, ROTATE, SHADOW_FILTER, TOP, TRANSFORM,
+                     TRANSPARENCY, Field, kinds)
+from .limits import MAX_COORDINATE, MAX_LIGHTS, MAX_OBJECTS, MAX_SCENE_BYTES, MAX_TRIANGLES
 from .model import (Camera, DirectionalLight, Geometry, Image, Light, LightTexture, Medium, Phase, PointLight, Render,
                     Scene, ShadowFilter, SpotLight, Transparency)
-from .textures import TextureError, cube_from_cross, cube_from_faces, read_texture
+from .textures import TextureCache, TextureError
 from .transforms import (affine, matrix_to_quat, quat_to_matrix, rotation_axis_angle, rotation_euler,
                          transform_normals, transform_points)
 from .yaml_tree import (Node, apply_override, boolean, choice, compose, direction, integer, mapping, mark_where,
@@ -85,6 +85,26 @@ def _scale(node: Node | None) -> np.ndarray:
     return np.full(3, number(node, field.low, lo_open=field.low_open))
 
 
+def _within_float32(node: Node, what: str, points, got: Callable[[float], str] | None = None) -> None:
+    """Points (any shape, scene units) within ±MAX_COORDINATE, where the device's float32
+    products stay finite (clrays.scene.limits); NaN and infinity fail too."""
+    points = np.asarray(points, dtype=np.float64)
+    if points.size == 0:
+        return
+    largest = max(float(points.max()), -float(points.min()))  # no |points| copy: a million triangles are 72 MB
+    if not largest <= MAX_COORDINATE:  # (NaN fails too)
+        value = largest if not math.isnan(largest) else float("nan")
+        node.fail(f"{what} within ±{MAX_COORDINATE:g} (scene units; float32 on the device overflows beyond)",
+                  got(value) if got else f"{value:g}")
+
+
+def _point(node: Node) -> np.ndarray:
+    """A position: a vec3 within ±MAX_COORDINATE."""
+    point = vec3(node)
+    _within_float32(node, "a point", point, lambda _: show(node))
+    return point
+
+
 # --------------------------------------------------------------------------- sections
 
 
@@ -100,8 +120,8 @@ def _image(node: Node) -> Image:
 
 def _camera(node: Node) -> Camera:
     m = mapping(node, CAMERA.required, CAMERA.optional)
-    position = vec3(m["position"])
-    look_at = vec3(m["look_at"])
+    position = _point(m["position"])
+    look_at = _point(m["look_at"])
     if np.array_equal(position, look_at):
         m["look_at"].fail("a point different from camera.position")
     default_up = CAMERA["up"].default
@@ -115,38 +135,48 @@ def _camera(node: Node) -> Camera:
                   fov_deg=_read(CAMERA["fov_deg"], m.get("fov_deg")), far=_read(CAMERA["far"], m.get("far")))
 
 
-def _texture(node: Node | None, base_dir: Path) -> LightTexture | None:
-    """A light's texture file read into linear texels (clrays.scene.textures), or None."""
-    if node is None:
-        return None
+def _texture_path(node: Node, base_dir: Path) -> Path:
     if not isinstance(node.value, str) or not node.value.strip():
         node.fail("a texture file path (.png, .exr or .npy)")
     path = Path(node.value)
-    path = path if path.is_absolute() else base_dir / path
+    return path if path.is_absolute() else base_dir / path
+
+
+def _texture(node: Node | None, base_dir: Path, cache: TextureCache) -> LightTexture | None:
+    """A light's texture file read into linear texels (clrays.scene.textures), or None;
+    read once for all the lights that name it (`cache`)."""
+    if node is None:
+        return None
+    path = _texture_path(node, base_dir)
     try:
-        return LightTexture(read_texture(path), node.value)
+        return LightTexture(cache.image(path), node.value)
     except TextureError as exc:
         node.fail("a texture image (.png, .exr or .npy) with finite texels >= 0", f"{show(node)}: {exc} ({path})")
 
 
-def _cube_texture(node: Node | None, base_dir: Path) -> LightTexture | None:
+def _cube_texture(node: Node | None, base_dir: Path, cache: TextureCache) -> LightTexture | None:
     """A point light's cube texture: six files (a list) or one cross layout (a string)."""
     if node is None:
         return None
     if isinstance(node.value, list):
         if len(node.value) != 6:
             node.fail("six texture files [+x, -x, +y, -y, +z, -z] or one cross image", f"{len(node.value)} files")
-        faces = [_texture(item, base_dir) for item in node.value]
+        paths = [_texture_path(item, base_dir) for item in node.value]
         try:
-            texels = cube_from_faces([face.texels for face in faces])
+            texels = cache.cube_faces(paths)
         except TextureError as exc:
-            node.fail("six square texture images of one size", f"{show(node)}: {exc}")
-        return LightTexture(texels, ", ".join(face.file for face in faces))
-    cross = _texture(node, base_dir)
+            if exc.face is None:
+                node.fail("six square texture images of one size", f"{show(node)}: {exc}")
+            face = node.value[exc.face]
+            face.fail("a texture image (.png, .exr or .npy) with finite texels >= 0",
+                      f"{show(face)}: {exc} ({paths[exc.face]})")
+        return LightTexture(texels, ", ".join(item.value for item in node.value))
+    path = _texture_path(node, base_dir)
     try:
-        return LightTexture(cube_from_cross(cross.texels), cross.file)
+        return LightTexture(cache.cube_cross(path), node.value)
     except TextureError as exc:
-        node.fail("a cross of 4 × 3 square cells, or a list of six files", f"{show(node)}: {exc}")
+        node.fail("a cross of 4 × 3 square cells, or a list of six files, with finite texels >= 0",
+                  f"{show(node)}: {exc} ({path})")
 
 
 def _texture_only(m: dict[str, Node], *keys: str) -> None:
@@ -158,24 +188,45 @@ def _texture_only(m: dict[str, Node], *keys: str) -> None:
                             show(m[key]))
 
 
-def _light(node: Node, base_dir: Path = Path(".")) -> Light:
+def _light(node: Node, base_dir: Path = Path("."), cache: TextureCache | None = None) -> Light:
+    cache = TextureCache() if cache is None else cache
     kind, m = typed(node, kinds(LIGHTS))
     keys = LIGHTS[kind]
     if kind == "point":
-        return PointLight(position=vec3(m["position"]), intensity=_power(keys["intensity"], m["intensity"]),
-                          texture=_cube_texture(m.get("texture"), base_dir))
+        light = PointLight(position=_point(m["position"]), intensity=_power(keys["intensity"], m["intensity"]),
+                           texture=_cube_texture(m.get("texture"), base_dir, cache))
+        return _textured_power(m, light, light.intensity, cache)
     if kind == "spot":
-        return SpotLight(position=vec3(m["position"]), direction=direction(m["direction"]),
-                         cone_deg=_read(keys["cone_deg"], m["cone_deg"]),
-                         intensity=_power(keys["intensity"], m["intensity"]),
-                         texture=_texture(m.get("texture"), base_dir))
+        light = SpotLight(position=_point(m["position"]), direction=direction(m["direction"]),
+                          cone_deg=_read(keys["cone_deg"], m["cone_deg"]),
+                          intensity=_power(keys["intensity"], m["intensity"]),
+                          texture=_texture(m.get("texture"), base_dir, cache))
+        return _textured_power(m, light, light.intensity, cache)
     _texture_only(m, "texture_size", "texture_wrap")
     size_field = keys["texture_size"]
     size = tuple(numbers(m["texture_size"], 2, "a list of 2 numbers > 0 [width, height]", size_field.low,
                          lo_open=size_field.low_open)) if "texture_size" in m else size_field.default
-    return DirectionalLight(direction=direction(m["direction"]), irradiance=_power(keys["irradiance"], m["irradiance"]),
-                            texture=_texture(m.get("texture"), base_dir), texture_size=tuple(float(v) for v in size),
-                            texture_wrap=_read(keys["texture_wrap"], m.get("texture_wrap")))
+    light = DirectionalLight(direction=direction(m["direction"]),
+                             irradiance=_power(keys["irradiance"], m["irradiance"]),
+                             texture=_texture(m.get("texture"), base_dir, cache),
+                             texture_size=tuple(float(v) for v in size),
+                             texture_wrap=_read(keys["texture_wrap"], m.get("texture_wrap")))
+    return _textured_power(m, light, light.irradiance, cache)
+
+
+def _textured_power(m: dict[str, Node], light: Light, power: np.ndarray, cache: TextureCache,
+                    power_node: Node | None = None) -> Light:
+    """The light, its power × its brightest texel checked against MAX_POWER: the texture
+    multiplies the power per light ray (a 2e37 texel at intensity 1e30 overflowed float32)."""
+    if light.texture is None:
+        return light
+    brightest = cache.brightest(light.texture.texels)
+    if float(np.max(power)) * brightest > MAX_POWER:
+        key = "irradiance" if isinstance(light, DirectionalLight) else "intensity"
+        (power_node or m[key]).fail(f"a power whose product with the brightest texel ({brightest:g}) is at most "
+                                    f"{MAX_POWER:g} (beyond it float32 radiance overflows)",
+                                    f"{float(np.max(power)):g}")
+    return light
 
 
 def _lights(node: Node) -> list[Node]:
@@ -313,10 +364,30 @@ def _transform_parts(node: Node | None) -> tuple[np.ndarray, np.ndarray, np.ndar
     return translate, rotate, _scale(m.get("scale"))
 
 
+@dataclasses.dataclass(frozen=True)
+class _VertexNormals:
+    """A smooth shape's normals at its points and the faces that index them, spread to
+    each triangle's vertices (F, 3, 3) only as the scene's geometry is assembled: a sphere
+    of a million triangles keeps 12 MB of normals while the others load, not 72."""
+
+    at_points: np.ndarray  # (V, 3) unit
+    faces: np.ndarray  # (F, 3) indices into at_points
+
+    def array(self) -> np.ndarray:
+        return primitives.indexed_triangles(self.at_points, self.faces)
+
+    def transformed(self, matrix: np.ndarray) -> "_VertexNormals":
+        return _VertexNormals(transform_normals(matrix, self.at_points), self.faces)
+
+
+def _normals_array(normals: np.ndarray | _VertexNormals | None) -> np.ndarray | None:
+    return normals.array() if isinstance(normals, _VertexNormals) else normals
+
+
 # An object's shape in its own frame: triangles (T, 3, 3); for a smooth object, the normal
-# at each of their vertices (T, 3, 3), None for a flat one; and its outward winding
-# (geometry.closed_outward: +1, -1, or 0 for a surface that closes no solid).
-_Shape = tuple[np.ndarray, np.ndarray | None, int]
+# at each of their vertices ((T, 3, 3), or _VertexNormals), None for a flat one; and its
+# outward winding (geometry.closed_outward: +1, -1, or 0 for a surface that closes no solid).
+_Shape = tuple[np.ndarray, np.ndarray | _VertexNormals | None, int]
 
 
 def _triangles(m: dict[str, Node]) -> _Shape:
@@ -341,9 +412,14 @@ def _box(m: dict[str, Node]) -> _Shape:
 
 
 def _sphere(m: dict[str, Node]) -> _Shape:
+    """A sphere's triangles, shaded smooth with its analytic normals (flat, its 48 segments
+    showed as bands across a lit top)."""
     keys = OBJECTS["sphere"]
-    return primitives.sphere_triangles(vec3(m["center"]), _read(keys["radius"], m["radius"]),
-                                       _read(keys["segments"], m.get("segments"))), None, 1  # closed, outward
+    center = _point(m["center"])
+    points, faces = primitives.sphere_mesh(center, _read(keys["radius"], m["radius"]),
+                                           _read(keys["segments"], m.get("segments")))
+    normals = _VertexNormals(primitives.sphere_normals(points, center), faces)
+    return primitives.indexed_triangles(points, faces), normals, 1  # closed, wound outward
 
 
 def _plane(m: dict[str, Node]) -> _Shape:
@@ -360,22 +436,26 @@ def _mesh(m: dict[str, Node], base_dir: Path) -> _Shape:
     path = Path(node.value)
     path = path if path.is_absolute() else base_dir / path
     try:
-        triangles, normals, outward = primitives.load_mesh(path)
+        triangles, normals, outward = primitives.load_mesh(path, MAX_TRIANGLES)
+    except primitives.MeshTooLarge as exc:  # counted before trimesh builds them
+        node.fail(f"at most {MAX_TRIANGLES} triangles in the whole scene (simplify the mesh)",
+                  f"{show(node)} ({exc.count} triangles in its faces)")
     except (ValueError, OSError) as exc:
         node.fail("a readable mesh file (.obj, .ply or .stl) with triangles",
                   f"{show(node)} ({exc}: {path})")
     return triangles, normals if smooth else None, outward
 
 
-def _relief_image(node: Node, base_dir: Path) -> tuple[np.ndarray, Path]:
-    """An image key of a relief read into (H, W, C) floats; a one-line error naming the
-    key, its value and the reason otherwise."""
+def _relief_image(node: Node, base_dir: Path, check_shape: Callable[[int, int], None]) -> np.ndarray:
+    """An image key of a relief read into (H, W, C) floats, its size checked by
+    `check_shape(height, width)` before it is decoded; a one-line error naming the key,
+    its value and the reason otherwise."""
     if not isinstance(node.value, str) or not node.value.strip():
         node.fail("an image file path (.png, .exr or .npy)")
     path = Path(node.value)
     path = path if path.is_absolute() else base_dir / path
     try:
-        return relief_images.read_image(path), path
+        return relief_images.read_image(path, check_shape)
     except (ValueError, OSError) as exc:
         node.fail("a readable 2D image (.png 8 or 16 bit, .exr or .npy)", f"{show(node)} ({exc}: {path})")
 
@@ -387,24 +467,39 @@ def read_relief(m: dict[str, Node], base_dir: Path) -> relief_images.Relief:
     if np.linalg.norm(np.cross(normal, up)) < PARALLEL_TOLERANCE:
         m["up"].fail("a direction not parallel to normal")
     size = numbers(m["size"], 2, "a list of 2 numbers [w, h] > 0", keys["size"].low, lo_open=True)
+    _within_float32(m["size"], "sizes", size, lambda _: show(m["size"]))
     height = _read(keys["height"], m["height"])
-    image, _ = _relief_image(m["depth_map"], base_dir)
+    _within_float32(m["height"], "a height", height)
+    center = _point(m["center"])
+
+    def triangles_fit(rows: int, cols: int) -> None:  # before decoding: a small PNG may hold 13000² texels
+        if relief_images.cell_count((rows, cols)) > MAX_TRIANGLES:
+            m["depth_map"].fail(f"at most {MAX_TRIANGLES} triangles (two per cell of four texels)",
+                                f"{show(m['depth_map'])} ({cols} × {rows} texels: "
+                                f"{relief_images.cell_count((rows, cols))} triangles)")
+
+    image = _relief_image(m["depth_map"], base_dir, triangles_fit)
     depth, alpha = relief_images.depth_and_alpha(image)
-    if relief_images.cell_count(depth.shape) > MAX_TRIANGLES:  # before building them: they may be huge
-        m["depth_map"].fail(f"at most {MAX_TRIANGLES} triangles (two per cell of four texels)",
-                            f"{show(m['depth_map'])} ({depth.shape[1]} × {depth.shape[0]} texels: "
-                            f"{relief_images.cell_count(depth.shape)} triangles)")
     solid = np.ones(depth.shape, bool) if alpha is None else alpha > 0
     albedo = None
     if "albedo_map" in m:
-        colours, _ = _relief_image(m["albedo_map"], base_dir)
-        if colours.shape[:2] != depth.shape:
-            m["albedo_map"].fail(f"an image of the depth map's size, {depth.shape[1]} × {depth.shape[0]}",
-                                 f"{show(m['albedo_map'])} ({colours.shape[1]} × {colours.shape[0]})")
+        def same_size(rows: int, cols: int) -> None:
+            if (rows, cols) != depth.shape:
+                m["albedo_map"].fail(f"an image of the depth map's size, {depth.shape[1]} × {depth.shape[0]}",
+                                     f"{show(m['albedo_map'])} ({cols} × {rows})")
+
+        colours = _relief_image(m["albedo_map"], base_dir, same_size)
         albedo, colour_alpha = relief_images.colour_and_alpha(colours)
+        low, high = OBJECT["albedo"].low, OBJECT["albedo"].high
+        outside = (albedo < low) | (albedo > high)
+        if outside.any():  # as a scalar albedo is: a texel of 1e6 would be a lamp
+            y, x, c = np.argwhere(outside)[0]
+            m["albedo_map"].fail(f"albedo texels in [{low:g}, {high:g}], as albedo's",
+                                 f"{show(m['albedo_map'])} ({albedo[y, x, c]:g} at texel (x={x}, y={y}), "
+                                 f"{int(outside.any(axis=2).sum())} outside in all)")
         if colour_alpha is not None:
             solid &= colour_alpha > 0
-    frame = relief_images.relief_frame(vec3(m["center"]), normal, up, size, depth.shape)
+    frame = relief_images.relief_frame(center, normal, up, size, depth.shape)
     return relief_images.Relief(frame, height * depth, solid, albedo)
 
 
@@ -433,8 +528,8 @@ def _reject_normals_off_meshes(node: Node) -> None:
         return
     kind = node.value["type"].value
     if isinstance(kind, str) and kind in OBJECTS and "normals" not in OBJECTS[kind].optional:
-        node.value["normals"].fail(f"no normals key on a {kind} (only a mesh has vertex normals to interpolate; "
-                                   f"every other object is shaded flat)")
+        node.value["normals"].fail(f"no normals key on a {kind} (only a mesh chooses between its vertex normals "
+                                   f"and flat shading; a sphere is shaded smooth, every other object flat)")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -443,11 +538,11 @@ class _Object:
     albedo, and what an animation of it needs (its own triangles and normals, its transform)."""
 
     triangles: np.ndarray  # (T, 3, 3) world space
-    normals: np.ndarray | None  # (T, 3, 3) world space, unit, for a smooth object (else each is the face normal)
+    normals: np.ndarray | _VertexNormals | None  # (T, 3, 3) world space, unit, for a smooth object
     albedo: np.ndarray  # (3,), or (T, 3) for a relief with an albedo_map
     opacity: np.ndarray  # (3,)
     local: np.ndarray  # (T, 3, 3) before the transform
-    local_normals: np.ndarray | None  # (T, 3, 3) before the transform, for a smooth object
+    local_normals: np.ndarray | _VertexNormals | None  # before the transform, for a smooth object
     parts: tuple[np.ndarray, np.ndarray, np.ndarray]  # translate (3,), rotation 3x3, scale (3,)
     relief: relief_images.Relief | None = None  # a relief object's texels, for the pre-warp
     outward: int = 0  # +1 or -1: a closed, opaque solid and its winding (Geometry.outward); 0: none
@@ -469,11 +564,16 @@ def _object(node: Node, base_dir: Path) -> _Object:
         local, local_normals, outward = _BUILDERS[kind](m, base_dir)
     if np.any(opacity < 1.0):  # light passes through: each of its surfaces counts
         outward = 0
+    _within_float32(node, "vertices", local)  # before the transform multiplies them
     triangles, normals = local, local_normals
     if "transform" in m:
         matrix = affine(*parts)
-        triangles = transform_points(matrix, local)
-        if local_normals is not None:
+        with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused just below
+            triangles = transform_points(matrix, local)
+        _within_float32(m["transform"], "vertices (after the transform)", triangles)
+        if isinstance(local_normals, _VertexNormals):
+            normals = local_normals.transformed(matrix)
+        elif local_normals is not None:
             normals = transform_normals(matrix, local_normals)
     return _Object(triangles, normals, albedo, opacity, local, local_normals, parts, relief, outward)
 
@@ -515,7 +615,7 @@ def _geometry(node: Node | None, base_dir: Path, rigs: list | None = None) -> Ge
         if rigs is not None:
             translate, rotate, scale = obj.parts
             rigs.append(ObjectRig(obj.local, slice(start, start + count), translate, matrix_to_quat(rotate), scale,
-                                  obj.local_normals))
+                                  _normals_array(obj.local_normals)))
         if obj.normals is not None:
             smooth_normals.append((slice(start, start + count), obj.normals))
         if obj.relief is not None:
@@ -532,7 +632,7 @@ def _geometry(node: Node | None, base_dir: Path, rigs: list | None = None) -> Ge
     normals = primitives.flat_normals(triangles)  # once for all objects: per object, it dominated loading
     smooth = np.zeros(len(triangles), bool)
     for rows, object_normals in smooth_normals:
-        normals[rows], smooth[rows] = object_normals, True
+        normals[rows], smooth[rows] = _normals_array(object_normals), True
     return Geometry(triangles=triangles, albedo=np.ascontiguousarray(np.concatenate(albedo), dtype=np.float64),
                     object_id=np.concatenate(ids).astype(np.int32), normals=normals, smooth=smooth,
                     reliefs=tuple(reliefs), opacity=_opacity_or_none(np.concatenate(opacity)),
@@ -564,16 +664,16 @@ def _opacity_or_none(opacity: np.ndarray) -> np.ndarray | None:
 # Animated properties: name -> (reader, interpolation). Lights by type, like LIGHTS.
 _Reader = tuple[Callable[[Node], Any], str]
 _CAMERA_TRACKS: dict[str, _Reader] = {
-    "position": (vec3, "linear"),
-    "look_at": (vec3, "linear"),
+    "position": (_point, "linear"),
+    "look_at": (_point, "linear"),
     "up": (direction, "direction"),
     "orientation": (_unit_quaternion, "rotation"),
     "fov_deg": (lambda n: _read(CAMERA["fov_deg"], n), "linear"),
 }
 _LIGHT_TRACKS: dict[str, dict[str, _Reader]] = {
-    "point": {"position": (vec3, "linear"),
+    "point": {"position": (_point, "linear"),
               "intensity": (lambda n: _power(LIGHTS["point"]["intensity"], n), "linear")},
-    "spot": {"position": (vec3, "linear"), "direction": (direction, "direction"),
+    "spot": {"position": (_point, "linear"), "direction": (direction, "direction"),
              "cone_deg": (lambda n: _read(LIGHTS["spot"]["cone_deg"], n), "linear"),
              "intensity": (lambda n: _power(LIGHTS["spot"]["intensity"], n), "linear")},
     "directional": {"direction": (direction, "direction"),
@@ -651,6 +751,18 @@ def _animation(node: Node, scene: Scene, rigs: list[ObjectRig]) -> Animation:
                              lambda i: _LIGHT_TRACKS[scene.lights[i].type], easing) if "lights" in m else {}
     objects = _indexed_tracks(m["objects"], "object", len(rigs), lambda i: _OBJECT_TRACKS,
                               easing) if "objects" in m else {}
+    for index, (tracks, nodes) in objects.items():
+        _check_object_track_extent(rigs[index], tracks, nodes)
+    for index, (tracks, nodes) in lights.items():
+        for name in ("intensity", "irradiance"):
+            texture = scene.lights[index].texture
+            if name in tracks and texture is not None:
+                brightest = float(texture.texels.max())
+                for key, key_node in zip(tracks[name].keys, nodes[name]):
+                    if float(np.max(key.value)) * brightest > MAX_POWER:
+                        key_node.fail(f"a power whose product with the brightest texel ({brightest:g}) is at "
+                                      f"most {MAX_POWER:g} (beyond it float32 radiance overflows)",
+                                      f"{float(np.max(key.value)):g}")
     medium, medium_nodes = _keys(m["medium"], _MEDIUM_TRACKS, easing) if "medium" in m else ({}, {})
     if "g" in medium and scene.medium.phase.type != "hg":
         medium_nodes["g"][0].fail("a medium with phase {type: hg, g: ...} (only then is there a g to animate)",
@@ -663,6 +775,28 @@ def _animation(node: Node, scene: Scene, rigs: list[ObjectRig]) -> Animation:
     if camera.keys() & {"position", "look_at", "up"} and "orientation" not in camera:
         _check_camera_path(m["camera"], animation, scene)
     return animation
+
+
+def _check_object_track_extent(rig: ObjectRig, tracks: dict[str, Track], nodes: dict[str, list[Node]]) -> None:
+    """An animated object's vertices stay within ±MAX_COORDINATE at every frame: |R·S·p + t|
+    is at most max(scale)·|p| + |t|, and every easing keeps a track between its keys, so
+    checking each key against half the bound covers every frame between them."""
+    half = MAX_COORDINATE / 2
+    extent = float(np.max(np.linalg.norm(rig.local.reshape(-1, 3), axis=1))) if rig.local.size else 0.0
+    translates = [key.value for key in tracks["translate"].keys] if "translate" in tracks else [rig.translate]
+    scales = [key.value for key in tracks["scale"].keys] if "scale" in tracks else [rig.scale]
+    for i, value in enumerate(translates):
+        if not float(np.linalg.norm(value)) <= half:
+            node = nodes["translate"][i] if "translate" in tracks else None
+            if node is not None:
+                node.fail(f"a translation of length at most {half:g} (scene units: every frame's vertices stay "
+                          f"within ±{MAX_COORDINATE:g}, where float32 on the device holds)", show(node))
+    for i, value in enumerate(scales):
+        if not float(np.max(value)) * extent <= half:
+            node = nodes["scale"][i] if "scale" in tracks else None
+            if node is not None:
+                node.fail(f"a scale of at most {half / max(extent, 1e-300):g} for this object (its vertices stay "
+                          f"within ±{MAX_COORDINATE:g}, where float32 on the device holds)", show(node))
 
 
 def _check_camera_path(node: Node, animation: Animation, scene: Scene) -> None:
@@ -727,10 +861,11 @@ def _scene(root: Node, filename: str, source: Path | str | None, overrides: Sequ
     base_dir = Path(source).parent if source is not None else Path.cwd()
     imported, fps = _gltf(m["gltf"], base_dir, "camera" in m) if "gltf" in m else (None, None)
     rigs: list[ObjectRig] = []
+    textures = TextureCache()  # a file that several lights name is read once, and shared
     scene = Scene(  # sections are read (and fail) in the order the format lists them
         image=_image(m["image"]),
         camera=_camera(m["camera"]) if "camera" in m else imported.camera,
-        lights=tuple(_light(n, base_dir) for n in _lights(m["lights"])) if "lights" in m else (),
+        lights=tuple(_light(n, base_dir, textures) for n in _lights(m["lights"])) if "lights" in m else (),
         medium=_medium(m.get("medium")),
         background=_read(TOP["background"], m.get("background")),
         geometry=_geometry(m.get("objects"), base_dir, rigs if "animation" in m else None),

@@ -22,10 +22,12 @@ import io
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
 from .files import FileRefused, missing, read_regular_file
+from .image_files import image_shape, load_npy, npy_header
 from .limits import MAX_MESH_BYTES
 
 IMAGE_SUFFIXES = (".png", ".exr", ".npy")
@@ -64,9 +66,12 @@ def relief_frame(center, normal, up, size, shape) -> ReliefFrame:
     return ReliefFrame(corner, right * width / cols, -up * height / rows, normal)
 
 
-def read_image(path: Path) -> np.ndarray:
+def read_image(path: Path, check_shape: Callable[[int, int], None] | None = None) -> np.ndarray:
     """An image file as float64 (H, W, C) in [0, 1], C in 1..4 (grey, grey + alpha, RGB,
-    RGBA). Raises ValueError with a one-line reason (no file, unreadable, not 2D, …)."""
+    RGBA). Raises ValueError with a one-line reason (no file, unreadable, another format
+    than its extension says, not 2D, non-finite values, …). Its size is read from its
+    header and checked, by `check_shape(height, width)` too when given (which raises
+    ValueError), before anything is decoded."""
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in IMAGE_SUFFIXES:
@@ -77,6 +82,15 @@ def read_image(path: Path) -> np.ndarray:
         data = read_regular_file(path, MAX_RELIEF_IMAGE_BYTES)
     except FileRefused as exc:
         raise ValueError(str(exc)) from None
+    if suffix == ".npy":
+        shape = npy_header(data)[0]
+        if len(shape) not in (2, 3):
+            raise ValueError(f"not a 2D image (an array of shape {shape}; expected H × W with 1 to 4 channels)")
+    height, width = image_shape(data, suffix, path)
+    if min(height, width) < 2:
+        raise ValueError(f"an image of {width} × {height} texels has no cell (at least 2 × 2)")
+    if check_shape is not None:
+        check_shape(height, width)
     if suffix == ".npy":
         image = _read_npy(data)
     elif suffix == ".png":
@@ -90,21 +104,16 @@ def read_image(path: Path) -> np.ndarray:
                          f"channels)")
     if min(image.shape[:2]) < 2:
         raise ValueError(f"an image of {image.shape[1]} × {image.shape[0]} texels has no cell (at least 2 × 2)")
-    if not np.isfinite(image).all():
-        raise ValueError("the image has non-finite values")
+    bad = ~np.isfinite(image)
+    if bad.any():
+        y, x, c = np.argwhere(bad)[0]
+        raise ValueError(f"the image has non-finite values ({image[y, x, c]} at texel (x={x}, y={y}), "
+                         f"{int(bad.any(axis=2).sum())} in all)")
     return image
 
 
 def _read_npy(data: bytes) -> np.ndarray:
-    try:
-        array = np.load(io.BytesIO(data), allow_pickle=False)
-    except Exception as exc:  # numpy raises several types for a corrupt file
-        raise ValueError(f"not a valid .npy file ({type(exc).__name__})") from None
-    if not (np.issubdtype(array.dtype, np.number) or array.dtype == bool) or np.iscomplexobj(array):
-        raise ValueError(f"not an image of numbers (dtype {array.dtype})")
-    if array.ndim not in (2, 3):
-        raise ValueError(f"not a 2D image (an array of shape {tuple(array.shape)}; expected H × W with 1 to 4 "
-                         f"channels)")
+    array = load_npy(data)  # numbers only: its header is checked (image_files.npy_header)
     return array.astype(np.float64)
 
 
@@ -113,6 +122,8 @@ def _read_png(data: bytes) -> np.ndarray:
 
     try:
         with Image.open(io.BytesIO(data)) as image:
+            if image.format != "PNG":
+                raise ValueError(f"a {image.format} image named .png")
             image.load()
             mode = image.mode
             if mode in ("I;16", "I;16B", "I;16L", "I"):  # 16-bit grey
@@ -120,8 +131,8 @@ def _read_png(data: bytes) -> np.ndarray:
             if mode not in ("L", "LA", "RGB", "RGBA"):
                 image = image.convert("RGBA" if "A" in image.getbands() or "transparency" in image.info else "RGB")
             return np.asarray(image, dtype=np.float64) / 255.0
-    except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as exc:
-        raise ValueError(f"not a valid PNG file ({type(exc).__name__})") from None
+    except (UnidentifiedImageError, OSError, SyntaxError) as exc:
+        raise ValueError(f"not a readable PNG image ({type(exc).__name__})") from None
 
 
 def _read_exr(path: Path) -> np.ndarray:

@@ -40,9 +40,12 @@ if TYPE_CHECKING:
 
 def pack_light_textures(scene, eye_ws: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(light_texture_t per light, float4 texels of every texture one after another) for a
-    scene in eye space (at least one texel, so the buffer exists)."""
+    scene in eye space (at least one texel, so the buffer exists). Lights that share a
+    texture (the loader gives them one array: clrays.scene.textures.TextureCache) share its
+    texels here too: 16 spot lights with one 4096² gobo hold 256 MiB, not 4 GiB."""
     entries = np.zeros(max(len(scene.lights), 1), dtype=structs.light_texture_dtype)
-    chunks, first = [], 0
+    first_of: dict[int, int] = {}  # id(texels) -> its first texel in the packed buffer
+    unique, total = [], 0
     for index, light in enumerate(scene.lights):
         if not textured(light):
             continue
@@ -59,14 +62,19 @@ def pack_light_textures(scene, eye_ws: np.ndarray) -> tuple[np.ndarray, np.ndarr
         else:
             entry["scale_x"], entry["scale_y"] = 1.0 / light.texture_size[0], 1.0 / light.texture_size[1]
             entry["wrap"] = structs.TEXTURE_WRAP_REPEAT if light.texture_wrap == "repeat" else structs.TEXTURE_WRAP_CLAMP
-        entry["first_texel"], entry["width"], entry["height"] = first, light.texture.width, light.texture.height
+        texels = light.texture.texels
+        if id(texels) not in first_of:
+            first_of[id(texels)] = total
+            unique.append(texels)
+            total += light.texture.height * light.texture.width
+        entry["first_texel"], entry["width"], entry["height"] = first_of[id(texels)], light.texture.width, \
+            light.texture.height
         entry["textured"] = 1
-        texels = np.zeros((light.texture.height * light.texture.width, 4), dtype=np.float32)
-        texels[:, :3] = light.texture.texels.reshape(-1, 3)
-        chunks.append(texels)
-        first += len(texels)
-    texels = np.concatenate(chunks) if chunks else np.zeros((1, 4), dtype=np.float32)
-    return entries, texels
+    packed = np.zeros((max(total, 1), 4), dtype=np.float32)  # one array: no per-texture copies to join
+    for texels in unique:
+        first = first_of[id(texels)]
+        packed[first:first + texels.shape[0] * texels.shape[1], :3] = texels.reshape(-1, 3)
+    return entries, packed
 
 
 # --------------------------------------------------------------------------- the low-rank integrand in γ

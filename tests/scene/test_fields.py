@@ -76,3 +76,19 @@ def test_the_loader_reads_its_limits_from_the_table(path, value, message):
     parse_scene(text, overrides=[f"{path}={value - 1}"])
     with pytest.raises(SceneError, match=message):
         parse_scene(text, overrides=[f"{path}={value}"])
+
+
+def test_relief_example_names_the_file_the_tool_writes():
+    """The relief example of docs/scene-format.md names the depth image that
+    tools/lattice_depth.py writes, as scenes/lattice.yaml (beside it) reads it."""
+    import re
+
+    text = DOC.read_text()
+    section = text[text.index("### relief"):text.index("### transform")]
+    example = re.search(r"```yaml\n(.*?)```", section, re.DOTALL).group(1)
+    depth_map = re.search(r"depth_map: (\S+)", example).group(1)
+    spec = importlib.util.spec_from_file_location("lattice_depth", REPO / "tools" / "lattice_depth.py")
+    lattice_depth = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(lattice_depth)
+    assert REPO / "scenes" / depth_map == lattice_depth.DEFAULT_OUTPUT
+    assert f"depth_map: {depth_map}" in (REPO / "scenes" / "lattice.yaml").read_text()

@@ -423,7 +423,12 @@ def _buffer_past_the_end(document, builder):
     return bytes(data)
 
 
+def _far_node(document, _builder):
+    document["nodes"][-1]["translation"] = [1e13, 0.0, 0.0]  # finite in float32, too far for its products
+
+
 HOSTILE = {
+    "vertices beyond float32's safe range": (_far_node, r"meshes: expected world-space coordinates within ±1e\+12.*got "),
     "lying count": (_set("accessors.0.count", 1000), r"accessors\.0\.count: expected at most 24 elements.*got 1000"),
     "lying offset": (_set("accessors.0.byteOffset", 4000), r"accessors\.0\.count: expected at most 0 elements"),
     "view past its buffer": (_set("bufferViews.0.byteLength", 10 ** 6),

@@ -155,3 +155,24 @@ def test_the_example_textures_are_what_make_gobo_draws():
     result = subprocess.run([sys.executable, str(root / "tools" / "make_gobo.py"), "--check"], capture_output=True,
                             text=True)
     assert result.returncode == 0, result.stderr
+
+
+def test_texture_cache_decodes_a_file_once_and_counts_what_the_device_holds(tmp_path):
+    """A file named by several lights is one array, counted once; the total is checked
+    from each file's header before it is decoded; a cube counts its six faces."""
+    from clrays.scene.textures import TextureCache, TextureError
+
+    for name in ("a", "b"):
+        np.save(tmp_path / f"{name}.npy", np.full((8, 8), 0.5))
+    cache = TextureCache(max_texels=100)
+    first = cache.image(tmp_path / "a.npy")
+    assert cache.image(tmp_path / "a.npy") is first and cache.texels == 64
+    with pytest.raises(TextureError, match=r"a texture of 64 texels from an image of 8×8, more than the 36 left of "
+                                           r"the 100 that all the lights' textures may hold together"):
+        cache.image(tmp_path / "b.npy")
+    cube = TextureCache(max_texels=6 * 64)
+    texels = cube.cube_faces([tmp_path / "a.npy"] * 6)
+    assert texels.shape == (48, 8, 3) and cube.texels == 6 * 64
+    assert cube.cube_faces([tmp_path / "a.npy"] * 6) is texels
+    with pytest.raises(TextureError, match=r"a texture of 384 texels"):
+        TextureCache(max_texels=6 * 64 - 1).cube_faces([tmp_path / "a.npy"] * 6)

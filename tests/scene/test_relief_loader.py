@@ -94,7 +94,7 @@ def test_transform_applies(tmp_path):
 
 @pytest.mark.parametrize("override, message", [
     ("objects.0.depth_map=missing.png", r"objects\.0\.depth_map: expected a readable 2D image .*no such file"),
-    ("objects.0.depth_map=bad.png", r"objects\.0\.depth_map: .*not a valid PNG file"),
+    ("objects.0.depth_map=bad.png", r"objects\.0\.depth_map: .*not a readable PNG image \(it does not start as one\)"),
     ("objects.0.depth_map=line.npy", r"objects\.0\.depth_map: .*not a 2D image \(an array of shape \(5,\)"),
     ("objects.0.depth_map=cube.npy", r"objects\.0\.depth_map: .*not a 2D image \(an array of shape \(3, 3, 3, 3\)"),
     ("objects.0.depth_map=depth.txt", r"objects\.0\.depth_map: .*unsupported image format '\.txt'"),
