@@ -312,6 +312,7 @@ Examples:
   clrays render scenes/demo.yaml -o out/demo.exr --method raymarch --set render.steps=1024
   clrays render scenes/demo.yaml -o out/demo.npy --set medium.sigma_s=0.1 --stats
   clrays render scenes/orbit.yaml -o out/orbit_30.png --frame 30
+  clrays render scenes/colonnade.glb -o out/c.png --set medium.sigma_s=0.06 --camera view
 """)
 @click.argument("scene", type=click.Path(path_type=Path))
 @method_option()
