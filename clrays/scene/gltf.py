@@ -242,7 +242,7 @@ class _Reader:
         if self._buffer_bytes > MAX_GLTF_BYTES:
             self.fail(path, f"buffers of at most {_size(MAX_GLTF_BYTES)} in all (docs/limits.md)",
                       f"{self._buffer_bytes} bytes with this one")
-        self._buffers[index] = data[:length]
+        self._buffers[index] = memoryview(data)[:length]  # a view: a 128 MiB buffer is not copied
         return self._buffers[index]
 
     def _uri(self, uri: str, path: str) -> bytes:
@@ -261,7 +261,8 @@ class _Reader:
         relative = urllib.parse.unquote(uri)
         parsed = urllib.parse.urlsplit(uri)
         candidate = (self.folder / relative)
-        if parsed.scheme or relative.startswith(("/", "\\")) or Path(relative).is_absolute() or "\\" in relative:
+        if (parsed.scheme or relative.startswith(("/", "\\")) or Path(relative).is_absolute() or "\\" in relative
+                or "\0" in relative):
             self.fail(path, "a relative file path inside the glTF file's folder", json.dumps(uri))
         try:
             resolved, folder = candidate.resolve(), self.folder.resolve()
