@@ -56,7 +56,7 @@ _WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "
 _TRIANGLES, _TRIANGLE_STRIP, _TRIANGLE_FAN = 4, 5, 6
 
 #: Side of the texture that carries a spot's cone falloff: bilinear between texel centres,
-#: it follows the analytic attenuation to within 2e-3 at its kink (the inner cone) and 1e-5
+#: it follows the analytic attenuation to within 2e-3 at its kink (the inner cone) and 1e-4
 #: elsewhere (tests/scene/test_gltf.py), at 4 MiB per spot on the device.
 FALLOFF_TEXTURE_SIDE = 512
 #: The widest outer cone whose falloff fits the texture: the texture spans [-tan c, tan c],
