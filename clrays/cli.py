@@ -22,7 +22,8 @@ from click.core import ParameterSource
 from . import device as device_settings
 from .device import list_devices, select_device
 from .errors import ClraysError, DeviceError, OutputError
-from .image_io import check_finite, check_folder, check_output_path, make_folder, write_image
+from .image_io import check_folder, check_output_path, make_folder
+from .passes import pass_paths, pass_problem, write_render
 from .reference.exact import estimate_seconds
 from .runs import bench as bench_run
 from .runs.references import parse_reference
@@ -31,6 +32,7 @@ from .runs.sequence import (check_pattern, check_video_path, parse_frames, rende
 from .runs.video import DEFAULT_CRF, video_encoder_options
 from .runs.sweep import axes_from, format_table, run_sweep
 from .scene.fields import unread_render_keys
+from .scene.limits import MAX_LIGHTS
 from .scene.load import load_scene
 from .scene.model import METHODS, RENAMED_METHODS, SHADOW_FILTERS
 from .session import Renderer
@@ -160,6 +162,25 @@ def camera_option():
 def with_camera(overrides, camera: str | None) -> tuple[str, ...]:
     """The overrides, and `gltf.camera` when --camera names one (JSON-quoted: any name is one YAML string)."""
     return tuple(overrides) + ((f"gltf.camera={json.dumps(camera)}",) if camera is not None else ())
+
+
+def aov_option():
+    return option("--aov", "aovs", metavar="NAME[,NAME...]", group=OUTPUT,
+                  help="Render passes to write too: in_scatter, in_scatter_light<i>, transmittance, surface, depth "
+                       "(.exr: layers of the one file; .png, .npy: <stem>.<pass>.<ext> beside it). The same as "
+                       "--set render.aovs=[...].")
+
+
+def with_aovs(overrides, aovs: str | None) -> tuple[str, ...]:
+    """The overrides, and `render.aovs` when --aov names passes (each JSON-quoted: one YAML string)."""
+    if aovs is None:
+        return tuple(overrides)
+    names = [name.strip() for name in aovs.split(",")]
+    for name in names:
+        problem = pass_problem(name, MAX_LIGHTS)
+        if problem is not None:
+            raise ClraysError(f"--aov: expected {problem}, got {name!r}")
+    return tuple(overrides) + (f"render.aovs=[{', '.join(json.dumps(name) for name in names)}]",)
 
 
 def _finite_exposure(context: click.Context, parameter, value: float) -> float:
@@ -322,18 +343,21 @@ Examples:
         help="Render frame N of the scene's animation (see `clrays sequence`).")
 @option("-o", "--output", required=True, type=click.Path(path_type=Path), group=OUTPUT,
         help="Output image: .png (8-bit sRGB), .exr (float RGB) or .npy (float32 linear H×W×3).")
+@aov_option()
 @exposure_option("PNG only")
 @option("--stats", is_flag=True, group=RUN, help="Print per-stage device times and device memory.")
 @verbose_option()
 @progress_option("Progress bar for slow methods (default: on a terminal).")
 @device_option()
 @click.pass_context
-def render(context, scene: Path, method, overrides, camera, frame, output: Path, exposure, stats, verbose, progress,
-           device) -> None:
+def render(context, scene: Path, method, overrides, camera, frame, output: Path, aovs, exposure, stats, verbose,
+           progress, device) -> None:
     """Render SCENE (a YAML file, or glTF: .glb, .gltf) to an image."""
     check_output_path(output)
     check_exposure_applies(exposure, [output])
-    loaded = load_scene(scene, with_camera(overrides, camera))
+    loaded = load_scene(scene, with_aovs(with_camera(overrides, camera), aovs))
+    for path in pass_paths(output, loaded.render.aovs):
+        check_output_path(path)
     if frame is not None:
         parse_frames(str(frame), scene_frames(loaded), "--frame")
         loaded = loaded.animation.scene_at(loaded, frame) if loaded.animation is not None else loaded
@@ -342,7 +366,7 @@ def render(context, scene: Path, method, overrides, camera, frame, output: Path,
     with _interruptible(context, f"{output} was not written"):
         progress = _estimate_exact(loaded, method, progress)
         result = Renderer(device).render(loaded, method, progress=progress)
-        write_image(output, check_finite(result.image, str(scene)), exposure)
+        write_render(output, result, loaded, exposure, str(scene))
     if stats:
         _print_stats(result)
 
@@ -436,6 +460,7 @@ there, so an interrupted run resumes where it stopped (--overwrite renders all a
         help=f"MP4 quality: H.264 constant rate factor, lower is better (default {DEFAULT_CRF}).")
 @option("--video-option", "video_options", multiple=True, metavar="KEY=VALUE", group=OUTPUT,
         help="MP4: an ffmpeg output option (repeatable), e.g. --video-option preset=slow or pix_fmt=yuv444p.")
+@aov_option()
 @exposure_option("PNG and video")
 @overwrite_option("Render every frame, also those already written.")
 @reuse_option("frames")
@@ -445,8 +470,8 @@ there, so an interrupted run resumes where it stopped (--overwrite renders all a
 @cluster_options
 @device_option()
 @click.pass_context
-def sequence(context, scene, frames, method, overrides, camera, pattern, video, crf, video_options, exposure, overwrite, reuse,
-             stats, verbose, progress, scheduler, workers, device) -> None:
+def sequence(context, scene, frames, method, overrides, camera, pattern, video, crf, video_options, aovs, exposure,
+             overwrite, reuse, stats, verbose, progress, scheduler, workers, device) -> None:
     """Render the frames of SCENE's animation to numbered images."""
     done = []
     with _resumable(context, lambda: f"{len(done)} new frames"):
@@ -455,7 +480,7 @@ def sequence(context, scene, frames, method, overrides, camera, pattern, video, 
             check_video_path(video)
             encoder_options = video_encoder_options(video, crf, video_options)
         check_exposure_applies(exposure, [pattern] + ([video] if video is not None else []))
-        overrides = with_camera(overrides, camera)
+        overrides = with_aovs(with_camera(overrides, camera), aovs)
         loaded = load_scene(scene, overrides)
         chosen = parse_frames(frames, scene_frames(loaded))
         if stats or verbose:

@@ -148,8 +148,8 @@ def _worker_renderer(reuse: bool):
 
 
 def _slim(result):
-    """A RenderResult without its image, which the worker has written: only times travel."""
-    return replace(result, image=np.zeros((0, 0, 3), np.float32))
+    """A RenderResult without its image and passes, which the worker has written: only times travel."""
+    return replace(result, image=np.zeros((0, 0, 3), np.float32), passes=None)
 
 
 def render_frame_task(item: tuple[int, str], *, scene, method: str | None, exposure: float, reuse: bool,
@@ -157,7 +157,7 @@ def render_frame_task(item: tuple[int, str], *, scene, method: str | None, expos
     """Render one frame of a sequence on a worker and write its file: item = (frame, path).
     Returns the slimmed RenderResult, or None when the file is there already (a task
     run again after its worker died, having written it)."""
-    from ..image_io import check_finite, write_image
+    from ..passes import write_render
 
     frame, path = item
     path = Path(path)
@@ -166,7 +166,7 @@ def render_frame_task(item: tuple[int, str], *, scene, method: str | None, expos
     with _session_lock:
         frame_scene = scene.animation.scene_at(scene, frame) if scene.animation is not None else scene
         result = _worker_renderer(reuse).render(frame_scene, method)
-        write_image(path, check_finite(result.image, f"frame {frame}"), exposure)
+        write_render(path, result, frame_scene, exposure, f"frame {frame}")
     return _slim(result)
 
 

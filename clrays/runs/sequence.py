@@ -22,8 +22,8 @@ from pathlib import Path
 from typing import Callable
 
 from ..errors import ClraysError, OutputError
-from ..image_io import (FORMATS, check_finite, check_folder, check_output_path, make_folder, read_srgb8,
-                        write_atomic, write_image)
+from ..image_io import FORMATS, check_folder, check_output_path, make_folder, read_srgb8, write_atomic
+from ..passes import write_render
 from ..reuse import digest, scene_digest
 from ..session import Renderer, RenderResult
 from ..scene.model import Scene
@@ -168,7 +168,7 @@ def render_sequence(scene: Scene, pattern: str | Path, frames: range | None = No
         for frame, path in work:
             frame_scene = scene.animation.scene_at(scene, frame) if scene.animation is not None else scene
             result = renderer.render(frame_scene, method)
-            write_image(path, check_finite(result.image, f"frame {frame}"), exposure)
+            write_render(path, result, frame_scene, exposure, f"frame {frame}")
             yield (frame, path), result
 
     try:
