@@ -320,6 +320,7 @@ def main() -> None:
     Examples:
       clrays render scenes/demo.yaml -o out/demo.png
       clrays sequence scenes/orbit.yaml -o 'out/orbit/frame_{:04d}.png'
+      clrays watch scenes/demo.yaml -o out/demo.png
       clrays sweep scenes/demo.yaml --set medium.sigma_s=0.02,0.05 -o out/sweep
       clrays bench scenes/demo.yaml -r 640x360
       clrays info
@@ -502,6 +503,55 @@ def sequence(context, scene, frames, method, overrides, camera, pattern, video, 
         if video is not None:
             fps = loaded.animation.fps if loaded.animation is not None else 24.0
             click.echo(f"wrote {write_video(report.paths, video, fps, exposure, encoder_options)}")
+
+
+@main.command(section="Render", epilog="""
+\b
+Examples:
+  clrays watch scenes/demo.yaml -o out/demo.png
+  clrays watch scenes/colonnade.yaml -o out/c.exr --also scenes/colonnade.glb --aov in_scatter
+  clrays watch scenes/demo.yaml -o out/d.png --set image.width=320 --set image.height=180
+
+\b
+Each save renders again in the same session: stages whose inputs the edit left alone are
+reused. One line per render (its time, the stages reused); an edit that fails prints its
+one-line error and the last image stays. Ctrl-C ends it.
+""")
+@click.argument("scene", type=click.Path(path_type=Path))
+@option("-o", "--output", required=True, type=click.Path(path_type=Path), group=OUTPUT,
+        help="Output image: .png, .exr or .npy, rewritten atomically after each save.")
+@option("--also", multiple=True, type=click.Path(path_type=Path), metavar="FILE", group=SCENE,
+        help="Another file whose saves render again too (repeatable): a mesh, texture or glTF file the scene reads.")
+@method_option()
+@overrides_option("Override a scene field (repeatable), e.g. --set image.width=320.")
+@camera_option()
+@aov_option()
+@exposure_option("PNG only")
+@option("--max-renders", type=click.IntRange(1), hidden=True, group=RUN, help="Stop after N renders (tests).")
+@device_option()
+@click.pass_context
+def watch(context, scene: Path, output: Path, also, method, overrides, camera, aovs, exposure, max_renders,
+          device) -> None:
+    """Render SCENE to an image again on every save of it (or of an --also file)."""
+    from .runs.watch import watch as watch_files
+
+    check_output_path(output)
+    check_exposure_applies(exposure, [output])
+    overrides = with_aovs(with_camera(overrides, camera), aovs)
+    renderer = Renderer(device)
+    if method != "exact":
+        renderer.device  # a device that cannot start fails here, once, not on every save
+    counts = [0, 0]
+
+    def echo(line: str) -> None:
+        failed = line.startswith("clrays: error:")
+        counts[failed] += 1
+        click.echo(line, err=failed)
+
+    click.echo(f"watching {', '.join(map(str, (scene, *also)))}; Ctrl-C to stop")
+    with _stopped_by_signal(context, lambda: f": watch stopped after {counts[0]} render(s), {counts[1]} error(s)"):
+        watch_files(scene, output, overrides=overrides, method=method, exposure=exposure, renderer=renderer,
+                    also=also, max_renders=max_renders, echo=echo)
 
 
 @main.command(section="Study", short_help="Render SCENE at each combination of --set values, tabulated.",
