@@ -106,3 +106,16 @@ def test_no_pass_no_buffer(method):
     pixels = 48 * 32
     extra = 48 * pixels + (3 * 16 * pixels if method == "raymarch" else 0)  # shade's terms; raymarch: each light alone
     assert with_passes.device_bytes - without.device_bytes == extra
+
+
+@pytest.mark.parametrize("method", ["minmax", "volume_moments", "raymarch", "exact"])
+def test_identities_with_the_eye_in_a_lamp(renderer, method):
+    """The eye at the point light: the epipolar methods take its in-scattering on the host (stages/lamp.py)."""
+    scene = parse_scene(SCENE.replace("SPP", "1").replace("position: [1.5, 4, 0.5]", "position: [0, 2.5, 7]"),
+                        "passes.yaml")
+    result = renderer.render(dataclasses.replace(scene, render=dataclasses.replace(scene.render, aovs=tuple(ALL))),
+                             method)
+    passes, peak = result.passes, float(result.image.max())
+    assert passes["in_scatter_light0"].max() > 0.5 * peak  # the lamp's light is most of the image
+    assert np.abs(passes["surface"] * passes["transmittance"] + passes["in_scatter"] - result.image).max() <= 1e-4 * peak
+    assert np.abs(sum(passes[f"in_scatter_light{i}"] for i in range(3)) - passes["in_scatter"]).max() <= 1e-4 * peak
