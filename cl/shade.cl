@@ -6,8 +6,8 @@
  * stage's answer per sample and light, with surface_shadows exact; the shadow_filter stage's
  * with surface_shadows filtered), light_textures and texels (a light's texture,
  * docs/light-textures.md), and with translucent objects the translucency stage's layers
- * (translucency.h); writes image (one
- * float4 per pixel, linear rgb). With one sample per pixel, image is scatter's own buffer
+ * (translucency.h); writes image (one float4 per pixel, linear rgb) and, built with
+ * SHADE_PASSES, passes (the render passes' terms). With one sample per pixel, image is scatter's own buffer
  * (clrays/stages/shade.py): each work-item reads its samples' in-scattering before it
  * writes their pixels, and no other reads them.
  *
