@@ -82,6 +82,9 @@ kernel void raymarch(global const frame_t* frame, global const view_t* views,
     float u = frame->jitter ? hash_unit((uint)sample * 0x9e3779b9u + 0x85ebca6bu) : 0.5f;
     float3 radiance = (float3)(0.0f);
     for (int l = 0; l < frame->light_count; ++l) {
+#ifdef ONLY_LIGHT /* a render pass of one light's in-scattering (clrays/passes.py) */
+        if (l != ONLY_LIGHT) continue;
+#endif
         global const light_t* light = lights + l;
         /* A spot light is marched only inside its cone: the hard edge is then exact and
          * no step is spent where the light does not reach. */

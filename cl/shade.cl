@@ -6,8 +6,8 @@
  * stage's answer per sample and light, with surface_shadows exact; the shadow_filter stage's
  * with surface_shadows filtered), light_textures and texels (a light's texture,
  * docs/light-textures.md), and with translucent objects the translucency stage's layers
- * (translucency.h); writes image (one
- * float4 per pixel, linear rgb). With one sample per pixel, image is scatter's own buffer
+ * (translucency.h); writes image (one float4 per pixel, linear rgb) and, built with
+ * SHADE_PASSES, passes (the render passes' terms). With one sample per pixel, image is scatter's own buffer
  * (clrays/stages/shade.py): each work-item reads its samples' in-scattering before it
  * writes their pixels, and no other reads them.
  *
@@ -31,6 +31,16 @@
 #define TRANSPARENCY_ARGS , global const float4* transmittance, global const float4* in_front
 #else
 #define TRANSPARENCY_ARGS
+#endif
+
+/* Render passes (clrays/passes.py) build shade with SHADE_PASSES: per pixel, three float4 of
+ * `passes` take the mean transmittance to the first surface (w: the nearest sample's depth, +inf
+ * where none meets a surface), the mean attenuated surface radiance and the mean in-scattering.
+ * A frame without passes builds shade without, and nothing of it is compiled. */
+#ifdef SHADE_PASSES
+#define PASSES_ARGS , global float4* passes
+#else
+#define PASSES_ARGS
 #endif
 
 /* A vector quantity over the lanes: each component a float8. */
@@ -151,7 +161,7 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                   global const float2* offsets, global const float4* scatter,
                   global const float* visible_exact, global const light_texture_t* light_textures,
                   global const float4* texels, global float4* image TRANSLUCENCY_ARGS SURFACE_THROUGH_ARGS
-                  TRANSPARENCY_ARGS)
+                  TRANSPARENCY_ARGS PASSES_ARGS)
 {
     int pixels = frame->width * frame->height, first = get_global_id(0) * LANES;
     if (first >= pixels) return;
@@ -176,6 +186,10 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
     int light_count = frame->light_count;
     int map_test = frame->surface_shadows != SURFACE_SHADOWS_EXACT && frame->surface_shadows != SURFACE_SHADOWS_FILTERED;
     vec_lanes total = splat_lanes((float3)(0.0f));
+#ifdef SHADE_PASSES
+    vec_lanes pass_through = splat_lanes((float3)(0.0f)), pass_surface = pass_through, pass_scatter = pass_through;
+    float_lanes pass_depth = (float_lanes)(INFINITY);
+#endif
     for (int s = 0; s < frame->spp; ++s) {
         int_lanes sample = pixel * frame->spp + s;
         /* view_screen and view_ray (lighting.h) on each lane */
@@ -211,6 +225,9 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
             }
         }
         int_lanes background = (tri < 0) | (distance > frame->far);
+#ifdef SHADE_PASSES
+        pass_depth = fmin_lanes(pass_depth, background ? (float_lanes)(INFINITY) : distance);
+#endif
         distance = background ? frame->far : distance;
         vec_lanes surface = splat_lanes(frame->background.xyz);
         if (!all_lanes(background)) {
@@ -323,8 +340,30 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
         total.y += surface.y * to_eye.y + in_scatter.y;
         total.z += surface.z * to_eye.z + in_scatter.z;
 #endif
+#ifdef SHADE_PASSES
+        pass_through.x += to_eye.x;
+        pass_through.y += to_eye.y;
+        pass_through.z += to_eye.z;
+        pass_surface.x += surface.x * to_eye.x;
+        pass_surface.y += surface.y * to_eye.y;
+        pass_surface.z += surface.z * to_eye.z;
+        pass_scatter.x += in_scatter.x;
+        pass_scatter.y += in_scatter.y;
+        pass_scatter.z += in_scatter.z;
+#endif
     }
     float spp = (float)frame->spp;
+#ifdef SHADE_PASSES
+    for (int k = 0; k < LANES; ++k)
+        if (inside[k]) {
+            passes[3 * pixel[k]] = (float4)(pass_through.x[k] / spp, pass_through.y[k] / spp,
+                                            pass_through.z[k] / spp, pass_depth[k]);
+            passes[3 * pixel[k] + 1] = (float4)(pass_surface.x[k] / spp, pass_surface.y[k] / spp,
+                                                pass_surface.z[k] / spp, 0.0f);
+            passes[3 * pixel[k] + 2] = (float4)(pass_scatter.x[k] / spp, pass_scatter.y[k] / spp,
+                                                pass_scatter.z[k] / spp, 0.0f);
+        }
+#endif
     if (run) { /* four stores of two pixels each */
         float_lanes pairs[4];
         records_of_lanes(total.x / spp, total.y / spp, total.z / spp, 1.0f, pairs);

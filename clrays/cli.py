@@ -22,8 +22,8 @@ from click.core import ParameterSource
 from . import device as device_settings
 from .device import list_devices, select_device
 from .errors import ClraysError, DeviceError, OutputError
-from .image_io import (check_finite, check_folder, check_name_length, check_output_path, make_folder,
-                       make_output_folder, write_image)
+from .image_io import check_folder, check_name_length, check_output_path, make_folder, make_output_folder
+from .passes import pass_paths, pass_problem, write_render
 from .reference.exact import estimate_seconds
 from .runs import bench as bench_run
 from .runs.references import parse_reference
@@ -33,7 +33,7 @@ from .runs.video import DEFAULT_CRF, VIDEO_OPTIONS, video_encoder_options
 from .runs.sweep import axes_from, format_table, run_sweep
 from .scene import files as scene_files
 from .scene.fields import unread_render_keys
-from .scene.limits import MAX_SWEEP_POINTS
+from .scene.limits import MAX_LIGHTS, MAX_SWEEP_POINTS
 from .scene.load import load_scene
 from .scene.model import METHODS, RENAMED_METHODS, SHADOW_FILTERS
 from .session import Renderer
@@ -175,6 +175,25 @@ def camera_option():
 def with_camera(overrides, camera: str | None) -> tuple[str, ...]:
     """The overrides, and `gltf.camera` when --camera names one (JSON-quoted: any name is one YAML string)."""
     return tuple(overrides) + ((f"gltf.camera={json.dumps(camera)}",) if camera is not None else ())
+
+
+def aov_option():
+    return option("--aov", "aovs", metavar="NAME[,NAME...]", group=OUTPUT,
+                  help="Render passes to write too: in_scatter, in_scatter_light<i>, transmittance, surface, depth "
+                       "(.exr: layers of the one file; .png, .npy: <stem>.<pass>.<ext> beside it). The same as "
+                       "--set render.aovs=[...].")
+
+
+def with_aovs(overrides, aovs: str | None) -> tuple[str, ...]:
+    """The overrides, and `render.aovs` when --aov names passes (each JSON-quoted: one YAML string)."""
+    if aovs is None:
+        return tuple(overrides)
+    names = [name.strip() for name in aovs.split(",")]
+    for name in names:
+        problem = pass_problem(name, MAX_LIGHTS)
+        if problem is not None:
+            raise ClraysError(f"--aov: expected {problem}, got {name!r}")
+    return tuple(overrides) + (f"render.aovs=[{', '.join(json.dumps(name) for name in names)}]",)
 
 
 def _finite_exposure(context: click.Context, parameter, value: float) -> float:
@@ -319,6 +338,7 @@ def main() -> None:
     Examples:
       clrays render scenes/demo.yaml -o out/demo.png
       clrays sequence scenes/orbit.yaml -o 'out/orbit/frame_{:04d}.png'
+      clrays watch scenes/demo.yaml -o out/demo.png
       clrays sweep scenes/demo.yaml --set medium.sigma_s=0.02,0.05 -o out/sweep
       clrays bench scenes/demo.yaml -r 640x360
       clrays info
@@ -332,6 +352,7 @@ Examples:
   clrays render scenes/demo.yaml -o out/demo.exr --method raymarch --set render.steps=1024
   clrays render scenes/demo.yaml -o out/demo.npy --set medium.sigma_s=0.1 --stats
   clrays render scenes/orbit.yaml -o out/orbit_30.png --frame 30
+  clrays render scenes/colonnade.glb -o out/c.png --set medium.sigma_s=0.06 --camera view
 """)
 @click.argument("scene", type=click.Path(path_type=Path))
 @confine_option()
@@ -343,6 +364,7 @@ Examples:
 @option("-o", "--output", required=True, type=click.Path(path_type=Path), group=OUTPUT,
         help="Output image: .png (8-bit sRGB), .exr (float RGB) or .npy (float32 linear H×W×3); its folder is "
              "created.")
+@aov_option()
 @exposure_option("PNG only")
 @option("--stats", is_flag=True, group=RUN, help="Print per-stage device times and device memory.")
 @verbose_option()
@@ -350,13 +372,15 @@ Examples:
                  "line every 10 % of a long frame).")
 @device_option()
 @click.pass_context
-def render(context, scene: Path, method, overrides, camera, frame, output: Path, exposure, stats, verbose, progress,
-           device) -> None:
+def render(context, scene: Path, method, overrides, camera, frame, output: Path, aovs, exposure, stats, verbose,
+           progress, device) -> None:
     """Render SCENE (a YAML file, or glTF: .glb, .gltf) to an image."""
     check_output_path(output, folder_exists=False)
     check_exposure_applies(exposure, [output])
-    loaded = load_scene(scene, with_camera(overrides, camera))
+    loaded = load_scene(scene, with_aovs(with_camera(overrides, camera), aovs))
     check_output_path(make_output_folder(output))  # created, as every command creates its output's folder
+    for path in pass_paths(output, loaded.render.aovs):
+        check_output_path(path)
     if frame is not None:
         parse_frames(str(frame), scene_frames(loaded), "--frame")
         loaded = loaded.animation.scene_at(loaded, frame) if loaded.animation is not None else loaded
@@ -365,7 +389,7 @@ def render(context, scene: Path, method, overrides, camera, frame, output: Path,
     with _interruptible(context, f"{output} was not written"):
         progress = _estimate_exact(loaded, method, progress)
         result = Renderer(device).render(loaded, method, progress=progress)
-        write_image(output, check_finite(result.image, str(scene)), exposure)
+        write_render(output, result, loaded, exposure, str(scene))
     if stats:
         _print_stats(result)
 
@@ -462,6 +486,7 @@ there, so an interrupted run resumes where it stopped (--overwrite renders all a
 @option("--video-option", "video_options", multiple=True, metavar="KEY=VALUE", group=OUTPUT,
         help=f"MP4: an encoding option for ffmpeg (repeatable), e.g. --video-option preset=slow or "
              f"pix_fmt=yuv444p; KEY is one of {', '.join(VIDEO_OPTIONS)}.")
+@aov_option()
 @exposure_option("PNG and video")
 @overwrite_option("Render every frame, also those already written.")
 @reuse_option("frames")
@@ -471,8 +496,8 @@ there, so an interrupted run resumes where it stopped (--overwrite renders all a
 @cluster_options
 @device_option()
 @click.pass_context
-def sequence(context, scene, frames, method, overrides, camera, pattern, video, crf, video_options, exposure, overwrite, reuse,
-             stats, verbose, progress, scheduler, workers, device) -> None:
+def sequence(context, scene, frames, method, overrides, camera, pattern, video, crf, video_options, aovs, exposure,
+             overwrite, reuse, stats, verbose, progress, scheduler, workers, device) -> None:
     """Render the frames of SCENE's animation to numbered images."""
     done = []
     with _resumable(context, lambda: f"{len(done)} new frames"):
@@ -481,7 +506,7 @@ def sequence(context, scene, frames, method, overrides, camera, pattern, video, 
             check_video_path(video)
             encoder_options = video_encoder_options(video, crf, video_options)
         check_exposure_applies(exposure, [pattern] + ([video] if video is not None else []))
-        overrides = with_camera(overrides, camera)
+        overrides = with_aovs(with_camera(overrides, camera), aovs)
         loaded = load_scene(scene, overrides)
         chosen = parse_frames(frames, scene_frames(loaded))
         if stats or verbose:
@@ -509,6 +534,55 @@ def sequence(context, scene, frames, method, overrides, camera, pattern, video, 
         if video is not None:
             fps = loaded.animation.fps if loaded.animation is not None else 24.0
             click.echo(f"wrote {write_video(report.paths, video, fps, exposure, encoder_options)}")
+
+
+@main.command(section="Render", epilog="""
+\b
+Examples:
+  clrays watch scenes/demo.yaml -o out/demo.png
+  clrays watch scenes/colonnade.yaml -o out/c.exr --also scenes/colonnade.glb --aov in_scatter
+  clrays watch scenes/demo.yaml -o out/d.png --set image.width=320 --set image.height=180
+
+\b
+Each save renders again in the same session: stages whose inputs the edit left alone are
+reused. One line per render (its time, the stages reused); an edit that fails prints its
+one-line error and the last image stays. Ctrl-C ends it.
+""")
+@click.argument("scene", type=click.Path(path_type=Path))
+@option("-o", "--output", required=True, type=click.Path(path_type=Path), group=OUTPUT,
+        help="Output image: .png, .exr or .npy, rewritten atomically after each save.")
+@option("--also", multiple=True, type=click.Path(path_type=Path), metavar="FILE", group=SCENE,
+        help="Another file whose saves render again too (repeatable): a mesh, texture or glTF file the scene reads.")
+@method_option()
+@overrides_option("Override a scene field (repeatable), e.g. --set image.width=320.")
+@camera_option()
+@aov_option()
+@exposure_option("PNG only")
+@option("--max-renders", type=click.IntRange(1), hidden=True, group=RUN, help="Stop after N renders (tests).")
+@device_option()
+@click.pass_context
+def watch(context, scene: Path, output: Path, also, method, overrides, camera, aovs, exposure, max_renders,
+          device) -> None:
+    """Render SCENE to an image again on every save of it (or of an --also file)."""
+    from .runs.watch import watch as watch_files
+
+    check_output_path(output)
+    check_exposure_applies(exposure, [output])
+    overrides = with_aovs(with_camera(overrides, camera), aovs)
+    renderer = Renderer(device)
+    if method != "exact":
+        renderer.device  # a device that cannot start fails here, once, not on every save
+    counts = [0, 0]
+
+    def echo(line: str) -> None:
+        failed = line.startswith("clrays: error:")
+        counts[failed] += 1
+        click.echo(line, err=failed)
+
+    click.echo(f"watching {', '.join(map(str, (scene, *also)))}; Ctrl-C to stop")
+    with _stopped_by_signal(context, lambda: f": watch stopped after {counts[0]} render(s), {counts[1]} error(s)"):
+        watch_files(scene, output, overrides=overrides, method=method, exposure=exposure, renderer=renderer,
+                    also=also, max_renders=max_renders, echo=echo)
 
 
 @main.command(section="Study", short_help="Render SCENE at each combination of --set values, tabulated.",

@@ -281,6 +281,19 @@ def write_image(path: str | Path, radiance: np.ndarray, exposure: float = 0.0) -
     return Path(path)
 
 
+def write_exr(temporary: str, channels: dict[str, np.ndarray]) -> None:
+    """An EXR of `channels` (OpenEXR's names: "RGB", or "R", "depth.Z", ...), ZIP-compressed.
+    A failed write (a full disk), which OpenEXR reports as a RuntimeError, is an OSError."""
+    import OpenEXR
+
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    try:
+        with OpenEXR.File(header, channels) as exr:
+            exr.write(temporary)
+    except RuntimeError as exc:
+        raise OSError(_errno_in(str(exc)), _exr_reason(str(exc))) from exc
+
+
 def write_frame(path: str | Path, radiance: np.ndarray, exposure: float = 0.0) -> str:
     """`write_image`, returning the `file_digest` of the bytes written (what a sequence's
     manifest ties the frame's scene to)."""
@@ -294,14 +307,7 @@ def write_frame(path: str | Path, radiance: np.ndarray, exposure: float = 0.0) -
 
             Image.fromarray(to_srgb8(radiance, exposure), mode="RGB").save(temporary, format="PNG")
         elif suffix == ".exr":
-            import OpenEXR
-
-            header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-            try:
-                with OpenEXR.File(header, {"RGB": radiance}) as exr:
-                    exr.write(temporary)
-            except RuntimeError as exc:  # OpenEXR reports a failed write (a full disk) so
-                raise OSError(_errno_in(str(exc)), _exr_reason(str(exc))) from exc
+            write_exr(temporary, {"RGB": radiance})
         else:
             np.save(temporary, radiance)
 

@@ -36,6 +36,7 @@ from .device import Device, StageTimer
 from .errors import ClraysError
 from .inputs import FrameBuffers, FrameInputs, frame_inputs, upload
 from .physics.radiometry import effective_far
+from .passes import assemble, per_light_indices, samples_to_pixels
 from .reuse import COMPUTED, REUSED, SKIPPED, Reuse, StageCache, StageRecord, digest, geometry_parts, scene_digest
 from .scene.costs import with_derived_sizes
 from .scene.model import METHODS, RENAMED_METHODS, Render, Scene
@@ -94,6 +95,13 @@ class InScatter:
             self.holds_values = True
         return self.buffer
 
+    def snapshot(self) -> np.ndarray:
+        """The in-scattering added so far, (samples, 4) float64 on the host (a render pass's
+        per-light part is the difference of two)."""
+        if not self.holds_values:
+            return np.zeros((self.samples, 4))
+        return self.device.read(self.buffer, (self.samples, 4), np.float32).astype(np.float64)
+
     def writing(self) -> tuple[object, bool]:
         """(the buffer, whether the stage writes every sample instead of adding to it)."""
         overwrite = not self.holds_values
@@ -117,6 +125,7 @@ class RenderResult:
     textures: tuple[tuple[int, int], ...] = ()
     samples: SampleCounts | None = None  # what epipolar sampling computed, interpolated and fixed up
     shadow_rays: int | None = None  # exact surface shadows: the entries (sample × light) the maps left to a ray
+    passes: dict[str, np.ndarray] | None = None  # the render passes asked for (clrays.passes), by name; else None
 
     @property
     def reused(self) -> list[str]:
@@ -148,6 +157,7 @@ class Frame:
     textures: list[tuple[int, int]] = field(default_factory=list)  # (slices, γ texels) per light with a texture
     samples: SampleCounts | None = None  # what epipolar sampling computed, summed over the lights
     progress: object = None  # of raymarch's march, as Renderer.render's `progress`
+    light_scatter: dict[int, np.ndarray] = field(default_factory=dict)  # per-light passes: light → (samples, 4)
 
 
 class Renderer:
@@ -188,7 +198,7 @@ class Renderer:
         if self._device is not None:
             self._device.allocated_bytes = 0
         # A frame identical to a kept one: its image, and every stage counts as reused.
-        image, stages, textures, samples, rays = reuse.keep("frame", lambda: digest("frame", scene_digest(scene)),
+        image, stages, textures, samples, rays, passes = reuse.keep("frame", lambda: digest("frame", scene_digest(scene)),
                                                             lambda: self._frame(scene, method, reuse, timer, progress))
         status = record.status() or {stage: REUSED for stage in stages}
         device_bytes = self._device.allocated_bytes if self._device is not None else 0
@@ -196,12 +206,14 @@ class Renderer:
             self._device.end_frame(device_bytes)
         wall_ms = (time.perf_counter() - start) * 1e3
         # A kept frame's image is shared with the cache: the caller gets a copy to change.
+        if passes is not None and use_cache:
+            passes = {name: value.copy() for name, value in passes.items()}
         return RenderResult(image.copy() if use_cache else image, method, timer.milliseconds(), wall_ms,
-                            device_bytes, status, timer.host_labels, scene.render, textures, samples, rays)
+                            device_bytes, status, timer.host_labels, scene.render, textures, samples, rays, passes)
 
     def _frame(self, scene: Scene, method: str, reuse: Reuse, timer: StageTimer, progress: bool):
-        """(image, stage labels, epipolar texture sizes, sample counts, shadow rays) of one
-        frame: the pipeline of the module docstring, one line per stage."""
+        """(image, stage labels, epipolar texture sizes, sample counts, shadow rays, render
+        passes or None) of one frame: the pipeline of the module docstring, one line per stage."""
         if method == "exact":
             return self._exact(scene, reuse, timer, progress)
         frame = self._upload(scene, method, reuse, timer)  # the scene in eye space, packed into device structs
@@ -212,10 +224,10 @@ class Renderer:
         frame.in_scatter = InScatter(self.device, frame.buffers.inputs.samples)  # in-scattering per camera sample
         VOLUME_METHODS[method](self, frame)  # raymarch; or per light rectify → minmax → integrand → traverse
         visible, rays = self._visibility(frame.occluders, frame.rastered, frame.keys, reuse, timer)  # visibility
-        image = self._shade(frame, visible)  # shade: surfaces, attenuation, + in-scattering
+        image, passes = self._shade(frame, visible)  # shade: surfaces, attenuation, + in-scattering
         # The stages that ran: a frame identical to this one counts them reused (not the skipped ones).
         ran = tuple(stage for stage, status in reuse.record.status().items() if status != SKIPPED)
-        return image, ran, tuple(frame.textures), frame.samples, rays
+        return image, ran, tuple(frame.textures), frame.samples, rays, passes
 
     def _upload(self, scene: Scene, method: str, reuse: Reuse, timer: StageTimer) -> Frame:
         """The frame's inputs checked against the device and uploaded, with their stage keys."""
@@ -233,6 +245,10 @@ class Renderer:
         device, buffers, timer, layers = self.device, frame.buffers, frame.timer, frame.layers
         frame.reuse.record.note("raymarch", COMPUTED)
         raymarch(device, buffers, frame.rastered, frame.in_scatter.adding(), timer, layers, progress=frame.progress)
+        for index in per_light_indices(frame.scene.render.aovs):  # a render pass per light: that light marched alone
+            alone = device.buffer(nbytes=16 * frame.in_scatter.samples)
+            raymarch(device, buffers, frame.rastered, alone, timer, layers, only_light=index)
+            frame.light_scatter[index] = device.read(alone, (frame.in_scatter.samples, 4), np.float32)
         self._films_in_scatter(frame, lambda r, s, t: raymarch(device, buffers, r, s, t, layers),
                                lambda: transparency_march(device, buffers, frame.rastered, frame.films, timer, layers))
 
@@ -240,11 +256,15 @@ class Renderer:
         """The volume stages of methods minmax and volume_moments, light by light."""
         if self._no_medium(frame):
             return
+        wanted = per_light_indices(frame.scene.render.aovs)  # render passes of single lights
         for index, light in enumerate(frame.scene.lights):
+            before = frame.in_scatter.snapshot() if index in wanted else None
             if eye_in_lamp(frame.scene, light):  # d_el → 0: no epipolar frame, nothing visible is shadowed
                 self._lamp_in_scatter(frame, light)
             else:
                 self._light_volume(frame, index, light)
+            if before is not None:  # (float32 sums differ exactly in float64: the parts add up to the whole)
+                frame.light_scatter[index] = frame.in_scatter.snapshot() - before
         frame.reuse.record.note(VOLUME_STAGES[frame.method][-1], COMPUTED)
 
     def _no_medium(self, frame: Frame) -> bool:
@@ -310,10 +330,19 @@ class Renderer:
         through = None if layers is None or frame.scene.render.surface_shadows != "exact" else \
             surface_transmittance(device, buffers, rastered, layers, timer)  # (translucent shadows' exact edges)
         transparency = None if frame.films is None else composite(device, buffers, rastered, frame.films, timer, layers)
+        aovs = frame.scene.render.aovs
         image = shade(device, buffers, rastered, frame.in_scatter.adding(), timer, visible, layers, through,
-                      transparency)
+                      transparency, passes=bool(aovs))
         frame.reuse.record.note("shade", COMPUTED)
-        return image
+        if not aovs:
+            return image, None
+        image, terms = image
+        size = frame.scene.image
+        per_light = {index: samples_to_pixels(frame.light_scatter.get(index, np.zeros((frame.in_scatter.samples, 4))),
+                                              size.height, size.width, size.spp)
+                     for index in per_light_indices(aovs)}
+        return image, assemble(aovs, terms[..., 0, :3], terms[..., 1, :3], terms[..., 2, :3], terms[..., 0, 3],
+                               per_light)
 
     def _films(self, buffers: FrameBuffers, rastered: RasterResult, reuse: Reuse, timer: StageTimer) -> Films | None:
         """The transparency stage's films (clrays.stages.transparency); None, and the stage
@@ -386,10 +415,16 @@ class Renderer:
         from .reference.exact import render_exact
 
         start = time.perf_counter()
-        image = render_exact(scene, progress=progress).astype(np.float32)
+        parts = {} if scene.render.aovs else None
+        image = render_exact(scene, progress=progress, parts=parts).astype(np.float32)
         timer.add_host("exact", (time.perf_counter() - start) * 1e3)
         reuse.record.note("exact", COMPUTED)
-        return image, ("exact",), (), None, None
+        passes = None
+        if parts is not None:
+            lights = parts["lights"]
+            passes = assemble(scene.render.aovs, parts["transmittance"], parts["attenuated_surface"], lights.sum(axis=0),
+                              parts["depth"], dict(enumerate(lights)))
+        return image, ("exact",), (), None, None, passes
 
     def _raster(self, buffers: FrameBuffers, keys: StageKeys, reuse: Reuse, timer: StageTimer):
         """The raster stage, each part kept while its inputs are: the camera's depth and
@@ -471,6 +506,10 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
              ("in-scattering", 16 * samples)]
     if scene.image.spp > 1:  # (with one sample per pixel the image takes the in-scattering's buffer)
         sizes.append(("image", 16 * pixels))
+    if scene.render.aovs:  # render passes: shade's terms per pixel; raymarch marches a light alone into its own
+        sizes.append(("render passes", 48 * pixels))
+        if scene.render.method == "raymarch" and per_light_indices(scene.render.aovs):
+            sizes.append(("one light's in-scattering", 16 * samples))
     for index, (first, count) in enumerate(inputs.light_views):
         views = inputs.views[first:first + count]
         sizes.append((f"shadow map of light {index}", 4 * int((views["width"] * views["height"]).sum())))

@@ -97,9 +97,12 @@ class AllTriangles:
         return lit_intervals(origins, dirs, D, light, self.triangles, halfspaces=halfspaces, lamp_radius=lamp_radius)
 
 
-def _radiance(scene: Scene, eye: np.ndarray, dirs: np.ndarray, prepared, quad: dict, queries) -> np.ndarray:
+def _radiance(scene: Scene, eye: np.ndarray, dirs: np.ndarray, prepared, quad: dict, queries,
+              parts: dict | None = None) -> np.ndarray:
     """Radiance (N, 3) of unit rays from the eye (the model in the module docstring);
-    `queries`: `SceneBvh` or `AllTriangles`."""
+    `queries`: `SceneBvh` or `AllTriangles`. `parts`, a dict, receives the terms of the
+    render passes (clrays.passes): `transmittance` e^{-σt·D}, `attenuated_surface`,
+    `depth` (+inf without a surface) and `lights`, each light's in-scattering (L, N, 3)."""
     n = len(dirs)
     tri = np.asarray(scene.geometry.triangles, dtype=np.float64).reshape(-1, 3, 3)
     medium = scene.medium
@@ -135,8 +138,13 @@ def _radiance(scene: Scene, eye: np.ndarray, dirs: np.ndarray, prepared, quad: d
             irradiance += lin
         surf[hits] = np.asarray(scene.geometry.albedo, dtype=np.float64)[idx[hits]] / math.pi * irradiance
     out = surf * np.exp(-sigma_t * D[:, None])
+    if parts is not None:
+        parts["transmittance"] = np.exp(-sigma_t * D[:, None])
+        parts["attenuated_surface"] = out.copy()
+        parts["depth"] = np.where(hit, t, np.inf)
+        parts["lights"] = np.zeros((len(prepared), n, 3))
     if np.any(sigma_s > 0):
-        for light, halfspaces in prepared:
+        for index, (light, halfspaces) in enumerate(prepared):
             ray, a, b = queries.lit_intervals(eye, dirs, D, light, halfspaces,
                                               lamp_radius=radiometry.lamp_radius(scene))
             if textured(light):  # cut at the texture's texel centres (clrays.physics.light_texture)
@@ -144,12 +152,15 @@ def _radiance(scene: Scene, eye: np.ndarray, dirs: np.ndarray, prepared, quad: d
             else:
                 seg = in_scatter_segments(light, medium, eye, dirs[ray], a, b, **quad)
             for ch in range(3):
-                out[:, ch] += np.bincount(ray, weights=seg[:, ch], minlength=n)
+                light_part = np.bincount(ray, weights=seg[:, ch], minlength=n)
+                out[:, ch] += light_part
+                if parts is not None:
+                    parts["lights"][index, :, ch] = light_part
     return out
 
 
 def render_exact(scene: Scene, progress: bool = False, rows=None, *, panels: int = 8,
-                 tol: float | None = 1e-10, bvh: bool = True) -> np.ndarray:
+                 tol: float | None = 1e-10, bvh: bool = True, parts: dict | None = None) -> np.ndarray:
     """Ground-truth radiance image (H, W, 3) float64 (or (len(rows), W, 3) with `rows`).
 
     Each pixel is the mean over its `image.spp` sample rays (`camera.primary_rays`, one
@@ -157,12 +168,16 @@ def render_exact(scene: Scene, progress: bool = False, rows=None, *, panels: int
     docstring. `rows` selects image rows (a slice or indices) for tests on big images;
     `progress` shows a tqdm bar over ray chunks (or, a function, lines of text); `panels` and `tol` are the point-light
     quadrature's starting panel count and relative tolerance (tol=None: one fixed pass);
-    `bvh` as in `exact_pixels`.
+    `bvh` and `parts` as in `exact_pixels` (its arrays shaped as the image's).
     """
     image = scene.image
     row_idx = np.atleast_1d(np.arange(image.height)[slice(None) if rows is None else rows])
     ys, xs = np.repeat(row_idx, image.width), np.tile(np.arange(image.width), len(row_idx))
-    radiance = exact_pixels(scene, ys, xs, progress, panels=panels, tol=tol, bvh=bvh)
+    radiance = exact_pixels(scene, ys, xs, progress, panels=panels, tol=tol, bvh=bvh, parts=parts)
+    if parts is not None:
+        for name, value in parts.items():
+            parts[name] = value.reshape(*value.shape[:-2], len(row_idx), image.width, *value.shape[-1:]) \
+                if name == "lights" else value.reshape(len(row_idx), image.width, *value.shape[1:])
     return radiance.reshape(len(row_idx), image.width, 3)
 
 
@@ -188,13 +203,16 @@ class _ProgressLines:
 
 
 def exact_pixels(scene: Scene, ys, xs, progress=False, *, panels: int = 8,
-                 tol: float | None = 1e-10, bvh: bool = True) -> np.ndarray:
+                 tol: float | None = 1e-10, bvh: bool = True, parts: dict | None = None) -> np.ndarray:
     """Ground-truth radiance (N, 3) float64 of the pixels (ys[i], xs[i]): what
     `render_exact` gives there, at a cost proportional to the number of pixels (for
     measuring error on a fixed subset of a large image). `progress`: True for a tqdm bar,
     or a function that takes a line of text, called every PROGRESS_LINE_PERCENT.
     `bvh`: find the triangles each ray can meet on a BVH (`bvh_queries.SceneBvh`), or,
-    False, test every triangle (`AllTriangles`: same images up to rounding, slow)."""
+    False, test every triangle (`AllTriangles`: same images up to rounding, slow).
+    `parts`, a dict (opaque scenes), receives the per-pixel terms of the render passes
+    (clrays.passes): the means over the samples of `transmittance` and `attenuated_surface`
+    (N, 3), of each light's in-scattering `lights` (L, N, 3), and the nearest `depth` (N,)."""
     image, camera = scene.image, scene.camera
     ys, xs = np.asarray(ys, dtype=np.intp), np.asarray(xs, dtype=np.intp)
     offsets = sample_offsets(image.spp)
@@ -225,11 +243,21 @@ def exact_pixels(scene: Scene, ys, xs, progress=False, *, panels: int = 8,
         bar = tqdm(total=len(offsets) * len(starts), desc="exact", unit="chunk")
     quad = {"panels": panels, "tol": tol}
     total = np.zeros((len(ys), 3))
+    if parts is not None:
+        parts.update(transmittance=np.zeros((len(ys), 3)), attenuated_surface=np.zeros((len(ys), 3)),
+                     lights=np.zeros((len(prepared), len(ys), 3)), depth=np.full(len(ys), np.inf))
     for k in range(len(offsets)):
         # One sample offset at a time keeps the ray array at H·W·3 floats.
         dirs = primary_rays(camera, image, offsets[k:k + 1])[ys, xs, 0, :]
         for s in starts:
-            total[s:s + chunk] += radiance(scene, eye, dirs[s:s + chunk], prepared, quad, queries)
+            ray_parts = None if parts is None else {}
+            extra = {} if parts is None else {"parts": ray_parts}  # (opaque scenes' _radiance only)
+            total[s:s + chunk] += radiance(scene, eye, dirs[s:s + chunk], prepared, quad, queries, **extra)
+            if parts is not None:
+                for name in ("transmittance", "attenuated_surface"):
+                    parts[name][s:s + chunk] += ray_parts[name] / len(offsets)
+                parts["lights"][:, s:s + chunk] += ray_parts["lights"] / len(offsets)
+                parts["depth"][s:s + chunk] = np.minimum(parts["depth"][s:s + chunk], ray_parts["depth"])
             if bar is not None:
                 bar.update(1)
     if bar is not None:

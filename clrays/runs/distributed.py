@@ -329,8 +329,8 @@ def _worker_renderer(reuse: bool):
 
 
 def _slim(result):
-    """A RenderResult without its image, which the worker has written: only times travel."""
-    return replace(result, image=np.zeros((0, 0, 3), np.float32))
+    """A RenderResult without its image and passes, which the worker has written: only times travel."""
+    return replace(result, image=np.zeros((0, 0, 3), np.float32), passes=None)
 
 
 def render_frame_task(item: tuple[int, str, str], *, scene, method: str | None, exposure: float, reuse: bool,
@@ -338,7 +338,7 @@ def render_frame_task(item: tuple[int, str, str], *, scene, method: str | None, 
     """Render one frame of a sequence on a worker, write its file and its manifest line:
     item = (frame, path, frame digest). Returns the slimmed RenderResult, or None when the
     file is there already (a task run again after its worker died, having written it)."""
-    from ..image_io import check_finite, write_frame
+    from ..passes import write_render
     from .sequence import append_frame_line
 
     frame, path, frame_digest_hex = item
@@ -348,7 +348,7 @@ def render_frame_task(item: tuple[int, str, str], *, scene, method: str | None, 
     with _session_lock:
         frame_scene = scene.animation.scene_at(scene, frame) if scene.animation is not None else scene
         result = _worker_renderer(reuse).render(frame_scene, method)
-        content = write_frame(path, check_finite(result.image, f"frame {frame}"), exposure)
+        content = write_render(path, result, frame_scene, exposure, f"frame {frame}")
         append_frame_line(path, frame_digest_hex, content)
     return _slim(result)
 

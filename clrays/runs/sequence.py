@@ -28,8 +28,9 @@ from pathlib import Path
 from typing import Callable
 
 from ..errors import ClraysError, OutputError
-from ..image_io import (FORMATS, check_finite, check_folder, check_name_length, check_output_path, file_digest,
-                        folder_lock, make_folder, make_output_folder, read_srgb8, write_atomic, write_frame)
+from ..image_io import (FORMATS, check_folder, check_name_length, check_output_path, file_digest, folder_lock,
+                        make_folder, make_output_folder, read_srgb8, write_atomic)
+from ..passes import write_render
 from ..reuse import digest, scene_digest
 from ..scene.files import FileRefused, read_regular_file
 from ..scene.limits import MAX_FRAME_FIELD_WIDTH, MAX_RUN_RECORD_BYTES
@@ -298,7 +299,7 @@ def _run_frames(scene, frames, paths, renderer, method, exposure, overwrite, pro
     if executor is None:
         for frame, path, key, frame_scene in to_render():
             result = renderer.render(frame_scene, method)
-            content = write_frame(path, check_finite(result.image, f"frame {frame}"), exposure)
+            content = write_render(path, result, frame_scene, exposure, f"frame {frame}")
             manifest_of(path).record(path, key, content)
             _done(report, frame, path, result, on_frame, bar, f"frame {frame}")
         return

@@ -332,6 +332,9 @@ RENDER = Section("render", (
                 "angles seen from the light, dense where the ray passes it, so the 1/d² peak of a light in view "
                 "converges; `uniform` at equal distances (the marcher before equiangular steps). Directional "
                 "lights always take uniform steps ([docs/design.md](design.md) §4.8)", read_by=("raymarch",)),
+    Field("aovs", "list of strings", Render.aovs, shown_default="`[]`",
+          notes="[render passes](#render-passes) written beside the image: `in_scatter`, `in_scatter_light<i>`, "
+                "`transmittance`, `surface`, `depth` (also `--aov`); not with translucent objects"),
 ))
 
 

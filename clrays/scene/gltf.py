@@ -56,7 +56,7 @@ _WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "
 _TRIANGLES, _TRIANGLE_STRIP, _TRIANGLE_FAN = 4, 5, 6
 
 #: Side of the texture that carries a spot's cone falloff: bilinear between texel centres,
-#: it follows the analytic attenuation to within 2e-3 at its kink (the inner cone) and 1e-5
+#: it follows the analytic attenuation to within 2e-3 at its kink (the inner cone) and 1e-4
 #: elsewhere (tests/scene/test_gltf.py), at 4 MiB per spot on the device.
 FALLOFF_TEXTURE_SIDE = 512
 #: The widest outer cone whose falloff fits the texture: the texture spans [-tan c, tan c],
@@ -242,7 +242,7 @@ class _Reader:
         if self._buffer_bytes > MAX_GLTF_BYTES:
             self.fail(path, f"buffers of at most {_size(MAX_GLTF_BYTES)} in all (docs/limits.md)",
                       f"{self._buffer_bytes} bytes with this one")
-        self._buffers[index] = data[:length]
+        self._buffers[index] = memoryview(data)[:length]  # a view: a 128 MiB buffer is not copied
         return self._buffers[index]
 
     def _uri(self, uri: str, path: str) -> bytes:
@@ -261,7 +261,8 @@ class _Reader:
         relative = urllib.parse.unquote(uri)
         parsed = urllib.parse.urlsplit(uri)
         candidate = (self.folder / relative)
-        if parsed.scheme or relative.startswith(("/", "\\")) or Path(relative).is_absolute() or "\\" in relative:
+        if (parsed.scheme or relative.startswith(("/", "\\")) or Path(relative).is_absolute() or "\\" in relative
+                or "\0" in relative):
             self.fail(path, "a relative file path inside the glTF file's folder", json.dumps(uri))
         try:
             resolved, folder = candidate.resolve(), self.folder.resolve()

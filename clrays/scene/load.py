@@ -27,6 +27,7 @@ from . import geometry as primitives
 from . import gltf as gltf_files
 from . import relief as relief_images
 from ..errors import SceneError
+from ..passes import pass_problem
 from ..structs import CONVEX_OUTSIDE_ONLY
 from .animation import Animation, Key, ObjectRig, Track
 from .files import FileRefused, read_regular_file, scene_files
@@ -259,7 +260,8 @@ def _render(node: Node | None) -> Render:
     m = mapping(node, optional=RENDER.optional)
     # A size left out stays None: the renderer derives it from the image (clrays.scene.costs).
     values = {field.key: None if field.default is None and field.key not in m else _read(field, m.get(field.key))
-              for field in RENDER.fields if field.key not in ("shadow_filter", "transparency")}
+              for field in RENDER.fields if field.key not in ("shadow_filter", "transparency", "aovs")}
+    values["aovs"] = _aovs(m.get("aovs"))
     values["shadow_filter"] = _shadow_filter(m, values)
     values["transparency"] = _transparency(m.get("transparency"))
     if values["surface_shadows"] == "filtered" and values["shadow_filter"] is None:
@@ -271,6 +273,38 @@ def _render(node: Node | None) -> Render:
             m["pcf"].fail(f"0 with surface_shadows: {values['surface_shadows']} (a filter radius needs "
                           f"surface_shadows: pcf)", str(values["pcf"]))
     return Render(**values)
+
+
+def _aovs(node: Node | None) -> tuple[str, ...]:
+    """`render.aovs`: a list of pass names (clrays.passes), each once; the light indices are
+    checked with the lights (`_check_aovs`)."""
+    if node is None:
+        return ()
+    if not isinstance(node.value, list):
+        node.fail("a list of pass names")
+    names = []
+    for item in node.value:
+        problem = pass_problem(item.value, MAX_LIGHTS)
+        if problem is not None:
+            item.fail(problem)
+        if item.value in names:
+            item.fail("each pass once", f"{item.value!r} twice")
+        names.append(item.value)
+    return tuple(names)
+
+
+def _check_aovs(scene: Scene, node: Node | None) -> None:
+    """The passes against the scene: a light index it has, and no translucent object (the
+    films in front of a surface are no term of the passes' sum)."""
+    if node is None or not scene.render.aovs:
+        return
+    for item in node.value:
+        problem = pass_problem(item.value, len(scene.lights))
+        if problem is not None:
+            item.fail(problem)
+    if scene.geometry.translucent:
+        node.fail("no render passes in a scene with translucent objects (opacity below 1)",
+                  ", ".join(scene.render.aovs))
 
 
 def _shadow_filter(m: dict[str, Node], values: dict[str, Any]) -> ShadowFilter | None:
@@ -874,6 +908,8 @@ def _scene(root: Node, filename: str, source: Path | str | None, overrides: Sequ
     )
     if imported is not None:
         scene = gltf_files.merge(scene, imported, own_camera="camera" in m, own_animation="animation" in m, fps=fps)
+    if "render" in m and isinstance(m["render"].value, dict):
+        _check_aovs(scene, m["render"].value.get("aovs"))
     if "animation" in m:
         scene = dataclasses.replace(scene, animation=_animation(m["animation"], scene, rigs))
     return scene

@@ -216,6 +216,7 @@ class Render:
     translucent_layers: int = 4  # translucent surfaces per light texel, nearest the light first
     transparency: Transparency | None = None  # translucent surfaces: None takes Transparency()'s defaults
     step_spacing: str = "equiangular"  # raymarch: one of STEP_SPACINGS
+    aovs: tuple[str, ...] = ()  # render passes (clrays.passes): none unless asked for
 
 
 @dataclass(frozen=True)

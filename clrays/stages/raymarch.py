@@ -27,19 +27,22 @@ PROGRESS_LINE_PERCENT = 10
 
 
 def raymarch(device: Device, buffers: FrameBuffers, rastered: RasterResult, scatter, timer: StageTimer,
-             layers=None, walk=None, progress=None) -> None:
+             layers=None, walk=None, progress=None, only_light: int | None = None) -> None:
     """Write every camera sample's in-scattered radiance (float4, rgb) into `scatter`.
     `layers`: the translucency stage's, looked up per step (None: an opaque-only scene).
     `walk`: (work items, defines, arguments, label) of MBOIT's weighted fog march
     (clrays.stages.transparency_walk), which marches only the samples with films.
     `progress`: True for a tqdm bar, or a function that takes a line of text (lines every
     PROGRESS_LINE_PERCENT once PROGRESS_LINES_AFTER_S have passed); the samples are then
-    marched in PROGRESS_PARTS launches where the first says the march is long."""
+    marched in PROGRESS_PARTS launches where the first says the march is long.
+    `only_light`: march that light alone (a render pass of its in-scattering)."""
     work_items, label = buffers.inputs.samples, "raymarch"
     # STEP_SPACING 0: equiangular, 1: uniform (clrays.structs.STEP_SPACING_*)
     features = present(layers)
     defines = feature_defines(features, {"STEP_SPACING": STEP_SPACINGS.index(buffers.inputs.scene.render.step_spacing)})
     extra = feature_args(features)
+    if only_light is not None:
+        defines = {**defines, "ONLY_LIGHT": only_light}
     if walk is not None:
         work_items, walk_defines, walk_args, label = walk
         defines, extra = {**defines, **walk_defines}, (*extra, *walk_args)

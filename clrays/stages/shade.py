@@ -15,11 +15,14 @@ GROUP = 64
 
 
 def shade(device: Device, buffers: FrameBuffers, rastered: RasterResult, scatter, timer: StageTimer,
-          visible=None, layers=None, surface_through=None, transparency=None) -> np.ndarray:
+          visible=None, layers=None, surface_through=None, transparency=None, passes: bool = False):
     """Returns linear radiance, (H, W, 3) float32. `visible`: the visibility stage's answer
     (float per sample and light), read where `render.surface_shadows` is `exact`.
     `transparency`: the transparency stage's (transmittance, in_front) buffers, which a scene
-    with translucent objects composites with (clrays.stages.transparency); None otherwise."""
+    with translucent objects composites with (clrays.stages.transparency); None otherwise.
+    `passes`: also return, per pixel, the terms of the render passes (clrays.passes) as
+    (H, W, 3, 4) float32: (mean transmittance, nearest depth), (mean attenuated surface
+    radiance, 0), (mean in-scattering, 0); only then is their buffer allocated."""
     image = buffers.inputs.scene.image
     pixels = image.width * image.height
     # With one sample per pixel each work-item writes its pixels where it read their
@@ -38,10 +41,17 @@ def shade(device: Device, buffers: FrameBuffers, rastered: RasterResult, scatter
     if transparency is not None:  # the camera's translucent films (clrays.stages.transparency)
         defines = {**(defines or {}), "SHADE_TRANSPARENCY": 1}
         extra = extra + tuple(transparency)
+    terms = None
+    if passes:
+        terms = device.buffer(nbytes=48 * pixels)
+        defines, extra = {**(defines or {}), "SHADE_PASSES": 1}, extra + (terms,)
     work_items = -(-pixels // (LANES * GROUP)) * GROUP
     event = device.kernel("shade", "shade", {**(defines or {}), "LANES": LANES})(
         device.queue, (work_items,), (GROUP,), buffers.params, buffers.views, buffers.lights, rastered.shadow_depth,
         rastered.camera_depth, rastered.tri_id, buffers.tri_vertices, buffers.tri_normal, buffers.tri_vertex_normals,
         buffers.tri_albedo, buffers.offsets, scatter, visible, buffers.light_textures, buffers.texels, out, *extra)
     timer.add("shade", event)
-    return device.read_in_place(out, (image.height, image.width, 4), np.float32)[..., :3]
+    radiance = device.read_in_place(out, (image.height, image.width, 4), np.float32)[..., :3]
+    if terms is None:
+        return radiance
+    return radiance, device.read(terms, (image.height, image.width, 3, 4), np.float32)

@@ -440,6 +440,8 @@ HOSTILE = {
                               r"buffers\.0\.uri: expected a file inside the glTF file's folder, got \"\.\./secret"),
     "absolute uri": (_set("buffers", [{"byteLength": 4, "uri": "/etc/passwd"}]),
                      r"buffers\.0\.uri: expected a relative file path"),
+    "NUL in a uri": (_set("buffers", [{"byteLength": 4, "uri": "a%00b.bin"}]),
+                     r"buffers\.0\.uri: expected a relative file path inside the glTF file's folder, got \"a%00b"),
     "remote uri": (_set("buffers", [{"byteLength": 4, "uri": "https://example.com/x.bin"}]),
                    r"buffers\.0\.uri: expected a relative file path"),
     "NaN vertex": (_with_nan, r"accessors\.0: expected finite values for meshes\.0\.primitives\.0\.attributes"

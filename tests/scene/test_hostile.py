@@ -322,6 +322,19 @@ CASES = [
         d, HEAD + "objects: [{type: mesh, file: cut.stl}]\n"), []),
      r"objects\.0\.file: expected a readable mesh file .*not a valid STL file \(a binary STL is 84 bytes and 50 a "
      r"triangle; this one has 186 bytes, and its header says 1000 triangles\)"),
+    ("an unknown render pass", lambda d: (write(d, HEAD), ["--aov", "in_scatter,fog"]),
+     r"^clrays: error: --aov: expected one of in_scatter, transmittance, surface, depth or in_scatter_light<i>, "
+     r"got 'fog'$"),
+    ("a render pass of a light the scene lacks", lambda d: (write(d, HEAD + "render: {aovs: [in_scatter_light1]}\n"), []),
+     r"scene\.yaml:\d+:\d+: render\.aovs\.0: expected in_scatter_light<i> with i below the scene's 1 light\(s\), "
+     r"got 'in_scatter_light1'$"),
+    ("a render pass twice", lambda d: (write(d, HEAD), ["--aov", "depth,depth"]),
+     r"render\.aovs\.1: expected each pass once, got 'depth' twice$"),
+    ("render passes as a string", lambda d: (write(d, HEAD), ["--set", "render.aovs=depth"]),
+     r"render\.aovs: expected a list of pass names, got 'depth'$"),
+    ("render passes with translucent objects", lambda d: (write(
+        d, HEAD + "objects: [{type: box, min: [0, 0, 0], max: [1, 1, 1], opacity: 0.5}]\n"), ["--aov", "depth"]),
+     r"render\.aovs: expected no render passes in a scene with translucent objects \(opacity below 1\), got depth$"),
     # last: it builds two million triangles before it is refused, and the peak only grows
     ("4096 spheres of a million triangles each", lambda d: (write(d, HEAD + "objects:\n" + (
         "  - {type: sphere, center: [0, 0, 0], radius: 1, segments: 1024}\n" * MAX_OBJECTS)), []),
