@@ -63,7 +63,7 @@ def _errors(renderer, name, scene) -> None:
     exact_plain = renderer.render(_untextured(scene), "exact").image
     plain = renderer.render(_untextured(scene), "minmax", reuse=False).image
     print(f"\n{name} at {scene.image.width}×{scene.image.height}, relative RMSE against exact (%)\n")
-    print(f"| integrand | rank | textured | untextured |\n|---|---:|---:|---:|")
+    print("| integrand | rank | textured | untextured |\n|---|---:|---:|---:|")
     for mode in ("table", "svd"):
         for rank in (1, 2, 4, 8):
             sized = dataclasses.replace(scene, render=dataclasses.replace(scene.render, integrand=mode, svd_rank=rank))

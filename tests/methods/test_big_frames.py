@@ -3,7 +3,6 @@ allocation (session.check_device_memory); a 4K frame renders with both GPU metho
 within the memory it is predicted to need (slow: bench/RESULTS.md, "Big frames")."""
 from __future__ import annotations
 
-import re
 import time
 from types import SimpleNamespace
 

@@ -9,7 +9,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import clrays
 from clrays.reference.exact import render_exact
 from clrays.physics.geometry import occluded, raycast
 from clrays.reference.metrics import depth_edges, depth_map, image_error
