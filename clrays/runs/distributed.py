@@ -339,7 +339,7 @@ def render_frame_task(item: tuple[int, str, str], *, scene, method: str | None, 
     item = (frame, path, frame digest). Returns the slimmed RenderResult, or None when the
     file is there already (a task run again after its worker died, having written it)."""
     from ..passes import write_render
-    from .sequence import append_frame_line
+    from .frame_manifest import append_frame_line
 
     frame, path, frame_digest_hex = item
     path = Path(path)

@@ -309,7 +309,7 @@ def test_a_torn_manifest_line_costs_its_frame_alone(tmp_path):
 def test_recording_a_frame_costs_the_same_however_many_came_before(tmp_path):
     """The manifest was rewritten whole for every frame: 20 000 frames rendered nothing in
     120 s. A frame now appends one line."""
-    from clrays.runs.sequence import FrameManifest
+    from clrays.runs.frame_manifest import FrameManifest
 
     def seconds_per_record(before: int) -> float:
         folder = tmp_path / str(before)
