@@ -262,39 +262,54 @@ def listening(greeting: bytes | None) -> Callable[[], tuple[str, Listener]]:
 # --------------------------------------------------------------------------- cases of several processes
 
 
-def two_runs_in_one_folder(probe: Probe, d: Path) -> Result:
-    """Run A, then run B with another --set into A's folder while A runs: B fails in one
-    line naming A. Once A is stopped, A run again over the frames it wrote renders none:
-    every frame there is its scene's."""
-    scene = animated(d, 400, 24, 16)
-    shared = d / "shared" / "f_{:03d}.npy"
-    a = probe.spawn(["sequence", scene, "-o", shared, "--no-progress"], d)
-    start = time.perf_counter()
-    while not (d / "shared" / "f_000.npy").exists() and a.popen.poll() is None and time.perf_counter() - start < 30:
-        time.sleep(0.05)
-    b = probe.run(["sequence", scene, "-o", shared, "--no-progress", "--set", "medium.sigma_s=0.3", "--frames", "0:3"],
-                  d)
-    if a.popen.poll() is not None:
-        b.problems.append("run A ended before run B started")
-    group = _group(a.popen.pid)
-    a.signal(signal.SIGINT)
-    first = a.finish()
-    if first.code != 130:
-        b.problems.append(f"run A: exit {first.code} on SIGINT: {first.output.strip()[-300:]}")
-    pid = re.search(r"in use by another clrays run \(pid (\d+)", b.output)
-    if not pid:
-        b.problems.append("B does not say the folder is in use by another run")
-    elif int(pid.group(1)) not in group:
-        b.problems.append(f"B names pid {pid.group(1)}, not run A's")
-    written = sorted(int(p.stem[2:]) for p in (d / "shared").glob("f_*.npy"))
-    if written != list(range(len(written))) or not written:
-        b.problems.append(f"frames written by A: {written[:10]}")
-    again = probe.run(["sequence", scene, "-o", shared, "--no-progress", "--frames", f"0:{len(written) - 1}"], d)
-    expected = f"0 frames rendered, {len(written)} already there"
-    if again.code != 0 or expected not in again.output:
-        b.problems.append(f"A again: exit {again.code}, expected {expected!r}: {again.output.strip()[-300:]}")
-    b.note = f"A wrote {len(written)} frames; A again: {_last_line(again.output)}"
-    return b
+def two_runs_in_one_folder(simultaneous: bool) -> Callable[[Probe, Path], Result]:
+    """Run A, and run B with another --set into the same folder, B once A has written a
+    frame or both at the same moment: one of them fails in one line naming the other. Once
+    the other is stopped, it run again over the frames it wrote renders none: every frame
+    there is its scene's. The row is the failing run's."""
+    def run(probe: Probe, d: Path) -> Result:
+        scene = animated(d, 400, 24, 16)
+        shared = d / "shared" / "f_{:03d}.npy"
+        commands = {"A": ["sequence", scene, "-o", shared, "--no-progress"],
+                    "B": ["sequence", scene, "-o", shared, "--no-progress", "--set", "medium.sigma_s=0.3"]}
+        runs = {"A": probe.spawn(commands["A"], d)}
+        start = time.perf_counter()
+        while not simultaneous and not (d / "shared" / "f_000.npy").exists() and runs["A"].popen.poll() is None \
+                and time.perf_counter() - start < 30:
+            time.sleep(0.05)
+        runs["B"] = probe.spawn(commands["B"], d)
+        while all(process.popen.poll() is None for process in runs.values()) and time.perf_counter() - start < 30:
+            time.sleep(0.05)
+        loser = "B" if runs["B"].popen.poll() is not None else "A"
+        winner = "A" if loser == "B" else "B"
+        group = _group(runs[winner].popen.pid)
+        result = runs[loser].finish()
+        while not (d / "shared" / "f_000.npy").exists() and runs[winner].popen.poll() is None \
+                and time.perf_counter() - start < 30:
+            time.sleep(0.05)
+        runs[winner].signal(signal.SIGINT)
+        stopped = runs[winner].finish()
+        if stopped.code != 130:
+            result.problems.append(f"run {winner}: exit {stopped.code} on SIGINT: {stopped.output.strip()[-300:]}")
+        if not simultaneous and loser != "B":
+            result.problems.append("run A failed, not B")
+        pid = re.search(r"in use by another clrays run \(pid (\d+)", result.output)
+        if not pid:
+            result.problems.append(f"run {loser} does not say the folder is in use by another run")
+        elif int(pid.group(1)) not in group:
+            result.problems.append(f"run {loser} names pid {pid.group(1)}, not run {winner}'s")
+        written = sorted(int(p.stem[2:]) for p in (d / "shared").glob("f_*.npy"))
+        if not written or written != list(range(len(written))):
+            result.problems.append(f"frames written: {written[:10]}")
+            return result
+        again = probe.run([*commands[winner], "--frames", f"0:{len(written) - 1}"], d)
+        expected = f"0 frames rendered, {len(written)} already there"
+        if again.code != 0 or expected not in again.output:
+            result.problems.append(f"{winner} again: exit {again.code}, expected {expected!r}: "
+                                   f"{again.output.strip()[-300:]}")
+        result.note = f"{loser} failed; {winner} wrote {len(written)} frames; {winner} again: {_last_line(again.output)}"
+        return result
+    return run
 
 
 def _group(pid: int) -> set[int]:
@@ -509,7 +524,10 @@ def cases() -> list[Case]:
             d / "lie.stl", 2, claimed=1000) and write(d, HEAD + "objects: [{type: mesh, file: lie.stl}]\n"), [])),
              expect="ok", check=lambda d, r: [] if (d / "out.png").exists() else ["no out.png"]),
         # Sequences, sweeps, outputs
-        Case("two sequences into one folder (B's line)", lambda d: [], run=two_runs_in_one_folder),
+        Case("two sequences into one folder, B after A's first frame", lambda d: [],
+             run=two_runs_in_one_folder(simultaneous=False)),
+        Case("two sequences into one folder, started together", lambda d: [],
+             run=two_runs_in_one_folder(simultaneous=True)),
         Case("frame manifest a FIFO", manifest_fifo),
         Case("frame manifest a link to /dev/zero", manifest_zero),
         Case("results.csv a FIFO", results_fifo),
@@ -532,6 +550,8 @@ def cases() -> list[Case]:
             "relief-to-mesh", PROBE.tree / "scenes" / "lattice.yaml", "-o", d / "lattice.ply"],
              limit_file_bytes=4096, check=nothing_written("*.ply", ".*")),
         Case("render .exr onto a full disk (a 64 KiB tmpfs)", lambda d: [], run=exr_onto_a_full_disk),
+        # PoCL writes each program's preprocessed source into its cache before it looks the
+        # binary up, so a full disk under ~/.cache fails the kernel build as well.
         Case("render .exr under a 16 KiB file-size limit (kernel cache warm)", exr_under_a_file_limit,
              limit_file_bytes=16384, check=nothing_written("a.exr", ".*")),
         Case("Ctrl-C at a sequence's first frame", lambda d: [], expect="interrupted", run=interrupted_sequence(0.0)),
@@ -657,10 +677,9 @@ def main() -> None:
         for index, case in enumerate(chosen):
             result, lines = run_case(PROBE, case, index)
             results.append((case, result))
-            flags = "; ".join(result.problems) or "ok"
-            last = _last_line(result.output) + (f" ({result.note})" if result.note else "")
-            print(f"| {cell(case.name, 80)} | {result.code} | {lines} | {cell(last)} | {result.seconds:.1f} | "
-                  f"{result.peak_mb:.0f} | {cell(flags, 200)} |", flush=True)
+            flags = ("; ".join(result.problems) or "ok") + (f" ({result.note})" if result.note else "")
+            print(f"| {cell(case.name, 80)} | {result.code} | {lines} | {cell(_last_line(result.output))} | "
+                  f"{result.seconds:.1f} | {result.peak_mb:.0f} | {cell(flags, 200)} |", flush=True)
     finally:
         if not args.out:
             shutil.rmtree(out, ignore_errors=True)
