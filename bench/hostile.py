@@ -57,7 +57,8 @@ ONE_IN_THE_PLURAL = re.compile(r"(?<![\d.,])1 (new )?(frames|points)\b")
 
 # Run the child by a wrapper that reports its peak RSS where GNU time is missing.
 _RUSAGE_WRAPPER = """
-import resource, subprocess, sys
+import resource, signal, subprocess, sys
+signal.signal(signal.SIGINT, lambda *_: None)  # Ctrl-C is the child's (a handler, unlike SIG_IGN, is not inherited)
 code = subprocess.call(sys.argv[2:])
 with open(sys.argv[1], "w") as f:
     f.write(str(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss))
