@@ -52,6 +52,7 @@ TIMEOUT_S = 60.0  # a case still running then is killed (and flagged by its time
 TIME = shutil.which("time", path="/usr/bin") or None  # GNU time: the child's peak RSS, %M in KB
 #: Lines a command may print besides its one error line, each labelled as such.
 LABELLED = re.compile(r"^clrays: (notice: |exact: \d+% |exact on .*\(estimate\)$|frame \d+: |point \d+: )")
+HUNDRED_VALUES = ",".join(str(0.01 + n / 1000) for n in range(100))
 #: A count of one with its noun in the plural ("1 frames rendered", "after 1 new frames").
 ONE_IN_THE_PLURAL = re.compile(r"(?<![\d.,])1 (new )?(frames|points)\b")
 
@@ -308,7 +309,8 @@ def two_runs_in_one_folder(simultaneous: bool) -> Callable[[Probe, Path], Result
         if again.code != 0 or expected not in again.output:
             result.problems.append(f"{winner} again: exit {again.code}, expected {expected!r}: "
                                    f"{again.output.strip()[-300:]}")
-        result.note = f"{loser} failed; {winner} wrote {len(written)} frames; {winner} again: {_last_line(again.output)}"
+        result.note = (f"{loser} failed; {winner} wrote {len(written)} frames; "
+                       f"{winner} again: {_last_line(again.output)}")
         return result
     return run
 
@@ -480,7 +482,8 @@ def says(*wanted: str, never: tuple[str, ...] = ()) -> Callable[[Path, Result], 
 
 
 def cases() -> list[Case]:
-    HEAD, write, relief, gobo_light = scene_inputs.HEAD, scene_inputs.write, scene_inputs.relief, scene_inputs.gobo_light
+    HEAD, write, relief = scene_inputs.HEAD, scene_inputs.write, scene_inputs.relief
+    gobo_light = scene_inputs.gobo_light
     return [
         # Limits not checked before allocation
         Case("13000² PNG of zeros (657 KB) as a depth map",
@@ -501,7 +504,8 @@ def cases() -> list[Case]:
         Case("point light's cube of six 4096² PNG faces", render(lambda d: (grid_png(d / "gobo.png") and write(
             d, HEAD.replace("intensity: 100}", "intensity: 100, texture: [" + ", ".join(["gobo.png"] * 6) + "]}")),
             []))),
-        Case("22 MB OBJ, one face of 11 M triangles", from_tests("a 22 MB OBJ whose one face fans out to 11 M triangles")),
+        Case("22 MB OBJ, one face of 11 M triangles",
+             from_tests("a 22 MB OBJ whose one face fans out to 11 M triangles")),
         Case("sequence -o x_{:0999999999d}.png", lambda d: ["sequence", demo(PROBE), "-o", d / "x_{:0999999999d}.png"],
              check=nothing_written("x_*")),
         Case("sequence -o x_{:c}.png", lambda d: ["sequence", demo(PROBE), "-o", d / "x_{:c}.png"],
@@ -536,8 +540,8 @@ def cases() -> list[Case]:
         Case("sequence of 20 000 frames at 1×1 (stopped at its first)", lambda d: [], expect="interrupted",
              run=twenty_thousand_frames),
         Case("sweep of three axes of 100 values", lambda d: [
-            "sweep", animated(d, 1), *[a for key in ("medium.sigma_s", "medium.sigma_a", "lights.0.intensity") for a in (
-                "--set", f"{key}=" + ",".join(str(0.01 + n / 1000) for n in range(100)))], "-o", d / "out"],
+            "sweep", animated(d, 1), *[a for key in ("medium.sigma_s", "medium.sigma_a", "lights.0.intensity")
+                                       for a in ("--set", f"{key}=" + HUNDRED_VALUES)], "-o", d / "out"],
              check=nothing_written("out")),
         Case("--set sigma_s=0.3,0.4 --set 'medium={sigma_a: ...},{...}'", lambda d: [
             "sweep", animated(d, 1), "--set", "medium.sigma_s=0.3,0.4", "--set",
