@@ -26,6 +26,7 @@ from .image_io import check_folder, check_name_length, check_output_path, make_f
 from .passes import pass_paths, pass_problem, write_render
 from .reference.exact import estimate_seconds
 from .runs import bench as bench_run
+from .runs.progress import counted
 from .runs.references import parse_reference
 from .runs.sequence import (check_pattern, check_video_path, parse_frames, render_sequence, scene_frames,
                             write_video)
@@ -500,7 +501,7 @@ def sequence(context, scene, frames, method, overrides, camera, pattern, video, 
              overwrite, reuse, stats, verbose, progress, scheduler, workers, device) -> None:
     """Render the frames of SCENE's animation to numbered images."""
     done = []
-    with _resumable(context, lambda: f"{len(done)} new frames"):
+    with _resumable(context, lambda: counted(len(done), "new frame")):
         check_pattern(pattern)
         if video is not None:
             check_video_path(video)
@@ -624,7 +625,7 @@ def sweep(context, scene, overrides, camera, reference, method, out_dir, image_f
           scheduler, workers, device) -> None:
     """Render SCENE at every combination of the --set values and tabulate the results."""
     done = []
-    with _resumable(context, lambda: f"{len(done)} points"):
+    with _resumable(context, lambda: counted(len(done), "point")):
         _check_scene_file(scene)
         overrides = with_camera(overrides, camera)
         axes, _ = axes_from(list(overrides))

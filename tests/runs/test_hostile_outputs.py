@@ -619,6 +619,30 @@ def test_ctrl_c_at_many_moments_leaves_no_temporary(tmp_path):
         _interrupt_sequence(tmp_path, float(delay), index)
 
 
+@pytest.mark.parametrize("command", ["sequence", "sweep"])
+def test_an_interrupt_after_one_frame_or_point_says_it_in_the_singular(tmp_path, monkeypatch, command):
+    # It said "interrupted after 1 new frames".
+    from types import SimpleNamespace
+
+    import clrays.cli as cli
+
+    def one_then_interrupt(*args, on_frame=None, on_point=None, **kwargs):
+        if on_frame:
+            on_frame(0, tmp_path / "f_0.png", SimpleNamespace(wall_ms=1.0))
+        else:
+            on_point(SimpleNamespace(index=0, label="medium.sigma_s=0.02"), {"wall_ms": "1"})
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli, "render_sequence" if command == "sequence" else "run_sweep", one_then_interrupt)
+    scene = animated(tmp_path, 2)
+    args = ["-o", tmp_path / "f_{}.png"] if command == "sequence" else ["--set", "medium.sigma_s=0.02,0.05", "-o",
+                                                                        tmp_path / "out"]
+    code, out = run(command, scene, *args, "--no-progress")
+    noun = "new frame" if command == "sequence" else "point"
+    assert code == 130 and out.strip().splitlines()[-1] == (f"clrays: interrupted after 1 {noun}; run the same command "
+                                                            f"again to resume"), out
+
+
 def test_an_interrupt_while_the_temporary_is_created_leaves_nothing(tmp_path, monkeypatch):
     import clrays.image_io as image_io
 
