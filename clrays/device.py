@@ -12,6 +12,7 @@ import contextlib
 import hashlib
 import os
 import sys
+import tempfile
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -302,6 +303,25 @@ class Device:
     def name(self) -> str:
         return f"{self.device.platform.name.strip()} / {self.device.name.strip()}"
 
+    def _unwritable_cache(self) -> str:
+        """Why PoCL's kernel cache cannot be written, where it cannot (then no kernel builds:
+        PoCL writes each program's source there first, so a full disk fails every build),
+        as the tail of a build error; "" otherwise."""
+        if "portable" not in self.device.platform.name.lower():
+            return ""
+        folder = Path(os.environ.get("POCL_CACHE_DIR")
+                      or Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "pocl")
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            with tempfile.TemporaryFile(dir=folder) as probe:
+                probe.write(b"\0" * 65536)
+                probe.flush()
+                os.fsync(probe.fileno())
+        except OSError as exc:
+            return f": PoCL cannot write its kernel cache {folder} ({exc.strerror or exc}; free space there, or " \
+                   f"set POCL_CACHE_DIR)"
+        return ""
+
     def program(self, stage: str, defines: dict[str, object] | None = None):
         """Build (once) `cl/<stage>.cl` with `build_options(defines)`."""
         defines = defines or {}
@@ -316,7 +336,10 @@ class Device:
                     warnings.simplefilter("ignore", self.cl.CompilerWarning)
                     self._programs[key] = self.cl.Program(self.context, path.read_text()).build(options=options)
             except self.cl.RuntimeError as exc:
-                raise DeviceError(f"{path}: build failed with options {' '.join(options)}:\n{exc}") from exc
+                if show_compiler_output:  # --debug: the options and the compiler's log
+                    raise DeviceError(f"{path}: build failed with options {' '.join(options)}:\n{exc}") from exc
+                raise DeviceError(f"{path}: the OpenCL compiler could not build it"
+                                  f"{self._unwritable_cache()} (run with --debug for its log)") from exc
             finally:
                 self.build_ms += (time.perf_counter() - start) * 1e3
             if marker is not None:

@@ -16,6 +16,7 @@ from PIL import Image
 from clrays import load_scene
 from clrays.errors import OutputError
 from clrays.physics.radiometry import effective_far, lamp_radius
+from conftest import TEST_ON_POCL
 from conftest import run_cli as run
 
 # A closed room: every camera ray hits a wall, so camera.far bounds nothing.
@@ -290,3 +291,27 @@ def test_a_reference_step_count_of_superscript_digits_is_refused():
 
     with pytest.raises(ClraysError, match="expected exact or raymarch:N"):
         parse_reference("raymarch:²")
+
+
+@pytest.mark.skipif(not TEST_ON_POCL, reason="PoCL's kernel cache")
+def test_a_kernel_cache_that_cannot_be_written_is_one_line(tmp_path):
+    """PoCL writes each program's source into its kernel cache before it builds or looks
+    the binary up, so where the cache's disk is full every build fails. That is one line
+    naming the cache, not the compiler's options and log twice over (8 lines). A file-size
+    limit of 16 KiB on the process stands in for the full disk."""
+    import resource
+
+    scene = tmp_path / "s.yaml"
+    scene.write_text("version: 1\nimage: {width: 8, height: 6}\ncamera: {position: [0, 1, 5], look_at: [0, 0, 0]}\n"
+                     "lights: [{type: point, position: [0, 3, 0], intensity: 10}]\nmedium: {sigma_s: 0.1}\n")
+    cache = tmp_path / "pocl-cache"
+    env = {**os.environ, "POCL_CACHE_DIR": str(cache), "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
+    limit = 16 << 10
+    done = subprocess.run([sys.executable, "-m", "clrays", "render", str(scene), "-o", str(tmp_path / "x.png")],
+                          env=env, capture_output=True, text=True, timeout=120,
+                          preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit)))
+    lines = (done.stdout + done.stderr).strip().splitlines()
+    assert done.returncode == 1 and len(lines) == 1, lines
+    assert re.fullmatch(rf"clrays: error: .*\.cl: the OpenCL compiler could not build it: PoCL cannot write its kernel "
+                        rf"cache {re.escape(str(cache))} \(File too large; .*POCL_CACHE_DIR\) \(run with --debug .*\)",
+                        lines[0]), lines[0]
