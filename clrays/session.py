@@ -127,6 +127,11 @@ class RenderResult:
     shadow_rays: int | None = None  # exact surface shadows: the entries (sample × light) the maps left to a ray
     passes: dict[str, np.ndarray] | None = None  # the render passes asked for (clrays.passes), by name; else None
 
+    def without_pixels(self) -> RenderResult:
+        """This result without its image and passes (written to files): its times and counts
+        alone, which a long sequence keeps for every frame, and a dask worker sends back."""
+        return replace(self, image=np.zeros((0, 0, 3), np.float32), passes=None)
+
     @property
     def reused(self) -> list[str]:
         """The stages this frame took from an earlier one."""

@@ -30,11 +30,8 @@ import struct
 import threading
 import uuid
 import weakref
-from dataclasses import replace
 from pathlib import Path
 from typing import Any, Callable, Iterator, Sequence
-
-import numpy as np
 
 from ..errors import ClraysError
 
@@ -328,11 +325,6 @@ def _worker_renderer(reuse: bool):
     return _sessions[reuse]
 
 
-def _slim(result):
-    """A RenderResult without its image and passes, which the worker has written: only times travel."""
-    return replace(result, image=np.zeros((0, 0, 3), np.float32), passes=None)
-
-
 def render_frame_task(item: tuple[int, str, str], *, scene, method: str | None, exposure: float, reuse: bool,
                       overwrite: bool):
     """Render one frame of a sequence on a worker, write its file and its manifest line:
@@ -350,7 +342,7 @@ def render_frame_task(item: tuple[int, str, str], *, scene, method: str | None, 
         result = _worker_renderer(reuse).render(frame_scene, method)
         content = write_render(path, result, frame_scene, exposure, f"frame {frame}")
         append_frame_line(path, frame_digest_hex, content)
-    return _slim(result)
+    return result.without_pixels()  # only times travel: the worker has written the image
 
 
 def render_point_task(item, *, folder: str, exposure: float, against, reuse: bool, progress: bool = False):

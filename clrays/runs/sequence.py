@@ -129,7 +129,8 @@ class SequenceReport:
     rendered: list[int] = field(default_factory=list)  # frames rendered by this run
     kept: list[int] = field(default_factory=list)  # frames whose file was already there, of the same scene
     stale: list[int] = field(default_factory=list)  # rendered again: their file was of another scene
-    results: dict[int, RenderResult] = field(default_factory=dict)  # of the rendered frames
+    # of the rendered frames, without their images (in the files): times, reuse, sizes
+    results: dict[int, RenderResult] = field(default_factory=dict)
     wall_s: float = 0.0
 
     def summary(self) -> str:
@@ -234,7 +235,7 @@ def _done(report: SequenceReport, frame: int, path: Path, result, on_frame, bar:
         report.kept.append(frame)
     else:
         report.rendered.append(frame)
-        report.results[frame] = result
+        report.results[frame] = result.without_pixels()  # a long sequence keeps no images
     if on_frame:
         on_frame(frame, path, result)
     bar.advance(label)

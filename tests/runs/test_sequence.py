@@ -210,3 +210,14 @@ def test_a_frame_of_a_still_scene_says_it_has_one(tmp_path):
     code, out = run("render", demo, "-o", tmp_path / "x.png", "--frame", "3")
     assert code == 1 and out.strip().splitlines()[-1].endswith(
         "--frame 3: the scene has no animation, so frame 0 alone; got 3:3")
+
+
+def test_a_sequence_keeps_no_image_of_its_frames(tmp_path, renderer):
+    """The frames are in their files: the report keeps each rendered frame's times and
+    reuse, not its pixels, so a long sequence at a large size does not grow in memory."""
+    from clrays import load_scene
+
+    scene = load_scene(Path(__file__).resolve().parents[2] / "scenes" / "orbit.yaml", overrides=["image.width=16", "image.height=9"])
+    report = render_sequence(scene, tmp_path / "f_{:02d}.npy", range(0, 2), renderer=renderer)
+    assert sorted(report.results) == [0, 1]
+    assert all(result.image.size == 0 and result.stage_ms for result in report.results.values())
