@@ -328,6 +328,11 @@ RENDER = Section("render", (
                 "angles seen from the light, dense where the ray passes it, so the 1/d² peak of a light in view "
                 "converges; `uniform` at equal distances (the marcher before equiangular steps). Directional "
                 "lights always take uniform steps ([docs/design.md](design.md) §4.8)", read_by=("raymarch",)),
+    Field("target_error", "number", Render.target_error, 0.0, 100.0, low_open=True, high_open=True,
+          shown_default="none: the settings as written",
+          notes="percent relative RMSE against `exact` (as `clrays bench` measures it): `render`, `sequence` and "
+                "`sweep` first tune the sizes and sampling settings for the cheapest frame within it "
+                "(`clrays tune`; once per scene, kept in .cache/clrays or $CLRAYS_CACHE) and render with them"),
 ))
 
 

@@ -189,6 +189,8 @@ class Render:
     translucent_layers: int = 4  # translucent surfaces per light texel, nearest the light first
     transparency: Transparency | None = None  # translucent surfaces: None takes Transparency()'s defaults
     step_spacing: str = "equiangular"  # raymarch: one of STEP_SPACINGS
+    # Percent relative RMSE against `exact` to tune the settings for (clrays.runs.tune); None: as written.
+    target_error: float | None = None
 
 
 @dataclass(frozen=True)
