@@ -185,6 +185,14 @@ def test_an_animation_is_measured_on_first_middle_and_last_frames(tmp_path):
     frames = tuning.measured_frames(scene)
     assert [tuple(frame.camera.position) for frame in frames] == \
            [tuple(scene.animation.scene_at(scene, n).camera.position) for n in (0, 4, 8)]
+
+
+@pytest.mark.slow
+def test_an_animations_error_is_the_largest_of_its_frames(tmp_path):
+    path = tmp_path / "animated.yaml"
+    path.write_text(SCENE + ANIMATION)
+    scene = load_scene(path)
+    frames = tuning.measured_frames(scene)
     result = tuning.tune(scene, 0.01, ReferenceCache(tmp_path / "cache"), Renderer(reuse=False), repeats=1)
     best = result.best
     assert best is not None and result.default.rmse > 0.01  # measured: 3.746 % at the start
@@ -202,3 +210,16 @@ def test_the_search_grows_finer_rungs_and_stops_at_the_ladders_end():
     assert step.step(3, True) == 1 and step.step(1, True) is None and step.step(3, False) == 6
     assert [knob.key for knob in tuning.knobs_for("raymarch", "epipolar")] == ["shadow_map", "steps"]
     assert len(tuning.knobs_for("minmax", "pixel")) == 3
+
+
+@pytest.mark.slow
+def test_a_sweep_renders_each_point_with_its_tuned_settings(scene_file, tmp_path, cache):
+    scene_file.write_text(SCENE.replace("steps: 64}", "steps: 64, target_error: 0.5}"))
+    out = tmp_path / "sweep"
+    code, text = run("sweep", scene_file, "--set", "medium.sigma_s=0.06,0.08", "--format", "npy", "-o", out,
+                     "--no-progress", env=cache)
+    assert code == 0, text
+    assert len(list((out / ".references").glob("tuned-*.json"))) == 2  # one per point's scene
+    for index, sigma_s in enumerate(("0.06", "0.08")):
+        scene = load_scene(scene_file, [f"medium.sigma_s={sigma_s}"])
+        assert exact_error(scene, np.load(out / f"{index:03d}.npy")) <= 0.005
