@@ -567,6 +567,8 @@ error counts). A scene may instead carry render.target_error: `render`, `sequenc
 @overrides_option("Override a scene field (repeatable), e.g. --set image.width=320.")
 @option("--pixels", type=click.IntRange(16), default=4000, show_default=True, group=RUN,
         help="Pixels (fixed random subset) on which the error against exact is measured.")
+@option("--most-settings", type=click.IntRange(1, 1000), default=60, show_default=True, metavar="N", group=RUN,
+        help="Stop the search after measuring N settings (each a few frames of each measured frame).")
 @option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path), group=OUTPUT,
         help="The tuned scene: SCENE's YAML with the tuned settings in its render mapping.")
 @option("--cache", type=click.Path(file_okay=False, path_type=Path), default=None, group=OUTPUT,
@@ -574,7 +576,8 @@ error counts). A scene may instead carry render.target_error: `render`, `sequenc
 @progress_option()
 @device_option()
 @click.pass_context
-def tune(context, scene: Path, target, method, overrides, pixels, output: Path, cache, progress, device) -> None:
+def tune(context, scene: Path, target, method, overrides, pixels, most_settings, output: Path, cache, progress,
+         device) -> None:
     """Find the cheapest render settings of SCENE whose error against exact is at most PCT."""
     from .runs import tune as tuning
     from .runs.progress import Progress
@@ -589,22 +592,22 @@ def tune(context, scene: Path, target, method, overrides, pixels, output: Path, 
         target = loaded.render.target_error
     cache = cache or tuning.cache_folder()
     with _interruptible(context, f"{output} was not written"), \
-            Progress(progress, tuning.MOST_SETTINGS, "setting", "tune") as bar:
+            Progress(progress, most_settings, "setting", "tune") as bar:
         def on_trial(trial) -> None:
             bar.advance(f"{tuning.settings_text(trial.settings)}: {100 * trial.rmse:.3f} %")
             if not progress:
                 click.echo(tuning.trial_line(trial), err=True)
 
         result = tuning.tune(loaded, target / 100, ReferenceCache(cache), renderer=Renderer(device, reuse=False),
-                             method=method, pixels=pixels, on_trial=on_trial)
+                             method=method, pixels=pixels, most_settings=most_settings, on_trial=on_trial)
     best = result.best
     if best is None:
         raise tuning.unreachable(str(scene), result)
     settings = {**({"method": method} if method else {}), **best.settings}
     tuning.write_tuned_yaml(scene, output, settings, list(overrides))
     click.echo(f"{tuning.settings_text(best.settings)}")
-    click.echo(f"error against exact {100 * best.rmse:.3f} % (target {target:g} %), {best.frame_ms:.0f} ms a frame; "
-               f"{tuning.default_trial_line(result)}; {len(result.trials)} settings tried in {result.seconds:.0f} s")
+    click.echo(f"error against exact {100 * best.rmse:.3f} % (target {target:g} %), {best.frame_ms:.0f} ms a frame")
+    click.echo(f"{tuning.default_trial_line(result)}; {len(result.trials)} settings tried in {result.seconds:.0f} s")
     click.echo(f"wrote {output}")
 
 

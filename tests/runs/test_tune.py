@@ -114,13 +114,17 @@ def test_a_tuned_scene_written_elsewhere_keeps_its_files_and_overrides(tmp_path,
     assert (tuned.image.width, tuned.image.height) == (32, 18)
 
 
-def test_an_unreachable_target_is_one_line_naming_the_best_error(scene_file, tmp_path, cache):
+@pytest.mark.parametrize("budget", [pytest.param([], marks=pytest.mark.slow), ["--most-settings", 5]])
+def test_an_unreachable_target_is_one_line_naming_the_best_error(scene_file, tmp_path, cache, budget):
     out = tmp_path / "never.yaml"
-    code, text = run("tune", scene_file, "--target-error", 0.001, "-o", out, "--no-progress", env=cache)
+    code, text = run("tune", scene_file, "--target-error", 0.001, *budget, "-o", out, "--no-progress", env=cache)
     assert code == 1
     lines = without_trials(text)
     assert len(lines) == 1 and lines[0].startswith("clrays: error: ")
     assert "target error 0.001 %: not reached; the best error found is" in lines[0]
+    best = float(lines[0].split("the best error found is ")[1].split(" %")[0])
+    tried = [float(line.split(": ")[-1].split(" %")[0]) for line in text.splitlines() if line.startswith("clrays: tune:")]
+    assert best == min(tried)  # the best of the settings it tried
     assert not out.exists()
 
 
@@ -157,6 +161,7 @@ def test_render_target_error_tunes_once_and_caches(scene_file, tmp_path, cache):
     assert code == 0 and "clrays: tune:" in third and "(cached)" not in third
 
 
+@pytest.mark.slow
 def test_an_unreachable_scene_target_fails_render_in_one_line(scene_file, tmp_path, cache):
     scene_file.write_text(SCENE.replace("steps: 64}", "steps: 64, target_error: 0.001}"))
     code, text = run("render", scene_file, "-o", tmp_path / "x.png", "--no-progress", env=cache)
