@@ -228,3 +228,14 @@ def test_a_sweep_renders_each_point_with_its_tuned_settings(scene_file, tmp_path
     for index, sigma_s in enumerate(("0.06", "0.08")):
         scene = load_scene(scene_file, [f"medium.sigma_s={sigma_s}"])
         assert exact_error(scene, np.load(out / f"{index:03d}.npy")) <= 0.005
+
+
+def test_a_scene_without_render_gets_one_and_exact_has_nothing_to_tune(scene_file, tmp_path, cache):
+    bare = SCENE[:SCENE.index("render:")]
+    scene_file.write_text(bare)
+    out = tmp_path / "tuned.yaml"
+    code, text = run("tune", scene_file, "--target-error", 50, "--pixels", 200, "-o", out, "--no-progress", env=cache)
+    assert code == 0, text
+    assert out.read_text().startswith(bare) and "shadow_map" in yaml.safe_load(out.read_text())["render"]
+    code, text = run("tune", scene_file, "--target-error", 1, "--method", "exact", "-o", out, env=cache)
+    assert code == 1 and text.count("\n") == 1 and "exact is the reference itself" in text
