@@ -17,6 +17,7 @@ largest of them, the cost their mean.
 from __future__ import annotations
 
 import json
+import math
 import os
 import statistics
 import time
@@ -102,11 +103,12 @@ def knobs_for(method: str, sampling: str) -> tuple[Knob, ...]:
 @dataclass
 class Trial:
     """One setting measured: its values, the largest error over the frames measured
-    (relative RMSE, a fraction) and the mean frame time."""
+    (relative RMSE, a fraction) and the median frame time over every timed frame."""
 
     settings: dict
     rmse: float
     frame_ms: float
+    failed: str = ""  # why the setting did not render (its error and time are then inf)
 
 
 @dataclass
@@ -175,7 +177,12 @@ class Search:
         worst, times = 0.0, []
         for frame in self.frames:
             variant = with_settings(frame, settings)
-            image = self.renderer.render(variant, reuse=False).image  # also builds the kernels
+            try:
+                image = self.renderer.render(variant, reuse=False).image  # also builds the kernels
+            except ClraysError as exc:  # e.g. past the device's memory: a setting the search cannot take
+                trial = self.trials[key] = Trial(dict(settings), math.inf, math.inf, str(exc))
+                self.on_trial(trial)
+                return trial
             error = self.references.error(frame, EXACT, image, self.pixels)
             if not error.pixels:
                 raise ClraysError(f"{frame.source or 'scene'}: at {frame.image.width}x{frame.image.height} no pixel "
@@ -369,6 +376,8 @@ def _read_tuned(path: Path, target: float) -> Tuned | None:
 
 
 def trial_line(trial: Trial) -> str:
+    if trial.failed:
+        return f"clrays: tune: {settings_text(trial.settings)}: not rendered: {trial.failed}"
     return f"clrays: tune: {settings_text(trial.settings)}: {100 * trial.rmse:.3f} %, {trial.frame_ms:.0f} ms"
 
 
