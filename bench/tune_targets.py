@@ -10,7 +10,9 @@ setting of a grid over the same knobs that meets each target (bench/RESULTS.md, 
 The grid: shadow_map 256–4096, slices and gamma_samples 256–2048 (×2 steps), and for
 minmax's epipolar sampling line_samples at ½, 1 and 2× the derived count with
 initial_step 1, 3 and 6 (refine_threshold at its default): 720 settings, each timed as
-tune times them (median of 3 warm frames, after the frame whose error is measured).
+tune times them (median of 3 warm frames, after the frame whose error is measured). Both
+compare by `clrays tune`'s cost, the process's CPU time per frame on a CPU device (columns
+"CPU ms"), which the load of a shared machine moves far less than the wall time.
 """
 from __future__ import annotations
 
@@ -58,10 +60,11 @@ def main() -> None:
     renderer = Renderer(reuse=False)
     print(f"{width}×{height}; relative RMSE against exact on {tuning.TUNE_PIXELS} pixels, depth edges out; frame: "
           f"median of {tuning.TUNE_REPEATS} warm frames\n")
-    head = "| scene | target | tuned setting | error % | frame ms | defaults: error %, ms | tried | tuning s |"
-    rule = "|---|---|---|---|---|---|---|---|"
+    head = ("| scene | target | tuned setting | error % | frame ms | CPU ms | defaults: error %, ms, CPU ms | tried "
+            "| tuning s |")
+    rule = "|---|---|---|---|---|---|---|---|---|"
     if args.grid:
-        head, rule = head + " grid's fastest: setting, error %, ms | tuned / grid |", rule + "---|---|"
+        head, rule = head + " grid's fastest: setting, error %, CPU ms | tuned / grid, CPU |", rule + "---|---|"
     print(head)
     print(rule)
     for name in args.scenes:
@@ -78,16 +81,18 @@ def main() -> None:
             cells = [name, f"{100 * target:g} %"]
             if best is None:
                 cells += [f"not reached (best {100 * result.closest.rmse:.3f} %: "
-                          f"{tuning.settings_text(result.closest.settings)})", "—", "—"]
+                          f"{tuning.settings_text(result.closest.settings)})", "—", "—", "—"]
             else:
-                cells += [tuning.settings_text(best.settings), f"{100 * best.rmse:.3f}", f"{best.frame_ms:.0f}"]
-            cells += [f"{100 * default.rmse:.3f}, {default.frame_ms:.0f}", str(len(result.trials)), f"{seconds:.0f}"]
+                cells += [tuning.settings_text(best.settings), f"{100 * best.rmse:.3f}", f"{best.frame_ms:.0f}",
+                          f"{best.cost_ms:.0f}"]
+            cells += [f"{100 * default.rmse:.3f}, {default.frame_ms:.0f}, {default.cost_ms:.0f}",
+                      str(len(result.trials)), f"{seconds:.0f}"]
             if grid_trials is not None:
                 good = [trial for trial in grid_trials if trial.rmse <= target]
-                fastest = min(good, key=lambda trial: trial.frame_ms) if good else None
+                fastest = min(good, key=lambda trial: trial.cost_ms) if good else None
                 cells.append(f"{tuning.settings_text(fastest.settings)}, {100 * fastest.rmse:.3f}, "
-                             f"{fastest.frame_ms:.0f}" if fastest else "none meets it")
-                cells.append(f"{best.frame_ms / fastest.frame_ms:.2f}" if fastest and best else "—")
+                             f"{fastest.cost_ms:.0f}" if fastest else "none meets it")
+                cells.append(f"{best.cost_ms / fastest.cost_ms:.2f}" if fastest and best else "—")
             print("| " + " | ".join(cells) + " |", flush=True)
 
 

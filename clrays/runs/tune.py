@@ -11,6 +11,9 @@ The search is coordinate descent over a ladder per knob (`knobs_for`): from the 
 image derives, while the error is over the target it takes the one-rung step, among every
 knob's next finer rung, that buys the most error per millisecond; once under it, it takes
 the coarser rung that saves the most time while the target still holds, until none does.
+A frame's cost is the median of a few warm frames in one session, every stage computed:
+of the process's CPU time on a CPU device (a shared machine's load moves it by a few per
+cent, the wall time by 1–3×), of the wall time on a GPU.
 An animated scene is measured on its first, middle and last frames: the error is the
 largest of them, the cost their mean.
 """
@@ -108,7 +111,11 @@ class Trial:
     settings: dict
     rmse: float
     frame_ms: float
-    failed: str = ""  # why the setting did not render (its error and time are then inf)
+    failed: str = ""  # why the setting did not render (its error and times are then inf)
+    #: What the search compares: the process's CPU time per frame on a CPU device (every
+    #: OpenCL thread's; other processes on a shared machine move it by a few per cent, the
+    #: wall time by 1-3x: bench/RESULTS.md), the wall time on a GPU. Median, as frame_ms.
+    cost_ms: float = math.nan
 
 
 @dataclass
@@ -128,7 +135,7 @@ class Tuning:
     @property
     def best(self) -> Trial | None:
         good = [trial for trial in self.trials if trial.rmse <= self.target]
-        return min(good, key=lambda trial: trial.frame_ms) if good else None
+        return min(good, key=lambda trial: trial.cost_ms) if good else None
 
     @property
     def closest(self) -> Trial:
@@ -169,6 +176,9 @@ class Search:
         self.repeats = repeats
         self.on_trial = on_trial or (lambda trial: None)
         self.trials: dict[tuple, Trial] = {}
+        import pyopencl as cl
+
+        self.on_cpu = bool(renderer.device.device.type & cl.device_type.CPU)
 
     def measure(self, settings: dict) -> Trial:
         key = tuple(sorted(settings.items()))
@@ -180,7 +190,7 @@ class Search:
             try:
                 image = self.renderer.render(variant, reuse=False).image  # also builds the kernels
             except ClraysError as exc:  # e.g. past the device's memory: a setting the search cannot take
-                trial = self.trials[key] = Trial(dict(settings), math.inf, math.inf, str(exc))
+                trial = self.trials[key] = Trial(dict(settings), math.inf, math.inf, str(exc), math.inf)
                 self.on_trial(trial)
                 return trial
             error = self.references.error(frame, EXACT, image, self.pixels)
@@ -190,10 +200,9 @@ class Search:
                                   f"at a larger image")
             worst = max(worst, error.rmse)
             for _ in range(self.repeats):
-                start = time.perf_counter()
-                self.renderer.render(variant, reuse=False)
-                times.append((time.perf_counter() - start) * 1e3)
-        trial = Trial(dict(settings), worst, statistics.median(times))
+                times.append(self._timed(variant))
+        walls, costs = zip(*times)
+        trial = Trial(dict(settings), worst, statistics.median(walls), cost_ms=statistics.median(costs))
         self.trials[key] = trial
         self.on_trial(trial)
         return trial
@@ -208,11 +217,15 @@ class Search:
                 for frame in self.frames:
                     variant = with_settings(frame, settings)
                     self.renderer.render(variant, reuse=False)
-                    for _ in range(self.repeats):
-                        start = time.perf_counter()
-                        self.renderer.render(variant, reuse=False)
-                        kept.append((time.perf_counter() - start) * 1e3)
+                    kept.extend(self._timed(variant)[0] for _ in range(self.repeats))
         return statistics.median(times[0]), statistics.median(times[1])
+
+    def _timed(self, scene: Scene) -> tuple[float, float]:
+        """(wall ms, cost ms) of one frame, every stage computed (Trial.cost_ms)."""
+        start, start_cpu = time.perf_counter(), time.process_time()
+        self.renderer.render(scene, reuse=False)
+        wall = (time.perf_counter() - start) * 1e3
+        return wall, (time.process_time() - start_cpu) * 1e3 if self.on_cpu else wall
 
 
 def start_settings(scene: Scene, method: str) -> dict:
@@ -266,10 +279,10 @@ def tune(scene: Scene, target: float, references: ReferenceCache, renderer: Rend
             break
         reached = [trial for _, trial in better if trial.rmse <= target]
         if reached:  # the cheapest step that reaches it
-            current = min(reached, key=lambda trial: trial.frame_ms)
+            current = min(reached, key=lambda trial: trial.cost_ms)
             break
         keys, current = max(better, key=lambda move: (current.rmse - move[1].rmse)
-                            / max(move[1].frame_ms - current.frame_ms, 0.01 * current.frame_ms))
+                            / max(move[1].cost_ms - current.cost_ms, 0.01 * current.cost_ms))
         # Further along the same move while each rung still cuts the error by LINE_GAIN: a
         # rung costs one setting, a survey of every move seven.
         while current.rmse > target and len(search.trials) < growing:
@@ -283,10 +296,10 @@ def tune(scene: Scene, target: float, references: ReferenceCache, renderer: Rend
     # Under it: the coarser rung that saves the most time while the target holds.
     while current.rmse <= target and len(search.trials) < most_settings:
         cheaper = [trial for _, trial in neighbours(current, False)
-                   if trial.rmse <= target and trial.frame_ms < current.frame_ms * (1 - TIME_MARGIN)]
+                   if trial.rmse <= target and trial.cost_ms < current.cost_ms * (1 - TIME_MARGIN)]
         if not cheaper:
             break
-        current = min(cheaper, key=lambda trial: trial.frame_ms)
+        current = min(cheaper, key=lambda trial: trial.cost_ms)
     tuning.trials = list(search.trials.values())
     if tuning.best is not None:
         tuning.in_turns = search.in_turns(tuning.best.settings, tuning.default.settings)
@@ -378,7 +391,8 @@ def _read_tuned(path: Path, target: float) -> Tuned | None:
 def trial_line(trial: Trial) -> str:
     if trial.failed:
         return f"clrays: tune: {settings_text(trial.settings)}: not rendered: {trial.failed}"
-    return f"clrays: tune: {settings_text(trial.settings)}: {100 * trial.rmse:.3f} %, {trial.frame_ms:.0f} ms"
+    cpu = f" (CPU {trial.cost_ms:.0f} ms)" if trial.cost_ms != trial.frame_ms else ""
+    return f"clrays: tune: {settings_text(trial.settings)}: {100 * trial.rmse:.3f} %, {trial.frame_ms:.0f} ms{cpu}"
 
 
 # --------------------------------------------------------------------------- writing the tuned scene
