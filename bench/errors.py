@@ -7,6 +7,7 @@ quotes these for every change that moves an image).
     .venv/bin/python bench/errors.py demo sun --size 640x360
     .venv/bin/python bench/errors.py --size 640x360 --set render.sampling=pixel   # another setting
     .venv/bin/python bench/errors.py --all --methods minmax,raymarch --size 320x180  # every scene in scenes/
+    .venv/bin/python bench/errors.py orbit --frame 10 --methods minmax,raymarch --size 640x360
 
 With `--methods`, a pair of columns per method (the scene's own `render` otherwise, as
 `--set render.method=M` would give), and the frame time of each (one warm frame).
@@ -36,6 +37,7 @@ def main() -> None:
     parser.add_argument("--all", action="store_true", help="every scene in scenes/ (instead of the bench's)")
     parser.add_argument("--methods", default="", help="comma-separated methods, a column pair each "
                                                       "(default: the scene's own method)")
+    parser.add_argument("--frame", type=int, default=None, help="an animated scene's frame (default: its base frame)")
     parser.add_argument("--size", type=image_size, default="1280x720")
     parser.add_argument("--pixels", type=int, default=4000)
     parser.add_argument("--cache", default=str(REPO / ".cache" / "references"))
@@ -65,6 +67,8 @@ def main() -> None:
                                    overrides=[f"image.width={width}", f"image.height={height}", *chosen, *args.set])
             except ClraysError as exc:
                 sys.exit(f"errors.py: {exc}")
+            if args.frame is not None and scene.animation is not None:
+                scene = scene.animation.scene_at(scene, args.frame)
             renderer.render(scene)  # kernels built
             start = time.perf_counter()
             image = renderer.render(scene).image
