@@ -177,11 +177,11 @@ def test_an_unreachable_scene_target_fails_render_in_one_line(scene_file, tmp_pa
 
 @pytest.mark.slow
 def test_a_sequence_pays_for_the_tuning_once(scene_file, tmp_path, cache):
-    scene_file.write_text(SCENE.replace("steps: 64}", "steps: 64, target_error: 0.5}") + ANIMATION)
+    scene_file.write_text(SCENE.replace("steps: 64}", "steps: 64, target_error: 2}") + ANIMATION)
     code, text = run("sequence", scene_file, "-o", tmp_path / "f_{:02d}.npy", "--frames", "0:2", "--stats",
                      "--no-progress", env=cache)
     assert code == 0, text
-    assert "tuned for 0.5 %" in text
+    assert "tuned for 2 %" in text
     code, again = run("sequence", scene_file, "-o", tmp_path / "g_{:02d}.npy", "--frames", "3:4", "--stats",
                       "--no-progress", env=cache)
     assert code == 0 and "clrays: tune:" not in again and "(cached)" in again
@@ -202,13 +202,16 @@ def test_an_animations_error_is_the_largest_of_its_frames(tmp_path):
     path.write_text(SCENE + ANIMATION)
     scene = load_scene(path)
     frames = tuning.measured_frames(scene)
-    result = tuning.tune(scene, 0.01, ReferenceCache(tmp_path / "cache"), Renderer(reuse=False), repeats=1)
+    # 2 %: the start measures 3.746 %, and the first survey's slices=64 1.890 %, so the
+    # search reaches it whatever the frame times (a shared machine's load) make it choose.
+    result = tuning.tune(scene, 0.02, ReferenceCache(tmp_path / "cache"), Renderer(reuse=False), repeats=1)
     best = result.best
-    assert best is not None and result.default.rmse > 0.01  # measured: 3.746 % at the start
+    assert best is not None and result.default.rmse > 0.02
     errors = [exact_error(frame, Renderer(reuse=False).render(tuning.with_settings(frame, best.settings)).image)
               for frame in frames]
     assert best.rmse == pytest.approx(max(errors), rel=1e-9)  # the largest of the frames counts
-    assert max(errors) <= 0.01
+    assert max(errors) <= 0.02
+    assert len(set(errors)) == 3  # three different frames were measured
 
 
 def test_the_search_grows_finer_rungs_and_stops_at_the_ladders_end():
