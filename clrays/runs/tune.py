@@ -5,17 +5,17 @@ The error is measured as `clrays bench` measures it (`clrays.runs.bench`): relat
 luminance RMSE against `exact` on a fixed, seeded subset of pixels, depth edges left
 out, the references kept on disk (`clrays.runs.references`), so a scene's `exact` is
 computed once and every setting tried is measured against it. A frame's cost is the
-median wall time of a few warm frames in one session, every stage computed.
+median of a few warm frames in one session, every stage computed: of the process's CPU
+time on a CPU device (a shared machine's load moves it by a few per cent, the wall time
+by 1–3×), of the wall time on a GPU.
 
-The search is coordinate descent over a ladder per knob (`knobs_for`): from the sizes the
-image derives, while the error is over the target it takes the one-rung step, among every
-knob's next finer rung, that buys the most error per millisecond; once under it, it takes
-the coarser rung that saves the most time while the target still holds, until none does.
-A frame's cost is the median of a few warm frames in one session, every stage computed:
-of the process's CPU time on a CPU device (a shared machine's load moves it by a few per
-cent, the wall time by 1–3×), of the wall time on a GPU.
+The search is coordinate descent over a ladder per knob (`knobs_for`): from the settings
+as written (sizes left unset derived from the image), while the error is over the target
+it takes the one-rung step, of one knob or of all of them at once, that buys the most
+error per millisecond, and follows it while each rung still pays; once under the target it
+takes the coarser rung that saves the most time while the target holds, until none does.
 An animated scene is measured on its first, middle and last frames: the error is the
-largest of them, the cost their mean.
+largest of them, the cost the median over all their timed frames.
 """
 from __future__ import annotations
 
@@ -44,9 +44,9 @@ from .references import EXACT, ReferenceCache
 TUNE_PIXELS = 4000
 #: Timed frames per setting, after the frame whose image is measured (which builds the kernels).
 TUNE_REPEATS = 3
-#: The most settings one search measures: a survey of the 6 knobs tries 6, so this bounds
-#: a search at about 10 surveys; a 640×360 frame of the bench scenes costs 0.05–1 s, and a
-#: setting 4 of them (bench/RESULTS.md, "Tuning").
+#: The most settings one search measures: a survey tries 7 (each knob, and all at once), so
+#: this bounds a search at about 8 surveys; a 640×360 frame of the bench scenes costs 0.05–1 s, and a
+#: setting 4 of them (bench/RESULTS.md, "Fine occluders and tuning").
 MOST_SETTINGS = 60
 #: Along the chosen knob, a finer rung is taken without a new survey while it cuts the error by this fraction.
 LINE_GAIN = 0.15
@@ -71,8 +71,8 @@ ANIMATION_FRAMES = 3
 
 @dataclass(frozen=True)
 class Knob:
-    """One render setting and its ladder: `finer(value)` and `coarser(value)` give the
-    next rung towards less error and towards less time (None past the ladder's end)."""
+    """One render setting and its ladder: `step(value, finer)` gives the next rung towards
+    less error (finer) or towards less time, ×2 or ÷2, None past the ladder's end."""
 
     key: str
     low: float
