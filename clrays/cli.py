@@ -384,15 +384,30 @@ def render(context, scene: Path, method, overrides, camera, frame, output: Path,
         check_output_path(path)
     if frame is not None:
         parse_frames(str(frame), scene_frames(loaded), "--frame")
-        loaded = loaded.animation.scene_at(loaded, frame) if loaded.animation is not None else loaded
-    if stats or verbose:
-        _notice_unread_keys(loaded, method)
     with _interruptible(context, f"{output} was not written"):
+        loaded, tuned = _tuned(loaded, method, device, progress)
+        if frame is not None and loaded.animation is not None:
+            loaded = loaded.animation.scene_at(loaded, frame)
+        if stats or verbose:
+            _notice_unread_keys(loaded, method)
         progress = _estimate_exact(loaded, method, progress)
         result = Renderer(device).render(loaded, method, progress=progress)
         write_render(output, result, loaded, exposure, str(scene))
     if stats:
         _print_stats(result)
+        if tuned is not None:
+            click.echo(f"  {tuned.line()}")
+
+
+def _tuned(scene, method: str | None, device: str | None, progress: bool):
+    """(scene, Tuned or None): with the settings its `render.target_error` asks for
+    (clrays.runs.tune), tuned once per scene; a line per setting tried when no bar shows."""
+    if scene.render.target_error is None:
+        return scene, None
+    from .runs.tune import tuned_scene
+
+    return tuned_scene(scene, method, renderer=Renderer(device), progress=progress,
+                       log=lambda line: click.echo(line, err=True))
 
 
 def _stage_statuses(result) -> dict[str, str]:
@@ -510,6 +525,9 @@ def sequence(context, scene, frames, method, overrides, camera, pattern, video, 
         overrides = with_aovs(with_camera(overrides, camera), aovs)
         loaded = load_scene(scene, overrides)
         chosen = parse_frames(frames, scene_frames(loaded))
+        loaded, tuned = _tuned(loaded, method, device, progress)
+        if stats and tuned is not None:
+            click.echo(tuned.line())
         if stats or verbose:
             _notice_unread_keys(loaded, method)
 
@@ -645,6 +663,80 @@ def sweep(context, scene, overrides, camera, reference, method, out_dir, image_f
                                overwrite=overwrite, progress=progress, on_point=on_point, executor=executor)
         click.echo(format_table(report.rows, axes), nl=False)
         click.echo(report.summary())
+
+
+def _target_percent(context, parameter, value: float | None) -> float | None:
+    """--target-error in (0, 100) percent; NaN slips through a FloatRange."""
+    if value is not None and not (math.isfinite(value) and 0 < value < 100):
+        raise click.BadParameter(f"expected a percentage between 0 and 100 like 0.5, got {value}")
+    return value
+
+
+@main.command(section="Study", short_help="Find the cheapest render settings within an error against exact.",
+              epilog="""
+\b
+Examples:
+  clrays tune scenes/lattice.yaml --target-error 1 -o out/lattice_tuned.yaml
+  clrays tune scenes/demo.yaml --target-error 0.2 --set image.width=320 --set image.height=180 -o out/demo.yaml
+
+\b
+The error is as `clrays bench` measures it: relative RMSE of luminance against `exact` on
+a fixed subset of pixels, depth edges left out (`exact` is computed once and kept in
+--cache). From the sizes the image derives, the search grows the setting that buys the
+most error per millisecond while over the target, then shrinks settings while the target
+holds. An animated scene is measured on its first, middle and last frames (the largest
+error counts). A scene may instead carry render.target_error: `render`, `sequence` and
+`sweep` then tune it once and render with the result.
+""")
+@click.argument("scene", type=click.Path(path_type=Path))
+@option("--target-error", "target", type=float, metavar="PCT", callback=_target_percent, group=SCENE,
+        help="Relative RMSE against exact, in percent (default: the scene's render.target_error).")
+@method_option()
+@overrides_option("Override a scene field (repeatable), e.g. --set image.width=320.")
+@option("--pixels", type=click.IntRange(16), default=4000, show_default=True, group=RUN,
+        help="Pixels (fixed random subset) on which the error against exact is measured.")
+@option("--most-settings", type=click.IntRange(1, 1000), default=60, show_default=True, metavar="N", group=RUN,
+        help="Stop the search after measuring N settings (each a few frames of each measured frame).")
+@option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path), group=OUTPUT,
+        help="The tuned scene: SCENE's YAML with the tuned settings in its render mapping.")
+@option("--cache", type=click.Path(file_okay=False, path_type=Path), default=None, group=OUTPUT,
+        help="Where exact references are cached (default: $CLRAYS_CACHE, else .cache/clrays).")
+@progress_option()
+@device_option()
+@click.pass_context
+def tune(context, scene: Path, target, method, overrides, pixels, most_settings, output: Path, cache, progress,
+         device) -> None:
+    """Find the cheapest render settings of SCENE whose error against exact is at most PCT."""
+    from .runs import tune as tuning
+    from .runs.progress import Progress
+    from .runs.references import ReferenceCache
+
+    _check_scene_file(scene)
+    check_folder(output)
+    loaded = load_scene(scene, overrides)
+    if target is None:
+        if loaded.render.target_error is None:
+            raise ClraysError(f"{scene}: no target: give --target-error PCT or set render.target_error")
+        target = loaded.render.target_error
+    cache = cache or tuning.cache_folder()
+    with _interruptible(context, f"{output} was not written"), \
+            Progress(progress, most_settings, "setting", "tune") as bar:
+        def on_trial(trial) -> None:
+            bar.advance(f"{tuning.settings_text(trial.settings)}: {100 * trial.rmse:.3f} %")
+            if not progress:
+                click.echo(tuning.trial_line(trial), err=True)
+
+        result = tuning.tune(loaded, target / 100, ReferenceCache(cache), renderer=Renderer(device, reuse=False),
+                             method=method, pixels=pixels, most_settings=most_settings, on_trial=on_trial)
+    best = result.best
+    if best is None:
+        raise tuning.unreachable(str(scene), result)
+    settings = {**({"method": method} if method else {}), **best.settings}
+    tuning.write_tuned_yaml(scene, output, settings, list(overrides))
+    click.echo(f"{tuning.settings_text(best.settings)}")
+    click.echo(f"error against exact {100 * best.rmse:.3f} % (target {target:g} %), {best.frame_ms:.0f} ms a frame")
+    click.echo(f"{tuning.default_trial_line(result)}; {len(result.trials)} settings tried in {result.seconds:.0f} s")
+    click.echo(f"wrote {output}")
 
 
 def _check_scene_file(path: Path) -> None:

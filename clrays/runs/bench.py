@@ -48,7 +48,10 @@ from ..scene.model import Scene
 from ..scene.load import load_scene
 from .references import EXACT, ReferenceCache
 
-DEFAULT_SCENES = ("scenes/demo.yaml", "scenes/bunny.yaml", "scenes/behind.yaml", "scenes/sun.yaml")
+DEFAULT_SCENES = ("scenes/demo.yaml", "scenes/bunny.yaml", "scenes/behind.yaml", "scenes/sun.yaml",
+                  # Fine occluders, where volume visibility from the shadow map fails first: a relief
+                  # lattice, slats thinner than a texel, a closed room lit through one window.
+                  "scenes/lattice.yaml", "scenes/grate.yaml", "scenes/room.yaml")
 #: Relative RMSE targets of the headline: the speedup of minmax over raymarch is read at each.
 RMSE_TARGETS = (0.05, 0.01, 0.005)
 #: raymarch's ladder: the first step count (8, not 32: with equiangular steps the bunny and

@@ -41,6 +41,7 @@ from ..scene.model import Scene
 from ..scene.files import FileRefused, read_regular_file
 from ..scene.limits import MAX_RUN_RECORD_BYTES, MAX_SWEEP_POINTS
 from ..scene.load import load_scene
+from .tune import tuned_scene
 from .point import ERROR_COLUMNS, REFERENCE_COLUMNS, REFERENCES, SweepPoint, render_point
 from .progress import Progress, counted
 from .references import ReferenceCache, parse_reference
@@ -308,7 +309,9 @@ def run_sweep(path: str | Path, spec, out_dir: str | Path, *, overrides: Sequenc
 
     def point_scene(point: SweepPoint) -> Scene:
         scene = load_scene(path, fixed + point.overrides)
-        return scene if method is None else replace(scene, render=replace(scene.render, method=method))
+        scene = scene if method is None else replace(scene, render=replace(scene.render, method=method))
+        # render.target_error: the point's tuned settings (searched once per scene, then read from the cache).
+        return tuned_scene(scene, folder=folder / REFERENCES, progress=progress)[0]
 
     renderer = renderer or Renderer()
     references = ReferenceCache(folder / REFERENCES, renderer, progress) if against else None

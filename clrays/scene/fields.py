@@ -335,6 +335,11 @@ RENDER = Section("render", (
     Field("aovs", "list of strings", Render.aovs, shown_default="`[]`",
           notes="[render passes](#render-passes) written beside the image: `in_scatter`, `in_scatter_light<i>`, "
                 "`transmittance`, `surface`, `depth` (also `--aov`); not with translucent objects"),
+    Field("target_error", "number", Render.target_error, 0.0, 100.0, low_open=True, high_open=True,
+          shown_default="none: the settings as written",
+          notes="percent relative RMSE against `exact` (as `clrays bench` measures it): `render`, `sequence` and "
+                "`sweep` first tune the sizes and sampling settings for the cheapest frame within it "
+                "(`clrays tune`; once per scene, kept in .cache/clrays or $CLRAYS_CACHE) and render with them"),
 ))
 
 

@@ -217,6 +217,8 @@ class Render:
     transparency: Transparency | None = None  # translucent surfaces: None takes Transparency()'s defaults
     step_spacing: str = "equiangular"  # raymarch: one of STEP_SPACINGS
     aovs: tuple[str, ...] = ()  # render passes (clrays.passes): none unless asked for
+    # Percent relative RMSE against `exact` to tune the settings for (clrays.runs.tune); None: as written.
+    target_error: float | None = None
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,491 @@
+"""`clrays tune`: the cheapest render settings whose error against `exact` is at most a
+target, and the tuned settings a scene asks for with `render.target_error`.
+
+The error is measured as `clrays bench` measures it (`clrays.runs.bench`): relative
+luminance RMSE against `exact` on a fixed, seeded subset of pixels, depth edges left
+out, the references kept on disk (`clrays.runs.references`), so a scene's `exact` is
+computed once and every setting tried is measured against it. A frame's cost is the
+median of a few warm frames in one session, every stage computed: of the process's CPU
+time on a CPU device (a shared machine's load moves it by a few per cent, the wall time
+by 1–3×), of the wall time on a GPU.
+
+The search is coordinate descent over a ladder per knob (`knobs_for`): from the settings
+as written (sizes left unset derived from the image), while the error is over the target
+it takes the one-rung step, of one knob or of all of them at once, that buys the most
+error per millisecond, and follows it while each rung still pays; once under the target it
+takes the coarser rung that saves the most time while the target holds, until none does.
+An animated scene is measured on its first, middle and last frames: the error is the
+largest of them, the cost the median over all their timed frames.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import statistics
+import time
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Callable
+
+from ..digest import digest
+from ..errors import ClraysError
+from ..image_io import make_folder, write_atomic
+from ..reuse import scene_digest
+from ..scene.costs import with_derived_sizes
+from ..scene.yaml_tree import Node, apply_override, compose, mark_where
+from ..scene.model import Scene
+from ..session import Renderer
+from .bench import error_pixels
+from .progress import Progress
+from .references import EXACT, ReferenceCache
+
+#: Pixels the error is measured on, as `clrays bench` measures it.
+TUNE_PIXELS = 4000
+#: Timed frames per setting, after the frame whose image is measured (which builds the kernels).
+TUNE_REPEATS = 3
+#: The most settings one search measures: a survey tries 7 (each knob, and all at once), so
+#: this bounds a search at about 8 surveys; a 640×360 frame of the bench scenes costs 0.05–1 s, and a
+#: setting 4 of them (bench/RESULTS.md, "Fine occluders and tuning").
+MOST_SETTINGS = 60
+#: Along the chosen knob, a finer rung is taken without a new survey while it cuts the error by this fraction.
+LINE_GAIN = 0.15
+#: A coarser setting must save this fraction of the frame time to be taken: less is the
+#: noise of a median of 3 frames on a shared machine.
+TIME_MARGIN = 0.03
+#: A finer rung must cut the error by at least this fraction to count as progress.
+ERROR_MARGIN = 0.01
+#: Where the ladders stop. The shadow map at 4096: a point light's cube at 8192² holds
+#: 1.5 GiB of depth alone. Slices and γ texels at 4096: a 4096² epipolar texture per light.
+MOST_SHADOW_MAP = 4096
+MOST_SLICES = 4096
+MOST_GAMMA_SAMPLES = 4096
+MOST_LINE_SAMPLES = 8192
+MOST_STEPS = 4096
+LEAST_REFINE_THRESHOLD = 0.0025
+MOST_REFINE_THRESHOLD = 0.08
+MOST_INITIAL_STEP = 16
+#: Frames of an animation that are measured (first, middle, last).
+ANIMATION_FRAMES = 3
+
+
+@dataclass(frozen=True)
+class Knob:
+    """One render setting and its ladder: `step(value, finer)` gives the next rung towards
+    less error (finer) or towards less time, ×2 or ÷2, None past the ladder's end."""
+
+    key: str
+    low: float
+    high: float
+    smaller_is_finer: bool = False  # initial_step, refine_threshold: a smaller value costs more
+
+    def step(self, value, finer: bool):
+        up = finer != self.smaller_is_finer
+        new = value * 2 if up else value / 2
+        if isinstance(value, int):
+            new = int(new)
+        if new < self.low or new > self.high or new == value:
+            return None
+        return new
+
+
+def knobs_for(method: str, sampling: str) -> tuple[Knob, ...]:
+    """The settings `method` reads that trade time for error."""
+    shadow_map = Knob("shadow_map", 64, MOST_SHADOW_MAP)
+    if method == "raymarch":
+        return shadow_map, Knob("steps", 8, MOST_STEPS)
+    if method == "exact":
+        return ()
+    knobs = (shadow_map, Knob("slices", 16, MOST_SLICES), Knob("gamma_samples", 16, MOST_GAMMA_SAMPLES))
+    if method == "minmax" and sampling == "epipolar":
+        knobs += (Knob("line_samples", 16, MOST_LINE_SAMPLES), Knob("initial_step", 1, MOST_INITIAL_STEP, True),
+                  Knob("refine_threshold", LEAST_REFINE_THRESHOLD, MOST_REFINE_THRESHOLD, True))
+    return knobs
+
+
+@dataclass
+class Trial:
+    """One setting measured: its values, the largest error over the frames measured
+    (relative RMSE, a fraction) and the median frame time over every timed frame."""
+
+    settings: dict
+    rmse: float
+    frame_ms: float
+    failed: str = ""  # why the setting did not render (its error and times are then inf)
+    #: What the search compares: the process's CPU time per frame on a CPU device (every
+    #: OpenCL thread's; other processes on a shared machine move it by a few per cent, the
+    #: wall time by 1-3x: bench/RESULTS.md), the wall time on a GPU. Median, as frame_ms.
+    cost_ms: float = math.nan
+
+
+@dataclass
+class Tuning:
+    """A search's outcome: `best` the cheapest trial at or under `target` (None: not
+    reached), `closest` the lowest error found, and every trial in order."""
+
+    target: float
+    method: str
+    trials: list[Trial] = field(default_factory=list)
+    seconds: float = 0.0
+    default: Trial | None = None
+    #: (best, default) frame ms timed again in turns at the end, so that a change of the
+    #: machine's load during the search does not favour either (None: no best).
+    in_turns: tuple[float, float] | None = None
+
+    @property
+    def best(self) -> Trial | None:
+        good = [trial for trial in self.trials if trial.rmse <= self.target]
+        return min(good, key=lambda trial: trial.cost_ms) if good else None
+
+    @property
+    def closest(self) -> Trial:
+        return min(self.trials, key=lambda trial: trial.rmse)
+
+
+def settings_text(settings: dict) -> str:
+    return " ".join(f"{key}={value:g}" if isinstance(value, float) else f"{key}={value}"
+                    for key, value in settings.items())
+
+
+def measured_frames(scene: Scene) -> list[Scene]:
+    """The still scenes the error is measured on: the scene itself, or for an animation
+    its first, middle and last frames."""
+    if scene.animation is None:
+        return [scene]
+    frames = scene.animation.frames
+    chosen = sorted({frames[0], frames[len(frames) // 2], frames[-1]})[:ANIMATION_FRAMES]
+    return [scene.animation.scene_at(scene, frame) for frame in chosen]
+
+
+def with_settings(scene: Scene, settings: dict) -> Scene:
+    return replace(scene, render=replace(scene.render, target_error=None, **settings))
+
+
+class Search:
+    """Measures settings of one scene: error against `exact` on the pixel subset of each
+    measured frame, and frame time; each setting at most once."""
+
+    def __init__(self, scene: Scene, method: str, references: ReferenceCache, renderer: Renderer,
+                 pixels: int = TUNE_PIXELS, repeats: int = TUNE_REPEATS, on_trial: Callable[[Trial], None] = None):
+        self.frames = [replace(frame, render=replace(frame.render, method=method)) for frame in measured_frames(scene)]
+        self.method = method
+        self.references = references
+        self.renderer = renderer
+        image = scene.image
+        self.pixels = error_pixels(image.width, image.height, pixels)
+        self.repeats = repeats
+        self.on_trial = on_trial or (lambda trial: None)
+        self.trials: dict[tuple, Trial] = {}
+        import pyopencl as cl
+
+        self.on_cpu = bool(renderer.device.device.type & cl.device_type.CPU)
+
+    def measure(self, settings: dict) -> Trial:
+        key = tuple(sorted(settings.items()))
+        if key in self.trials:
+            return self.trials[key]
+        worst, times = 0.0, []
+        for frame in self.frames:
+            variant = with_settings(frame, settings)
+            try:
+                image = self.renderer.render(variant, reuse=False).image  # also builds the kernels
+            except ClraysError as exc:  # e.g. past the device's memory: a setting the search cannot take
+                trial = self.trials[key] = Trial(dict(settings), math.inf, math.inf, str(exc), math.inf)
+                self.on_trial(trial)
+                return trial
+            error = self.references.error(frame, EXACT, image, self.pixels)
+            if not error.pixels:
+                raise ClraysError(f"{frame.source or 'scene'}: at {frame.image.width}x{frame.image.height} no pixel "
+                                  f"is left to compare against exact (each is dark or on a depth edge); tune it "
+                                  f"at a larger image")
+            worst = max(worst, error.rmse)
+            for _ in range(self.repeats):
+                times.append(self._timed(variant))
+        walls, costs = zip(*times)
+        trial = Trial(dict(settings), worst, statistics.median(walls), cost_ms=statistics.median(costs))
+        self.trials[key] = trial
+        self.on_trial(trial)
+        return trial
+
+    def in_turns(self, first: dict, second: dict, turns: int = 2) -> tuple[float, float]:
+        """Median frame ms of two settings timed in turns: each turn a warm-up frame (a
+        change of sizes rebuilds kernels and buffers) and `repeats` timed frames of one,
+        then of the other."""
+        times: tuple[list, list] = ([], [])
+        for _ in range(turns):
+            for settings, kept in zip((first, second), times):
+                for frame in self.frames:
+                    variant = with_settings(frame, settings)
+                    self.renderer.render(variant, reuse=False)
+                    kept.extend(self._timed(variant)[0] for _ in range(self.repeats))
+        return statistics.median(times[0]), statistics.median(times[1])
+
+    def _timed(self, scene: Scene) -> tuple[float, float]:
+        """(wall ms, cost ms) of one frame, every stage computed (Trial.cost_ms)."""
+        start, start_cpu = time.perf_counter(), time.process_time()
+        self.renderer.render(scene, reuse=False)
+        wall = (time.perf_counter() - start) * 1e3
+        return wall, (time.process_time() - start_cpu) * 1e3 if self.on_cpu else wall
+
+
+def start_settings(scene: Scene, method: str) -> dict:
+    """The settings as the scene renders them: sizes it leaves unset derived from the image."""
+    render = with_derived_sizes(replace(scene, render=replace(scene.render, method=method))).render
+    return {knob.key: getattr(render, knob.key) for knob in knobs_for(method, render.sampling)}
+
+
+def tune(scene: Scene, target: float, references: ReferenceCache, renderer: Renderer | None = None,
+         method: str | None = None, pixels: int = TUNE_PIXELS, repeats: int = TUNE_REPEATS,
+         most_settings: int = MOST_SETTINGS, on_trial: Callable[[Trial], None] = None) -> Tuning:
+    """Search the settings of `scene` for the cheapest frame whose relative RMSE against
+    `exact` (a fraction; `target` too) is at most `target` (module docstring). `method`:
+    the method to tune (default: the scene's). `on_trial(trial)` after each setting."""
+    method = method or scene.render.method
+    if method == "exact":
+        raise ClraysError(f"{scene.source or 'scene'}: render.method exact is the reference itself: it has no "
+                          f"settings to tune (tune minmax, raymarch or volume_moments)")
+    renderer = renderer or Renderer(reuse=False)
+    search = Search(scene, method, references, renderer, pixels, repeats, on_trial)
+    knobs = knobs_for(method, scene.render.sampling)
+    started = time.perf_counter()
+    current = search.measure(start_settings(scene, method))
+    tuning = Tuning(target, method, default=current)
+
+    def moved(settings: dict, keys: tuple[str, ...], finer: bool) -> dict | None:
+        """`settings` with each knob of `keys` one rung on (None where none can move)."""
+        changes = {knob.key: knob.step(settings[knob.key], finer) for knob in knobs if knob.key in keys}
+        changes = {key: value for key, value in changes.items() if value is not None}
+        return {**settings, **changes} if changes else None
+
+    # One knob at a time, and every knob at once: where the error is the largest of several
+    # frames, or one size caps what another buys, no single knob may move it.
+    moves = [(knob.key,) for knob in knobs] + ([tuple(knob.key for knob in knobs)] if len(knobs) > 1 else [])
+
+    def neighbours(trial: Trial, finer: bool) -> list[tuple[tuple[str, ...], Trial]]:
+        found = []
+        for keys in moves:
+            settings = moved(trial.settings, keys, finer)
+            if settings is not None and len(search.trials) < most_settings:
+                found.append((keys, search.measure(settings)))
+        return found
+
+    # Over the target: the finer rung that buys the most error per millisecond (a third of
+    # the settings kept for the way back, where a rung taken overshoots).
+    growing = most_settings - most_settings // 3
+    while current.rmse > target and len(search.trials) < growing:
+        better = [(keys, trial) for keys, trial in neighbours(current, True)
+                  if trial.rmse < current.rmse * (1 - ERROR_MARGIN)]
+        if not better:
+            break
+        reached = [trial for _, trial in better if trial.rmse <= target]
+        if reached:  # the cheapest step that reaches it
+            current = min(reached, key=lambda trial: trial.cost_ms)
+            break
+        keys, current = max(better, key=lambda move: (current.rmse - move[1].rmse)
+                            / max(move[1].cost_ms - current.cost_ms, 0.01 * current.cost_ms))
+        # Further along the same move while each rung still cuts the error by LINE_GAIN: a
+        # rung costs one setting, a survey of every move seven.
+        while current.rmse > target and len(search.trials) < growing:
+            settings = moved(current.settings, keys, True)
+            if settings is None:
+                break
+            trial = search.measure(settings)
+            if trial.rmse > current.rmse * (1 - LINE_GAIN):
+                break
+            current = trial
+    # Under it: the coarser rung that saves the most time while the target holds.
+    while current.rmse <= target and len(search.trials) < most_settings:
+        cheaper = [trial for _, trial in neighbours(current, False)
+                   if trial.rmse <= target and trial.cost_ms < current.cost_ms * (1 - TIME_MARGIN)]
+        if not cheaper:
+            break
+        current = min(cheaper, key=lambda trial: trial.cost_ms)
+    tuning.trials = list(search.trials.values())
+    if tuning.best is not None:
+        tuning.in_turns = search.in_turns(tuning.best.settings, tuning.default.settings)
+    tuning.seconds = time.perf_counter() - started
+    return tuning
+
+
+def unreachable(source: str, tuning: Tuning) -> ClraysError:
+    closest = tuning.closest
+    return ClraysError(f"{source}: target error {100 * tuning.target:g} %: not reached; the best error found is "
+                       f"{100 * closest.rmse:.3f} % ({settings_text(closest.settings)}, {len(tuning.trials)} "
+                       f"settings tried)")
+
+
+# --------------------------------------------------------------------------- render.target_error
+
+
+def cache_folder() -> Path:
+    """Where the exact references and tuned settings are kept: $CLRAYS_CACHE, else
+    .cache/clrays (as `clrays bench --cache`)."""
+    return Path(os.environ.get("CLRAYS_CACHE") or ".cache/clrays")
+
+
+@dataclass(frozen=True)
+class Tuned:
+    """Settings a `render.target_error` scene renders with, and what the tuning measured."""
+
+    settings: dict
+    rmse: float
+    frame_ms: float
+    target: float
+    cached: bool  # read from the cache rather than searched now
+
+    def line(self) -> str:
+        return (f"tuned for {100 * self.target:g} %: {settings_text(self.settings)}; error against exact "
+                f"{100 * self.rmse:.3f} %, {self.frame_ms:.0f} ms a frame when tuned"
+                + (" (cached)" if self.cached else ""))
+
+
+def tuned_scene(scene: Scene, method: str | None = None, folder: Path | None = None,
+                renderer: Renderer | None = None, progress: bool = False,
+                log: Callable[[str], None] | None = None) -> tuple[Scene, Tuned | None]:
+    """`scene` with the settings its `render.target_error` asks for (unchanged, and None,
+    where it sets none). Tuned once per scene: the result is kept in `folder` (default
+    `cache_folder()`) as tuned-<digest>.json, the digest of the scene and the method, so
+    every frame of a sequence and every later run reads it; a file that does not parse
+    is tuned again. An unreachable target is a ClraysError."""
+    percent = scene.render.target_error
+    if percent is None:
+        return scene, None
+    method = method or scene.render.method
+    target = percent / 100
+    folder = folder or cache_folder()
+    key = digest("tuned", scene_digest(replace(scene, source=None)), scene.animation, method).hex()[:24]
+    path = folder / f"tuned-{key}.json"
+    tuned = _read_tuned(path, target)
+    if tuned is None:
+        with Progress(progress, MOST_SETTINGS, "setting", "tune") as bar:
+            def on_trial(trial: Trial) -> None:
+                bar.advance(f"{settings_text(trial.settings)}: {100 * trial.rmse:.3f} %")
+                if log is not None and not progress:
+                    log(trial_line(trial))
+
+            timing = Renderer(renderer.device if renderer is not None else None, reuse=False)  # every stage computed
+            tuning = tune(scene, target, ReferenceCache(folder, renderer, progress), renderer=timing, method=method,
+                          on_trial=on_trial)
+        best = tuning.best
+        if best is None:
+            raise unreachable(f"{scene.source or 'scene'}: render.target_error", tuning)
+        tuned = Tuned(best.settings, best.rmse, best.frame_ms, target, False)
+        make_folder(folder, "the reference folder")
+        text = json.dumps({**asdict(tuned), "cached": None}, indent=1)
+        write_atomic(path, lambda temporary: Path(temporary).write_text(text, encoding="utf-8"))
+    return with_settings(scene, tuned.settings), tuned
+
+
+def _read_tuned(path: Path, target: float) -> Tuned | None:
+    """The kept tuning at `path`, or None where there is none or it does not parse."""
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+        settings = data["settings"]
+        if not isinstance(settings, dict) or not all(isinstance(v, (int, float)) for v in settings.values()):
+            return None
+        return Tuned(settings, float(data["rmse"]), float(data["frame_ms"]), target, True)
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def trial_line(trial: Trial) -> str:
+    if trial.failed:
+        return f"clrays: tune: {settings_text(trial.settings)}: not rendered: {trial.failed}"
+    cpu = f" (CPU {trial.cost_ms:.0f} ms)" if trial.cost_ms != trial.frame_ms else ""
+    return f"clrays: tune: {settings_text(trial.settings)}: {100 * trial.rmse:.3f} %, {trial.frame_ms:.0f} ms{cpu}"
+
+
+# --------------------------------------------------------------------------- writing the tuned scene
+
+
+def write_tuned_yaml(source: Path, output: Path, settings: dict, overrides=()) -> None:
+    """Write the scene file `source` to `output` with `settings` in its `render` mapping
+    and no `target_error`; every other key as written. The top-level `render` key and its
+    value are replaced in the text (or appended where there is none), so the rest of the
+    file, comments included, stays as it is, unless `overrides` (`--set`) change it or
+    `output` lies in another folder: then the file is written out again (comments at its
+    top kept), with its overrides applied and its relative file paths (meshes, textures,
+    depth maps) made relative to `output`'s folder."""
+    import yaml
+
+    text = source.read_text(encoding="utf-8")
+    moved = output.resolve().parent != source.resolve().parent
+    if overrides or moved:
+        root = compose(text, "", mark_where(str(source)), str(source))
+        for override in overrides:
+            apply_override(root, override)
+        data = _plain(root)
+        if moved:
+            _rebase_paths(data, source.parent, output.parent)
+        header = "".join(line for line in text.splitlines(keepends=True)[:_leading_comments(text)])
+        text = header + yaml.safe_dump(data, default_flow_style=None, sort_keys=False, width=100, allow_unicode=True)
+    root = yaml.compose(text, Loader=yaml.SafeLoader)
+    render, span = {}, None
+    for key, value in root.value:
+        if key.value == "render":
+            span = (key.start_mark.index, value.end_mark.index)
+            loaded = yaml.safe_load(text).get("render")
+            render = dict(loaded) if isinstance(loaded, dict) else {}
+    render.pop("target_error", None)
+    render.update(settings)
+    block = yaml.safe_dump({"render": render}, default_flow_style=None, sort_keys=False, width=1000)
+    if span is None:
+        new = text + ("" if text.endswith("\n") or not text else "\n") + block
+    else:
+        start, end = span
+        if not text[start:end].endswith("\n"):  # a one-line value: its line's comment spoke of the old one
+            line_end = text.find("\n", end)
+            rest = text[end:] if line_end < 0 else text[end:line_end]
+            if not rest.strip() or rest.strip().startswith("#"):
+                end = len(text) if line_end < 0 else line_end + 1
+        new = text[:start] + block + text[end:]
+    write_atomic(output, lambda temporary: Path(temporary).write_text(new, encoding="utf-8"))
+
+
+def _plain(node: Node):
+    """A composed scene tree as plain lists, dicts and scalars."""
+    if isinstance(node.value, dict):
+        return {key: _plain(value) for key, value in node.value.items()}
+    if isinstance(node.value, list):
+        return [_plain(item) for item in node.value]
+    return node.value
+
+
+def _leading_comments(text: str) -> int:
+    """How many lines at the top of `text` are comments."""
+    count = 0
+    for line in text.splitlines():
+        if not line.startswith("#"):
+            break
+        count += 1
+    return count
+
+
+def _rebase_paths(data: dict, source_dir: Path, output_dir: Path) -> None:
+    """Relative file paths of the scene (light textures, meshes, relief images) made
+    relative to `output_dir` instead of `source_dir`."""
+    def rebased(value):
+        if isinstance(value, str) and value.strip() and not Path(value).is_absolute():
+            return os.path.relpath(source_dir.resolve() / value, output_dir.resolve())
+        return value
+
+    for light in data.get("lights") or []:
+        if isinstance(light, dict) and "texture" in light:
+            texture = light["texture"]
+            light["texture"] = [rebased(item) for item in texture] if isinstance(texture, list) else rebased(texture)
+    for item in data.get("objects") or []:
+        if isinstance(item, dict):
+            for key in ("file", "depth_map", "albedo_map"):
+                if key in item:
+                    item[key] = rebased(item[key])
+
+
+def default_trial_line(tuning: Tuning) -> str:
+    """The start of the search (the settings as written or derived) beside the result, their
+    frames timed in turns."""
+    default = tuning.default
+    text = f"as written: {100 * default.rmse:.3f} %"
+    if tuning.in_turns is not None:
+        best_ms, default_ms = tuning.in_turns
+        text += f", {default_ms:.0f} ms a frame against {best_ms:.0f} ms tuned (timed in turns)"
+    return text
