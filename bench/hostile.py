@@ -27,7 +27,6 @@ import struct
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 import zlib
 from dataclasses import dataclass, field
@@ -43,6 +42,7 @@ import numpy as np  # noqa: E402
 
 import test_hostile as scene_inputs  # noqa: E402  (tests/scene/)
 from test_confine import FIELDS, outside_names, write_asset  # noqa: E402
+from test_distributed import Listener  # noqa: E402  (tests/runs/)
 from test_hostile_outputs import animated  # noqa: E402  (tests/runs/)
 from test_sequence import write_scene  # noqa: E402
 
@@ -208,33 +208,6 @@ def nothing_written(*names: str) -> Callable[[Path, Result], list[str]]:
 
 
 # --------------------------------------------------------------------------- servers for --scheduler
-
-
-class Listener:
-    """A TCP listener on 127.0.0.1 that accepts and then stays silent, or sends `greeting`
-    and stays open."""
-
-    def __init__(self, greeting: bytes | None = None):
-        self.socket = socket.create_server(("127.0.0.1", 0))
-        self.address = f"tcp://127.0.0.1:{self.socket.getsockname()[1]}"
-        self.greeting, self.connections = greeting, []
-        threading.Thread(target=self._serve, daemon=True).start()
-
-    def _serve(self) -> None:
-        while True:
-            try:
-                connection, _ = self.socket.accept()
-            except OSError:
-                return
-            self.connections.append(connection)
-            if self.greeting is not None:
-                with contextlib.suppress(OSError):
-                    connection.sendall(self.greeting)
-
-    def close(self) -> None:
-        for connection in self.connections:
-            connection.close()
-        self.socket.close()
 
 
 def closed_port() -> str:

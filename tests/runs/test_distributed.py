@@ -168,7 +168,7 @@ def test_a_plain_render_and_sequence_never_import_dask_or_the_video_encoder(tmp_
 
 # --------------------------------------------------------------------------- connections that fail
 
-class _Server:
+class Listener:
     """A TCP listener on 127.0.0.1 that accepts and then stays silent, or sends `greeting`."""
 
     def __init__(self, greeting: bytes | None = None):
@@ -227,10 +227,10 @@ def _in_a_fresh_process(runs: list[list[str]], timeout: float) -> list[tuple[int
 
 
 def test_a_scheduler_that_is_not_there_or_not_dask_is_one_line_within_seconds(tmp_path):
-    silent = _Server()
+    silent = Listener()
     # Garbage whose first 8 bytes, read as dask's frame length, claim 3.07 EiB (a MemoryError before).
-    garbage = _Server(struct.pack("<Q", int(3.07 * 2**60)) + b"\xff" * 4096)
-    short_garbage = _Server(struct.pack("<Q", 16) + b"\xff" * 16)  # a length dask would read, then not msgpack
+    garbage = Listener(struct.pack("<Q", int(3.07 * 2**60)) + b"\xff" * 4096)
+    short_garbage = Listener(struct.pack("<Q", 16) + b"\xff" * 16)  # a length dask would read, then not msgpack
     cases = [
         ("garbage", r"--scheduler garbage: expected a dask scheduler address tcp://HOST:PORT"),
         ("tcp://", r"--scheduler tcp://: expected a dask scheduler address tcp://HOST:PORT"),
