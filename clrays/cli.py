@@ -691,8 +691,10 @@ error counts). A scene may instead carry render.target_error: `render`, `sequenc
 @click.argument("scene", type=click.Path(path_type=Path))
 @option("--target-error", "target", type=float, metavar="PCT", callback=_target_percent, group=SCENE,
         help="Relative RMSE against exact, in percent (default: the scene's render.target_error).")
+@confine_option()
 @method_option()
 @overrides_option("Override a scene field (repeatable), e.g. --set image.width=320.")
+@camera_option()
 @option("--pixels", type=click.IntRange(16), default=4000, show_default=True, group=RUN,
         help="Pixels (fixed random subset) on which the error against exact is measured.")
 @option("--most-settings", type=click.IntRange(1, 1000), default=60, show_default=True, metavar="N", group=RUN,
@@ -704,8 +706,8 @@ error counts). A scene may instead carry render.target_error: `render`, `sequenc
 @progress_option()
 @device_option()
 @click.pass_context
-def tune(context, scene: Path, target, method, overrides, pixels, most_settings, output: Path, cache, progress,
-         device) -> None:
+def tune(context, scene: Path, target, method, overrides, camera, pixels, most_settings, output: Path, cache,
+         progress, device) -> None:
     """Find the cheapest render settings of SCENE whose error against exact is at most PCT."""
     from .runs import tune as tuning
     from .runs.progress import Progress
@@ -713,6 +715,7 @@ def tune(context, scene: Path, target, method, overrides, pixels, most_settings,
 
     _check_scene_file(scene)
     check_folder(output)
+    overrides = with_camera(overrides, camera)
     loaded = load_scene(scene, overrides)
     if target is None:
         if loaded.render.target_error is None:

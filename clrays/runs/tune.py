@@ -32,7 +32,9 @@ from ..digest import digest
 from ..errors import ClraysError
 from ..image_io import make_folder, write_atomic
 from ..reuse import scene_digest
+from ..scene import gltf as gltf_files
 from ..scene.costs import with_derived_sizes
+from ..scene.fields import FORMAT_VERSION
 from ..scene.yaml_tree import Node, apply_override, compose, mark_where
 from ..scene.model import Scene
 from ..session import Renderer
@@ -405,10 +407,16 @@ def write_tuned_yaml(source: Path, output: Path, settings: dict, overrides=()) -
     file, comments included, stays as it is, unless `overrides` (`--set`) change it or
     `output` lies in another folder: then the file is written out again (comments at its
     top kept), with its overrides applied and its relative file paths (meshes, textures,
-    depth maps) made relative to `output`'s folder."""
+    depth maps) made relative to `output`'s folder. A glTF `source` is written as the YAML
+    scene that imports it (`gltf: {file: ...}`), with the overrides."""
     import yaml
 
-    text = source.read_text(encoding="utf-8")
+    if source.suffix.lower() in gltf_files.SUFFIXES:  # binary or JSON: the YAML scene that brings it in
+        width, height = gltf_files.DEFAULT_IMAGE
+        text = (f"# {source.name} with tuned render settings (clrays tune)\nversion: {FORMAT_VERSION}\n"
+                f"image: {{width: {width}, height: {height}}}\ngltf: {{file: {json.dumps(source.name)}}}\n")
+    else:
+        text = source.read_text(encoding="utf-8")
     moved = output.resolve().parent != source.resolve().parent
     if overrides or moved:
         root = compose(text, "", mark_where(str(source)), str(source))
@@ -462,7 +470,7 @@ def _leading_comments(text: str) -> int:
 
 
 def _rebase_paths(data: dict, source_dir: Path, output_dir: Path) -> None:
-    """Relative file paths of the scene (light textures, meshes, relief images) made
+    """Relative file paths of the scene (light textures, meshes, relief images, a glTF file) made
     relative to `output_dir` instead of `source_dir`."""
     def rebased(value):
         if isinstance(value, str) and value.strip() and not Path(value).is_absolute():
@@ -478,6 +486,8 @@ def _rebase_paths(data: dict, source_dir: Path, output_dir: Path) -> None:
             for key in ("file", "depth_map", "albedo_map"):
                 if key in item:
                     item[key] = rebased(item[key])
+    if isinstance(data.get("gltf"), dict) and "file" in data["gltf"]:
+        data["gltf"]["file"] = rebased(data["gltf"]["file"])
 
 
 def default_trial_line(tuning: Tuning) -> str:

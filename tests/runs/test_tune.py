@@ -118,6 +118,24 @@ def test_a_tuned_scene_written_elsewhere_keeps_its_files_and_overrides(tmp_path,
     assert (tuned.image.width, tuned.image.height) == (32, 18)
 
 
+def test_a_tuned_gltf_scene_is_the_yaml_that_imports_it(tmp_path, cache):
+    """A .glb is no text to edit: the tuned scene is a YAML file that brings it in by
+    `gltf.file` (from the output's folder), with the overrides and the camera chosen."""
+    out = tmp_path / "tuned" / "colonnade.yaml"
+    out.parent.mkdir()
+    glb = Path(__file__).resolve().parents[2] / "scenes" / "colonnade.glb"
+    code, text = run("tune", glb, "--target-error", 50, "--set", "image.width=32", "--set", "image.height=18",
+                     "--set", "medium.sigma_s=0.06", "--camera", "view", "--pixels", 200, "--most-settings", 3,
+                     "-o", out, "--no-progress", env=cache)
+    assert code == 0, text
+    written = yaml.safe_load(out.read_text())
+    assert set(written["gltf"]) == {"file", "camera"} and written["gltf"]["camera"] == "view"
+    assert (out.parent / written["gltf"]["file"]).resolve() == glb
+    tuned = load_scene(out)
+    assert (tuned.image.width, tuned.image.height) == (32, 18) and tuned.medium.sigma_s[0] == 0.06
+    assert tuned.render.shadow_map == written["render"]["shadow_map"]
+
+
 @pytest.mark.parametrize("budget", [pytest.param([], marks=pytest.mark.slow), ["--most-settings", 5]])
 def test_an_unreachable_target_is_one_line_naming_the_best_error(scene_file, tmp_path, cache, budget):
     out = tmp_path / "never.yaml"
