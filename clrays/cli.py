@@ -568,6 +568,7 @@ reused. One line per render (its time, the stages reused); an edit that fails pr
 one-line error and the last image stays. Ctrl-C ends it.
 """)
 @click.argument("scene", type=click.Path(path_type=Path))
+@confine_option()
 @option("-o", "--output", required=True, type=click.Path(path_type=Path), group=OUTPUT,
         help="Output image: .png, .exr or .npy, rewritten atomically after each save.")
 @option("--also", multiple=True, type=click.Path(path_type=Path), metavar="FILE", group=SCENE,

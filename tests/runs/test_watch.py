@@ -130,3 +130,25 @@ def test_ctrl_c_ends_it_in_one_line(tmp_path):
         process.kill()
     assert process.returncode == 130
     assert out == "" and err.strip().splitlines() == ["clrays: interrupted: watch stopped after 1 render(s), 0 error(s)"]
+
+
+def test_confine_refuses_a_file_outside_the_scenes_folder(tmp_path):
+    """`watch --confine`, as every command that loads a scene: a mesh named outside the
+    scene's folder is the edit's one error line, and the watch waits for the next save."""
+    folder = tmp_path / "scenes"
+    folder.mkdir()
+    (tmp_path / "m.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    scene = folder / "scene.yaml"
+    scene.write_text(SCENE.replace("objects:\n", "objects:\n  - {type: mesh, file: ../m.obj}\n"))
+    process = subprocess.Popen([sys.executable, "-c", "from clrays.cli import main; main()", "watch", str(scene),
+                                "-o", str(tmp_path / "out.png"), "--confine"], cwd=REPO, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True, env={**os.environ, "PYTHONPATH": str(REPO)})
+    try:
+        assert process.stdout.readline().startswith("watching ")
+        error = process.stderr.readline()
+        process.send_signal(signal.SIGINT)
+        process.communicate(timeout=30)
+    finally:
+        process.kill()
+    assert error.startswith("clrays: error: ") and "objects.0.file" in error and "outside the scene's folder" in error
+    assert not (tmp_path / "out.png").exists()

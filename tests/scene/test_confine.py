@@ -144,7 +144,8 @@ def test_clrays_confine_values(monkeypatch, value, on):
 @pytest.mark.parametrize("command", [["render", "-o", "{out}/a.png"], ["sequence", "-o", "{out}/f_{{}}.png"],
                                      ["sweep", "--set", "render.slices=32,64", "-o", "{out}/sweep"],
                                      ["compare", "-o", "{out}/compare"], ["relief-to-mesh", "-o", "{out}/m.ply"],
-                                     ["bench", "--out", "{out}/bench"]])
+                                     ["bench", "--out", "{out}/bench"],
+                                     ["tune", "--target-error", "1", "-o", "{out}/tuned.yaml"]])
 def test_every_command_that_loads_a_scene_takes_confine(layout, tmp_path, command):
     scenes, secret = layout
     field = "objects.0.depth_map"  # a relief, which relief-to-mesh needs too
