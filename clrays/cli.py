@@ -341,6 +341,7 @@ def main() -> None:
       clrays sequence scenes/orbit.yaml -o 'out/orbit/frame_{:04d}.png'
       clrays watch scenes/demo.yaml -o out/demo.png
       clrays sweep scenes/demo.yaml --set medium.sigma_s=0.02,0.05 -o out/sweep
+      clrays tune scenes/grate.yaml --target-error 0.5 -o out/grate_tuned.yaml
       clrays bench scenes/demo.yaml -r 640x360
       clrays info
     """
