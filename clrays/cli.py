@@ -28,8 +28,9 @@ from .reference.exact import estimate_seconds
 from .runs import bench as bench_run
 from .runs.progress import counted
 from .runs.references import parse_reference
-from .runs.sequence import (check_pattern, check_video_path, parse_frames, render_sequence, scene_frames,
-                            write_video)
+from .runs.point import REFERENCES
+from .runs.sequence import (check_pattern, check_video_path, lock_folder, parse_frames, render_sequence,
+                            scene_frames, write_video)
 from .runs.video import DEFAULT_CRF, VIDEO_OPTIONS, video_encoder_options
 from .runs.sweep import axes_from, format_table, run_sweep
 from .scene import files as scene_files
@@ -400,14 +401,15 @@ def render(context, scene: Path, method, overrides, camera, frame, output: Path,
             click.echo(f"  {tuned.line()}")
 
 
-def _tuned(scene, method: str | None, device: str | None, progress: bool):
+def _tuned(scene, method: str | None, device: str | None, progress: bool, folder: Path | None = None):
     """(scene, Tuned or None): with the settings its `render.target_error` asks for
-    (clrays.runs.tune), tuned once per scene; a line per setting tried when no bar shows."""
+    (clrays.runs.tune), tuned once per scene and kept in `folder` (default: the cache); a
+    line per setting tried when no bar shows."""
     if scene.render.target_error is None:
         return scene, None
     from .runs.tune import tuned_scene
 
-    return tuned_scene(scene, method, renderer=Renderer(device), progress=progress,
+    return tuned_scene(scene, method, folder=folder, renderer=Renderer(device), progress=progress,
                        log=lambda line: click.echo(line, err=True))
 
 
@@ -526,7 +528,9 @@ def sequence(context, scene, frames, method, overrides, camera, pattern, video, 
         overrides = with_aovs(with_camera(overrides, camera), aovs)
         loaded = load_scene(scene, overrides)
         chosen = parse_frames(frames, scene_frames(loaded))
-        loaded, tuned = _tuned(loaded, method, device, progress)
+        # Kept beside the frames: their digests hold the tuned settings, so a run resumed from
+        # anywhere must find the same ones, or it would take every frame for another scene's.
+        loaded, tuned = _tuned(loaded, method, device, progress, lock_folder(str(pattern)) / REFERENCES)
         if stats and tuned is not None:
             click.echo(tuned.line())
         if stats or verbose:

@@ -350,9 +350,9 @@ def tuned_scene(scene: Scene, method: str | None = None, folder: Path | None = N
     every frame of a sequence and every later run reads it; a file that does not parse
     is tuned again. An unreachable target is a ClraysError."""
     percent = scene.render.target_error
-    if percent is None:
-        return scene, None
     method = method or scene.render.method
+    if percent is None or method == "exact":  # exact is the reference the target is measured against
+        return scene, None
     target = percent / 100
     folder = folder or cache_folder()
     key = digest("tuned", scene_digest(replace(scene, source=None)), scene.animation, method).hex()[:24]

@@ -36,14 +36,17 @@ from ..errors import SceneError
 from . import geometry as primitives
 from .animation import Animation
 from .files import FileRefused, read_regular_file
-from .fields import MAX_POWER
+from .fields import ANIMATION, MAX_POWER
 from .limits import MAX_COORDINATE, MAX_GLTF_BYTES, MAX_GLTF_NODES, MAX_LIGHTS, MAX_OBJECTS, MAX_TRIANGLES
 from .model import Camera, DirectionalLight, Geometry, Light, LightTexture, PointLight, Scene, SpotLight
 from .textures import MAX_TEXTURE_SIDE, srgb_to_linear
 from .transforms import quat_to_matrix, slerp, transform_normals, transform_points
 
 SUFFIXES = (".glb", ".gltf")
+#: The last frame an animation may have: a YAML scene's bound (`animation.frames`).
+MAX_ANIMATION_FRAME = int(ANIMATION["frames"].high)
 FLOAT32_MAX = float(np.finfo(np.float32).max)
+FLOAT64_MAX = float(np.finfo(np.float64).max)
 GLB_MAGIC = b"glTF"
 _CHUNK_JSON, _CHUNK_BIN = 0x4E4F534A, 0x004E4942
 #: Extensions a file may require: the only one clrays reads. Any other required one is refused by name.
@@ -71,6 +74,14 @@ DEFAULT_IMAGE = (640, 360)
 #: at the distance where their sphere fills this vertical field of view.
 DEFAULT_VIEW_DIRECTION = np.array([0.0, 0.5, 1.0]) / math.sqrt(1.25)
 DEFAULT_FOV_DEG = 50.0
+
+
+def _finite_number(value: Any) -> bool:
+    """A JSON number that is finite as a float64: an integer literal of 400 digits is a
+    Python int that `math.isfinite` cannot take (OverflowError)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return False
+    return abs(value) <= FLOAT64_MAX if isinstance(value, int) else math.isfinite(value)
 
 
 # --------------------------------------------------------------------------- the parts read
@@ -159,6 +170,7 @@ class _Reader:
         self._buffers: dict[int, bytes] = {}
         self._items: dict[str, list] = {}
         self._buffer_bytes = 0
+        self.image_means: dict[int, np.ndarray] = {}  # images.i → its linear mean colour, decoded once
 
     def fail(self, path: str, expected: str, got: Any) -> NoReturn:
         raise SceneError(f"{self.file}: {path}: expected {expected}, got {_show(got)}")
@@ -173,7 +185,7 @@ class _Reader:
             return default
         value = obj[key]
         ok = {"int": lambda v: isinstance(v, int) and not isinstance(v, bool),
-              "number": lambda v: isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v),
+              "number": _finite_number,
               "string": lambda v: isinstance(v, str), "list": lambda v: isinstance(v, list),
               "dict": lambda v: isinstance(v, dict), "bool": lambda v: isinstance(v, bool)}[kind](value)
         names = {"int": "an integer", "number": "a finite number", "string": "a string", "list": "a list",
@@ -190,8 +202,7 @@ class _Reader:
         values = self.get(obj, key, path, "list", default)
         if values is default:
             return np.asarray(default, dtype=np.float64)
-        if len(values) != count or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
-                                           and math.isfinite(v) for v in values):
+        if len(values) != count or not all(_finite_number(v) for v in values):
             self.fail(where, f"a list of {count} finite numbers", values)
         array = np.asarray(values, dtype=np.float64)
         if (lo is not None and array.min() < lo) or (hi is not None and array.max() > hi):
@@ -558,6 +569,15 @@ def _mean_texture(reader: _Reader, texture_info: dict, path: str) -> np.ndarray:
     if "source" not in texture:
         return np.ones(3)  # a texture of an extension's image format: not read
     image_index = reader.index(texture, "source", f"textures.{texture_index}", "images")
+    if image_index not in reader.image_means:  # materials sharing an image decode it once
+        reader.image_means[image_index] = _mean_image(reader, image_index)
+    return reader.image_means[image_index]
+
+
+def _mean_image(reader: _Reader, image_index: int) -> np.ndarray:
+    """The linear mean colour of images[image_index] (PNG or JPEG, sRGB-encoded), its size
+    checked before it is decoded, its 8-bit values counted rather than converted: a 4096²
+    image costs its 48 MiB of bytes, not float copies of them."""
     where = f"images.{image_index}"
     image = reader.items("images")[image_index]
     if "uri" in image:
@@ -581,10 +601,14 @@ def _mean_texture(reader: _Reader, texture_info: dict, path: str) -> np.ndarray:
             if max(opened.size) > MAX_TEXTURE_SIDE:  # before decoding: a small file may hold a huge image
                 reader.fail(where, f"an image with sides of at most {MAX_TEXTURE_SIDE} pixels",
                             f"{opened.size[0]}×{opened.size[1]}")
-            encoded = np.asarray(opened.convert("RGB"), dtype=np.float64) / 255.0
+            encoded = np.asarray(opened.convert("RGB"), dtype=np.uint8).reshape(-1, 3)
+    except Image.DecompressionBombError as exc:  # PIL's own limit, above ours: refused at its header
+        reader.fail(where, f"an image with sides of at most {MAX_TEXTURE_SIDE} pixels", f"({exc})")
     except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as exc:
         reader.fail(where, "a readable PNG or JPEG image", f"({exc})")
-    return srgb_to_linear(encoded).reshape(-1, 3).mean(axis=0)
+    linear = srgb_to_linear(np.arange(256) / 255.0)
+    counts = [np.bincount(encoded[:, channel], minlength=256) for channel in range(3)]
+    return np.array([count @ linear for count in counts]) / max(len(encoded), 1)
 
 
 def _meshes(reader: _Reader, graph: NodeGraph, world: dict[int, np.ndarray], animated: bool):
@@ -1026,6 +1050,10 @@ def merge(scene: Scene, imported: Imported, own_camera: bool, own_animation: boo
     scene = replace(scene, lights=lights, geometry=merged,
                     camera=scene.camera if own_camera else imported.camera)
     if imported.duration is not None and not own_animation:
+        frames = imported.duration * fps
+        if not frames <= MAX_ANIMATION_FRAME:  # as a YAML animation's frames (fields.ANIMATION)
+            raise SceneError(f"{imported.file}: animations: expected at most {MAX_ANIMATION_FRAME} frames at "
+                             f"gltf.fps {fps:g}, got {imported.duration:.6g} s of keys ({frames:.6g} frames)")
         first_light = len(lights) - len(imported.lights)
         scene = replace(scene, animation=GltfAnimation(
             fps=fps, first=0, last=max(int(math.ceil(imported.duration * fps - 1e-9)), 0),

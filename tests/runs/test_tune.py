@@ -205,6 +205,28 @@ def test_a_sequence_pays_for_the_tuning_once(scene_file, tmp_path, cache):
     assert code == 0 and "clrays: tune:" not in again and "(cached)" in again
 
 
+@pytest.mark.slow
+def test_a_sequence_keeps_its_tuning_beside_its_frames(scene_file, tmp_path, cache):
+    """The frames' digests hold the tuned settings, so the tuning is kept with the frames
+    (OUTPUT/.references), not in the cache: resumed with another cache (another folder,
+    another node), the run takes the same settings and keeps every frame."""
+    scene_file.write_text(SCENE.replace("steps: 64}", "steps: 64, target_error: 2}") + ANIMATION)
+    frames = tmp_path / "frames" / "f_{:02d}.npy"
+    code, text = run("sequence", scene_file, "-o", frames, "--frames", "0:2", "--no-progress", env=cache)
+    assert code == 0 and list((tmp_path / "frames" / ".references").glob("tuned-*.json")), text
+    code, again = run("sequence", scene_file, "-o", frames, "--frames", "0:2", "--no-progress",
+                      env={"CLRAYS_CACHE": str(tmp_path / "another cache")})
+    assert code == 0 and "clrays: tune:" not in again and "0 frames rendered, 3 already there" in again, again
+
+
+def test_exact_renders_a_scene_with_a_target_as_it_is(scene_file, tmp_path, cache):
+    """`exact` is what a target is measured against: it has nothing to tune, and renders."""
+    scene_file.write_text(SCENE.replace("steps: 64}", "steps: 64, target_error: 2}"))
+    code, text = run("render", scene_file, "--method", "exact", "-o", tmp_path / "x.npy", "--no-progress", env=cache)
+    assert code == 0 and "clrays: tune:" not in text, text
+    assert not (tmp_path / "cache").exists()
+
+
 def test_an_animation_is_measured_on_first_middle_and_last_frames(tmp_path):
     path = tmp_path / "animated.yaml"
     path.write_text(SCENE + ANIMATION)

@@ -427,6 +427,29 @@ def _far_node(document, _builder):
     document["nodes"][-1]["translation"] = [1e13, 0.0, 0.0]  # finite in float32, too far for its products
 
 
+def _keys_for_ages(document, builder):
+    """A translation key at 1e30 s: at 24 fps, more frames than any sequence may have."""
+    builder.doc = document
+    builder.animate(len(document["nodes"]) - 1, "translation", [0.0, 1e30], [[0, 0, 0], [1, 0, 0]])
+
+
+def _bomb_texture(document, _builder):
+    """A base colour texture whose PNG header claims 20000 × 20000 texels (PIL's own bomb
+    limit is below that: it refuses at the header, which must still be one line)."""
+    import tempfile
+
+    from test_hostile import png_claiming
+
+    with tempfile.TemporaryDirectory() as folder:
+        data = png_claiming(Path(folder) / "bomb.png", 20000, 20000).read_bytes()
+    document["images"] = [{"uri": "data:image/png;base64," + base64.b64encode(data).decode()}]
+    document["textures"] = [{"source": 0}]
+    document["materials"] = [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}]
+    for mesh in document["meshes"]:
+        for primitive in mesh["primitives"]:
+            primitive["material"] = 0
+
+
 HOSTILE = {
     "vertices beyond float32's safe range": (_far_node, r"meshes: expected world-space coordinates within ±1e\+12.*got "),
     "lying count": (_set("accessors.0.count", 1000), r"accessors\.0\.count: expected at most 24 elements.*got 1000"),
@@ -473,6 +496,10 @@ HOSTILE = {
     "power past float32": (_set("extensions.KHR_lights_punctual.lights.0.intensity", 1e35),
                            r"lights\.0\.intensity: expected a power \(intensity × color × light_scale\) of at most "
                            r"1e\+30, got 1e\+35"),
+    "a 401-digit integer": (_set("extensions.KHR_lights_punctual.lights.0.intensity", 10 ** 400),
+                            r"lights\.0\.intensity: expected a finite number"),
+    "keys 1e30 s long": (_keys_for_ages, r"animations: expected at most 100000 frames at gltf\.fps 24, got 1e\+30 s"),
+    "a base colour image claiming 20000²": (_bomb_texture, r"images\.0: expected an image with sides of at most 4096"),
     "spot too wide": (_set("extensions.KHR_lights_punctual.lights.0",
                            {"type": "spot", "spot": {"outerConeAngle": 1.55}}),
                       r"spot\.outerConeAngle: expected an angle in \(0, 1\.4835\]"),
