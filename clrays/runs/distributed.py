@@ -329,13 +329,15 @@ def render_frame_task(item: tuple[int, str, str], *, scene, method: str | None, 
                       overwrite: bool):
     """Render one frame of a sequence on a worker, write its file and its manifest line:
     item = (frame, path, frame digest). Returns the slimmed RenderResult, or None when the
-    file is there already (a task run again after its worker died, having written it)."""
+    frame is there already, of this scene (a task run again after its worker died, having
+    written it). A file there of another scene (a task of an earlier run, still running
+    when it was stopped, wrote it since) is rendered over."""
     from ..passes import write_render
-    from .frame_manifest import append_frame_line
+    from .frame_manifest import FrameManifest, append_frame_line
 
     frame, path, frame_digest_hex = item
     path = Path(path)
-    if path.exists() and not overwrite:
+    if not overwrite and path.exists() and FrameManifest(path.parent).matches(path, frame_digest_hex):
         return None
     with _session_lock:
         frame_scene = scene.animation.scene_at(scene, frame) if scene.animation is not None else scene

@@ -294,3 +294,19 @@ def test_local_workers_shut_down_without_a_word():
                           env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
     assert done.returncode == 0 and done.stdout == "closed\n", done.stderr[-2000:]
     assert done.stderr == "", done.stderr[-2000:]
+
+
+def test_a_worker_renders_over_a_frame_of_another_scene(tmp_path):
+    """A worker skips a frame only where the manifest ties the file to this scene: a file
+    another run's late task wrote there (of another --set) is rendered over, not kept."""
+    from clrays.runs.distributed import render_frame_task
+    from clrays.runs.frame_manifest import FrameManifest, frame_digest
+
+    scene = load_scene(write_scene(tmp_path, 2))
+    path = tmp_path / "f_00.npy"
+    key = frame_digest(scene, None, 0.0, ".npy")
+    path.write_bytes(b"an image of another scene")
+    options = dict(scene=scene, method=None, exposure=0.0, reuse=False, overwrite=False)
+    assert render_frame_task((0, str(path), key), **options) is not None
+    assert FrameManifest(tmp_path).matches(path, key)
+    assert render_frame_task((0, str(path), key), **options) is None  # now it is this scene's
