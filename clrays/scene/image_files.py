@@ -70,16 +70,30 @@ def png_shape(data: bytes) -> tuple[int, int]:
     return height, width
 
 
+#: Channels an EXR texture or depth map may hold: RGBA at most. OpenEXR decodes every
+#: channel of every part, so a file of one small RGB part and a hidden large one, or of
+#: hundreds of channels, would decode far past what its data window shows.
+MAX_EXR_CHANNELS = 4
+
+
 def exr_shape(path: Path) -> tuple[int, int]:
-    """(height, width) of an EXR file's data window, from its header."""
+    """(height, width) of an EXR file's data window, from its header: one part of at most
+    MAX_EXR_CHANNELS channels, so that the window bounds what decoding it costs."""
     import OpenEXR
 
     try:
         with OpenEXR.File(str(path), header_only=True) as exr:
-            low, high = exr.header()["dataWindow"]
+            parts, header = len(exr.parts), exr.header()
+            low, high = header["dataWindow"]
+            channels = len(header.get("channels") or ())
     except Exception as exc:  # OpenEXR raises bare exceptions for broken files
         detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise ImageFileError(f"not a readable EXR image ({detail})") from None
+    if parts != 1:
+        raise ImageFileError(f"an EXR of {parts} parts, not one image (save the image alone)")
+    if channels > MAX_EXR_CHANNELS:
+        raise ImageFileError(f"an EXR of {channels} channels, not an image of at most {MAX_EXR_CHANNELS} "
+                             f"(R, G, B, A; save the image alone)")
     return int(high[1]) - int(low[1]) + 1, int(high[0]) - int(low[0]) + 1
 
 

@@ -122,6 +122,26 @@ def exr_claiming(path: Path, width: int, height: int) -> Path:
     return path
 
 
+def exr_hiding(path: Path, kind: str) -> Path:
+    """A 4 × 4 RGB EXR that decodes to far more than its data window shows: a second part
+    of 2000 × 3000 (`parts`), or 64 channels beside R, G, B (`channels`)."""
+    import OpenEXR
+
+    def header():  # one each: OpenEXR writes the part's data window into it; one display window for both
+        return {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage,
+                "displayWindow": (np.array([0, 0], np.int32), np.array([1999, 2999], np.int32))}
+
+    small = {"RGB": np.zeros((4, 4, 3), np.float32)}
+    if kind == "parts":
+        with OpenEXR.File([OpenEXR.Part(header(), small, "shown"),
+                           OpenEXR.Part(header(), {"Z": np.zeros((3000, 2000), np.float32)}, "hidden")]) as exr:
+            exr.write(str(path))
+    else:
+        with OpenEXR.File(header(), {**small, **{f"extra{i}": np.zeros((4, 4), np.float32) for i in range(64)}}) as exr:
+            exr.write(str(path))
+    return path
+
+
 def npy_claiming(path: Path, shape: tuple) -> Path:
     """A .npy of a few hundred bytes whose header claims `shape` float64 values."""
     header = io.BytesIO()
@@ -241,6 +261,10 @@ CASES = [
      r"lights\.0\.texture: .*'huge\.png': an image of 30000×30000 texels, not sides in \[1, 4096\]"),
     ("a 16k² EXR as a depth map", lambda d: (exr_claiming(d / "big.exr", 16384, 16384) and relief(d, "big.exr"), []),
      rf"objects\.0\.depth_map: expected at most {MAX_TRIANGLES} triangles .*16384 × 16384 texels"),
+    ("a two-part EXR as a gobo", lambda d: (exr_hiding(d / "p.exr", "parts") and write(d, gobo_light("p.exr")), []),
+     r"lights\.0\.texture: .*an EXR of 2 parts, not one image"),
+    ("an EXR of 67 channels as a depth map", lambda d: (exr_hiding(d / "c.exr", "channels") and relief(d, "c.exr"), []),
+     r"objects\.0\.depth_map: .*an EXR of 67 channels, not an image of at most 4"),
     ("a 16k² EXR as a gobo", lambda d: (exr_claiming(d / "big.exr", 16384, 16384) and write(
         d, gobo_light("big.exr")), []),
      r"lights\.0\.texture: .*'big\.exr': an image of 16384×16384 texels, not sides in \[1, 4096\]"),
