@@ -34,7 +34,8 @@ from ..image_io import make_folder, write_atomic
 from ..reuse import scene_digest
 from ..scene import gltf as gltf_files
 from ..scene.costs import with_derived_sizes
-from ..scene.fields import FORMAT_VERSION
+from ..scene.files import FileRefused, read_regular_file
+from ..scene.fields import FORMAT_VERSION, RENDER
 from ..scene.yaml_tree import Node, apply_override, compose, mark_where
 from ..scene.model import Scene
 from ..session import Renderer
@@ -341,6 +342,10 @@ class Tuned:
                 + (" (cached)" if self.cached else ""))
 
 
+#: A kept tuning (tuned-<digest>.json): a few hundred bytes.
+MAX_TUNED_BYTES = 64 << 10
+
+
 def tuned_scene(scene: Scene, method: str | None = None, folder: Path | None = None,
                 renderer: Renderer | None = None, progress: bool = False,
                 log: Callable[[str], None] | None = None) -> tuple[Scene, Tuned | None]:
@@ -355,9 +360,11 @@ def tuned_scene(scene: Scene, method: str | None = None, folder: Path | None = N
         return scene, None
     target = percent / 100
     folder = folder or cache_folder()
-    key = digest("tuned", scene_digest(replace(scene, source=None)), scene.animation, method).hex()[:24]
+    # Render passes change what a frame writes, not its error: a scene's tuning serves it with or without them.
+    untuned = replace(scene, source=None, render=replace(scene.render, aovs=()))
+    key = digest("tuned", scene_digest(untuned), scene.animation, method).hex()[:24]
     path = folder / f"tuned-{key}.json"
-    tuned = _read_tuned(path, target)
+    tuned = _read_tuned(path, target, knobs_for(method, scene.render.sampling))
     if tuned is None:
         with Progress(progress, MOST_SETTINGS, "setting", "tune") as bar:
             def on_trial(trial: Trial) -> None:
@@ -378,15 +385,23 @@ def tuned_scene(scene: Scene, method: str | None = None, folder: Path | None = N
     return with_settings(scene, tuned.settings), tuned
 
 
-def _read_tuned(path: Path, target: float) -> Tuned | None:
-    """The kept tuning at `path`, or None where there is none or it does not parse."""
+def _read_tuned(path: Path, target: float, knobs: tuple[Knob, ...]) -> Tuned | None:
+    """The kept tuning at `path`, or None where there is none, or it does not parse, or it
+    holds anything but the method's knobs within the scene format's ranges (a hand edit, a
+    file of another version): then the scene is tuned again."""
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
+        data = json.loads(read_regular_file(path, MAX_TUNED_BYTES).decode("utf-8"))
         settings = data["settings"]
-        if not isinstance(settings, dict) or not all(isinstance(v, (int, float)) for v in settings.values()):
+        if not isinstance(settings, dict) or set(settings) - {knob.key for knob in knobs}:
             return None
+        for key, value in settings.items():
+            field = RENDER[key]
+            if isinstance(value, bool) or not isinstance(value, int if field.type == "integer" else (int, float)):
+                return None
+            if not field.low <= value <= field.high:
+                return None
         return Tuned(settings, float(data["rmse"]), float(data["frame_ms"]), target, True)
-    except (OSError, ValueError, KeyError, TypeError):
+    except (FileRefused, ValueError, KeyError, TypeError, AttributeError):
         return None
 
 

@@ -4,6 +4,7 @@ YAML keeps the user's keys, a scene's target tunes once and is cached, and an an
 measured on several frames."""
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -181,6 +182,11 @@ def test_render_target_error_tunes_once_and_caches(scene_file, tmp_path, cache):
     files[0].write_text("{not json")  # a corrupt entry is tuned again
     code, third = run("render", scene_file, "-o", first, "--stats", "--no-progress", env=cache)
     assert code == 0 and "clrays: tune:" in third and "(cached)" not in third
+    # So is one that names a setting the method has no knob for, or a value out of range.
+    for settings in ({"bogus": 1}, {"shadow_map": True}, {"slices": -5}, {"refine_threshold": 1e9}):
+        files[0].write_text(json.dumps({"settings": settings, "rmse": 0.001, "frame_ms": 1.0}))
+        code, again = run("render", scene_file, "-o", first, "--stats", "--no-progress", env=cache)
+        assert code == 0 and "clrays: tune:" in again and "(cached)" not in again, (settings, again)
 
 
 @pytest.mark.slow
