@@ -41,7 +41,7 @@ from ..scene.model import Scene
 from ..scene.files import FileRefused, read_regular_file
 from ..scene.limits import MAX_RUN_RECORD_BYTES, MAX_SWEEP_POINTS
 from ..scene.load import load_scene
-from .tune import tuned_scene
+from .tune import knobs_for, tuned_scene
 from .point import ERROR_COLUMNS, REFERENCE_COLUMNS, REFERENCES, SweepPoint, render_point
 from .progress import Progress, counted
 from .references import ReferenceCache, parse_reference
@@ -307,13 +307,21 @@ def run_sweep(path: str | Path, spec, out_dir: str | Path, *, overrides: Sequenc
     value_keys = check_values(path, axes, fixed)
     folder = make_folder(out_dir, "the sweep folder")
 
+    renderer = renderer or Renderer()
+    swept_render_keys = {axis.key.removeprefix("render.") for axis in axes if axis.key.startswith("render.")}
+
     def point_scene(point: SweepPoint) -> Scene:
         scene = load_scene(path, fixed + point.overrides)
         scene = scene if method is None else replace(scene, render=replace(scene.render, method=method))
+        if scene.render.target_error is not None:
+            # A swept setting that the target would tune: the tuned value would replace it in every point.
+            tuned_keys = {knob.key for knob in knobs_for(scene.render.method, scene.render.sampling)}
+            if swept_render_keys & tuned_keys:
+                raise ClraysError(f"{path}: render.{sorted(swept_render_keys & tuned_keys)[0]} is swept, and "
+                                  f"render.target_error tunes it: sweep it without a target, or sweep the target")
         # render.target_error: the point's tuned settings (searched once per scene, then read from the cache).
-        return tuned_scene(scene, folder=folder / REFERENCES, progress=progress)[0]
+        return tuned_scene(scene, folder=folder / REFERENCES, renderer=renderer, progress=progress)[0]
 
-    renderer = renderer or Renderer()
     references = ReferenceCache(folder / REFERENCES, renderer, progress) if against else None
     points = sweep_points(axes)
     report = SweepReport(folder, [])

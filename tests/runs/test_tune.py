@@ -283,6 +283,18 @@ def test_a_sweep_renders_each_point_with_its_tuned_settings(scene_file, tmp_path
         assert exact_error(scene, np.load(out / f"{index:03d}.npy")) <= 0.005
 
 
+def test_a_sweep_of_a_setting_the_target_tunes_is_one_line(scene_file, tmp_path, cache):
+    """Sweeping render.slices while render.target_error tunes it would render every point
+    at the tuned slices and label it with the swept ones: refused before any point."""
+    scene_file.write_text(SCENE.replace("steps: 64}", "steps: 64, target_error: 2}"))
+    code, text = run("sweep", scene_file, "--set", "render.slices=32,64", "-o", tmp_path / "sweep", "--no-progress",
+                     env=cache)
+    lines = text.strip().splitlines()
+    assert code == 1 and len(lines) == 1, text
+    assert "render.slices is swept, and render.target_error tunes it" in lines[0]
+    assert not list((tmp_path / "sweep").glob("*.png"))
+
+
 def test_a_scene_without_render_gets_one_and_exact_has_nothing_to_tune(scene_file, tmp_path, cache):
     bare = SCENE[:SCENE.index("render:")]
     scene_file.write_text(bare)
