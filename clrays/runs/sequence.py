@@ -117,8 +117,10 @@ def lock_folder(pattern: str) -> Path:
     """The folder a sequence locks: the deepest one that holds every frame of `pattern`
     (the frame number may name folders: `out/{:04d}/beauty.png` locks `out`)."""
     parts = Path(pattern).parts
-    fixed = next(i for i, part in enumerate(parts) if "{" in part)
-    return Path(*parts[:fixed]) if fixed else Path(".")
+    # The first part with a replacement field: `{{` is a literal brace, which names no frame.
+    fixed = next(i for i, part in enumerate(parts)
+                 if any(field is not None for _, field, _, _ in string.Formatter().parse(part)))
+    return Path(*(part.format() for part in parts[:fixed])) if fixed else Path(".")  # `{{1}}` names `{1}`
 
 
 @dataclass

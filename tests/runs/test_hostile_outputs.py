@@ -201,6 +201,15 @@ def test_two_sequences_into_one_folder_leave_each_frame_its_scenes(tmp_path):
         np.testing.assert_array_equal(np.load(str(shared).format(frame)), np.load(str(alone).format(frame)))
 
 
+def test_a_folder_named_with_literal_braces_is_the_one_locked():
+    """`{{1}}` in a pattern is a folder named `{1}`, not the frame's field: the run locks it,
+    not the folder above it."""
+    from clrays.runs.sequence import frame_path, lock_folder
+
+    assert lock_folder("out{{1}}/f_{:03d}.png") == Path("out{1}") == frame_path("out{{1}}/f_{:03d}.png", 7).parent
+    assert lock_folder("out/{:04d}/beauty.png") == Path("out") and lock_folder("f_{}.png") == Path(".")
+
+
 def test_frames_in_folders_of_their_own_lock_the_folder_above(tmp_path):
     from clrays.image_io import folder_lock
 
