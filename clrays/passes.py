@@ -20,6 +20,7 @@ I = Σ_i in_scatter_light<i>. A frame asked for no pass computes and allocates n
 from __future__ import annotations
 
 import re
+from glob import escape as glob_escape
 from pathlib import Path
 
 import numpy as np
@@ -87,6 +88,16 @@ def pass_paths(output: Path, names) -> list[Path]:
     if output.suffix.lower() == ".exr" or not names:
         return [output]
     return [output, *(pass_path(output, name) for name in names)]
+
+
+def written_pass_files(output: Path) -> list[Path]:
+    """The pass files beside a .png or .npy `output` that some render wrote (any pass name,
+    `<stem>.<pass>.<ext>`): what goes with a frame that is rendered again."""
+    if output.suffix.lower() == ".exr":
+        return []
+    prefix, suffix = f"{output.stem}.", output.suffix
+    return [path for path in output.parent.glob(f"{glob_escape(output.stem)}.*{suffix}")
+            if (name := path.name[len(prefix):-len(suffix)]) in PASSES or _PER_LIGHT.match(name)]
 
 
 def exr_layers(image: np.ndarray, passes: dict[str, np.ndarray]) -> dict[str, np.ndarray]:

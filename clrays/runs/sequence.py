@@ -27,7 +27,7 @@ from typing import Callable
 from ..errors import ClraysError, OutputError
 from ..image_io import (FORMATS, check_folder, check_name_length, check_output_path, folder_lock, make_folder,
                         make_output_folder, read_srgb8, write_atomic)
-from ..passes import write_render
+from ..passes import pass_paths, write_render, written_pass_files
 from ..scene.limits import MAX_FRAME_FIELD_WIDTH
 from ..session import Renderer, RenderResult
 from ..scene.model import Scene
@@ -196,7 +196,8 @@ def _run_frames(scene, frames, paths, renderer, method, exposure, overwrite, pro
             frame_scene = scene.animation.scene_at(scene, frame) if scene.animation is not None else scene
             manifest = manifest_of(path)
             key = frame_digest(frame_scene, method, exposure, path.suffix.lower())
-            if not overwrite and manifest.matches(path, key):
+            if not overwrite and manifest.matches(path, key) and all(
+                    part.exists() for part in pass_paths(path, frame_scene.render.aovs)):
                 report.kept.append(frame)
                 if on_frame:
                     on_frame(frame, path, None)
@@ -206,7 +207,8 @@ def _run_frames(scene, frames, paths, renderer, method, exposure, overwrite, pro
                 # A stale frame goes before its new one is rendered (here or by a worker, which
                 # skips a file that is there), so that no kill leaves it to be taken for new.
                 try:
-                    path.unlink()
+                    for part in (path, *written_pass_files(path)):  # its passes go with it: they were its scene's
+                        part.unlink(missing_ok=True)
                 except OSError as exc:
                     raise OutputError(f"{path}: cannot replace the stale frame: {exc.strerror or exc}") from None
                 if not overwrite:

@@ -76,3 +76,19 @@ def test_sequence_passes(tmp_path):
     assert code == 0, out
     names = sorted(p.name for p in tmp_path.glob("f_*"))
     assert names == sorted(f"f_{i:02d}{part}.npy" for i in range(3) for part in ("", ".in_scatter", ".depth"))
+
+
+def test_a_resumed_sequence_keeps_each_frames_passes_its_own(tmp_path):
+    """Run again with other passes, a frame is rendered again and its old pass files go with
+    it (they were of another scene); a frame whose pass file is gone is rendered again."""
+    scene = tmp_path / "orbit.yaml"
+    scene.write_text(SCENE + "animation:\n  fps: 2\n  frames: [0, 1]\n  camera:\n"
+                             "    - {frame: 0, position: [0, 2, 8]}\n    - {frame: 1, position: [2, 2, 8]}\n")
+    pattern = tmp_path / "f_{:02d}.npy"
+    assert run("sequence", scene, "-o", pattern, "--aov", "in_scatter")[0] == 0
+    code, out = run("sequence", scene, "-o", pattern, "--aov", "depth")
+    assert code == 0 and "2 frames rendered" in out, out
+    assert sorted(p.name for p in tmp_path.glob("f_*")) == ["f_00.depth.npy", "f_00.npy", "f_01.depth.npy", "f_01.npy"]
+    (tmp_path / "f_01.depth.npy").unlink()
+    code, out = run("sequence", scene, "-o", pattern, "--aov", "depth")
+    assert code == 0 and "1 frame rendered" in out and (tmp_path / "f_01.depth.npy").exists(), out
