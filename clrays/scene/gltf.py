@@ -981,6 +981,42 @@ def _check_coordinates(reader: "_Reader", triangles: np.ndarray, lights, camera)
                               "beyond)", f"{largest:.3g}")
 
 
+def _check_animated_poses(reader: "_Reader", graph: NodeGraph, instances, light_nodes, camera_node) -> None:
+    """The animated poses within what the device holds, as a YAML animation's keys are: at
+    the key times where a channel reaches its largest value, and its first and last, every
+    mesh's bounds, every light and the camera within ±MAX_COORDINATE, the camera's frame
+    not scaled to nothing (its direction would be 0/0). Those times bound the linear and
+    step channels' poses between them; a cubic spline's may overshoot, as its tangents say."""
+    if not graph.channels:
+        return
+    times = set()
+    for channel in graph.channels:
+        values = channel.values[1::3] if channel.interpolation == "CUBICSPLINE" else channel.values
+        times.update((float(channel.times[0]), float(channel.times[-1]),
+                      float(channel.times[int(np.abs(values).max(axis=1).argmax())])))
+    corners = {}
+    for instance in instances:
+        points = instance.local.reshape(-1, 3)
+        low, high = points.min(axis=0), points.max(axis=0)
+        corners[instance.node] = np.array([[x, y, z, 1.0] for x in (low[0], high[0]) for y in (low[1], high[1])
+                                           for z in (low[2], high[2])])
+    for time in sorted(times):
+        world = graph.world(time)
+        placed = [corners[node] @ world[node].T for node in corners]
+        placed += [world[node][:, 3] for node in light_nodes]
+        if camera_node is not None:
+            placed.append(world[camera_node][:, 3])
+        largest = max((float(np.abs(p[..., :3]).max()) for p in placed), default=0.0)
+        if not largest <= MAX_COORDINATE:
+            reader.fail("animations", f"poses within ±{MAX_COORDINATE:g} (float32 on the device overflows beyond)",
+                        f"a coordinate of {largest:.3g} at {time:g} s")
+        if camera_node is not None:
+            frame = world[camera_node][:3, 1:3]  # up (Y) and backwards (Z)
+            if not np.all(np.linalg.norm(frame, axis=0) > 1e-12):
+                reader.fail(f"nodes.{camera_node}", "a camera node whose animated scale leaves it a direction",
+                            f"a scale of 0 at {time:g} s")
+
+
 def import_gltf(path: Path, file: str | None = None, camera: str | None = None, light_scale: float = 1.0) -> Imported:
     """Read a glTF 2.0 file: `camera` names the camera to take (the first otherwise),
     `light_scale` multiplies every light's power. `file` names it in messages."""
@@ -1006,6 +1042,7 @@ def import_gltf(path: Path, file: str | None = None, camera: str | None = None, 
     scene_camera, camera_node = _camera(reader, _cameras(reader, graph, world), camera, world, bounds)
     _check_coordinates(reader, triangles, lights, scene_camera)
     graph = NodeGraph(graph.parents, graph.order, graph.matrices, graph.trs, channels)
+    _check_animated_poses(reader, graph, instances, light_nodes, camera_node)
     object_id = np.concatenate([np.full(i.rows.stop - i.rows.start, k, np.int32) for k, i in enumerate(instances)]) \
         if instances else np.zeros(0, np.int32)
     return Imported(file=file, triangles=triangles,

@@ -433,6 +433,19 @@ def _keys_for_ages(document, builder):
     builder.animate(len(document["nodes"]) - 1, "translation", [0.0, 1e30], [[0, 0, 0], [1, 0, 0]])
 
 
+def _far_key(document, builder):
+    """The mesh's node moved 1e13 away at its second key: finite in float32, too far for the device."""
+    builder.doc = document
+    builder.animate(len(document["nodes"]) - 1, "translation", [0.0, 1.0], [[0, 0, 0], [1e13, 0, 0]])
+
+
+def _camera_scaled_to_nothing(document, builder):
+    """A camera whose node's scale goes to 0: its direction would be 0/0 at that frame."""
+    builder.doc = document
+    camera = builder.node(camera=builder.camera(0.8), translation=[0, 1, 6])
+    builder.animate(camera, "scale", [0.0, 1.0], [[1, 1, 1], [0, 0, 0]])
+
+
 def _bomb_texture(document, _builder):
     """A base colour texture whose PNG header claims 20000 × 20000 texels (PIL's own bomb
     limit is below that: it refuses at the header, which must still be one line)."""
@@ -499,6 +512,10 @@ HOSTILE = {
     "a 401-digit integer": (_set("extensions.KHR_lights_punctual.lights.0.intensity", 10 ** 400),
                             r"lights\.0\.intensity: expected a finite number"),
     "keys 1e30 s long": (_keys_for_ages, r"animations: expected at most 100000 frames at gltf\.fps 24, got 1e\+30 s"),
+    "an animated translation of 1e13": (_far_key, r"animations: expected poses within ±1e\+12 .*got a coordinate of "
+                                                  r"1e\+13 at 1 s"),
+    "a camera scaled to nothing": (_camera_scaled_to_nothing, r"nodes\.\d+: expected a camera node whose animated "
+                                                             r"scale leaves it a direction, got a scale of 0 at 1 s"),
     "a base colour image claiming 20000²": (_bomb_texture, r"images\.0: expected an image with sides of at most 4096"),
     "spot too wide": (_set("extensions.KHR_lights_punctual.lights.0",
                            {"type": "spot", "spot": {"outerConeAngle": 1.55}}),
