@@ -272,6 +272,13 @@ def tune(scene: Scene, target: float, references: ReferenceCache, renderer: Rend
                 found.append((keys, search.measure(settings)))
         return found
 
+    # A start that does not render (past the device's memory): every knob a rung coarser at
+    # a time until one does, and the search goes on from there.
+    while current.failed and len(search.trials) < most_settings:
+        settings = moved(current.settings, tuple(knob.key for knob in knobs), False)
+        if settings is None:
+            break
+        current = search.measure(settings)
     # Over the target: the finer rung that buys the most error per millisecond (a third of
     # the settings kept for the way back, where a rung taken overshoots).
     growing = most_settings - most_settings // 3
@@ -304,7 +311,7 @@ def tune(scene: Scene, target: float, references: ReferenceCache, renderer: Rend
             break
         current = min(cheaper, key=lambda trial: trial.cost_ms)
     tuning.trials = list(search.trials.values())
-    if tuning.best is not None:
+    if tuning.best is not None and not tuning.default.failed:  # (a start that did not render has no time)
         tuning.in_turns = search.in_turns(tuning.best.settings, tuning.default.settings)
     tuning.seconds = time.perf_counter() - started
     return tuning
@@ -509,6 +516,8 @@ def default_trial_line(tuning: Tuning) -> str:
     """The start of the search (the settings as written or derived) beside the result, their
     frames timed in turns."""
     default = tuning.default
+    if default.failed:
+        return f"as written: not rendered ({default.failed})"
     text = f"as written: {100 * default.rmse:.3f} %"
     if tuning.in_turns is not None:
         best_ms, default_ms = tuning.in_turns

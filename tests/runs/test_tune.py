@@ -304,3 +304,24 @@ def test_a_scene_without_render_gets_one_and_exact_has_nothing_to_tune(scene_fil
     assert out.read_text().startswith(bare) and "shadow_map" in yaml.safe_load(out.read_text())["render"]
     code, text = run("tune", scene_file, "--target-error", 1, "--method", "exact", "-o", out, env=cache)
     assert code == 1 and text.count("\n") == 1 and "exact is the reference itself" in text
+
+
+def test_a_start_that_does_not_render_is_searched_from_below(scene_file, tmp_path, monkeypatch, renderer):
+    """Settings past what the device holds fail to render; where the start is such a
+    setting, the search steps every knob coarser until one renders, and goes on from there."""
+    from clrays.errors import DeviceError
+
+    render = type(renderer).render
+
+    def render_small_maps_only(self, scene, *args, **kwargs):
+        if scene.render.shadow_map is not None and scene.render.shadow_map > 64:
+            raise DeviceError("the shadow map does not fit the device (a stand-in for its memory)")
+        return render(self, scene, *args, **kwargs)
+
+    monkeypatch.setattr(type(renderer), "render", render_small_maps_only)
+    scene = load_scene(scene_file, ["render.shadow_map=256"])
+    result = tuning.tune(scene, 0.5, ReferenceCache(tmp_path / "cache"), renderer=renderer, pixels=200,
+                         most_settings=8)
+    assert result.default.failed and result.best is not None, [t.settings for t in result.trials]
+    assert result.best.settings["shadow_map"] <= 64
+    assert tuning.default_trial_line(result).startswith("as written: not rendered (the shadow map does not fit")
