@@ -286,6 +286,19 @@ class _Reader:
         except FileRefused as exc:
             self.fail(path, "a readable buffer file", f"{uri!r} ({exc})")
 
+    def view(self, index: int) -> tuple[dict, bytes, int, int]:
+        """bufferViews[index]: (the view, its buffer's bytes, its byteOffset, its
+        byteLength), the view checked to lie within the buffer."""
+        path = f"bufferViews.{index}"
+        view = self.items("bufferViews")[index]
+        data = self.buffer(self.index(view, "buffer", path, "buffers"))
+        offset = self.get(view, "byteOffset", path, "int", 0, lo=0)
+        length = self.get(view, "byteLength", path, "int", lo=1)
+        if offset + length > len(data):
+            self.fail(f"{path}.byteLength", f"a view within its buffer's {len(data)} bytes (byteOffset {offset})",
+                      length)
+        return view, data, offset, length
+
     def accessor(self, index: int, path: str, types: tuple[str, ...], components: tuple[int, ...]) -> np.ndarray:
         """Accessor `index` as float64 (count, width) (a SCALAR's (count,)), checked against its view's bytes."""
         where = f"accessors.{index}"
@@ -311,13 +324,7 @@ class _Reader:
         else:
             view_index = self.index(acc, "bufferView", where, "bufferViews")
             view_path = f"bufferViews.{view_index}"
-            view = self.items("bufferViews")[view_index]
-            data = self.buffer(self.index(view, "buffer", view_path, "buffers"))
-            view_offset = self.get(view, "byteOffset", view_path, "int", 0, lo=0)
-            view_length = self.get(view, "byteLength", view_path, "int", lo=1)
-            if view_offset + view_length > len(data):
-                self.fail(f"{view_path}.byteLength", f"a view within its buffer's {len(data)} bytes "
-                          f"(byteOffset {view_offset})", view_length)
+            view, data, view_offset, view_length = self.view(view_index)
             stride = self.get(view, "byteStride", view_path, "int", element, lo=4, hi=252)
             if stride < element:
                 self.fail(f"{view_path}.byteStride", f"at least the element's {element} bytes", stride)
@@ -583,14 +590,7 @@ def _mean_image(reader: _Reader, image_index: int) -> np.ndarray:
     if "uri" in image:
         data = reader._uri(reader.get(image, "uri", where, "string"), f"{where}.uri")
     else:
-        view_index = reader.index(image, "bufferView", where, "bufferViews")
-        view_path = f"bufferViews.{view_index}"
-        view = reader.items("bufferViews")[view_index]
-        buffer = reader.buffer(reader.index(view, "buffer", view_path, "buffers"))
-        offset = reader.get(view, "byteOffset", view_path, "int", 0, lo=0)
-        length = reader.get(view, "byteLength", view_path, "int", lo=1)
-        if offset + length > len(buffer):
-            reader.fail(f"{view_path}.byteLength", f"a view within its buffer's {len(buffer)} bytes", length)
+        _, buffer, offset, length = reader.view(reader.index(image, "bufferView", where, "bufferViews"))
         data = buffer[offset:offset + length]
     from PIL import Image, UnidentifiedImageError
 
