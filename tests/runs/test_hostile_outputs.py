@@ -515,26 +515,31 @@ def test_a_full_disk_is_one_line_and_leaves_no_temporary(tmp_path, monkeypatch, 
     def full(*args, **kwargs):
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    class FullFile:  # OpenEXR.File, on a full disk
-        def __init__(self, *args):
-            pass
-
-        def __enter__(self):
-            return self
-
-        def __exit__(self, *exc_info):
-            return False
-
-        def write(self, name):
-            raise RuntimeError(f'Failed to write pixel data to image file "{name}". No space left on device')
-
     monkeypatch.setattr(Image.Image, "save", full)
     monkeypatch.setattr(np, "save", full)
-    monkeypatch.setattr(OpenEXR, "File", FullFile)
+    monkeypatch.setattr(OpenEXR, "File", FullExrFile)
     with pytest.raises(OutputError) as caught:
         write_image(tmp_path / f"a{suffix}", np.ones((4, 6, 3), np.float32))
     assert str(caught.value) == f"{tmp_path}/a{suffix}: cannot write: No space left on device"
     assert not list(tmp_path.iterdir())
+
+
+class FullExrFile:
+    """OpenEXR.File on a full disk: it writes part of the file, then reports the failure
+    as OpenEXR does (a RuntimeError naming the file)."""
+
+    def __init__(self, *args):
+        pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc_info):
+        return False
+
+    def write(self, name):
+        Path(name).write_bytes(b"partial")
+        raise RuntimeError(f'Failed to write pixel data to image file "{name}". No space left on device')
 
 
 def _limit_file_size(limit: int):
@@ -566,21 +571,7 @@ def test_a_sequence_onto_a_full_disk_leaves_nothing(tmp_path, monkeypatch):
     # In this process: a file-size limit would stop the OpenCL compiler's cache as well.
     import OpenEXR
 
-    class FullFile:  # OpenEXR.File, on a full disk
-        def __init__(self, *args):
-            pass
-
-        def __enter__(self):
-            return self
-
-        def __exit__(self, *exc_info):
-            return False
-
-        def write(self, name):
-            Path(name).write_bytes(b"partial")
-            raise RuntimeError(f'Failed to write pixel data to image file "{name}". No space left on device')
-
-    monkeypatch.setattr(OpenEXR, "File", FullFile)
+    monkeypatch.setattr(OpenEXR, "File", FullExrFile)
     code, out = run("sequence", animated(tmp_path, 2), "-o", tmp_path / "out" / "f_{}.exr", "--no-progress")
     assert code == 1
     assert one_line(out) == f"clrays: error: {tmp_path}/out/f_0.exr: cannot write: No space left on device"
