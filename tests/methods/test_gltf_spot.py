@@ -66,4 +66,5 @@ def test_a_soft_spot_follows_exact_in_every_method(scenes, part, method):
     scene, exact = scenes[part]
     image = clrays.render(scene, method=method, reuse=False)
     error = image_error(image, exact, depth_edges(depth_map(scene)))
+    print(f"soft spot, {part}, {method} against exact: {error}")
     assert error.pixels > 1000 and error.rmse < 0.005, f"{method}, {part}: {error}"

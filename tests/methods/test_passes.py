@@ -60,6 +60,8 @@ def test_identities(renderer, method, extra, spp):
     assert peak > 0
     beauty = passes["surface"] * passes["transmittance"] + passes["in_scatter"]
     lights = sum(passes[f"in_scatter_light{i}"] for i in range(3))
+    print(f"passes {method} {' '.join(extra)} spp {spp}: |S·T + I − image| {np.abs(beauty - image).max() / peak:.1e}, "
+          f"|Σ lights − I| {np.abs(lights - passes['in_scatter']).max() / peak:.1e} of the peak")
     assert np.abs(beauty - image).max() <= 1e-4 * peak
     assert np.abs(lights - passes["in_scatter"]).max() <= 1e-4 * peak
     # Each light's part is its own: none is zero, and none is the whole.
@@ -90,6 +92,7 @@ def test_in_scatter_is_the_exact_volume(renderer, method, extra):
     reference = renderer.render(dataclasses.replace(black, render=dataclasses.replace(black.render, aovs=())),
                                 "exact").image
     in_scatter = renderer.render(scene, method).passes["in_scatter"]  # the surfaces' colour does not reach it
+    print(f"in_scatter {method} {' '.join(extra)} against exact, black surfaces: {image_error(in_scatter, reference)}")
     assert image_error(in_scatter, reference).rmse < 0.005
 
 
