@@ -293,6 +293,11 @@ class Device:
         self._max_group = max(min(MAX_CPU_GROUP, int(self.device.max_work_group_size)), 1)
         self._local_sizes: dict[tuple, tuple] = {}
         self.allocated_bytes = 0
+        #: Times the host has waited for this device's queue to reach a point (a blocking
+        #: read, a mapped buffer, a flag): each one drains the queue, and on a GPU leaves
+        #: the device idle while the host enqueues again. RenderResult.host_waits counts a
+        #: frame's.
+        self.host_waits = 0
         self._announced = False
 
     @property
@@ -458,13 +463,18 @@ class Device:
         events = [self.cl.enqueue_copy(self.queue, array, buffer, is_blocking=False)
                   for array, (buffer, _) in zip(arrays, reads)]
         if events:
-            self.cl.wait_for_events(events[-1:])
+            self.wait(events[-1])
         return arrays
 
     def read(self, buffer, shape, dtype) -> np.ndarray:
         out = np.empty(shape, dtype=dtype)
-        self.cl.enqueue_copy(self.queue, out, buffer).wait()
+        self.wait(self.cl.enqueue_copy(self.queue, out, buffer, is_blocking=False))
         return out
+
+    def wait(self, event) -> None:
+        """The host waits for `event` (counted in `host_waits`)."""
+        self.host_waits += 1
+        event.wait()
 
     def read_in_place(self, buffer, shape, dtype) -> np.ndarray:
         """A buffer the frame is done with, as an array: on a CPU device the buffer's own
@@ -475,6 +485,6 @@ class Device:
         if not self._spread:
             return self.read(buffer, shape, dtype)
         flags = self.cl.map_flags.READ | self.cl.map_flags.WRITE  # (the caller may write to its image)
-        array, event = self.cl.enqueue_map_buffer(self.queue, buffer, flags, 0, shape, dtype)
-        event.wait()
+        array, event = self.cl.enqueue_map_buffer(self.queue, buffer, flags, 0, shape, dtype, is_blocking=False)
+        self.wait(event)
         return np.asarray(_Holding(array, buffer))

@@ -126,6 +126,7 @@ class RenderResult:
     samples: SampleCounts | None = None  # what epipolar sampling computed, interpolated and fixed up
     shadow_rays: int | None = None  # exact surface shadows: the entries (sample × light) the maps left to a ray
     passes: dict[str, np.ndarray] | None = None  # the render passes asked for (clrays.passes), by name; else None
+    host_waits: int = 0  # times the host waited for the device within the frame (Device.host_waits), the image's read too
 
     def without_pixels(self) -> RenderResult:
         """This result without its image and passes (written to files): its times and counts
@@ -200,6 +201,7 @@ class Renderer:
         record, timer = StageRecord(), StageTimer()
         use_cache = self.reuse if reuse is None else reuse
         reuse = Reuse(self.cache if use_cache else None, record, max(len(scene.lights), 1))
+        waits_before = self._device.host_waits if self._device is not None else 0
         if self._device is not None:
             self._device.allocated_bytes = 0
         # A frame identical to a kept one: its image, and every stage counts as reused.
@@ -207,6 +209,7 @@ class Renderer:
                                                             lambda: self._frame(scene, method, reuse, timer, progress))
         status = record.status() or {stage: REUSED for stage in stages}
         device_bytes = self._device.allocated_bytes if self._device is not None else 0
+        host_waits = self._device.host_waits - waits_before if self._device is not None else 0
         if self._device is not None:
             self._device.end_frame(device_bytes)
         wall_ms = (time.perf_counter() - start) * 1e3
@@ -214,7 +217,8 @@ class Renderer:
         if passes is not None and use_cache:
             passes = {name: value.copy() for name, value in passes.items()}
         return RenderResult(image.copy() if use_cache else image, method, timer.milliseconds(), wall_ms,
-                            device_bytes, status, timer.host_labels, scene.render, textures, samples, rays, passes)
+                            device_bytes, status, timer.host_labels, scene.render, textures, samples, rays, passes,
+                            host_waits)
 
     def _frame(self, scene: Scene, method: str, reuse: Reuse, timer: StageTimer, progress: bool):
         """(image, stage labels, epipolar texture sizes, sample counts, shadow rays, render

@@ -189,7 +189,7 @@ def map_is_empty(device: Device, shadow_map: ShadowMap) -> bool:
             shadow_map.empty = True
         else:
             seen, read = shadow_map.flag
-            read.wait()
+            device.wait(read)
             shadow_map.empty = not seen[0]
             shadow_map.flag = None
     return shadow_map.empty
