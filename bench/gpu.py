@@ -1,0 +1,154 @@
+"""A frame's cost on one device at the sizes the published anchors used, with the error that
+goes with it: per bench scene, size and method, the device time per kernel, the wall time
+per frame in a warm session and in a sequence, the host's share, the host's waits, and the
+error against `exact` measured from this device's images (bench/RESULTS.md, "Frames on a
+GPU").
+
+    CLRAYS_DEVICE=nvidia .venv/bin/python bench/gpu.py                      # the whole table
+    .venv/bin/python bench/gpu.py demo --sizes 320x180 --frames 3          # a quick look on a CPU
+    .venv/bin/python bench/gpu.py --methods minmax --sizes 1280x720,2560x1600 --kernels
+
+Every size's scene is the scene file's with its image size replaced, sizes derived from it
+as `clrays render` derives them (docs/scene-format.md). Columns:
+- **device ms**: the median frame's device time, every kernel's profiling event summed
+  (and the host-timed stages, `--stats`'s total); `--kernels` lists the largest kernels.
+- **warm wall ms**: a frame rendered from scratch (no stage reused) in a session whose
+  kernels are built, median of `--frames`.
+- **sequence wall ms**: per frame of a `--frames`-long sequence whose camera turns 0.5°
+  about its target each frame (so every camera stage runs again, and a shadow map whose
+  light and geometry stand still is kept, as `clrays sequence` keeps it), frames submitted
+  ahead where the session can keep frames in flight (`Renderer.submit`): the whole
+  sequence's wall time over its frames.
+- **host ms**: sequence wall less the median device time: the host's work the device waits
+  for.
+- **waits**: the times the host waited for the device in one frame (`RenderResult.host_waits`).
+- **RMSE % / p99 %**: against `exact` on the bench's pixel subset (`--pixels`, kept in
+  `--cache`), depth edges out, of the last warm frame's image.
+"""
+from __future__ import annotations
+
+import argparse
+import collections
+import math
+import statistics
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from arguments import frame_count, image_size  # noqa: E402  (bench/, beside this script)
+from kernel_times import record_launches  # noqa: E402
+from stage_times import check_scenes  # noqa: E402
+from clrays.errors import ClraysError  # noqa: E402
+from clrays.runs.bench import error_pixels  # noqa: E402
+from clrays.runs.references import EXACT, ReferenceCache  # noqa: E402
+from clrays.scene.load import load_scene  # noqa: E402
+from clrays.session import Renderer  # noqa: E402
+
+SCENES = ("demo", "bunny", "behind", "sun")
+SIZES = "1280x720,1920x1080,2560x1600,3840x2160"
+#: The camera's turn per frame of the timed sequence, about its target.
+TURN_DEGREES = 0.5
+
+
+def sizes_list(text: str) -> list[str]:
+    """`--sizes`: comma-separated WxH."""
+    return [image_size(part) for part in text.split(",") if part]
+
+
+def turned(scene, frame: int):
+    """`scene` with its camera turned frame × TURN_DEGREES about the vertical through its target."""
+    camera = scene.camera
+    angle = math.radians(TURN_DEGREES * frame)
+    offset = np.asarray(camera.position, float) - np.asarray(camera.look_at, float)
+    c, s = math.cos(angle), math.sin(angle)
+    rotated = np.array([c * offset[0] + s * offset[2], offset[1], -s * offset[0] + c * offset[2]])
+    return replace(scene, camera=replace(camera, position=np.asarray(camera.look_at, float) + rotated))
+
+
+def sequence_wall_ms(renderer: Renderer, scene, frames: int) -> float:
+    """Wall time per frame of a sequence of `frames` turned frames, each image read back:
+    submitted one frame ahead where the session can (Renderer.submit), else one by one."""
+    scenes = [turned(scene, index + 1) for index in range(frames)]
+    start = time.perf_counter()
+    if hasattr(renderer, "submit"):
+        pending = renderer.submit(scenes[0])
+        for upcoming in scenes[1:]:
+            following = renderer.submit(upcoming)
+            pending.result()
+            pending = following
+        pending.result()
+    else:
+        for each in scenes:
+            renderer.render(each)
+    return (time.perf_counter() - start) * 1e3 / frames
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("scenes", nargs="*", default=SCENES, help="scene names in scenes/ (default: the bench four)")
+    parser.add_argument("--sizes", type=sizes_list, default=sizes_list(SIZES), help=f"WxH,... (default {SIZES})")
+    parser.add_argument("--methods", default="minmax,volume_moments", help="comma-separated methods (default "
+                                                                           "minmax,volume_moments)")
+    parser.add_argument("--frames", type=frame_count, default=5, help="timed frames (default 5)")
+    parser.add_argument("--kernels", action="store_true", help="list the largest kernels of each row")
+    parser.add_argument("--pixels", type=int, default=4000, help="pixels the error is measured on (default 4000)")
+    parser.add_argument("--cache", default=str(REPO / ".cache" / "references"), help="where exact's pixels are kept")
+    args = parser.parse_args()
+    check_scenes("gpu.py", args.scenes)
+    methods = [method for method in args.methods.split(",") if method]
+    launches: list[tuple[str, object]] = []
+    record_launches(launches)
+    references = ReferenceCache(Path(args.cache))
+    renderer = Renderer()
+    print(f"{renderer.device.name}; median of {args.frames} frames\n")
+    print("| scene | size | method | device ms | warm wall ms | sequence wall ms | host ms | waits | RMSE % | p99 % |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for name in args.scenes:
+        for size in args.sizes:
+            width, height = (int(v) for v in size.split("x"))
+            for method in methods:
+                try:
+                    scene = load_scene(REPO / "scenes" / f"{name}.yaml", overrides=[
+                        f"image.width={width}", f"image.height={height}", f"render.method={method}"])
+                except ClraysError as exc:
+                    sys.exit(f"gpu.py: {exc}")
+                renderer.clear()
+                renderer.render(scene, reuse=False)  # kernels built, buffers pooled
+                launches.clear()
+                device, walls, kernels, waits = [], [], collections.defaultdict(list), []
+                result = None
+                for _ in range(args.frames):
+                    start = time.perf_counter()
+                    result = renderer.render(scene, reuse=False)
+                    walls.append((time.perf_counter() - start) * 1e3)
+                    device.append(sum(result.stage_ms.values()))
+                    waits.append(result.host_waits)
+                    sums = collections.defaultdict(float)
+                    for kernel, event in launches:
+                        sums[kernel] += (event.profile.end - event.profile.start) * 1e-6
+                    launches.clear()
+                    for kernel, total in sums.items():
+                        kernels[kernel].append(total)
+                image = result.image
+                renderer.clear()
+                renderer.render(turned(scene, 0))  # the sequence's first frame: what it keeps is kept
+                sequence = sequence_wall_ms(renderer, scene, args.frames)
+                launches.clear()
+                error = references.error(scene, EXACT, image, error_pixels(width, height, args.pixels))
+                device_ms = statistics.median(device)
+                print(f"| {name} | {width}×{height} | {method} | {device_ms:.2f} | {statistics.median(walls):.2f} | "
+                      f"{sequence:.2f} | {sequence - device_ms:.2f} | {statistics.median(waits):.0f} | "
+                      f"{100 * error.rmse:.4f} | {100 * error.p99:.4f} |", flush=True)
+                if args.kernels:
+                    largest = sorted(((statistics.median(v), k) for k, v in kernels.items()), reverse=True)[:8]
+                    print("  " + ", ".join(f"{k} {m:.2f}" for m, k in largest), flush=True)
+
+
+if __name__ == "__main__":
+    main()
