@@ -75,9 +75,13 @@ def raster_passes(device: Device, program: str, name: str, defines: dict | None,
     `raster_big_samples` pixels) with their rows; `name_rows` draws those with one
     work-item per block of RASTER_ROWS_PER_ITEM rows by `raster_rows_columns` columns of
     the view, which owns its block (docs/design.md §4.1).
-    Every view's first pass runs before the host waits, once, for all their lists: a wait
-    per cube face left the device idle six times a frame. (The views have texels of their
-    own, and every update is a min or a max, which no order changes.)"""
+    The rows pass reads its list's length from the counter pass 1 leaves on the device, so
+    both passes of every view are enqueued without the host waiting: a wait for the
+    counts drained the queue twice a frame (camera and shadow map), and on a GPU left the
+    device idle meanwhile. A view whose list is empty still launches its rows pass, whose
+    work-items return at once. Pass 1 lists every view before any rows pass runs; the
+    views have texels of their own, and every update is a min or a max, which no order
+    changes."""
     if count == 0 or not view_indices:
         return
     capacity = min(count, structs.RASTER_BIG_TRIANGLES)  # a triangle lists itself at most once
@@ -88,15 +92,13 @@ def raster_passes(device: Device, program: str, name: str, defines: dict | None,
         lists.append((device.buffer(np.zeros(1, np.uint32)), device.buffer(nbytes=12 * capacity)))
         timer.add(stage, first_pass(device.queue, (count,), None, vertices, np.int32(count), views,
                                     np.int32(view_index), offsets, np.int32(sample_count), *lists[-1], *target))
-    counts = device.read_all([(big_count, 1) for big_count, _ in lists], np.uint32)
     rows_pass = device.kernel(program, f"{name}_rows", defines)
-    for view_index, (height, width), listed, (_, big) in zip(view_indices, view_sizes, counts, lists):
-        if listed[0]:
-            columns = raster_rows_columns(device, width)
-            timer.add(stage, rows_pass(
-                device.queue, (-(-height // structs.RASTER_ROWS_PER_ITEM), -(-width // columns)), None, vertices,
-                views, np.int32(view_index), offsets, np.int32(sample_count), big,
-                np.int32(min(int(listed[0]), capacity)), np.int32(columns), *target))
+    for view_index, (height, width), (big_count, big) in zip(view_indices, view_sizes, lists):
+        columns = raster_rows_columns(device, width)
+        timer.add(stage, rows_pass(
+            device.queue, (-(-height // structs.RASTER_ROWS_PER_ITEM), -(-width // columns)), None, vertices,
+            views, np.int32(view_index), offsets, np.int32(sample_count), big, big_count, np.int32(columns),
+            *target))
 
 
 def _rasterize(device: Device, buffers: FrameBuffers, view_indices: list[int], offsets, sample_count: int,
