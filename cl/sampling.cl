@@ -17,9 +17,14 @@
  *                 blend of their distances does) and unshadowed weight and each other's
  *                 radiance, blending the two slices as traverse does; flag it for fix_up
  *                 where a slice cannot
- *   fixup_count,  per block of camera samples: count the flagged ones, then list them
- *   fixup_list    (offsets: the counts' prefix sums, from the host)
- *   fix_up        per listed camera sample: walk those rows for the sample itself
+ *   fixup_count   per block of camera samples: count the flagged ones
+ *   fixup_offsets one work-group: the counts' prefix sums (each block's offset), the
+ *                 list's length, and the walks' sum (SampleCounts), in `counts`
+ *   fixup_list    per block of camera samples: list the flagged ones from its offset
+ *   fix_up        per run of the list: walk those rows for each listed sample itself
+ *
+ * No count crosses to the host inside a frame: fix_up reads the list's length from
+ * `counts`, and the host reads `counts` only when asked for the frame's SampleCounts.
  *
  * line_samples and gather take LANES samples per work-item as float8 vectors (lanes.h):
  * PoCL would run them one at a time (docs/design.md §4.5, "Cost on PoCL").
@@ -51,7 +56,7 @@
 
 /* What clrays.stages.sampling.SampleCounts counts of the line samples, those that walked
  * their row, each run of them keeps in its own entry of `walked` (line_scatter stores it,
- * line_refine_fill adds its refined ones), and the host sums them. A global atomic per
+ * line_refine_fill adds its refined ones), and fixup_offsets sums them. A global atomic per
  * walked sample cost line_scatter a fifth of its time on two cores (the counter's cache line
  * goes back and forth); gather flags its fix-ups instead (fixup_count, fixup_list). */
 
@@ -537,8 +542,56 @@ kernel void fixup_count(int samples, global const uchar* fixup_flags, global uin
     block_counts[block] = count;
 }
 
+/* `counts` of a light's epipolar sampling, as fixup_offsets writes them. */
+#define COUNT_COMPUTED 0 /* line samples that walked their row */
+#define COUNT_FIXED_UP 1 /* camera samples listed for fix_up: the list's length */
+
+/* Work-items of fixup_offsets' one work-group, each summing a run of the block counts;
+ * from clrays/stages/sampling.py (-D). */
+#ifndef FIXUP_SCAN_ITEMS
+#define FIXUP_SCAN_ITEMS 256
+#endif
+
+/* One work-group: each block's offset in the fix-up list (the exclusive prefix sums of
+ * `block_counts`), the list's length, and the sum of the `walk_entries` entries of
+ * `walked`, into `counts` (COUNT_*). A frame has about a thousand blocks at 1280×720:
+ * each work-item sums a run of them, and the first adds up the runs' sums. */
+__attribute__((reqd_work_group_size(FIXUP_SCAN_ITEMS, 1, 1)))
+kernel void fixup_offsets(int blocks, global const uint* block_counts, int walk_entries,
+                          global const ushort* walked, global uint* block_offsets, global uint* counts)
+{
+    local uint run_sums[FIXUP_SCAN_ITEMS], walk_sums[FIXUP_SCAN_ITEMS];
+    int item = get_local_id(0);
+    int per_item = (blocks + FIXUP_SCAN_ITEMS - 1) / FIXUP_SCAN_ITEMS;
+    int begin = inline_min(item * per_item, blocks), end = inline_min(begin + per_item, blocks);
+    uint sum = 0;
+    for (int block = begin; block < end; ++block) sum += block_counts[block];
+    uint walks = 0;
+    for (int k = item; k < walk_entries; k += FIXUP_SCAN_ITEMS) walks += walked[k];
+    run_sums[item] = sum;
+    walk_sums[item] = walks;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    if (item == 0) {
+        uint listed = 0, computed = 0;
+        for (int k = 0; k < FIXUP_SCAN_ITEMS; ++k) {
+            uint run = run_sums[k];
+            run_sums[k] = listed;
+            listed += run;
+            computed += walk_sums[k];
+        }
+        counts[COUNT_COMPUTED] = computed;
+        counts[COUNT_FIXED_UP] = listed;
+    }
+    barrier(CLK_LOCAL_MEM_FENCE);
+    uint at = run_sums[item];
+    for (int block = begin; block < end; ++block) {
+        block_offsets[block] = at;
+        at += block_counts[block];
+    }
+}
+
 /* Per block: list its flagged camera samples (index·4 + a bit per slice) from its offset
- * in `fixups` on (the block counts' prefix sums, taken on the host). */
+ * in `fixups` on (the block counts' prefix sums, from fixup_offsets). */
 kernel void fixup_list(int samples, global const uchar* fixup_flags, global const uint* block_offsets,
                        global uint* fixups)
 {
@@ -549,27 +602,35 @@ kernel void fixup_list(int samples, global const uchar* fixup_flags, global cons
         if (fixup_flags[sample]) fixups[at++] = (uint)sample << 2 | fixup_flags[sample];
 }
 
-/* Per listed camera sample: walk the rows of the slices it could not interpolate, as
- * traverse does, and add them with their weights. */
+/* Per run of the fix-up list (its length read from `counts`, so the host sizes the launch
+ * without it: clrays.device.Device.list_launch): for each listed camera sample, walk the
+ * rows of the slices it could not interpolate, as traverse does, and add them with their
+ * weights. The runs are the list split evenly over the launch's work-items, one sample
+ * each on a GPU (whose launch has a work-item per camera sample), a few dozen each on a
+ * CPU (a few work-groups per core, each a stretch of the list, as before). */
 NOT_ACROSS_WORK_ITEMS
 kernel void fix_up(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                    global const epipolar_t* ep, global const float2* tree, global const integrand_t* integrand,
                    global const float* tables, global const uint* camera_depth, global const float2* offsets,
-                   global const uint* fixups, int count, global float4* scatter WALK_FEATURE_ARGS)
+                   global const uint* fixups, global const uint* counts, global float4* scatter WALK_FEATURE_ARGS)
 {
-    int k = get_global_id(0);
-    if (k >= count) return;
+    uint count = counts[COUNT_FIXED_UP], items = get_global_size(0);
+    uint per_item = count / items + (count % items != 0);
+    uint begin = get_global_id(0) * per_item, end = min(begin + per_item, count);
+    if (begin >= end) return;
     walk_features_t features;
     ATTACH_WALK_FEATURES(features) /* a light texture, translucent layers (walk_features.h) */
-    uint entry = fixups[k];
-    int sample = entry >> 2;
-    float distance, t;
-    int i0, i1;
-    float3 dir = gather_ray(frame, views, offsets, camera_depth, ep, sample, &distance, &i0, &i1, &t);
-    ray_span_t span;
-    if (!ray_span(ep, lights + ep->light_index, frame, integrand, dir, distance, &span)) return;
-    float3 walked = (float3)(0.0f);
-    if (entry & 1) walked += (1.0f - t) * row_radiance(ep, tree, i0, &span, integrand, tables, frame, &features);
-    if (entry & 2) walked += t * row_radiance(ep, tree, i1, &span, integrand, tables, frame, &features);
-    scatter[sample] += (float4)(walked, 0.0f);
+    for (uint k = begin; k < end; ++k) {
+        uint entry = fixups[k];
+        int sample = entry >> 2;
+        float distance, t;
+        int i0, i1;
+        float3 dir = gather_ray(frame, views, offsets, camera_depth, ep, sample, &distance, &i0, &i1, &t);
+        ray_span_t span;
+        if (!ray_span(ep, lights + ep->light_index, frame, integrand, dir, distance, &span)) continue;
+        float3 walked = (float3)(0.0f);
+        if (entry & 1) walked += (1.0f - t) * row_radiance(ep, tree, i0, &span, integrand, tables, frame, &features);
+        if (entry & 2) walked += t * row_radiance(ep, tree, i1, &span, integrand, tables, frame, &features);
+        scatter[sample] += (float4)(walked, 0.0f);
+    }
 }

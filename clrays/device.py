@@ -207,6 +207,8 @@ class StageTimer:
 GROUPS_PER_UNIT = 32
 #: The largest work-group spread_local_size makes (PoCL's largest), unless the device's is smaller.
 MAX_CPU_GROUP = 4096
+#: Work-items per work-group of Device.list_launch on a CPU device.
+LIST_GROUP = 64
 #: Device.fill on a CPU device: fills of at least this many bytes run as a kernel, each
 #: work-item storing this many 16-byte vectors.
 PARALLEL_FILL_BYTES = 1 << 20
@@ -401,6 +403,20 @@ class Device:
         group = 1 << (aim.bit_length() - 1)
         return (-(-max(count, 1) // group) * group,), (group,)
 
+    def list_launch(self, bound: int) -> tuple[tuple[int], tuple[int] | None]:
+        """(global size, work-group shape) of a 1-D launch over a list whose length the
+        device alone knows, at most `bound` items, by a kernel that splits the list evenly
+        over its work-items (cl/sampling.cl, fix_up): the host enqueues it without waiting
+        to learn the length. On a device other than a CPU, a work-item per item of `bound`,
+        those past the length returning at once. On a CPU device GROUPS_PER_UNIT work-groups
+        per compute unit of LIST_GROUP work-items, whatever the length: each work-group a
+        stretch of the list, as counted_launch's were, and one work-group size for PoCL
+        to compile."""
+        if not self._spread:
+            return (max(bound, 1),), None
+        group = min(LIST_GROUP, self._max_group)
+        return (GROUPS_PER_UNIT * self._units * group,), (group,)
+
     def buffer(self, array: np.ndarray | None = None, nbytes: int | None = None, writable: bool = True):
         """A device buffer, filled from `array` or of `nbytes` uninitialised bytes; on a CPU
         device a large one of `nbytes` comes from the pool (POOLED_BYTES)."""
@@ -475,6 +491,12 @@ class Device:
         """The host waits for `event` (counted in `host_waits`)."""
         self.host_waits += 1
         event.wait()
+
+    def collect(self, event) -> None:
+        """The host takes what `event`'s command made, which it expects done (a copy enqueued
+        before a later wait): it waits, counted in `host_waits`, only where it is not."""
+        if event.command_execution_status != self.cl.command_execution_status.COMPLETE:
+            self.wait(event)
 
     def read_in_place(self, buffer, shape, dtype) -> np.ndarray:
         """A buffer the frame is done with, as an array: on a CPU device the buffer's own

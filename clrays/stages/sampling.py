@@ -11,8 +11,6 @@ for it.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from .. import structs
@@ -26,19 +24,65 @@ from .raster import RasterResult
 from .rectify import Epipolar, poles_on_screen, slice_sides
 
 
-@dataclass
 class SampleCounts:
     """What epipolar sampling did in one frame, summed over its lights: line samples that
-    walked their row, camera samples interpolated on both of their slices, and camera
-    samples that walked at least one row themselves."""
+    walked their row (`computed`), camera samples interpolated on both of their slices
+    (`interpolated`), and camera samples that walked at least one row themselves
+    (`fixed_up`).
 
-    computed: int = 0
-    interpolated: int = 0
-    fixed_up: int = 0
+    The counts are made on the device (cl/sampling.cl, fixup_offsets), and each light's
+    are copied to the host behind the rest of its frame: they are read when first asked
+    for, by then (after the frame's image was read) without waiting for the device.
+    Reading them inside the frame made the host wait for the device twice per light."""
+
+    def __init__(self, computed: int = 0, interpolated: int = 0, fixed_up: int = 0, pending: tuple = ()):
+        self._counts = (computed, interpolated, fixed_up)
+        # per light still on its way: (device, host array of COUNT_*, its copy's event, camera samples)
+        self._pending = tuple(pending)
+
+    @classmethod
+    def on_device(cls, device: Device, counts, samples: int) -> SampleCounts:
+        """One light's counts, in `counts` (uint[2], cl/sampling.cl COUNT_*) once the device
+        gets there, over `samples` camera samples: their copy is enqueued now, not waited for."""
+        host = np.zeros(2, np.uint32)
+        return cls(pending=((device, host, device.cl.enqueue_copy(device.queue, host, counts, is_blocking=False),
+                             samples),))
+
+    def _settled(self) -> tuple[int, int, int]:
+        computed, interpolated, fixed_up = self._counts
+        for device, host, copy, samples in self._pending:
+            device.collect(copy)
+            computed, interpolated, fixed_up = (computed + int(host[0]), interpolated + samples - int(host[1]),
+                                                fixed_up + int(host[1]))
+        self._counts, self._pending = (computed, interpolated, fixed_up), ()
+        return self._counts
+
+    @property
+    def computed(self) -> int:
+        return self._settled()[0]
+
+    @property
+    def interpolated(self) -> int:
+        return self._settled()[1]
+
+    @property
+    def fixed_up(self) -> int:
+        return self._settled()[2]
 
     def __add__(self, other: SampleCounts) -> SampleCounts:
-        return SampleCounts(self.computed + other.computed, self.interpolated + other.interpolated,
-                            self.fixed_up + other.fixed_up)
+        counts = tuple(a + b for a, b in zip(self._counts, other._counts))
+        return SampleCounts(*counts, pending=self._pending + other._pending)
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, SampleCounts) and self._settled() == other._settled()
+
+    def __repr__(self) -> str:
+        computed, interpolated, fixed_up = self._settled()
+        return f"SampleCounts(computed={computed}, interpolated={interpolated}, fixed_up={fixed_up})"
+
+    def __getstate__(self) -> dict:
+        """Pickled (a dask worker's result) as the counts themselves: events stay behind."""
+        return {"_counts": self._settled(), "_pending": ()}
 
 
 def line_ranges(scene, params: np.ndarray) -> np.ndarray:
@@ -167,6 +211,8 @@ def beta_of_pseudo(q: np.ndarray) -> np.ndarray:
 LANES = 8
 #: Camera samples per block of the fix-up list (fixup_count, fixup_list).
 FIXUP_BLOCK = 1024
+#: Work-items of fixup_offsets' one work-group (cl/sampling.cl FIXUP_SCAN_ITEMS).
+FIXUP_SCAN_ITEMS = 256
 
 
 def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterResult, epipolar: Epipolar,
@@ -191,6 +237,7 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
     samples, n32 = inputs.samples, np.int32(n)
     light = inputs.scene.lights[int(epipolar.params["light_index"])]
     traversal = {"TRAVERSAL": TRAVERSALS.index(render.traversal), "LANES": LANES, "FIXUP_BLOCK": FIXUP_BLOCK,
+                 "FIXUP_SCAN_ITEMS": FIXUP_SCAN_ITEMS,
                  "SAMPLING_LIGHT": structs.LIGHT_SPOT if isinstance(light, SpotLight) else structs.LIGHT_POINT}
     traversal, walked = feature_defines(features, traversal), feature_args(features)
 
@@ -212,25 +259,28 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
     run("gather", (-(-samples // LANES),), None, buffers.params, buffers.views, buffers.lights,
         epipolar.buffer, rastered.camera_depth, buffers.offsets, ranges_buffer, line, radiance, n32, lengths, threshold,
         np.float32(epipole_sin(inputs.scene, light)), np.int32(samples), np.int32(overwrite), scatter, fixup_flags)
-    fixups, fixed_up = fixup_list(device, fixup_flags, samples, run)
-    computed = int(device.read(walks, runs * slices, np.uint16).sum(dtype=np.int64))
-    if fixed_up:
-        run("fix_up", *device.counted_launch(fixed_up), buffers.params, buffers.views, buffers.lights, epipolar.buffer,
-            epipolar.tree, integrand.params, integrand.data, rastered.camera_depth, buffers.offsets, fixups,
-            np.int32(fixed_up), scatter, *walked)
-    return SampleCounts(computed, samples - fixed_up, fixed_up)
+    fixups, counts = fixup_list(device, fixup_flags, samples, walks, runs * slices, run)
+    run("fix_up", *device.list_launch(samples), buffers.params, buffers.views, buffers.lights, epipolar.buffer,
+        epipolar.tree, integrand.params, integrand.data, rastered.camera_depth, buffers.offsets, fixups, counts,
+        scatter, *walked)
+    return SampleCounts.on_device(device, counts, samples)
 
 
-def fixup_list(device: Device, fixup_flags, samples: int, run) -> tuple[object, int]:
-    """(the fix-up list, its length) from gather's flags: each block of FIXUP_BLOCK camera
+def fixup_list(device: Device, fixup_flags, samples: int, walks, walk_entries: int, run) -> tuple[object, object]:
+    """(the fix-up list, its counts) from gather's flags: each block of FIXUP_BLOCK camera
     samples counts its flagged ones, and lists them from the prefix sum of the counts
     before it. An atomic append in gather costs about as much (measured); the flags keep
-    the list in sample order, the same from run to run."""
+    the list in sample order, the same from run to run. The prefix sum is one work-group's
+    on the device (fixup_offsets), which also sums `walks` (its first `walk_entries`): the
+    counts (uint[2], cl/sampling.cl COUNT_*) stay there, and the list has room for every
+    camera sample, so the host waits for neither."""
     blocks, samples32 = -(-samples // FIXUP_BLOCK), np.int32(samples)
     block_counts = device.buffer(nbytes=4 * blocks)
+    block_offsets = device.buffer(nbytes=4 * blocks)
+    counts = device.buffer(nbytes=4 * 2)
     run("fixup_count", (blocks,), None, samples32, fixup_flags, block_counts)
-    counts = device.read(block_counts, blocks, np.uint32).astype(np.int64)
-    offsets = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.uint32)
-    fixups = device.buffer(nbytes=4 * max(int(counts.sum()), 1))  # camera samples listed for fix_up
-    run("fixup_list", (blocks,), None, samples32, fixup_flags, device.buffer(offsets, writable=False), fixups)
-    return fixups, int(counts.sum())
+    run("fixup_offsets", (FIXUP_SCAN_ITEMS,), (FIXUP_SCAN_ITEMS,), np.int32(blocks), block_counts,
+        np.int32(walk_entries), walks, block_offsets, counts)
+    fixups = device.buffer(nbytes=4 * samples)  # camera samples listed for fix_up, at most every one
+    run("fixup_list", (blocks,), None, samples32, fixup_flags, block_offsets, fixups)
+    return fixups, counts
