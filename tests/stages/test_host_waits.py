@@ -1,0 +1,140 @@
+"""The host's waits for the device inside a frame (Device.host_waits): the counts that size
+a launch (raster's lists of big triangles, epipolar sampling's fix-up list) are read on the
+device by the kernels that need them, and the frame's statistics (SampleCounts) are read
+only when asked for, after the image."""
+import pickle
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from clrays.device import Device
+from clrays.scene.load import load_scene
+from clrays.stages.sampling import FIXUP_BLOCK, FIXUP_SCAN_ITEMS, SampleCounts, fixup_list
+
+SCENES = Path(__file__).resolve().parents[2] / "scenes"
+BENCH_SCENES = ("demo", "bunny", "behind", "sun")
+
+#: Waits of a default frame of each bench scene at 96×54 (method minmax, epipolar
+#: sampling, exact surface shadows), each named by the function that waits:
+#: - map_is_empty (stages/raster.py): whether the light's map holds anything, 1;
+#: - rectify (stages/rectify.py): the bounds of β and γ that size the epipolar texture, 1;
+#: - _bound_passes (stages/visibility.py): the bound passes' lists of tall triangles (their
+#:   lengths, then the lists, which the host orders nearest first), 2 per run of the passes:
+#:   once for the bound maps and once for the shadow rays' texels (ray_lists), 4;
+#: - visibility (stages/visibility.py): how many shadow rays the maps left, which picks
+#:   their path (listed triangles or the BVH) and sizes their launch, 1;
+#: - ray_lists (stages/visibility.py): whether the rays' lists of triangles overflowed, 1;
+#: - shade (stages/shade.py): the image, 1.
+#: None comes from raster's rows passes or from epipolar sampling.
+WAITS_96x54 = {"map_is_empty": 1, "rectify": 1, "_bound_passes": 4, "visibility": 1, "<genexpr>": 1, "shade": 1}
+FREE_OF_WAITS = ("raster_passes", "epipolar_sampling", "fixup_list")
+DEVICE_READS = ("read", "read_all", "read_in_place")
+
+
+def _waits_by_caller(monkeypatch) -> list[list[str]]:
+    """Every Device.wait from now on, as the names of the functions on the stack."""
+    stacks = []
+    wait = Device.wait
+
+    def recording(self, event):
+        frame, names = sys._getframe(1), []
+        while frame is not None:
+            names.append(frame.f_code.co_name)
+            frame = frame.f_back
+        stacks.append(names)
+        return wait(self, event)
+
+    monkeypatch.setattr(Device, "wait", recording)
+    return stacks
+
+
+@pytest.mark.parametrize("name", BENCH_SCENES)
+def test_a_default_frame_waits_only_where_listed(renderer, monkeypatch, name):
+    scene = load_scene(SCENES / f"{name}.yaml", overrides=["image.width=96", "image.height=54"])
+    renderer.render(scene, reuse=False)  # (kernels built)
+    stacks = _waits_by_caller(monkeypatch)
+    result = renderer.render(scene, reuse=False)
+    assert result.host_waits == sum(WAITS_96x54.values()), [names[:3] for names in stacks]
+    callers = {}
+    for names in stacks:
+        caller = next(name for name in names if name not in DEVICE_READS)
+        callers[caller] = callers.get(caller, 0) + 1
+        assert not set(names) & set(FREE_OF_WAITS), names[:6]
+    assert callers == WAITS_96x54
+
+
+def test_sample_counts_are_read_without_a_wait(renderer, device):
+    """Asked for after the frame, the counts are on the host already: no wait, the same
+    values every time, and a pickled result (a dask worker's) carries them."""
+    scene = load_scene(SCENES / "demo.yaml", overrides=["image.width=64", "image.height=36"])
+    result = renderer.render(scene, reuse=False)
+    waits = renderer.device.host_waits
+    counts = result.samples
+    assert counts.interpolated + counts.fixed_up == 64 * 36 * scene.image.spp
+    assert 0 < counts.fixed_up and 0 < counts.computed
+    assert renderer.device.host_waits == waits
+    again = pickle.loads(pickle.dumps(result.without_pixels())).samples
+    assert (again.computed, again.interpolated, again.fixed_up) == (counts.computed, counts.interpolated,
+                                                                     counts.fixed_up)
+    assert again == counts and repr(again) == repr(counts)
+    assert counts + counts == SampleCounts(2 * counts.computed, 2 * counts.interpolated, 2 * counts.fixed_up)
+
+
+@pytest.mark.parametrize("samples", [1, FIXUP_BLOCK, 3 * FIXUP_BLOCK + 5, (FIXUP_SCAN_ITEMS + 3) * FIXUP_BLOCK + 17])
+def test_fixup_list_and_counts_match_numpy(device, samples):
+    """fixup_count → fixup_offsets → fixup_list against numpy: the flagged samples in order,
+    with their flags; the list's length and the walks' sum in `counts`. The largest case has
+    more blocks than fixup_offsets has work-items (runs of two blocks)."""
+    rng = np.random.default_rng(samples)
+    flags = np.where(rng.random(samples) < 0.3, rng.integers(1, 4, samples), 0).astype(np.uint8)
+    walks = rng.integers(0, 9, 1000, dtype=np.uint16)
+
+    def run(name, global_size, local_size, *args):
+        device.kernel("sampling", name, {"FIXUP_BLOCK": FIXUP_BLOCK, "FIXUP_SCAN_ITEMS": FIXUP_SCAN_ITEMS})(
+            device.queue, global_size, local_size, *args)
+
+    fixups, counts = fixup_list(device, device.buffer(flags), samples, device.buffer(walks), 997, run)
+    listed = np.flatnonzero(flags)
+    computed, fixed_up = device.read(counts, 2, np.uint32)
+    assert fixed_up == len(listed) and computed == int(walks[:997].sum())
+    got = device.read(fixups, max(len(listed), 1), np.uint32)[:len(listed)]
+    np.testing.assert_array_equal(got >> 2, listed)
+    np.testing.assert_array_equal(got & 3, flags[listed])
+
+
+@pytest.mark.parametrize("bound", [0, 1, 100, 5000, 10**6])
+def test_list_launch_covers_every_item_once(device, bound):
+    """fix_up's split of a list over Device.list_launch's work-items, in numpy: every item of
+    any length up to `bound` belongs to exactly one work-item's run."""
+    (items,), local = device.list_launch(bound)
+    assert local is None or items % local[0] == 0
+    for count in sorted({0, 1, bound // 3, bound}):
+        per_item = count // items + (count % items != 0)
+        begin = np.arange(items, dtype=np.int64) * per_item
+        end = np.minimum(begin + per_item, count)
+        covered = np.zeros(count, np.int64)
+        for b, e in zip(begin, end):
+            covered[b:e] += 1
+        assert np.all(covered == 1), count
+
+
+def test_fix_up_launch_is_sized_without_the_list(renderer, monkeypatch):
+    """fix_up is launched over Device.list_launch(camera samples), and the image is that of a
+    launch over the list alone: the work-items past the list's length do nothing."""
+    scene = load_scene(SCENES / "sun.yaml", overrides=["image.width=80", "image.height=45"])
+    image = renderer.render(scene, reuse=False).image
+    bounds = []
+    list_launch = Device.list_launch
+
+    def spy(self, bound):
+        bounds.append(bound)
+        return list_launch(self, bound)
+
+    monkeypatch.setattr(Device, "list_launch", spy)
+    assert np.array_equal(renderer.render(scene, reuse=False).image, image)
+    assert bounds == [80 * 45 * scene.image.spp]
+    # One work-item per camera sample (a GPU's shape) gives the same bits as PoCL's runs.
+    monkeypatch.setattr(Device, "list_launch", lambda self, bound: ((max(bound, 1),), None))
+    assert np.array_equal(renderer.render(scene, reuse=False).image, image)
