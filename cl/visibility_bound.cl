@@ -445,9 +445,11 @@ kernel void visibility_bound(global const float4* tri_vertices, int count, globa
 kernel void visibility_bound_rows(global const float4* tri_vertices, global const view_t* views, int first_view,
                                   int view_count, global uint* bound, global int* writer,
                                   int masked, global const uint* read_mask, int mask_offset, TOUCHING_ARGS,
-                                  global const int4* big_items, int big_count, int rows_per_item,
+                                  global const int4* big_items, global const int* listed, int rows_per_item,
                                   int columns_per_item)
 {
+    int big_count = *listed; /* (read here: the host enqueues this pass without waiting for it) */
+    if (big_count == 0) return;
     int row_begin = get_global_id(0) * rows_per_item, row_end = row_begin + rows_per_item;
     int column_begin = get_global_id(1) * columns_per_item, column_end = column_begin + columns_per_item;
     if (row_begin >= views[first_view].height || column_begin >= views[first_view].width) return;
@@ -458,4 +460,60 @@ kernel void visibility_bound_rows(global const float4* tri_vertices, global cons
         bound_triangle(tri_vertices, views, first_view, view_count, bound, writer, masked, read_mask, mask_offset,
                        TOUCHING_PASS, big.x, row_begin, row_end, column_begin, column_end, 1, 0, 0, 0, 0);
     }
+}
+
+/* The rows pass's list of a view ordered nearest the view first (by the distance of each
+ * listed triangle's centroid from the view's origin; orthographic: its depth along
+ * `forward`): a far floor under nearer triangles then mostly finds their bounds already
+ * below its own nearest depth and skips its texel maths. Any order gives the same maps.
+ * The list's length is read here, so the host enqueues this without waiting for it. One
+ * work-group sorts (key, place) pairs in local memory (a bitonic sort over the power of two
+ * ORDER_LONGEST, the pairs past the list's length at +inf); a list longer than that keeps
+ * the order in which the first pass listed it. */
+#define ORDER_LONGEST 2048 /* 16 KiB of local memory */
+kernel void visibility_order(global const float4* tri_vertices, global const view_t* views, int view_index,
+                             global const int4* big_items, global const int* big_count, global int4* ordered)
+{
+    local float keys[ORDER_LONGEST];
+    local int places[ORDER_LONGEST];
+    int count = *big_count, item = get_local_id(0), items = get_local_size(0);
+    if (count > ORDER_LONGEST) {
+        for (int k = item; k < count; k += items) ordered[k] = big_items[k];
+        return;
+    }
+    int size = 1;
+    while (size < count) size <<= 1;
+    global const view_t* view = views + view_index;
+    for (int k = item; k < size; k += items) {
+        float key = INFINITY;
+        if (k < count) {
+            int tri = big_items[k].x;
+            float3 centroid = (tri_vertices[3 * tri].xyz + tri_vertices[3 * tri + 1].xyz
+                               + tri_vertices[3 * tri + 2].xyz) / 3.0f - view->origin.xyz;
+            key = view->projection == PROJECTION_PERSPECTIVE ? length(centroid) : dot(centroid, view->forward.xyz);
+        }
+        keys[k] = key;
+        places[k] = k;
+    }
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (int run = 2; run <= size; run <<= 1) {
+        for (int stride = run >> 1; stride > 0; stride >>= 1) {
+            for (int k = item; k < size; k += items) {
+                int other = k ^ stride;
+                if (other > k) {
+                    int ascending = (k & run) == 0;
+                    float a = keys[k], b = keys[other];
+                    if ((a > b) == ascending && a != b) {
+                        keys[k] = b;
+                        keys[other] = a;
+                        int place = places[k];
+                        places[k] = places[other];
+                        places[other] = place;
+                    }
+                }
+            }
+            barrier(CLK_LOCAL_MEM_FENCE);
+        }
+    }
+    for (int k = item; k < count; k += items) ordered[k] = big_items[places[k]];
 }

@@ -65,6 +65,11 @@ TOUCHING_NODES_PER_ENTRY = 64
 #: triangles, lists the triangles touching the texels of those rays alone (`ray_lists`: the
 #: bound passes again over those texels) rather than building the BVH.
 RAY_LIST_ENTRIES = 1 << 17
+#: Work-items of the one work-group that orders a view's list of tall triangles nearest
+#: first (cl/visibility_bound.cl, visibility_order: a bitonic sort in local memory of up to
+#: ORDER_LONGEST, 2048; a longer list stays in the order it was listed in, which gives the
+#: same maps. The bench scenes list at most 829: demo, a face, at 1280×720).
+ORDER_ITEMS = 256
 #: Camera samples one visibility_prepare or visibility work-item takes, as float8 lanes (cl/lanes.h).
 PREPARE_LANES = 8
 
@@ -221,9 +226,11 @@ def _bound_passes(device: Device, inputs: FrameInputs, first: int, bound, writer
     # Only the cube faces the frame can read (`view_needed`, as raster.shadow does): no
     # sample projects into the others, so their texels are never asked for.
     drawn = [int(view) for view in np.flatnonzero(inputs.view_needed[1:]) + 1]
-    # Every view's first pass, then one wait for all their lists; then the host orders a
-    # view's list while the device runs the rows pass of the view before (each view has
-    # texels of its own, and a texel's values do not depend on the order of the passes).
+    # Every view's first pass, then each view's list ordered nearest first and its rows
+    # pass, all on the device: the kernels read the lists' lengths themselves, so the host
+    # enqueues every pass without waiting (it read the lengths and the lists, and ordered
+    # them itself: two waits per run of the passes, each draining the queue). Each view has
+    # texels of its own, and a texel's values do not depend on the order of the passes.
     big = {}  # view → (its list of big items, their count)
     for view in drawn:
         if rects is None or (filter_rects and view not in rects):  # (a view the recording frame did not draw)
@@ -238,11 +245,14 @@ def _bound_passes(device: Device, inputs: FrameInputs, first: int, bound, writer
             device.queue, (count,), None, vertices, np.int32(count), views, np.int32(view), np.int32(1), bound,
             writer, masked, read_mask, np.int32(first), *lists, np.int32(BOUND_SMALL_ROWS), *big[view],
             np.int32(mode), view_rects))
-    listed = dict(zip(drawn, device.read_all([(big[view][1], 1) for view in drawn], np.int32)))
-    views_listed = [view for view in drawn if listed[view][0]]
-    items = device.read_all([(big[view][0], (int(listed[view][0]), 4)) for view in views_listed], np.int32)
-    for view, listed_items in zip(views_listed, items):
-        ordered = device.buffer(nearest_first(listed_items, inputs, view), writable=False)  # (copied, no wait)
+    # (one list's order at a time: the queue is in order, so each view's rows pass has read
+    # its list before the next view's order overwrites it)
+    ordered = device.buffer(nbytes=16 * count)
+    order = device.kernel("visibility_bound", "visibility_order")
+    for view in drawn:
+        items, listed = big[view]
+        timer.add("visibility", order(device.queue, (ORDER_ITEMS,), (ORDER_ITEMS,), vertices, views, np.int32(view),
+                                      items, listed, ordered))
         height, width = int(inputs.views[view]["height"]), int(inputs.views[view]["width"])
         # the first pass packs a triangle's first and last column in 16 bits each
         # (big_items' w; shadow maps are at most 8192 wide, clrays.scene.fields)
@@ -250,8 +260,8 @@ def _bound_passes(device: Device, inputs: FrameInputs, first: int, bound, writer
         rows, columns = rows_pass_block(device, width)
         timer.add("visibility", rows_pass(
             device.queue, (-(-height // rows), -(-width // columns)), None, vertices, views, np.int32(view),
-            np.int32(1), bound, writer, masked, read_mask, np.int32(first), *lists, ordered,
-            np.int32(len(listed_items)), np.int32(rows), np.int32(columns)))
+            np.int32(1), bound, writer, masked, read_mask, np.int32(first), *lists, ordered, listed,
+            np.int32(rows), np.int32(columns)))
 
 
 def ray_lists(device: Device, buffers: FrameBuffers, prepared: Prepared, ray_entries, rays: int,
@@ -286,21 +296,6 @@ def ray_lists(device: Device, buffers: FrameBuffers, prepared: Prepared, ray_ent
     if any(int(device.read(t.count, 1, np.int32)[0]) > t.capacity for t in lists):
         return None
     return lists
-
-
-def nearest_first(items: np.ndarray, inputs: FrameInputs, view: int) -> np.ndarray:
-    """The rows pass's list (item, first row, last row) ordered by the distance of each
-    item's centroid from the view (orthographic: its depth), nearest first. The result is
-    the same in any order; in this one a far floor under nearer triangles mostly finds
-    their bounds already below its own nearest depth and skips its texel maths
-    (bound_triangle's floor_bits)."""
-    centroids = inputs.tri_vertices[:, :3].reshape(-1, 3, 3)[items[:, 0]].astype(np.float64).mean(axis=1)
-    centroids -= np.asarray(inputs.views[view]["origin"][:3], np.float64)
-    if inputs.views[view]["projection"] == structs.PROJECTION_PERSPECTIVE:
-        distance = np.linalg.norm(centroids, axis=1)
-    else:
-        distance = centroids @ np.asarray(inputs.views[view]["forward"][:3], np.float64)
-    return np.ascontiguousarray(items[np.argsort(distance, kind="stable")])
 
 
 def bound_atlas(device: Device, buffers: FrameBuffers, bounds: list[BoundMap]) -> BoundMap:

@@ -1,6 +1,6 @@
 """The host's waits for the device inside a frame (Device.host_waits): the counts that size
-a launch (raster's lists of big triangles, epipolar sampling's fix-up list) are read on the
-device by the kernels that need them, and the frame's statistics (SampleCounts) are read
+a launch (raster's and the bound passes' lists of big triangles, epipolar sampling's fix-up
+list) are read on the device by the kernels that need them, and the frame's statistics (SampleCounts) are read
 only when asked for, after the image."""
 import pickle
 import sys
@@ -20,16 +20,13 @@ BENCH_SCENES = ("demo", "bunny", "behind", "sun")
 #: sampling, exact surface shadows), each named by the function that waits:
 #: - map_is_empty (stages/raster.py): whether the light's map holds anything, 1;
 #: - rectify (stages/rectify.py): the bounds of β and γ that size the epipolar texture, 1;
-#: - _bound_passes (stages/visibility.py): the bound passes' lists of tall triangles (their
-#:   lengths, then the lists, which the host orders nearest first), 2 per run of the passes:
-#:   once for the bound maps and once for the shadow rays' texels (ray_lists), 4;
 #: - visibility (stages/visibility.py): how many shadow rays the maps left, which picks
 #:   their path (listed triangles or the BVH) and sizes their launch, 1;
 #: - ray_lists (stages/visibility.py): whether the rays' lists of triangles overflowed, 1;
 #: - shade (stages/shade.py): the image, 1.
-#: None comes from raster's rows passes or from epipolar sampling.
-WAITS_96x54 = {"map_is_empty": 1, "rectify": 1, "_bound_passes": 4, "visibility": 1, "<genexpr>": 1, "shade": 1}
-FREE_OF_WAITS = ("raster_passes", "epipolar_sampling", "fixup_list")
+#: None comes from raster's rows passes, epipolar sampling or visibility's bound passes.
+WAITS_96x54 = {"map_is_empty": 1, "rectify": 1, "visibility": 1, "<genexpr>": 1, "shade": 1}
+FREE_OF_WAITS = ("raster_passes", "epipolar_sampling", "fixup_list", "_bound_passes")
 DEVICE_READS = ("read", "read_all", "read_in_place")
 
 

@@ -129,3 +129,38 @@ def test_the_rows_pass_draws_the_same_maps_whatever_block_a_work_item_owns(devic
     assert blocks, "the scene has triangles taller than the first pass's rows"
     np.testing.assert_array_equal(other_bound, bound)
     np.testing.assert_array_equal(other_writer, writer)
+
+
+@pytest.mark.parametrize("kind", ["point", "directional"])
+@pytest.mark.parametrize("listed", [0, 1, 37, 300, 2048, 2049])
+def test_the_rows_pass_list_is_ordered_nearest_first_on_the_device(device, kind, listed):
+    """visibility_order against numpy: the list, whose length the kernel reads from the
+    device, comes back as the same items nearest the view first (a triangle's centroid from
+    the view's origin; orthographic: along `forward`), within float32 rounding of the
+    distances; a list longer than ORDER_LONGEST (2048) comes back as it was."""
+    from clrays.stages.visibility import ORDER_ITEMS
+
+    scene = make_scene(_triangles(), [LIGHTS[kind]], shadow_map=48)
+    inputs = light_pass_inputs(frame_inputs(scene), 0)
+    view = 1
+    rng = np.random.default_rng(listed)
+    triangles = inputs.tri_vertices.shape[0] // 3
+    items = np.stack([rng.integers(0, triangles, listed), rng.integers(0, 48, listed), rng.integers(0, 48, listed),
+                      rng.integers(0, 1 << 20, listed)], axis=1).astype(np.int32).reshape(-1, 4)
+    ordered = device.buffer(nbytes=16 * max(listed, 1))
+    device.kernel("visibility_bound", "visibility_order")(
+        device.queue, (ORDER_ITEMS,), (ORDER_ITEMS,), device.buffer(inputs.tri_vertices), device.buffer(inputs.views),
+        np.int32(view), device.buffer(items if listed else np.zeros((1, 4), np.int32)),
+        device.buffer(np.array([listed], np.int32)), ordered)
+    got = device.read(ordered, (max(listed, 1), 4), np.int32)[:listed]
+    if listed > 2048:
+        np.testing.assert_array_equal(got, items)
+        return
+    assert sorted(map(tuple, got)) == sorted(map(tuple, items))  # the same items, each once
+    centroids = inputs.tri_vertices[:, :3].reshape(-1, 3, 3).astype(np.float64).mean(axis=1)[got[:, 0]]
+    centroids -= np.asarray(inputs.views[view]["origin"][:3], np.float64)
+    if inputs.views[view]["projection"] == structs.PROJECTION_PERSPECTIVE:
+        distance = np.linalg.norm(centroids, axis=1)
+    else:
+        distance = centroids @ np.asarray(inputs.views[view]["forward"][:3], np.float64)
+    assert np.all(np.diff(distance) >= -1e-5 * (1.0 + np.abs(distance[1:])))
