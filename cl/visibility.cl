@@ -339,3 +339,33 @@ kernel void visibility(global const frame_t* frame, global const view_t* views, 
                          tri_normal, offsets, visible, ray_entries, ray_count, first + k, l);
     }
 }
+
+/* After visibility: the way the entries it left go (VISIBILITY_ROUTE_*), one work-item. None
+ * left; else the frame's own lists of the triangles at each texel (a thumbnail), where every
+ * light has them whole (`list_counts` of `lights`, each at most its `list_capacities`; no
+ * lists: list_capacities 0) and every entry has a texel; else lists made for the rays'
+ * texels alone (ray_lists), where those rays are at most `list_limit` and each has a
+ * texel; else the BVH. */
+kernel void visibility_route(global const int* ray_count, int lights, global const int* list_counts,
+                             global const int* list_capacities, int list_limit, global int* route)
+{
+    if (get_global_id(0) != 0) return;
+    int rays = ray_count[0], without_texel = ray_count[1], whole = lights > 0;
+    for (int l = 0; l < lights; ++l) whole = whole && list_capacities[l] > 0 && list_counts[l] <= list_capacities[l];
+    *route = rays == 0                             ? VISIBILITY_ROUTE_NONE
+           : whole && !without_texel               ? VISIBILITY_ROUTE_LISTED
+           : !whole && !without_texel && rays <= list_limit ? VISIBILITY_ROUTE_RAY_LISTS
+                                                   : VISIBILITY_ROUTE_BVH;
+}
+
+/* After ray_lists: its lists answer the rays where every light's holds at most
+ * `nodes_per_ray` nodes per ray (the room they had: more, and the BVH is the cheaper way);
+ * else the BVH. One work-item. */
+kernel void visibility_reroute(global const int* ray_count, int lights, global const int* list_counts,
+                               int nodes_per_ray, global int* route)
+{
+    if (get_global_id(0) != 0 || *route != VISIBILITY_ROUTE_RAY_LISTS) return;
+    int whole = 1;
+    for (int l = 0; l < lights; ++l) whole = whole && list_counts[l] <= nodes_per_ray * ray_count[0];
+    *route = whole ? VISIBILITY_ROUTE_RAY_LISTED : VISIBILITY_ROUTE_BVH;
+}

@@ -27,6 +27,22 @@
 #define MAP_TEXEL_OUTSIDE -1 /* the point projects outside the map: lit (a map covers every occluder) */
 #define MAP_TEXEL_NONE -2    /* behind a perspective view: a ray decides */
 
+/* A launch the host enqueues before the device knows whether the frame needs it: it returns
+ * at once unless visibility's route (VISIBILITY_ROUTE_*, clrays/structs.py; written by
+ * visibility_route) is `wanted`; VISIBILITY_ROUTE_ANY runs whatever the route. */
+#define ROUTE_ARGS global const int* route, int wanted
+#define RETURN_UNLESS_ROUTED if (wanted != VISIBILITY_ROUTE_ANY && *route != wanted) return;
+
+/* The run of a list of `count` items (a length the device alone knows) that this work-item
+ * takes: the list split evenly over the launch (clrays.device.Device.list_launch). */
+#define LIST_RUN(count, begin, end)                                                         \
+    int begin, end;                                                                         \
+    {                                                                                       \
+        int items_ = get_global_size(0), per_item_ = (count) / items_ + ((count) % items_ != 0); \
+        begin = get_global_id(0) * per_item_;                                               \
+        end = min(begin + per_item_, (count));                                              \
+    }
+
 /* Unit direction of the view ray through pixel coordinates (px, py) of a perspective view. */
 inline float3 view_direction(global const view_t* view, float px, float py)
 {

@@ -387,8 +387,9 @@ inline void bound_triangle(global const float4* tri_vertices, global const view_
  * (frame addresses; the light's own maps are at address - first). A work-item per word was mostly its own overhead: a
  * cube's mask is 196k words, few of them with a bit set. */
 kernel void visibility_clear(global const uint* read_mask, int first, int texels, int clear_maps, global uint* bound,
-                             global int* writer, global int* touching_head, int touching_capacity)
+                             global int* writer, global int* touching_head, int touching_capacity, ROUTE_ARGS)
 {
+    RETURN_UNLESS_ROUTED
     int first_word = first >> 5, last_word = (first + texels - 1) >> 5;
     int begin = first_word + get_global_id(0) * VISIBILITY_CLEAR_WORDS;
     int end = min(begin + VISIBILITY_CLEAR_WORDS, last_word + 1);
@@ -424,8 +425,9 @@ kernel void visibility_bound(global const float4* tri_vertices, int count, globa
                              int first_view, int view_count, global uint* bound, global int* writer,
                              int masked, global const uint* read_mask, int mask_offset, TOUCHING_ARGS,
                              int small_rows, global int4* big_items, volatile global int* big_count,
-                             int rect_mode, global int4* rects)
+                             int rect_mode, global int4* rects, ROUTE_ARGS)
 {
+    RETURN_UNLESS_ROUTED
     int item = get_global_id(0);
     if (item >= count * view_count) return;
     if (rect_mode == RECTS_FILTER) {
@@ -446,8 +448,9 @@ kernel void visibility_bound_rows(global const float4* tri_vertices, global cons
                                   int view_count, global uint* bound, global int* writer,
                                   int masked, global const uint* read_mask, int mask_offset, TOUCHING_ARGS,
                                   global const int4* big_items, global const int* listed, int rows_per_item,
-                                  int columns_per_item)
+                                  int columns_per_item, ROUTE_ARGS)
 {
+    RETURN_UNLESS_ROUTED
     int big_count = *listed; /* (read here: the host enqueues this pass without waiting for it) */
     if (big_count == 0) return;
     int row_begin = get_global_id(0) * rows_per_item, row_end = row_begin + rows_per_item;
@@ -472,8 +475,10 @@ kernel void visibility_bound_rows(global const float4* tri_vertices, global cons
  * the order in which the first pass listed it. */
 #define ORDER_LONGEST 2048 /* 16 KiB of local memory */
 kernel void visibility_order(global const float4* tri_vertices, global const view_t* views, int view_index,
-                             global const int4* big_items, global const int* big_count, global int4* ordered)
+                             global const int4* big_items, global const int* big_count, global int4* ordered,
+                             ROUTE_ARGS)
 {
+    RETURN_UNLESS_ROUTED
     local float keys[ORDER_LONGEST];
     local int places[ORDER_LONGEST];
     int count = *big_count, item = get_local_id(0), items = get_local_size(0);

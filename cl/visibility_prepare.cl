@@ -223,11 +223,12 @@ kernel void visibility_prepare(global const frame_t* frame, global const view_t*
 }
 
 /* The texels of the entries left to a shadow ray (clrays/stages/visibility.py ray_lists):
- * their addresses get their bit in read_mask, as visibility_prepare's. */
-kernel void visibility_mark_listed(global const int* ray_entries, int ray_count, global const int2* map_read,
-                                   global uint* read_mask)
+ * their addresses get their bit in read_mask, as visibility_prepare's. The entries' count is
+ * read here (ray_count[0]), each work-item taking a run of them. */
+kernel void visibility_mark_listed(global const int* ray_entries, global const int* ray_count,
+                                   global const int2* map_read, global uint* read_mask, ROUTE_ARGS)
 {
-    int item = get_global_id(0);
-    if (item >= ray_count) return;
-    mark_read(read_mask, map_read[ray_entries[item]].x);
+    RETURN_UNLESS_ROUTED
+    LIST_RUN(ray_count[0], begin, end)
+    for (int item = begin; item < end; ++item) mark_read(read_mask, map_read[ray_entries[item]].x);
 }

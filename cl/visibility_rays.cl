@@ -45,27 +45,33 @@ kernel void visibility_rays(global const frame_t* frame, global const view_t* vi
 /* The same rays of one light's entries (`light`), each against the triangles that touch
  * its texel (note_touching: the light's lists, texel addresses less `first`, the frame's
  * address of the light's texel 0) instead of the BVH's: the same triangles that can meet
- * the segment, tested by the same ray test, so the same answer (docs/design.md §4.6). */
+ * the segment, tested by the same ray test, so the same answer (docs/design.md §4.6).
+ * Enqueued before the device knows the route (ROUTE_ARGS) or the entries' count
+ * (ray_count[0], read here; each work-item takes a run of the entries). */
 kernel void visibility_rays_listed(global const frame_t* frame, global const view_t* views,
                                    global const light_t* lights, global const uint* camera_depth,
                                    global const int* tri_id, global const float4* tri_vertices,
                                    global const float4* tri_normal, global const float2* offsets,
                                    global const int2* map_read, int light, int first,
                                    global const int* touching_head, global const int2* touching,
-                                   global const int* ray_entries, int ray_count, global float* visible)
+                                   global const int* ray_entries, global const int* ray_count, global float* visible,
+                                   ROUTE_ARGS)
 {
-    int item = get_global_id(0);
-    if (item >= ray_count) return;
-    int entry = ray_entries[item];
-    if (entry % frame->light_count != light) return;
-    float3 start, ray;
-    float t_max;
-    listed_shadow_ray(frame, views, lights, camera_depth, tri_id, tri_normal, offsets, entry, &start, &ray, &t_max);
-    int skip = tri_id[entry / frame->light_count], occluded = 0;
-    for (int node = touching_head[map_read[entry].x - first]; node >= 0 && !occluded; node = touching[node].y) {
-        int tri = touching[node].x;
-        occluded = tri != skip && ray_meets_triangle(start, ray, 0.0f, t_max, tri_vertices[3 * tri].xyz,
-                                                     tri_vertices[3 * tri + 1].xyz, tri_vertices[3 * tri + 2].xyz);
+    RETURN_UNLESS_ROUTED
+    LIST_RUN(ray_count[0], begin, end)
+    for (int item = begin; item < end; ++item) {
+        int entry = ray_entries[item];
+        if (entry % frame->light_count != light) continue;
+        float3 start, ray;
+        float t_max;
+        listed_shadow_ray(frame, views, lights, camera_depth, tri_id, tri_normal, offsets, entry, &start, &ray,
+                          &t_max);
+        int skip = tri_id[entry / frame->light_count], occluded = 0;
+        for (int node = touching_head[map_read[entry].x - first]; node >= 0 && !occluded; node = touching[node].y) {
+            int tri = touching[node].x;
+            occluded = tri != skip && ray_meets_triangle(start, ray, 0.0f, t_max, tri_vertices[3 * tri].xyz,
+                                                         tri_vertices[3 * tri + 1].xyz, tri_vertices[3 * tri + 2].xyz);
+        }
+        visible[entry] = occluded ? 0.0f : 1.0f;
     }
-    visible[entry] = occluded ? 0.0f : 1.0f;
 }

@@ -93,12 +93,21 @@ VISIBILITY_PENDING = -1.0
 RECTS_NONE, RECTS_RECORD, RECTS_FILTER = 0, 1, 2
 # Words of the read mask (32 texels each) one visibility_clear work-item takes.
 VISIBILITY_CLEAR_WORDS = 32
+# visibility's route: how the entries the maps leave get their shadow rays, decided on the
+# device (cl/visibility.cl, visibility_route), so that the host enqueues the listed paths
+# without waiting to learn the rays' count: none left; the frame's own lists (a thumbnail);
+# lists of the rays' texels to be made, then those lists; the BVH. A launch of one path
+# returns at once under another; ROUTE_ANY: a launch that runs whatever the route.
+VISIBILITY_ROUTE_ANY = -1
+VISIBILITY_ROUTE_NONE, VISIBILITY_ROUTE_LISTED, VISIBILITY_ROUTE_RAY_LISTS = 0, 1, 2
+VISIBILITY_ROUTE_RAY_LISTED, VISIBILITY_ROUTE_BVH = 3, 4
 
 #: Every constant above by its C name: the `-D` options of every kernel build.
 KERNEL_CONSTANTS = {
     name: value for name, value in dict(globals()).items()
     if name.startswith(("PROJECTION_", "LIGHT_", "PHASE_", "INTEGRAND_", "TRAVERSAL_", "RASTER_", "SURFACE_SHADOWS_",
-                         "TEXTURE_WRAP_", "SHADOW_FILTER_", "WRITER_", "STEP_SPACING_", "RECTS_", "CONVEX_"))
+                         "TEXTURE_WRAP_", "SHADOW_FILTER_", "WRITER_", "STEP_SPACING_", "RECTS_", "CONVEX_",
+                         "VISIBILITY_ROUTE_"))
     or name in ("DEPTH_EMPTY", "SIN_BETA_MIN", "VISIBILITY_PENDING", "VISIBILITY_CLEAR_WORDS", "SURFACE_BIAS_TEXELS",
                 "SHADOW_RAY_OFFSET_REL")
 }

@@ -198,7 +198,8 @@ def visibility_bound(device: Device, buffers: FrameBuffers, light_index: int, ti
         words = (first + inputs.shadow_texels - 1) // 32 - first // 32 + 1
         timer.add("visibility", device.kernel("visibility_bound", "visibility_clear")(
             device.queue, (-(-words // structs.VISIBILITY_CLEAR_WORDS),), None, prepared.read_mask,
-            np.int32(first), np.int32(inputs.shadow_texels), np.int32(1), bound, writer, lists[0], lists[3]))
+            np.int32(first), np.int32(inputs.shadow_texels), np.int32(1), bound, writer, lists[0], lists[3],
+            *ungated(device)))
     # A frame too large for lists now may list its rays' texels later (ray_lists): the
     # rectangles let that pass skip the triangles that touch none of them.
     rects = {} if prepared is not None and touching is None else None
@@ -207,16 +208,24 @@ def visibility_bound(device: Device, buffers: FrameBuffers, light_index: int, ti
     return BoundMap(bound, writer, inputs.shadow_texels, touching, rects)
 
 
+def ungated(device: Device) -> tuple:
+    """The route arguments (cl/visibility.h ROUTE_ARGS) of a launch that runs whatever the route."""
+    return device.buffer(np.full(1, structs.VISIBILITY_ROUTE_ANY, np.int32)), np.int32(structs.VISIBILITY_ROUTE_ANY)
+
+
 def _bound_passes(device: Device, inputs: FrameInputs, first: int, bound, writer, read_mask, lists: tuple,
-                  timer: StageTimer, rects: dict | None = None, filter_rects: bool = False) -> None:
+                  timer: StageTimer, rects: dict | None = None, filter_rects: bool = False,
+                  route: tuple | None = None) -> None:
     """Both bound passes of one light (`inputs` anchored at it) over the views the frame
     can read: with `read_mask`, only the texels whose bit it has (at the texel's address +
     `first`); `lists`, the touching-list arguments (capacity 0: none). `rects` (view →
     buffer): filled with each triangle's texel rectangle, or with `filter_rects`, read to
-    skip the triangles whose rectangle holds no texel of `read_mask`."""
+    skip the triangles whose rectangle holds no texel of `read_mask`. `route`: (visibility's
+    route buffer, the route these passes run under), else they always run."""
     count = inputs.tri_vertices.shape[0] // 3
     if not count:
         return
+    route = route or ungated(device)
     vertices = device.buffer(inputs.tri_vertices, writable=False)
     views = device.buffer(inputs.views, writable=False)
     masked = np.int32(read_mask is not None)
@@ -244,7 +253,7 @@ def _bound_passes(device: Device, inputs: FrameInputs, first: int, bound, writer
         timer.add("visibility", first_pass(
             device.queue, (count,), None, vertices, np.int32(count), views, np.int32(view), np.int32(1), bound,
             writer, masked, read_mask, np.int32(first), *lists, np.int32(BOUND_SMALL_ROWS), *big[view],
-            np.int32(mode), view_rects))
+            np.int32(mode), view_rects, *route))
     # (one list's order at a time: the queue is in order, so each view's rows pass has read
     # its list before the next view's order overwrites it)
     ordered = device.buffer(nbytes=16 * count)
@@ -252,7 +261,7 @@ def _bound_passes(device: Device, inputs: FrameInputs, first: int, bound, writer
     for view in drawn:
         items, listed = big[view]
         timer.add("visibility", order(device.queue, (ORDER_ITEMS,), (ORDER_ITEMS,), vertices, views, np.int32(view),
-                                      items, listed, ordered))
+                                      items, listed, ordered, *route))
         height, width = int(inputs.views[view]["height"]), int(inputs.views[view]["width"])
         # the first pass packs a triangle's first and last column in 16 bits each
         # (big_items' w; shadow maps are at most 8192 wide, clrays.scene.fields)
@@ -261,22 +270,29 @@ def _bound_passes(device: Device, inputs: FrameInputs, first: int, bound, writer
         timer.add("visibility", rows_pass(
             device.queue, (-(-height // rows), -(-width // columns)), None, vertices, views, np.int32(view),
             np.int32(1), bound, writer, masked, read_mask, np.int32(first), *lists, ordered, listed,
-            np.int32(rows), np.int32(columns)))
+            np.int32(rows), np.int32(columns), *route))
 
 
-def ray_lists(device: Device, buffers: FrameBuffers, prepared: Prepared, ray_entries, rays: int,
-              bounds: list[BoundMap], timer: StageTimer) -> list[TouchingLists] | None:
-    """Per light, the triangles touching each texel that a listed shadow ray reads, or None
-    when some list outgrew its room. The bound passes run again over those texels alone:
-    they write the bound and writer maps' own values again (each texel's is the least, or
-    the one, of the same triangles), and list the triangles as they go."""
+def ray_lists(device: Device, buffers: FrameBuffers, prepared: Prepared, ray_entries, ray_count,
+              bounds: list[BoundMap], route, timer: StageTimer) -> list[TouchingLists]:
+    """Per light, the triangles touching each texel that a listed shadow ray reads. The bound
+    passes run again over those texels alone: they write the bound and writer maps' own
+    values again (each texel's is the least, or the one, of the same triangles), and list
+    the triangles as they go. Enqueued before the device knows whether the rays take this
+    way: every launch returns at once unless `route` (visibility_route's) says
+    VISIBILITY_ROUTE_RAY_LISTS, and the rays' count is read on the device. The lists have
+    room for TOUCHING_NODES_PER_ENTRY nodes per ray of the most rays that take this way
+    (visibility_route's list limit); visibility_reroute sends the rays to the BVH where a
+    list holds more than TOUCHING_NODES_PER_ENTRY per ray of this frame's."""
     inputs = buffers.inputs
     words = max((inputs.shadow_texels + 31) // 32, 1)
+    gate = (route, np.int32(structs.VISIBILITY_ROUTE_RAY_LISTS))
     mask = device.buffer(nbytes=4 * words)
     device.fill(mask, np.uint32(0), 4 * words, timer, "visibility")
     timer.add("visibility", device.kernel("visibility_prepare", "visibility_mark_listed")(
-        device.queue, *device.counted_launch(rays), ray_entries, np.int32(rays), prepared.map_read, mask))
-    capacity = TOUCHING_NODES_PER_ENTRY * rays
+        device.queue, *device.list_launch(ray_list_limit(inputs)), ray_entries, ray_count, prepared.map_read, mask,
+        *gate))
+    capacity = max(TOUCHING_NODES_PER_ENTRY * ray_list_limit(inputs), 1)
     lists = []
     for index, light in enumerate(bounds):
         light_inputs = light_pass_inputs(inputs, index)
@@ -289,13 +305,26 @@ def ray_lists(device: Device, buffers: FrameBuffers, prepared: Prepared, ray_ent
             # the lists' heads only: the maps keep their values, which the passes write again
             timer.add("visibility", device.kernel("visibility_bound", "visibility_clear")(
                 device.queue, (-(-light_words // structs.VISIBILITY_CLEAR_WORDS),), None, mask, np.int32(first),
-                np.int32(light.texels), np.int32(0), light.bound, light.writer, touching.head, np.int32(capacity)))
+                np.int32(light.texels), np.int32(0), light.bound, light.writer, touching.head, np.int32(capacity),
+                *gate))
             _bound_passes(device, light_inputs, first, light.bound, light.writer, mask, arguments, timer,
-                          light.rects, filter_rects=light.rects is not None)
+                          light.rects, filter_rects=light.rects is not None, route=gate)
         lists.append(touching)
-    if any(int(device.read(t.count, 1, np.int32)[0]) > t.capacity for t in lists):
-        return None
     return lists
+
+
+def ray_list_limit(inputs: FrameInputs) -> int:
+    """The most shadow rays that ray_lists lists the texels of: RAY_LIST_ENTRIES, and no more
+    than the frame has triangles (more rays, and the BVH is the cheaper way) or entries."""
+    return min(RAY_LIST_ENTRIES, inputs.scene.geometry.count, inputs.samples * max(len(inputs.scene.lights), 1))
+
+
+def list_counts(device: Device, lists: list[TouchingLists]):
+    """The node counts of every light's lists in one buffer (device copies: no wait)."""
+    counts = device.buffer(nbytes=4 * max(len(lists), 1))
+    for index, touching in enumerate(lists):
+        device.cl.enqueue_copy(device.queue, counts, touching.count, byte_count=4, dst_offset=4 * index)
+    return counts
 
 
 def bound_atlas(device: Device, buffers: FrameBuffers, bounds: list[BoundMap]) -> BoundMap:
@@ -314,10 +343,19 @@ def bound_atlas(device: Device, buffers: FrameBuffers, bounds: list[BoundMap]) -
 def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, prepared: Prepared, bound: BoundMap,
                bvh: Callable[[], DeviceBvh], timer: StageTimer, lights: list[BoundMap] | None = None):
     """(float[samples × lights]: 1 where the sample sees the light, 0 where it does not
-    (`prepared.visible`, its pending entries decided), the shadow rays cast). The maps decide first; the entries
-    they leave cast a shadow ray: against the triangles touching their texel where every
-    light's BoundMap in `lights` has its lists whole and every ray has a texel, else
-    through the BVH, which `bvh()` builds (or gives the one a session kept) only then."""
+    (`prepared.visible`, its pending entries decided), the shadow rays cast). The maps decide
+    first; the entries they leave cast a shadow ray: against the triangles touching their
+    texel where every light's BoundMap in `lists` has its lists whole and every ray has a
+    texel; else, where the rays are few (ray_list_limit) and each has a texel, against lists
+    made for their texels alone (ray_lists) where those are whole; else through the BVH,
+    which `bvh()` builds (or gives the one a session kept) only then.
+
+    The route is decided on the device (visibility_route, visibility_reroute), and the
+    listed ways are enqueued before it, each launch returning at once unless the route is
+    its own: the host waits once, for the rays' count and the route, and only then builds
+    the BVH where the route asks for it (a host decision: the BVH is never built where no
+    ray needs it, and a scene with reliefs builds its tree on the host). It waited twice
+    before, for the count, then for the rays' lists' room."""
     inputs = buffers.inputs
     entries = inputs.samples * max(len(inputs.scene.lights), 1)
     ray_entries = device.buffer(nbytes=4 * entries)
@@ -326,28 +364,39 @@ def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, pr
         device.queue, (-(-inputs.samples // PREPARE_LANES),), None, buffers.params, buffers.views, buffers.lights,
         rastered.shadow_depth, bound.bound, bound.writer, prepared.map_read, rastered.camera_depth, rastered.tri_id,
         buffers.tri_vertices, buffers.tri_normal, buffers.offsets, prepared.visible, ray_entries, ray_count))
-    rays, without_texel = (int(v) for v in device.read(ray_count, 2, np.int32))
-    if not rays:
-        return prepared.visible, 0
-    touching = [light.touching for light in lights or ()]
-    whole = (touching and all(lists is not None for lists in touching)
-             and all(int(device.read(lists.count, 1, np.int32)[0]) <= lists.capacity for lists in touching))
-    if not whole and lights and not without_texel and rays <= min(RAY_LIST_ENTRIES, inputs.scene.geometry.count):
-        touching = ray_lists(device, buffers, prepared, ray_entries, rays, lights, timer)
-        whole = touching is not None
-    if not without_texel and whole:
-        for index, lists in enumerate(touching):
+    lights = lights or []
+    own = [light.touching for light in lights]
+    own = own if own and all(lists is not None for lists in own) else []  # a thumbnail's lists, for every light
+    limit = ray_list_limit(inputs) if lights else 0
+    route = device.buffer(nbytes=4)
+    timer.add("visibility", device.kernel("visibility", "visibility_route")(
+        device.queue, (1,), None, ray_count, np.int32(len(own)), list_counts(device, own),
+        device.buffer(np.array([lists.capacity for lists in own] or [0], np.int32), writable=False),
+        np.int32(limit), route))
+
+    def rays_listed(lists: list[TouchingLists], wanted: int) -> None:
+        for index, touching in enumerate(lists):
             # this frame's address of the light's texel 0 (a kept map's lists are by the light's own addresses)
             first = int(inputs.views[inputs.light_views[index][0]]["depth_offset"])
             timer.add("visibility", device.kernel("visibility_rays", "visibility_rays_listed")(
-                device.queue, *device.counted_launch(rays), buffers.params, buffers.views, buffers.lights,
+                device.queue, *device.list_launch(entries), buffers.params, buffers.views, buffers.lights,
                 rastered.camera_depth, rastered.tri_id, buffers.tri_vertices, buffers.tri_normal, buffers.offsets,
-                prepared.map_read, np.int32(index), np.int32(first), lists.head, lists.nodes, ray_entries,
-                np.int32(rays), prepared.visible))
-        return prepared.visible, rays
+                prepared.map_read, np.int32(index), np.int32(first), touching.head, touching.nodes, ray_entries,
+                ray_count, prepared.visible, route, np.int32(wanted)))
+
+    rays_listed(own, structs.VISIBILITY_ROUTE_LISTED)
+    if limit:
+        made = ray_lists(device, buffers, prepared, ray_entries, ray_count, lights, route, timer)
+        timer.add("visibility", device.kernel("visibility", "visibility_reroute")(
+            device.queue, (1,), None, ray_count, np.int32(len(made)), list_counts(device, made),
+            np.int32(TOUCHING_NODES_PER_ENTRY), route))
+        rays_listed(made, structs.VISIBILITY_ROUTE_RAY_LISTED)
+    (rays, _), (taken,) = device.read_all([(ray_count, 2), (route, 1)], np.int32)
+    if taken != structs.VISIBILITY_ROUTE_BVH:
+        return prepared.visible, int(rays)
     tree = bvh()
     timer.add("visibility", device.kernel("visibility_rays", "visibility_rays")(
-        device.queue, *device.counted_launch(rays), buffers.params, buffers.views, buffers.lights,
+        device.queue, *device.counted_launch(int(rays)), buffers.params, buffers.views, buffers.lights,
         rastered.camera_depth, rastered.tri_id, buffers.tri_vertices, buffers.tri_normal, buffers.offsets,
         tree.node_bounds, tree.node_children, np.int32(tree.root), ray_entries, np.int32(rays), prepared.visible))
-    return prepared.visible, rays
+    return prepared.visible, int(rays)

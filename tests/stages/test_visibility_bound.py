@@ -138,7 +138,7 @@ def test_the_rows_pass_list_is_ordered_nearest_first_on_the_device(device, kind,
     device, comes back as the same items nearest the view first (a triangle's centroid from
     the view's origin; orthographic: along `forward`), within float32 rounding of the
     distances; a list longer than ORDER_LONGEST (2048) comes back as it was."""
-    from clrays.stages.visibility import ORDER_ITEMS
+    from clrays.stages.visibility import ORDER_ITEMS, ungated
 
     scene = make_scene(_triangles(), [LIGHTS[kind]], shadow_map=48)
     inputs = light_pass_inputs(frame_inputs(scene), 0)
@@ -151,7 +151,7 @@ def test_the_rows_pass_list_is_ordered_nearest_first_on_the_device(device, kind,
     device.kernel("visibility_bound", "visibility_order")(
         device.queue, (ORDER_ITEMS,), (ORDER_ITEMS,), device.buffer(inputs.tri_vertices), device.buffer(inputs.views),
         np.int32(view), device.buffer(items if listed else np.zeros((1, 4), np.int32)),
-        device.buffer(np.array([listed], np.int32)), ordered)
+        device.buffer(np.array([listed], np.int32)), ordered, *ungated(device))
     got = device.read(ordered, (max(listed, 1), 4), np.int32)[:listed]
     if listed > 2048:
         np.testing.assert_array_equal(got, items)

@@ -144,3 +144,60 @@ def test_a_kept_bound_map_lists_its_rays_texels_again(device, monkeypatch):
     assert kept.stage_status["raster.shadow"] == "reused" and kept.stage_status["visibility"] == "computed"
     assert calls == [1, 1]
     np.testing.assert_array_equal(kept.image, Renderer(device, reuse=False).render(brighter).image)
+
+
+def test_rays_lists_that_outgrow_their_room_fall_back_to_the_bvh(device, monkeypatch):
+    # No room per ray: the lists made for the rays' texels overflow, which the device finds
+    # (visibility_reroute), and the rays take the BVH, with the image of the lists.
+    scene = make_scene(np.concatenate([_triangles(), _small_grid()]), [LIGHTS["point"]], width=64, height=48,
+                       shadow_map=64)
+    monkeypatch.setattr(stage, "TOUCHING_ENTRIES", 0)
+    reference = Renderer(device, reuse=False).render(scene)
+    monkeypatch.setattr(stage, "TOUCHING_NODES_PER_ENTRY", 0)
+    real, built = stage.bvh_build_tree, []
+    monkeypatch.setattr(stage, "bvh_build_tree", lambda *args: built.append(1) or real(*args))
+    overflowed = Renderer(device, reuse=False).render(scene)
+    assert built == [1] and overflowed.shadow_rays == reference.shadow_rays > 0
+    np.testing.assert_array_equal(overflowed.image, reference.image)
+
+
+def _host_route(rays, without_texel, counts, capacities, limit, lists_made=None, nodes_per_ray=0):
+    """The route as the host chose it when it read the counts (clrays/structs.py VISIBILITY_ROUTE_*)."""
+    from clrays import structs
+
+    if not rays:
+        return structs.VISIBILITY_ROUTE_NONE
+    whole = bool(capacities) and all(0 < c and n <= c for n, c in zip(counts, capacities))
+    if whole and not without_texel:
+        return structs.VISIBILITY_ROUTE_LISTED
+    if not whole and not without_texel and rays <= limit:
+        if all(n <= nodes_per_ray * rays for n in lists_made):
+            return structs.VISIBILITY_ROUTE_RAY_LISTED
+    return structs.VISIBILITY_ROUTE_BVH
+
+
+def test_the_device_routes_the_rays_as_the_host_did(device):
+    """visibility_route and visibility_reroute against the host's rule, over every case:
+    no ray; the thumbnail's lists whole or not; rays with no texel; rays within the list
+    limit or not; the rays' lists within their room or not."""
+    cases = 0
+    for rays in (0, 1, 50, 51):
+        for without_texel in (0, 1):
+            for thumbnail in ([], [(10, 20)], [(10, 20), (30, 20)], [(5, 0)]):
+                for made in ([10], [10, 200], [2000]):
+                    counts = [n for n, _ in thumbnail]
+                    capacities = [c for _, c in thumbnail]
+                    route = device.buffer(np.full(1, 99, np.int32))
+                    ray_count = device.buffer(np.array([rays, without_texel], np.int32))
+                    device.kernel("visibility", "visibility_route")(
+                        device.queue, (1,), None, ray_count, np.int32(len(thumbnail)),
+                        device.buffer(np.array(counts or [0], np.int32)),
+                        device.buffer(np.array(capacities or [0], np.int32)), np.int32(50), route)
+                    device.kernel("visibility", "visibility_reroute")(
+                        device.queue, (1,), None, ray_count, np.int32(len(made)),
+                        device.buffer(np.array(made, np.int32)), np.int32(4), route)
+                    got = int(device.read(route, 1, np.int32)[0])
+                    assert got == _host_route(rays, without_texel, counts, capacities, 50, made, 4), \
+                        (rays, without_texel, thumbnail, made)
+                    cases += 1
+    assert cases == 96
