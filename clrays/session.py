@@ -59,8 +59,8 @@ from .stages.transparency import (Films, composite, opaque_camera_vertices, tran
                                   transparency_of)
 from .stages.transparency_walk import transparency_march, transparency_walk
 from .stages.volume_moments import volume_moments
-from .stages.visibility import (bound_atlas, bvh_topology_of, upload_bvh, visibility, visibility_bound,
-                                visibility_prepare)
+from .stages.visibility import (TOUCHING_NODES_PER_ENTRY, bound_atlas, bvh_topology_of, ray_list_limit, upload_bvh,
+                                visibility, visibility_bound, visibility_prepare)
 
 #: The rectified texture of a light whose shadow map is empty (nothing casts a shadow)
 #: is π everywhere whatever its size, so it is built at this size (the minimum).
@@ -548,6 +548,11 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
         entries = samples * len(scene.lights)
         sizes += [("texels the visibility stage reads", 8 * entries + inputs.shadow_texels // 8),
                   ("visibility's answers", 4 * entries), ("the list of shadow rays", 4 * entries)]
+        # the lists of the triangles at the shadow rays' texels, made before the device knows
+        # whether the rays take them: room for the most rays that may (stages/visibility.py)
+        sizes += [(f"the shadow rays' lists of triangles of light {index}",
+                   8 * TOUCHING_NODES_PER_ENTRY * ray_list_limit(inputs)) for index in range(len(scene.lights))]
+        sizes.append(("the heads of the shadow rays' lists", 4 * inputs.shadow_texels))
     if scene.geometry.translucent and scene.lights:  # the translucency stage's layers (translucency.py)
         layers = scene.render.translucent_layers
         sizes.append(("translucent layers", 12 * layers * inputs.shadow_texels))

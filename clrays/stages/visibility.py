@@ -18,7 +18,10 @@ sample's lit test reads, `visibility_bound` draws each light's maps at those tex
 (a thumbnail) the bound passes also list, per texel read, the triangles touching it, and
 `visibility_rays_listed` tests those instead: no BVH at all; in a frame that leaves fewer
 rays than it has triangles, the bound passes run again over the rays' texels alone to
-list them (`ray_lists`; docs/design.md §4.6).
+list them (`ray_lists`; docs/design.md §4.6). The counts stay on the device: the passes
+read their lists' lengths there, the listed ways run or return by a route the device
+decides (`visibility_route`), and the host waits once, before the BVH, which it builds
+only where that route asks for it.
 """
 from __future__ import annotations
 
