@@ -28,6 +28,7 @@ from .scene.model import DirectionalLight, Scene, SpotLight
 #: cone would spend most texels near its rim.
 SPOT_SINGLE_VIEW_MAX_DEG = 75.0
 
+
 #: All lights' shadow maps share one depth buffer, indexed by an int offset per view.
 MAX_SHADOW_TEXELS = 2**31 - 1
 #: Light-anchored vertex sets a geometry keeps (light_pass_inputs): a few static lights' own.
@@ -54,6 +55,42 @@ def _view(origin, forward, up, scale_x, scale_y, width, height, projection, dept
     v["projection"] = projection
     v["depth_offset"] = depth_offset
     return v
+
+
+def without_walled_off_light(scene: Scene) -> Scene:
+    """`scene` with the power of every light that `walled_off` separates from the eye set to
+    0, which is exact: no texel-sized gap of a shadow map lets it through then."""
+    if not scene.lights or not scene.geometry.outward.any():
+        return scene
+    eye_windings = scene.geometry.solid_windings(scene.camera.position)
+    if not (np.abs(eye_windings) > 0.75).any() and all(isinstance(light, DirectionalLight) for light in scene.lights):
+        return scene
+    walled = [walled_off(scene.geometry, eye_windings, light) for light in scene.lights]
+    if not any(walled):
+        return scene
+    return replace(scene, lights=tuple(_dark(light) if dark else light for light, dark in zip(scene.lights, walled)))
+
+
+def _dark(light):
+    field = "irradiance" if isinstance(light, DirectionalLight) else "intensity"
+    return replace(light, **{field: np.zeros(3)})
+
+
+def walled_off(geometry, eye_windings: np.ndarray, light) -> bool:
+    """Whether a closed opaque solid holds the eye and not the light, or the light and not
+    the eye. Then every point the camera sees, on the eye's side of the solid's walls, is cut
+    off from the light: its in-scattering and direct light are 0, as `exact` finds them.
+    The shadow maps alone would let a layer about a texel thick behind each wall count as
+    lit (docs/stability.md, "A closed room"). Clearly inside is a winding number of
+    magnitude above 3/4, clearly outside below 1/4; a point on a wall decides nothing."""
+    if not len(eye_windings):
+        return False
+    light_windings = (np.zeros_like(eye_windings) if isinstance(light, DirectionalLight)
+                      else geometry.solid_windings(light.position))
+    inside = lambda windings: np.abs(windings) > 0.75
+    outside = lambda windings: np.abs(windings) < 0.25
+    return bool(np.any((inside(eye_windings) & outside(light_windings))
+                       | (outside(eye_windings) & inside(light_windings))))
 
 
 def _any_up(forward) -> np.ndarray:

@@ -34,7 +34,7 @@ import numpy as np
 
 from .device import Device, StageTimer
 from .errors import ClraysError
-from .inputs import FrameBuffers, FrameInputs, frame_inputs, upload
+from .inputs import FrameBuffers, FrameInputs, frame_inputs, upload, without_walled_off_light
 from .physics.radiometry import effective_far
 from .passes import assemble, per_light_indices, samples_to_pixels
 from .reuse import COMPUTED, REUSED, SKIPPED, Reuse, StageCache, StageRecord, digest, geometry_parts, scene_digest
@@ -240,6 +240,7 @@ class Renderer:
 
     def _upload(self, scene: Scene, method: str, reuse: Reuse, timer: StageTimer) -> Frame:
         """The frame's inputs checked against the device and uploaded, with their stage keys."""
+        scene = without_walled_off_light(scene)  # a light a closed solid keeps from the eye: dark, exactly
         inputs = frame_inputs(scene)
         check_device_memory(self.device, inputs)
         refuse_translucency(scene, method)  # (volume_moments: no transmittance term)

@@ -99,6 +99,22 @@ def make_scene(triangles=None, lights=None, width=32, height=24, spp=1, position
     )
 
 
+def with_closed_solid(scene: Scene, rows: slice) -> Scene:
+    """`scene` with its triangles `rows` one closed solid, as loading a box, a sphere or a
+    closed mesh marks it (`Geometry.outward`); make_scene's triangles are an open soup."""
+    from dataclasses import replace
+
+    from clrays.scene.geometry import closed_outward
+
+    geometry = scene.geometry
+    solid = geometry.triangles[rows]
+    sign = closed_outward(solid.reshape(-1, 3), np.arange(3 * len(solid)).reshape(-1, 3))
+    assert sign != 0, "the rows do not close a solid"
+    outward, object_id = geometry.outward.copy(), geometry.object_id.copy()
+    outward[rows], object_id[rows] = sign, object_id.max() + 1
+    return replace(scene, geometry=replace(geometry, outward=outward, object_id=object_id))
+
+
 def _hg(c, g):
     return (1 - g * g) / (4 * math.pi * (1 + g * g - 2 * g * c) ** 1.5)
 

@@ -326,19 +326,24 @@ class Geometry:
         solid's box is outside it; inside the box, its winding number decides: the solid
         angle its triangles span seen from `point` over 4π (Van Oosterom and Strackee's
         formula), 0 outside, ±1 inside, ±1/2 on the surface."""
+        return bool((np.abs(self.solid_windings(point)) >= 0.25).any())
+
+    def solid_windings(self, point) -> np.ndarray:
+        """(S,) the winding number of each closed solid (`outward`) around `point`: 0 outside
+        (and outside the solid's box), ±1 inside, ±1/2 on the surface."""
         point = np.asarray(point, dtype=np.float64)
         solids, lo, hi = self.kept(("solids",), self._solids)
+        windings = np.zeros(len(solids))
         margin = 1e-6 * np.max(hi - lo, axis=1, keepdims=True) if len(solids) else 0.0
         near = np.flatnonzero(np.all((point >= lo - margin) & (point <= hi + margin), axis=1))
-        for rows in (solids[k] for k in near):
-            a, b, c = (self.triangles[rows, k] - point for k in range(3))
+        for k in near:
+            a, b, c = (self.triangles[solids[k], i] - point for i in range(3))
             la, lb, lc = (np.linalg.norm(v, axis=1) for v in (a, b, c))
             det = np.einsum("ij,ij->i", a, np.cross(b, c))
             div = la * lb * lc + np.einsum("ij,ij->i", a, b) * lc + np.einsum("ij,ij->i", b, c) * la \
                 + np.einsum("ij,ij->i", c, a) * lb
-            if abs(2.0 * np.arctan2(det, div).sum() / (4.0 * np.pi)) >= 0.25:
-                return True
-        return False
+            windings[k] = 2.0 * np.arctan2(det, div).sum() / (4.0 * np.pi)
+        return windings
 
     def _solids(self) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
         """The closed solids: each one's triangles' rows, and their bounds lo, hi (S, 3)."""
