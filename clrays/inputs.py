@@ -17,17 +17,12 @@ from .scene.camera import camera_basis, sample_offsets
 from .device import Device
 from .errors import ClraysError
 from .physics.radiometry import effective_far, lamp_radius
-from .scene.costs import with_derived_sizes
+from .scene.costs import SPOT_SINGLE_VIEW_MAX_DEG, with_derived_sizes
 from .stages.cube_faces import sampled_cube_faces
 from .stages.light_texture import pack_light_textures
 from .scene.relief_frame import relief_faces
 from .stages.relief import carries_relief_triangles, place_reliefs
 from .scene.model import DirectionalLight, Scene, SpotLight
-
-#: Spot lights wider than this use a cube map: a single perspective map of a wide
-#: cone would spend most texels near its rim.
-SPOT_SINGLE_VIEW_MAX_DEG = 75.0
-
 
 #: All lights' shadow maps share one depth buffer, indexed by an int offset per view.
 MAX_SHADOW_TEXELS = 2**31 - 1

@@ -19,6 +19,8 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
+import numpy as np
+
 from .model import Scene
 
 #: Upper clamps: the measured defaults (bench/RESULTS.md, "Choosing defaults").
@@ -52,6 +54,19 @@ MIN_INITIAL_STEP = 3
 MAX_INITIAL_STEP = 6
 #: Shadow-map texels per pixel of the image diagonal.
 SHADOW_TEXELS_PER_PIXEL = 4
+#: Spot lights wider than this use a cube map: a single perspective map of a wide
+#: cone would spend most texels near its rim.
+SPOT_SINGLE_VIEW_MAX_DEG = 75.0
+#: Texels across the thinnest closed solid, seen from its light, that a derived map gives at
+#: least. scenes/grate.yaml's 1 cm slats 2.8 below a point light at 320×180, against `exact`
+#: (bench/RESULTS.md, "Volume visibility"): 1.8 texels of a 1024² cube face 3.26 %, 3.7 texels
+#: (2048²) 2.22 %, 7.4 (4096²) 0.24 %; the slices and γ texels moved it by under 0.06.
+OCCLUDER_TEXELS = 6
+#: A derived map grows for thin solids to at most this many times the image's size, and
+#: this side (for all lights' maps together): a 4096² cube map is 384 MiB of depths, the
+#: grate's whole frame 1188 MiB of device memory at 320×180 (97 MiB at 1024²).
+OCCLUDER_MAP_GROWTH = 4
+MAX_OCCLUDER_SHADOW_MAP = 4096
 #: Slices per pixel of the image perimeter, γ texels per pixel of its diagonal (measured, above).
 SLICES_PER_BORDER_PIXEL = 4
 GAMMA_TEXELS_PER_PIXEL = 8
@@ -68,6 +83,84 @@ def _clamped(value: float, low: int, high: int) -> int:
 def derived_shadow_map(width: int, height: int) -> int:
     """Shadow map side (texels, per cube face) for a width × height image."""
     return _clamped(SHADOW_TEXELS_PER_PIXEL * math.hypot(width, height), MIN_SHADOW_MAP, MAX_SHADOW_MAP)
+
+
+def occluder_shadow_map(scene: Scene, image_map: int) -> int:
+    """The map side at which the thinnest closed solid, seen from each light, spans
+    OCCLUDER_TEXELS texels, when that is more than `image_map`: at most
+    OCCLUDER_MAP_GROWTH × `image_map`, and MAX_OCCLUDER_SHADOW_MAP for all lights' maps
+    together (halved for each 4× the lights; docs/design.md §8, "Volume visibility"). Light passes between such solids in sheets no wider than they are,
+    and a map that decides them at a texel or two gets every shaft's share wrong."""
+    widths = [thinnest_solid(scene.geometry, light) for light in scene.lights]
+    widths = [width for width in widths if width is not None]
+    if not widths:
+        return image_map
+    needed = OCCLUDER_TEXELS / min(widths)  # texels per unit of the map's side, whose extent is 1
+    # All lights' maps together no larger than one light's at MAX_OCCLUDER_SHADOW_MAP.
+    largest = MAX_OCCLUDER_SHADOW_MAP >> math.ceil(math.log2(len(scene.lights)) / 2)
+    return max(min(_power_of_two_at_least(needed), OCCLUDER_MAP_GROWTH * image_map, largest), image_map)
+
+
+def thinnest_solid(geometry, light) -> float | None:
+    """The narrowest width of a closed solid's box as the light's map sees it, as a fraction
+    of the map's side (None: no solid counts). A cube face spans tangents -1 to 1 (2 units;
+    its texels are largest at the centre, where the width is taken), a single-view spot
+    ±tan(cone), a directional map the scene's bounding sphere. A solid that holds the light
+    or spans more than about 84° from it is no thin occluder and is skipped."""
+    lo, hi = geometry.solid_bounds()
+    if not len(lo):
+        return None
+    corners = _box_corners(lo, hi)  # (S, 8, 3)
+    if getattr(light, "type", None) == "directional":
+        direction = np.asarray(light.direction, dtype=np.float64)
+        right, up = _plane_axes(direction)
+        plane = np.stack([corners @ right, corners @ up], axis=-1)
+        scene_lo, scene_hi = geometry.bounds()
+        side = 2 * max(np.linalg.norm(scene_hi - scene_lo) / 2, 1e-6) * 1.01  # inputs.frame_inputs' sphere
+    else:
+        towards = corners - np.asarray(light.position, dtype=np.float64)
+        centre = towards.mean(axis=1)
+        centre /= np.maximum(np.linalg.norm(centre, axis=1, keepdims=True), 1e-300)
+        along = np.einsum("sci,si->sc", towards, centre)
+        ahead = np.all(along > 0.1 * np.linalg.norm(towards, axis=2), axis=1)  # within ~84° of its centre
+        if not ahead.any():
+            return None
+        towards, centre, along = towards[ahead], centre[ahead], along[ahead]
+        right = np.cross(centre, np.where(np.abs(centre[:, 1:2]) < 0.9, [[0.0, 1.0, 0.0]], [[1.0, 0.0, 0.0]]))
+        right /= np.linalg.norm(right, axis=1, keepdims=True)
+        up = np.cross(right, centre)
+        tangent = towards / along[..., None]  # on the plane one unit from the light: texels are tangents
+        plane = np.stack([np.einsum("sci,si->sc", tangent, right), np.einsum("sci,si->sc", tangent, up)], axis=-1)
+        spot_view = light.type == "spot" and light.cone_deg <= SPOT_SINGLE_VIEW_MAX_DEG
+        side = 2 * math.tan(math.radians(light.cone_deg)) if spot_view else 2.0
+    return float(_min_width(plane).min() / side)
+
+
+def _box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(S, 8, 3) the corners of S boxes."""
+    pick = np.array([[(k >> axis) & 1 for axis in range(3)] for k in range(8)], dtype=bool)  # (8, 3)
+    return np.where(pick[None], hi[:, None, :], lo[:, None, :])
+
+
+def _plane_axes(direction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    forward = direction / np.linalg.norm(direction)
+    right = np.cross(forward, [0.0, 1.0, 0.0] if abs(forward[1]) < 0.9 else [1.0, 0.0, 0.0])
+    right /= np.linalg.norm(right)
+    return right, np.cross(right, forward)
+
+
+def _min_width(points: np.ndarray) -> np.ndarray:
+    """(S,) the least width of each set of 2D points (S, P, 2) over all directions: the least
+    is across an edge of the hull, so across some pair of the points."""
+    i, j = np.triu_indices(points.shape[1], 1)
+    edge = points[:, j] - points[:, i]  # (S, pairs, 2)
+    normal = np.stack([-edge[..., 1], edge[..., 0]], axis=-1)
+    length = np.linalg.norm(normal, axis=-1)
+    normal = normal / np.maximum(length, 1e-300)[..., None]
+    spread = np.einsum("spk,sqk->spq", normal, points)  # (S, pairs, P)
+    widths = np.ptp(spread, axis=-1)
+    widths = np.where(length > 0, widths, np.inf)  # two corners at one point give no direction
+    return widths.min(axis=1)
 
 
 def derived_slices(width: int, height: int, shadow_map: int) -> int:
@@ -100,7 +193,7 @@ def with_derived_sizes(scene: Scene) -> Scene:
     if None not in (render.shadow_map, render.slices, render.gamma_samples, render.line_samples,
                     render.initial_step):
         return scene
-    shadow_map = render.shadow_map or derived_shadow_map(image.width, image.height)
+    shadow_map = render.shadow_map or occluder_shadow_map(scene, derived_shadow_map(image.width, image.height))
     slices = render.slices or derived_slices(image.width, image.height, shadow_map)
     gamma_samples = render.gamma_samples or derived_gamma_samples(image.width, image.height, shadow_map)
     line_samples = render.line_samples or derived_line_samples(image.width, image.height)

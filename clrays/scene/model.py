@@ -345,6 +345,11 @@ class Geometry:
             windings[k] = 2.0 * np.arctan2(det, div).sum() / (4.0 * np.pi)
         return windings
 
+    def solid_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi), each (S, 3): the box of each closed solid (`outward`)."""
+        _, lo, hi = self.kept(("solids",), self._solids)
+        return lo, hi
+
     def _solids(self) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
         """The closed solids: each one's triangles' rows, and their bounds lo, hi (S, 3)."""
         rows = np.flatnonzero(self.outward != 0)
