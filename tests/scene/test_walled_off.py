@@ -54,6 +54,6 @@ def test_an_eye_on_a_wall_decides_nothing():
 
 def test_rooms_with_a_window_keep_their_light():
     """The bench's rooms are walls of separate boxes, open at a window: no light is walled off."""
-    for name in ("sun", "room", "lattice", "demo", "behind"):
+    for name in ("sun", "room", "lattice", "demo", "behind", "bunny"):
         scene = load_scene(SCENES / f"{name}.yaml")
         assert without_walled_off_light(scene) is scene, name
