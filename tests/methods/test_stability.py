@@ -587,6 +587,28 @@ def test_closed_geometry_is_black_for_the_shadow_map_methods(renderer):
     assert max(worst.values()) <= 1e-6
 
 
+@pytest.mark.parametrize("kind", ["point", "directional"])
+def test_a_camera_leaving_a_closed_box_reuses_only_what_holds(renderer, kind):
+    """The eye inside the box (the light dark), outside it (lit), inside again: a session
+    that keeps its stages gives each frame bit for bit as one that keeps none. A walled-off
+    light's power is 0 in the scene the stage keys read, so the integrand and light-texture
+    keys follow it; the trees, which do not read the power, are kept."""
+    from clrays.session import Renderer
+
+    inside, outside = _EYE, _EYE + np.array([0.0, 0.0, 1.5])
+    scenes = [with_closed_solid(stress_scene(lights_at(LIGHT_POSITION)[kind], np.concatenate(
+        [occluders(), box_triangles(_EYE - 0.5, _EYE + 0.5)]), position=tuple(eye)), slice(len(occluders()), None))
+        for eye in (inside, outside, inside)]
+    keeping = Renderer(renderer.device)
+    fresh = Renderer(renderer.device, reuse=False)
+    images = []
+    for scene in scenes:
+        kept = keeping.render(scene, "minmax").image
+        assert np.array_equal(kept, fresh.render(scene, "minmax").image)
+        images.append(kept)
+    assert images[0].max() == 0.0 and images[2].max() == 0.0 and images[1].max() > 0.0
+
+
 @pytest.mark.parametrize("kind", ["point", "spot"])
 def test_camera_and_light_inside_a_room(renderer, kind):
     """Camera and light inside a closed room: every ray ends on a wall, the walls' outsides
