@@ -76,7 +76,7 @@ def walled_off(geometry, eye_windings: np.ndarray, light) -> bool:
     the eye. Then every point the camera sees, on the eye's side of the solid's walls, is cut
     off from the light: its in-scattering and direct light are 0, as `exact` finds them.
     The shadow maps alone would let a layer about a texel thick behind each wall count as
-    lit (docs/stability.md, "A closed room"). Clearly inside is a winding number of
+    lit (docs/stability.md, "Closed geometry"). Clearly inside is a winding number of
     magnitude above 3/4, clearly outside below 1/4; a point on a wall decides nothing."""
     if not len(eye_windings):
         return False

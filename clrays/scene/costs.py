@@ -21,7 +21,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from .model import Scene
+from .model import DirectionalLight, Scene, SpotLight
 
 #: Upper clamps: the measured defaults (bench/RESULTS.md, "Choosing defaults").
 MAX_SHADOW_MAP = 1024
@@ -89,8 +89,9 @@ def occluder_shadow_map(scene: Scene, image_map: int) -> int:
     """The map side at which the thinnest closed solid, seen from each light, spans
     OCCLUDER_TEXELS texels, when that is more than `image_map`: at most
     OCCLUDER_MAP_GROWTH × `image_map`, and MAX_OCCLUDER_SHADOW_MAP for all lights' maps
-    together (halved for each 4× the lights; docs/design.md §8, "Volume visibility"). Light passes between such solids in sheets no wider than they are,
-    and a map that decides them at a texel or two gets every shaft's share wrong."""
+    together (halved for each 4× the lights; docs/design.md §8, "Volume visibility"). Light
+    passes between such solids in sheets no wider than they are, and a map that decides
+    them at a texel or two gets every shaft's share wrong."""
     widths = [thinnest_solid(scene.geometry, light) for light in scene.lights]
     widths = [width for width in widths if width is not None]
     if not widths:
@@ -103,15 +104,17 @@ def occluder_shadow_map(scene: Scene, image_map: int) -> int:
 
 def thinnest_solid(geometry, light) -> float | None:
     """The narrowest width of a closed solid's box as the light's map sees it, as a fraction
-    of the map's side (None: no solid counts). A cube face spans tangents -1 to 1 (2 units;
-    its texels are largest at the centre, where the width is taken), a single-view spot
-    ±tan(cone), a directional map the scene's bounding sphere. A solid that holds the light
-    or spans more than about 84° from it is no thin occluder and is skipped."""
+    of the map's side (None: no solid counts). For a point or spot light the width is an
+    angle (a tangent on the plane one unit from the light, across the solid's direction),
+    and the map's side the tangents a view spans: 2 for a cube face, whose texels are
+    widest at its centre, 2·tan(cone) for a single-view spot; for a directional light a
+    length, and the side the scene's bounding sphere's. A solid that holds the light or
+    reaches more than about 84° from its own direction is no thin occluder and is skipped."""
     lo, hi = geometry.solid_bounds()
     if not len(lo):
         return None
     corners = _box_corners(lo, hi)  # (S, 8, 3)
-    if getattr(light, "type", None) == "directional":
+    if isinstance(light, DirectionalLight):
         direction = np.asarray(light.direction, dtype=np.float64)
         right, up = _plane_axes(direction)
         plane = np.stack([corners @ right, corners @ up], axis=-1)
@@ -131,7 +134,7 @@ def thinnest_solid(geometry, light) -> float | None:
         up = np.cross(right, centre)
         tangent = towards / along[..., None]  # on the plane one unit from the light: texels are tangents
         plane = np.stack([np.einsum("sci,si->sc", tangent, right), np.einsum("sci,si->sc", tangent, up)], axis=-1)
-        spot_view = light.type == "spot" and light.cone_deg <= SPOT_SINGLE_VIEW_MAX_DEG
+        spot_view = isinstance(light, SpotLight) and light.cone_deg <= SPOT_SINGLE_VIEW_MAX_DEG
         side = 2 * math.tan(math.radians(light.cone_deg)) if spot_view else 2.0
     return float(_min_width(plane).min() / side)
 
@@ -143,6 +146,7 @@ def _box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 
 
 def _plane_axes(direction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(right, up) of an orthographic view along `direction` (any pair across it serves a width)."""
     forward = direction / np.linalg.norm(direction)
     right = np.cross(forward, [0.0, 1.0, 0.0] if abs(forward[1]) < 0.9 else [1.0, 0.0, 0.0])
     right /= np.linalg.norm(right)
