@@ -91,7 +91,8 @@ def coverage(name: str, width: int, height: int) -> None:
                        for sx in (-1, 1) for sy in (-1, 1)]
     seen = clip(hull(plane(np.array(pyramid))), box)
     rng = np.random.default_rng(1)
-    d = cam_forward + rng.uniform(-tan_x, tan_x, (400000, 1)) * cam_right + rng.uniform(-tan_y, tan_y, (400000, 1)) * cam_up
+    d = (cam_forward + rng.uniform(-tan_x, tan_x, (400000, 1)) * cam_right
+         + rng.uniform(-tan_y, tan_y, (400000, 1)) * cam_up)
     points = eye + d / np.linalg.norm(d, axis=1, keepdims=True) * far * rng.uniform(0, 1, (400000, 1)) ** (1 / 3)
     clipped = plane(points[np.all((points >= lo) & (points <= hi), axis=1)])
     rays = primary_rays(scene.camera, scene.image, np.array([[0.5, 0.5]])).reshape(-1, 3)
@@ -100,7 +101,8 @@ def coverage(name: str, width: int, height: int) -> None:
     segments = plane((eye + rays[:, None, :] * ends[:, None, None] * along).reshape(-1, 3))
     outline = Polygon(box)
     visible = segments[outline.contains_points(segments, radius=1e-9) | outline.contains_points(segments, radius=-1e-9)]
-    centres = corner + (np.stack(np.meshgrid(np.arange(TEXELS), np.arange(TEXELS)), -1).reshape(-1, 2) + 0.5) * side / TEXELS
+    grid = np.stack(np.meshgrid(np.arange(TEXELS), np.arange(TEXELS)), -1).reshape(-1, 2)
+    centres = corner + (grid + 0.5) * side / TEXELS
     texel = side / TEXELS
     print(f"{name} {width}×{height}: the sphere's square {side:.2f} units, {100 * texel:.2f} cm texels at {TEXELS}²")
     for label, region in (("the box", box), ("the pyramid within the box's outline", seen),
