@@ -300,6 +300,7 @@ class Device:
         #: the device idle while the host enqueues again. RenderResult.host_waits counts a
         #: frame's.
         self.host_waits = 0
+        self._deferred_waits: list | None = None  # (deferred_waits)
         self._announced = False
 
     @property
@@ -488,7 +489,11 @@ class Device:
         return out
 
     def wait(self, event) -> None:
-        """The host waits for `event` (counted in `host_waits`)."""
+        """The host waits for `event` (counted in `host_waits`); within `deferred_waits`,
+        the event is kept for later instead."""
+        if self._deferred_waits is not None:
+            self._deferred_waits.append(event)
+            return
         self.host_waits += 1
         event.wait()
 
@@ -497,6 +502,18 @@ class Device:
         before a later wait): it waits, counted in `host_waits`, only where it is not."""
         if event.command_execution_status != self.cl.command_execution_status.COMPLETE:
             self.wait(event)
+
+    @contextlib.contextmanager
+    def deferred_waits(self, events: list):
+        """Within the block a read returns at once, its array not yet filled, and its event
+        goes to `events`: the caller waits for the last of them (the queue is in order)
+        before it touches any array read. A frame in flight reads its image so
+        (clrays.session.PendingFrame), and the host goes on to the next frame meanwhile."""
+        self._deferred_waits = events
+        try:
+            yield events
+        finally:
+            self._deferred_waits = None
 
     def read_in_place(self, buffer, shape, dtype) -> np.ndarray:
         """A buffer the frame is done with, as an array: on a CPU device the buffer's own

@@ -22,9 +22,16 @@ the geometry do, the min-max trees while those and the eye–light frame do, the
 integrand tables while the medium and the β/γ ranges do; a frame identical to a recent
 one is not rendered at all. Keys are digests of the stages' inputs (clrays.reuse), so
 reuse never changes an image. `RenderResult.stage_status` says what each stage did.
+
+Frames in flight: `Renderer.submit` does a frame's host work and enqueues its device work,
+and returns before the image is read (`PendingFrame`); `result()` reads it when asked for,
+with the stage times, and keeps it for an identical frame. So the host prepares frame N+1
+(scene, uploads, keys) while the device works on frame N; `render` is
+`submit(...).result()`. At most MAX_FRAMES_IN_FLIGHT frames are unread at once.
 """
 from __future__ import annotations
 
+import collections
 import dataclasses
 import time
 from dataclasses import dataclass, field, replace
@@ -114,7 +121,7 @@ class RenderResult:
     image: np.ndarray  # (H, W, 3) float32 linear radiance
     method: str
     stage_ms: dict[str, float] = field(default_factory=dict)  # time per stage (device events, or host clock)
-    wall_ms: float = 0.0
+    wall_ms: float = 0.0  # from Renderer.submit to the image read (render: the whole call)
     device_bytes: int = 0  # device memory allocated for the frame
     # stage → "computed", "reused", "skipped" or "reused k of n" (per light); raster is
     # "raster.camera" and "raster.shadow"; a frame identical to a kept one is all "reused".
@@ -144,6 +151,67 @@ class RenderResult:
         return sum(ms for label, ms in self.stage_ms.items() if label not in self.host_stages)
 
 
+#: Frames a session lets be submitted and not yet read (Renderer.submit): two let the host
+#: prepare one while the device works on the other.
+MAX_FRAMES_IN_FLIGHT = 2
+
+
+class PendingFrame:
+    """A frame in flight (Renderer.submit): its host work done, its device work enqueued, its
+    image not yet read. `result()` waits for the image and returns the frame's RenderResult,
+    the same object at every call; its `wall_ms` runs from the submit to the image read.
+
+    What the frame's kernels write stays theirs until then: the image's buffer is held by the
+    image itself (Device.read_in_place), and the buffers it let go of may go to a later
+    frame (a CPU device's pool) only because the queue is in order, so that frame's kernels
+    run after this one's."""
+
+    def __init__(self, renderer: Renderer, unread: RenderResult, stages: tuple[str, ...], passes, reads: list,
+                 timer: StageTimer, start: float, key: bytes | None, use_cache: bool):
+        """`unread`: the result but for the image's contents, the passes, the times; `stages`:
+        the stages that ran (the frame cache's entry); `passes`: a function that assembles
+        them once `reads` are done, the passes themselves, or None."""
+        self._renderer, self._unread, self._stages, self._passes, self._reads = renderer, unread, stages, passes, reads
+        self._timer, self._start, self._use_cache = timer, start, use_cache
+        self.key = key  # the frame cache's key, under which the image is kept once read; None: not kept
+        self._result: RenderResult | None = None
+
+    @property
+    def done(self) -> bool:
+        """Whether the image has been read (`result()` returns at once)."""
+        return self._result is not None
+
+    def result(self) -> RenderResult:
+        """The frame's RenderResult, its image read (waiting for the device's work on it)."""
+        if self._result is None:
+            self._result = self._read()
+        return self._result
+
+    def _read(self) -> RenderResult:
+        renderer, unread = self._renderer, self._unread
+        if self in renderer._in_flight:
+            renderer._in_flight.remove(self)
+        host_waits = unread.host_waits
+        if self._reads:  # one wait: the queue is in order, so the earlier reads are done with the last
+            device = renderer.device
+            before = device.host_waits
+            device.wait(self._reads[-1])
+            host_waits += device.host_waits - before
+            self._reads = []
+        passes = self._passes() if callable(self._passes) else self._passes
+        image = unread.image
+        if self.key is not None:  # kept for an identical frame, now that it holds the image
+            renderer.cache.put("frame", self.key, (image, self._stages, unread.textures, unread.samples,
+                                                   unread.shadow_rays, passes))
+        stage_ms = self._timer.milliseconds()
+        wall_ms = (time.perf_counter() - self._start) * 1e3
+        # A kept frame's image is shared with the cache: the caller gets a copy to change.
+        if self._use_cache:
+            image = image.copy()
+            passes = None if passes is None else {name: value.copy() for name, value in passes.items()}
+        return replace(unread, image=image, stage_ms=stage_ms, wall_ms=wall_ms, passes=passes, host_waits=host_waits)
+
+
 @dataclass
 class Frame:
     """What the stages of one frame hand each other (Renderer._frame), filled in stage by stage."""
@@ -163,6 +231,7 @@ class Frame:
     textures: list[tuple[int, int]] = field(default_factory=list)  # (slices, γ texels) per light with a texture
     samples: SampleCounts | None = None  # what epipolar sampling computed, summed over the lights
     progress: object = None  # of raymarch's march, as Renderer.render's `progress`
+    reads: list = field(default_factory=list)  # events of the reads left for PendingFrame.result (shade's)
     light_scatter: dict[int, np.ndarray] = field(default_factory=dict)  # per-light passes: light → (samples, 4)
 
 
@@ -175,6 +244,7 @@ class Renderer:
         self._device_spec = device if isinstance(device, str) else None
         self.reuse = reuse
         self.cache = StageCache(cache_entries)
+        self._in_flight: collections.deque[PendingFrame] = collections.deque()  # submitted, not yet read
 
     @property
     def device(self) -> Device:
@@ -191,42 +261,62 @@ class Renderer:
         """Render one frame. `method` overrides `scene.render.method`; `reuse` overrides
         the session's `reuse` for this frame (False: compute every stage, keep nothing).
         `progress` (exact and raymarch): True for a tqdm bar, or a function that takes a
-        line of text."""
+        line of text. The same as `submit(...).result()`."""
+        return self.submit(scene, method, progress, reuse).result()
+
+    def submit(self, scene: Scene, method: str | None = None, progress: bool = False,
+               reuse: bool | None = None) -> PendingFrame:
+        """Start one frame, as `render` takes it, and return before its image is read: the
+        frame's host work is done and its device work enqueued, and `PendingFrame.result()`
+        waits for the image. Meanwhile the host can prepare the next frame while the device
+        works on this one. At most MAX_FRAMES_IN_FLIGHT frames are unread at once: a
+        submit beyond them first reads the oldest (kept for its `result()`)."""
         method = RENAMED_METHODS.get(method, method) or scene.render.method
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r}; expected one of {', '.join(METHODS)}")
         # Sizes the scene leaves unset follow its image; resolved before any stage key is taken.
         scene = with_derived_sizes(replace(scene, render=replace(scene.render, method=method)))
         start = time.perf_counter()
-        record, timer = StageRecord(), StageTimer()
         use_cache = self.reuse if reuse is None else reuse
+        key = digest("frame", scene_digest(scene)) if use_cache else None
+        # An identical frame still in flight is read first, so that this one finds its image
+        # kept; and the oldest beyond the bound.
+        for earlier in [pending for pending in self._in_flight if key is not None and pending.key == key]:
+            earlier.result()
+        while len(self._in_flight) >= MAX_FRAMES_IN_FLIGHT:
+            self._in_flight[0].result()
+        record, timer = StageRecord(), StageTimer()
         reuse = Reuse(self.cache if use_cache else None, record, max(len(scene.lights), 1))
         waits_before = self._device.host_waits if self._device is not None else 0
         if self._device is not None:
             self._device.allocated_bytes = 0
         # A frame identical to a kept one: its image, and every stage counts as reused.
-        image, stages, textures, samples, rays, passes = reuse.keep("frame", lambda: digest("frame", scene_digest(scene)),
-                                                            lambda: self._frame(scene, method, reuse, timer, progress))
+        found, kept = self.cache.get("frame", key) if key is not None else (False, None)
+        reads = []  # the events of the frame's reads left for `result()` (Device.deferred_waits)
+        image, stages, textures, samples, rays, passes = kept if found else \
+            self._frame(scene, method, reuse, timer, progress, reads)
         status = record.status() or {stage: REUSED for stage in stages}
         device_bytes = self._device.allocated_bytes if self._device is not None else 0
         host_waits = self._device.host_waits - waits_before if self._device is not None else 0
         if self._device is not None:
             self._device.end_frame(device_bytes)
-        wall_ms = (time.perf_counter() - start) * 1e3
-        # A kept frame's image is shared with the cache: the caller gets a copy to change.
-        if passes is not None and use_cache:
-            passes = {name: value.copy() for name, value in passes.items()}
-        return RenderResult(image.copy() if use_cache else image, method, timer.milliseconds(), wall_ms,
-                            device_bytes, status, timer.host_labels, scene.render, textures, samples, rays, passes,
-                            host_waits)
+        unread = RenderResult(image, method, {}, 0.0, device_bytes, status, timer.host_labels, scene.render,
+                              textures, samples, rays, None, host_waits)
+        pending = PendingFrame(self, unread, stages, passes, reads, timer, start, None if found else key, use_cache)
+        if reads:
+            self._in_flight.append(pending)
+        return pending
 
-    def _frame(self, scene: Scene, method: str, reuse: Reuse, timer: StageTimer, progress: bool):
+    def _frame(self, scene: Scene, method: str, reuse: Reuse, timer: StageTimer, progress: bool, reads: list):
         """(image, stage labels, epipolar texture sizes, sample counts, shadow rays, render
-        passes or None) of one frame: the pipeline of the module docstring, one line per stage."""
+        passes or None) of one frame: the pipeline of the module docstring, one line per stage.
+        The image's reads are enqueued, their events added to `reads`: the image and the
+        passes' terms are there once the last is done, and the passes are a function that
+        assembles them then."""
         if method == "exact":
             return self._exact(scene, reuse, timer, progress)
         frame = self._upload(scene, method, reuse, timer)  # the scene in eye space, packed into device structs
-        frame.progress = progress
+        frame.progress, frame.reads = progress, reads
         frame.rastered, frame.maps = self._raster(frame.buffers, frame.keys, reuse, timer)  # raster: depths, maps
         frame.layers = self._translucency(frame.buffers, frame.keys, reuse, timer)  # translucency: light side
         frame.films = self._films(frame.buffers, frame.rastered, reuse, timer)  # transparency: camera side
@@ -341,8 +431,9 @@ class Renderer:
             surface_transmittance(device, buffers, rastered, layers, timer)  # (translucent shadows' exact edges)
         transparency = None if frame.films is None else composite(device, buffers, rastered, frame.films, timer, layers)
         aovs = frame.scene.render.aovs
-        image = shade(device, buffers, rastered, frame.in_scatter.adding(), timer, visible, layers, through,
-                      transparency, passes=bool(aovs))
+        with device.deferred_waits(frame.reads):  # the image is read when the frame's result is asked for
+            image = shade(device, buffers, rastered, frame.in_scatter.adding(), timer, visible, layers, through,
+                          transparency, passes=bool(aovs))
         frame.reuse.record.note("shade", COMPUTED)
         if not aovs:
             return image, None
@@ -351,8 +442,8 @@ class Renderer:
         per_light = {index: samples_to_pixels(frame.light_scatter.get(index, np.zeros((frame.in_scatter.samples, 4))),
                                               size.height, size.width, size.spp)
                      for index in per_light_indices(aovs)}
-        return image, assemble(aovs, terms[..., 0, :3], terms[..., 1, :3], terms[..., 2, :3], terms[..., 0, 3],
-                               per_light)
+        return image, lambda: assemble(aovs, terms[..., 0, :3], terms[..., 1, :3], terms[..., 2, :3],
+                                       terms[..., 0, 3], per_light)
 
     def _films(self, buffers: FrameBuffers, rastered: RasterResult, reuse: Reuse, timer: StageTimer) -> Films | None:
         """The transparency stage's films (clrays.stages.transparency); None, and the stage
