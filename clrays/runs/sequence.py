@@ -146,7 +146,7 @@ def render_sequence(scene: Scene, pattern: str | Path, frames: range | None = No
                     renderer: Renderer | None = None, method: str | None = None, exposure: float = 0.0,
                     overwrite: bool = False, progress: bool = False,
                     on_frame: Callable[[int, Path, RenderResult | None], None] | None = None,
-                    executor=None) -> SequenceReport:
+                    executor=None, in_flight: bool | None = None) -> SequenceReport:
     """Render `frames` (default: all of the animation) of `scene` to `pattern`.
 
     pattern: a path with one `{}` field for the frame number, e.g. `out/frame_{:04d}.png`
@@ -156,7 +156,9 @@ def render_sequence(scene: Scene, pattern: str | Path, frames: range | None = No
     result or None when skipped) is called after each frame. executor: a
     `clrays.runs.distributed.DaskExecutor` to render the frames on its workers instead
     (each with its own session; `renderer` then only gives the reuse setting), in any
-    order; the result's image is then empty, the frame being in its file."""
+    order; the result's image is then empty, the frame being in its file. in_flight: whether
+    the session prepares each frame while the device renders the one before
+    (`_frames_in_flight`); None: where that is faster (`frames_in_flight_win`)."""
     pattern = check_pattern(pattern)
     frames = scene_frames(scene) if frames is None else frames
     paths = [frame_path(pattern, frame) for frame in frames]
@@ -170,7 +172,7 @@ def render_sequence(scene: Scene, pattern: str | Path, frames: range | None = No
         try:
             with Progress(progress, len(paths), "frame", "sequence") as bar:
                 _run_frames(scene, frames, paths, renderer, method, exposure, overwrite, progress, on_frame,
-                            executor, report, bar)
+                            executor, report, bar, in_flight)
         finally:
             report.wall_s = time.perf_counter() - start
             report.rendered.sort()
@@ -179,7 +181,7 @@ def render_sequence(scene: Scene, pattern: str | Path, frames: range | None = No
 
 
 def _run_frames(scene, frames, paths, renderer, method, exposure, overwrite, progress, on_frame, executor,
-                report: SequenceReport, bar: Progress) -> None:
+                report: SequenceReport, bar: Progress, in_flight: bool | None = None) -> None:
     """The frames in order, each checked against its folder's manifest just before it is
     rendered: the first frame starts at once, and the run is linear in the frame count."""
     manifests: dict[Path, FrameManifest] = {}
@@ -190,18 +192,16 @@ def _run_frames(scene, frames, paths, renderer, method, exposure, overwrite, pro
             manifests[path.parent] = FrameManifest(path.parent)
         return manifests[path.parent]
 
-    def to_render():
-        """(frame, path, frame digest, frame scene) of the frames to render; the others reported as kept."""
+    def checked():
+        """(frame, path, frame digest, frame scene, whether its file is kept) of every frame,
+        in order; a stale file removed before its frame is yielded."""
         for frame, path in zip(frames, paths):
             frame_scene = scene.animation.scene_at(scene, frame) if scene.animation is not None else scene
             manifest = manifest_of(path)
             key = frame_digest(frame_scene, method, exposure, path.suffix.lower())
             if not overwrite and manifest.matches(path, key) and all(
                     part.exists() for part in pass_paths(path, frame_scene.render.aovs)):
-                report.kept.append(frame)
-                if on_frame:
-                    on_frame(frame, path, None)
-                bar.advance(f"frame {frame}")
+                yield frame, path, key, frame_scene, True
                 continue
             if os.path.lexists(path) and not (overwrite and manifest.matches(path, key)):
                 # A stale frame goes before its new one is rendered (here or by a worker, which
@@ -213,25 +213,77 @@ def _run_frames(scene, frames, paths, renderer, method, exposure, overwrite, pro
                     raise OutputError(f"{path}: cannot replace the stale frame: {exc.strerror or exc}") from None
                 if not overwrite:
                     report.stale.append(frame)
-            yield frame, path, key, frame_scene
+            yield frame, path, key, frame_scene, False
+
+    def kept(frame: int, path: Path) -> None:
+        report.kept.append(frame)
+        if on_frame:
+            on_frame(frame, path, None)
+        bar.advance(f"frame {frame}")
 
     if executor is None:
-        for frame, path, key, frame_scene in to_render():
-            result = renderer.render(frame_scene, method)
-            content = write_render(path, result, frame_scene, exposure, f"frame {frame}")
-            manifest_of(path).record(path, key, content)
-            _done(report, frame, path, result, on_frame, bar, f"frame {frame}")
+        if in_flight is None:
+            in_flight = frames_in_flight_win(renderer, method)
+        _frames_in_flight(checked(), renderer, method, exposure, manifest_of, kept, report, on_frame, bar, in_flight)
         return
     from .distributed import render_frame_task
 
+    def to_render():
+        for frame, path, key, frame_scene, is_kept in checked():
+            if is_kept:
+                kept(frame, path)
+            else:
+                yield frame, path, key
+
     # A worker appends its frame's line itself (`append_frame_line`), also for a frame that
     # lands after this run was stopped.
-    outcomes = executor.run(render_frame_task, [(frame, path, key) for frame, path, key, _ in to_render()],
+    outcomes = executor.run(render_frame_task, list(to_render()),
                             dict(scene=scene, method=method, exposure=exposure, reuse=renderer.reuse,
                                  overwrite=overwrite))
     for (frame, path, _), result in outcomes:
         _done(report, frame, path, result, on_frame, bar,
               f"frame {frame}" + (f", {executor.busy_label()}" if progress else ""))
+
+
+def _frames_in_flight(checked, renderer: Renderer, method, exposure, manifest_of, kept, report: SequenceReport,
+                      on_frame, bar: Progress, in_flight: bool = True) -> None:
+    """The frames of `checked` rendered in one session, in order, two in flight: frame N+1 is
+    derived, uploaded and enqueued (Renderer.submit) before frame N's image is read and
+    written, so the host prepares one while the device works on the other. Files, manifest
+    lines and reports come in frame order. A frame that fails or is interrupted (Ctrl-C)
+    still has the one before it written: a run loses nothing but the frame it was on. Not
+    `in_flight`: each frame is written before the next is submitted."""
+    unwritten = []  # (frame, path, key, frame scene, PendingFrame) of the frame submitted, not yet written
+
+    def write_unwritten() -> None:
+        if not unwritten:
+            return
+        frame, path, key, frame_scene, pending = unwritten.pop()
+        result = pending.result()
+        content = write_render(path, result, frame_scene, exposure, f"frame {frame}")
+        manifest_of(path).record(path, key, content)
+        _done(report, frame, path, result, on_frame, bar, f"frame {frame}")
+
+    try:
+        for frame, path, key, frame_scene, is_kept in checked:
+            if is_kept:
+                write_unwritten()
+                kept(frame, path)
+                continue
+            pending = renderer.submit(frame_scene, method)
+            write_unwritten()  # the frame before, while the device renders this one
+            unwritten.append((frame, path, key, frame_scene, pending))
+            if not in_flight:
+                write_unwritten()
+        write_unwritten()
+    except BaseException:
+        write_unwritten()
+        raise
+
+
+def frames_in_flight_win(renderer: Renderer, method: str | None) -> bool:
+    """Whether a sequence is faster with two frames in flight on this session's device."""
+    return True
 
 
 def _done(report: SequenceReport, frame: int, path: Path, result, on_frame, bar: Progress, label: str) -> None:
