@@ -12,7 +12,8 @@ a changed scene (another `--set`, an edited file) or replaced by another writer;
 interrupted run loses nothing but the frame it was on. A run holds the lock of the folder
 above its frames (`lock_folder`), so a second run into it stops at once. One render
 session (`Renderer`) renders all frames, so what a frame shares with the previous one is
-not computed again (docs/design.md §7).
+not computed again (docs/design.md §7), two frames in flight: the next frame is prepared
+and enqueued before a frame's image is read and written (docs/design.md §4).
 """
 from __future__ import annotations
 
@@ -146,7 +147,7 @@ def render_sequence(scene: Scene, pattern: str | Path, frames: range | None = No
                     renderer: Renderer | None = None, method: str | None = None, exposure: float = 0.0,
                     overwrite: bool = False, progress: bool = False,
                     on_frame: Callable[[int, Path, RenderResult | None], None] | None = None,
-                    executor=None, in_flight: bool | None = None) -> SequenceReport:
+                    executor=None, in_flight: bool = True) -> SequenceReport:
     """Render `frames` (default: all of the animation) of `scene` to `pattern`.
 
     pattern: a path with one `{}` field for the frame number, e.g. `out/frame_{:04d}.png`
@@ -156,9 +157,9 @@ def render_sequence(scene: Scene, pattern: str | Path, frames: range | None = No
     result or None when skipped) is called after each frame. executor: a
     `clrays.runs.distributed.DaskExecutor` to render the frames on its workers instead
     (each with its own session; `renderer` then only gives the reuse setting), in any
-    order; the result's image is then empty, the frame being in its file. in_flight: whether
+    order; the result's image is then empty, the frame being in its file. in_flight (default):
     the session prepares each frame while the device renders the one before
-    (`_frames_in_flight`); None: where that is faster (`frames_in_flight_win`)."""
+    (`_frames_in_flight`); False: one frame at a time, as bench/frames_in_flight.py compares."""
     pattern = check_pattern(pattern)
     frames = scene_frames(scene) if frames is None else frames
     paths = [frame_path(pattern, frame) for frame in frames]
@@ -181,7 +182,7 @@ def render_sequence(scene: Scene, pattern: str | Path, frames: range | None = No
 
 
 def _run_frames(scene, frames, paths, renderer, method, exposure, overwrite, progress, on_frame, executor,
-                report: SequenceReport, bar: Progress, in_flight: bool | None = None) -> None:
+                report: SequenceReport, bar: Progress, in_flight: bool = True) -> None:
     """The frames in order, each checked against its folder's manifest just before it is
     rendered: the first frame starts at once, and the run is linear in the frame count."""
     manifests: dict[Path, FrameManifest] = {}
@@ -222,8 +223,6 @@ def _run_frames(scene, frames, paths, renderer, method, exposure, overwrite, pro
         bar.advance(f"frame {frame}")
 
     if executor is None:
-        if in_flight is None:
-            in_flight = frames_in_flight_win(renderer, method)
         _frames_in_flight(checked(), renderer, method, exposure, manifest_of, kept, report, on_frame, bar, in_flight)
         return
     from .distributed import render_frame_task
@@ -279,11 +278,6 @@ def _frames_in_flight(checked, renderer: Renderer, method, exposure, manifest_of
     except BaseException:
         write_unwritten()
         raise
-
-
-def frames_in_flight_win(renderer: Renderer, method: str | None) -> bool:
-    """Whether a sequence is faster with two frames in flight on this session's device."""
-    return True
 
 
 def _done(report: SequenceReport, frame: int, path: Path, result, on_frame, bar: Progress, label: str) -> None:

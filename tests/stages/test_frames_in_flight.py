@@ -150,9 +150,10 @@ def test_kept_frames_are_reported_in_order_between_frames_in_flight(tmp_path, de
                              on_frame=lambda frame, path, result: order.append((frame, result is None)))
     assert order == [(0, False), (1, True), (2, False), (3, False), (4, True)]
     assert report.rendered == [0, 2, 3] and report.kept == [1, 4]
+    alone = Renderer(device, reuse=False)
     for frame in range(5):
         np.testing.assert_array_equal(np.load(tmp_path / f"f_{frame:02d}.npy"),
-                                      Renderer(device, reuse=False).render(scene.animation.scene_at(scene, frame)).image)
+                                      alone.render(scene.animation.scene_at(scene, frame)).image)
 
 
 @pytest.mark.parametrize("failure", [KeyboardInterrupt, RuntimeError])
