@@ -305,6 +305,9 @@ class Renderer:
         pending = PendingFrame(self, unread, stages, passes, reads, timer, start, None if found else key, use_cache)
         if reads:
             self._in_flight.append(pending)
+            # A driver may hold enqueued commands until a wait or a flush: the device starts
+            # on this frame's work now, while the host goes on.
+            self.device.queue.flush()
         return pending
 
     def _frame(self, scene: Scene, method: str, reuse: Reuse, timer: StageTimer, progress: bool, reads: list):
