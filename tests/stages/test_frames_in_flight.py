@@ -25,8 +25,8 @@ def orbit(width: int = 64, height: int = 36, *overrides: str):
     return load_scene(SCENES / "orbit.yaml", overrides=[f"image.width={width}", f"image.height={height}", *overrides])
 
 
-def orbit_frames(count: int = 4, *overrides: str) -> list:
-    scene = orbit(64, 36, *overrides)
+def orbit_frames(count: int = 4, *overrides: str, size: tuple[int, int] = (64, 36)) -> list:
+    scene = orbit(*size, *overrides)
     return [scene.animation.scene_at(scene, frame) for frame in range(count)]
 
 
@@ -65,8 +65,9 @@ def test_frames_in_flight_are_the_frames_rendered_one_at_a_time(device, reuse, o
 def test_two_frames_in_flight_keep_their_own_buffers(device):
     """On a CPU device the image is the pooled buffer the kernels wrote (no copy with
     reuse off): the second frame in flight must get another one, and reading it first must
-    leave the first frame's image as it renders alone."""
-    first_scene, second_scene = orbit_frames(4)[::3]
+    leave the first frame's image as it renders alone. (At 96×54 the image's buffer is
+    large enough to come from the pool: POOLED_BYTES.)"""
+    first_scene, second_scene = orbit_frames(4, size=(96, 54))[::3]
     alone = Renderer(device, reuse=False).render(first_scene).image
     renderer = Renderer(device, reuse=False)
     first = renderer.submit(first_scene)
