@@ -252,6 +252,14 @@ class Renderer:
             self._device = Device(self._device_spec)
         return self._device
 
+    @property
+    def frames_in_flight_win(self) -> bool:
+        """Whether a frame in flight beside the next gains time on this session's device: on
+        one that works beside the host (a GPU), not on a CPU device, whose kernels take the
+        host's own cores (PoCL on two cores: level within the noise, bench/frames_in_flight.py);
+        False before the session has a device (`exact` needs none)."""
+        return self._device is not None and not self._device.is_cpu
+
     def clear(self) -> None:
         """Forget every kept stage result (frees their device memory)."""
         self.cache.clear()

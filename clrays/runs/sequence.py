@@ -12,8 +12,8 @@ a changed scene (another `--set`, an edited file) or replaced by another writer;
 interrupted run loses nothing but the frame it was on. A run holds the lock of the folder
 above its frames (`lock_folder`), so a second run into it stops at once. One render
 session (`Renderer`) renders all frames, so what a frame shares with the previous one is
-not computed again (docs/design.md §7), two frames in flight: the next frame is prepared
-and enqueued before a frame's image is read and written (docs/design.md §4).
+not computed again (docs/design.md §7); on a GPU with two frames in flight: the next frame
+is prepared and enqueued before a frame's image is read and written (docs/design.md §4).
 """
 from __future__ import annotations
 
@@ -147,7 +147,7 @@ def render_sequence(scene: Scene, pattern: str | Path, frames: range | None = No
                     renderer: Renderer | None = None, method: str | None = None, exposure: float = 0.0,
                     overwrite: bool = False, progress: bool = False,
                     on_frame: Callable[[int, Path, RenderResult | None], None] | None = None,
-                    executor=None, in_flight: bool = True) -> SequenceReport:
+                    executor=None, in_flight: bool | None = None) -> SequenceReport:
     """Render `frames` (default: all of the animation) of `scene` to `pattern`.
 
     pattern: a path with one `{}` field for the frame number, e.g. `out/frame_{:04d}.png`
@@ -157,9 +157,9 @@ def render_sequence(scene: Scene, pattern: str | Path, frames: range | None = No
     result or None when skipped) is called after each frame. executor: a
     `clrays.runs.distributed.DaskExecutor` to render the frames on its workers instead
     (each with its own session; `renderer` then only gives the reuse setting), in any
-    order; the result's image is then empty, the frame being in its file. in_flight (default):
+    order; the result's image is then empty, the frame being in its file. in_flight: whether
     the session prepares each frame while the device renders the one before
-    (`_frames_in_flight`); False: one frame at a time, as bench/frames_in_flight.py compares."""
+    (`_frames_in_flight`); None (default): where that gains time (Renderer.frames_in_flight_win)."""
     pattern = check_pattern(pattern)
     frames = scene_frames(scene) if frames is None else frames
     paths = [frame_path(pattern, frame) for frame in frames]
@@ -182,7 +182,7 @@ def render_sequence(scene: Scene, pattern: str | Path, frames: range | None = No
 
 
 def _run_frames(scene, frames, paths, renderer, method, exposure, overwrite, progress, on_frame, executor,
-                report: SequenceReport, bar: Progress, in_flight: bool = True) -> None:
+                report: SequenceReport, bar: Progress, in_flight: bool | None = None) -> None:
     """The frames in order, each checked against its folder's manifest just before it is
     rendered: the first frame starts at once, and the run is linear in the frame count."""
     manifests: dict[Path, FrameManifest] = {}
@@ -245,13 +245,14 @@ def _run_frames(scene, frames, paths, renderer, method, exposure, overwrite, pro
 
 
 def _frames_in_flight(checked, renderer: Renderer, method, exposure, manifest_of, kept, report: SequenceReport,
-                      on_frame, bar: Progress, in_flight: bool = True) -> None:
+                      on_frame, bar: Progress, in_flight: bool | None = None) -> None:
     """The frames of `checked` rendered in one session, in order, two in flight: frame N+1 is
     derived, uploaded and enqueued (Renderer.submit) before frame N's image is read and
     written, so the host prepares one while the device works on the other. Files, manifest
     lines and reports come in frame order. A frame that fails or is interrupted (Ctrl-C)
     still has the one before it written: a run loses nothing but the frame it was on. Not
-    `in_flight`: each frame is written before the next is submitted."""
+    `in_flight` (None: `renderer.frames_in_flight_win`): each frame is written before the
+    next is submitted."""
     unwritten = []  # (frame, path, key, frame scene, PendingFrame) of the frame submitted, not yet written
 
     def write_unwritten() -> None:
@@ -272,7 +273,7 @@ def _frames_in_flight(checked, renderer: Renderer, method, exposure, manifest_of
             pending = renderer.submit(frame_scene, method)
             write_unwritten()  # the frame before, while the device renders this one
             unwritten.append((frame, path, key, frame_scene, pending))
-            if not in_flight:
+            if not (renderer.frames_in_flight_win if in_flight is None else in_flight):
                 write_unwritten()
         write_unwritten()
     except BaseException:

@@ -192,3 +192,28 @@ def test_the_pool_hands_no_buffer_of_a_frame_in_flight_to_the_next(tmp_path):
     for frame, path in zip(range(6), report.paths):
         np.testing.assert_array_equal(np.load(path), fresh.render(scene.animation.scene_at(scene, frame)).image,
                                       err_msg=f"frame {frame}")
+
+
+@pytest.mark.parametrize("in_flight", [True, False, None])
+def test_a_frame_is_written_after_the_next_is_submitted_only_in_flight(tmp_path, device, monkeypatch, in_flight):
+    """In flight, frame N's file is written after frame N+1 is submitted; one at a time,
+    before. By default (None) a sequence is in flight where the session's device gains
+    from it: not on a CPU device."""
+    real_submit, written_at_submit = Renderer.submit, []
+
+    def submit(self, scene, *args, **kwargs):
+        written_at_submit.append(sorted(p.name for p in tmp_path.glob("f_*")))
+        return real_submit(self, scene, *args, **kwargs)
+
+    monkeypatch.setattr(Renderer, "submit", submit)
+    renderer = Renderer(device)
+    render_sequence(orbit(), tmp_path / "f_{:02d}.npy", range(3), renderer=renderer, in_flight=in_flight)
+    overlapped = renderer.frames_in_flight_win if in_flight is None else in_flight
+    if in_flight is None:
+        assert overlapped == (not device.is_cpu)
+    expected = [[], [], ["f_00.npy"]] if overlapped else [[], ["f_00.npy"], ["f_00.npy", "f_01.npy"]]
+    assert written_at_submit == expected
+
+
+def test_a_session_without_a_device_has_no_frames_in_flight_to_gain_from():
+    assert Renderer().frames_in_flight_win is False
