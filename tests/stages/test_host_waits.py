@@ -23,20 +23,23 @@ BENCH_SCENES = ("demo", "bunny", "behind", "sun")
 #: - visibility (stages/visibility.py): the shadow rays' count and route, once the listed
 #:   ways are enqueued: the host builds the BVH (on the host for reliefs) only where the
 #:   route asks for it, 1;
-#: - shade (stages/shade.py): the image, 1.
+#: - _read (session.py, PendingFrame.result): the image, whose read shade enqueued, 1.
 #: None comes from raster's rows passes, epipolar sampling, or visibility's bound passes and
 #: rays' lists.
-WAITS_96x54 = {"map_is_empty": 1, "rectify": 1, "visibility": 1, "shade": 1}
+WAITS_96x54 = {"map_is_empty": 1, "rectify": 1, "visibility": 1, "_read": 1}
 FREE_OF_WAITS = ("raster_passes", "epipolar_sampling", "fixup_list", "_bound_passes", "ray_lists")
 DEVICE_READS = ("read", "read_all", "read_in_place")
 
 
 def _waits_by_caller(monkeypatch) -> list[list[str]]:
-    """Every Device.wait from now on, as the names of the functions on the stack."""
+    """Every Device.wait from now on that waits (not one deferred to the frame's result), as
+    the names of the functions on the stack."""
     stacks = []
     wait = Device.wait
 
     def recording(self, event):
+        if self._deferred_waits is not None:
+            return wait(self, event)
         frame, names = sys._getframe(1), []
         while frame is not None:
             names.append(frame.f_code.co_name)
