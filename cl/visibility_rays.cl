@@ -22,24 +22,28 @@ inline void listed_shadow_ray(global const frame_t* frame, global const view_t* 
     *t_max = light->type == LIGHT_DIRECTIONAL ? INFINITY : 1.0f;
 }
 
-/* The shadow rays of the entries visibility listed, through the BVH, one work-item per
- * entry. Each entry's answer depends on it alone, so the list's order (atomics) changes
- * nothing. */
+/* The shadow rays of the entries visibility listed, through the BVH: the list's length
+ * (ray_count[0]) read here, each work-item a run of it (LIST_RUN), and nothing done unless
+ * the route is the BVH's (ROUTE_ARGS; VISIBILITY_ROUTE_ANY where the host has read it).
+ * Each entry's answer depends on it alone, so the list's order (atomics) changes nothing. */
 kernel void visibility_rays(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                             global const uint* camera_depth, global const int* tri_id,
                             global const float4* tri_vertices, global const float4* tri_normal,
                             global const float2* offsets, global const float4* node_bounds,
                             global const int2* node_children, int root, global const int* ray_entries,
-                            int ray_count, global float* visible)
+                            global const int* ray_count, global float* visible, ROUTE_ARGS)
 {
-    int item = get_global_id(0);
-    if (item >= ray_count) return;
-    int entry = ray_entries[item];
-    float3 start, ray;
-    float t_max;
-    listed_shadow_ray(frame, views, lights, camera_depth, tri_id, tri_normal, offsets, entry, &start, &ray, &t_max);
-    visible[entry] = bvh_occluded(node_bounds, node_children, root, tri_vertices, start, ray, 0.0f, t_max,
-                                  tri_id[entry / frame->light_count]) ? 0.0f : 1.0f;
+    RETURN_UNLESS_ROUTED
+    LIST_RUN(ray_count[0], begin, end)
+    for (int item = begin; item < end; ++item) {
+        int entry = ray_entries[item];
+        float3 start, ray;
+        float t_max;
+        listed_shadow_ray(frame, views, lights, camera_depth, tri_id, tri_normal, offsets, entry, &start, &ray,
+                          &t_max);
+        visible[entry] = bvh_occluded(node_bounds, node_children, root, tri_vertices, start, ray, 0.0f, t_max,
+                                      tri_id[entry / frame->light_count]) ? 0.0f : 1.0f;
+    }
 }
 
 /* The same rays of one light's entries (`light`), each against the triangles that touch

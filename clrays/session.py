@@ -199,17 +199,20 @@ class PendingFrame:
             host_waits += device.host_waits - before
             self._reads = []
         passes = self._passes() if callable(self._passes) else self._passes
+        # Counted on the device (visibility's RayCount), their copy done with the image's.
+        rays = None if unread.shadow_rays is None else int(unread.shadow_rays)
         image = unread.image
         if self.key is not None:  # kept for an identical frame, now that it holds the image
-            renderer.cache.put("frame", self.key, (image, self._stages, unread.textures, unread.samples,
-                                                   unread.shadow_rays, passes))
+            renderer.cache.put("frame", self.key, (image, self._stages, unread.textures, unread.samples, rays,
+                                                   passes))
         stage_ms = self._timer.milliseconds()
         wall_ms = (time.perf_counter() - self._start) * 1e3
         # A kept frame's image is shared with the cache: the caller gets a copy to change.
         if self._use_cache:
             image = image.copy()
             passes = None if passes is None else {name: value.copy() for name, value in passes.items()}
-        return replace(unread, image=image, stage_ms=stage_ms, wall_ms=wall_ms, passes=passes, host_waits=host_waits)
+        return replace(unread, image=image, stage_ms=stage_ms, wall_ms=wall_ms, passes=passes, host_waits=host_waits,
+                       shadow_rays=rays)
 
 
 @dataclass

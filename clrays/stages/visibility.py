@@ -394,12 +394,45 @@ def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, pr
             device.queue, (1,), None, ray_count, np.int32(len(made)), list_counts(device, made),
             np.int32(TOUCHING_NODES_PER_ENTRY), route))
         rays_listed(made, structs.VISIBILITY_ROUTE_RAY_LISTED)
+    if bvh_ahead(device):  # the tree built (or kept) before the route is known, its rays gated by it
+        _cast_through_bvh(device, buffers, rastered, prepared, bvh(), ray_entries, ray_count, entries,
+                          (route, np.int32(structs.VISIBILITY_ROUTE_BVH)), timer)
+        return prepared.visible, RayCount(device, ray_count)
     (rays, _), (taken,) = device.read_all([(ray_count, 2), (route, 1)], np.int32)
-    if taken != structs.VISIBILITY_ROUTE_BVH:
-        return prepared.visible, int(rays)
-    tree = bvh()
-    timer.add("visibility", device.kernel("visibility_rays", "visibility_rays")(
-        device.queue, *device.counted_launch(int(rays)), buffers.params, buffers.views, buffers.lights,
-        rastered.camera_depth, rastered.tri_id, buffers.tri_vertices, buffers.tri_normal, buffers.offsets,
-        tree.node_bounds, tree.node_children, np.int32(tree.root), ray_entries, np.int32(rays), prepared.visible))
+    if taken == structs.VISIBILITY_ROUTE_BVH:
+        _cast_through_bvh(device, buffers, rastered, prepared, bvh(), ray_entries, ray_count, int(rays),
+                          (route, np.int32(structs.VISIBILITY_ROUTE_ANY)), timer)
     return prepared.visible, int(rays)
+
+
+def bvh_ahead(device: Device) -> bool:
+    """Whether visibility builds the frame's BVH (or takes the kept one) before it knows
+    whether a ray needs it, so that the host never waits inside the stage: on a GPU, where a
+    wait leaves the device idle while the host enqueues what follows, and the tree's refit
+    costs little. A CPU device waits for the rays' count and route instead and builds the
+    tree only where a ray needs it (the host's wait costs it nothing: its cores run the
+    kernels either way)."""
+    return not device.is_cpu
+
+
+def _cast_through_bvh(device: Device, buffers: FrameBuffers, rastered: RasterResult, prepared: Prepared,
+                      tree: DeviceBvh, ray_entries, ray_count, bound: int, route: tuple, timer: StageTimer) -> None:
+    """visibility_rays over the listed entries (at most `bound`, their count on the device),
+    under `route` (visibility_rays' ROUTE_ARGS)."""
+    timer.add("visibility", device.kernel("visibility_rays", "visibility_rays")(
+        device.queue, *device.list_launch(max(bound, 1)), buffers.params, buffers.views, buffers.lights,
+        rastered.camera_depth, rastered.tri_id, buffers.tri_vertices, buffers.tri_normal, buffers.offsets,
+        tree.node_bounds, tree.node_children, np.int32(tree.root), ray_entries, ray_count, prepared.visible, *route))
+
+
+class RayCount:
+    """The shadow rays a frame cast, counted on the device (bvh_ahead): copied to the host
+    behind the frame and read when asked for, by then (after the image) without a wait."""
+
+    def __init__(self, device: Device, ray_count):
+        self._device, self._host = device, np.zeros(2, np.int32)
+        self._copy = device.cl.enqueue_copy(device.queue, self._host, ray_count, is_blocking=False)
+
+    def __int__(self) -> int:
+        self._device.collect(self._copy)
+        return int(self._host[0])

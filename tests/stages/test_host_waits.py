@@ -141,3 +141,21 @@ def test_list_launches_give_the_same_image_in_either_shape(renderer, monkeypatch
     assert bounds.count(samples) >= 2  # fix_up's, and the rays' (one light: an entry per sample)
     monkeypatch.setattr(Device, "list_launch", lambda self, bound: ((max(bound, 1),), None))
     assert np.array_equal(renderer.render(scene, reuse=False).image, image)
+
+
+@pytest.mark.parametrize("name", BENCH_SCENES)
+@pytest.mark.parametrize("size", [(32, 18), (160, 90)])
+def test_a_bvh_built_ahead_gives_the_same_frame_without_the_wait(renderer, monkeypatch, name, size):
+    """As on a GPU (visibility.bvh_ahead): the BVH built before the rays' route is known and
+    its rays gated on the device, so visibility does not wait; the images and the shadow
+    rays counted are those of the frame that waits, whichever route the rays take (a
+    thumbnail's lists at 32×18, the BVH at 160×90)."""
+    from clrays.stages import visibility
+
+    scene = load_scene(SCENES / f"{name}.yaml", overrides=[f"image.width={size[0]}", f"image.height={size[1]}"])
+    waiting = renderer.render(scene, reuse=False)
+    monkeypatch.setattr(visibility, "bvh_ahead", lambda device: True)
+    ahead = renderer.render(scene, reuse=False)
+    assert np.array_equal(ahead.image, waiting.image)
+    assert ahead.shadow_rays == waiting.shadow_rays and ahead.shadow_rays > 0
+    assert ahead.host_waits == waiting.host_waits - 1
