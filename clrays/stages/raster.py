@@ -11,7 +11,7 @@ import numpy as np
 
 from .. import structs
 from ..device import Device, StageTimer
-from ..inputs import FrameBuffers, light_pass_inputs, opaque_occluders
+from ..inputs import FrameBuffers, FrameInputs, light_pass_inputs, opaque_occluders
 from .relief import ReliefDrawer
 
 
@@ -144,10 +144,10 @@ class ShadowMap:
     depth: object  # uint[texels]
     texels: int
     triangles: int  # scene triangles: with none, the map is empty without looking
-    empty: bool | None = None  # nothing rasterized: filled in by `map_is_empty` when first asked
-    # raster_any's flag on its way to the host: (the host array, the read's event), or None
+    empty: bool | None = None  # nothing can be rasterized: filled in by `map_is_empty` when first asked
+    # the light pass's inputs (anchored at the light), which `map_is_empty` asks, or None
     # where the map is empty without looking
-    flag: tuple | None = None
+    inputs: FrameInputs | None = None
 
 
 def raster_shadow_map(device: Device, buffers: FrameBuffers, light_index: int, timer: StageTimer) -> ShadowMap:
@@ -172,29 +172,55 @@ def raster_shadow_map(device: Device, buffers: FrameBuffers, light_index: int, t
         reliefs.map("relief_map_depth", None, light_buffers.views, inputs.views, view_index, centre, 1, (depth,))
     shadow_map = ShadowMap(depth, inputs.shadow_texels, inputs.scene.geometry.count)
     if shadow_map.triangles and shadow_map.texels:
-        # Whether the map is empty, asked now and read when map_is_empty needs it: the host
-        # does the next stages' set-up while the device answers (it waited for the flag,
-        # then built the epipolar frame, the device idle meanwhile).
-        flag = device.buffer(np.zeros(1, np.uint32))
-        device.kernel("raster", "raster_any", raster_defines(device))(
-            device.queue, (-(-texels // structs.RASTER_ANY_TEXELS),), None, depth, np.int32(shadow_map.texels), flag)
-        seen = np.zeros(1, np.uint32)
-        shadow_map.flag = (seen, device.cl.enqueue_copy(device.queue, seen, flag, is_blocking=False))
+        shadow_map.inputs = inputs
     return shadow_map
 
 
+#: Slack of `map_is_empty`'s plane tests, relative to a vertex's largest coordinate in the
+#: view: far above the float32 rounding of the device's projection (6e-8), so a triangle the
+#: host finds outside a view never reaches a texel there.
+OUTSIDE_VIEW_SLACK = 1e-5
+
+
 def map_is_empty(device: Device, shadow_map: ShadowMap) -> bool:
-    """Whether nothing at all was rasterized into a light's map (asked on the device when
-    the map was drawn: the host reads a flag, not the map)."""
+    """Whether nothing can be rasterized into a light's map, decided on the host from the
+    geometry, so the frame does not wait for the device: every triangle the light pass
+    draws lies wholly outside one side of each view the frame draws (behind a perspective
+    view, or past an edge of its frustum or of an orthographic box), in float64 with
+    OUTSIDE_VIEW_SLACK. A triangle inside a view that covers no texel centre, or one the
+    view culls as a back face, leaves the map empty while this says False: the frame then
+    rectifies the full texture, which gives the same radiance but for float32 rounding
+    (clrays.session.Renderer._rectify). A relief is drawn by its pre-warp: a map with one
+    counts as not empty. `device` is not asked (kept for the callers)."""
     if shadow_map.empty is None:
-        if shadow_map.flag is None:  # no triangle or no texel
-            shadow_map.empty = True
-        else:
-            seen, read = shadow_map.flag
-            device.wait(read)
-            shadow_map.empty = not seen[0]
-            shadow_map.flag = None
+        inputs = shadow_map.inputs
+        shadow_map.empty = inputs is None or (not inputs.reliefs and not _any_triangle_in_views(inputs))
+        shadow_map.inputs = None
     return shadow_map.empty
+
+
+def _any_triangle_in_views(inputs: FrameInputs) -> bool:
+    """Whether some triangle of a light pass (`light_pass_inputs`) may reach a view it draws."""
+    carried = len(inputs.tri_vertices) // 3
+    vertices = (inputs.scene.geometry.triangles[:carried] - inputs.light_anchor_ws[0]).reshape(-1, 3)
+    for view in inputs.views[1:][inputs.view_needed[1:]]:
+        basis = np.stack([view["right"][:3], view["up"][:3], view["forward"][:3]]).astype(np.float64)
+        x, y, z = ((vertices - view["origin"][:3].astype(np.float64)) @ basis.T).T
+        slack = OUTSIDE_VIEW_SLACK * np.maximum(np.maximum(abs(x), abs(y)), abs(z))
+        if view["projection"] == structs.PROJECTION_PERSPECTIVE:
+            reach_x, reach_y = float(view["scale_x"]) * z, float(view["scale_y"]) * z
+            outside = [z <= 0.0]
+        else:
+            reach_x, reach_y = float(view["scale_x"]), float(view["scale_y"])
+            outside = []
+        outside += [x - reach_x > slack, -x - reach_x > slack, y - reach_y > slack, -y - reach_y > slack]
+        # a triangle is out of the view when its three vertices are out on the same side
+        out = np.zeros(len(vertices) // 3, dtype=bool)
+        for side in outside:
+            out |= side.reshape(-1, 3).all(axis=1)
+        if not out.all():
+            return True
+    return False
 
 
 def shadow_atlas(device: Device, buffers: FrameBuffers, maps: list[ShadowMap]):
