@@ -9,12 +9,15 @@
  * integrand_prefix replaces a point row's last cell by panels halving towards the ray's point
  * at infinity and sums the cells in compensated (Kahan) float32.
  *
- * Rows come from the host as float4 (δ = π - β, β, ρ(cos β), 0), computed in float64:
- * a point row's K needs sin((1+x)δ/2), which it takes as sin(β + (1-x)δ/2) past π/2, so
- * β ≈ 0 keeps its relative precision; a directional row's phase does not depend on x.
- * K is written in u = 1 - x, exact near x = 1, where the far half-ray is squeezed. */
+ * Rows are float4 (δ = π - β, β, ρ(cos β), 0), which integrand_rows computes in double
+ * (the host's float64 rule, clrays/stages/integrand.py table_rows) from the visible β range
+ * that rectify reduced: a point row's K needs sin((1+x)δ/2), which it takes as
+ * sin(β + (1-x)δ/2) past π/2, so β ≈ 0 keeps its relative precision; a directional row's
+ * phase does not depend on x. K is written in u = 1 - x, exact near x = 1, where the far
+ * half-ray is squeezed. */
 #include "common.h"
 #include "lanes.h"
+#include "visible_ranges.h"
 
 #if QUAD_NODES != 3
 #error "integrand_build.cl spells out 3-point Gauss-Legendre"
@@ -72,6 +75,34 @@ ALWAYS_INLINE rgb_lanes directional_integrand(float_lanes x, float4 row, float4 
     k.b = amplitude.z * row.z * exp(-sigma_t.z * (x * s_end.z));
     return k;
 }
+
+#pragma OPENCL FP_CONTRACT OFF /* the host's float64 rule, operation for operation */
+/* One work-item per β row: the row's nodes β_j = β_min + (β_max - β_min)·sin²(π/2·t_j),
+ * t_j = j/(n_beta - 1) as numpy's linspace, over the visible rays' β range (the bounds
+ * rectify_bounds reduced), and the float4 (δ, β, ρ(cos β), 0) integrand_cells reads; work-item
+ * 0 writes the range into the integrand's params, where integrand.h reads it. `g`: the
+ * Henyey–Greenstein g, one wide_t (double where the device has it). */
+kernel void integrand_rows(global const uint* bounds, int directional, global const wide_t* g, int n_beta,
+                           global float4* rows, global integrand_t* params)
+{
+    int j = get_global_id(0);
+    wide_t beta_min, beta_max, gamma_max;
+    visible_ranges(bounds, directional, &beta_min, &beta_max, &gamma_max);
+    if (j == 0) {
+        params->beta_min = (float)beta_min;
+        params->beta_max = (float)beta_max;
+    }
+    if (!rows || j >= n_beta) return;
+    wide_t t = j == n_beta - 1 ? 1.0 : (wide_t)j * (1.0 / (wide_t)(n_beta - 1));
+    wide_t s = sin((WIDE_PI * 0.5) * t);
+    wide_t beta = beta_min + (beta_max - beta_min) * (s * s);
+    wide_t c = clamp(cos(beta), (wide_t)-1.0, (wide_t)1.0);
+    wide_t gg = *g;
+    wide_t d = (1.0 + gg * gg) - (2.0 * gg) * c;
+    wide_t rho = (1.0 - gg * gg) / ((4.0 * WIDE_PI) * (d * sqrt(d)));
+    rows[j] = (float4)((float)fmax(WIDE_PI - beta, (wide_t)1e-20), (float)beta, (float)rho, 0.0f);
+}
+#pragma OPENCL FP_CONTRACT ON
 
 /* One work-item per LANES cells of a row: ∫ K over cell k, written at column k + 1. */
 kernel void integrand_cells(global const float4* rows, int point, float4 amplitude, float4 sigma_t, float4 s_end,

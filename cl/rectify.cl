@@ -2,13 +2,15 @@
  * light angle γ, the view angle β of the light ray's blocker, S[α, γ] (docs/design.md §2, §3).
  * Reads views, lights, shadow_depth, epipolar, slice_sides, texel_angles; writes level 0
  * of the min-max tree (float2 (S, S) per texel). rectify_bounds reads camera_depth and reduces the
- * β and γ ranges the visible rays need (as pseudo-angles, see pseudo_angle_lanes).
+ * β and γ ranges the visible rays need (as pseudo-angles, see pseudo_angle_lanes);
+ * rectify_ranges turns them into epipolar->gamma_step, texel_angles and the ranges.
  *
  *   tree row α: | level 0: N texels | level 1: N/2 | level 2: N/4 | ... | 1 | (float2 min, max)
  *               0                   N            3N/2                    2N-1 */
 #include "lighting.h"
 #include "atan2_approx.h"
 #include "lanes.h"
+#include "visible_ranges.h"
 
 #define PI_F 3.14159265358979f
 
@@ -83,9 +85,38 @@ kernel void rectify_bounds(global const frame_t* frame, global const view_t* vie
 }
 
 
-/* slice_sides[α] = u·cos α + w·sin α at the slice's centre and texel_angles[γ] = (γ, cos γ,
- * sin γ) come from the host (clrays/stages/rectify.py slice_sides, texel_angles): the same for every
- * texel of a row or column, they cost the kernel no trigonometry. Texel centres, except
+/* One work-item per texel of a row: from the bounds, the γ step of the texture (written to
+ * epipolar->gamma_step by work-item 0), the texel's (γ, cos γ, sin γ, 0) and, by work-item
+ * 0, ranges = (β_min, β_max, γ_max, 1/max(β_max - β_min, 1e-6)) as float. The host read the
+ * bounds and computed these until a frame ran without a wait (clrays/stages/rectify.py
+ * texel_angles is the same rule in numpy). When no visible ray has extent in γ (γ_max ≤ 0)
+ * the texture spans γ ∈ [0, 1]: every ray's lit run is then empty, and the light adds
+ * nothing, where a zero step would divide by zero. */
+kernel void rectify_ranges(global const uint* bounds, global const light_t* lights, global epipolar_t* epipolar,
+                           global float4* texel_angles, global float4* ranges)
+{
+    int texel = get_global_id(0), n = epipolar->gamma_samples;
+    if (texel >= n) return;
+    int directional = lights[epipolar->light_index].type == LIGHT_DIRECTIONAL;
+    wide_t beta_min, beta_max, gamma_max;
+    visible_ranges(bounds, directional, &beta_min, &beta_max, &gamma_max);
+    float gamma_step = gamma_max > 0.0 ? (float)(gamma_max / (wide_t)n) : 1.0f / (float)n;
+    /* texel centres, except texel 0 at γ = 0 (see below); one float product, as the host's */
+    float gamma = texel == 0 ? 0.0f : ((float)texel + 0.5f) * gamma_step;
+    texel_angles[texel] = (float4)(gamma, (float)cos((wide_t)gamma), (float)sin((wide_t)gamma), 0.0f);
+    if (texel == 0) {
+        epipolar->gamma_step = gamma_step;
+        wide_t span = beta_max - beta_min;
+        ranges[0] = (float4)((float)beta_min, (float)beta_max, (float)gamma_max,
+                             (float)(1.0 / (span > 1e-6 ? span : 1e-6)));
+    }
+}
+
+
+/* slice_sides[α] = u·cos α + w·sin α at the slice's centre comes from the host
+ * (clrays/stages/rectify.py slice_sides) and texel_angles[γ] = (γ, cos γ, sin γ) from
+ * rectify_ranges: the same for every texel of a row or column, they cost the kernel no
+ * trigonometry. Texel centres, except
  * texel 0 at γ = 0: the eye's own light ray (through the eye, the same for every slice). A
  * ray straight away from the light (β → π) spans only γ < SIN_BETA_MIN·s, far less than
  * half a texel, and its visibility is that ray's.

@@ -1,5 +1,7 @@
 /* volume_moments — in-scattered radiance per camera sample from prefix sums of moments
  * along each rectified row (method `moments`, docs/design.md §9, the volume).
+ * Both read ranges (rectify_ranges: β_min, β_max, γ_max, 1/max(β_max - β_min, 1e-6)), on
+ * the device, so the host never waits for them.
  * volume_moments_prefix reads tree (level 0: the rectified S[α, γ]); writes prefix
  *   ((gamma_samples + 1) moment sums per row, the first 0).
  * volume_moments_scatter reads frame, views, lights, epipolar, prefix, integrand, tables,
@@ -46,11 +48,12 @@ inline float beta_depth(float beta, float beta_min, float inverse_beta_range)
     return 0.05f + 0.9f * clamp((beta - beta_min) * inverse_beta_range, 0.0f, 1.0f);
 }
 
-kernel void volume_moments_prefix(global const epipolar_t* ep, global const float2* tree, float beta_min,
-                                  float inverse_beta_range, global prefix_t* prefix)
+kernel void volume_moments_prefix(global const epipolar_t* ep, global const float2* tree,
+                                  global const float4* ranges, global prefix_t* prefix)
 {
     int slice = get_global_id(0);
     if (slice >= ep->slices) return;
+    float beta_min = ranges->x, inverse_beta_range = ranges->w;
     int n = ep->gamma_samples;
     global const float2* row = tree + (size_t)slice * 2 * n; /* level 0 of the row's min-max tree */
     global prefix_t* out = prefix + (size_t)slice * (n + 1);
@@ -129,7 +132,7 @@ kernel void volume_moments_scatter(global const frame_t* frame, global const vie
                                    global const light_t* lights, global const epipolar_t* epipolar,
                                    global const prefix_t* prefix, global const integrand_t* integrand,
                                    global const float* tables, global const uint* camera_depth,
-                                   global const float2* offsets, float beta_min, float inverse_beta_range,
+                                   global const float2* offsets, global const float4* ranges,
                                    float moment_bias, global float4* scatter WALK_FEATURE_ARGS)
 {
     int sample = get_global_id(0);
@@ -146,7 +149,7 @@ kernel void volume_moments_scatter(global const frame_t* frame, global const vie
     size_t stride = (size_t)ep->gamma_samples + 1;
     global const prefix_t* row0 = prefix + i0 * stride;
     global const prefix_t* row1 = prefix + i1 * stride;
-    float receiver = beta_depth(span.ray.beta, beta_min, inverse_beta_range);
+    float receiver = beta_depth(span.ray.beta, ranges->x, ranges->w);
     walk_features_t features;
     ATTACH_WALK_FEATURES(features) /* a light texture (walk_features.h) */
 #ifdef LIGHT_TEXTURE

@@ -19,7 +19,7 @@ buffers, integrand tables) and re-runs a stage only when what it reads changed
 (docs/design.md §7). `StageKeys` says, beside each stage, what that is: the shadow maps
 while the lights and the geometry stand still, the camera depth while the camera and
 the geometry do, the min-max trees while those and the eye–light frame do, the
-integrand tables while the medium and the β/γ ranges do; a frame identical to a recent
+integrand tables while the medium and what decides the β/γ ranges (which stay on the device) do; a frame identical to a recent
 one is not rendered at all. Keys are digests of the stages' inputs (clrays.reuse), so
 reuse never changes an image. `RenderResult.stage_status` says what each stage did.
 
@@ -398,14 +398,12 @@ class Renderer:
         """One light's rectify → minmax → integrand → traverse (or volume_moments)."""
         device, buffers, keys, reuse, timer = self.device, frame.buffers, frame.keys, frame.reuse, frame.timer
         epipolar = self._rectify(buffers, frame.rastered, frame.maps, keys, index, reuse, timer)  # rectify: S[α, γ]
-        if epipolar is None:  # no visible ray has any extent in γ
-            return
         frame.textures.append((int(epipolar.params["slices"]), int(epipolar.params["gamma_samples"])))
         if frame.method == "minmax":
             self._minmax(epipolar, reuse, timer)  # minmax: the 1D min-max mipmap of every row
-        tables = reuse.stage("integrand", lambda: keys.integrand(index, epipolar),  # integrand: lit run → radiance
+        tables = reuse.stage("integrand", lambda: keys.integrand(index),  # integrand: lit run → radiance
                              lambda: integrand(device, frame.scene, light, epipolar, timer), per_light=True)
-        texture = reuse.stage("light_texture", lambda: keys.light_texture(index, epipolar),  # light_texture: T·Γ_i sums
+        texture = reuse.stage("light_texture", lambda: keys.light_texture(index),  # light_texture: T·Γ_i sums
                               lambda: light_texture(device, buffers, index, epipolar, tables, timer),
                               per_light=True) if textured(light) else None
         if frame.method == "volume_moments":  # prefix sums of moments, one reconstruction per ray
@@ -566,7 +564,7 @@ class Renderer:
         return RasterResult(camera_depth, tri_id, atlas), maps
 
     def _rectify(self, buffers: FrameBuffers, rastered: RasterResult, maps: list[ShadowMap], keys: StageKeys,
-                 index: int, reuse: Reuse, timer: StageTimer) -> Epipolar | None:
+                 index: int, reuse: Reuse, timer: StageTimer) -> Epipolar:
         """The rectify stage of one light, kept while `keys.trees` is the same. A light whose
         map is empty casts no shadow anywhere: its texture is π everywhere and the tree walk
         finds one lit run at any texture size, so a minimal texture gives the same radiance
@@ -587,9 +585,8 @@ class Renderer:
 
     def _unshadowed_trees(self, buffers: FrameBuffers, rastered: RasterResult, index: int, timer: StageTimer):
         epipolar = rectify(self.device, buffers, rastered, index, timer)
-        if epipolar is not None:
-            minmax(self.device, epipolar, timer)
-            epipolar.unshadowed = True
+        minmax(self.device, epipolar, timer)
+        epipolar.unshadowed = True
         return epipolar
 
     def _minmax(self, epipolar: Epipolar, reuse: Reuse, timer: StageTimer) -> None:
@@ -746,33 +743,45 @@ class StageKeys:
                                  inputs.lights[index]["type"], inputs.view_needed[first:first + count]))
         return shadow
 
+    def _light_geometry(self, index: int) -> dict:
+        """The light's fields but its power, which neither rectify nor minmax reads."""
+        light = self.inputs.scene.lights[index]
+        return {f.name: getattr(light, f.name) for f in dataclasses.fields(light)
+                if f.name not in ("intensity", "irradiance")}
+
     def trees(self, index: int) -> bytes:
         """rectify + minmax of one light: the camera depth, the light's map, the epipolar
         frame (eye, light, camera, image) and the texture size. Not the medium, the
         light's power or the shading options, which neither stage reads."""
         inputs, scene = self.inputs, self.inputs.scene
-        light = scene.lights[index]
-        geometry_of_light = {f.name: getattr(light, f.name) for f in dataclasses.fields(light)
-                             if f.name not in ("intensity", "irradiance")}
         first, count = inputs.light_views[index]
-        return digest("trees", index, self.camera, self.shadow[index], geometry_of_light, inputs.eye_ws,
+        return digest("trees", index, self.camera, self.shadow[index], self._light_geometry(index), inputs.eye_ws,
                       inputs.views[:1], inputs.views[first:first + count], scene.camera, scene.image,
                       scene.render.slices, scene.render.gamma_samples)
 
-    def light_texture(self, index: int, epipolar: Epipolar) -> bytes:
+    def ranges(self, index: int) -> bytes:
+        """The β and γ ranges of one light's visible rays, which rectify reduces and keeps on
+        the device (clrays.stages.rectify.VisibleRanges): not their values, which the host
+        never reads, but what decides them: the camera depth (geometry, eye, camera view,
+        sample offsets), the light's position or direction, the camera and the image."""
+        inputs, scene = self.inputs, self.inputs.scene
+        return digest("ranges", index, self.camera, self._light_geometry(index), inputs.eye_ws, scene.camera,
+                      scene.image)
+
+    def light_texture(self, index: int) -> bytes:
         """light_texture of one light: the trees' key (the epipolar frame and texture size,
         the light with its texture), the integrand's (the medium, the β range) and the rank."""
-        return digest("light_texture", self.trees(index), self.integrand(index, epipolar), self.inputs.eye_ws,
+        return digest("light_texture", self.trees(index), self.integrand(index), self.inputs.eye_ws,
                       self.inputs.scene.render.svd_rank)
 
-    def integrand(self, index: int, epipolar: Epipolar) -> bytes:
-        """integrand of one light: the medium, the light, the eye–light distance, the β and
-        γ ranges of the visible rays, the integrand mode and rank, the camera's far, the
-        table size (it follows the image)."""
+    def integrand(self, index: int) -> bytes:
+        """integrand of one light: the medium, the light, the β and γ ranges of the visible
+        rays (by `ranges`, which also decides the eye–light distance), the integrand mode
+        and rank, the camera's far, the table size (it follows the image)."""
         scene = self.inputs.scene
         return digest("tables", scene.medium, scene.lights[index], scene.render.integrand, scene.render.svd_rank,
                       effective_far(scene), integrand_table_size(scene.image.width, scene.image.height),
-                      epipolar.d_el, epipolar.beta_min, epipolar.beta_max, epipolar.gamma_max)
+                      self.ranges(index))
 
 
 _renderers: dict[str | None, Renderer] = {}

@@ -618,12 +618,33 @@ def grey_table(tables: IntegrandTables) -> bool:
     return tables.mode == "table" and _shared_channel(tables.constants) is not None
 
 
-def device_table(device: Device, tables: IntegrandTables, timer: StageTimer | None = None) -> object:
+def wide_type(device: Device) -> type:
+    """The numpy type of cl/visible_ranges.h's wide_t on `device`: float64 where it has doubles."""
+    return np.float64 if "cl_khr_fp64" in device.device.extensions else np.float32
+
+
+def device_rows(device: Device, tables: IntegrandTables, visible, params, timer: StageTimer | None = None):
+    """On the device, from the visible rays' β range `visible` (clrays.stages.rectify.VisibleRanges,
+    not read by the host):
+    the β range written into `params` (integrand_t) and, for the `table` mode, the rows
+    `table_rows` would give (cl/integrand_build.cl integrand_rows), else None."""
+    rows = device.buffer(nbytes=16 * tables.n_beta) if tables.mode == "table" else None
+    g = device.buffer(np.array([tables.constants[0, C_G]], dtype=wide_type(device)), writable=False)
+    event = device.kernel("integrand_build", "integrand_rows", TABLE_BUILD_DEFINES)(
+        device.queue, (max(tables.n_beta, 1),), None, visible.bounds, np.int32(visible.directional), g,
+        np.int32(tables.n_beta), rows, params)
+    if timer is not None:
+        timer.add("integrand", event)
+    return rows
+
+
+def device_table(device: Device, tables: IntegrandTables, timer: StageTimer | None = None, rows=None) -> object:
     """The `table` mode's prefix rows F(β_j, x_k), (3, n_beta, n_gamma) float32, or for a
     `grey_table` (1, n_beta, n_gamma) of unit amplitude, built on the device
     (cl/integrand_build.cl): the same rule as `_prefix_rows`, in float32, with a
     compensated running sum. The cells are independent, so the device takes them all at
-    once where the host would loop over chunks of rows (docs/design.md §4.4)."""
+    once where the host would loop over chunks of rows (docs/design.md §4.4). `rows`: the
+    β rows on the device (`device_rows`); None: `table_rows(tables)`, uploaded."""
     c = tables.constants
     point = int(tables.light_kind == "point")
     grey = int(grey_table(tables))
@@ -631,7 +652,8 @@ def device_table(device: Device, tables: IntegrandTables, timer: StageTimer | No
     sigma_t = structs.float4(c[:, C_SIGMA_T])
     d_el, g = np.float32(c[0, C_D_EL]), np.float32(c[0, C_G])
     n_beta, n_gamma = tables.n_beta, tables.n_gamma
-    rows = device.buffer(table_rows(tables), writable=False)
+    if rows is None:
+        rows = device.buffer(table_rows(tables), writable=False)
     table = device.buffer(nbytes=4 * (1 if grey else 3) * n_beta * n_gamma)
     cells = device.kernel("integrand_build", "integrand_cells", TABLE_BUILD_DEFINES)
     prefix = device.kernel("integrand_build", "integrand_prefix", TABLE_BUILD_DEFINES)
@@ -648,16 +670,23 @@ def device_table(device: Device, tables: IntegrandTables, timer: StageTimer | No
 
 class DeviceIntegrand:
     """One light's integrand tables, packed as `cl/integrand.h` reads them, on the device.
-    A table built on the device is read back into `tables` only when asked for."""
+    A table built on the device is read back into `tables` only when asked for, and so is
+    the β range the device wrote (`visible`, clrays.stages.rectify.VisibleRanges: where it
+    came from; None: `tables` has it)."""
 
-    def __init__(self, tables: IntegrandTables, params, data, device: Device | None = None):
+    def __init__(self, tables: IntegrandTables, params, data, device: Device | None = None, visible=None):
         self._tables = tables
         self.params = params  # integrand_t
         self.data = data  # float[]: the prefix table, or the SVD bases then prefix integrals
         self._device = device
+        self._visible = visible
 
     @property
     def tables(self) -> IntegrandTables:
+        if self._visible is not None:
+            beta_min, beta_max, gamma_max, _ = self._visible.host()
+            self._tables = replace(self._tables, beta_min=beta_min, beta_max=beta_max, gamma_max=gamma_max)
+            self._visible = None
         if self._tables.mode == "table" and self._tables.prefix is None:
             self._tables = replace(self._tables, prefix=read_device_table(self._device, self.data, self._tables))
         return self._tables
@@ -674,27 +703,32 @@ def read_device_table(device: Device, table, tables: IntegrandTables) -> np.ndar
 def integrand(device: Device, scene, light, epipolar, timer: StageTimer) -> DeviceIntegrand:
     """Stage integrand: one light's per-frame tables over the β and γ ranges of the
     visible rays (`epipolar`): the `table` mode's built on the device (`device_table`),
-    the others on the host in float64 and uploaded."""
+    from the β range the device holds (`device_rows`), without a host wait; the others
+    on the host in float64 and uploaded (the `svd` mode reads the range back for its
+    singular value decomposition)."""
     render, medium = scene.render, scene.medium
-    if render.integrand == "table":  # built before the clock starts, as every device stage's kernels are
-        device.program("integrand_build", TABLE_BUILD_DEFINES)
+    device.program("integrand_build", TABLE_BUILD_DEFINES)  # built before the clock starts, as every stage's kernels
     start = time.perf_counter()
     directional = isinstance(light, DirectionalLight)
     n_beta, n_gamma = integrand_table_size(scene.image.width, scene.image.height)
+    on_device = render.integrand != "svd"  # the host needs no β for the table's rows nor for analytic
+    # A placeholder range where the device fills it in: it only passes the checks.
+    beta_min, beta_max, gamma_max = (0.0, math.pi, math.pi) if on_device else epipolar.visible.host()[:3]
     try:
         tables = build_integrand(
             render.integrand, "directional" if directional else "point", medium.sigma_s, medium.sigma_t,
             medium.phase, light.irradiance if directional else light.intensity, epipolar.d_el,
-            epipolar.beta_min, epipolar.beta_max, epipolar.gamma_max, rank=render.svd_rank,
-            n_beta=n_beta, n_gamma=n_gamma,
+            beta_min, beta_max, max(gamma_max, math.ulp(0.0)), rank=render.svd_rank, n_beta=n_beta, n_gamma=n_gamma,
             s_max=effective_far(scene) if directional and render.integrand != "analytic" else None,
             rows=render.integrand != "table")
     except ValueError as exc:  # e.g. `analytic` where no closed form exists
         where = f"{scene.source}: " if scene.source else ""
         raise ClraysError(f"{where}render.integrand: {str(exc).removeprefix('integrand: ')}") from exc
     params, data = pack_integrand(tables)
-    data = device_table(device, tables, timer) if tables.mode == "table" else device.buffer(data, writable=False)
-    packed = DeviceIntegrand(tables, device.buffer(params.reshape(1), writable=False), data, device)
+    params_buffer = device.buffer(params.reshape(1))
+    rows = device_rows(device, tables, epipolar.visible, params_buffer, timer)  # the β range, on the device
+    data = device_table(device, tables, timer, rows) if tables.mode == "table" else device.buffer(data, writable=False)
+    packed = DeviceIntegrand(tables, params_buffer, data, device, epipolar.visible if on_device else None)
     timer.add_host("integrand", (time.perf_counter() - start) * 1e3)
     return packed
 

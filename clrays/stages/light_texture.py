@@ -170,7 +170,7 @@ def light_texture(device: Device, buffers: FrameBuffers, light_index: int, epipo
     light = scene.lights[light_index]
     directional = isinstance(light, DirectionalLight)
     n, slices = int(epipolar.params["gamma_samples"]), int(epipolar.params["slices"])
-    gamma_step = float(epipolar.params["gamma_step"])
+    gamma_step = epipolar.gamma_step  # (the host's SVD needs the ranges: read back from the device)
     n_beta = max(int(integrand.tables.n_beta), 16)
     rank = scene.render.svd_rank
     basis = gamma_basis("directional" if directional else "point", scene.medium,

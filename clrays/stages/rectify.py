@@ -48,15 +48,44 @@ def _defines(device: Device) -> dict:
 
 
 @dataclass
+class VisibleRanges:
+    """The β and γ ranges of one light's visible rays, on the device: `bounds`, the
+    pseudo-angles rectify_bounds reduces, and `ranges`, the float4 (β_min, β_max, γ_max,
+    1/max(β_max - β_min, 1e-6)) rectify_ranges makes of them. The kernels that need the
+    ranges read them there, so a frame never waits for them; `host` reads them back, once,
+    for the host-side paths that need the values (the `svd` integrand, a light's texture)
+    and for tests, each such read a host wait (Device.host_waits)."""
+
+    device: Device
+    bounds: object  # uint[4]: pseudo-angles of β_min, β_max, γ_max (cl/visible_ranges.h)
+    ranges: object  # float4
+    directional: bool
+    gamma_samples: int  # texels of the texture's rows, which divide γ_max into its step
+    _host: tuple | None = None
+
+    def host(self) -> tuple[float, float, float, float]:
+        """(β_min, β_max, γ_max, γ step): β in radians, γ in radians (point, spot) or length
+        (directional); γ_max ≤ 0 where no visible ray has extent in γ. β and γ_max in
+        float64 from the bounds, as cl/visible_ranges.h; the step in float32, as the
+        texture's (rectify_ranges)."""
+        if self._host is None:
+            q_beta_min, q_beta_max, gamma = self.device.read(self.bounds, 4, np.uint32)[:3].view(np.float32).astype(float)
+            gamma_max = gamma if self.directional else angle_of_pseudo(gamma)
+            n = self.gamma_samples
+            gamma_step = float(np.float32(gamma_max / n) if gamma_max > 0 else np.float32(1.0) / np.float32(n))
+            self._host = (min(angle_of_pseudo(q_beta_min), math.pi), min(angle_of_pseudo(q_beta_max), math.pi),
+                          float(gamma_max), gamma_step)
+        return self._host
+
+
+@dataclass
 class Epipolar:
     """The epipolar texture of one light and what it was built from."""
 
-    params: np.ndarray  # epipolar_t
+    params: np.ndarray  # epipolar_t, but for gamma_step (rectify_ranges writes it into `buffer`)
     buffer: object  # the epipolar_t on the device
     tree: object  # float2[slices][2·gamma_samples]: the min-max tree rows
-    beta_min: float
-    beta_max: float
-    gamma_max: float
+    visible: VisibleRanges  # the β and γ ranges of the visible rays, on the device
     levels_built: bool = False  # the minmax stage has filled levels 1..log2(N) of `tree`
     unshadowed: bool = False  # the minimal texture of a light that casts no shadow (clrays.session)
 
@@ -64,6 +93,23 @@ class Epipolar:
     def d_el(self) -> float:
         """Eye–light distance (0 for a directional light)."""
         return float(self.params["d_el"])
+
+    # The ranges on the host: each reads them back once (VisibleRanges.host), a host wait.
+    @property
+    def beta_min(self) -> float:
+        return self.visible.host()[0]
+
+    @property
+    def beta_max(self) -> float:
+        return self.visible.host()[1]
+
+    @property
+    def gamma_max(self) -> float:
+        return self.visible.host()[2]
+
+    @property
+    def gamma_step(self) -> float:
+        return self.visible.host()[3]
 
 
 def slice_basis(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -149,11 +195,11 @@ def slice_sides(params: np.ndarray) -> np.ndarray:
     return sides
 
 
-def texel_angles(params: np.ndarray) -> np.ndarray:
+def texel_angles(params: np.ndarray, gamma_step: float) -> np.ndarray:
     """(gamma_samples, 4) float32: (γ, cos γ, sin γ, 0) of each texel of a row: its centre,
-    texel 0 at γ = 0 (cl/rectify.cl rectify)."""
+    texel 0 at γ = 0 (cl/rectify.cl rectify); what rectify_ranges writes on the device."""
     n = int(params["gamma_samples"])
-    gamma = (np.arange(n, dtype=np.float32) + np.float32(0.5)) * np.float32(params["gamma_step"])
+    gamma = (np.arange(n, dtype=np.float32) + np.float32(0.5)) * np.float32(gamma_step)
     gamma[0] = 0.0
     angles = np.zeros((n, 4), dtype=np.float32)
     angles[:, 0], angles[:, 1], angles[:, 2] = gamma, np.cos(gamma.astype(float)), np.sin(gamma.astype(float))
@@ -162,44 +208,39 @@ def texel_angles(params: np.ndarray) -> np.ndarray:
 
 def angle_of_pseudo(q: float) -> float:
     """The angle θ ∈ [0, π] of cl/rectify.cl pseudo_angle_lanes q: 2·atan(q) up to q = 1, π - 2·atan(2 - q)
-    above (q = 2 - cot(θ/2)); +inf (no camera sample) stays +inf."""
+    above (q = 2 - cot(θ/2)); +inf (no camera sample) stays +inf. cl/visible_ranges.h is the
+    device's copy."""
     if not math.isfinite(q):
         return q
     return 2.0 * math.atan(q) if q <= 1.0 else math.pi - 2.0 * math.atan(2.0 - q)
 
 
 def rectify(device: Device, buffers: FrameBuffers, rastered: RasterResult, light_index: int,
-            timer: StageTimer) -> Epipolar | None:
-    """Build S[α, γ] for one light; None when no visible ray has any extent in γ."""
+            timer: StageTimer) -> Epipolar:
+    """Build S[α, γ] for one light. The β and γ ranges of the visible rays are reduced,
+    and turned into the texture's γ step, on the device (`Epipolar.ranges`): nothing here
+    waits for them. Where no visible ray has any extent in γ the texture spans γ ∈ [0, 1]
+    and every ray's lit run is empty, so the light adds nothing."""
     scene = buffers.inputs.scene
     params = epipolar_frame(scene, buffers, light_index)
-    frame_buffer = device.buffer(params.reshape(1))
-    bounds = np.array([structs.DEPTH_EMPTY, 0, 0, 0], dtype=np.uint32)
-    bounds_buffer = device.buffer(bounds)
+    frame_buffer = device.buffer(params.reshape(1))  # rectify_ranges writes its gamma_step
+    bounds_buffer = device.buffer(np.array([structs.DEPTH_EMPTY, 0, 0, 0], dtype=np.uint32))
     samples = buffers.inputs.samples
-    event = device.kernel("rectify", "rectify_bounds", _defines(device))(
+    defines = _defines(device)
+    event = device.kernel("rectify", "rectify_bounds", defines)(
         device.queue, (-(-samples // BOUNDS_CHUNK),), None, buffers.params, buffers.views, buffers.lights,
         frame_buffer, rastered.camera_depth, buffers.offsets, bounds_buffer)
     timer.add("rectify", event)
-    q_beta_min, q_beta_max, gamma = device.read(bounds_buffer, 4, np.uint32)[:3].view(np.float32).astype(float)
-    beta_min, beta_max = angle_of_pseudo(q_beta_min), angle_of_pseudo(q_beta_max)
-    gamma_max = gamma if isinstance(scene.lights[light_index], DirectionalLight) else angle_of_pseudo(gamma)
-    # float32(π) is 9e-8 above π: a ray pointing straight away from the light (the
-    # anti-epipole on a pixel centre) would put β past the integrand's [0, π].
-    beta_min, beta_max = min(beta_min, math.pi), min(beta_max, math.pi)
-    if not gamma_max > 0:
-        return None
-    n = int(params["gamma_samples"])
-    params["gamma_step"] = gamma_max / n
-    frame_buffer = device.buffer(params.reshape(1), writable=False)
-    slices = int(params["slices"])
+    n, slices = int(params["gamma_samples"]), int(params["slices"])
+    angles, ranges = device.buffer(nbytes=16 * n), device.buffer(nbytes=16)
+    timer.add("rectify", device.kernel("rectify", "rectify_ranges", defines)(
+        device.queue, (n,), None, bounds_buffer, buffers.lights, frame_buffer, angles, ranges))
     tree = device.buffer(nbytes=8 * slices * 2 * n)
     sides = device.buffer(slice_sides(params), writable=False)
-    angles = device.buffer(texel_angles(params), writable=False)
     group = min(SLICES_PER_GROUP, slices)
-    defines = _defines(device)
     event = device.kernel("rectify", "rectify", defines)(
         device.queue, (-(-n // (defines["RECTIFY_BATCHES"] * LANES)), -(-slices // group) * group), (1, group),
         buffers.views, buffers.lights, rastered.shadow_depth, frame_buffer, sides, angles, tree)
     timer.add("rectify", event)
-    return Epipolar(params, frame_buffer, tree, float(beta_min), float(beta_max), float(gamma_max))
+    visible = VisibleRanges(device, bounds_buffer, ranges, isinstance(scene.lights[light_index], DirectionalLight), n)
+    return Epipolar(params, frame_buffer, tree, visible)

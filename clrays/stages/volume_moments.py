@@ -45,14 +45,13 @@ def volume_moments(device: Device, buffers: FrameBuffers, rastered: RasterResult
     defines = {"PREFIX_DOUBLE": int(double), "MOMENT_CHUNKS": chunks}
     scatter_defines = feature_defines(features, defines)
     prefix = device.buffer(nbytes=(32 if double else 16) * slices * (gamma_samples + 1))
-    # z = (S − β_min) / (β_max − β_min): the visible rays' β range, as wide as [0, 1] can hold it.
-    beta_min = np.float32(epipolar.beta_min)
-    inverse_range = np.float32(1.0 / max(epipolar.beta_max - epipolar.beta_min, 1e-6))
+    # z = (S − β_min) / (β_max − β_min): the visible rays' β range, as wide as [0, 1] can hold
+    # it, which the kernels read on the device (`epipolar.visible`).
     event = device.kernel("volume_moments", "volume_moments_prefix", defines)(
-        device.queue, (slices,), None, epipolar.buffer, epipolar.tree, beta_min, inverse_range, prefix)
+        device.queue, (slices,), None, epipolar.buffer, epipolar.tree, epipolar.visible.ranges, prefix)
     timer.add("volume_moments", event)
     event = device.kernel("volume_moments", "volume_moments_scatter", scatter_defines)(
         device.queue, (buffers.inputs.samples,), None, buffers.params, buffers.views, buffers.lights,
         epipolar.buffer, prefix, integrand.params, integrand.data, rastered.camera_depth, buffers.offsets,
-        beta_min, inverse_range, np.float32(VOLUME_MOMENT_BIAS), scatter, *feature_args(features))
+        epipolar.visible.ranges, np.float32(VOLUME_MOMENT_BIAS), scatter, *feature_args(features))
     timer.add("volume_moments", event)

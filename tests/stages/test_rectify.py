@@ -47,7 +47,7 @@ def _rectified(device, scene):
     maps = [raster_shadow_map(device, buffers, 0, timer)]
     rastered = RasterResult(camera_depth, tri_id, shadow_atlas(device, buffers, maps))
     epipolar = rectify(device, buffers, rastered, 0, timer)
-    params = epipolar.params
+    params = device.read(epipolar.buffer, (), structs.epipolar_dtype)  # as the kernels read it: γ step included
     n, slices = int(params["gamma_samples"]), int(params["slices"])
     tree = device.read(epipolar.tree, (slices, 2 * n, 2), np.float32)
     shadow = device.read(rastered.shadow_depth, buffers.inputs.shadow_texels, np.uint32).view(np.float32)

@@ -65,7 +65,9 @@ EXPECTED_REUSE = {
     1: {"raster.shadow"},  # camera moves, lights static
     3: {"raster.shadow"},  # camera arrives (frame 3 != 2)
     4: {"raster.camera", "raster.shadow", "rectify", "minmax"},  # only the power changes
-    6: {"integrand"},  # the sphere moves (both maps, the view); the β and γ ranges stay
+    # The sphere moves (both maps, the view). The β and γ ranges happen to stay, but they live
+    # on the device and the integrand is keyed on what decides them, the camera depth among it.
+    6: set(),
     8: {"raster.camera", "raster.shadow", "rectify", "minmax"},  # only the medium changes
     11: {"raster.camera", "raster.shadow", "rectify", "minmax", "integrand", "traverse", "visibility", "shade"},  # same as 10
 }
@@ -85,6 +87,32 @@ def test_sequence_with_reuse_equals_without(device, method):
             assert set(kept.reused) == EXPECTED_REUSE[frame], (frame, kept.stage_status)
         if method == "raymarch" and frame == 4:
             assert set(kept.reused) == {"raster.camera", "raster.shadow"}
+
+
+def test_integrand_follows_what_decides_the_ranges(device):
+    """The β and γ ranges the integrand's tables span stay on the device, so its key holds
+    what decides them (camera depth, light geometry, camera, image) instead of their values:
+    the tables are kept while those, the medium and the light's power stay, and rebuilt when
+    the medium or a light's power changes; every image equals one computed from scratch."""
+    lights = [PointLight(v3(0.3, 5, -0.5), np.full(3, 60.0)),
+              SpotLight(v3(-2, 6, 1), v3(0.2, -1, 0) / np.hypot(0.2, 1), 35.0, np.full(3, 80.0))]
+    scene = make_scene(_slats(), lights, **SMALL)
+    session, scratch = Renderer(device), Renderer(device, reuse=False)
+    brighter_spot = replace(lights[1], intensity=np.full(3, 120.0))
+    frames = [
+        (scene, "computed"),
+        (replace(scene, background=np.full(3, 0.2)), "reused"),  # shading alone
+        (replace(scene, medium=replace(scene.medium, sigma_a=np.full(3, 0.03))), "computed"),
+        (replace(scene, lights=(lights[0], brighter_spot)), "reused 1 of 2"),  # the spot's power
+        (replace(scene, lights=(lights[0], brighter_spot)), None),  # the same frame: kept whole
+    ]
+    for frame, integrand in frames:
+        kept = session.render(frame)
+        if integrand is None:
+            assert set(kept.stage_status.values()) == {"reused"}
+        else:
+            assert kept.stage_status["integrand"] == integrand, kept.stage_status
+        np.testing.assert_array_equal(kept.image, scratch.render(frame).image)
 
 
 def test_one_light_moving_keeps_the_others(device):
