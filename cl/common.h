@@ -149,7 +149,7 @@ typedef struct {
     int rank;         /* svd terms */
     int light_type;   /* LIGHT_* */
     int grey;         /* table: one plane of unit amplitude, times amplitude per channel */
-    int _pad1;
+    int no_extent;    /* no visible ray has extent in γ: every ray's span is empty (integrand_rows) */
     int _pad2;
 } integrand_t;
 

@@ -80,7 +80,8 @@ ALWAYS_INLINE rgb_lanes directional_integrand(float_lanes x, float4 row, float4 
 /* One work-item per β row: the row's nodes β_j = β_min + (β_max - β_min)·sin²(π/2·t_j),
  * t_j = j/(n_beta - 1) as numpy's linspace, over the visible rays' β range (the bounds
  * rectify_bounds reduced), and the float4 (δ, β, ρ(cos β), 0) integrand_cells reads; work-item
- * 0 writes the range into the integrand's params, where integrand.h reads it. `g`: the
+ * 0 writes the range into the integrand's params, where integrand.h reads it, and whether no
+ * visible ray has extent in γ (walk.h's spans are then empty). `g`: the
  * Henyey–Greenstein g, one wide_t (double where the device has it). */
 kernel void integrand_rows(global const uint* bounds, int directional, global const wide_t* g, int n_beta,
                            global float4* rows, global integrand_t* params)
@@ -91,6 +92,7 @@ kernel void integrand_rows(global const uint* bounds, int directional, global co
     if (j == 0) {
         params->beta_min = (float)beta_min;
         params->beta_max = (float)beta_max;
+        params->no_extent = !(gamma_max > 0.0);
     }
     if (!rows || j >= n_beta) return;
     wide_t t = j == n_beta - 1 ? 1.0 : (wide_t)j * (1.0 / (wide_t)(n_beta - 1));

@@ -90,8 +90,9 @@ kernel void rectify_bounds(global const frame_t* frame, global const view_t* vie
  * 0, ranges = (β_min, β_max, γ_max, 1/max(β_max - β_min, 1e-6)) as float. The host read the
  * bounds and computed these until a frame ran without a wait (clrays/stages/rectify.py
  * texel_angles is the same rule in numpy). When no visible ray has extent in γ (γ_max ≤ 0)
- * the texture spans γ ∈ [0, 1]: every ray's lit run is then empty, and the light adds
- * nothing, where a zero step would divide by zero. */
+ * the texture spans γ ∈ [0, 1], where a zero step would divide by zero, and the walks find
+ * every ray's span empty (integrand_rows' no_extent, walk.h finish_span): the light adds
+ * nothing, as when the host skipped it. */
 kernel void rectify_ranges(global const uint* bounds, global const light_t* lights, global epipolar_t* epipolar,
                            global float4* texel_angles, global float4* ranges)
 {

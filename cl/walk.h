@@ -93,12 +93,14 @@ ALWAYS_INLINE float ray_beta(global const epipolar_t* ep, float3 dir, float* sin
 }
 
 /* What ray_span leaves to the rest once the lit γ [span->gamma_begin, span->gamma_end] of
- * the ray up to `distance` is set: the lamp's chord and the integrand's row. */
+ * the ray up to `distance` is set: the lamp's chord and the integrand's row. Where no
+ * visible ray has extent in γ (the bounds rectify reduced, which the host does not read)
+ * every span is empty, and the light adds nothing. */
 ALWAYS_INLINE int finish_span(global const epipolar_t* ep, global const frame_t* frame,
                               global const integrand_t* integrand, int directional, float beta, float sin_beta,
                               float cos_beta, float distance, ray_span_t* span)
 {
-    if (!(span->gamma_end > span->gamma_begin)) return 0;
+    if (!(span->gamma_end > span->gamma_begin) || integrand->no_extent) return 0;
     /* The lamp (lighting.h): a ray that passes within its radius of a point or spot light
      * leaves out the chord inside it, as exact does; this keeps a ray through the light
      * finite. For every other ray the chord is empty. Its ends are kept within the lit γ

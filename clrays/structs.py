@@ -167,7 +167,7 @@ integrand_dtype = np.dtype([
     ("amplitude", _f4), ("sigma_t", _f4), ("s_end", _f4),
     ("beta_min", np.float32), ("beta_max", np.float32), ("d_el", np.float32), ("g", np.float32),
     ("mode", np.int32), ("n_beta", np.int32), ("n_gamma", np.int32), ("rank", np.int32),
-    ("light_type", np.int32), ("grey", np.int32), ("_pad1", np.int32), ("_pad2", np.int32),
+    ("light_type", np.int32), ("grey", np.int32), ("no_extent", np.int32), ("_pad2", np.int32),
 ])
 
 light_texture_dtype = np.dtype([

@@ -2,8 +2,8 @@
 
 Host side of `cl/rectify.cl`: the light's epipolar frame (axis, slice basis), the
 fan of slices that crosses the screen, the β and γ ranges of the visible rays
-(reduced on the device from the camera depth), and the rectify launch that writes
-level 0 of the min-max tree.
+(reduced on the device from the camera depth, and kept there: VisibleRanges), and the
+rectify launch that writes level 0 of the min-max tree.
 """
 from __future__ import annotations
 
@@ -82,7 +82,7 @@ class VisibleRanges:
 class Epipolar:
     """The epipolar texture of one light and what it was built from."""
 
-    params: np.ndarray  # epipolar_t, but for gamma_step (rectify_ranges writes it into `buffer`)
+    params: np.ndarray  # epipolar_t, gamma_step 0: rectify_ranges writes it into `buffer` (host: gamma_step)
     buffer: object  # the epipolar_t on the device
     tree: object  # float2[slices][2·gamma_samples]: the min-max tree rows
     visible: VisibleRanges  # the β and γ ranges of the visible rays, on the device
@@ -220,7 +220,8 @@ def rectify(device: Device, buffers: FrameBuffers, rastered: RasterResult, light
     """Build S[α, γ] for one light. The β and γ ranges of the visible rays are reduced,
     and turned into the texture's γ step, on the device (`Epipolar.ranges`): nothing here
     waits for them. Where no visible ray has any extent in γ the texture spans γ ∈ [0, 1]
-    and every ray's lit run is empty, so the light adds nothing."""
+    and the walks find every ray's span empty (the integrand's `no_extent`, set on the
+    device), so the light adds nothing."""
     scene = buffers.inputs.scene
     params = epipolar_frame(scene, buffers, light_index)
     frame_buffer = device.buffer(params.reshape(1))  # rectify_ranges writes its gamma_step

@@ -191,7 +191,7 @@ def walk_in_float64(scene, epipolar, tables, rows, depth) -> np.ndarray:
     light = scene.lights[0]
     params = epipolar.params
     axis, u, w = (params[name][:3].astype(np.float64) for name in ("axis", "u", "w"))
-    d_el, step = float(params["d_el"]), float(params["gamma_step"])
+    d_el, step = float(params["d_el"]), epipolar.gamma_step  # (the step is made on the device)
     slices, samples_per_row = int(params["slices"]), int(params["gamma_samples"])
     alpha_min, alpha_step = float(params["alpha_min"]), float(params["alpha_step"])
     directional = isinstance(light, DirectionalLight)

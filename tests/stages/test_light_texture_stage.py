@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from clrays import structs
 from clrays.device import StageTimer
 from clrays.inputs import frame_inputs, upload
 from clrays.physics.light_texture import light_texture as host_texture
@@ -53,10 +54,10 @@ def test_rectified_texture_and_prefix_sums_match_numpy(device, kind):
     tables = integrand(device, scene, scene.lights[0], epipolar, timer)
     texture = light_texture(device, buffers, 0, epipolar, tables, timer)
     n, slices, rank = int(epipolar.params["gamma_samples"]), int(epipolar.params["slices"]), texture.rank
-    points = _light_rays(scene, epipolar.params, n, slices)
+    points = _light_rays(scene, device.read(epipolar.buffer, (), structs.epipolar_dtype), n, slices)
     expected = host_texture(scene.lights[0], points.reshape(-1, 3)).reshape(slices, n, 3)
     prefix = device.read(texture.prefix, (slices, 3, rank + 1, n + 1), np.float32).astype(np.float64)
-    step = float(epipolar.params["gamma_step"])
+    step = epipolar.gamma_step
     rectified = np.diff(prefix[:, :, 0], axis=-1).transpose(0, 2, 1) / step  # term 0 is ∫T
     # Texel lookups of float32 coordinates: a texel of 2 changes by 2·Δx per texel of Δx.
     np.testing.assert_allclose(rectified, expected, atol=2e-3 * TEXELS.max())

@@ -10,6 +10,7 @@ from clrays import structs
 from clrays.device import StageTimer
 from clrays.inputs import frame_inputs, upload
 from clrays.scene.geometry import box_triangles
+from clrays.scene.model import Phase
 from clrays.stages.raster import RasterResult, raster_camera, raster_shadow_map, shadow_atlas
 from clrays.stages.rectify import rectify
 from conftest import DirectionalLight, PointLight, SpotLight, grid_plane, make_scene, v3
@@ -216,3 +217,81 @@ def test_angle_of_pseudo_inverts_the_pseudo_angle():
     q = np.where(theta <= math.pi / 2, np.tan(theta / 2), 2.0 - 1.0 / np.tan(np.maximum(theta, 1e-300) / 2))
     assert np.allclose([angle_of_pseudo(v) for v in q], theta, rtol=0, atol=1e-12)
     assert angle_of_pseudo(math.inf) == math.inf
+
+
+def _epipolar_of(device, scene):
+    buffers = upload(device, frame_inputs(scene))
+    timer = StageTimer()
+    camera_depth, tri_id = raster_camera(device, buffers, timer)
+    rastered = RasterResult(camera_depth, tri_id, shadow_atlas(device, buffers, [raster_shadow_map(device, buffers, 0,
+                                                                                                 timer)]))
+    return buffers, rectify(device, buffers, rastered, 0, timer)
+
+
+@pytest.mark.parametrize("kind", LIGHTS)
+def test_device_ranges_are_the_host_rules_bits(device, kind):
+    """The β and γ ranges stay on the device (rectify_ranges, integrand_rows): the γ step,
+    texel angles, ranges and integrand rows they give are the bits the host's float64
+    rules give from the same bounds, so moving them changed no image."""
+    from clrays.stages.integrand import build_integrand, device_rows, pack_integrand, table_rows
+    from clrays.stages.rectify import _defines, texel_angles
+
+    scene = _scene(LIGHTS[kind])
+    buffers, epipolar = _epipolar_of(device, scene)
+    beta_min, beta_max, gamma_max, gamma_step = epipolar.visible.host()
+    assert 0.0 <= beta_min < beta_max <= math.pi and gamma_max > 0
+    on_device = device.read(epipolar.buffer, (), structs.epipolar_dtype)
+    assert on_device["gamma_step"] == np.float32(gamma_max / int(epipolar.params["gamma_samples"]))
+    assert on_device["gamma_step"] == np.float32(gamma_step)
+    ranges = device.read(epipolar.visible.ranges, 4, np.float32)
+    expected = np.array([beta_min, beta_max, gamma_max, 1.0 / max(beta_max - beta_min, 1e-6)]).astype(np.float32)
+    np.testing.assert_array_equal(ranges, expected)
+    n = int(on_device["gamma_samples"])
+    angles = device.buffer(nbytes=16 * n)  # rectify_ranges again, its texel angles kept this time
+    device.kernel("rectify", "rectify_ranges", _defines(device))(
+        device.queue, (n,), None, epipolar.visible.bounds, buffers.lights, epipolar.buffer, angles,
+        device.buffer(nbytes=16))
+    np.testing.assert_array_equal(device.read(angles, (n, 4), np.float32), texel_angles(on_device, gamma_step))
+
+    light = scene.lights[0]
+    directional = isinstance(light, DirectionalLight)
+    tables = build_integrand("table", "directional" if directional else "point", scene.medium.sigma_s,
+                             scene.medium.sigma_t, Phase("hg", 0.35), light.irradiance if directional else light.intensity,
+                             epipolar.d_el, beta_min, beta_max, gamma_max, n_beta=64, n_gamma=64, s_max=30.0,
+                             rows=False)
+    params = device.buffer(pack_integrand(tables)[0].reshape(1))
+    rows = device_rows(device, tables, epipolar.visible, params)
+    np.testing.assert_array_equal(device.read(rows, (64, 4), np.float32), table_rows(tables))
+    written = device.read(params, (), structs.integrand_dtype)
+    assert written["beta_min"] == np.float32(beta_min) and written["beta_max"] == np.float32(beta_max)
+
+
+def _along_the_axis(light, sampling="epipolar", method="minmax", wall=True):
+    """A 1×1 image whose one ray runs along `light`'s epipolar axis (to a wall before the
+    light, or into the open): no visible ray has extent in γ. A second light lights the fog."""
+    triangles = np.array([[[3, -5, -5], [3, 5, -5], [3, -5, 5]], [[3, 5, -5], [3, 5, 5], [3, -5, 5]]], float)
+    return make_scene(triangles if wall else None, [light, PointLight(v3(1, 3, 1), np.full(3, 30.0))], width=1,
+                      height=1, position=(0, 1, 0), look_at=(5, 1, 0), slices=16, gamma_samples=16, shadow_map=64,
+                      sampling=sampling, method=method, aovs=("in_scatter_light0", "in_scatter_light1"))
+
+
+@pytest.mark.parametrize("light, wall", [(DirectionalLight(v3(-1, 0, 0), np.full(3, 2.0)), True),
+                                         (DirectionalLight(v3(-1, 0, 0), np.full(3, 2.0)), False),
+                                         (PointLight(v3(5, 1, 0), np.full(3, 30.0)), True)],
+                         ids=["directional", "directional-open", "point"])
+@pytest.mark.parametrize("sampling, method", [("epipolar", "minmax"), ("pixel", "minmax"),
+                                              ("pixel", "volume_moments")])
+def test_no_visible_extent_in_gamma_adds_nothing(device, monkeypatch, light, wall, sampling, method):
+    """γ_max = 0 (the one ray along the light's axis): the host no longer reads the bounds
+    to skip the light, the device finds every ray's span empty instead (integrand_t's
+    no_extent), and the light's in-scattering is exactly 0, as when it was skipped, while
+    the other light's is not. Its texture spans γ ∈ [0, 1]."""
+    import clrays.session
+    from clrays.session import Renderer
+
+    built = []
+    monkeypatch.setattr(clrays.session, "rectify", lambda *args: built.append(rectify(*args)) or built[-1])
+    result = Renderer(device, reuse=False).render(_along_the_axis(light, sampling, method, wall))
+    assert built[0].gamma_max == 0.0 and built[0].gamma_step == np.float32(1 / 16) and built[1].gamma_max > 0
+    assert np.all(result.passes["in_scatter_light0"] == 0.0)
+    assert np.all(result.passes["in_scatter_light1"] > 0) and np.all(np.isfinite(result.image))
