@@ -19,8 +19,8 @@ buffers, integrand tables) and re-runs a stage only when what it reads changed
 (docs/design.md §7). `StageKeys` says, beside each stage, what that is: the shadow maps
 while the lights and the geometry stand still, the camera depth while the camera and
 the geometry do, the min-max trees while those and the eye–light frame do, the
-integrand tables while the medium and what decides the β/γ ranges (which stay on the device) do; a frame identical to a recent
-one is not rendered at all. Keys are digests of the stages' inputs (clrays.reuse), so
+integrand tables while the medium and what decides the β/γ ranges (which stay on the
+device) do; a frame identical to a recent one is not rendered at all. Keys are digests of the stages' inputs (clrays.reuse), so
 reuse never changes an image. `RenderResult.stage_status` says what each stage did.
 
 Frames in flight: `Renderer.submit` does a frame's host work and enqueues its device work,

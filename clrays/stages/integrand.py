@@ -624,9 +624,9 @@ def wide_type(device: Device) -> type:
 
 
 def device_rows(device: Device, tables: IntegrandTables, visible, params, timer: StageTimer | None = None):
-    """On the device, from the visible rays' β range `visible` (clrays.stages.rectify.VisibleRanges,
-    not read by the host):
-    the β range written into `params` (integrand_t) and, for the `table` mode, the rows
+    """On the device, from the visible rays' β range `visible` (clrays.stages.rectify.
+    VisibleRanges), which the host does not read: the range written into `params`
+    (integrand_t, with its `no_extent` flag) and, for the `table` mode, the rows
     `table_rows` would give (cl/integrand_build.cl integrand_rows), else None."""
     rows = device.buffer(nbytes=16 * tables.n_beta) if tables.mode == "table" else None
     g = device.buffer(np.array([tables.constants[0, C_G]], dtype=wide_type(device)), writable=False)

@@ -69,7 +69,8 @@ class VisibleRanges:
         float64 from the bounds, as cl/visible_ranges.h; the step in float32, as the
         texture's (rectify_ranges)."""
         if self._host is None:
-            q_beta_min, q_beta_max, gamma = self.device.read(self.bounds, 4, np.uint32)[:3].view(np.float32).astype(float)
+            bounds = self.device.read(self.bounds, 4, np.uint32)
+            q_beta_min, q_beta_max, gamma = bounds[:3].view(np.float32).astype(float)
             gamma_max = gamma if self.directional else angle_of_pseudo(gamma)
             n = self.gamma_samples
             gamma_step = float(np.float32(gamma_max / n) if gamma_max > 0 else np.float32(1.0) / np.float32(n))

@@ -255,10 +255,10 @@ def test_device_ranges_are_the_host_rules_bits(device, kind):
 
     light = scene.lights[0]
     directional = isinstance(light, DirectionalLight)
+    power = light.irradiance if directional else light.intensity
     tables = build_integrand("table", "directional" if directional else "point", scene.medium.sigma_s,
-                             scene.medium.sigma_t, Phase("hg", 0.35), light.irradiance if directional else light.intensity,
-                             epipolar.d_el, beta_min, beta_max, gamma_max, n_beta=64, n_gamma=64, s_max=30.0,
-                             rows=False)
+                             scene.medium.sigma_t, Phase("hg", 0.35), power, epipolar.d_el, beta_min, beta_max,
+                             gamma_max, n_beta=64, n_gamma=64, s_max=30.0, rows=False)
     params = device.buffer(pack_integrand(tables)[0].reshape(1))
     rows = device_rows(device, tables, epipolar.visible, params)
     np.testing.assert_array_equal(device.read(rows, (64, 4), np.float32), table_rows(tables))
