@@ -219,7 +219,7 @@ def angle_of_pseudo(q: float) -> float:
 def rectify(device: Device, buffers: FrameBuffers, rastered: RasterResult, light_index: int,
             timer: StageTimer) -> Epipolar:
     """Build S[α, γ] for one light. The β and γ ranges of the visible rays are reduced,
-    and turned into the texture's γ step, on the device (`Epipolar.ranges`): nothing here
+    and turned into the texture's γ step, on the device (`Epipolar.visible`): nothing here
     waits for them. Where no visible ray has any extent in γ the texture spans γ ∈ [0, 1]
     and the walks find every ray's span empty (the integrand's `no_extent`, set on the
     device), so the light adds nothing."""
