@@ -189,8 +189,9 @@ def map_is_empty(device: Device, shadow_map: ShadowMap) -> bool:
     view, or past an edge of its frustum or of an orthographic box), in float64 with
     OUTSIDE_VIEW_SLACK. A triangle inside a view that covers no texel centre, or one the
     view culls as a back face, leaves the map empty while this says False: the frame then
-    rectifies the full texture, which gives the same radiance but for float32 rounding
-    (clrays.session.Renderer._rectify). A relief is drawn by its pre-warp: a map with one
+    rectifies and samples the full texture as for any shadowing light, which differs from
+    the minimal texture's per-pixel walk by epipolar sampling's interpolation alone
+    (clrays.session.Renderer._rectify). No scene in scenes/ has such a map. A relief is drawn by its pre-warp: a map with one
     counts as not empty. `device` is not asked (kept for the callers)."""
     if shadow_map.empty is None:
         inputs = shadow_map.inputs
