@@ -6,6 +6,7 @@ Host side of `cl/raster.cl`. Depth is stored as the uint bits of a positive floa
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Callable
 
 import numpy as np
 
@@ -145,9 +146,9 @@ class ShadowMap:
     texels: int
     triangles: int  # scene triangles: with none, the map is empty without looking
     empty: bool | None = None  # nothing can be rasterized: filled in by `map_is_empty` when first asked
-    # the light pass's inputs (anchored at the light), which `map_is_empty` asks, or None
-    # where the map is empty without looking
-    inputs: FrameInputs | None = None
+    # whether a triangle may reach a view the pass draws, asked by `map_is_empty`
+    # (`_reaches_views`), or None where the map is empty without looking
+    reaches: Callable[[], bool] | None = None
 
 
 def raster_shadow_map(device: Device, buffers: FrameBuffers, light_index: int, timer: StageTimer) -> ShadowMap:
@@ -172,7 +173,7 @@ def raster_shadow_map(device: Device, buffers: FrameBuffers, light_index: int, t
         reliefs.map("relief_map_depth", None, light_buffers.views, inputs.views, view_index, centre, 1, (depth,))
     shadow_map = ShadowMap(depth, inputs.shadow_texels, inputs.scene.geometry.count)
     if shadow_map.triangles and shadow_map.texels:
-        shadow_map.inputs = inputs
+        shadow_map.reaches = _reaches_views(inputs)
     return shadow_map
 
 
@@ -194,9 +195,8 @@ def map_is_empty(device: Device, shadow_map: ShadowMap) -> bool:
     (clrays.session.Renderer._rectify). No scene in scenes/ has such a map. A relief is drawn by its pre-warp: a map with one
     counts as not empty. `device` is not asked (kept for the callers)."""
     if shadow_map.empty is None:
-        inputs = shadow_map.inputs
-        shadow_map.empty = inputs is None or (not inputs.reliefs and not _any_triangle_in_views(inputs))
-        shadow_map.inputs = None
+        shadow_map.empty = shadow_map.reaches is None or not shadow_map.reaches()
+        shadow_map.reaches = None
     return shadow_map.empty
 
 
@@ -207,16 +207,19 @@ EMPTY_TEST_TRIANGLES = 2048
 EMPTY_TEST_KEPT = 8
 
 
-def _any_triangle_in_views(inputs: FrameInputs) -> bool:
+def _reaches_views(inputs: FrameInputs) -> Callable[[], bool]:
     """Whether some triangle of a light pass (`light_pass_inputs`) may reach a view it
-    draws; kept on the geometry for the light's anchor and views, so a frame that renders
-    a static light afresh (reuse off) asks once."""
-    carried = len(inputs.tri_vertices) // 3
-    views = inputs.views[1:][inputs.view_needed[1:]]
-    anchor = inputs.light_anchor_ws[0]
+    draws (a relief always may), as a question asked later: it holds the geometry, the
+    anchor and the views, not the pass's vertices. The answer is kept on the geometry for
+    the light's anchor and views, so frames that render a static light afresh (reuse off)
+    ask once."""
+    carried, has_reliefs = len(inputs.tri_vertices) // 3, bool(inputs.reliefs)
+    views = inputs.views[1:][inputs.view_needed[1:]].copy()
+    anchor = inputs.light_anchor_ws[0].copy()
     geometry = inputs.scene.geometry
-    return geometry.kept(("in_views", carried, anchor.tobytes(), views.tobytes()),
-                         lambda: _triangles_reach(geometry.triangles[:carried], anchor, views), most=EMPTY_TEST_KEPT)
+    return lambda: has_reliefs or geometry.kept(
+        ("in_views", carried, anchor.tobytes(), views.tobytes()),
+        lambda: _triangles_reach(geometry.triangles[:carried], anchor, views), most=EMPTY_TEST_KEPT)
 
 
 def _triangles_reach(triangles: np.ndarray, anchor: np.ndarray, views: np.ndarray) -> bool:
