@@ -1,7 +1,9 @@
 """The host's waits for the device inside a frame (Device.host_waits): the counts that size
 a launch (raster's and the bound passes' lists of big triangles, epipolar sampling's fix-up
-list) are read on the device by the kernels that need them, and the frame's statistics (SampleCounts) are read
-only when asked for, after the image."""
+list) are read on the device by the kernels that need them, the visible rays' β and γ ranges
+stay there for the kernels that follow rectify, whether a light's map is empty is decided on
+the host from the geometry, and the frame's statistics (SampleCounts) are read only when
+asked for, after the image."""
 import pickle
 import sys
 from pathlib import Path
@@ -18,16 +20,15 @@ BENCH_SCENES = ("demo", "bunny", "behind", "sun")
 
 #: Waits of a default frame of each bench scene at 96×54 (method minmax, epipolar
 #: sampling, exact surface shadows), each named by the function that waits:
-#: - map_is_empty (stages/raster.py): whether the light's map holds anything, 1;
-#: - rectify (stages/rectify.py): the bounds of β and γ that size the epipolar texture, 1;
 #: - visibility (stages/visibility.py): the shadow rays' count and route, once the listed
-#:   ways are enqueued: the host builds the BVH (on the host for reliefs) only where the
-#:   route asks for it, 1;
+#:   ways are enqueued: on a CPU device the host builds the BVH (on the host for reliefs)
+#:   only where the route asks for it, 1 (on a GPU none: visibility.bvh_ahead, below);
 #: - _read (session.py, PendingFrame.result): the image, whose read shade enqueued, 1.
 #: None comes from raster's rows passes, epipolar sampling, or visibility's bound passes and
 #: rays' lists.
-WAITS_96x54 = {"map_is_empty": 1, "rectify": 1, "visibility": 1, "_read": 1}
-FREE_OF_WAITS = ("raster_passes", "epipolar_sampling", "fixup_list", "_bound_passes", "ray_lists")
+WAITS_96x54 = {"visibility": 1, "_read": 1}
+FREE_OF_WAITS = ("map_is_empty", "rectify", "integrand", "raster_passes", "epipolar_sampling", "fixup_list",
+                 "_bound_passes", "ray_lists")
 DEVICE_READS = ("read", "read_all", "read_in_place")
 
 
