@@ -1,7 +1,8 @@
 """The host's share of a frame: per bench scene, the integrand table build on its own (its
 arguments captured from a real frame, rebuilt on one core), the main thread's CPU time per
-frame, the frame's wall time and its stage time; medians over frames rendered from scratch
-(bench/RESULTS.md, "Host stages").
+frame, the frame's wall time, its stage time, the wall time less the stage time (the median
+of each frame's) and the times the host waited for the device in a frame; medians over
+frames rendered from scratch (bench/RESULTS.md, "Host stages").
 
     .venv/bin/python bench/host_stages.py --size 1280x720 --frames 5
     .venv/bin/python bench/host_stages.py --repo ../main --size 1280x720 --frames 5   # another tree
@@ -57,8 +58,9 @@ def main() -> None:
         sys.modules[spec.name] = other
         spec.loader.exec_module(other)
     against = " | against's build ms | same float32 tables" if other else ""
-    print("| scene | integrand build ms (one core) | main thread CPU ms / frame | wall ms | stage ms" + against + " |")
-    print("|---|---|---|---|---|" + "---|---|" * bool(other))
+    print("| scene | integrand build ms (one core) | main thread CPU ms / frame | wall ms | stage ms | wall − stage ms "
+          "| host waits" + against + " |")
+    print("|---|---|---|---|---|---|---|" + "---|---|" * bool(other))
     build = integrand_stage.build_integrand
     for name in args.scenes:
         scene = load_scene(REPO / "scenes" / f"{name}.yaml", overrides=[f"image.width={width}", f"image.height={height}"])
@@ -72,13 +74,15 @@ def main() -> None:
         integrand_stage.build_integrand = capture
         renderer.render(scene)  # builds the kernels, and captures the build's arguments
         integrand_stage.build_integrand = build
-        cpu, wall, stage = [], [], []
+        cpu, wall, stage, host, waits = [], [], [], [], []
         for _ in range(args.frames):
             started_cpu, started = time.thread_time(), time.perf_counter()
             result = renderer.render(scene)
             wall.append((time.perf_counter() - started) * 1e3)
             cpu.append((time.thread_time() - started_cpu) * 1e3)
             stage.append(sum(result.stage_ms.values()))
+            host.append(wall[-1] - stage[-1])
+            waits.append(getattr(result, "host_waits", None))  # (None: a tree from before it counted them)
         builds, theirs, same = [], [], True
         for a, k in calls[:1] * (args.builds + 1):
             started = time.perf_counter()
@@ -95,8 +99,9 @@ def main() -> None:
         built = f"{statistics.median(builds[1:]):.1f}" if calls else "—"
         compared = f" | {statistics.median(theirs[1:]):.1f} | {'yes' if same else 'NO'}" if other and calls else \
             (" | — | —" if other else "")
+        counted = "—" if None in waits else f"{statistics.median(waits):.0f}"
         print(f"| {name} | {built} | {statistics.median(cpu):.1f} | {statistics.median(wall):.1f} | "
-              f"{statistics.median(stage):.1f}{compared} |", flush=True)
+              f"{statistics.median(stage):.1f} | {statistics.median(host):.1f} | {counted}{compared} |", flush=True)
 
 
 if __name__ == "__main__":
