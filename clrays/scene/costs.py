@@ -13,6 +13,10 @@ diagonal (128) 11.7 %, where 1024 × 1024 gives 2.4 %. Every size is rounded up 
 of two (sizes change in steps, not with every pixel) and clamped: below by what a shadow
 or a slice still resolves, above by the measured defaults of bench/RESULTS.md ("Choosing
 defaults"), so 64×48 and larger with a 1024 map render exactly as before.
+
+A textured point or spot light asks for more: the rectified texture samples its image once
+per slice and γ texel, so neither may be coarser than the image's texels seen from the
+light, or the two-slice blend and the γ cells average its pattern away (docs/light-textures.md).
 """
 from __future__ import annotations
 
@@ -70,6 +74,13 @@ MAX_OCCLUDER_SHADOW_MAP = 4096
 #: Slices per pixel of the image perimeter, γ texels per pixel of its diagonal (measured, above).
 SLICES_PER_BORDER_PIXEL = 4
 GAMMA_TEXELS_PER_PIXEL = 8
+#: Upper clamps of what a light texture asks for. scenes/gobo.yaml (a 256² gobo over a 28°
+#: cone) asks for exactly these; against `exact` they take its minmax error from 1.47 to
+#: 0.44 % at 320×180 and from 0.68 to 0.12 % at 96×64 (bench/RESULTS.md, "A light texture's
+#: slices and γ texels"). The texture's prefix sums grow with slices × γ texels (152 MiB here
+#: at rank 4); a finer texture is left to `render.slices` and `render.gamma_samples`.
+MAX_TEXTURE_SLICES = 2048
+MAX_TEXTURE_GAMMA_SAMPLES = 1024
 
 
 def _power_of_two_at_least(value: float) -> int:
@@ -178,6 +189,32 @@ def derived_gamma_samples(width: int, height: int, shadow_map: int) -> int:
                     MIN_GAMMA_SAMPLES, MAX_GAMMA_SAMPLES)
 
 
+def texture_texel_angle(light) -> float | None:
+    """The angle at the light between neighbouring texels of its texture where they are
+    widest (at the image's centre), in radians; None without a texture, for a smooth one
+    (a glTF cone's falloff, whose 512² texels sample a slow ramp), or for a directional
+    light, whose texels are lengths across the beam, not angles."""
+    texture = light.texture
+    if texture is None or texture.smooth or isinstance(light, DirectionalLight):
+        return None
+    if light.type == "spot":  # the image fills [−tan c, tan c]² at distance 1 along the axis
+        return 2.0 * math.tan(math.radians(light.cone_deg)) / max(texture.width, texture.height)
+    return 2.0 / texture.width  # a point light's cube: each face spans [−1, 1]² at distance 1
+
+
+def texture_sizes(lights) -> tuple[int, int]:
+    """(slices, γ texels) that resolve every textured light's image: neighbouring slices at
+    most a texel apart where a light ray is perpendicular to the eye–light axis (sin γ = 1,
+    and the fan a full circle: 2π / texel), and γ cells at most a texel long over the
+    largest γ range, π; (0, 0) when no light has a texture whose texels are angles."""
+    angles = [angle for angle in map(texture_texel_angle, lights) if angle is not None]
+    if not angles:
+        return 0, 0
+    finest = min(angles)
+    return (_clamped(2.0 * math.pi / finest, MIN_SLICES, MAX_TEXTURE_SLICES),
+            _clamped(math.pi / finest, MIN_GAMMA_SAMPLES, MAX_TEXTURE_GAMMA_SAMPLES))
+
+
 def derived_line_samples(width: int, height: int) -> int:
     """Samples along each slice's line: half the image diagonal in pixels."""
     return min(max(math.ceil(LINE_SAMPLES_PER_PIXEL * math.hypot(width, height)), MIN_LINE_SAMPLES),
@@ -198,8 +235,10 @@ def with_derived_sizes(scene: Scene) -> Scene:
                     render.initial_step):
         return scene
     shadow_map = render.shadow_map or occluder_shadow_map(scene, derived_shadow_map(image.width, image.height))
-    slices = render.slices or derived_slices(image.width, image.height, shadow_map)
-    gamma_samples = render.gamma_samples or derived_gamma_samples(image.width, image.height, shadow_map)
+    texture_slices, texture_gamma_samples = texture_sizes(scene.lights)
+    slices = render.slices or max(derived_slices(image.width, image.height, shadow_map), texture_slices)
+    gamma_samples = render.gamma_samples or max(derived_gamma_samples(image.width, image.height, shadow_map),
+                                                texture_gamma_samples)
     line_samples = render.line_samples or derived_line_samples(image.width, image.height)
     initial_step = render.initial_step or derived_initial_step(line_samples)
     return replace(scene, render=replace(render, shadow_map=shadow_map, slices=slices, gamma_samples=gamma_samples,

@@ -13,8 +13,9 @@ from typing import Any
 from .animation import EASINGS
 from .limits import MAX_LIGHTS, MAX_MESH_BYTES, MAX_OBJECTS, MAX_SCENE_BYTES, MAX_TRIANGLES
 from .costs import (INITIAL_SAMPLES_PER_LINE, MAX_GAMMA_SAMPLES, MAX_INITIAL_STEP, MAX_LINE_SAMPLES,
-                    MAX_OCCLUDER_SHADOW_MAP, MAX_SHADOW_MAP, OCCLUDER_MAP_GROWTH, OCCLUDER_TEXELS,
-                    MAX_SLICES, MIN_GAMMA_SAMPLES, MIN_INITIAL_STEP, MIN_LINE_SAMPLES, MIN_SHADOW_MAP, MIN_SLICES)
+                    MAX_OCCLUDER_SHADOW_MAP, MAX_SHADOW_MAP, MAX_SLICES, MAX_TEXTURE_GAMMA_SAMPLES, MAX_TEXTURE_SLICES,
+                    MIN_GAMMA_SAMPLES, MIN_INITIAL_STEP, MIN_LINE_SAMPLES, MIN_SHADOW_MAP, MIN_SLICES,
+                    OCCLUDER_MAP_GROWTH, OCCLUDER_TEXELS)
 from .model import (INTEGRAND_MODES, METHODS, NORMALS, RELIEF_MODES, RENAMED_METHODS, RENAMED_TRANSPARENCY_TYPES,
                     SAMPLINGS, SHADOW_FILTERS, STEP_SPACINGS, SURFACE_SHADOWS, TEXTURE_WRAPS, TRANSPARENCY_TYPES, TRANSPARENCY_WARPS, TRAVERSALS, Camera,
                     DirectionalLight, Image, Render, ShadowFilter, Transparency)
@@ -285,11 +286,13 @@ RENDER = Section("render", (
           read_by=_RASTER_METHODS),
     Field("slices", "integer", Render.slices, 16, 16384,
           shown_default=f"from the image: 4 × its perimeter or `shadow_map`, the smaller, as a power of two in "
-                        f"[{MIN_SLICES}, {MAX_SLICES}]",
+                        f"[{MIN_SLICES}, {MAX_SLICES}]; up to {MAX_TEXTURE_SLICES} for a textured point or spot light "
+                        "(one a texel)",
           notes="min-max: epipolar slices", read_by=_EPIPOLAR_METHODS),
     Field("gamma_samples", "integer", Render.gamma_samples, 16, 16384,
           shown_default=f"from the image: 8 × its diagonal or `shadow_map`, the smaller, as a power of two in "
-                        f"[{MIN_GAMMA_SAMPLES}, {MAX_GAMMA_SAMPLES}]",
+                        f"[{MIN_GAMMA_SAMPLES}, {MAX_GAMMA_SAMPLES}]; up to {MAX_TEXTURE_GAMMA_SAMPLES} for a textured "
+                        "point or spot light (one a texel)",
           notes="min-max: samples along each slice (rounded up to a power of two)", read_by=_EPIPOLAR_METHODS),
     Field("integrand", "string", Render.integrand, choices=INTEGRAND_MODES,
           notes="min-max: how the scattering integrand is evaluated ([docs/integrand.md](integrand.md)); "

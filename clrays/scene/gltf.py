@@ -769,7 +769,7 @@ def falloff_texture(inner: float, outer: float, side: int = FALLOFF_TEXTURE_SIDE
         values = spot_attenuation(1.0 / np.sqrt(1.0 + radius * radius), inner, outer)
         texels = np.repeat(values[:, :, None], 3, axis=2).astype(np.float32)
         _FALLOFF_TEXTURES[key] = LightTexture(texels, f"cone falloff {math.degrees(inner):g}° to "
-                                                      f"{math.degrees(outer):g}°")
+                                                      f"{math.degrees(outer):g}°", smooth=True)
     return _FALLOFF_TEXTURES[key]
 
 

@@ -79,6 +79,9 @@ class LightTexture:
 
     texels: np.ndarray  # (H, W, 3) float32, finite, >= 0
     file: str  # as written in the scene, for messages
+    #: True for a texture that varies slowly across its texels (a glTF spot's cone falloff):
+    #: the sizes derived for a textured light need not resolve each texel (scene/costs.py).
+    smooth: bool = False
 
     def __post_init__(self):
         self.texels.flags.writeable = False  # shared between lights, and digested once

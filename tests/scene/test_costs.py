@@ -5,14 +5,16 @@ from dataclasses import replace
 
 import pytest
 
-from clrays.scene.costs import with_derived_sizes
+import numpy as np
+
+from clrays.scene.costs import MAX_TEXTURE_GAMMA_SAMPLES, MAX_TEXTURE_SLICES, with_derived_sizes
 from clrays.scene.fields import RENDER
-from clrays.scene.model import Image, Render
+from clrays.scene.model import DirectionalLight, Image, LightTexture, PointLight, Render, SpotLight
 from tests.conftest import grid_plane, make_scene
 
 
-def _sizes(width, height, **render):
-    scene = make_scene(width=width, height=height)
+def _sizes(width, height, lights=None, **render):
+    scene = make_scene(width=width, height=height, lights=lights)
     scene = replace(scene, image=Image(width, height, 1), render=Render(**render))
     resolved = with_derived_sizes(scene).render
     return resolved.shadow_map, resolved.slices, resolved.gamma_samples
@@ -51,3 +53,33 @@ def test_thumbnail_render_rectifies_a_small_texture(renderer):
     result = renderer.render(scene, reuse=False)
     assert (result.render.shadow_map, result.render.slices, result.render.gamma_samples) == (128, 128, 128)
     assert result.textures == ((128, 128),)
+
+
+def _texture(side, smooth=False):
+    return LightTexture(np.ones((side, side, 3), np.float32), "test", smooth=smooth)
+
+
+def _spot(texture, cone_deg=28.0):
+    return SpotLight(np.array([0.0, 4.0, 0.0]), np.array([0.0, -1.0, 0.0]), cone_deg, np.full(3, 30.0), texture=texture)
+
+
+def test_a_textured_spot_gets_slices_and_texels_that_resolve_its_texture():
+    # scenes/gobo.yaml's 256² over 28°: a texel is 2·tan 28° / 256 = 4.16 mrad at the light,
+    # so 2π / 4.16e-3 = 1512 → 2048 slices and π / 4.16e-3 = 756 → 1024 γ texels.
+    assert _sizes(320, 180, lights=[_spot(_texture(256))]) == (1024, 2048, 1024)
+    assert _sizes(64, 36, lights=[_spot(_texture(256))]) == (512, 2048, 1024)
+    # A coarse texture asks for no more than the image does; a fine one is clamped.
+    assert _sizes(320, 180, lights=[_spot(_texture(16))]) == (1024, 1024, 1024)
+    assert _sizes(320, 180, lights=[_spot(_texture(4096))]) == (1024, MAX_TEXTURE_SLICES, MAX_TEXTURE_GAMMA_SAMPLES)
+    # Sizes the scene sets are kept.
+    assert _sizes(320, 180, lights=[_spot(_texture(256))], slices=512, gamma_samples=256) == (1024, 512, 256)
+
+
+def test_textures_that_ask_for_no_more_sizes():
+    cube = LightTexture(np.ones((6 * 128, 128, 3), np.float32), "cube")  # faces of 2/128 rad: 403 slices
+    assert _sizes(320, 180, lights=[PointLight(np.array([0.0, 4.0, 0.0]), np.full(3, 30.0), texture=cube)]) \
+        == (1024, 1024, 1024)
+    # A glTF cone's falloff is a slow ramp over 512² texels; a directional light's texels are lengths.
+    assert _sizes(320, 180, lights=[_spot(_texture(512, smooth=True))]) == (1024, 1024, 1024)
+    sun = DirectionalLight(np.array([0.0, -1.0, 0.0]), np.full(3, 2.0), texture=_texture(1024))
+    assert _sizes(320, 180, lights=[sun]) == (1024, 1024, 1024)
