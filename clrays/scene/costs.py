@@ -81,6 +81,11 @@ GAMMA_TEXELS_PER_PIXEL = 8
 #: at rank 4); a finer texture is left to `render.slices` and `render.gamma_samples`.
 MAX_TEXTURE_SLICES = 2048
 MAX_TEXTURE_GAMMA_SAMPLES = 1024
+#: Device memory that what the textures ask for may take: every textured light's prefix sums
+#: and rectified texels (clrays.stages.light_texture) together. One gobo at 2048 × 1024 and
+#: rank 4 takes 152 MiB; 16 spot lights sharing a gobo in a 32×18 frame asked for 2.4 GiB
+#: (tests/scene/test_hostile.py), so past this the raise is halved, down to the image's sizes.
+TEXTURE_SIZES_BUDGET = 256 << 20
 
 
 def _power_of_two_at_least(value: float) -> int:
@@ -215,6 +220,27 @@ def texture_sizes(lights) -> tuple[int, int]:
             _clamped(math.pi / finest, MIN_GAMMA_SAMPLES, MAX_TEXTURE_GAMMA_SAMPLES))
 
 
+def texture_raised_sizes(scene: Scene, slices: int, gamma_samples: int) -> tuple[int, int]:
+    """`slices` and `gamma_samples` (the image's, or the scene's own) raised to what the
+    textured lights ask for (`texture_sizes`), the sizes the scene sets left as they are; while
+    every textured light's prefix sums and rectified texels would pass TEXTURE_SIZES_BUDGET,
+    the raise, the larger of the two in proportion, is halved."""
+    render = scene.render
+    wanted_slices, wanted_gamma = texture_sizes(scene.lights)
+    raised_slices = slices if render.slices else max(slices, wanted_slices)
+    raised_gamma = gamma_samples if render.gamma_samples else max(gamma_samples, wanted_gamma)
+    textured = sum(light.texture is not None for light in scene.lights)
+    bytes_per_texel = textured * (4 * 3 * (render.svd_rank + 1) + 16)  # prefix sums; rectified float4
+    while (raised_slices * raised_gamma * bytes_per_texel > TEXTURE_SIZES_BUDGET
+           and (raised_slices > slices or raised_gamma > gamma_samples)):
+        if raised_gamma <= gamma_samples or (raised_slices > slices
+                                             and raised_slices / slices >= raised_gamma / gamma_samples):
+            raised_slices //= 2
+        else:
+            raised_gamma //= 2
+    return raised_slices, raised_gamma
+
+
 def derived_line_samples(width: int, height: int) -> int:
     """Samples along each slice's line: half the image diagonal in pixels."""
     return min(max(math.ceil(LINE_SAMPLES_PER_PIXEL * math.hypot(width, height)), MIN_LINE_SAMPLES),
@@ -235,10 +261,9 @@ def with_derived_sizes(scene: Scene) -> Scene:
                     render.initial_step):
         return scene
     shadow_map = render.shadow_map or occluder_shadow_map(scene, derived_shadow_map(image.width, image.height))
-    texture_slices, texture_gamma_samples = texture_sizes(scene.lights)
-    slices = render.slices or max(derived_slices(image.width, image.height, shadow_map), texture_slices)
-    gamma_samples = render.gamma_samples or max(derived_gamma_samples(image.width, image.height, shadow_map),
-                                                texture_gamma_samples)
+    slices, gamma_samples = texture_raised_sizes(
+        scene, render.slices or derived_slices(image.width, image.height, shadow_map),
+        render.gamma_samples or derived_gamma_samples(image.width, image.height, shadow_map))
     line_samples = render.line_samples or derived_line_samples(image.width, image.height)
     initial_step = render.initial_step or derived_initial_step(line_samples)
     return replace(scene, render=replace(render, shadow_map=shadow_map, slices=slices, gamma_samples=gamma_samples,

@@ -83,3 +83,12 @@ def test_textures_that_ask_for_no_more_sizes():
     assert _sizes(320, 180, lights=[_spot(_texture(512, smooth=True))]) == (1024, 1024, 1024)
     sun = DirectionalLight(np.array([0.0, -1.0, 0.0]), np.full(3, 2.0), texture=_texture(1024))
     assert _sizes(320, 180, lights=[sun]) == (1024, 1024, 1024)
+
+
+def test_what_textures_ask_for_stays_within_a_budget():
+    # 16 spot lights sharing a 4096² gobo in a 32×18 frame asked for 2048 × 1024 each: 2.4 GiB
+    # of prefix sums. Within TEXTURE_SIZES_BUDGET the raise halves, the larger first, to
+    # 256 slices × 512 γ texels (16 × 76 B × 131072 = 152 MiB); never below the image's.
+    assert _sizes(32, 18, lights=[_spot(_texture(4096), 30.0)] * 16) == (256, 256, 512)
+    # Two gobos at 320×180: 2 × 152 MiB is over, so the slices go back to the image's 1024.
+    assert _sizes(320, 180, lights=[_spot(_texture(256))] * 2) == (1024, 1024, 1024)
