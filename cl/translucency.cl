@@ -97,7 +97,7 @@ kernel void translucency_rectify(global const view_t* views, global const light_
 
 /* translucency_surface — with `render.surface_shadows: exact`, the transmittance that
  * reaches each camera sample's surface from each light, as the exact reference computes
- * it: where the layers of the 3 × 3 texels around the sample's lookup agree, their
+ * it: where the layers of the 5 × 5 texels around the sample's lookup agree, their
  * transmittance; elsewhere (the edges of a translucent shadow) a shadow ray through the
  * translucent triangles' own BVH, multiplying (1 − α) of every one it crosses.
  * Reads frame, views, lights, layers, camera_depth, tri_id, tri_normal, offsets, the
@@ -105,6 +105,12 @@ kernel void translucency_rectify(global const view_t* views, global const light_
  * (float4 per sample and light). Opaque occluders are the visibility stage's. */
 /* SHADOW_RAY_OFFSET_REL and SURFACE_BIAS_TEXELS: visibility.cl's and shade.cl's, from
  * clrays/structs.py (-D). */
+
+/* The texels around the lookup whose layers must agree for their answer to stand: the lookup
+ * lies up to a texel from the point along the normal (lighting.h's shadow_lookup), so 2 keeps
+ * the 3 × 3 around the point's own texel inside the test; with 1, an edge a texel beyond it went
+ * unseen (a floor pixel of scenes/glass_row.yaml at 640 × 360, lit in exact, took a pane's shadow). */
+#define AGREE_RADIUS 2
 
 /* The product of (1 − α) of every translucent triangle but `skip` that crosses
  * origin + t·dir, t ∈ (0, t_max): bvh_occluded's walk, visiting every hit. */
@@ -177,7 +183,7 @@ kernel void translucency_surface(global const frame_t* frame, global const view_
         float3 to_light;
         float3 incident = light_incident(light, frame->sigma_t.xyz, p, &to_light);
         if (incident.x + incident.y + incident.z == 0.0f || eye_in_lamp(light, frame->lamp_radius)) continue;
-        /* The layers decide where the 3 × 3 texels around the lookup agree (shade's lookup point). */
+        /* The layers decide where the texels around the lookup agree (shade's lookup point). */
         float3 lookup = shadow_lookup(light, p, n);
         global const view_t* view = views + light_view_index(light, lookup);
         float2 texel;
@@ -186,10 +192,10 @@ kernel void translucency_surface(global const frame_t* frame, global const view_
             float reach = depth - SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth);
             int tx = (int)texel.x, ty = (int)texel.y;
             float3 centre = texel_layers(view, layer_depth, layer_clear, layer_stride, tx, ty, reach);
-            int agree = texel.x >= 1.0f && texel.y >= 1.0f && texel.x < (float)view->width - 1.0f
-                        && texel.y < (float)view->height - 1.0f;
-            for (int j = -1; j <= 1 && agree; ++j)
-                for (int i = -1; i <= 1 && agree; ++i)
+            int agree = texel.x >= AGREE_RADIUS && texel.y >= AGREE_RADIUS
+                        && texel.x < (float)(view->width - AGREE_RADIUS) && texel.y < (float)(view->height - AGREE_RADIUS);
+            for (int j = -AGREE_RADIUS; j <= AGREE_RADIUS && agree; ++j)
+                for (int i = -AGREE_RADIUS; i <= AGREE_RADIUS && agree; ++i)
                     agree = all(texel_layers(view, layer_depth, layer_clear, layer_stride, tx + i, ty + j, reach)
                                 == centre);
             if (agree) {

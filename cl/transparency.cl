@@ -16,7 +16,7 @@
 #include "translucency.h"
 
 #ifndef TRANSPARENCY_MOMENTS
-#define TRANSPARENCY_MOMENTS 0 /* 1: MBOIT's estimate of T(z_k⁻) instead of the ordered product */
+#define TRANSPARENCY_MOMENTS 0 /* 1: films gathered in no order (mboit, gathered), not peeled in order */
 #endif
 /* Hits closer than this (relative) are one surface: a ray through the edge two triangles of a
  * pane share meets both at the same depth, and the pane must count once. */
@@ -30,6 +30,12 @@
 #define WALKED_FOG_ARG
 #endif
 /* SURFACE_BIAS_TEXELS: shade.cl's surface shadow test's, from clrays/structs.py (-D). */
+#ifndef FILM_SHADOW_RAYS
+/* 1 (`surface_shadows: exact`): a film's light through the translucent surfaces nearer the light
+ * is a shadow ray's product over the translucent triangles, as exact computes it, not the
+ * layers' lookup, whose coloured shadow edges are a texel wide. */
+#define FILM_SHADOW_RAYS 0
+#endif
 
 /* Möller–Trumbore, two-sided, edges inclusive with EDGE_SLACK (common.h): the distance along
  * the ray, +inf for a miss. */
@@ -139,14 +145,36 @@ kernel void transparency_gather(LAYER_ARGS, global const int* counts, int slots,
     }
 }
 
+/* The product of (1 − α) of the translucent triangles that the shadow ray from a film at p
+ * (normal n, facing the camera) to the light crosses: it leaves from the side facing the light,
+ * offset as translucency_surface's ray (translucency.cl), so the film's own pane is behind it. */
+inline float3 film_shadow_ray(global const light_t* light, float3 p, float3 n, float3 to_light,
+                              global const float4* tri_vertices, global const float4* tri_opacity,
+                              global const int* translucent, int translucent_count)
+{
+    float to_light_distance = light->type == LIGHT_DIRECTIONAL ? 0.0f : length(light->position.xyz - p);
+    float3 side = dot(n, to_light) >= 0.0f ? n : -n;
+    float3 start = p + side * (SHADOW_RAY_OFFSET_REL * (length(p) + to_light_distance));
+    float3 ray = light->type == LIGHT_DIRECTIONAL ? to_light : light->position.xyz - start;
+    float t_max = light->type == LIGHT_DIRECTIONAL ? INFINITY : 1.0f;
+    float3 through = (float3)(1.0f);
+    for (int i = 0; i < translucent_count; ++i) {
+        int tri = translucent[i];
+        if (hit_distance(start, ray, tri_vertices, tri) < t_max) through *= 1.0f - tri_opacity[tri].xyz;
+    }
+    return through;
+}
+
 /* S_k: the light a surface of albedo `albedo` at p reflects towards the camera, as shade.cl's
  * two-sided Lambertian with the shadow-map test (its flat normal: smooth shading normals are
- * shade.cl's own), and through the translucent surfaces nearer the light (translucency.h) when
- * the light side's layers are given. Weighted by the layer's opacity by the caller. */
+ * shade.cl's own), and through the translucent surfaces nearer the light when the light side's
+ * layers are given: their lookup (translucency.h), or with FILM_SHADOW_RAYS a shadow ray.
+ * Weighted by the layer's opacity by the caller. */
 inline float3 surface_radiance(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                                global const uint* shadow_depth, global const light_texture_t* light_textures,
-                               global const float4* texels, float3 p, float3 n, float3 dir, float3 albedo
-                               TRANSLUCENCY_ARGS)
+                               global const float4* texels, float3 p, float3 n, float3 dir, float3 albedo,
+                               global const float4* tri_vertices, global const float4* tri_opacity,
+                               global const int* translucent, int translucent_count TRANSLUCENCY_ARGS)
 {
     if (dot(n, dir) > 0.0f) n = -n; /* two-sided: face the camera */
     float3 irradiance = (float3)(0.0f);
@@ -161,9 +189,15 @@ inline float3 surface_radiance(global const frame_t* frame, global const view_t*
             float3 lookup = shadow_lookup(lights + l, p, n);
             visible = shadow_visibility(lights + l, views, shadow_depth, lookup, SURFACE_BIAS_TEXELS, 0);
 #ifdef TRANSLUCENT_LAYERS
+#if FILM_SHADOW_RAYS
+            if (visible > 0.0f)
+                incident *= film_shadow_ray(lights + l, p, n, to_light, tri_vertices, tri_opacity, translucent,
+                                            translucent_count);
+#else
             if (visible > 0.0f)
                 incident *= light_transmittance(lights + l, views, layer_depth, layer_clear, layer_stride, lookup,
                                                 SURFACE_BIAS_TEXELS);
+#endif
 #endif
         }
         irradiance += incident * (cosine * visible);
@@ -183,7 +217,8 @@ kernel void transparency_composite(global const frame_t* frame, global const vie
                                    global const float4* tri_opacity, global const light_texture_t* light_textures,
                                    global const float4* texels, int slots, global const uint* film_depth,
                                    global const int* film_tri, global const float4* film_scatter,
-                                   float2 depth_range, float moment_bias, global float4* transmittance,
+                                   float2 depth_range, float moment_bias, global const int* translucent,
+                                   int translucent_count, global float4* transmittance,
                                    global float4* in_front TRANSLUCENCY_ARGS WALKED_FOG_ARG)
 {
     int sample = get_global_id(0);
@@ -208,9 +243,12 @@ kernel void transparency_composite(global const frame_t* frame, global const vie
         float z = as_float(film_depth[k * samples + sample]);
         float3 alpha = tri_opacity[tri].xyz;
         float3 surface = surface_radiance(frame, views, lights, shadow_depth, light_textures, texels, origin + z * dir,
-                                          tri_normal[tri].xyz, dir, tri_albedo[tri].xyz TRANSLUCENCY_PASS);
+                                          tri_normal[tri].xyz, dir, tri_albedo[tri].xyz, tri_vertices,
+                                          tri_opacity, translucent, translucent_count TRANSLUCENCY_PASS);
         float3 radiance = surface * exp(-sigma_t * z) + film_scatter[k * samples + sample].xyz;
-#if TRANSPARENCY_MOMENTS
+#if TRANSPARENCY_GATHERED
+        float3 weight = alpha * estimated_transmittance(&moments, z, depth_range, moment_bias);
+#elif TRANSPARENCY_MOMENTS
         float in_front_fraction = absorbance_in_front(b, warped_depth(z, depth_range), moment_bias);
         float3 weight = alpha * exp(-b0 * in_front_fraction);
 #else
@@ -221,7 +259,7 @@ kernel void transparency_composite(global const frame_t* frame, global const vie
         weights += weight;
     }
 #if TRANSPARENCY_MOMENTS
-    through = exp(-b0);
+    through = moments.behind;
     light *= select((float3)(0.0f), (1.0f - through) / weights, isgreater(weights, (float3)(0.0f)));
 #endif
 #ifdef TRANSPARENCY_WEIGHTED_WALK

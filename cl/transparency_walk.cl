@@ -35,6 +35,29 @@ inline float depth_gamma(global const epipolar_t* ep, int directional, float sin
     return directional ? s * sin_beta : atan2(s * sin_beta, ep->d_el - s * cos_beta);
 }
 
+/* The bounds of the pieces between the nearest and the farthest film into bounds[0 … WALK_PIECES]:
+ * with the gathered films' exact transmittance and at most WALK_PIECES + 1 films, the films'
+ * own depths in order (the last repeated: empty pieces), so that T is constant over each piece
+ * and its weight at the middle is exact; otherwise even steps in the warp. */
+inline void piece_bounds(const film_moments_t* films, float* bounds)
+{
+#if TRANSPARENCY_GATHERED
+    if (films->count <= WALK_PIECES + 1) {
+        int n = 0;
+        for (int k = 0; k < films->count; ++k) { /* insertion sort of a handful of depths */
+            float z = as_float(films->film_depth[k * films->samples + films->sample]);
+            int at = n++;
+            for (; at > 0 && bounds[at - 1] > z; --at) bounds[at] = bounds[at - 1];
+            bounds[at] = z;
+        }
+        for (int j = n; j <= WALK_PIECES; ++j) bounds[j] = bounds[n - 1];
+        return;
+    }
+#endif
+    for (int j = 0; j <= WALK_PIECES; ++j)
+        bounds[j] = depth_between(films->nearest, films->farthest, (float)j / (float)WALK_PIECES);
+}
+
 /* The pieces of the ray and the fog's weight over each, into the walk's features. */
 inline void fog_pieces(global const epipolar_t* ep, global const light_t* light, float3 dir,
                        const film_moments_t* films, float2 depth_range, float moment_bias, walk_features_t* features)
@@ -42,14 +65,16 @@ inline void fog_pieces(global const epipolar_t* ep, global const light_t* light,
     float sin_beta, cos_beta;
     ray_beta(ep, dir, &sin_beta, &cos_beta);
     int directional = light->type == LIGHT_DIRECTIONAL;
+    float bounds[WALK_PIECES + 1];
+    piece_bounds(films, bounds);
     features->piece_gamma[0] = -INFINITY;
-    features->piece_weight[0] = (float4)(1.0f - exp(-films->b0), 0.0f);
-    for (int j = 0; j <= WALK_PIECES; ++j) {
-        float s = depth_between(films->nearest, films->farthest, (float)j / (float)WALK_PIECES);
-        features->piece_gamma[j + 1] = depth_gamma(ep, directional, sin_beta, cos_beta, s);
-    }
+    features->piece_weight[0] = (float4)(1.0f - films->behind, 0.0f);
+    for (int j = 0; j <= WALK_PIECES; ++j)
+        features->piece_gamma[j + 1] = depth_gamma(ep, directional, sin_beta, cos_beta, bounds[j]);
     for (int j = 1; j <= WALK_PIECES; ++j) {
-        float middle = depth_between(films->nearest, films->farthest, ((float)j - 0.5f) / (float)WALK_PIECES);
+        float middle = TRANSPARENCY_GATHERED ? 0.5f * (bounds[j - 1] + bounds[j])
+                                             : depth_between(films->nearest, films->farthest,
+                                                             ((float)j - 0.5f) / (float)WALK_PIECES);
         features->piece_weight[j] = (float4)(fog_weight(films, middle, depth_range, moment_bias), 0.0f);
     }
 }

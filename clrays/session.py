@@ -665,13 +665,13 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
         if scene.render.surface_shadows == "exact":
             sizes.append(("surface transmittance", 16 * samples * len(scene.lights)))
     if scene.geometry.translucent:  # the transparency stage's films (transparency.py): depth, triangle, fog per slot
-        # Peeling's layers bound its slots; MBOIT gathers every film a ray meets, counted here as at
+        # Peeling's layers bound its slots; gathered and mboit take every film a ray meets, counted as at
         # most 64 (the most layers peeling takes) or the translucent triangles, the fewer.
         settings = transparency_of(scene)
         slots = settings.layers if settings.type == "depth_peeling" else min(len(translucent_triangles(scene)), 64)
         sizes += [("translucent films seen by the camera", 24 * slots * samples),
                   ("films' transmittance and light", 32 * samples)]
-        if settings.type == "mboit":  # its weighted walk's sample list and fog (stages/transparency_walk.py)
+        if settings.type != "depth_peeling":  # the weighted walk's sample list and fog (transparency_walk.py)
             sizes.append(("samples with films and their walked fog", 20 * samples))
     if scene.render.surface_shadows == "filtered":  # the moment maps and their blur's scratch (shadow_filter.py)
         sizes += [("moment maps", 16 * inputs.shadow_texels), ("moment maps' blur scratch", 16 * inputs.shadow_texels)]

@@ -329,7 +329,7 @@ RENDER = Section("render", (
           notes="translucent objects: how many translucent surfaces each light's map keeps per texel, nearest "
                 "the light first; along a light ray, those beyond that many let it through unattenuated "
                 "([docs/design.md](design.md#translucent-occluders-the-light-side))", read_by=("minmax", "raymarch")),
-    Field("transparency", "mapping or string", shown_default="`{type: mboit}`",
+    Field("transparency", "mapping or string", shown_default="`{type: gathered}`",
           notes="[render.transparency](#rendertransparency): how the camera composites "
                 "[translucent objects](#translucent-objects); a string is its `type`. Read only where an "
                 "object has `opacity` below 1", read_by=("minmax", "raymarch")),
@@ -368,8 +368,9 @@ TRANSPARENCY = Section("render.transparency", (
     Field("type", "string", Transparency.type, choices=TRANSPARENCY_TYPES,
           renamed=tuple(RENAMED_TRANSPARENCY_TYPES.items()),
           notes="`depth_peeling`: the `layers` nearest translucent surfaces of each camera ray, composited in "
-                "order; `mboit`: every one of them, composited with a transmittance reconstructed from 4 power "
-                "moments of the absorbance, in no order "
+                "order; `gathered`: every one of them, gathered in no order, each weighted by the exact product "
+                "of the (1 − α) in front of it; `mboit`: every one of them, composited with a transmittance "
+                "reconstructed from 4 power moments of the absorbance, in no order "
                 "(MBOIT; [docs/design.md](design.md#translucent-surfaces-the-camera-side); `moments`, its former "
                 "name, reads as `mboit`). Left out, the keys given name it (`layers`: depth_peeling; `warp`, "
                 "`moment_bias`: mboit); a key the type does not read is an error"),

@@ -4,8 +4,9 @@ surfaces: the camera side). Host side of `cl/transparency.cl`.
 
     layers (peel or gather) → in-scatter up to each layer (the method's own stage) → composite
 
-MBOIT (`mboit`) replaces the in-scatter runs up to each layer by one walk of the fog per
-sample that meets films, weighted by its estimated transmittance (stages/transparency_walk.py).
+The gathered types (`gathered`, `mboit`) replace the in-scatter runs up to each layer by one walk
+of the fog per sample that meets films, weighted by the films' transmittance: the exact product
+over the sample's list, or MBOIT's estimate (stages/transparency_walk.py).
 
 A scene whose objects are all opaque runs none of it: the session skips the stage, and the
 camera raster, which draws the opaque triangles only here, draws them all there.
@@ -129,7 +130,7 @@ def _layer_args(buffers: FrameBuffers, rastered: RasterResult, translucent, coun
 def translucent_films(device: Device, buffers: FrameBuffers, rastered: RasterResult, timer: StageTimer,
                       weighted_walk: bool = True) -> Films:
     """Each camera sample's translucent hits in front of its opaque depth: the `layers` nearest
-    in order (depth_peeling), or all of them in no order (mboit). `weighted_walk` (mboit):
+    in order (depth_peeling), or all of them in no order (gathered, mboit). `weighted_walk`:
     list the samples with films for MBOIT's one walk of the fog; False: the in-scatter runs per
     slot, as peeling's (the tests' reference)."""
     inputs = buffers.inputs
@@ -187,19 +188,24 @@ def composite(device: Device, buffers: FrameBuffers, rastered: RasterResult, lay
     inputs = buffers.inputs
     settings = transparency_of(inputs.scene)
     samples = inputs.samples
-    defines = {"TRANSPARENCY_MOMENTS": int(settings.type == "mboit"),
+    defines = {"TRANSPARENCY_MOMENTS": int(settings.type != "depth_peeling"),
+               "TRANSPARENCY_GATHERED": int(settings.type == "gathered"),
                "TRANSPARENCY_LOG_WARP": int(settings.warp == "log")}
     features = present(light_layers)
     defines, light_args = feature_defines(features, defines), feature_args(features)
+    if inputs.scene.render.surface_shadows == "exact":  # a film's coloured shadow edges where exact has them
+        defines["FILM_SHADOW_RAYS"] = 1
     if layers.walked is not None:  # MBOIT's fog, walked once per sample (stages/transparency_walk.py)
         defines["TRANSPARENCY_WEIGHTED_WALK"] = 1
         light_args = (*light_args, layers.walked)
     transmittance, in_front = device.buffer(nbytes=16 * samples), device.buffer(nbytes=16 * samples)
     near, far = depth_range(inputs)
+    films = film_triangles(inputs)  # the shadow rays' triangles (FILM_SHADOW_RAYS)
     timer.add(LABEL, device.kernel("transparency", "transparency_composite", defines)(
         device.queue, (samples,), None, buffers.params, buffers.views, buffers.offsets, buffers.lights,
         rastered.shadow_depth, buffers.tri_vertices, buffers.tri_normal, buffers.tri_albedo,
         layers.opacity, buffers.light_textures, buffers.texels, np.int32(layers.slots),
         layers.depth, layers.tri, layers.scatter, np.array([near, far], np.float32),
-        np.float32(settings.moment_bias), transmittance, in_front, *light_args))
+        np.float32(settings.moment_bias), device.buffer(films if len(films) else np.zeros(1, np.int32), writable=False),
+        np.int32(len(films)), transmittance, in_front, *light_args))
     return transmittance, in_front

@@ -1,6 +1,6 @@
-"""Stage transparency_walk: MBOIT's fog in front of the opaque depth in one walk per camera
-sample that meets translucent films, each stretch of fog weighted by the films' estimated
-transmittance in front of it less T(D) (docs/design.md, translucent surfaces: the camera side).
+"""Stage transparency_walk: the gathered films' fog in front of the opaque depth in one walk per
+camera sample that meets translucent films, each stretch of fog weighted by the films'
+transmittance in front of it (exact for `gathered`, MBOIT's estimate for `mboit`) less T(D) (docs/design.md, translucent surfaces: the camera side).
 Host side of `cl/transparency_walk.cl` (minmax: the min-max rows' walk) and of `cl/raymarch.cl`
 built with TRANSPARENCY_WEIGHTED_WALK (raymarch). Timed as transparency.fog, the work it
 replaces: the in-scatter stages run up to each film (Films.add_in_scatter)."""
@@ -27,6 +27,7 @@ WALK_PIECES = 4
 def _walk_defines(buffers: FrameBuffers) -> dict:
     settings = transparency_of(buffers.inputs.scene)
     return {"TRANSPARENCY_WEIGHTED_WALK": 1, "TRANSPARENCY_LOG_WARP": int(settings.warp == "log"),
+            "TRANSPARENCY_GATHERED": int(settings.type == "gathered"),
             "WALK_PIECES": WALK_PIECES}
 
 

@@ -19,8 +19,9 @@ def transparency_of(*overrides):
 
 def test_keys_and_defaults():
     assert transparency_of() is None  # left out: Transparency()'s defaults
-    assert Transparency() == Transparency("mboit", 8, "log", 5e-3)
+    assert Transparency() == Transparency("gathered", 8, "log", 5e-3)
     assert transparency_of("render.transparency=mboit") == Transparency(type="mboit")
+    assert transparency_of("render.transparency=gathered") == Transparency(type="gathered")
     assert transparency_of("render.transparency={type: depth_peeling, layers: 3}").layers == 3
     assert transparency_of("render.transparency={type: mboit, warp: none, moment_bias: 0}") == \
         Transparency("mboit", 8, "none", 0.0)
@@ -32,9 +33,10 @@ def test_the_former_name_moments_reads_as_mboit():
 
 
 BAD = [
-    ("render.transparency={type: peel}", r"render\.transparency\.type: expected one of 'depth_peeling', 'mboit', "
-                                         r"got 'peel'"),
-    ("render.transparency=sorted", r"render\.transparency: expected one of 'depth_peeling', 'mboit', got 'sorted'"),
+    ("render.transparency={type: peel}", r"render\.transparency\.type: expected one of 'depth_peeling', 'gathered', "
+                                         r"'mboit', got 'peel'"),
+    ("render.transparency=sorted", r"render\.transparency: expected one of 'depth_peeling', 'gathered', 'mboit', "
+                                   r"got 'sorted'"),
     ("render.transparency={layers: 0}", r"render\.transparency\.layers: expected an integer in \[1, 64\], got 0"),
     ("render.transparency={layers: 2.5}", r"render\.transparency\.layers: expected an integer in \[1, 64\], got 2\.5"),
     ("render.transparency={warp: linear}", r"render\.transparency\.warp: expected one of 'none', 'log', got 'linear'"),
@@ -69,6 +71,8 @@ def test_a_key_of_one_type_names_it_when_the_type_is_left_out():
 @pytest.mark.parametrize("override, message", [
     ("render.transparency={type: mboit, layers: 4}",
      r"render\.transparency\.layers: only depth_peeling reads it, got type mboit"),
+    ("render.transparency={type: gathered, warp: log}",
+     r"render\.transparency\.warp: only mboit reads it, got type gathered"),
     ("render.transparency={type: depth_peeling, moment_bias: 0.01}",
      r"render\.transparency\.moment_bias: only mboit reads it, got type depth_peeling"),
     ("render.transparency={layers: 4, warp: log}",
