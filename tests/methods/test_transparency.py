@@ -1,7 +1,7 @@
 """Translucent objects seen by the camera (the transparency stage; docs/design.md, translucent
 surfaces: the camera side): a pane
-blends over the wall behind it, depth peeling composites its layers in order, MBOIT comes close
-to it, and an opaque-only scene runs none of it."""
+blends over the wall behind it, depth peeling composites its layers in order, the gathered list
+(the default) meets exact, MBOIT comes close to it, and an opaque-only scene runs none of it."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -246,3 +246,24 @@ def test_a_shadow_edge_beyond_the_lookups_texels_is_seen(renderer):
     expected = exact_pixels(scene, np.array([257]), np.array([356]))[0]
     pixel = renderer.render(scene, "minmax").image[257, 356]
     np.testing.assert_allclose(pixel, expected, rtol=1e-3)
+
+
+@pytest.mark.parametrize("method", ["minmax", "raymarch"])
+def test_the_gathered_walk_is_the_per_film_composite(renderer, monkeypatch, method):
+    """`gathered`'s fog walked once, its pieces ending at the films (five films, WALK_PIECES + 1),
+    against the in-scatter runs up to each film: black panes, so the films' light in front is all
+    fog. T is exact and constant over each piece, so minmax's walk is the per-film composite
+    (measured 9e-8 relative); raymarch weights each step at its point, a step that straddles a
+    film takes one side's T (measured 0.045 %)."""
+    spy = CompositeSpy(monkeypatch)
+    black = [f"objects.{i}.albedo=0" for i in range(2, 7)]
+    scene = small_row(*black, "render.transparency={type: gathered}")
+    renderer.render(scene, method, reuse=False)
+    monkeypatch.setattr(clrays.session, "translucent_films", _films_run_per_film)
+    renderer.render(scene, method, reuse=False)
+    walk, runs = spy.frames
+    films = (runs["tri"] >= 0).any(axis=0)
+    assert films.sum() > 300 and not walk["scatter"].any()
+    fog = runs["in_front"][films]
+    error = np.sqrt(np.mean((walk["in_front"][films] - fog) ** 2)) / fog.mean()
+    assert error < (1e-5 if method == "minmax" else 0.002)
