@@ -1,4 +1,4 @@
-"""MBOIT against depth peeling at 1, 2, 4 and 8 layers on scenes/glass_row.yaml (five
+"""The gathered list (the default) and MBOIT against depth peeling at 1, 2, 4 and 8 layers on scenes/glass_row.yaml (five
 overlapping coloured panes in fog), timed in the same run (bench/RESULTS.md, "Translucent
 objects: the camera side"):
 
@@ -44,7 +44,8 @@ PER_FILM = "moments per film"  # MBOIT's composite with the fog run up to each f
 def configurations(sweep: bool, per_film: bool = False, pieces: tuple[int, ...] = ()) -> dict[str, str]:
     """label → render.transparency override."""
     runs = {f"peel {k}": f"{{type: depth_peeling, layers: {k}}}" for k in PEELING}
-    runs["moments"] = "{type: mboit}"  # the defaults: log warp, the measured moment_bias
+    runs["gathered"] = "{type: gathered}"  # the default: every film, the exact product in front of each
+    runs["moments"] = "{type: mboit}"  # MBOIT's defaults: log warp, the measured moment_bias
     if per_film:
         runs[PER_FILM] = "{type: mboit}"
     for count in pieces:
