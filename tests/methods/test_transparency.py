@@ -267,3 +267,24 @@ def test_the_gathered_walk_is_the_per_film_composite(renderer, monkeypatch, meth
     fog = runs["in_front"][films]
     error = np.sqrt(np.mean((walk["in_front"][films] - fog) ** 2)) / fog.mean()
     assert error < (1e-5 if method == "minmax" else 0.002)
+
+
+def test_more_films_than_pieces_walk_close_to_the_per_film_composite(renderer, monkeypatch):
+    """Seven black panes, more than WALK_PIECES + 1: `gathered`'s walk takes even pieces in the
+    warp, each weighted by the exact T at its middle, against the in-scatter runs up to each film
+    (measured 0.052 %, minmax)."""
+    extra = "".join(f"  - {{type: plane, center: [{x}, 1.5, {z}], normal: [0, 0, 1], size: 2.2, segments: 1, "
+                    f"opacity: 0.3}}\n" for x, z in ((0.2, 0.4), (0.6, -1.2)))
+    text = (ROOT / "scenes" / "glass_row.yaml").read_text().replace("render:", extra + "render:")
+    black = [f"objects.{i}.albedo=0" for i in range(2, 9)]
+    scene = parse_scene(text, overrides=["image.width=64", "image.height=36", *black])
+    spy = CompositeSpy(monkeypatch)
+    renderer.render(scene, "minmax", reuse=False)
+    monkeypatch.setattr(clrays.session, "translucent_films", _films_run_per_film)
+    renderer.render(scene, "minmax", reuse=False)
+    walk, runs = spy.frames
+    assert (runs["tri"] >= 0).sum(axis=0).max() == 7
+    films = (runs["tri"] >= 0).any(axis=0)
+    fog = runs["in_front"][films]
+    error = np.sqrt(np.mean((walk["in_front"][films] - fog) ** 2)) / fog.mean()
+    assert error < 0.002
