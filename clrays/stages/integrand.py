@@ -682,6 +682,11 @@ class DeviceIntegrand:
         self._visible = visible
 
     @property
+    def n_beta(self) -> int:
+        """The tables' β rows, known on the host (no read back)."""
+        return int(self._tables.n_beta)
+
+    @property
     def tables(self) -> IntegrandTables:
         if self._visible is not None:
             beta_min, beta_max, gamma_max, _ = self._visible.host()

@@ -171,7 +171,7 @@ def light_texture(device: Device, buffers: FrameBuffers, light_index: int, epipo
     directional = isinstance(light, DirectionalLight)
     n, slices = int(epipolar.params["gamma_samples"]), int(epipolar.params["slices"])
     gamma_step = epipolar.gamma_step  # (the host's SVD needs the ranges: read back from the device)
-    n_beta = max(int(integrand.tables.n_beta), 16)
+    n_beta = max(integrand.n_beta, 16)  # (not `tables`, which reads the table back)
     rank = scene.render.svd_rank
     basis = gamma_basis("directional" if directional else "point", scene.medium,
                         light.irradiance if directional else light.intensity, epipolar.d_el,
