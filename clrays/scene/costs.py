@@ -14,9 +14,10 @@ of two (sizes change in steps, not with every pixel) and clamped: below by what 
 or a slice still resolves, above by the measured defaults of bench/RESULTS.md ("Choosing
 defaults"), so 64×48 and larger with a 1024 map render exactly as before.
 
-A textured point or spot light asks for more: the rectified texture samples its image once
-per slice and γ texel, so neither may be coarser than the image's texels seen from the
-light, or the two-slice blend and the γ cells average its pattern away (docs/light-textures.md).
+A textured light asks for more: the rectified texture samples its image once per slice
+and γ texel, so neither may be coarser than the image's texels seen from the light (a
+point or spot light's, angles) or across its beam (a directional light's, lengths), or
+the two-slice blend and the γ cells average its pattern away (docs/light-textures.md).
 """
 from __future__ import annotations
 
@@ -79,6 +80,9 @@ GAMMA_TEXELS_PER_PIXEL = 8
 #: 0.44 % at 320×180 and from 0.68 to 0.12 % at 96×64 (bench/RESULTS.md, "A light texture's
 #: slices and γ texels"). The texture's prefix sums grow with slices × γ texels (152 MiB here
 #: at rank 4); a finer texture is left to `render.slices` and `render.gamma_samples`.
+#: scenes/stained_glass.yaml's sun asks for 4096 × 2048 and gets these: 0.65–0.90 % against
+#: `exact` from 96×64 to 1280×720, where 4096 × 2048 gives 0.39–0.71 % at 5–8× the frame
+#: (bench/RESULTS.md, "A directional light's texture sets its slices").
 MAX_TEXTURE_SLICES = 2048
 MAX_TEXTURE_GAMMA_SAMPLES = 1024
 #: Device memory that what the textures ask for may take: every textured light's prefix sums
@@ -207,17 +211,66 @@ def texture_texel_angle(light) -> float | None:
     return 2.0 / texture.width  # a point light's cube: each face spans [−1, 1]² at distance 1
 
 
-def texture_sizes(lights) -> tuple[int, int]:
-    """(slices, γ texels) that resolve every textured light's image: neighbouring slices at
-    most a texel apart where a light ray is perpendicular to the eye–light axis (sin γ = 1,
-    and the fan a full circle: 2π / texel), and γ cells at most a texel long over the
-    largest γ range, π; (0, 0) when no light has a texture whose texels are angles."""
-    angles = [angle for angle in map(texture_texel_angle, lights) if angle is not None]
-    if not angles:
+def texture_texel_length(light) -> float | None:
+    """A directional light's texel as a length across its beam: one tile covers
+    `texture_size` scene units of the plane perpendicular to the light, so a texel is
+    width / columns by height / rows, and the shorter side counts; None without a texture,
+    for a smooth one, or for a point or spot light (whose texels are angles)."""
+    texture = light.texture
+    if texture is None or texture.smooth or not isinstance(light, DirectionalLight):
+        return None
+    return min(light.texture_size[0] / texture.width, light.texture_size[1] / texture.height)
+
+
+def directional_texture_reach(scene: Scene, light) -> tuple[float, float]:
+    """(fan, reach) of a directional light's epipolar frame as the camera sees it: the angle
+    its slices span around the eye's line along the light (`stages.rectify.slice_fan`: 2π
+    when the sun or the antisun is on screen) and the farthest distance from that line at
+    which the camera sees lit fog, γ's largest value: the scene bounds' farthest corner from
+    the line, and no more than the effective far (where every ray ends). Fog seen past the
+    scene's bounds is not counted: the geometry ends there and the pattern lies far off."""
+    from ..physics.radiometry import effective_far
+    from ..stages.rectify import slice_basis, slice_fan  # the frame the rectify stage builds
+
+    towards = -np.asarray(light.direction, dtype=np.float64)
+    towards /= np.linalg.norm(towards)
+    u, w = slice_basis(towards)
+    _, fan, _ = slice_fan(scene, towards, u, w)
+    lo, hi = scene.geometry.bounds()
+    corners = _box_corners(lo[None], hi[None])[0] - np.asarray(scene.camera.position, dtype=np.float64)
+    across = corners - np.outer(corners @ towards, towards)  # off the eye's line along the light
+    return fan, min(float(np.linalg.norm(across, axis=1).max()), effective_far(scene))
+
+
+def texture_sizes(scene: Scene) -> tuple[int, int]:
+    """(slices, γ texels) that resolve every textured light's image; (0, 0) when no light
+    has a texture with texels to resolve.
+
+    A point or spot light's texels are angles at the light: neighbouring slices at most a
+    texel apart where a light ray is perpendicular to the eye–light axis (sin γ = 1, and
+    the fan a full circle: 2π / texel), and γ cells at most a texel long over the largest
+    γ range, π.
+
+    A directional light's texels are lengths t across its beam. Its epipolar frame
+    (docs/design.md §3) puts the light ray (α, γ) on the line γ·r(α) + s·ω: (γ, α) are
+    polar coordinates, around the eye's line along ω, of the plane perpendicular to ω,
+    the very plane the texture tiles. Neighbouring slices are γ·Δα apart there, widest at
+    the reach R, the largest γ the camera sees (`directional_texture_reach`), and the fan's
+    span A is cut into slices of Δα = A / slices: slices ≥ A·R / t. A row's γ cells divide
+    [0, γ_max ≤ R] evenly: γ texels ≥ R / t."""
+    slices = gamma = 0.0
+    for light in scene.lights:
+        angle = texture_texel_angle(light)
+        if angle is not None:
+            slices, gamma = max(slices, 2.0 * math.pi / angle), max(gamma, math.pi / angle)
+        length = texture_texel_length(light)
+        if length is not None:
+            fan, reach = directional_texture_reach(scene, light)
+            slices, gamma = max(slices, fan * reach / length), max(gamma, reach / length)
+    if not slices:
         return 0, 0
-    finest = min(angles)
-    return (_clamped(2.0 * math.pi / finest, MIN_SLICES, MAX_TEXTURE_SLICES),
-            _clamped(math.pi / finest, MIN_GAMMA_SAMPLES, MAX_TEXTURE_GAMMA_SAMPLES))
+    return (_clamped(slices, MIN_SLICES, MAX_TEXTURE_SLICES),
+            _clamped(gamma, MIN_GAMMA_SAMPLES, MAX_TEXTURE_GAMMA_SAMPLES))
 
 
 def texture_raised_sizes(scene: Scene, slices: int, gamma_samples: int) -> tuple[int, int]:
@@ -226,7 +279,7 @@ def texture_raised_sizes(scene: Scene, slices: int, gamma_samples: int) -> tuple
     every textured light's prefix sums and rectified texels would pass TEXTURE_SIZES_BUDGET,
     the raise, the larger of the two in proportion, is halved."""
     render = scene.render
-    wanted_slices, wanted_gamma = texture_sizes(scene.lights)
+    wanted_slices, wanted_gamma = texture_sizes(scene)
     raised_slices = slices if render.slices else max(slices, wanted_slices)
     raised_gamma = gamma_samples if render.gamma_samples else max(gamma_samples, wanted_gamma)
     textured = sum(light.texture is not None for light in scene.lights)

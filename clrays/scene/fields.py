@@ -286,13 +286,13 @@ RENDER = Section("render", (
           read_by=_RASTER_METHODS),
     Field("slices", "integer", Render.slices, 16, 16384,
           shown_default=f"from the image: 4 × its perimeter or `shadow_map`, the smaller, as a power of two in "
-                        f"[{MIN_SLICES}, {MAX_SLICES}]; up to {MAX_TEXTURE_SLICES} for a textured point or spot light "
+                        f"[{MIN_SLICES}, {MAX_SLICES}]; up to {MAX_TEXTURE_SLICES} for a textured light "
                         "(one a texel)",
           notes="min-max: epipolar slices", read_by=_EPIPOLAR_METHODS),
     Field("gamma_samples", "integer", Render.gamma_samples, 16, 16384,
           shown_default=f"from the image: 8 × its diagonal or `shadow_map`, the smaller, as a power of two in "
                         f"[{MIN_GAMMA_SAMPLES}, {MAX_GAMMA_SAMPLES}]; up to {MAX_TEXTURE_GAMMA_SAMPLES} for a textured "
-                        "point or spot light (one a texel)",
+                        "light (one a texel)",
           notes="min-max: samples along each slice (rounded up to a power of two)", read_by=_EPIPOLAR_METHODS),
     Field("integrand", "string", Render.integrand, choices=INTEGRAND_MODES,
           notes="min-max: how the scattering integrand is evaluated ([docs/integrand.md](integrand.md)); "
