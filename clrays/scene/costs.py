@@ -81,7 +81,7 @@ GAMMA_TEXELS_PER_PIXEL = 8
 #: slices and γ texels"). The texture's prefix sums grow with slices × γ texels (152 MiB here
 #: at rank 4); a finer texture is left to `render.slices` and `render.gamma_samples`.
 #: scenes/stained_glass.yaml's sun asks for 4096 × 2048 and gets these: 0.65–0.90 % against
-#: `exact` from 96×64 to 1280×720, where 4096 × 2048 gives 0.39–0.71 % at 5–8× the frame
+#: `exact` from 96×64 to 1280×720, where 4096 × 2048 gives 0.39–0.71 % at 4–11× the frame
 #: (bench/RESULTS.md, "A directional light's texture sets its slices").
 MAX_TEXTURE_SLICES = 2048
 MAX_TEXTURE_GAMMA_SAMPLES = 1024
