@@ -19,8 +19,9 @@ as `clrays render` derives them (docs/scene-format.md). Columns:
   light and geometry stand still is kept, as `clrays sequence` keeps it), frames submitted
   ahead where the session can keep frames in flight (`Renderer.submit`): the whole
   sequence's wall time over its frames.
-- **host ms**: sequence wall less the median device time: the host's work the device waits
-  for.
+- **host ms**: sequence wall less the sequence's device time per frame (its frames' own
+  stages, what a frame kept from the one before left out): the host's work the device
+  waits for.
 - **waits**: the times the host waited for the device in one frame (`RenderResult.host_waits`).
 - **RMSE % / p99 %**: against `exact` on the bench's pixel subset (`--pixels`, kept in
   `--cache`), depth edges out, of the last warm frame's image.
@@ -71,22 +72,25 @@ def turned(scene, frame: int):
     return replace(scene, camera=replace(camera, position=np.asarray(camera.look_at, float) + rotated))
 
 
-def sequence_wall_ms(renderer: Renderer, scene, frames: int) -> float:
-    """Wall time per frame of a sequence of `frames` turned frames, each image read back:
-    submitted one frame ahead where the session can (Renderer.submit), else one by one."""
+def sequence_ms(renderer: Renderer, scene, frames: int) -> tuple[float, float]:
+    """(wall ms, device ms) per frame of a sequence of `frames` turned frames, each image
+    read back: submitted one frame ahead where the session can (Renderer.submit), else one
+    by one. The device time is the frames' own, stages a frame kept from the one before
+    left out, as the sequence's are."""
     scenes = [turned(scene, index + 1) for index in range(frames)]
+    results = []
     start = time.perf_counter()
     if hasattr(renderer, "submit"):
         pending = renderer.submit(scenes[0])
         for upcoming in scenes[1:]:
             following = renderer.submit(upcoming)
-            pending.result()
+            results.append(pending.result())
             pending = following
-        pending.result()
+        results.append(pending.result())
     else:
-        for each in scenes:
-            renderer.render(each)
-    return (time.perf_counter() - start) * 1e3 / frames
+        results = [renderer.render(each) for each in scenes]
+    wall = (time.perf_counter() - start) * 1e3 / frames
+    return wall, sum(sum(result.stage_ms.values()) for result in results) / frames
 
 
 def main() -> None:
@@ -138,12 +142,12 @@ def main() -> None:
                 image = result.image
                 renderer.clear()
                 renderer.render(turned(scene, 0))  # the sequence's first frame: what it keeps is kept
-                sequence = sequence_wall_ms(renderer, scene, args.frames)
+                sequence, sequence_device = sequence_ms(renderer, scene, args.frames)
                 launches.clear()
                 error = references.error(scene, EXACT, image, error_pixels(width, height, args.pixels))
                 device_ms = statistics.median(device)
                 print(f"| {name} | {width}×{height} | {method} | {device_ms:.2f} | {statistics.median(walls):.2f} | "
-                      f"{sequence:.2f} | {sequence - device_ms:.2f} | {statistics.median(waits):.0f} | "
+                      f"{sequence:.2f} | {sequence - sequence_device:.2f} | {statistics.median(waits):.0f} | "
                       f"{100 * error.rmse:.4f} | {100 * error.p99:.4f} |", flush=True)
                 if args.kernels:
                     largest = sorted(((statistics.median(v), k) for k, v in kernels.items()), reverse=True)[:8]

@@ -24,7 +24,7 @@ def _feed(h, value: Any) -> None:
     if isinstance(value, np.ndarray):
         array = np.ascontiguousarray(value)
         h.update(f"a{array.dtype.str}{array.shape}".encode())
-        h.update(array.tobytes())
+        h.update(array.reshape(-1).view(np.uint8) if array.size else b"")  # its bytes, not a copy of them
     elif isinstance(value, (bytes, bytearray)):
         h.update(b"b%d:" % len(value) + bytes(value))
     elif isinstance(value, (bool, int, float, str, type(None), np.generic, PurePath)):
