@@ -123,12 +123,12 @@ typedef struct {
     float alpha_min;   /* first slice's lower edge, rad */
     float alpha_step;  /* slice spacing, rad */
     int slices;
-    float gamma_step;  /* γ per texel: rad (point, spot) or length (directional) */
+    float gamma_step;  /* γ_max / gamma_samples, the mean texel: rad (point, spot) or length (directional) */
     int gamma_samples; /* texels per row, a power of two */
     int levels;        /* log2(gamma_samples): the mip chain has levels + 1 levels */
     int light_index;
     int full_circle;   /* slices wrap around: the epipole or anti-epipole is on screen */
-    int _pad0;
+    float gamma_warp;  /* W of the γ texels' spacing (gamma_texels.h): 0 (even) for a directional light */
     int _pad1;
     int _pad2;
 } epipolar_t;

@@ -18,7 +18,7 @@ kernel void light_texture_rectify(global const light_t* lights, global const epi
     if (cell >= ep->gamma_samples || slice >= ep->slices) return;
     global const light_t* light = lights + ep->light_index;
     float alpha = ep->alpha_min + ((float)slice + 0.5f) * ep->alpha_step;
-    float gamma = ((float)cell + 0.5f) * ep->gamma_step;
+    float gamma = gamma_at_texel(gamma_texels_of(ep), (float)cell + 0.5f);
     float3 r = ep->u.xyz * cos(alpha) + ep->w.xyz * sin(alpha);
     float3 on_ray = light->type == LIGHT_DIRECTIONAL ? gamma * r
                                                      : light->position.xyz - ep->axis.xyz * cos(gamma) + r * sin(gamma);
@@ -36,7 +36,7 @@ kernel void light_texture_prefix(global const epipolar_t* epipolar, global const
     int rank = textured->rank, n = textured->gamma_samples;
     if (item >= 3 * (rank + 1) || slice >= textured->slices) return;
     int channel = item / (rank + 1), term = item % (rank + 1);
-    float step = epipolar->gamma_step;
+    gamma_texels_t texels = gamma_texels_of(epipolar);
     global const float4* row = rectified + (size_t)slice * n;
     global const float* gamma = gamma_basis + ((size_t)channel * rank + max(term - 1, 0)) * n;
     global float* out = prefix + (((size_t)slice * 3 + channel) * (rank + 1) + term) * (n + 1);
@@ -45,7 +45,7 @@ kernel void light_texture_prefix(global const epipolar_t* epipolar, global const
     for (int k = 0; k < n; ++k) {
         float4 t = row[k];
         float texel = channel == 0 ? t.x : (channel == 1 ? t.y : t.z);
-        float value = step * texel * (term == 0 ? 1.0f : gamma[k]) - compensation;
+        float value = gamma_texel_width(texels, k) * texel * (term == 0 ? 1.0f : gamma[k]) - compensation;
         float next = sum + value;
         compensation = (next - sum) - value;
         sum = next;

@@ -4,6 +4,7 @@
  * clrays/reference/light_texture.py is the same lookup on the host. */
 #ifndef CLRAYS_LIGHT_TEXTURE_H
 #define CLRAYS_LIGHT_TEXTURE_H
+#include "gamma_texels.h"
 #include "integrand.h"
 
 inline int texture_wrap(int i, int n, int wrap)
@@ -65,8 +66,8 @@ inline float3 light_texture(global const light_texture_t* texture, global const 
     return mix(top, bottom, ty);
 }
 
-/* One row's prefix sum at γ: cells of gamma_step, values at the cell boundaries
- * (n + 1 of them), linear in between. */
+/* One row's prefix sum at texel coordinate `cell` (gamma_texels.h): values at the cell
+ * boundaries (n + 1 of them), linear in between. */
 inline float prefix_at(global const float* prefix, int n, float cell)
 {
     int k = clamp((int)floor(cell), 0, n - 1);
@@ -85,11 +86,11 @@ inline float prefix_at(global const float* prefix, int n, float cell)
  * slice's prefix sums: [channel][0..rank][n + 1], term 0 of T alone, term i + 1 of T·Γ_i;
  * basis holds B[channel][rank][n_beta], then ∫Γ as P[channel][rank][n + 1]. */
 inline float3 textured_run_radiance(global const textured_integrand_t* ti, global const float* basis,
-                                    global const float* row_prefix, float gamma_step, const integrand_row_t* ray,
+                                    global const float* row_prefix, gamma_texels_t texels, const integrand_row_t* ray,
                                     float3 untextured, float gamma0, float gamma1)
 {
     int n = ti->gamma_samples, rank = ti->rank;
-    float c0 = gamma0 / gamma_step, c1 = gamma1 / gamma_step;
+    float c0 = gamma_texel_coord(texels, gamma0), c1 = gamma_texel_coord(texels, gamma1);
     float span = ti->beta_max - ti->beta_min;
     float row_t = 0.0f;
     int j = 0;
@@ -104,8 +105,9 @@ inline float3 textured_run_radiance(global const textured_integrand_t* ti, globa
     for (int c = 0; c < 3; ++c) {
         global const float* q = row_prefix + (size_t)c * (rank + 1) * row_length;
         /* The mean over the run; a run shorter than 1e-3 of a cell takes its cell's value. */
+        int cell = clamp((int)c0, 0, n - 1);
         float mean = c1 - c0 > 1e-3f ? (prefix_at(q, n, c1) - prefix_at(q, n, c0)) / (gamma1 - gamma0)
-                                     : (q[clamp((int)c0, 0, n - 1) + 1] - q[clamp((int)c0, 0, n - 1)]) / gamma_step;
+                                     : (q[cell + 1] - q[cell]) / gamma_texel_width(texels, cell);
         float correction = 0.0f;
         for (int i = 0; i < rank; ++i) {
             global const float* b = basis + ((size_t)c * rank + i) * ti->n_beta;

@@ -102,8 +102,13 @@ kernel void rectify_ranges(global const uint* bounds, global const light_t* ligh
     wide_t beta_min, beta_max, gamma_max;
     visible_ranges(bounds, directional, &beta_min, &beta_max, &gamma_max);
     float gamma_step = gamma_max > 0.0 ? (float)(gamma_max / (wide_t)n) : 1.0f / (float)n;
-    /* texel centres, except texel 0 at γ = 0 (see below); one float product, as the host's */
-    float gamma = texel == 0 ? 0.0f : ((float)texel + 0.5f) * gamma_step;
+    /* texel centres, except texel 0 at γ = 0 (see below); even texels one float product, as
+     * the host's; a point or spot light's finer near γ = 0 (gamma_texels.h) in double */
+    float warp = epipolar->gamma_warp;
+    wide_t centre = (wide_t)texel + 0.5, w = (wide_t)warp;
+    float gamma = texel == 0     ? 0.0f
+                  : warp > 0.0f ? (float)(centre * (wide_t)gamma_step * (1.0 - w + w * centre / (wide_t)n))
+                                : ((float)texel + 0.5f) * gamma_step;
     texel_angles[texel] = (float4)(gamma, (float)cos((wide_t)gamma), (float)sin((wide_t)gamma), 0.0f);
     if (texel == 0) {
         epipolar->gamma_step = gamma_step;

@@ -61,7 +61,8 @@ kernel void translucency_rectify(global const view_t* views, global const light_
     if (texel >= ep->gamma_samples || slice >= ep->slices) return;
     global const light_t* light = lights + ep->light_index;
     float alpha = ep->alpha_min + ((float)slice + 0.5f) * ep->alpha_step;
-    float gamma = texel == 0 ? 0.0f : ((float)texel + 0.5f) * ep->gamma_step; /* rectify's texel centres */
+    float gamma = texel == 0 ? 0.0f /* rectify's texel centres */
+                             : gamma_at_texel(gamma_texels_of(ep), (float)texel + 0.5f);
     float3 r = ep->u.xyz * cos(alpha) + ep->w.xyz * sin(alpha);
     /* The light ray's texel in the shadow atlas, as rectify finds it. */
     global const view_t* view;

@@ -14,6 +14,7 @@
  *                                           unorm16 (x = r | g << 16, y = b) */
 #ifndef CLRAYS_TRANSLUCENCY_H
 #define CLRAYS_TRANSLUCENCY_H
+#include "gamma_texels.h"
 #include "lighting.h"
 
 #ifdef TRANSLUCENT_LAYERS

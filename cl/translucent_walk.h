@@ -35,10 +35,11 @@ inline float3 walk_row_translucent(global const epipolar_t* ep, global const flo
 {
     float beta = ray->beta;
     int n = ep->gamma_samples;
-    int end = min(n, (int)ceil(gamma_end / ep->gamma_step));
+    gamma_texels_t texels = gamma_texels_of(ep);
+    int end = min(n, (int)ceil(gamma_texel_coord(texels, gamma_end)));
     float3 radiance = (float3)(0.0f), run_through = (float3)(0.0f);
     int run_start = -1, run_end = 0;
-    for (int position = clamp((int)floor(gamma_begin / ep->gamma_step), 0, n); position < end; ++position) {
+    for (int position = clamp((int)floor(gamma_texel_coord(texels, gamma_begin)), 0, n); position < end; ++position) {
         float3 through = row[position].x > beta ? texel_transmittance(beta_row, clear_row, position, beta)
                                                 : (float3)(0.0f);
         int lit = through.x + through.y + through.z > 0.0f;
@@ -47,17 +48,17 @@ inline float3 walk_row_translucent(global const epipolar_t* ep, global const flo
             continue;
         }
         if (run_start >= 0)
-            radiance += run_through * run_radiance(in, tables, frame, ray, features, row_prefix, ep->gamma_step,
-                                                   fmax(run_start * ep->gamma_step, gamma_begin),
-                                                   fmin(run_end * ep->gamma_step, gamma_end));
+            radiance += run_through * run_radiance(in, tables, frame, ray, features, row_prefix, texels,
+                                                   fmax(gamma_at_texel(texels, (float)run_start), gamma_begin),
+                                                   fmin(gamma_at_texel(texels, (float)run_end), gamma_end));
         run_start = lit ? position : -1;
         run_end = position + 1;
         run_through = through;
     }
     if (run_start >= 0)
-        radiance += run_through * run_radiance(in, tables, frame, ray, features, row_prefix, ep->gamma_step,
-                                               fmax(run_start * ep->gamma_step, gamma_begin),
-                                               fmin(run_end * ep->gamma_step, gamma_end));
+        radiance += run_through * run_radiance(in, tables, frame, ray, features, row_prefix, texels,
+                                               fmax(gamma_at_texel(texels, (float)run_start), gamma_begin),
+                                               fmin(gamma_at_texel(texels, (float)run_end), gamma_end));
     return radiance;
 }
 

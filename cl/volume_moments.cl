@@ -72,13 +72,13 @@ kernel void volume_moments_prefix(global const epipolar_t* ep, global const floa
  * as traverse's lit runs (walk.h, docs/light-textures.md). */
 inline float3 chunk_radiance(global const integrand_t* in, global const float* tables, global const frame_t* frame,
                              const integrand_row_t* ray, const walk_features_t* features,
-                             global const float* texture0, global const float* texture1, float t, float gamma_step,
-                             float g0, float g1)
+                             global const float* texture0, global const float* texture1, float t,
+                             gamma_texels_t texels, float g0, float g1)
 {
 #ifdef LIGHT_TEXTURE
     if (features->textured->textured && g1 > g0)
-        return mix(unweighted_run_radiance(in, tables, frame, ray, features, texture0, gamma_step, g0, g1),
-                   unweighted_run_radiance(in, tables, frame, ray, features, texture1, gamma_step, g0, g1), t);
+        return mix(unweighted_run_radiance(in, tables, frame, ray, features, texture0, texels, g0, g1),
+                   unweighted_run_radiance(in, tables, frame, ray, features, texture1, texels, g0, g1), t);
 #endif
     return segment_radiance(in, tables, frame, ray, g0, g1);
 }
@@ -94,13 +94,14 @@ inline float3 moments_rows(global const epipolar_t* ep, global const prefix_t* r
                            global const float* texture0, global const float* texture1)
 {
     int n = ep->gamma_samples;
+    gamma_texels_t texels = gamma_texels_of(ep);
     float3 radiance = (float3)(0.0f);
     float chunk = (gamma_end - gamma_begin) / (float)MOMENT_CHUNKS;
     float run_start = -1.0f; /* γ ≥ 0 where a run of wholly lit parts began */
     for (int c = 0; c < MOMENT_CHUNKS; ++c) {
         float g0 = gamma_begin + c * chunk, g1 = c + 1 == MOMENT_CHUNKS ? gamma_end : g0 + chunk;
-        int i0 = clamp((int)floor(g0 / ep->gamma_step), 0, n);
-        int i1 = clamp((int)ceil(g1 / ep->gamma_step), i0, n);
+        int i0 = clamp((int)floor(gamma_texel_coord(texels, g0)), 0, n);
+        int i1 = clamp((int)ceil(gamma_texel_coord(texels, g1)), i0, n);
         float lit = 1.0f;
         if (i1 > i0) {
             prefix_scalar_t count = (prefix_scalar_t)(i1 - i0);
@@ -113,16 +114,16 @@ inline float3 moments_rows(global const epipolar_t* ep, global const prefix_t* r
             continue;
         }
         if (run_start >= 0.0f) {
-            radiance += chunk_radiance(in, tables, frame, ray, features, texture0, texture1, t, ep->gamma_step,
+            radiance += chunk_radiance(in, tables, frame, ray, features, texture0, texture1, t, texels,
                                        run_start, g0);
             run_start = -1.0f;
         }
         if (lit > 0.0f)
-            radiance += lit * chunk_radiance(in, tables, frame, ray, features, texture0, texture1, t, ep->gamma_step,
+            radiance += lit * chunk_radiance(in, tables, frame, ray, features, texture0, texture1, t, texels,
                                              g0, g1);
     }
     if (run_start >= 0.0f)
-        radiance += chunk_radiance(in, tables, frame, ray, features, texture0, texture1, t, ep->gamma_step, run_start,
+        radiance += chunk_radiance(in, tables, frame, ray, features, texture0, texture1, t, texels, run_start,
                                    gamma_end);
     return radiance;
 }

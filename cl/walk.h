@@ -6,6 +6,7 @@
 #ifndef CLRAYS_WALK_H
 #define CLRAYS_WALK_H
 
+#include "gamma_texels.h"
 #include "integrand.h"
 #include "light_texture.h"
 #include "minmax.h"
@@ -21,13 +22,13 @@
  * this row when it has one. */
 inline float3 unweighted_run_radiance(global const integrand_t* in, global const float* tables,
                                       global const frame_t* frame, const integrand_row_t* ray,
-                                      const walk_features_t* features, global const float* row_prefix, float gamma_step,
-                                      float gamma0, float gamma1)
+                                      const walk_features_t* features, global const float* row_prefix,
+                                      gamma_texels_t texels, float gamma0, float gamma1)
 {
     float3 untextured = segment_radiance(in, tables, frame, ray, gamma0, gamma1);
 #ifdef LIGHT_TEXTURE
     if (!features->textured->textured || !(gamma1 > gamma0)) return untextured;
-    return textured_run_radiance(features->textured, features->basis, row_prefix, gamma_step, ray, untextured, gamma0,
+    return textured_run_radiance(features->textured, features->basis, row_prefix, texels, ray, untextured, gamma0,
                                  gamma1);
 #else
     return untextured;
@@ -40,14 +41,14 @@ inline float3 unweighted_run_radiance(global const integrand_t* in, global const
  * camera side). Piece j is [piece_gamma[j], piece_gamma[j + 1]). */
 inline float3 run_radiance(global const integrand_t* in, global const float* tables, global const frame_t* frame,
                            const integrand_row_t* ray, const walk_features_t* features, global const float* row_prefix,
-                           float gamma_step, float gamma0, float gamma1)
+                           gamma_texels_t texels, float gamma0, float gamma1)
 {
     float3 radiance = (float3)(0.0f);
     for (int j = 0; j <= WALK_PIECES; ++j) {
         float begin = fmax(gamma0, features->piece_gamma[j]), end = fmin(gamma1, features->piece_gamma[j + 1]);
         if (end > begin)
             radiance += features->piece_weight[j].xyz
-                        * unweighted_run_radiance(in, tables, frame, ray, features, row_prefix, gamma_step, begin, end);
+                        * unweighted_run_radiance(in, tables, frame, ray, features, row_prefix, texels, begin, end);
     }
     return radiance;
 }
@@ -197,10 +198,11 @@ inline float3 walk_row(global const epipolar_t* ep, global const float2* row, co
 {
     float beta = ray->beta;
     int n = ep->gamma_samples;
-    int end = inline_min(n, (int)-inline_floor(-(gamma_end / ep->gamma_step))); /* ceil */
+    gamma_texels_t texels = gamma_texels_of(ep);
+    int end = inline_min(n, (int)-inline_floor(-gamma_texel_coord(texels, gamma_end))); /* ceil */
     float3 radiance = (float3)(0.0f);
     int run_start = -1, run_end = 0;
-    int position = inline_clamp_int((int)inline_floor(gamma_begin / ep->gamma_step), 0, n);
+    int position = inline_clamp_int((int)inline_floor(gamma_texel_coord(texels, gamma_begin)), 0, n);
     while (position < end) {
         int size;
         int lit;
@@ -222,17 +224,17 @@ inline float3 walk_row(global const epipolar_t* ep, global const float2* row, co
             if (run_start < 0) run_start = position;
             run_end = position + size;
         } else if (run_start >= 0) {
-            radiance += run_radiance(in, tables, frame, ray, features, row_prefix, ep->gamma_step,
-                                     inline_fmax(run_start * ep->gamma_step, gamma_begin),
-                                     inline_fmin(run_end * ep->gamma_step, gamma_end));
+            radiance += run_radiance(in, tables, frame, ray, features, row_prefix, texels,
+                                     inline_fmax(gamma_at_texel(texels, (float)run_start), gamma_begin),
+                                     inline_fmin(gamma_at_texel(texels, (float)run_end), gamma_end));
             run_start = -1;
         }
         position += size;
     }
     if (run_start >= 0)
-        radiance += run_radiance(in, tables, frame, ray, features, row_prefix, ep->gamma_step,
-                                 inline_fmax(run_start * ep->gamma_step, gamma_begin),
-                                 inline_fmin(run_end * ep->gamma_step, gamma_end));
+        radiance += run_radiance(in, tables, frame, ray, features, row_prefix, texels,
+                                 inline_fmax(gamma_at_texel(texels, (float)run_start), gamma_begin),
+                                 inline_fmin(gamma_at_texel(texels, (float)run_end), gamma_end));
     return radiance;
 }
 

@@ -67,6 +67,34 @@ FAR_DEVICE_MAX = 1e18
 # stays finite; only rays within 1e-9 rad of the eye–light axis see the clamp.
 SIN_BETA_MIN = 1e-9
 
+# A point or spot light's γ texels are even in u ∈ [0, N], γ = γ_max·t·(1 − W + W·t), t = u/N
+# (epipolar_t.gamma_warp, cl/gamma_texels.h, texel_gamma below): W = 0.7 makes the texels
+# next to the eye's light ray (γ = 0) 0.3× the even width and those at γ_max 1.7×. Along a
+# camera ray at angle β from the light, ds/dγ = d²/(d_el·sin β): rays close to the light's
+# direction cover long stretches with the first texels (orbit.yaml frame 10, 0.80 → 0.49 %
+# at 640×360; bench/RESULTS.md, "γ texels finer near the eye's light ray, kept"). A
+# quadratic, not γ0·(e^{K·u/N} − 1): the walks evaluate it and its inverse (a square root)
+# at every run, and log1p and expm1 there cost traverse about a third more on PoCL. A
+# directional light's γ is a length with ds/dγ = 1/sin β, the same all along: its texels
+# stay even (W = 0).
+GAMMA_TEXEL_WARP = 0.7
+
+
+def texel_gamma(gamma_step: float, n: int, u, warp: float) -> np.ndarray:
+    """γ at texel coordinate u of a row of n texels (float64; the start of texel u for an
+    integer u, 0 at u = 0): u·gamma_step·(1 − W + W·u/n), W = warp; as cl/gamma_texels.h
+    gamma_at_texel."""
+    u = np.asarray(u, dtype=np.float64)
+    return u * float(gamma_step) * (1.0 - warp + warp * u / n)
+
+
+def texel_coordinate(gamma_step: float, n: int, gamma, warp: float) -> np.ndarray:
+    """The texel coordinate u of γ, `texel_gamma`'s inverse (cl/gamma_texels.h gamma_texel_coord)."""
+    x = np.asarray(gamma, dtype=np.float64) / float(gamma_step)
+    even = 1.0 - warp
+    return 2.0 * x / (even + np.sqrt(even * even + 4.0 * warp * x / n))
+
+
 # raster: a triangle spanning more than RASTER_BIG_ROWS rows of a view (a floor plane)
 # is listed by the first pass instead of looping over its rows alone; up to
 # RASTER_BIG_TRIANGLES of them per launch, the rest draw their own rows.
@@ -160,7 +188,7 @@ epipolar_dtype = np.dtype([
     ("axis", _f4), ("u", _f4), ("w", _f4),
     ("d_el", np.float32), ("alpha_min", np.float32), ("alpha_step", np.float32), ("slices", np.int32),
     ("gamma_step", np.float32), ("gamma_samples", np.int32), ("levels", np.int32), ("light_index", np.int32),
-    ("full_circle", np.int32), ("_pad0", np.int32), ("_pad1", np.int32), ("_pad2", np.int32),
+    ("full_circle", np.int32), ("gamma_warp", np.float32), ("_pad1", np.int32), ("_pad2", np.int32),
 ])
 
 integrand_dtype = np.dtype([

@@ -83,8 +83,8 @@ def pack_light_textures(scene, eye_ws: np.ndarray) -> tuple[np.ndarray, np.ndarr
 @dataclass(frozen=True)
 class GammaBasis:
     """sinβ·I(β, γ) ≈ Σ_i B_i(β)·Γ_i(γ) per channel (float64): B (3, rank, n_beta) on the sin²
-    β nodes over [beta_min, beta_max], Γ (3, rank, n) at the centres of n cells of
-    gamma_step, P (3, rank, n + 1) = gamma_step·cumsum(Γ), 0 first."""
+    β nodes over [beta_min, beta_max], Γ (3, rank, n) at the centres of the n γ cells of a
+    row (structs.texel_gamma), P (3, rank, n + 1) = cumsum(cell width·Γ), 0 first."""
 
     basis_beta: np.ndarray
     gamma: np.ndarray
@@ -94,7 +94,8 @@ class GammaBasis:
     rank: int
 
 
-def gamma_basis(light_kind, medium, power, d_el, beta_min, beta_max, gamma_step, n, n_beta, rank) -> GammaBasis:
+def gamma_basis(light_kind, medium, power, d_el, beta_min, beta_max, gamma_step, n, n_beta, rank,
+                gamma_warp=0.0) -> GammaBasis:
     """The truncated SVD of K = sinβ·I(β, γ) (docs/integrand.md's I, in the tree's γ: the
     light angle, or s·sinβ for a directional light) sampled on SVD_SAMPLES² nodes (β on
     sin²-spaced nodes, γ at cell centres over [0, n·gamma_step]), extended to the n_beta
@@ -118,7 +119,7 @@ def gamma_basis(light_kind, medium, power, d_el, beta_min, beta_max, gamma_step,
     gamma_samples = (np.arange(SVD_SAMPLES) + 0.5) * (gamma_max / SVD_SAMPLES)
     samples = k(beta_samples, gamma_samples)
     beta_rows = _beta_nodes(beta_min, beta_max, n_beta)
-    cells = (np.arange(n) + 0.5) * gamma_step
+    cells = structs.texel_gamma(gamma_step, n, np.arange(n) + 0.5, gamma_warp)
     at_rows, at_cells = k(beta_rows, gamma_samples), k(beta_samples, cells)
     basis_beta = np.zeros((3, rank, n_beta))
     gamma = np.zeros((3, rank, n))
@@ -136,7 +137,8 @@ def gamma_basis(light_kind, medium, power, d_el, beta_min, beta_max, gamma_step,
         basis_beta[1:] = basis_beta[0] * (amplitude[1:] / amplitude[0])[:, None, None]
         gamma[1:] = gamma[0]
     prefix = np.zeros((3, rank, n + 1))
-    prefix[..., 1:] = gamma_step * np.cumsum(gamma, axis=-1)
+    widths = np.diff(structs.texel_gamma(gamma_step, n, np.arange(n + 1), gamma_warp))
+    prefix[..., 1:] = np.cumsum(widths * gamma, axis=-1)
     return GammaBasis(basis_beta, gamma, prefix, float(beta_min), float(beta_max), rank)
 
 
@@ -175,7 +177,8 @@ def light_texture(device: Device, buffers: FrameBuffers, light_index: int, epipo
     rank = scene.render.svd_rank
     basis = gamma_basis("directional" if directional else "point", scene.medium,
                         light.irradiance if directional else light.intensity, epipolar.d_el,
-                        epipolar.beta_min, epipolar.beta_max, gamma_step, n, n_beta, rank)
+                        epipolar.beta_min, epipolar.beta_max, gamma_step, n, n_beta, rank,
+                        epipolar.gamma_warp)
     params = np.zeros(1, dtype=structs.textured_integrand_dtype)
     params["beta_min"], params["beta_max"] = basis.beta_min, basis.beta_max
     params["n_beta"], params["rank"], params["gamma_samples"], params["slices"] = n_beta, rank, n, slices

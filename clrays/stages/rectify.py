@@ -112,6 +112,11 @@ class Epipolar:
     def gamma_step(self) -> float:
         return self.visible.host()[3]
 
+    @property
+    def gamma_warp(self) -> float:
+        """W of the γ texels' spacing (structs.GAMMA_TEXEL_WARP; 0, even, for a directional light)."""
+        return float(self.params["gamma_warp"])
+
 
 def slice_basis(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unit u, w with (u, w, axis) orthonormal: α = atan2(v·w, v·u)."""
@@ -183,6 +188,8 @@ def epipolar_frame(scene, buffers: FrameBuffers, light_index: int) -> np.ndarray
     params["alpha_min"], params["alpha_step"], params["slices"] = alpha_min, span / slices, slices
     params["gamma_samples"], params["levels"] = gamma_samples, int(math.log2(gamma_samples))
     params["light_index"], params["full_circle"] = light_index, int(full)
+    # γ texels finer near the eye's light ray for a point or spot light (gamma_texels.h)
+    params["gamma_warp"] = 0.0 if isinstance(light, DirectionalLight) else structs.GAMMA_TEXEL_WARP
     return params
 
 
@@ -197,10 +204,15 @@ def slice_sides(params: np.ndarray) -> np.ndarray:
 
 
 def texel_angles(params: np.ndarray, gamma_step: float) -> np.ndarray:
-    """(gamma_samples, 4) float32: (γ, cos γ, sin γ, 0) of each texel of a row: its centre,
-    texel 0 at γ = 0 (cl/rectify.cl rectify); what rectify_ranges writes on the device."""
+    """(gamma_samples, 4) float32: (γ, cos γ, sin γ, 0) of each texel of a row: its centre
+    (structs.texel_gamma), texel 0 at γ = 0 (cl/rectify.cl rectify); what rectify_ranges
+    writes on the device."""
     n = int(params["gamma_samples"])
-    gamma = (np.arange(n, dtype=np.float32) + np.float32(0.5)) * np.float32(gamma_step)
+    warp = float(params["gamma_warp"])
+    if warp > 0:  # float64, as rectify_ranges in double
+        gamma = structs.texel_gamma(gamma_step, n, np.arange(n) + 0.5, warp).astype(np.float32)
+    else:
+        gamma = (np.arange(n, dtype=np.float32) + np.float32(0.5)) * np.float32(gamma_step)
     gamma[0] = 0.0
     angles = np.zeros((n, 4), dtype=np.float32)
     angles[:, 0], angles[:, 1], angles[:, 2] = gamma, np.cos(gamma.astype(float)), np.sin(gamma.astype(float))

@@ -14,6 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from clrays.scene.camera import primary_rays
+from clrays.structs import texel_coordinate, texel_gamma
 from clrays.device import StageTimer
 from clrays.inputs import frame_inputs, upload
 from clrays.stages.integrand import segment_radiance
@@ -192,6 +193,7 @@ def walk_in_float64(scene, epipolar, tables, rows, depth) -> np.ndarray:
     params = epipolar.params
     axis, u, w = (params[name][:3].astype(np.float64) for name in ("axis", "u", "w"))
     d_el, step = float(params["d_el"]), epipolar.gamma_step  # (the step is made on the device)
+    warp = epipolar.gamma_warp
     slices, samples_per_row = int(params["slices"]), int(params["gamma_samples"])
     alpha_min, alpha_step = float(params["alpha_min"]), float(params["alpha_step"])
     directional = isinstance(light, DirectionalLight)
@@ -234,14 +236,16 @@ def walk_in_float64(scene, epipolar, tables, rows, depth) -> np.ndarray:
         for which, weight in ((0, 1.0 - blend[sample]), (1, blend[sample])):
             row = rows[near[which][sample]]
             for low, high in ((gamma_begin[sample], lamp0[sample]), (lamp1[sample], gamma_end[sample])):
-                start = min(max(int(math.floor(low / step)), 0), samples_per_row)
-                stop = min(samples_per_row, int(math.ceil(high / step)))
+                start = min(max(int(math.floor(texel_coordinate(step, samples_per_row, low, warp))), 0),
+                            samples_per_row)
+                stop = min(samples_per_row, int(math.ceil(texel_coordinate(step, samples_per_row, high, warp))))
                 if stop <= start:
                     continue
                 lit = np.concatenate([[False], row[start:stop] > beta[sample], [False]])
                 edges = np.flatnonzero(np.diff(lit.astype(np.int8)))
                 for run_start, run_end in zip(edges[0::2] + start, edges[1::2] + start):
-                    segments.append((sample, weight, max(run_start * step, low), min(run_end * step, high)))
+                    segments.append((sample, weight, max(texel_gamma(step, samples_per_row, run_start, warp), low),
+                                     min(texel_gamma(step, samples_per_row, run_end, warp), high)))
     radiance = np.zeros((len(dirs), 3))
     if segments:
         sample, weight, gamma0, gamma1 = (np.array(column) for column in zip(*segments))

@@ -33,7 +33,7 @@ LIGHTS = {
 def _light_rays(scene, params, n, slices):
     """World-space points on the light ray of each (slice, cell centre), as the kernel takes them."""
     alpha = params["alpha_min"] + (np.arange(slices) + 0.5) * params["alpha_step"]
-    gamma = (np.arange(n) + 0.5) * params["gamma_step"]
+    gamma = structs.texel_gamma(float(params["gamma_step"]), n, np.arange(n) + 0.5, float(params["gamma_warp"]))
     r = (np.cos(alpha)[:, None, None] * params["u"][:3].astype(np.float64)
          + np.sin(alpha)[:, None, None] * params["w"][:3].astype(np.float64))
     axis = params["axis"][:3].astype(np.float64)
@@ -57,16 +57,17 @@ def test_rectified_texture_and_prefix_sums_match_numpy(device, kind):
     points = _light_rays(scene, device.read(epipolar.buffer, (), structs.epipolar_dtype), n, slices)
     expected = host_texture(scene.lights[0], points.reshape(-1, 3)).reshape(slices, n, 3)
     prefix = device.read(texture.prefix, (slices, 3, rank + 1, n + 1), np.float32).astype(np.float64)
-    step = epipolar.gamma_step
-    rectified = np.diff(prefix[:, :, 0], axis=-1).transpose(0, 2, 1) / step  # term 0 is ∫T
+    step, warp = epipolar.gamma_step, epipolar.gamma_warp
+    widths = np.diff(structs.texel_gamma(step, n, np.arange(n + 1), warp))  # each γ cell's length
+    rectified = (np.diff(prefix[:, :, 0], axis=-1) / widths).transpose(0, 2, 1)  # term 0 is ∫T
     # Texel lookups of float32 coordinates: a texel of 2 changes by 2·Δx per texel of Δx.
     np.testing.assert_allclose(rectified, expected, atol=2e-3 * TEXELS.max())
     basis = gamma_basis("directional" if kind == "directional" else "point", scene.medium,
                         LIGHTS[kind].irradiance if kind == "directional" else LIGHTS[kind].intensity,
                         epipolar.d_el, epipolar.beta_min, epipolar.beta_max, step, n,
-                        max(tables.tables.n_beta, 16), rank)
+                        max(tables.tables.n_beta, 16), rank, warp)
     for term in range(1, rank + 1):
-        cumulative = step * np.cumsum(rectified.transpose(0, 2, 1) * basis.gamma[None, :, term - 1], axis=-1)
+        cumulative = np.cumsum(widths * rectified.transpose(0, 2, 1) * basis.gamma[None, :, term - 1], axis=-1)
         scale = np.abs(cumulative).max()
         np.testing.assert_allclose(prefix[:, :, term, 1:], cumulative, atol=1e-5 * scale)
 

@@ -110,7 +110,8 @@ def numpy_rectify(inputs, params, shadow) -> np.ndarray:
     views = inputs.views
     n, slices = int(params["gamma_samples"]), int(params["slices"])
     alpha = float(params["alpha_min"]) + (np.arange(slices) + 0.5) * float(params["alpha_step"])
-    gamma = (np.arange(n) + 0.5) * float(params["gamma_step"])
+    gamma = structs.texel_gamma(float(np.float32(params["gamma_step"])), n, np.arange(n) + 0.5,
+                                float(params["gamma_warp"]))
     gamma[0] = 0.0  # texel 0 is the eye's own light ray
     alpha, gamma = np.meshgrid(alpha, gamma, indexing="ij")
     alpha, gamma = alpha.ravel(), gamma.ravel()
@@ -243,6 +244,7 @@ def test_device_ranges_are_the_host_rules_bits(device, kind):
     on_device = device.read(epipolar.buffer, (), structs.epipolar_dtype)
     assert on_device["gamma_step"] == np.float32(gamma_max / int(epipolar.params["gamma_samples"]))
     assert on_device["gamma_step"] == np.float32(gamma_step)
+    assert on_device["gamma_warp"] == np.float32(0.0 if kind == "directional" else structs.GAMMA_TEXEL_WARP)
     ranges = device.read(epipolar.visible.ranges, 4, np.float32)
     expected = np.array([beta_min, beta_max, gamma_max, 1.0 / max(beta_max - beta_min, 1e-6)]).astype(np.float32)
     np.testing.assert_array_equal(ranges, expected)
@@ -295,3 +297,19 @@ def test_no_visible_extent_in_gamma_adds_nothing(device, monkeypatch, light, wal
     assert built[0].gamma_max == 0.0 and built[0].gamma_step == np.float32(1 / 16) and built[1].gamma_max > 0
     assert np.all(result.passes["in_scatter_light0"] == 0.0)
     assert np.all(result.passes["in_scatter_light1"] > 0) and np.all(np.isfinite(result.image))
+
+
+def test_gamma_texels_grow_from_the_eyes_light_ray():
+    """A point or spot light's γ texels span [0, N·gamma_step] (structs.texel_gamma), finest at
+    γ = 0 and growing evenly: with W = 0.7 the first is 0.3 of the even width, the last 1.7;
+    texel_coordinate inverts texel_gamma."""
+    n, step, warp = 1024, 3e-3, structs.GAMMA_TEXEL_WARP
+    edges = structs.texel_gamma(step, n, np.arange(n + 1), warp)
+    widths = np.diff(edges)
+    assert edges[0] == 0.0 and edges[-1] == pytest.approx(n * step, rel=1e-12)
+    assert np.all(widths > 0) and np.all(np.diff(widths) > 0)
+    assert widths[0] / step == pytest.approx(0.3, abs=1e-3) and widths[-1] / step == pytest.approx(1.7, abs=1e-3)
+    np.testing.assert_allclose(structs.texel_coordinate(step, n, edges, warp), np.arange(n + 1), atol=1e-9)
+    # A directional light's γ is a length, even along the ray: its texels stay even.
+    np.testing.assert_allclose(structs.texel_gamma(step, n, np.arange(n + 1), 0.0), step * np.arange(n + 1))
+    np.testing.assert_allclose(structs.texel_coordinate(step, n, step * np.arange(n + 1), 0.0), np.arange(n + 1))
