@@ -63,3 +63,48 @@ def primary_rays(camera: Camera, image: Image, offsets: np.ndarray | None = None
     sy = (1 - 2 * ys / image.height) * tan_half  # (H, 1, S)
     d = (forward[None, None, None, :] + sx[..., None] * right + sy[..., None] * up)
     return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def slice_basis(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit u, w with (u, w, axis) orthonormal: α = atan2(v·w, v·u)."""
+    helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    u = np.cross(axis, helper)
+    u /= np.linalg.norm(u)
+    return u, np.cross(axis, u)
+
+
+def poles_on_screen(scene, axis: np.ndarray) -> tuple[bool, bool]:
+    """Whether the epipole (the direction `axis`) and the anti-epipole (`-axis`) are on screen."""
+    camera, image = scene.camera, scene.image
+    right, up, forward = camera_basis(camera)
+    tan_x, tan_y = half_extents(camera, image)
+    on_screen = []
+    for pole in (axis, -axis):
+        depth = pole @ forward
+        on_screen.append(bool(depth > 0 and abs(pole @ right / depth) <= tan_x and abs(pole @ up / depth) <= tan_y))
+    return on_screen[0], on_screen[1]
+
+
+def slice_fan(scene, axis: np.ndarray, u: np.ndarray, w: np.ndarray) -> tuple[float, float, bool]:
+    """(alpha_min, alpha_span, full_circle): the slice angles that rays through the
+    screen take. When the epipole (axis) or anti-epipole (-axis) is on screen the slices
+    close the circle; otherwise α is continuous over the screen and its range is the
+    circle minus the largest gap between the angles of rays along the screen border."""
+    camera, image = scene.camera, scene.image
+    right, up, forward = camera_basis(camera)
+    tan_x, tan_y = half_extents(camera, image)
+    if any(poles_on_screen(scene, axis)):
+        return -math.pi, 2 * math.pi, True
+    edge = np.linspace(-1.0, 1.0, 4 * max(image.width, image.height) + 1)
+    ones = np.ones_like(edge)
+    border = np.concatenate([np.stack([edge, ones]), np.stack([edge, -ones]),
+                             np.stack([ones, edge]), np.stack([-ones, edge])], axis=1)
+    dirs = forward[:, None] + right[:, None] * (border[0] * tan_x) + up[:, None] * (border[1] * tan_y)
+    alpha = np.sort(np.arctan2(w @ dirs, u @ dirs))
+    gaps = np.diff(np.concatenate([alpha, alpha[:1] + 2 * math.pi]))
+    largest = int(np.argmax(gaps))
+    start = alpha[(largest + 1) % len(alpha)]
+    span = 2 * math.pi - gaps[largest]
+    # A margin of 1% keeps border pixels between two slices rather than past the last one.
+    margin = 0.01 * span + 1e-6
+    return float(start - margin), float(min(span + 2 * margin, 2 * math.pi)), False

@@ -224,13 +224,13 @@ def texture_texel_length(light) -> float | None:
 
 def directional_texture_reach(scene: Scene, light) -> tuple[float, float]:
     """(fan, reach) of a directional light's epipolar frame as the camera sees it: the angle
-    its slices span around the eye's line along the light (`stages.rectify.slice_fan`: 2π
+    its slices span around the eye's line along the light (`scene.camera.slice_fan`: 2π
     when the sun or the antisun is on screen) and the farthest distance from that line at
     which the camera sees lit fog, γ's largest value: the scene bounds' farthest corner from
     the line, and no more than the effective far (where every ray ends). Fog seen past the
     scene's bounds is not counted: the geometry ends there and the pattern lies far off."""
     from ..physics.radiometry import effective_far
-    from ..stages.rectify import slice_basis, slice_fan  # the frame the rectify stage builds
+    from .camera import slice_basis, slice_fan  # the frame the rectify stage builds
 
     towards = -np.asarray(light.direction, dtype=np.float64)
     towards /= np.linalg.norm(towards)

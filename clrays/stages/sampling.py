@@ -21,7 +21,8 @@ from ..scene.camera import camera_basis, half_extents
 from .integrand import DeviceIntegrand
 from .features import WalkFeature, feature_args, feature_defines
 from .raster import RasterResult
-from .rectify import Epipolar, poles_on_screen, slice_sides
+from ..scene.camera import poles_on_screen
+from .rectify import Epipolar, slice_sides
 
 
 class SampleCounts:

@@ -15,7 +15,7 @@ from clrays.scene.costs import (MAX_TEXTURE_GAMMA_SAMPLES, MAX_TEXTURE_SLICES, T
 from clrays.scene.fields import RENDER
 from clrays.scene.load import load_scene
 from clrays.scene.model import DirectionalLight, Image, LightTexture, PointLight, Render, SpotLight
-from clrays.stages.rectify import slice_basis, slice_fan
+from clrays.scene.camera import slice_basis, slice_fan
 from tests.conftest import grid_plane, make_scene
 
 ROOT = Path(__file__).resolve().parents[2]
