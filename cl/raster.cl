@@ -396,14 +396,30 @@ inline int big_rectangle(const float2 corner[4], int count, int y0, int y1)
  * enough): it draws its block of every triangle pass 1 listed. Pass 1 has finished, and no
  * other work-item touches these samples, so the updates need no atomics (OWNED_BODY), and a
  * run of RASTER_LANES samples of one row inside the block can be read, updated and written
- * as one vector (LANES_BODY). The list's length is read here, from pass 1's counter (which
- * counts the triangles it found no room for too): the host enqueues this pass without
- * waiting to learn it, and with an empty list every work-item returns at once. */
+ * as one vector (LANES_BODY).
+ * With RASTER_COUNT_ON_DEVICE (clrays.stages.raster.raster_count_on_device: a GPU) the
+ * list's length is read here, from pass 1's counter (which counts the triangles it found
+ * no room for too): the host enqueues this pass without waiting to learn it, and with an
+ * empty list every work-item returns at once. Without it (a CPU device) the host reads the
+ * counters and passes the length, an argument every work-item shares: PoCL keeps a loop
+ * over it uniform across the work-items it runs together, and read on the device the
+ * length made the camera's rows pass take 1.6× its time. */
+#ifndef RASTER_COUNT_ON_DEVICE
+#define RASTER_COUNT_ON_DEVICE 1
+#endif
+#if RASTER_COUNT_ON_DEVICE
+#define RASTER_BIG_COUNT_ARG global const uint* big_counter
+#define RASTER_BIG_COUNT                                                                    \
+    int big_count = (int)min(*big_counter, (uint)RASTER_BIG_TRIANGLES);                     \
+    if (big_count == 0) return;
+#else
+#define RASTER_BIG_COUNT_ARG int big_count
+#define RASTER_BIG_COUNT
+#endif
 #define FOR_EACH_COVERED_SAMPLE_OF_OWNED_ROWS(OWNED_BODY, LANES_BODY)                        \
     int row0 = get_global_id(0) * RASTER_ROWS_PER_ITEM;                                     \
     int column0 = get_global_id(1) * columns_per_item;                                      \
-    int big_count = (int)min(*big_counter, (uint)RASTER_BIG_TRIANGLES);                     \
-    if (big_count == 0) return;                                                             \
+    RASTER_BIG_COUNT                                                                        \
     if (row0 >= views[view_index].height || column0 >= views[view_index].width) return;    \
     int row1 = min(row0 + RASTER_ROWS_PER_ITEM, views[view_index].height) - 1;              \
     int column1 = min(column0 + columns_per_item, views[view_index].width) - 1;             \
@@ -423,7 +439,7 @@ inline int big_rectangle(const float2 corner[4], int count, int y0, int y1)
 
 #define RASTER_ROWS_ARGS global const float4* tri_vertices, global const view_t* views, int view_index, \
                          global const float2* offsets, int sample_count, global const int* big,       \
-                         global const uint* big_counter, int columns_per_item
+                         RASTER_BIG_COUNT_ARG, int columns_per_item
 
 /* Each pass-1 kernel `name` has a pass-2 twin `name_rows`. */
 #define RASTER_KERNELS(name, TARGET, BODY, OWNED_BODY, LANES_BODY)                          \

@@ -58,12 +58,24 @@ def raster_big_samples(device: Device) -> int:
     return 0 if device.is_cpu else RASTER_BIG_SAMPLES_GPU
 
 
+def raster_count_on_device(device: Device) -> bool:
+    """Whether a rows pass reads its list's length on the device, so that the host enqueues
+    both passes without waiting (a GPU, which a wait leaves idle), or the host reads the
+    lengths, once for every view, and passes each as an argument (a CPU device: PoCL runs
+    a loop over an argument uniformly across the work-items it runs together, and over a
+    length read on the device the camera's rows pass took 1.6× its time; bench/RESULTS.md,
+    "The host's waits inside a frame")."""
+    return not device.is_cpu
+
+
 def raster_defines(device: Device, defines: dict | None = None) -> dict | None:
     """`defines` for a program built from cl/raster.cl on `device`, with RASTER_BIG_SAMPLES
-    where the device lists wide triangles: every kernel of the program takes the same, so
-    the program is built once."""
+    where the device lists wide triangles, and RASTER_COUNT_ON_DEVICE 0 where the host reads
+    the lists' lengths: every kernel of the program takes the same, so the program is built
+    once."""
     big_samples = raster_big_samples(device)
-    return {**(defines or {}), "RASTER_BIG_SAMPLES": big_samples} if big_samples else defines
+    defines = {**(defines or {}), "RASTER_BIG_SAMPLES": big_samples} if big_samples else defines
+    return defines if raster_count_on_device(device) else {**(defines or {}), "RASTER_COUNT_ON_DEVICE": 0}
 
 
 def raster_passes(device: Device, program: str, name: str, defines: dict | None, vertices, count: int, views,
@@ -76,13 +88,14 @@ def raster_passes(device: Device, program: str, name: str, defines: dict | None,
     `raster_big_samples` pixels) with their rows; `name_rows` draws those with one
     work-item per block of RASTER_ROWS_PER_ITEM rows by `raster_rows_columns` columns of
     the view, which owns its block (docs/design.md §4.1).
-    The rows pass reads its list's length from the counter pass 1 leaves on the device, so
-    both passes of every view are enqueued without the host waiting: a wait for the
-    counts drained the queue twice a frame (camera and shadow map), and on a GPU left the
-    device idle meanwhile. A view whose list is empty still launches its rows pass, whose
-    work-items return at once. Pass 1 lists every view before any rows pass runs; the
-    views have texels of their own, and every update is a min or a max, which no order
-    changes."""
+    On a GPU (`raster_count_on_device`) the rows pass reads its list's length from the
+    counter pass 1 leaves on the device, so both passes of every view are enqueued without
+    the host waiting: a wait for the counts drains the queue twice a frame (camera and
+    shadow map), and leaves a GPU idle meanwhile; a view whose list is empty still launches
+    its rows pass, whose work-items return at once. On a CPU device the host waits once for
+    every view's count and launches the rows passes of the views that listed any. Pass 1
+    lists every view before any rows pass runs; the views have texels of their own, and
+    every update is a min or a max, which no order changes."""
     if count == 0 or not view_indices:
         return
     capacity = min(count, structs.RASTER_BIG_TRIANGLES)  # a triangle lists itself at most once
@@ -94,7 +107,12 @@ def raster_passes(device: Device, program: str, name: str, defines: dict | None,
         timer.add(stage, first_pass(device.queue, (count,), None, vertices, np.int32(count), views,
                                     np.int32(view_index), offsets, np.int32(sample_count), *lists[-1], *target))
     rows_pass = device.kernel(program, f"{name}_rows", defines)
-    for view_index, (height, width), (big_count, big) in zip(view_indices, view_sizes, lists):
+    on_device = raster_count_on_device(device)
+    counts = [counter for counter, _ in lists] if on_device else \
+        [np.int32(min(int(listed[0]), capacity)) for listed in device.read_all([(c, 1) for c, _ in lists], np.uint32)]
+    for view_index, (height, width), (_, big), big_count in zip(view_indices, view_sizes, lists, counts):
+        if not on_device and not big_count:
+            continue
         columns = raster_rows_columns(device, width)
         timer.add(stage, rows_pass(
             device.queue, (-(-height // structs.RASTER_ROWS_PER_ITEM), -(-width // columns)), None, vertices,

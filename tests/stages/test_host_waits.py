@@ -19,16 +19,18 @@ SCENES = Path(__file__).resolve().parents[2] / "scenes"
 BENCH_SCENES = ("demo", "bunny", "behind", "sun")
 
 #: Waits of a default frame of each bench scene at 96×54 (method minmax, epipolar
-#: sampling, exact surface shadows), each named by the function that waits:
+#: sampling, exact surface shadows) on a CPU device, each named by the function that waits:
+#: - raster_passes (stages/raster.py): the lists' lengths of every view, before the rows
+#:   passes, once for the camera and once for the shadow maps, 2 (on a GPU none:
+#:   raster.raster_count_on_device, below);
 #: - visibility (stages/visibility.py): the shadow rays' count and route, once the listed
 #:   ways are enqueued: on a CPU device the host builds the BVH (on the host for reliefs)
 #:   only where the route asks for it, 1 (on a GPU none: visibility.bvh_ahead, below);
 #: - _read (session.py, PendingFrame.result): the image, whose read shade enqueued, 1.
-#: None comes from raster's rows passes, epipolar sampling, or visibility's bound passes and
-#: rays' lists.
-WAITS_96x54 = {"visibility": 1, "_read": 1}
-FREE_OF_WAITS = ("map_is_empty", "rectify", "integrand", "raster_passes", "epipolar_sampling", "fixup_list",
-                 "_bound_passes", "ray_lists")
+#: None comes from epipolar sampling, or visibility's bound passes and rays' lists.
+WAITS_96x54 = {"raster_passes": 2, "visibility": 1, "_read": 1}
+FREE_OF_WAITS = ("map_is_empty", "rectify", "integrand", "epipolar_sampling", "fixup_list", "_bound_passes",
+                 "ray_lists")
 DEVICE_READS = ("read", "read_all", "read_in_place")
 
 
@@ -146,17 +148,19 @@ def test_list_launches_give_the_same_image_in_either_shape(renderer, monkeypatch
 
 @pytest.mark.parametrize("name", BENCH_SCENES)
 @pytest.mark.parametrize("size", [(32, 18), (160, 90)])
-def test_a_bvh_built_ahead_gives_the_same_frame_without_the_wait(renderer, monkeypatch, name, size):
-    """As on a GPU (visibility.bvh_ahead): the BVH built before the rays' route is known and
-    its rays gated on the device, so visibility does not wait; the images and the shadow
-    rays counted are those of the frame that waits, whichever route the rays take (a
-    thumbnail's lists at 32×18, the BVH at 160×90)."""
-    from clrays.stages import visibility
+def test_a_gpus_frame_waits_once_for_the_same_image(renderer, monkeypatch, name, size):
+    """As on a GPU: the rows passes read their lists' lengths on the device
+    (raster.raster_count_on_device), and the BVH is built before the rays' route is known,
+    its rays gated on the device (visibility.bvh_ahead), so the frame waits for its image
+    alone; the image and the shadow rays counted are those of the frame that waits,
+    whichever route the rays take (a thumbnail's lists at 32×18, the BVH at 160×90)."""
+    from clrays.stages import raster, visibility
 
     scene = load_scene(SCENES / f"{name}.yaml", overrides=[f"image.width={size[0]}", f"image.height={size[1]}"])
     waiting = renderer.render(scene, reuse=False)
     monkeypatch.setattr(visibility, "bvh_ahead", lambda device: True)
+    monkeypatch.setattr(raster, "raster_count_on_device", lambda device: True)
     ahead = renderer.render(scene, reuse=False)
     assert np.array_equal(ahead.image, waiting.image)
     assert ahead.shadow_rays == waiting.shadow_rays and ahead.shadow_rays > 0
-    assert ahead.host_waits == waiting.host_waits - 1
+    assert (waiting.host_waits, ahead.host_waits) == (sum(WAITS_96x54.values()), 1)
