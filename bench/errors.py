@@ -22,7 +22,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from arguments import image_size  # noqa: E402  (bench/, beside this script)
+from arguments import frame_count, image_size  # noqa: E402  (bench/, beside this script)
 from clrays.runs.bench import DEFAULT_SCENES, error_pixels  # noqa: E402
 from clrays.runs.references import EXACT, ReferenceCache  # noqa: E402
 from clrays.errors import ClraysError  # noqa: E402
@@ -39,7 +39,7 @@ def main() -> None:
                                                       "(default: the scene's own method)")
     parser.add_argument("--frame", type=int, default=None, help="an animated scene's frame (default: its base frame)")
     parser.add_argument("--size", type=image_size, default="1280x720")
-    parser.add_argument("--pixels", type=int, default=4000)
+    parser.add_argument("--pixels", type=frame_count, default=4000)
     parser.add_argument("--cache", default=str(REPO / ".cache" / "references"))
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="a scene override, as `clrays render --set` (repeatable)")

@@ -101,7 +101,7 @@ def main() -> None:
                                                                            "minmax,volume_moments)")
     parser.add_argument("--frames", type=frame_count, default=5, help="timed frames (default 5)")
     parser.add_argument("--kernels", action="store_true", help="list the largest kernels of each row")
-    parser.add_argument("--pixels", type=int, default=4000, help="pixels the error is measured on (default 4000)")
+    parser.add_argument("--pixels", type=frame_count, default=4000, help="pixels the error is measured on (default 4000)")
     parser.add_argument("--cache", default=str(REPO / ".cache" / "references"), help="where exact's pixels are kept")
     args = parser.parse_args()
     check_scenes("gpu.py", args.scenes)
