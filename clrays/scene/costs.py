@@ -12,7 +12,8 @@ slices = perimeter (256) gives a p99 error of 6.5 % against `exact` and γ texel
 diagonal (128) 11.7 %, where 1024 × 1024 gives 2.4 %. Every size is rounded up to a power
 of two (sizes change in steps, not with every pixel) and clamped: below by what a shadow
 or a slice still resolves, above by the measured defaults of bench/RESULTS.md ("Choosing
-defaults"), so 64×48 and larger with a 1024 map render exactly as before.
+defaults"): 64×48 and larger get a 1024 map, 1024 slices and 1024 γ texels, unless a
+thin solid or a light's texture asks for more (below).
 
 A textured light asks for more: the rectified texture samples its image once per slice
 and γ texel, so neither may be coarser than the image's texels seen from the light (a
@@ -92,8 +93,13 @@ MAX_TEXTURE_GAMMA_SAMPLES = 1024
 TEXTURE_SIZES_BUDGET = 256 << 20
 
 
+#: The largest power of two a derived size is rounded to before its clamps: a ratio of
+#: scene values (a texture's texel of 1e-320, a box 1e-320 thin) can be infinite.
+MAX_POWER_OF_TWO = 1 << 30
+
+
 def _power_of_two_at_least(value: float) -> int:
-    return 1 << max(math.ceil(math.log2(max(value, 1.0))), 0)
+    return 1 << max(math.ceil(math.log2(min(max(value, 1.0), MAX_POWER_OF_TWO))), 0)
 
 
 def _clamped(value: float, low: int, high: int) -> int:
@@ -142,6 +148,16 @@ def thinnest_solid(geometry, light) -> float | None:
         side = 2 * max(np.linalg.norm(scene_hi - scene_lo) / 2, 1e-6) * 1.01  # inputs.frame_inputs' sphere
     else:
         towards = corners - np.asarray(light.position, dtype=np.float64)
+        if isinstance(light, SpotLight):  # a solid whose bounding sphere lies outside the cone casts nothing
+            axis = np.asarray(light.direction, dtype=np.float64) / np.linalg.norm(light.direction)
+            middle = towards.mean(axis=1)
+            distance = np.maximum(np.linalg.norm(middle, axis=1), 1e-300)
+            radius = np.linalg.norm(towards - middle[:, None], axis=2).max(axis=1)
+            off_axis = np.arccos(np.clip(middle @ axis / distance, -1.0, 1.0))
+            seen = off_axis - np.arcsin(np.minimum(radius / distance, 1.0)) <= math.radians(light.cone_deg)
+            if not seen.any():
+                return None
+            towards = towards[seen]
         centre = towards.mean(axis=1)
         centre /= np.maximum(np.linalg.norm(centre, axis=1, keepdims=True), 1e-300)
         along = np.einsum("sci,si->sc", towards, centre)

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from clrays.scene.costs import (MAX_OCCLUDER_SHADOW_MAP, OCCLUDER_MAP_GROWTH, OCCLUDER_TEXELS, thinnest_solid,
+from clrays.scene.costs import (MAX_OCCLUDER_SHADOW_MAP, MAX_TEXTURE_GAMMA_SAMPLES, MAX_TEXTURE_SLICES, OCCLUDER_MAP_GROWTH, OCCLUDER_TEXELS, thinnest_solid,
                                 with_derived_sizes)
 from clrays.scene.geometry import box_triangles
 from clrays.scene.load import load_scene
@@ -45,6 +45,27 @@ def test_a_slat_below_a_spot_and_the_sun():
     lo, hi = sun.geometry.bounds()
     sphere = 2 * np.linalg.norm(hi - lo) / 2 * 1.01  # the directional map's side (inputs.frame_inputs)
     assert thinnest_solid(sun.geometry, sun.lights[0]) == pytest.approx(0.01 / sphere, rel=1e-6)
+
+
+def test_a_spot_grows_its_map_only_for_a_slat_its_cone_can_reach():
+    """The slat below a 30° spot: the map grows (3.1 texels of 1024 across it: 2048) when the
+    spot looks down at it, also with the spot tilted 40° so that the slat's ends lie outside the
+    cone but its middle inside; not when the spot looks up, away from it."""
+    down = _slat_scene(SpotLight(v3(0, 6, 0), v3(0, -1, 0), 30.0, np.full(3, 30.0)))
+    tilted = _slat_scene(SpotLight(v3(0, 6, 0), v3(0, -math.cos(math.radians(40)), math.sin(math.radians(40))),
+                                   30.0, np.full(3, 30.0)))
+    away = _slat_scene(SpotLight(v3(0, 6, 0), v3(0, 1, 0), 30.0, np.full(3, 30.0)))
+    assert [with_derived_sizes(s).render.shadow_map for s in (down, tilted, away)] == [2048, 2048, 1024]
+    assert thinnest_solid(away.geometry, away.lights[0]) is None
+
+
+def test_a_vanishing_texel_is_bounded_by_the_caps():
+    """A texture tiled 1e-320 wide makes an infinite ratio of texels to the light's reach:
+    the derived sizes stop at their caps, with no overflow on the way."""
+    scene = load_scene(SCENES / "stained_glass.yaml", overrides=["image.width=32", "image.height=18",
+                                                                   "lights.0.texture_size=[1e-320, 1e-320]"])
+    render = with_derived_sizes(scene).render
+    assert (render.slices, render.gamma_samples) == (MAX_TEXTURE_SLICES, MAX_TEXTURE_GAMMA_SAMPLES)
 
 
 def test_growth_is_bounded_by_the_image_and_the_largest_map():
