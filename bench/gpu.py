@@ -16,12 +16,12 @@ as `clrays render` derives them (docs/scene-format.md). Columns:
   kernels are built, median of `--frames`.
 - **sequence wall ms**: per frame of a `--frames`-long sequence whose camera turns 0.5°
   about its target each frame (so every camera stage runs again, and a shadow map whose
-  light and geometry stand still is kept, as `clrays sequence` keeps it), frames submitted
-  ahead where the session can keep frames in flight (`Renderer.submit`): the whole
-  sequence's wall time over its frames.
+  light and geometry stand still is kept, as `clrays sequence` keeps it), with frames in
+  flight where `clrays sequence` keeps them (a GPU): the whole sequence's wall time over
+  its frames.
 - **host ms**: sequence wall less the sequence's device time per frame (its frames' own
-  stages, what a frame kept from the one before left out): the host's work the device
-  waits for.
+  kernels, what a frame kept from the one before left out; host-timed stages count as the
+  host's): the host's work the device waits for.
 - **waits**: the times the host waited for the device in one frame (`RenderResult.host_waits`).
 - **RMSE % / p99 %**: against `exact` on the bench's pixel subset (`--pixels`, kept in
   `--cache`), depth edges out, of the last warm frame's image.
@@ -74,13 +74,14 @@ def turned(scene, frame: int):
 
 def sequence_ms(renderer: Renderer, scene, frames: int) -> tuple[float, float]:
     """(wall ms, device ms) per frame of a sequence of `frames` turned frames, each image
-    read back: submitted one frame ahead where the session can (Renderer.submit), else one
-    by one. The device time is the frames' own, stages a frame kept from the one before
-    left out, as the sequence's are."""
+    read back, as `clrays sequence` renders them: frame N+1 submitted before frame N is
+    read where frames in flight win on the device (Renderer.frames_in_flight_win: a GPU),
+    else one by one. The device time is the frames' own (RenderResult.device_ms), stages a
+    frame kept from the one before left out, as the sequence's are."""
     scenes = [turned(scene, index + 1) for index in range(frames)]
     results = []
     start = time.perf_counter()
-    if hasattr(renderer, "submit"):
+    if renderer.frames_in_flight_win:
         pending = renderer.submit(scenes[0])
         for upcoming in scenes[1:]:
             following = renderer.submit(upcoming)
@@ -90,7 +91,7 @@ def sequence_ms(renderer: Renderer, scene, frames: int) -> tuple[float, float]:
     else:
         results = [renderer.render(each) for each in scenes]
     wall = (time.perf_counter() - start) * 1e3 / frames
-    return wall, sum(sum(result.stage_ms.values()) for result in results) / frames
+    return wall, sum(result.device_ms for result in results) / frames
 
 
 def main() -> None:

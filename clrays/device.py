@@ -393,8 +393,8 @@ class Device:
 
     def counted_launch(self, count: int) -> tuple[tuple[int], tuple[int] | None]:
         """(global size, work-group shape) of a 1-D launch over `count` items whose kernel
-        skips the work-items past `count`, a count that follows the scene (the camera
-        samples a fix-up walk takes). On a CPU device the work-group is the power of two
+        skips the work-items past `count`, a count that follows the scene and that the host
+        knows (fix_up's list, before its length stayed on the device: list_launch). On a CPU device the work-group is the power of two
         nearest below spread_local_size's aim and the launch is padded to a multiple of it:
         PoCL compiles a kernel for each work-group size it has not cached (about 450 ms),
         and a divisor of each count would be a new size at nearly every frame."""

@@ -131,8 +131,8 @@ def translucent_films(device: Device, buffers: FrameBuffers, rastered: RasterRes
                       weighted_walk: bool = True) -> Films:
     """Each camera sample's translucent hits in front of its opaque depth: the `layers` nearest
     in order (depth_peeling), or all of them in no order (gathered, mboit). `weighted_walk`:
-    list the samples with films for MBOIT's one walk of the fog; False: the in-scatter runs per
-    slot, as peeling's (the tests' reference)."""
+    list the samples with films for the one weighted walk of the fog (mboit, gathered);
+    False: the in-scatter runs per slot, as peeling's (the tests' reference)."""
     inputs = buffers.inputs
     settings = transparency_of(inputs.scene)
     samples = inputs.samples
@@ -195,7 +195,7 @@ def composite(device: Device, buffers: FrameBuffers, rastered: RasterResult, lay
     defines, light_args = feature_defines(features, defines), feature_args(features)
     if inputs.scene.render.surface_shadows == "exact":  # a film's coloured shadow edges where exact has them
         defines["FILM_SHADOW_RAYS"] = 1
-    if layers.walked is not None:  # MBOIT's fog, walked once per sample (stages/transparency_walk.py)
+    if layers.walked is not None:  # the films' fog, walked once per sample (stages/transparency_walk.py)
         defines["TRANSPARENCY_WEIGHTED_WALK"] = 1
         light_args = (*light_args, layers.walked)
     transmittance, in_front = device.buffer(nbytes=16 * samples), device.buffer(nbytes=16 * samples)

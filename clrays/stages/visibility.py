@@ -20,8 +20,9 @@ sample's lit test reads, `visibility_bound` draws each light's maps at those tex
 rays than it has triangles, the bound passes run again over the rays' texels alone to
 list them (`ray_lists`; docs/design.md §4.6). The counts stay on the device: the passes
 read their lists' lengths there, the listed ways run or return by a route the device
-decides (`visibility_route`), and the host waits once, before the BVH, which it builds
-only where that route asks for it.
+decides (`visibility_route`); on a CPU device the host waits once, before the BVH, which
+it builds only where that route asks for it, and on a GPU (`bvh_ahead`) the BVH is built
+or kept before the route is known and its rays gated on it: no wait.
 """
 from __future__ import annotations
 
@@ -355,10 +356,10 @@ def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, pr
 
     The route is decided on the device (visibility_route, visibility_reroute), and the
     listed ways are enqueued before it, each launch returning at once unless the route is
-    its own: the host waits once, for the rays' count and the route, and only then builds
-    the BVH where the route asks for it (a host decision: the BVH is never built where no
-    ray needs it, and a scene with reliefs builds its tree on the host). It waited twice
-    before, for the count, then for the rays' lists' room."""
+    its own. On a CPU device the host then waits once, for the rays' count and the route,
+    and builds the BVH only where the route asks for it (a scene with reliefs builds its
+    tree on the host); on a GPU (`bvh_ahead`) the BVH is built or kept first and its rays
+    gated on the route, and the count is read after the image (`RayCount`)."""
     inputs = buffers.inputs
     entries = inputs.samples * max(len(inputs.scene.lights), 1)
     ray_entries = device.buffer(nbytes=4 * entries)

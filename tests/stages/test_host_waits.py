@@ -108,22 +108,6 @@ def test_fixup_list_and_counts_match_numpy(device, samples):
     np.testing.assert_array_equal(got & 3, flags[listed])
 
 
-@pytest.mark.parametrize("bound", [0, 1, 100, 5000, 10**6])
-def test_list_launch_covers_every_item_once(device, bound):
-    """fix_up's split of a list over Device.list_launch's work-items, in numpy: every item of
-    any length up to `bound` belongs to exactly one work-item's run."""
-    (items,), local = device.list_launch(bound)
-    assert local is None or items % local[0] == 0
-    for count in sorted({0, 1, bound // 3, bound}):
-        per_item = count // items + (count % items != 0)
-        begin = np.arange(items, dtype=np.int64) * per_item
-        end = np.minimum(begin + per_item, count)
-        covered = np.zeros(count, np.int64)
-        for b, e in zip(begin, end):
-            covered[b:e] += 1
-        assert np.all(covered == 1), count
-
-
 def test_list_launches_give_the_same_image_in_either_shape(renderer, monkeypatch):
     """fix_up, and visibility's listed rays and marks, are launched over Device.list_launch
     of an upper bound (fix_up: the camera samples; the rays: the entries), each work-item
