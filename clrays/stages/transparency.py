@@ -26,6 +26,12 @@ from .raster import RasterResult
 
 LABEL = "transparency"
 FOG_LABEL = "transparency.fog"  # the in-scatter stages run up to each layer, timed apart
+#: A film's light takes a shadow ray through the translucent triangles (exact surface
+#: shadows) while they are at most this many; past it, the translucency layers' lookup, as
+#: before: each ray tests every one of them, for every film and light of every sample
+#: (glass_row's panes split into 640 triangles: 529 against 405 ms of the stage through the
+#: lookup, docs/design.md), and a translucent mesh of a million would not finish.
+FILM_SHADOW_RAY_TRIANGLES = 1024
 
 
 def transparency_of(scene: Scene) -> Transparency:
@@ -47,6 +53,13 @@ def film_triangles(inputs) -> np.ndarray:
     if inputs.raster_triangles is not None:
         indices = indices[indices < inputs.raster_triangles]
     return indices
+
+
+def films_take_shadow_rays(inputs, films: np.ndarray) -> bool:
+    """Whether the films' light comes by shadow rays through the translucent triangles
+    (`render.surface_shadows: exact`, and no more than FILM_SHADOW_RAY_TRIANGLES of them),
+    else by the translucency layers' lookup."""
+    return inputs.scene.render.surface_shadows == "exact" and len(films) <= FILM_SHADOW_RAY_TRIANGLES
 
 
 def opaque_camera_vertices(inputs) -> np.ndarray:
@@ -193,14 +206,14 @@ def composite(device: Device, buffers: FrameBuffers, rastered: RasterResult, lay
                "TRANSPARENCY_LOG_WARP": int(settings.warp == "log")}
     features = present(light_layers)
     defines, light_args = feature_defines(features, defines), feature_args(features)
-    if inputs.scene.render.surface_shadows == "exact":  # a film's coloured shadow edges where exact has them
+    films = film_triangles(inputs)  # the shadow rays' triangles (FILM_SHADOW_RAYS)
+    if films_take_shadow_rays(inputs, films):  # a film's coloured shadow edges where exact has them
         defines["FILM_SHADOW_RAYS"] = 1
     if layers.walked is not None:  # the films' fog, walked once per sample (stages/transparency_walk.py)
         defines["TRANSPARENCY_WEIGHTED_WALK"] = 1
         light_args = (*light_args, layers.walked)
     transmittance, in_front = device.buffer(nbytes=16 * samples), device.buffer(nbytes=16 * samples)
     near, far = depth_range(inputs)
-    films = film_triangles(inputs)  # the shadow rays' triangles (FILM_SHADOW_RAYS)
     timer.add(LABEL, device.kernel("transparency", "transparency_composite", defines)(
         device.queue, (samples,), None, buffers.params, buffers.views, buffers.offsets, buffers.lights,
         rastered.shadow_depth, buffers.tri_vertices, buffers.tri_normal, buffers.tri_albedo,
