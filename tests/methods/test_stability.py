@@ -587,6 +587,24 @@ def test_closed_geometry_is_black_for_the_shadow_map_methods(renderer):
     assert max(worst.values()) <= 1e-6
 
 
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason="from the shadow maps alone, a layer about a texel thick behind a wall "
+                   "counts as lit: the same closed scenes with their solids not marked closed (an open mesh, a "
+                   "room of separate walls), largest pixel / the same ray unshadowed: camera in a box 1.0 % "
+                   "(minmax, point), 2.0 % (minmax, sun), 1.9 % (raymarch, sun), 0.20 % (raymarch, point); light "
+                   "in a sphere 0.17 % (minmax, point); sun outside a room 0.06 % (minmax), 0.05 % (raymarch)")
+def test_walls_not_marked_closed_let_no_light_through(renderer):
+    """The scenes of test_closed_geometry_is_black_for_the_shadow_map_methods with their walls
+    left unmarked, so the walled-off rule does not apply and the maps alone decide."""
+    worst = {}
+    for case, kind in CLOSED_CASES:
+        scene = _closed_scenes()[case][kind]
+        scene = replace(scene, geometry=replace(scene.geometry, outward=np.zeros_like(scene.geometry.outward)))
+        for method in ("minmax", "raymarch"):
+            worst[case, kind, method] = _leak(renderer.render(scene, method).image, scene)[1]
+    print("leak / unshadowed, unmarked:", {key: f"{value:.1e}" for key, value in worst.items()})
+    assert max(worst.values()) <= 1e-6
+
+
 @pytest.mark.parametrize("kind", ["point", "directional"])
 def test_a_camera_leaving_a_closed_box_reuses_only_what_holds(renderer, kind):
     """The eye inside the box (the light dark), outside it (lit), inside again: a session
