@@ -12,8 +12,11 @@ slices = perimeter (256) gives a p99 error of 6.5 % against `exact` and γ texel
 diagonal (128) 11.7 %, where 1024 × 1024 gives 2.4 %. Every size is rounded up to a power
 of two (sizes change in steps, not with every pixel) and clamped: below by what a shadow
 or a slice still resolves, above by the measured defaults of bench/RESULTS.md ("Choosing
-defaults"): 64×48 and larger get a 1024 map, 1024 slices and 1024 γ texels, unless a
-thin solid or a light's texture asks for more (below).
+defaults"). An image whose diagonal is 100 pixels or more (96×64 and larger) gets the full
+1024 map whatever the texels per pixel give: there the map's texel across the scene, not the
+pixel, sets the error against `exact` (FULL_SHADOW_MAP_DIAGONAL). So 96×64 and larger get
+a 1024 map, 1024 slices and 1024 γ texels, unless a thin solid or a light's texture asks
+for more (below).
 
 A textured light asks for more: the rectified texture samples its image once per slice
 and γ texel, so neither may be coarser than the image's texels seen from the light (a
@@ -60,6 +63,20 @@ MIN_INITIAL_STEP = 3
 MAX_INITIAL_STEP = 6
 #: Shadow-map texels per pixel of the image diagonal.
 SHADOW_TEXELS_PER_PIXEL = 4
+#: From this image diagonal (pixels) up, the derived map is MAX_SHADOW_MAP, however few texels
+#: per pixel that is. A 512² map misses 0.5 % relative RMSE against `exact` at every size
+#: measured from 64×48 to 96×64 alike, so it is the map's texel across the scene's shafts,
+#: not a pixel's footprint, that sets the error (sun and room 0.73 and 0.82 % at 64×48, 0.59
+#: and 0.94 % at 80×60, 0.65 and 0.84 % at 96×64; orbit's frame 10 1.53 % at 96×64). 1024²,
+#: with the 1024 slices and γ texels it lets the image derive, brings every scene of scenes/
+#: at 96×64 within it (sun 0.34, room 0.28, orbit's frame 10 0.42 %) but the lattice and the
+#: stained glass, which miss it at every size (bench/RESULTS.md, "The full map from a
+#: diagonal of 100 pixels"). Both halves count: the map alone reads sun 0.51, room 0.57 %,
+#: the slices and γ texels alone 0.59, 0.75 %. 8 texels per pixel would give 96×64 the same
+#: but double every smaller image's map too, for 1.4–4× the frame (64×48: sun 11 → 35 ms,
+#: glass_row 134 → 528 ms); images under a diagonal of 100, thumbnails, keep the smaller
+#: maps and their error (64×48 above; 32×18: room 1.99 %).
+FULL_SHADOW_MAP_DIAGONAL = 100
 #: Spot lights wider than this use a cube map: a single perspective map of a wide
 #: cone would spend most texels near its rim.
 SPOT_SINGLE_VIEW_MAX_DEG = 75.0
@@ -108,6 +125,8 @@ def _clamped(value: float, low: int, high: int) -> int:
 
 def derived_shadow_map(width: int, height: int) -> int:
     """Shadow map side (texels, per cube face) for a width × height image."""
+    if math.hypot(width, height) >= FULL_SHADOW_MAP_DIAGONAL:
+        return MAX_SHADOW_MAP
     return _clamped(SHADOW_TEXELS_PER_PIXEL * math.hypot(width, height), MIN_SHADOW_MAP, MAX_SHADOW_MAP)
 
 

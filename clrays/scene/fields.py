@@ -12,7 +12,7 @@ from typing import Any
 
 from .animation import EASINGS
 from .limits import MAX_LIGHTS, MAX_MESH_BYTES, MAX_OBJECTS, MAX_SCENE_BYTES, MAX_TRIANGLES
-from .costs import (INITIAL_SAMPLES_PER_LINE, MAX_GAMMA_SAMPLES, MAX_INITIAL_STEP, MAX_LINE_SAMPLES,
+from .costs import (FULL_SHADOW_MAP_DIAGONAL, INITIAL_SAMPLES_PER_LINE, MAX_GAMMA_SAMPLES, MAX_INITIAL_STEP, MAX_LINE_SAMPLES,
                     MAX_OCCLUDER_SHADOW_MAP, MAX_SHADOW_MAP, MAX_SLICES, MAX_TEXTURE_GAMMA_SAMPLES, MAX_TEXTURE_SLICES,
                     MIN_GAMMA_SAMPLES, MIN_INITIAL_STEP, MIN_LINE_SAMPLES, MIN_SHADOW_MAP, MIN_SLICES,
                     OCCLUDER_MAP_GROWTH, OCCLUDER_TEXELS)
@@ -269,7 +269,8 @@ RENDER = Section("render", (
     Field("jitter", "boolean", Render.jitter, notes="raymarch: jitter sample positions (seeded per pixel)",
           read_by=("raymarch",)),
     Field("shadow_map", "integer", Render.shadow_map, 16, 8192,
-          shown_default=f"from the image: 4 × its diagonal, as a power of two in [{MIN_SHADOW_MAP}, {MAX_SHADOW_MAP}]; "
+          shown_default=f"from the image: 4 × its diagonal, as a power of two in [{MIN_SHADOW_MAP}, {MAX_SHADOW_MAP}], "
+                        f"{MAX_SHADOW_MAP} from a diagonal of {FULL_SHADOW_MAP_DIAGONAL} pixels; "
                         f"larger where a closed solid seen from its light is under {OCCLUDER_TEXELS} texels wide "
                         f"(up to {OCCLUDER_MAP_GROWTH} × that and {MAX_OCCLUDER_SHADOW_MAP})",
           notes="shadow map side in texels (cube maps: per face)", read_by=_RASTER_METHODS),

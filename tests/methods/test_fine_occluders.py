@@ -15,12 +15,14 @@ GRATE = Path(__file__).resolve().parents[2] / "scenes" / "grate.yaml"
 
 @pytest.mark.parametrize("method, bound", [("minmax", 0.5), ("raymarch", 0.5)])
 def test_the_grate_at_default_sizes_matches_exact(renderer, method, bound):
-    """The slats span 2.1 texels of the 512² cube face that 96×64 derives from the image; the
-    map grows to 2048² (8.6 texels). Relative RMSE against exact, depth edges out, measured on
-    PoCL: minmax 0.404 % (5.67 % with the 512² map), raymarch 0.494 % (5.65 %)."""
+    """The slats span 2.1 texels of the 1024² cube face that 96×64 derives from the image (a
+    diagonal of 100 pixels or more gets the full map); the map grows to 4096² (8.6 texels).
+    Relative RMSE against exact, depth edges out, measured on PoCL: minmax 0.202 % (0.404 %
+    when 96×64 derived 512², grown to 2048²; 5.67 % with the 512² map alone), raymarch
+    0.361 % (0.494 %; 5.65 %)."""
     scene = load_scene(GRATE, overrides=["image.width=96", "image.height=64"])
     exact = renderer.render(scene, "exact").image
     error = image_error(renderer.render(scene, method).image, exact, depth_edges(depth_map(scene)))
     print(f"grate 96×64, {method} at default sizes against exact: {error}")
     assert error.rmse < bound / 100
-    assert with_derived_sizes(scene).render.shadow_map == 2048
+    assert with_derived_sizes(scene).render.shadow_map == 4096
