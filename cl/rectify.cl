@@ -222,7 +222,8 @@ ALWAYS_INLINE void store_level0(global float* row, int first, int n, float_lanes
  * is 4 MB), and more of them at once wait about as long as 8. */
 kernel void rectify(global const view_t* views, global const light_t* lights,
                     global const uint* shadow_depth, global const epipolar_t* epipolar,
-                    global const float4* slice_sides, global const float4* texel_angles, global float2* tree)
+                    global const float4* slice_sides, global const float4* texel_angles, global float2* tree,
+                    global const int* shadow_triangle, global int* row_triangles)
 {
     int first = get_global_id(0) * RECTIFY_BATCHES * LANES, slice = get_global_id(1);
     global const epipolar_t* ep = epipolar;
@@ -254,4 +255,12 @@ kernel void rectify(global const view_t* views, global const light_t* lights,
     for (int b = 0; b < RECTIFY_BATCHES; ++b)
         store_level0(row, first + b * LANES, n,
                      rectify_beta(views, light, ep, gamma[b], cos_gamma[b], sin_gamma[b], depth[b], meets[b]));
+    /* Each texel's blocker, the nearest triangle the map holds there (-1: none): the walks
+     * place the shafts' edges on it (shaft_edges.h). */
+    global int* triangles = row_triangles + (size_t)slice * n;
+#pragma unroll
+    for (int b = 0; b < RECTIFY_BATCHES; ++b) {
+        int_lanes blocker = meets[b] ? GATHER_LANES(int_lanes, shadow_triangle, index[b]) : (int_lanes)(-1);
+        for (int k = 0; k < LANES && first + b * LANES + k < n; ++k) triangles[first + b * LANES + k] = blocker[k];
+    }
 }

@@ -12,6 +12,9 @@
 #include "minmax.h"
 #include "inline_math.h"
 #include "walk_features.h"
+#ifdef SHAFT_EDGES
+#include "shaft_edges.h"
+#endif
 
 /* TRAVERSAL_TREE and TRAVERSAL_SCAN come from clrays/structs.py (-D). */
 #ifndef TRAVERSAL
@@ -65,6 +68,9 @@ typedef struct {
     float gamma_end;
     float gamma_lamp0;
     float gamma_lamp1;
+#ifdef SHAFT_EDGES
+    float3 dir; /* the ray's unit direction, whose half-plane shaft_edges.h cuts the blockers with */
+#endif
 } ray_span_t;
 
 /* The unit direction of camera sample `sample` (its pixel's ray through its offset):
@@ -129,6 +135,9 @@ inline int ray_span_in_wedge(global const epipolar_t* ep, global const frame_t* 
 {
     float sin_beta, cos_beta;
     float beta = ray_beta(ep, dir, &sin_beta, &cos_beta);
+#ifdef SHAFT_EDGES
+    span->dir = dir;
+#endif
     float2 lit = lit_sweep(atan2_approx(distance * sin_beta, ep->d_el - distance * cos_beta), wedge);
     span->gamma_begin = lit.x;
     span->gamma_end = lit.y;
@@ -149,6 +158,9 @@ inline int ray_span(global const epipolar_t* ep, global const light_t* light, gl
     float sin_beta, cos_beta;
     float beta = ray_beta(ep, dir, &sin_beta, &cos_beta);
     int directional = light->type == LIGHT_DIRECTIONAL;
+#ifdef SHAFT_EDGES
+    span->dir = dir;
+#endif
     /* The ray from the eye starts at γ = atan2(+0, d_el) = +0: no arc tangent for it. */
     span->gamma_begin = 0.0f;
     span->gamma_end = directional ? distance * sin_beta : atan2_approx(distance * sin_beta, ep->d_el - distance * cos_beta);
@@ -185,17 +197,19 @@ inline void nearest_slices(global const epipolar_t* ep, float3 dir, int* i0, int
     slices_around(ep, atan2_approx(inline_dot(dir, ep->w.xyz), inline_dot(dir, ep->u.xyz)), i0, i1, t);
 }
 
-/* Radiance of the lit part of [gamma_begin, gamma_end) of ray beta along one row.
- * Adjacent lit nodes merge into one run, so the integrand is evaluated once per run.
+/* Radiance of the lit part of [gamma_begin, gamma_end) of the ray along row `slice`.
+ * Adjacent lit nodes merge into one run, so the integrand is evaluated once per run; with
+ * SHAFT_EDGES a run's ends move onto its blockers' silhouettes (shaft_edges.h).
  *
  * TRAVERSAL_TREE walks the tree without a stack: a node whose min > β is wholly lit,
  * one whose max ≤ β wholly shadowed, else descend; after a node, move to the next
  * one and climb while its index is even. TRAVERSAL_SCAN reads every texel. */
-inline float3 walk_row(global const epipolar_t* ep, global const float2* row, const integrand_row_t* ray,
+inline float3 walk_row(global const epipolar_t* ep, global const float2* row, const ray_span_t* span, int slice,
                        float gamma_begin, float gamma_end, global const integrand_t* in,
                        global const float* tables, global const frame_t* frame, const walk_features_t* features,
                        global const float* row_prefix)
 {
+    const integrand_row_t* ray = &span->ray;
     float beta = ray->beta;
     int n = ep->gamma_samples;
     gamma_texels_t texels = gamma_texels_of(ep);
@@ -203,6 +217,9 @@ inline float3 walk_row(global const epipolar_t* ep, global const float2* row, co
     float3 radiance = (float3)(0.0f);
     int run_start = -1, run_end = 0;
     int position = inline_clamp_int((int)inline_floor(gamma_texel_coord(texels, gamma_begin)), 0, n);
+#ifdef SHAFT_EDGES
+    run_edges_t edges = run_edges_of(ep, span->dir, beta, features, slice, position, gamma_begin, gamma_end);
+#endif
     while (position < end) {
         int size;
         int lit;
@@ -224,17 +241,24 @@ inline float3 walk_row(global const epipolar_t* ep, global const float2* row, co
             if (run_start < 0) run_start = position;
             run_end = position + size;
         } else if (run_start >= 0) {
-            radiance += run_radiance(in, tables, frame, ray, features, row_prefix, texels,
-                                     inline_fmax(gamma_at_texel(texels, (float)run_start), gamma_begin),
-                                     inline_fmin(gamma_at_texel(texels, (float)run_end), gamma_end));
+            float run0 = inline_fmax(gamma_at_texel(texels, (float)run_start), gamma_begin);
+            float run1 = inline_fmin(gamma_at_texel(texels, (float)run_end), gamma_end);
+#ifdef SHAFT_EDGES
+            if (place_run_ends(&edges, features, texels, run_start, run_end, 1, &run0, &run1))
+#endif
+            radiance += run_radiance(in, tables, frame, ray, features, row_prefix, texels, run0, run1);
             run_start = -1;
         }
         position += size;
     }
-    if (run_start >= 0)
-        radiance += run_radiance(in, tables, frame, ray, features, row_prefix, texels,
-                                 inline_fmax(gamma_at_texel(texels, (float)run_start), gamma_begin),
-                                 inline_fmin(gamma_at_texel(texels, (float)run_end), gamma_end));
+    if (run_start >= 0) {
+        float run0 = inline_fmax(gamma_at_texel(texels, (float)run_start), gamma_begin);
+        float run1 = inline_fmin(gamma_at_texel(texels, (float)run_end), gamma_end);
+#ifdef SHAFT_EDGES
+        if (place_run_ends(&edges, features, texels, run_start, run_end, 0, &run0, &run1))
+#endif
+        radiance += run_radiance(in, tables, frame, ray, features, row_prefix, texels, run0, run1);
+    }
     return radiance;
 }
 
@@ -266,10 +290,10 @@ inline float3 row_radiance(global const epipolar_t* ep, global const float2* tre
         return radiance;
     }
 #endif
-    float3 radiance = walk_row(ep, row, &span->ray, span->gamma_begin, span->gamma_lamp0, in, tables, frame, features,
+    float3 radiance = walk_row(ep, row, span, i, span->gamma_begin, span->gamma_lamp0, in, tables, frame, features,
                                row_prefix);
     if (span->gamma_lamp1 < span->gamma_end)
-        radiance += walk_row(ep, row, &span->ray, span->gamma_lamp1, span->gamma_end, in, tables, frame, features,
+        radiance += walk_row(ep, row, span, i, span->gamma_lamp1, span->gamma_end, in, tables, frame, features,
                              row_prefix);
     return radiance;
 }

@@ -31,6 +31,11 @@ typedef struct {
     global const uint2* layer_clear;
     global const int* layer_rows;
 #endif
+#ifdef SHAFT_EDGES
+    global const int* edge_rows;         /* each texel's blocker, rectify's row_triangles */
+    global const float4* edge_vertices;  /* the frame's triangles, eye space */
+    global const int* edge_neighbours;   /* each triangle's neighbour across each edge, -1: none */
+#endif
 #ifdef TRANSPARENCY_WEIGHTED_WALK
     float piece_gamma[WALK_PIECES + 2];
     float4 piece_weight[WALK_PIECES + 1];
@@ -48,6 +53,11 @@ typedef struct {
 #define ATTACH_RECTIFIED_LAYERS(f)                                                                            \
     (f).layer_beta = layer_beta; (f).layer_clear = layer_clear; (f).layer_rows = layer_rows;
 #endif
+#ifdef SHAFT_EDGES
+#define SHAFT_EDGE_ARGS , global const int* edge_rows, global const float4* edge_vertices, global const int* edge_neighbours
+#define ATTACH_SHAFT_EDGES(f) (f).edge_rows = edge_rows; (f).edge_vertices = edge_vertices; \
+    (f).edge_neighbours = edge_neighbours;
+#endif
 /* A feature not built: no arguments, nothing to hand on. */
 #ifndef LIGHT_TEXTURE_ARGS
 #define LIGHT_TEXTURE_ARGS
@@ -58,7 +68,13 @@ typedef struct {
 #define ATTACH_RECTIFIED_LAYERS(f)
 #endif
 
-#define WALK_FEATURE_ARGS LIGHT_TEXTURE_ARGS RECTIFIED_LAYER_ARGS
-#define ATTACH_WALK_FEATURES(features) ATTACH_LIGHT_TEXTURE(features) ATTACH_RECTIFIED_LAYERS(features)
+#ifndef SHAFT_EDGE_ARGS
+#define SHAFT_EDGE_ARGS
+#define ATTACH_SHAFT_EDGES(f)
+#endif
+
+#define WALK_FEATURE_ARGS LIGHT_TEXTURE_ARGS RECTIFIED_LAYER_ARGS SHAFT_EDGE_ARGS
+#define ATTACH_WALK_FEATURES(features) ATTACH_LIGHT_TEXTURE(features) ATTACH_RECTIFIED_LAYERS(features) \
+    ATTACH_SHAFT_EDGES(features)
 
 #endif

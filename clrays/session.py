@@ -48,6 +48,7 @@ from .reuse import COMPUTED, REUSED, SKIPPED, Reuse, StageCache, StageRecord, di
 from .scene.costs import with_derived_sizes
 from .scene.model import METHODS, RENAMED_METHODS, Render, Scene
 from .stages.features import walk_features
+from .stages.shaft_edges import ShaftEdges, edge_neighbours
 from .stages.integrand import integrand, integrand_table_size
 from .stages.lamp import eye_in_lamp, lamp_in_scatter
 from .stages.light_texture import light_texture
@@ -410,8 +411,10 @@ class Renderer:
             volume_moments(device, buffers, frame.rastered, epipolar, tables, frame.in_scatter.adding(), timer,
                            walk_features(texture, None))
             return
+        edges = None if epipolar.unshadowed else self._shaft_edges(buffers, epipolar, keys, reuse)
         features = walk_features(  # what the walks carry (stages/features.py, cl/walk_features.h)
-            texture, None if frame.layers is None else rectify_layers(device, buffers, frame.layers, epipolar, timer))
+            texture, None if frame.layers is None else rectify_layers(device, buffers, frame.layers, epipolar, timer),
+            edges)
         if frame.scene.render.sampling == "epipolar" and not epipolar.unshadowed:  # traverse: walk the trees
             counts = epipolar_sampling(device, buffers, frame.rastered, epipolar, tables, *frame.in_scatter.writing(),
                                        timer, features)
@@ -421,6 +424,16 @@ class Renderer:
         self._films_in_scatter(frame, lambda r, s, t: traverse(device, buffers, r, epipolar, tables, s, t, features),
                                lambda: transparency_walk(device, buffers, frame.films, epipolar, tables, timer,
                                                          features))
+
+    def _shaft_edges(self, buffers: FrameBuffers, epipolar, keys: StageKeys, reuse: Reuse) -> ShaftEdges | None:
+        """What places the walks' run ends on the blockers' silhouettes (stages/shaft_edges.py):
+        None where the frame does not carry every triangle's vertices."""
+        geometry = buffers.inputs.scene.geometry
+        if len(buffers.inputs.tri_vertices) // 3 != geometry.count or epipolar.triangles is None:
+            return None
+        neighbours = reuse.keep("edge_neighbours", lambda: digest("edge_neighbours", keys.geometry),
+                                lambda: self.device.buffer(edge_neighbours(geometry), writable=False))
+        return ShaftEdges(epipolar.triangles, buffers.tri_vertices, neighbours)
 
     def _films_in_scatter(self, frame: Frame, per_film, weighted=None) -> None:
         """The in-scattering a volume stage just added for the camera samples, added for the
@@ -560,8 +573,8 @@ class Renderer:
                             lambda index=index: raster_shadow_map(device, buffers, index, timer), per_light=True)
                 for index in range(len(buffers.inputs.scene.lights))]
         atlas = reuse.keep("shadow_atlas", lambda: digest(tuple(keys.shadow)),
-                           lambda: shadow_atlas(device, buffers, maps))
-        return RasterResult(camera_depth, tri_id, atlas), maps
+                           lambda: (shadow_atlas(device, buffers, maps), shadow_atlas(device, buffers, maps, "triangle")))
+        return RasterResult(camera_depth, tri_id, *atlas), maps
 
     def _rectify(self, buffers: FrameBuffers, rastered: RasterResult, maps: list[ShadowMap], keys: StageKeys,
                  index: int, reuse: Reuse, timer: StageTimer) -> Epipolar:

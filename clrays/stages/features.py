@@ -1,7 +1,8 @@
 """What a row walk may carry besides the tree and the integrand, on the host side of
 cl/walk_features.h (docs/design.md §4.5, "Features of the walk"): a light's texture (stage
-light_texture: `TextureTables`) and its rectified translucent layers (stage translucency:
-`RectifiedLayers`). Each offers its build defines (`defines()`) and its kernel arguments
+light_texture: `TextureTables`), its rectified translucent layers (stage translucency:
+`RectifiedLayers`), and the blockers that place its runs' ends (clrays/stages/shaft_edges.py:
+`ShaftEdges`). Each offers its build defines (`defines()`) and its kernel arguments
 (`args()`); a walking kernel built with a feature's defines takes its arguments after its
 own, in the order of `walk_features` (the kernel's WALK_FEATURE_ARGS). A feature the frame
 does not have is None, adds nothing, and leaves the kernel as it was without it.
@@ -17,9 +18,10 @@ class WalkFeature(Protocol):
     def args(self) -> tuple: ...
 
 
-def walk_features(texture: WalkFeature | None, layers: WalkFeature | None) -> tuple[WalkFeature, ...]:
-    """The features a walk carries, in cl/walk_features.h's order: texture, then layers."""
-    return present(texture, layers)
+def walk_features(texture: WalkFeature | None, layers: WalkFeature | None,
+                  edges: WalkFeature | None = None) -> tuple[WalkFeature, ...]:
+    """The features a walk carries, in cl/walk_features.h's order: texture, layers, edges."""
+    return present(texture, layers, edges)
 
 
 def present(*features: WalkFeature | None) -> tuple[WalkFeature, ...]:
@@ -40,3 +42,4 @@ def feature_defines(features: tuple[WalkFeature, ...], defines: dict | None = No
 def feature_args(features: tuple[WalkFeature, ...]) -> tuple:
     """The kernel arguments every feature appends, in order."""
     return tuple(argument for feature in features for argument in feature.args())
+

@@ -21,6 +21,8 @@ class RasterResult:
     camera_depth: object  # uint[H·W·spp]: as_uint(distance along the sample ray)
     tri_id: object  # int[H·W·spp]: nearest triangle, -1 where nothing was hit
     shadow_depth: object  # uint[shadow_texels]: every light's views, back to back
+    # int[shadow_texels]: the triangle nearest the light at each texel (-1: none), as shadow_depth
+    shadow_triangle: object = None
 
 
 def _launch(device: Device, buffers: FrameBuffers, name: str, defines: dict | None, view_indices: list[int],
@@ -161,6 +163,7 @@ class ShadowMap:
     """One light's shadow map, in its own buffer (views anchored at the light)."""
 
     depth: object  # uint[texels]
+    triangle: object  # int[texels]: the nearest triangle's index in the frame (-1: none)
     texels: int
     triangles: int  # scene triangles: with none, the map is empty without looking
     empty: bool | None = None  # nothing can be rasterized: filled in by `map_is_empty` when first asked
@@ -181,15 +184,33 @@ def raster_shadow_map(device: Device, buffers: FrameBuffers, light_index: int, t
                             lights=device.buffer(inputs.lights, writable=False),
                             tri_vertices=device.buffer(inputs.tri_vertices, writable=False))
     texels = max(inputs.shadow_texels, 1)
-    depth = device.buffer(nbytes=4 * texels)
-    device.fill(depth, structs.DEPTH_EMPTY, 4 * texels, timer, "raster")
+    depth, triangle = device.buffer(nbytes=4 * texels), device.buffer(nbytes=4 * texels)
     centre = device.buffer(np.array([[0.5, 0.5]], dtype=np.float32), writable=False)
     reliefs = ReliefDrawer(device, inputs.reliefs, inputs.light_anchor_ws[0], timer)  # anchored, as the triangles
     drawn = [view for view in range(1, len(inputs.views)) if inputs.view_needed[view]]  # (a face no sample reads stays empty)
-    _rasterize(device, light_buffers, drawn, centre, 1, depth, timer)
-    for view_index in drawn:
-        reliefs.map("relief_map_depth", None, light_buffers.views, inputs.views, view_index, centre, 1, (depth,))
-    shadow_map = ShadowMap(depth, inputs.shadow_texels, inputs.scene.geometry.count)
+    # The nearest triangle with each depth: the walks place the shafts' edges on it
+    # (cl/shaft_edges.h), as the camera's samples are resolved in raster_camera.
+    if _atomic64(device):
+        defines = {"RASTER_ATOMIC64": 1}
+        nearest = device.buffer(nbytes=8 * texels)
+        device.fill(nearest, np.uint64((int(structs.DEPTH_EMPTY) << 32) | 0xFFFFFFFF), 8 * texels, timer, "raster")
+        _launch(device, light_buffers, "raster_nearest", defines, drawn, centre, 1, (nearest,), timer)
+        for view_index in drawn:
+            reliefs.map("relief_map_nearest", defines, light_buffers.views, inputs.views, view_index, centre, 1,
+                        (nearest,))
+        timer.add("raster", device.kernel("raster", "raster_split", raster_defines(device, defines))(
+            device.queue, (texels,), None, nearest, np.int32(texels), depth, triangle))
+    else:
+        device.fill(depth, structs.DEPTH_EMPTY, 4 * texels, timer, "raster")
+        device.fill(triangle, np.int32(-1), 4 * texels, timer, "raster")
+        _rasterize(device, light_buffers, drawn, centre, 1, depth, timer)
+        for view_index in drawn:
+            reliefs.map("relief_map_depth", None, light_buffers.views, inputs.views, view_index, centre, 1, (depth,))
+        _launch(device, light_buffers, "raster_resolve", None, drawn, centre, 1, (depth, triangle), timer)
+        for view_index in drawn:
+            reliefs.map("relief_map_resolve", None, light_buffers.views, inputs.views, view_index, centre, 1,
+                        (depth, triangle))
+    shadow_map = ShadowMap(depth, triangle, inputs.shadow_texels, inputs.scene.geometry.count)
     if shadow_map.triangles and shadow_map.texels:
         shadow_map.reaches = _reaches_views(inputs)
     return shadow_map
@@ -266,14 +287,16 @@ def _triangles_reach(triangles: np.ndarray, anchor: np.ndarray, views: np.ndarra
     return False
 
 
-def shadow_atlas(device: Device, buffers: FrameBuffers, maps: list[ShadowMap]):
-    """Every light's map back to back, at the depth offsets of the frame's views."""
+def shadow_atlas(device: Device, buffers: FrameBuffers, maps: list[ShadowMap], part: str = "depth"):
+    """Every light's map back to back, at the depth offsets of the frame's views: their
+    depths, or (`part="triangle"`) their nearest triangles."""
     if len(maps) == 1:
-        return maps[0].depth
+        return getattr(maps[0], part)
     atlas = device.buffer(nbytes=4 * max(buffers.inputs.shadow_texels, 1))
     for (first, _), entry in zip(buffers.inputs.light_views, maps):
         offset = 4 * int(buffers.inputs.views[first]["depth_offset"])
-        device.cl.enqueue_copy(device.queue, atlas, entry.depth, byte_count=4 * entry.texels, dst_offset=offset)
+        device.cl.enqueue_copy(device.queue, atlas, getattr(entry, part), byte_count=4 * entry.texels,
+                               dst_offset=offset)
     return atlas
 
 
@@ -282,4 +305,5 @@ def raster(device: Device, buffers: FrameBuffers, timer: StageTimer) -> RasterRe
     camera, and each light's map anchored at the light, as a render session wires them."""
     camera_depth, tri_id = raster_camera(device, buffers, timer)
     maps = [raster_shadow_map(device, buffers, index, timer) for index in range(len(buffers.inputs.scene.lights))]
-    return RasterResult(camera_depth, tri_id, shadow_atlas(device, buffers, maps))
+    return RasterResult(camera_depth, tri_id, shadow_atlas(device, buffers, maps),
+                        shadow_atlas(device, buffers, maps, "triangle"))

@@ -87,6 +87,7 @@ class Epipolar:
     buffer: object  # the epipolar_t on the device
     tree: object  # float2[slices][2·gamma_samples]: the min-max tree rows
     visible: VisibleRanges  # the β and γ ranges of the visible rays, on the device
+    triangles: object = None  # int[slices][gamma_samples]: each texel's blocker, -1 for none
     levels_built: bool = False  # the minmax stage has filled levels 1..log2(N) of `tree`
     unshadowed: bool = False  # the minimal texture of a light that casts no shadow (clrays.session)
 
@@ -205,11 +206,13 @@ def rectify(device: Device, buffers: FrameBuffers, rastered: RasterResult, light
     timer.add("rectify", device.kernel("rectify", "rectify_ranges", defines)(
         device.queue, (n,), None, bounds_buffer, buffers.lights, frame_buffer, angles, ranges))
     tree = device.buffer(nbytes=8 * slices * 2 * n)
+    triangles = device.buffer(nbytes=4 * slices * n)
     sides = device.buffer(slice_sides(params), writable=False)
     group = min(SLICES_PER_GROUP, slices)
     event = device.kernel("rectify", "rectify", defines)(
         device.queue, (-(-n // (defines["RECTIFY_BATCHES"] * LANES)), -(-slices // group) * group), (1, group),
-        buffers.views, buffers.lights, rastered.shadow_depth, frame_buffer, sides, angles, tree)
+        buffers.views, buffers.lights, rastered.shadow_depth, frame_buffer, sides, angles, tree,
+        rastered.shadow_triangle, triangles)
     timer.add("rectify", event)
     visible = VisibleRanges(device, bounds_buffer, ranges, isinstance(scene.lights[light_index], DirectionalLight), n)
-    return Epipolar(params, frame_buffer, tree, visible)
+    return Epipolar(params, frame_buffer, tree, visible, triangles)

@@ -80,9 +80,11 @@ def _moved_record(record: ReliefRecord, rows: slice) -> ReliefRecord:
 
 def carries_relief_triangles(scene: Scene) -> bool:
     """Whether a frame's triangle buffers hold its reliefs' triangles besides the pre-warp:
-    the exact surface shadows' BVH and bound map, and the filtered shadows' depth range,
-    read them (docs/design.md, "What a frame carries"). Otherwise they are left out."""
-    return scene.render.surface_shadows in ("exact", "filtered") and bool(scene.lights)
+    the exact surface shadows' BVH and bound map, the filtered shadows' depth range, and
+    minmax's walks, which place the shafts' edges on the blockers (cl/shaft_edges.h), read
+    them (docs/design.md, "What a frame carries"). Otherwise they are left out."""
+    return bool(scene.lights) and (scene.render.surface_shadows in ("exact", "filtered")
+                                   or scene.render.method == "minmax")
 
 
 @dataclass

@@ -59,7 +59,10 @@ def test_minmax_matches_exact_and_raymarch(renderer, exact_images, case):
     scene = _case_scene(case, shadow_map=1024)
     edges = depth_edges(depth_map(scene))
     fast = renderer.render(scene, "minmax").image
-    marched = renderer.render(_case_scene(case, shadow_map=1024, steps=4096), "raymarch").image
+    # raymarch on a 4096² map: its shafts' edges are the map's texels, where minmax's lie on
+    # the blockers (cl/shaft_edges.h); on the same 1024² map the two differ by raymarch's
+    # texel error (spot: p99 6.8 % apart, minmax 4.0 % and raymarch 4.3 % from exact)
+    marched = renderer.render(_case_scene(case, shadow_map=4096, steps=4096), "raymarch").image
     versus_exact = image_error(fast, exact_images[case], edges)
     versus_raymarch = image_error(fast, marched, edges)
     print(case, "vs exact:", versus_exact, "| vs raymarch:", versus_raymarch)

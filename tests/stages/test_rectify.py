@@ -46,7 +46,8 @@ def _rectified(device, scene):
     timer = StageTimer()
     camera_depth, tri_id = raster_camera(device, buffers, timer)
     maps = [raster_shadow_map(device, buffers, 0, timer)]
-    rastered = RasterResult(camera_depth, tri_id, shadow_atlas(device, buffers, maps))
+    rastered = RasterResult(camera_depth, tri_id, shadow_atlas(device, buffers, maps),
+                            shadow_atlas(device, buffers, maps, "triangle"))
     epipolar = rectify(device, buffers, rastered, 0, timer)
     params = device.read(epipolar.buffer, (), structs.epipolar_dtype)  # as the kernels read it: γ step included
     n, slices = int(params["gamma_samples"]), int(params["slices"])
@@ -193,8 +194,9 @@ def test_bounds_match_numpy_over_the_camera_samples(device, kind):
     buffers = upload(device, frame_inputs(scene))
     timer = StageTimer()
     camera_depth, tri_id = raster_camera(device, buffers, timer)
-    rastered = RasterResult(camera_depth, tri_id, shadow_atlas(device, buffers, [raster_shadow_map(device, buffers, 0,
-                                                                                                 timer)]))
+    maps = [raster_shadow_map(device, buffers, 0, timer)]
+    rastered = RasterResult(camera_depth, tri_id, shadow_atlas(device, buffers, maps),
+                            shadow_atlas(device, buffers, maps, "triangle"))
     epipolar = rectify(device, buffers, rastered, 0, timer)
     depth = device.read(camera_depth, buffers.inputs.samples, np.uint32).view(np.float32).astype(np.float64)
     distance = np.minimum(depth, float(buffers.inputs.params["far"]))
@@ -224,8 +226,9 @@ def _epipolar_of(device, scene):
     buffers = upload(device, frame_inputs(scene))
     timer = StageTimer()
     camera_depth, tri_id = raster_camera(device, buffers, timer)
-    rastered = RasterResult(camera_depth, tri_id, shadow_atlas(device, buffers, [raster_shadow_map(device, buffers, 0,
-                                                                                                 timer)]))
+    maps = [raster_shadow_map(device, buffers, 0, timer)]
+    rastered = RasterResult(camera_depth, tri_id, shadow_atlas(device, buffers, maps),
+                            shadow_atlas(device, buffers, maps, "triangle"))
     return buffers, rectify(device, buffers, rastered, 0, timer)
 
 

@@ -75,9 +75,13 @@ def test_geometry_digest_follows_the_relief(tmp_path):
         != shape(_scene(tmp_path))
 
 
-@pytest.mark.parametrize("shadows, carried", [("map", False), ("pcf", False), ("exact", True), ("filtered", True)])
-def test_frame_carries_relief_triangles_only_where_read(tmp_path, shadows, carried):
-    scene = _scene(tmp_path, shadows)
+@pytest.mark.parametrize("shadows, method, carried", [
+    ("map", "raymarch", False), ("pcf", "raymarch", False), ("exact", "raymarch", True),
+    ("filtered", "raymarch", True),
+    ("map", "minmax", True),  # minmax's walks place the shafts' edges on any triangle (cl/shaft_edges.h)
+])
+def test_frame_carries_relief_triangles_only_where_read(tmp_path, shadows, method, carried):
+    scene = _scene(tmp_path, shadows, overrides=[f"render.method={method}"])
     inputs = frame_inputs(scene)
     relief_rows = sum(r.rows.stop - r.rows.start for r in scene.geometry.reliefs)
     assert inputs.raster_triangles == scene.geometry.count - relief_rows

@@ -1,0 +1,109 @@
+"""Shaft edges on the blockers (cl/shaft_edges.h, clrays/stages/shaft_edges.py): which
+triangle lies across each edge, the blocker rectify keeps per texel, and the walks' runs
+ending on the blockers' silhouettes rather than at texel boundaries."""
+import math
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from clrays.device import StageTimer
+from clrays.inputs import frame_inputs, upload
+from clrays.reference.metrics import depth_edges, depth_map, image_error
+from clrays.scene.geometry import box_triangles
+from clrays.scene.load import load_scene
+from clrays.stages import raster as raster_stage
+from clrays.stages.raster import raster
+from clrays.stages.rectify import rectify
+from clrays.stages.shaft_edges import edge_neighbours
+from conftest import DirectionalLight, PointLight, grid_plane, make_scene, v3
+
+SCENES = Path(__file__).resolve().parents[2] / "scenes"
+PI_F = float(np.float32(math.pi))  # S of an unblocked light ray
+
+
+def test_a_closed_box_links_every_edge_both_ways():
+    scene = make_scene(box_triangles([-1.0, 0.0, -1.0], [1.0, 2.0, 1.0]))
+    neighbours = edge_neighbours(scene.geometry)
+    assert neighbours.shape == (12, 3) and (neighbours >= 0).all()
+    for triangle, across in enumerate(neighbours):
+        for other in across:
+            assert other != triangle and triangle in neighbours[other]
+
+
+def test_a_border_and_a_translucent_triangle_have_no_neighbour_there():
+    square = grid_plane(0.0, 1.0, 1)  # two triangles sharing a diagonal; its sides are its border
+    assert sorted(edge_neighbours(make_scene(square).geometry).ravel().tolist()) == [-1, -1, -1, -1, 0, 1]
+    geometry = make_scene(np.concatenate([square, square + [0.0, 0.0, 2.0]])).geometry  # sharing z = 1
+    assert (edge_neighbours(geometry)[:2] >= 2).any()
+    opacity = np.ones((4, 3))
+    opacity[2:] = 0.5  # the second square a pane: the light goes on through it
+    linked = edge_neighbours(replace(geometry, opacity=opacity))
+    assert (linked[:2] < 2).all() and (linked[2:] == -1).all()
+
+
+def _blockers(device, scene):
+    """(S, blocker) of level 0 of the first light's tree, as rectify wrote them."""
+    buffers = upload(device, frame_inputs(scene))
+    timer = StageTimer()
+    epipolar = rectify(device, buffers, raster(device, buffers, timer), 0, timer)
+    n, slices = int(epipolar.params["gamma_samples"]), int(epipolar.params["slices"])
+    tree = device.read(epipolar.tree, slices * 2 * n * 2, np.float32).reshape(slices, 2 * n, 2)
+    blocker = device.read(epipolar.triangles, slices * n, np.int32).reshape(slices, n)
+    return tree[:, :n, 0], blocker
+
+
+def _scene(light):
+    triangles = np.concatenate([grid_plane(0.0, 8.0, 4), box_triangles([-1.0, 1.2, -1.0], [1.0, 1.6, 0.8])])
+    return make_scene(triangles, [light], width=48, height=32, position=(0, 2.5, 8), look_at=(0, 2.0, 0),
+                      shadow_map=128, slices=48, gamma_samples=128)
+
+
+@pytest.mark.parametrize("light", [PointLight(v3(0.4, 4.5, -0.6), np.full(3, 40.0)),
+                                   DirectionalLight(v3(0.35, -1.0, -0.25) / np.linalg.norm([0.35, -1.0, -0.25]),
+                                                    np.full(3, 1.5))], ids=["point", "directional"])
+def test_every_blocked_texel_keeps_its_blocker(device, monkeypatch, light):
+    scene = _scene(light)
+    beta, blocker = _blockers(device, scene)
+    blocked = beta < PI_F
+    assert blocked.any() and (~blocked).any()
+    assert (blocker[blocked] >= 0).all() and (blocker[blocked] < scene.geometry.count).all()
+    assert (beta[blocker == -1] == PI_F).all()  # (a blocker far behind the eye may give π too)
+    # The floor's blockers are the floor's triangles; the box's, the box's: some of each.
+    assert (blocker[blocked] < 32).any() and (blocker[blocked] >= 32).any()
+    # A device without 64-bit atomics resolves the nearest triangle in a second pass: the same.
+    monkeypatch.setattr(raster_stage, "_atomic64", lambda device: False)
+    beta_resolved, blocker_resolved = _blockers(device, scene)
+    np.testing.assert_array_equal(beta_resolved, beta)
+    np.testing.assert_array_equal(blocker_resolved, blocker)
+
+
+def test_a_relief_blocks_with_its_own_triangles(device):
+    scene = load_scene(SCENES / "lattice.yaml", ["image.width=32", "image.height=18", "render.shadow_map=256",
+                                                 "render.slices=64", "render.gamma_samples=256"])
+    inputs = frame_inputs(scene)
+    beta, blocker = _blockers(device, scene)
+    relief = range(inputs.raster_triangles, inputs.scene.geometry.count)  # placed last (place_reliefs)
+    ids = blocker[beta < PI_F]
+    assert np.isin(ids, relief).any()
+    assert (ids >= 0).all() and (ids < inputs.scene.geometry.count).all()
+
+
+def test_slat_shafts_have_their_edges_on_the_slats(renderer):
+    """Slats 12 cm wide under a sun, seen across their shafts: with the shafts' edges on the
+    slats a map gets closer to `exact` than the texels alone allow. Measured relative RMSE at
+    512² / 1024²: 0.318 / 0.162 % (with the runs' ends at the texels 0.512 / 0.265 %; at
+    4096², 0.118 and 0.143 %)."""
+    parts = [grid_plane(0.0, 8.0, 4)]
+    parts += [box_triangles([x, 2.0, -3.0], [x + 0.12, 2.1, 3.0]) for x in np.arange(-3.0, 3.0, 0.5)]
+    sun = DirectionalLight(v3(0.3, -1.0, 0.2) / np.linalg.norm([0.3, -1.0, 0.2]), np.full(3, 1.5))
+    make = lambda size: make_scene(np.concatenate(parts), [sun], width=64, height=36,  # noqa: E731
+                                   position=(0.0, 1.0, 6.0), look_at=(0.5, 1.2, 0.0), far=20.0, sigma_s=0.1,
+                                   sigma_a=0.02, shadow_map=size)
+    reference = renderer.render(make(1024), "exact").image
+    edges = depth_edges(depth_map(make(1024)))
+    errors = {size: image_error(renderer.render(make(size), "minmax").image, reference, edges).rmse
+              for size in (512, 1024)}
+    print("slat shafts, relative RMSE at 512 / 1024:", errors)
+    assert errors[512] <= 0.004 and errors[1024] <= 0.002
