@@ -5,7 +5,7 @@
  * those errors up. A shaft's edge is the light ray through its blocker's silhouette, and
  * rectify keeps, per texel, the triangle the map found nearest the light there. A run's
  * end moves to where the surface that triangle belongs to turns away in the ray's own
- * epipolar half-plane, when that lies within SHAFT_EDGE_WINDOW texels of the boundary.
+ * epipolar half-plane, when that lies close enough to the boundary (SHAFT_EDGE_REACH).
  *
  * In the ray's half-plane (eye at the origin): a = p·axis (axis towards the light), b =
  * p·across ≥ 0 (across: the ray's direction less its part along the axis). A point's γ is
@@ -56,13 +56,16 @@ typedef struct {
 /* Triangles a run's end follows across shared edges, at most: the relief lattice's bars
  * cross a texel in 1–2 cells. */
 #define SHAFT_EDGE_STEPS 16
-/* How far from the texel boundary, in γ texels, an end may move. The row's texel took its
- * state from the map texel nearest its centre, in its slice's plane, not the ray's: the
- * blocker's edge can lie a few texels off. Measured against `exact` at 320×180 (relative
- * RMSE %, window 0.5 / 1 / 2 / 4 / 8 texels): sun 0.27 / 0.15 / 0.099 / 0.096 / 0.096,
- * demo 0.141 / 0.133 / 0.131 / 0.116 / 0.114, lattice 2.32 / 2.21 / 1.99 / 1.99 / 2.09
- * (0.29, 0.144 and 2.35 with texel ends). */
-#define SHAFT_EDGE_WINDOW 4
+/* How far from the texel boundary an end may move: 1/SHAFT_EDGE_REACH of the row, and at
+ * least a texel. The row's texel took its state from the map texel nearest its centre, in
+ * its slice's plane, not the ray's: the blocker's edge can lie a few texels off, by an
+ * offset between the planes that does not shrink with the texels. Measured against `exact`
+ * (relative RMSE %) at 320×180 with 1024 γ texels, a window of 0.5 / 1 / 2 / 4 / 8 texels:
+ * sun 0.27 / 0.15 / 0.099 / 0.096 / 0.096, demo 0.141 / 0.133 / 0.131 / 0.116 / 0.114,
+ * lattice 2.32 / 2.21 / 1.99 / 1.99 / 2.09 (0.29, 0.144 and 2.35 with texel ends); on
+ * slats under a lamp at 64×36 with a 64² map and 32 γ texels, 1 / 2 / 4 texels: 1.89 /
+ * 1.96 / 2.16 (1.88 with texel ends): at 32 texels a texel is already that far. */
+#define SHAFT_EDGE_REACH 256
 
 /* Triangle `tri`'s cut with the ray's half-plane, its ends in rising γ; 0 when the triangle
  * misses the plane or reaches across the axis. */
@@ -129,6 +132,7 @@ typedef struct {
     float previous_end;
     float gamma_begin;
     float gamma_end;
+    float window; /* how far an end may move, texels */
 } run_edges_t;
 
 inline run_edges_t run_edges_of(global const epipolar_t* ep, float3 dir, float beta,
@@ -143,6 +147,7 @@ inline run_edges_t run_edges_of(global const epipolar_t* ep, float3 dir, float b
     edges.previous_end = gamma_begin;
     edges.gamma_begin = gamma_begin;
     edges.gamma_end = gamma_end;
+    edges.window = fmax(1.0f, (float)ep->gamma_samples / (float)SHAFT_EDGE_REACH);
     return edges;
 }
 
@@ -154,16 +159,17 @@ inline int place_run_ends(run_edges_t* edges, const walk_features_t* features, g
                           int run_start, int run_end, int closed, float* run0, float* run1)
 {
     if (!edges->planar) return *run1 > *run0;
+    float window = edges->window;
     if (run_start > edges->first)
         *run0 = shaft_edge(&edges->plane, features->edge_vertices, features->edge_neighbours,
                            edges->blockers[run_start - 1], edges->beta, 1,
-                           gamma_at_texel(texels, (float)(run_start - SHAFT_EDGE_WINDOW)),
-                           gamma_at_texel(texels, (float)(run_start + SHAFT_EDGE_WINDOW)), *run0);
+                           gamma_at_texel(texels, (float)run_start - window),
+                           gamma_at_texel(texels, (float)run_start + window), *run0);
     if (closed)
         *run1 = shaft_edge(&edges->plane, features->edge_vertices, features->edge_neighbours,
                            edges->blockers[run_end], edges->beta, 0,
-                           gamma_at_texel(texels, (float)(run_end - SHAFT_EDGE_WINDOW)),
-                           gamma_at_texel(texels, (float)(run_end + SHAFT_EDGE_WINDOW)), *run1);
+                           gamma_at_texel(texels, (float)run_end - window),
+                           gamma_at_texel(texels, (float)run_end + window), *run1);
     *run0 = clamp(*run0, edges->previous_end, edges->gamma_end);
     *run1 = clamp(*run1, edges->gamma_begin, edges->gamma_end);
     edges->previous_end = fmax(*run0, *run1);
