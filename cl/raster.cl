@@ -475,6 +475,9 @@ RASTER_KERNELS(raster_resolve, RESOLVE_TARGET,
 
 #ifdef RASTER_ATOMIC64
 #pragma OPENCL EXTENSION cl_khr_int64_extended_atomics : enable
+#ifndef RASTER_SPLIT_RUN
+#define RASTER_SPLIT_RUN 64
+#endif
 /* One pass for depth and triangle: the key (as_uint(t) << 32 | tri) orders by depth
  * first (positive floats order like their bits), ties to the lowest index. The key's depth
  * word (32 bits, read whole on any device, unlike a plain 64-bit read) only ever decreases:
@@ -484,10 +487,27 @@ RASTER_KERNELS(raster_resolve, RESOLVE_TARGET,
 #else
 #define KEY_DEPTH_WORD 0
 #endif
+/* Pass 2's update of a whole run of RASTER_LANES columns, one sample per pixel, as
+ * DEPTH_MIN_LANES's: the run's keys and the stored ones as one vector min. A lane the
+ * triangle misses holds (DEPTH_EMPTY, tri), which raster_split reads as nothing hit, and
+ * which any hit beats. Two ulong4 halves: as one ulong8, PoCL 3.0 on a CPU with AVX-512
+ * lost most of the run's stores (tests/stages/test_raster.py; docs/design.md §4.5, "Wide
+ * vectors"). */
+typedef ulong4 __attribute__((aligned(8))) ulong4_at_ulong;
+#define NEAREST_MIN_LANES(nearest)                                                          \
+    if (sample_count == 1 && first + RASTER_LANES <= column1 + 1) {                        \
+        global ulong4_at_ulong* run = (global ulong4_at_ulong*)(nearest + view->depth_offset + y * view->width + first); \
+        ulong4 low = (convert_ulong4(as_uint4(lanes.lo)) << 32) | (ulong4)((ulong)(uint)tri);  \
+        ulong4 high = (convert_ulong4(as_uint4(lanes.hi)) << 32) | (ulong4)((ulong)(uint)tri); \
+        run[0] = min(run[0], low);                                                          \
+        run[1] = min(run[1], high);                                                         \
+        continue;                                                                           \
+    }
 RASTER_KERNELS(raster_nearest, global ulong* nearest,
                if (as_uint(t) <= ((global const uint*)(nearest + idx))[KEY_DEPTH_WORD])
                    atom_min(nearest + idx, ((ulong)as_uint(t) << 32) | (ulong)tri);,
-               ulong key = ((ulong)as_uint(t) << 32) | (ulong)tri; if (key < nearest[idx]) nearest[idx] = key;, )
+               ulong key = ((ulong)as_uint(t) << 32) | (ulong)tri; if (key < nearest[idx]) nearest[idx] = key;,
+               NEAREST_MIN_LANES(nearest))
 
 kernel void raster_split(global const ulong* nearest, int samples, global uint* depth, global int* tri_id)
 {
@@ -496,6 +516,28 @@ kernel void raster_split(global const ulong* nearest, int samples, global uint* 
     ulong key = nearest[i];
     depth[i] = (uint)(key >> 32);
     tri_id[i] = depth[i] == DEPTH_EMPTY ? -1 : (int)(uint)key;
+}
+
+/* raster_split over RASTER_SPLIT_RUN keys per work-item, four at a time as vectors: a
+ * shadow map's millions of texels, where one per work-item cost PoCL 8 ms a cube map. */
+typedef uint4 __attribute__((aligned(4))) uint4_at_uint;
+typedef int4 __attribute__((aligned(4))) int4_at_int;
+kernel void raster_split_runs(global const ulong* nearest, int samples, global uint* depth, global int* tri_id)
+{
+    int first = get_global_id(0) * RASTER_SPLIT_RUN;
+    int end = min(first + RASTER_SPLIT_RUN, samples);
+    int i = first;
+    for (; i + 4 <= end; i += 4) {
+        ulong4 key = *(global const ulong4_at_ulong*)(nearest + i);
+        uint4 key_depth = convert_uint4(key >> 32);
+        *(global uint4_at_uint*)(depth + i) = key_depth;
+        *(global int4_at_int*)(tri_id + i) = key_depth == (uint4)(DEPTH_EMPTY) ? (int4)(-1) : convert_int4(convert_uint4(key));
+    }
+    for (; i < end; ++i) {
+        ulong key = nearest[i];
+        depth[i] = (uint)(key >> 32);
+        tri_id[i] = depth[i] == DEPTH_EMPTY ? -1 : (int)(uint)key;
+    }
 }
 #endif
 

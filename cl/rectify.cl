@@ -14,6 +14,9 @@
 
 #define PI_F 3.14159265358979f
 
+/* An int8 aligned as its elements are: a row's blockers stored 8 at a time. */
+typedef int8 __attribute__((aligned(4))) int8_at_int;
+
 /* Camera samples per rectify_bounds work-item (clrays/stages/rectify.py BOUNDS_CHUNK), LANES
  * at a time. */
 #ifndef BOUNDS_CHUNK
@@ -260,7 +263,13 @@ kernel void rectify(global const view_t* views, global const light_t* lights,
     global int* triangles = row_triangles + (size_t)slice * n;
 #pragma unroll
     for (int b = 0; b < RECTIFY_BATCHES; ++b) {
+        int start = first + b * LANES;
+        if (start >= n) continue;
         int_lanes blocker = meets[b] ? GATHER_LANES(int_lanes, shadow_triangle, index[b]) : (int_lanes)(-1);
-        for (int k = 0; k < LANES && first + b * LANES + k < n; ++k) triangles[first + b * LANES + k] = blocker[k];
+        if (start + LANES <= n) {
+            *(global int8_at_int*)(triangles + start) = blocker; /* one plain vector store */
+        } else {
+            for (int k = 0; start + k < n; ++k) triangles[start + k] = blocker[k];
+        }
     }
 }

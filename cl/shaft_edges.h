@@ -16,46 +16,66 @@
 #ifndef CLRAYS_SHAFT_EDGES_H
 #define CLRAYS_SHAFT_EDGES_H
 #include "common.h"
+#include "atan2_approx.h"
 #include "gamma_texels.h"
+#include "inline_math.h"
 #include "walk_features.h"
 
 typedef struct {
     float3 axis;   /* towards the light */
     float3 across; /* in the ray's half-plane, across the axis */
     float3 normal; /* of the half-plane */
+    float cos_beta;
+    float sin_beta;
     float d_el;
     int directional;
 } ray_plane_t;
 
-/* The half-plane of a unit ray `dir` with cos β = dir·axis; 0 where the ray runs along the
- * axis (no half-plane to speak of: its runs keep their texel ends). A directional light's
- * frame has d_el = 0 (a point light's lamp holding the eye never reaches a walk: lamp.py). */
-inline int ray_plane_of(global const epipolar_t* ep, float3 dir, ray_plane_t* plane)
+/* The half-plane of a unit ray `dir`; 0 where the ray runs along the axis (no half-plane
+ * to speak of: its runs keep their texel ends). A directional light's frame has d_el = 0
+ * (a point light's lamp holding the eye never reaches a walk: lamp.py). */
+ALWAYS_INLINE int ray_plane_of(global const epipolar_t* ep, float3 dir, ray_plane_t* plane)
 {
-    float cos_beta = dot(dir, ep->axis.xyz);
     float3 axis = ep->axis.xyz;
+    float cos_beta = inline_dot(dir, axis);
     float3 across = dir - cos_beta * axis;
-    float length_across = length(across);
-    if (!(length_across > 1e-4f)) return 0;
+    float sin_beta = inline_length(across);
+    if (!(sin_beta > 1e-4f)) return 0;
     plane->axis = axis;
-    plane->across = across / length_across;
-    plane->normal = cross(axis, plane->across);
+    plane->across = across / sin_beta;
+    plane->normal = inline_cross(axis, plane->across);
+    plane->cos_beta = cos_beta;
+    plane->sin_beta = sin_beta;
     plane->d_el = ep->d_el;
     plane->directional = ep->d_el == 0.0f;
     return 1;
 }
 
-/* One end of a triangle's cut with the half-plane: its γ and β, and the triangle's edge
+/* One end of a triangle's cut with the half-plane: its γ as a direction g (γ = g.y for a
+ * directional light, whose g.x is 1; atan2(g.y, g.x) for a point or spot light: ends
+ * compare by a cross product, and only the one a run ends on takes an arc tangent),
+ * whether it lies in front of the ray (its β at most the ray's), and the triangle's edge
  * (0: v0 → v1, 1: v1 → v2, 2: v2 → v0) it lies on. */
 typedef struct {
-    float gamma;
-    float beta;
+    float2 g;
+    int blocks;
     int edge;
 } cut_end_t;
 
-/* Triangles a run's end follows across shared edges, at most: the relief lattice's bars
- * cross a texel in 1–2 cells. */
-#define SHAFT_EDGE_STEPS 16
+/* Whether end p's γ is below end q's. */
+ALWAYS_INLINE int gamma_below(cut_end_t p, cut_end_t q)
+{
+    return p.g.x * q.g.y - p.g.y * q.g.x > 0.0f;
+}
+
+ALWAYS_INLINE float cut_gamma(const ray_plane_t* plane, cut_end_t end)
+{
+    return plane->directional ? end.g.y : atan2_approx(end.g.y, end.g.x);
+}
+
+/* Triangles a run's end follows across shared edges, at most. At 320×180, 4 / 8 / 16 steps:
+ * lattice 1.97 / 1.99 / 1.99 %, bunny 0.066 / 0.066 / 0.066 %, sun and demo the same. */
+#define SHAFT_EDGE_STEPS 8
 /* How far from the texel boundary an end may move: 1/SHAFT_EDGE_REACH of the row, and at
  * least a texel. The row's texel took its state from the map texel nearest its centre, in
  * its slice's plane, not the ray's: the blocker's edge can lie a few texels off, by an
@@ -72,21 +92,22 @@ typedef struct {
 inline int triangle_cut(const ray_plane_t* plane, global const float4* vertices, int tri, cut_end_t ends[2])
 {
     float3 v[3] = {vertices[3 * tri].xyz, vertices[3 * tri + 1].xyz, vertices[3 * tri + 2].xyz};
-    float h[3] = {dot(v[0], plane->normal), dot(v[1], plane->normal), dot(v[2], plane->normal)};
+    float h[3] = {inline_dot(v[0], plane->normal), inline_dot(v[1], plane->normal), inline_dot(v[2], plane->normal)};
     int found = 0;
     for (int i = 0; i < 3; ++i) {
         int j = i == 2 ? 0 : i + 1;
         if ((h[i] >= 0.0f) == (h[j] >= 0.0f)) continue;
         float3 p = v[i] + (v[j] - v[i]) * (h[i] / (h[i] - h[j]));
-        float a = dot(p, plane->axis), b = dot(p, plane->across);
+        float a = inline_dot(p, plane->axis), b = inline_dot(p, plane->across);
         if (b < 0.0f || found == 2) return 0;
-        ends[found].gamma = plane->directional ? b : atan2(b, plane->d_el - a);
-        ends[found].beta = atan2(b, a);
+        ends[found].g = plane->directional ? (float2)(1.0f, b) : (float2)(plane->d_el - a, b);
+        /* β_p = atan2(b, a) at most the ray's β */
+        ends[found].blocks = b * plane->cos_beta - a * plane->sin_beta <= 0.0f;
         ends[found].edge = i;
         ++found;
     }
     if (found != 2) return 0;
-    if (ends[1].gamma < ends[0].gamma) {
+    if (gamma_below(ends[1], ends[0])) {
         cut_end_t swap = ends[0];
         ends[0] = ends[1];
         ends[1] = swap;
@@ -95,30 +116,30 @@ inline int triangle_cut(const ray_plane_t* plane, global const float4* vertices,
 }
 
 /* Where a lit run ends before the shadowed texel whose blocker is `tri` (`begins`: where a
- * lit run begins after it), between γ `from` and `to` (a texel either side of the
+ * lit run begins after it), between γ `from` and `to` (a window either side of the
  * boundary); `fallback`, the texel boundary, where that is not found there. From the
  * blocker's cut, the surface is followed across the triangles' shared edges (`neighbours`,
  * three per triangle, -1 at a border) towards the lit side for as long as its cut goes on
  * that way in front of the ray: where it turns back, or ends at a border, is the silhouette
  * in the ray's plane, and the shaft's edge. */
 inline float shaft_edge(const ray_plane_t* plane, global const float4* vertices, global const int* neighbours,
-                        int tri, float beta, int begins, float from, float to, float fallback)
+                        int tri, int begins, float from, float to, float fallback)
 {
     cut_end_t ends[2];
     if (tri < 0 || !triangle_cut(plane, vertices, tri, ends)) return fallback;
     cut_end_t edge = ends[begins ? 1 : 0];
-    if (!(edge.beta <= beta)) return fallback;
-    for (int step = 0; step < SHAFT_EDGE_STEPS && (begins ? edge.gamma <= to : edge.gamma >= from); ++step) {
+    if (!edge.blocks) return fallback;
+    for (int step = 0; step < SHAFT_EDGE_STEPS; ++step) {
         int next = neighbours[3 * tri + edge.edge];
         if (next < 0 || !triangle_cut(plane, vertices, next, ends)) break;
         /* the neighbour's cut shares this end, on the edge that leads back; its other end goes on */
-        int shared = neighbours[3 * next + ends[0].edge] == tri ? 0 : 1;
-        cut_end_t far = ends[1 - shared];
-        if ((begins ? !(far.gamma > edge.gamma) : !(far.gamma < edge.gamma)) || !(far.beta <= beta)) break;
+        cut_end_t far = ends[neighbours[3 * next + ends[0].edge] == tri ? 1 : 0];
+        if (!(begins ? gamma_below(edge, far) : gamma_below(far, edge)) || !far.blocks) break;
         tri = next;
         edge = far;
     }
-    return edge.gamma >= from && edge.gamma <= to ? edge.gamma : fallback;
+    float gamma = cut_gamma(plane, edge);
+    return gamma >= from && gamma <= to ? gamma : fallback;
 }
 
 /* What a row's walk keeps to place its runs' ends: the ray's half-plane, the row's
@@ -127,7 +148,6 @@ typedef struct {
     ray_plane_t plane;
     int planar;
     global const int* blockers;
-    float beta;
     int first;
     float previous_end;
     float gamma_begin;
@@ -135,14 +155,12 @@ typedef struct {
     float window; /* how far an end may move, texels */
 } run_edges_t;
 
-inline run_edges_t run_edges_of(global const epipolar_t* ep, float3 dir, float beta,
-                                const walk_features_t* features, int slice, int first, float gamma_begin,
+inline run_edges_t run_edges_of(global const epipolar_t* ep, float3 dir, const walk_features_t* features, int slice, int first, float gamma_begin,
                                 float gamma_end)
 {
     run_edges_t edges;
     edges.planar = ray_plane_of(ep, dir, &edges.plane);
     edges.blockers = features->edge_rows + (size_t)slice * ep->gamma_samples;
-    edges.beta = beta;
     edges.first = first;
     edges.previous_end = gamma_begin;
     edges.gamma_begin = gamma_begin;
@@ -162,12 +180,12 @@ inline int place_run_ends(run_edges_t* edges, const walk_features_t* features, g
     float window = edges->window;
     if (run_start > edges->first)
         *run0 = shaft_edge(&edges->plane, features->edge_vertices, features->edge_neighbours,
-                           edges->blockers[run_start - 1], edges->beta, 1,
+                           edges->blockers[run_start - 1], 1,
                            gamma_at_texel(texels, (float)run_start - window),
                            gamma_at_texel(texels, (float)run_start + window), *run0);
     if (closed)
         *run1 = shaft_edge(&edges->plane, features->edge_vertices, features->edge_neighbours,
-                           edges->blockers[run_end], edges->beta, 0,
+                           edges->blockers[run_end], 0,
                            gamma_at_texel(texels, (float)run_end - window),
                            gamma_at_texel(texels, (float)run_end + window), *run1);
     *run0 = clamp(*run0, edges->previous_end, edges->gamma_end);

@@ -218,7 +218,7 @@ inline float3 walk_row(global const epipolar_t* ep, global const float2* row, co
     int run_start = -1, run_end = 0;
     int position = inline_clamp_int((int)inline_floor(gamma_texel_coord(texels, gamma_begin)), 0, n);
 #ifdef SHAFT_EDGES
-    run_edges_t edges = run_edges_of(ep, span->dir, beta, features, slice, position, gamma_begin, gamma_end);
+    run_edges_t edges = run_edges_of(ep, span->dir, features, slice, position, gamma_begin, gamma_end);
 #endif
     while (position < end) {
         int size;

@@ -49,6 +49,11 @@ RASTER_ROWS_COLUMNS_GPU = 32
 RASTER_BIG_SAMPLES_GPU = 1024
 
 
+#: Keys a work-item of raster_split_runs splits (cl/raster.cl's default): a shadow map's
+#: millions of texels one per work-item cost PoCL 8 ms a 1024² cube map.
+RASTER_SPLIT_RUN = 64
+
+
 def raster_rows_columns(device: Device, width: int) -> int:
     """Columns of a `width`-wide view per work-item of a rows pass: a CPU's cores take whole
     rows, which projects each listed triangle once per block of rows."""
@@ -198,8 +203,10 @@ def raster_shadow_map(device: Device, buffers: FrameBuffers, light_index: int, t
         for view_index in drawn:
             reliefs.map("relief_map_nearest", defines, light_buffers.views, inputs.views, view_index, centre, 1,
                         (nearest,))
-        timer.add("raster", device.kernel("raster", "raster_split", raster_defines(device, defines))(
-            device.queue, (texels,), None, nearest, np.int32(texels), depth, triangle))
+        split = device.kernel("raster", "raster_split_runs",
+                              raster_defines(device, {**defines, "RASTER_SPLIT_RUN": RASTER_SPLIT_RUN}))
+        timer.add("raster", split(
+            device.queue, (-(-texels // RASTER_SPLIT_RUN),), None, nearest, np.int32(texels), depth, triangle))
     else:
         device.fill(depth, structs.DEPTH_EMPTY, 4 * texels, timer, "raster")
         device.fill(triangle, np.int32(-1), 4 * texels, timer, "raster")
