@@ -218,6 +218,14 @@ ALWAYS_INLINE void store_level0(global float* row, int first, int n, float_lanes
     }
 }
 
+/* With RECTIFY_BLOCKERS, each texel's blocking triangle too: the maps' nearest triangles
+ * in, the rows' out. */
+#ifdef RECTIFY_BLOCKERS
+#define RECTIFY_BLOCKER_ARGS , global const int* shadow_triangle, global int* row_triangles
+#else
+#define RECTIFY_BLOCKER_ARGS
+#endif
+
 /* One work-item per RECTIFY_BATCHES·LANES texels of a slice, as float8 batches (lanes.h,
  * docs/design.md §4.5): the operations of view_project, light_view_index and shadow_texel
  * (lighting.h) in their order, so S is the same bits as one texel per work-item. Every
@@ -225,8 +233,8 @@ ALWAYS_INLINE void store_level0(global float* row, int first, int n, float_lanes
  * is 4 MB), and more of them at once wait about as long as 8. */
 kernel void rectify(global const view_t* views, global const light_t* lights,
                     global const uint* shadow_depth, global const epipolar_t* epipolar,
-                    global const float4* slice_sides, global const float4* texel_angles, global float2* tree,
-                    global const int* shadow_triangle, global int* row_triangles)
+                    global const float4* slice_sides, global const float4* texel_angles, global float2* tree
+                    RECTIFY_BLOCKER_ARGS)
 {
     int first = get_global_id(0) * RECTIFY_BATCHES * LANES, slice = get_global_id(1);
     global const epipolar_t* ep = epipolar;
@@ -258,6 +266,7 @@ kernel void rectify(global const view_t* views, global const light_t* lights,
     for (int b = 0; b < RECTIFY_BATCHES; ++b)
         store_level0(row, first + b * LANES, n,
                      rectify_beta(views, light, ep, gamma[b], cos_gamma[b], sin_gamma[b], depth[b], meets[b]));
+#ifdef RECTIFY_BLOCKERS
     /* Each texel's blocker, the nearest triangle the map holds there (-1: none): the walks
      * place the shafts' edges on it (shaft_edges.h). */
     global int* triangles = row_triangles + (size_t)slice * n;
@@ -272,4 +281,5 @@ kernel void rectify(global const view_t* views, global const light_t* lights,
             for (int k = 0; start + k < n; ++k) triangles[start + k] = blocker[k];
         }
     }
+#endif
 }

@@ -48,7 +48,7 @@ from .reuse import COMPUTED, REUSED, SKIPPED, Reuse, StageCache, StageRecord, di
 from .scene.costs import with_derived_sizes
 from .scene.model import METHODS, RENAMED_METHODS, Render, Scene
 from .stages.features import walk_features
-from .stages.shaft_edges import ShaftEdges, edge_neighbours
+from .stages.shaft_edges import ShaftEdges, edge_neighbours, keeps_blockers
 from .stages.integrand import integrand, integrand_table_size
 from .stages.lamp import eye_in_lamp, lamp_in_scatter
 from .stages.light_texture import light_texture
@@ -427,9 +427,11 @@ class Renderer:
 
     def _shaft_edges(self, buffers: FrameBuffers, epipolar, keys: StageKeys, reuse: Reuse) -> ShaftEdges | None:
         """What places the walks' run ends on the blockers' silhouettes (stages/shaft_edges.py):
-        None where the frame does not carry every triangle's vertices."""
+        None for `render.shaft_edges: texels`, and where the frame does not carry every
+        triangle's vertices."""
         geometry = buffers.inputs.scene.geometry
-        if len(buffers.inputs.tri_vertices) // 3 != geometry.count or epipolar.triangles is None:
+        if buffers.inputs.scene.render.shaft_edges != "blockers" \
+                or len(buffers.inputs.tri_vertices) // 3 != geometry.count or epipolar.triangles is None:
             return None
         neighbours = reuse.keep("edge_neighbours", lambda: digest("edge_neighbours", keys.geometry),
                                 lambda: self.device.buffer(edge_neighbours(geometry), writable=False))
@@ -746,14 +748,16 @@ class StageKeys:
 
     @cached_property
     def shadow(self) -> list[bytes]:
-        """raster.shadow, per light: the geometry, the light's views relative to its anchor and
-        which of them the frame reads (cube faces outside the camera's view are left empty)."""
+        """raster.shadow, per light: the geometry, the light's views relative to its anchor,
+        which of them the frame reads (cube faces outside the camera's view are left empty)
+        and whether the map keeps its blocking triangles."""
         inputs, shadow = self.inputs, []
         for index, (first, count) in enumerate(inputs.light_views):
             views = inputs.views[first:first + count].copy()
             views["origin"], views["depth_offset"] = 0.0, 0
             shadow.append(digest("shadow", self.geometry, inputs.light_anchor_ws[index], views,
-                                 inputs.lights[index]["type"], inputs.view_needed[first:first + count]))
+                                 inputs.lights[index]["type"], inputs.view_needed[first:first + count],
+                                 keeps_blockers(inputs.scene.render)))
         return shadow
 
     def _light_geometry(self, index: int) -> dict:

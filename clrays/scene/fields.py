@@ -17,7 +17,7 @@ from .costs import (FULL_SHADOW_MAP_DIAGONAL, INITIAL_SAMPLES_PER_LINE, MAX_GAMM
                     MIN_GAMMA_SAMPLES, MIN_INITIAL_STEP, MIN_LINE_SAMPLES, MIN_SHADOW_MAP, MIN_SLICES,
                     OCCLUDER_MAP_GROWTH, OCCLUDER_TEXELS)
 from .model import (INTEGRAND_MODES, METHODS, NORMALS, RELIEF_MODES, RENAMED_METHODS, RENAMED_TRANSPARENCY_TYPES,
-                    SAMPLINGS, SHADOW_FILTERS, STEP_SPACINGS, SURFACE_SHADOWS, TEXTURE_WRAPS, TRANSPARENCY_TYPES, TRANSPARENCY_WARPS, TRAVERSALS, Camera,
+                    SAMPLINGS, SHADOW_FILTERS, SHAFT_EDGES, STEP_SPACINGS, SURFACE_SHADOWS, TEXTURE_WRAPS, TRANSPARENCY_TYPES, TRANSPARENCY_WARPS, TRAVERSALS, Camera,
                     DirectionalLight, Image, Render, ShadowFilter, Transparency)
 from .textures import MAX_SCENE_TEXTURE_TEXELS, MAX_TEXTURE_SIDE
 
@@ -308,6 +308,10 @@ RENDER = Section("render", (
                 "interpolates it to the pixels, walking a pixel's own rays only where no sample lies at its "
                 "distance; `pixel` walks the two nearest slices' rows for every pixel sample "
                 "([docs/design.md](design.md) §4.5)", read_by=("minmax",)),
+    Field("shaft_edges", "string", Render.shaft_edges, choices=SHAFT_EDGES,
+          notes="min-max: `blockers` ends each lit run on the silhouette of the triangle the shadow map found "
+                "there, in the ray's own plane; `texels` at the texel boundary, as raymarch does, 1.2–1.3 × faster "
+                "at 1280×720 ([docs/design.md](design.md) §4.5)", read_by=("minmax",)),
     Field("line_samples", "integer", Render.line_samples, 2, 16384,
           shown_default=f"from the image: half its diagonal in pixels, in [{MIN_LINE_SAMPLES}, {MAX_LINE_SAMPLES}]",
           notes="`sampling: epipolar`: samples along the slice's line that is longest on the screen; a "

@@ -29,6 +29,8 @@ INTEGRAND_MODES = ("table", "svd", "analytic")
 TRAVERSALS = ("tree", "scan")
 # min-max: in-scattering at samples along epipolar lines, interpolated; or walked for every camera sample.
 SAMPLINGS = ("epipolar", "pixel")
+#: render.shaft_edges: where a lit run ends (cl/shaft_edges.h)
+SHAFT_EDGES = ("blockers", "texels")
 # raymarch: steps at equal angles seen from a point or spot light (dense where the ray passes
 # it), or at equal distances along the ray. Directional lights always take uniform steps.
 STEP_SPACINGS = ("equiangular", "uniform")
@@ -212,6 +214,7 @@ class Render:
     svd_rank: int = 4
     traversal: str = "tree"  # one of TRAVERSALS
     sampling: str = "epipolar"  # one of SAMPLINGS
+    shaft_edges: str = "blockers"  # one of SHAFT_EDGES
     line_samples: int | None = None  # epipolar: samples along each slice's line
     initial_step: int | None = None  # epipolar: every initial_step-th line sample walks its row
     # epipolar: relative change in distance (a spot light's: or unshadowed radiance) that is a break

@@ -14,6 +14,7 @@ from .. import structs
 from ..device import Device, StageTimer
 from ..inputs import FrameBuffers, FrameInputs, light_pass_inputs, opaque_occluders
 from .relief import ReliefDrawer
+from .shaft_edges import keeps_blockers
 
 
 @dataclass
@@ -168,7 +169,7 @@ class ShadowMap:
     """One light's shadow map, in its own buffer (views anchored at the light)."""
 
     depth: object  # uint[texels]
-    triangle: object  # int[texels]: the nearest triangle's index in the frame (-1: none)
+    triangle: object  # int[texels]: the nearest triangle's index in the frame (-1: none); None: not kept
     texels: int
     triangles: int  # scene triangles: with none, the map is empty without looking
     empty: bool | None = None  # nothing can be rasterized: filled in by `map_is_empty` when first asked
@@ -189,13 +190,19 @@ def raster_shadow_map(device: Device, buffers: FrameBuffers, light_index: int, t
                             lights=device.buffer(inputs.lights, writable=False),
                             tri_vertices=device.buffer(inputs.tri_vertices, writable=False))
     texels = max(inputs.shadow_texels, 1)
-    depth, triangle = device.buffer(nbytes=4 * texels), device.buffer(nbytes=4 * texels)
+    depth, triangle = device.buffer(nbytes=4 * texels), None
     centre = device.buffer(np.array([[0.5, 0.5]], dtype=np.float32), writable=False)
     reliefs = ReliefDrawer(device, inputs.reliefs, inputs.light_anchor_ws[0], timer)  # anchored, as the triangles
     drawn = [view for view in range(1, len(inputs.views)) if inputs.view_needed[view]]  # (a face no sample reads stays empty)
-    # The nearest triangle with each depth: the walks place the shafts' edges on it
-    # (cl/shaft_edges.h), as the camera's samples are resolved in raster_camera.
-    if _atomic64(device):
+    # With the depths, the nearest triangle where minmax's walks place the shafts' edges on
+    # it (cl/shaft_edges.h), resolved as the camera's samples are in raster_camera.
+    if not keeps_blockers(inputs.scene.render):
+        device.fill(depth, structs.DEPTH_EMPTY, 4 * texels, timer, "raster")
+        _rasterize(device, light_buffers, drawn, centre, 1, depth, timer)
+        for view_index in drawn:
+            reliefs.map("relief_map_depth", None, light_buffers.views, inputs.views, view_index, centre, 1, (depth,))
+    elif _atomic64(device):
+        triangle = device.buffer(nbytes=4 * texels)
         defines = {"RASTER_ATOMIC64": 1}
         nearest = device.buffer(nbytes=8 * texels)
         device.fill(nearest, np.uint64((int(structs.DEPTH_EMPTY) << 32) | 0xFFFFFFFF), 8 * texels, timer, "raster")
@@ -208,6 +215,7 @@ def raster_shadow_map(device: Device, buffers: FrameBuffers, light_index: int, t
         timer.add("raster", split(
             device.queue, (-(-texels // RASTER_SPLIT_RUN),), None, nearest, np.int32(texels), depth, triangle))
     else:
+        triangle = device.buffer(nbytes=4 * texels)
         device.fill(depth, structs.DEPTH_EMPTY, 4 * texels, timer, "raster")
         device.fill(triangle, np.int32(-1), 4 * texels, timer, "raster")
         _rasterize(device, light_buffers, drawn, centre, 1, depth, timer)
@@ -296,7 +304,9 @@ def _triangles_reach(triangles: np.ndarray, anchor: np.ndarray, views: np.ndarra
 
 def shadow_atlas(device: Device, buffers: FrameBuffers, maps: list[ShadowMap], part: str = "depth"):
     """Every light's map back to back, at the depth offsets of the frame's views: their
-    depths, or (`part="triangle"`) their nearest triangles."""
+    depths, or (`part="triangle"`) their nearest triangles, None where the maps keep none."""
+    if any(getattr(entry, part) is None for entry in maps):
+        return None
     if len(maps) == 1:
         return getattr(maps[0], part)
     atlas = device.buffer(nbytes=4 * max(buffers.inputs.shadow_texels, 1))

@@ -206,13 +206,16 @@ def rectify(device: Device, buffers: FrameBuffers, rastered: RasterResult, light
     timer.add("rectify", device.kernel("rectify", "rectify_ranges", defines)(
         device.queue, (n,), None, bounds_buffer, buffers.lights, frame_buffer, angles, ranges))
     tree = device.buffer(nbytes=8 * slices * 2 * n)
-    triangles = device.buffer(nbytes=4 * slices * n)
+    # each texel's blocking triangle beside it, where the maps keep them (cl/shaft_edges.h)
+    triangles = None if rastered.shadow_triangle is None else device.buffer(nbytes=4 * slices * n)
+    blockers = () if triangles is None else (rastered.shadow_triangle, triangles)
+    if triangles is not None:
+        defines = {**defines, "RECTIFY_BLOCKERS": 1}
     sides = device.buffer(slice_sides(params), writable=False)
     group = min(SLICES_PER_GROUP, slices)
     event = device.kernel("rectify", "rectify", defines)(
         device.queue, (-(-n // (defines["RECTIFY_BATCHES"] * LANES)), -(-slices // group) * group), (1, group),
-        buffers.views, buffers.lights, rastered.shadow_depth, frame_buffer, sides, angles, tree,
-        rastered.shadow_triangle, triangles)
+        buffers.views, buffers.lights, rastered.shadow_depth, frame_buffer, sides, angles, tree, *blockers)
     timer.add("rectify", event)
     visible = VisibleRanges(device, bounds_buffer, ranges, isinstance(scene.lights[light_index], DirectionalLight), n)
     return Epipolar(params, frame_buffer, tree, visible, triangles)

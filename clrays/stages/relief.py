@@ -83,8 +83,9 @@ def carries_relief_triangles(scene: Scene) -> bool:
     the exact surface shadows' BVH and bound map, the filtered shadows' depth range, and
     minmax's walks, which place the shafts' edges on the blockers (cl/shaft_edges.h), read
     them (docs/design.md, "What a frame carries"). Otherwise they are left out."""
-    return bool(scene.lights) and (scene.render.surface_shadows in ("exact", "filtered")
-                                   or scene.render.method == "minmax")
+    render = scene.render
+    return bool(scene.lights) and (render.surface_shadows in ("exact", "filtered")
+                                   or (render.method == "minmax" and render.shaft_edges == "blockers"))
 
 
 @dataclass

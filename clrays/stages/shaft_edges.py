@@ -11,6 +11,12 @@ import numpy as np
 from ..inputs import see_through
 
 
+def keeps_blockers(render) -> bool:
+    """Whether a frame's shadow maps and epipolar rows keep each texel's blocking triangle:
+    minmax with `render.shaft_edges: blockers` (the default)."""
+    return render.method == "minmax" and render.shaft_edges == "blockers"
+
+
 class ShaftEdges:
     """The walk feature SHAFT_EDGES: each texel's blocker, the frame's triangles (eye
     space) and each triangle's neighbours across its edges."""
