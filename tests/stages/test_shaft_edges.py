@@ -98,12 +98,24 @@ def test_slat_shafts_have_their_edges_on_the_slats(renderer):
     parts = [grid_plane(0.0, 8.0, 4)]
     parts += [box_triangles([x, 2.0, -3.0], [x + 0.12, 2.1, 3.0]) for x in np.arange(-3.0, 3.0, 0.5)]
     sun = DirectionalLight(v3(0.3, -1.0, 0.2) / np.linalg.norm([0.3, -1.0, 0.2]), np.full(3, 1.5))
-    make = lambda size: make_scene(np.concatenate(parts), [sun], width=64, height=36,  # noqa: E731
-                                   position=(0.0, 1.0, 6.0), look_at=(0.5, 1.2, 0.0), far=20.0, sigma_s=0.1,
-                                   sigma_a=0.02, shadow_map=size)
+    make = lambda size, ends="blockers": make_scene(  # noqa: E731
+        np.concatenate(parts), [sun], width=64, height=36, position=(0.0, 1.0, 6.0), look_at=(0.5, 1.2, 0.0),
+        far=20.0, sigma_s=0.1, sigma_a=0.02, shadow_map=size, shaft_edges=ends)
     reference = renderer.render(make(1024), "exact").image
     edges = depth_edges(depth_map(make(1024)))
-    errors = {size: image_error(renderer.render(make(size), "minmax").image, reference, edges).rmse
-              for size in (512, 1024)}
-    print("slat shafts, relative RMSE at 512 / 1024:", errors)
-    assert errors[512] <= 0.004 and errors[1024] <= 0.002
+    errors = {(size, ends): image_error(renderer.render(make(size, ends), "minmax").image, reference, edges).rmse
+              for size in (512, 1024) for ends in ("blockers", "texels")}
+    print("slat shafts, relative RMSE:", errors)
+    assert errors[512, "blockers"] <= 0.004 and errors[1024, "blockers"] <= 0.002
+    for size in (512, 1024):  # `render.shaft_edges: texels`, the runs' ends at the texels
+        assert errors[size, "blockers"] < 0.75 * errors[size, "texels"]
+
+
+def test_texel_ends_keep_no_blockers(device):
+    scene = _scene(PointLight(v3(0.4, 4.5, -0.6), np.full(3, 40.0)))
+    scene = replace(scene, render=replace(scene.render, shaft_edges="texels"))
+    buffers = upload(device, frame_inputs(scene))
+    timer = StageTimer()
+    rastered = raster(device, buffers, timer)
+    assert rastered.shadow_triangle is None
+    assert rectify(device, buffers, rastered, 0, timer).triangles is None
