@@ -1,5 +1,5 @@
 /* light_texture.h — a light's texture on the device (docs/light-textures.md): the bilinear
- * texel of the light ray through a point (raymarch, shade, light_texture_rectify), and the
+ * texel of the light ray through a point (raymarch, shade, light_texture_prefix), and the
  * radiance of a lit run of a textured light from the rectified prefix sums (traverse).
  * clrays/reference/light_texture.py is the same lookup on the host. */
 #ifndef CLRAYS_LIGHT_TEXTURE_H
@@ -7,13 +7,43 @@
 #include "gamma_texels.h"
 #include "integrand.h"
 
-inline int texture_wrap(int i, int n, int wrap)
+/* The texels a and b = a + 1 along a side of n texels either side of the integer-valued
+ * coordinate x0, wrapped (repeat) or clamped. The wrap is float arithmetic, exact while
+ * |x0| < 2^24 (and in range beyond), and only for x0 outside [0, n): an integer division
+ * per texel (four per lookup) made the rectified texture's lookups several times slower on
+ * PoCL, and the float wrap of every lookup was still 30 % of light_texture_prefix's time. */
+inline void texel_pair(float x0, int n, int wrap, int* a, int* b)
 {
     if (wrap == TEXTURE_WRAP_REPEAT) {
-        i %= n;
-        return i < 0 ? i + n : i;
+        float side = (float)n;
+        if (x0 < 0.0f || x0 >= side) { /* (coordinates wrapped once per γ cell skip this) */
+            x0 -= side * floor(x0 * (1.0f / side)); /* (a reciprocal, hoisted out of a loop of lookups) */
+            x0 = x0 < 0.0f ? x0 + side : (x0 >= side ? x0 - side : x0); /* the quotient rounded up or down */
+        }
+        *a = clamp((int)x0, 0, n - 1);
+        *b = *a + 1 < n ? *a + 1 : 0;
+    } else {
+        int i = (int)x0;
+        *a = clamp(i, 0, n - 1);
+        *b = clamp(i + 1, 0, n - 1);
     }
-    return clamp(i, 0, n - 1);
+}
+
+/* Bilinear between the texel centres of the w × h texels t at texel coordinates (fx, fy)
+ * (texel i's centre at i), wrapped or clamped at the sides. */
+inline float3 texture_bilinear(global const float4* t, int w, int h, int wrap, float fx, float fy)
+{
+    /* Clamped so that the int conversion below stays defined far outside the image. */
+    fx = clamp(fx, -1e9f, 1e9f);
+    fy = clamp(fy, -1e9f, 1e9f);
+    float x0 = floor(fx), y0 = floor(fy);
+    float tx = fx - x0, ty = fy - y0;
+    int xa, xb, ya, yb;
+    texel_pair(x0, w, wrap, &xa, &xb);
+    texel_pair(y0, h, wrap, &ya, &yb);
+    float3 top = mix(t[ya * w + xa].xyz, t[ya * w + xb].xyz, tx);
+    float3 bottom = mix(t[yb * w + xa].xyz, t[yb * w + xb].xyz, tx);
+    return mix(top, bottom, ty);
 }
 
 /* The texture's factor on the light that reaches p (eye space): 1 for an untextured light,
@@ -53,26 +83,17 @@ inline float3 light_texture(global const light_texture_t* texture, global const 
         sx = dot(w, texture->right.xyz) * texture->scale_x / along;
         sy = dot(w, texture->up.xyz) * texture->scale_y / along;
     }
-    /* Clamped so that the int conversion below stays defined far outside the image. */
-    float fx = clamp((sx + 1.0f) * 0.5f * (float)w - 0.5f, -1e9f, 1e9f);
-    float fy = clamp((1.0f - sy) * 0.5f * (float)h - 0.5f, -1e9f, 1e9f);
-    float x0 = floor(fx), y0 = floor(fy);
-    float tx = fx - x0, ty = fy - y0;
-    int ix = (int)x0, iy = (int)y0;
-    int xa = texture_wrap(ix, w, texture->wrap), xb = texture_wrap(ix + 1, w, texture->wrap);
-    int ya = texture_wrap(iy, h, texture->wrap), yb = texture_wrap(iy + 1, h, texture->wrap);
-    float3 top = mix(t[ya * w + xa].xyz, t[ya * w + xb].xyz, tx);
-    float3 bottom = mix(t[yb * w + xa].xyz, t[yb * w + xb].xyz, tx);
-    return mix(top, bottom, ty);
+    return texture_bilinear(t, w, h, texture->wrap, (sx + 1.0f) * 0.5f * (float)w - 0.5f,
+                            (1.0f - sy) * 0.5f * (float)h - 0.5f);
 }
 
 /* One row's prefix sum at texel coordinate `cell` (gamma_texels.h): values at the cell
- * boundaries (n + 1 of them), linear in between. */
-inline float prefix_at(global const float* prefix, int n, float cell)
+ * boundaries (n + 1 of them, `stride` floats apart), linear in between. */
+inline float prefix_at(global const float* prefix, int stride, int n, float cell)
 {
     int k = clamp((int)floor(cell), 0, n - 1);
     float f = clamp(cell - (float)k, 0.0f, 1.0f);
-    return mix(prefix[k], prefix[k + 1], f);
+    return mix(prefix[(size_t)k * stride], prefix[(size_t)(k + 1) * stride], f);
 }
 
 /* Radiance of the lit run [gamma0, gamma1) of ray `ray` along one slice of a textured light
@@ -83,13 +104,14 @@ inline float prefix_at(global const float* prefix, int n, float cell)
  * L_untextured is the integrand stage's segment (any mode); the sum is the low-rank SVD's
  * estimate of ∫(T - T̄)·I, which vanishes for a constant texture, so the SVD's own error
  * only enters multiplied by the texture's variation within the run. row_prefix holds the
- * slice's prefix sums: [channel][0..rank][n + 1], term 0 of T alone, term i + 1 of T·Γ_i;
- * basis holds B[channel][rank][n_beta], then ∫Γ as P[channel][rank][n + 1]. */
+ * slice's prefix sums (cl/light_texture.cl): a record per cell boundary of
+ * [channel][0..rank], term 0 of T alone, term i + 1 of T·Γ_i, so that a run's ends read
+ * four records; basis holds B[channel][rank][n_beta], then ∫Γ as P[channel][rank][n + 1]. */
 inline float3 textured_run_radiance(global const textured_integrand_t* ti, global const float* basis,
                                     global const float* row_prefix, gamma_texels_t texels, const integrand_row_t* ray,
                                     float3 untextured, float gamma0, float gamma1)
 {
-    int n = ti->gamma_samples, rank = ti->rank;
+    int n = ti->gamma_samples, rank = ti->rank, record = 3 * (rank + 1);
     float c0 = gamma_texel_coord(texels, gamma0), c1 = gamma_texel_coord(texels, gamma1);
     float span = ti->beta_max - ti->beta_min;
     float row_t = 0.0f;
@@ -103,19 +125,20 @@ inline float3 textured_run_radiance(global const textured_integrand_t* ti, globa
     float radiance[3];
     float base[3] = {untextured.x, untextured.y, untextured.z};
     for (int c = 0; c < 3; ++c) {
-        global const float* q = row_prefix + (size_t)c * (rank + 1) * row_length;
+        global const float* q = row_prefix + (size_t)c * (rank + 1);
         /* The mean over the run; a run shorter than 1e-3 of a cell takes its cell's value. */
         int cell = clamp((int)c0, 0, n - 1);
-        float mean = c1 - c0 > 1e-3f ? (prefix_at(q, n, c1) - prefix_at(q, n, c0)) / (gamma1 - gamma0)
-                                     : (q[cell + 1] - q[cell]) / gamma_texel_width(texels, cell);
+        float mean = c1 - c0 > 1e-3f ? (prefix_at(q, record, n, c1) - prefix_at(q, record, n, c0)) / (gamma1 - gamma0)
+                                     : (q[(size_t)(cell + 1) * record] - q[(size_t)cell * record])
+                                           / gamma_texel_width(texels, cell);
         float correction = 0.0f;
         for (int i = 0; i < rank; ++i) {
             global const float* b = basis + ((size_t)c * rank + i) * ti->n_beta;
             global const float* p = basis + (size_t)3 * rank * ti->n_beta + ((size_t)c * rank + i) * row_length;
-            global const float* qi = q + (size_t)(i + 1) * row_length;
+            global const float* qi = q + i + 1;
             float b_i = mix(b[j], b[j + 1], row_t);
-            correction += b_i * ((prefix_at(qi, n, c1) - prefix_at(qi, n, c0))
-                                 - mean * (prefix_at(p, n, c1) - prefix_at(p, n, c0)));
+            correction += b_i * ((prefix_at(qi, record, n, c1) - prefix_at(qi, record, n, c0))
+                                 - mean * (prefix_at(p, 1, n, c1) - prefix_at(p, 1, n, c0)));
         }
         radiance[c] = mean * base[c] + correction / ray->sin_beta;
     }

@@ -649,10 +649,9 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
         if scene.render.sampling == "epipolar":  # per line sample: (distance, weight) and radiance, one light at a time
             sizes.append(("epipolar line samples", 24 * scene.render.slices * scene.render.line_samples))
             sizes.append(("epipolar fix-up list", 4 * samples))
-        # A textured light's rectified texture and prefix sums (clrays.stages.light_texture).
+        # A textured light's prefix sums (clrays.stages.light_texture; the rectified texture is not stored).
         sizes += [(f"texture prefix sums of light {index}",
-                   4 * scene.render.slices * 3 * (scene.render.svd_rank + 1) * (gamma_samples + 1)
-                   + 16 * scene.render.slices * gamma_samples)
+                   4 * scene.render.slices * 3 * (scene.render.svd_rank + 1) * (gamma_samples + 1))
                   for index, light in enumerate(scene.lights) if textured(light)]
     if inputs.texels is not None and any(textured(light) for light in scene.lights):
         sizes.append(("light textures", 16 * len(inputs.texels)))

@@ -9,8 +9,9 @@ Per frame and textured light:
    γ, sampled on 64 × 64 (β, γ) nodes and factorised, K ≈ Σ_i B_i(β)·Γ_i(γ) (the paper's
    SVD; Nyström-extended to the integrand table's β rows and the tree's γ cells), with the
    prefix sums P_i of Γ_i over the cells.
-2. On the device, `light_texture_rectify` looks the texture up on every (slice, γ cell)
-   light ray, T[α, γ], and `light_texture_prefix` sums T and T·Γ_i along each row.
+2. On the device, `light_texture_prefix` takes each (slice, γ cell)'s texture T[α, γ] as
+   its mean over `cell_samples` points of the cell's light rays, and sums T and T·Γ_i
+   along each row (one pass: the rectified texture is never stored).
 3. traverse turns a lit run into radiance with `textured_run_radiance` (cl/light_texture.h):
    N lookups per run, whatever the texture holds.
 
@@ -28,8 +29,30 @@ import numpy as np
 
 from .. import structs
 from ..physics.light_texture import texture_frame, textured
+from ..scene.costs import texture_texel_angle, texture_texel_length
 from ..scene.model import DirectionalLight, SpotLight
 from .integrand import SVD_RELATIVE_CUTOFF, SVD_SAMPLES, _beta_nodes, integrand_exact
+
+#: Points per texel of a γ cell's length whose mean is the cell's texture
+#: (cl/light_texture.cl), at least 1 and at most MAX_CELL_SAMPLES: the cell's centre alone
+#: aliases a texture finer than the cell. scenes/stained_glass.yaml's cells are 1.6 of its
+#: texels long (γ_max ≈ 16.5 through the window, 1024 cells) and take 3 points; against
+#: `exact` at 160×90, 2048 slices, 1 point gives 0.65 %, 2 0.58 %, 3 0.56 %, 4 0.56 %,
+#: 8 0.56 % (bench/RESULTS.md, "A γ cell's texture is its mean").
+CELL_SAMPLES_PER_TEXEL = 1.5
+MAX_CELL_SAMPLES = 4
+
+
+def cell_samples(light, gamma_step: float, gamma_warp: float) -> int:
+    """Points per γ cell for `light`'s texture: CELL_SAMPLES_PER_TEXEL per texel along the
+    longest cell (1 + warp of the even step: docs/design.md §4.2), γ and texel both lengths
+    (a directional light) or both angles at the light; 1 for a smooth texture."""
+    texel = texture_texel_length(light) if isinstance(light, DirectionalLight) else texture_texel_angle(light)
+    if not texel:
+        return 1
+    longest = gamma_step * (1.0 + gamma_warp)
+    return min(max(math.ceil(min(CELL_SAMPLES_PER_TEXEL * longest / texel, MAX_CELL_SAMPLES)), 1), MAX_CELL_SAMPLES)
+
 
 if TYPE_CHECKING:
     from ..device import Device, StageTimer
@@ -152,7 +175,7 @@ class TextureTables:
 
     params: object  # textured_integrand_t
     basis: object  # float[]: B, then P (cl/light_texture.h)
-    prefix: object  # float[slices][3][rank + 1][n + 1]
+    prefix: object  # float[slices][n + 1][3][rank + 1]: a record per cell boundary
     rank: int
 
     def defines(self) -> dict:
@@ -166,7 +189,7 @@ class TextureTables:
 def light_texture(device: Device, buffers: FrameBuffers, light_index: int, epipolar: Epipolar,
                   integrand: DeviceIntegrand, timer: StageTimer) -> TextureTables:
     """Stage light_texture for one textured light: the low-rank integrand in γ (host), the
-    rectified texture and its per-row prefix sums (device)."""
+    rectified texture's per-row prefix sums (device)."""
     start = time.perf_counter()
     scene = buffers.inputs.scene
     light = scene.lights[light_index]
@@ -186,16 +209,13 @@ def light_texture(device: Device, buffers: FrameBuffers, light_index: int, epipo
     params_buffer = device.buffer(params, writable=False)
     packed = np.concatenate([basis.basis_beta.ravel(), basis.prefix.ravel()]).astype(np.float32)
     basis_buffer = device.buffer(packed, writable=False)
-    gamma_buffer = device.buffer(np.ascontiguousarray(basis.gamma, dtype=np.float32), writable=False)
+    # Γ[cell][channel][rank]: the prefix kernel reads a cell's at once.
+    gamma_buffer = device.buffer(np.ascontiguousarray(basis.gamma.transpose(2, 0, 1), dtype=np.float32),
+                                 writable=False)
     timer.add_host("light_texture", (time.perf_counter() - start) * 1e3)
-    rectified = device.buffer(nbytes=16 * slices * n)
-    event = device.kernel("light_texture", "light_texture_rectify")(
-        device.queue, (n, slices), None, buffers.lights, epipolar.buffer, buffers.light_textures, buffers.texels,
-        rectified)
-    timer.add("light_texture", event)
     prefix = device.buffer(nbytes=4 * slices * 3 * (rank + 1) * (n + 1))
-    event = device.kernel("light_texture", "light_texture_prefix")(
-        device.queue, (3 * (rank + 1), slices), None, epipolar.buffer, params_buffer, gamma_buffer, rectified,
-        prefix)
+    event = device.kernel("light_texture", "light_texture_prefix", {"TEXTURE_RANK": rank})(
+        device.queue, (slices,), None, buffers.lights, epipolar.buffer, buffers.light_textures, buffers.texels,
+        params_buffer, gamma_buffer, np.int32(cell_samples(light, gamma_step, epipolar.gamma_warp)), prefix)
     timer.add("light_texture", event)
     return TextureTables(params_buffer, basis_buffer, prefix, rank)

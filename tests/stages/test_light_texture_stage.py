@@ -1,6 +1,7 @@
-"""Stage light_texture against numpy: the rectified texture is the host's bilinear lookup on
-the same light rays, the prefix sums are cumulative sums of T·Γ_i, and the low-rank
-integrand in γ converges with the rank (docs/light-textures.md)."""
+"""Stage light_texture against numpy: each cell's texture is the mean of the host's bilinear
+lookups at the cell's evenly spaced points (`cell_samples`) on the same light rays, the prefix sums are
+cumulative sums of T·Γ_i, and the low-rank integrand in γ converges with the rank
+(docs/light-textures.md)."""
 from __future__ import annotations
 
 import math
@@ -14,7 +15,7 @@ from clrays.inputs import frame_inputs, upload
 from clrays.physics.light_texture import light_texture as host_texture
 from clrays.scene.model import LightTexture
 from clrays.stages.integrand import integrand, integrand_exact
-from clrays.stages.light_texture import gamma_basis, light_texture
+from clrays.stages.light_texture import cell_samples, gamma_basis, light_texture
 from clrays.stages.raster import raster
 from clrays.stages.rectify import rectify
 from conftest import DirectionalLight, PointLight, SpotLight, grid_plane, make_scene, v3
@@ -30,10 +31,11 @@ LIGHTS = {
 }
 
 
-def _light_rays(scene, params, n, slices):
-    """World-space points on the light ray of each (slice, cell centre), as the kernel takes them."""
+def _light_rays(scene, params, n, slices, at=0.5):
+    """World-space points on the light ray of each (slice, cell), `at` of the way through the
+    cell in its texel coordinate, as the kernel takes them."""
     alpha = params["alpha_min"] + (np.arange(slices) + 0.5) * params["alpha_step"]
-    gamma = structs.texel_gamma(float(params["gamma_step"]), n, np.arange(n) + 0.5, float(params["gamma_warp"]))
+    gamma = structs.texel_gamma(float(params["gamma_step"]), n, np.arange(n) + at, float(params["gamma_warp"]))
     r = (np.cos(alpha)[:, None, None] * params["u"][:3].astype(np.float64)
          + np.sin(alpha)[:, None, None] * params["w"][:3].astype(np.float64))
     axis = params["axis"][:3].astype(np.float64)
@@ -54,9 +56,14 @@ def test_rectified_texture_and_prefix_sums_match_numpy(device, kind):
     tables = integrand(device, scene, scene.lights[0], epipolar, timer)
     texture = light_texture(device, buffers, 0, epipolar, tables, timer)
     n, slices, rank = int(epipolar.params["gamma_samples"]), int(epipolar.params["slices"]), texture.rank
-    points = _light_rays(scene, device.read(epipolar.buffer, (), structs.epipolar_dtype), n, slices)
-    expected = host_texture(scene.lights[0], points.reshape(-1, 3)).reshape(slices, n, 3)
-    prefix = device.read(texture.prefix, (slices, 3, rank + 1, n + 1), np.float32).astype(np.float64)
+    params = device.read(epipolar.buffer, (), structs.epipolar_dtype)
+    samples = cell_samples(scene.lights[0], epipolar.gamma_step, epipolar.gamma_warp)
+    assert samples > 1 or kind == "point"  # the spot's and the sun's cells are longer than a texel: a mean
+    expected = np.mean([host_texture(scene.lights[0], _light_rays(scene, params, n, slices, (j + 0.5) / samples)
+                                     .reshape(-1, 3)).reshape(slices, n, 3) for j in range(samples)], axis=0)
+    # A record per cell boundary: [channel][term].
+    prefix = device.read(texture.prefix, (slices, n + 1, 3, rank + 1), np.float32).astype(np.float64)
+    prefix = prefix.transpose(0, 2, 3, 1)  # (slices, channel, term, boundary)
     step, warp = epipolar.gamma_step, epipolar.gamma_warp
     widths = np.diff(structs.texel_gamma(step, n, np.arange(n + 1), warp))  # each γ cell's length
     rectified = (np.diff(prefix[:, :, 0], axis=-1) / widths).transpose(0, 2, 1)  # term 0 is ∫T
