@@ -94,19 +94,22 @@ MAX_OCCLUDER_SHADOW_MAP = 4096
 SLICES_PER_BORDER_PIXEL = 4
 GAMMA_TEXELS_PER_PIXEL = 8
 #: Upper clamps of what a light texture asks for. scenes/gobo.yaml (a 256² gobo over a 28°
-#: cone) asks for exactly these; against `exact` they take its minmax error from 1.47 to
+#: cone) asks for 2048 × 1024; against `exact` that takes its minmax error from 1.47 to
 #: 0.44 % at 320×180 and from 0.68 to 0.12 % at 96×64 (bench/RESULTS.md, "A light texture's
-#: slices and γ texels"). The texture's prefix sums grow with slices × γ texels (152 MiB here
-#: at rank 4); a finer texture is left to `render.slices` and `render.gamma_samples`.
-#: scenes/stained_glass.yaml's sun asks for 4096 × 2048 and gets these: 0.65–0.90 % against
-#: `exact` from 96×64 to 1280×720, where 4096 × 2048 gives 0.39–0.71 % at 4–11× the frame
-#: (bench/RESULTS.md, "A directional light's texture sets its slices").
-MAX_TEXTURE_SLICES = 2048
+#: slices and γ texels"). scenes/stained_glass.yaml's sun asks for 4096 × 2048 and gets
+#: 4096 × 1024: with each γ cell's texture its mean (clrays.stages.light_texture.cell_samples)
+#: 0.76 / 0.52 / 0.44 / 0.44 % against `exact` at 96×64 / 320×180 / 640×360 / 1280×720, where
+#: 2048 slices gave 0.90 / 0.68 / 0.65 / 0.69 %, for 1.4× the frame at 640×360; 2048 γ texels
+#: would pass the budget below (bench/RESULTS.md, "The stained glass within reach of 0.5 %").
+#: The prefix sums grow with slices × γ texels (252 MiB at 4096 × 1024, rank 4); a finer
+#: texture is left to `render.slices` and `render.gamma_samples`.
+MAX_TEXTURE_SLICES = 4096
 MAX_TEXTURE_GAMMA_SAMPLES = 1024
 #: Device memory that what the textures ask for may take: every textured light's prefix sums
-#: and rectified texels (clrays.stages.light_texture) together. One gobo at 2048 × 1024 and
-#: rank 4 takes 152 MiB; 16 spot lights sharing a gobo in a 32×18 frame asked for 2.4 GiB
-#: (tests/scene/test_hostile.py), so past this the raise is halved, down to the image's sizes.
+#: (clrays.stages.light_texture) together. One gobo at 2048 × 1024 and rank 4 takes
+#: 126 MiB, the stained glass's sun at 4096 × 1024 252 MiB; 16 spot lights sharing a gobo in
+#: a 32×18 frame asked for 2.4 GiB (tests/scene/test_hostile.py), so past this the raise is
+#: halved, down to the image's sizes.
 TEXTURE_SIZES_BUDGET = 256 << 20
 
 
@@ -311,14 +314,14 @@ def texture_sizes(scene: Scene) -> tuple[int, int]:
 def texture_raised_sizes(scene: Scene, slices: int, gamma_samples: int) -> tuple[int, int]:
     """`slices` and `gamma_samples` (the image's, or the scene's own) raised to what the
     textured lights ask for (`texture_sizes`), the sizes the scene sets left as they are; while
-    every textured light's prefix sums and rectified texels would pass TEXTURE_SIZES_BUDGET,
+    every textured light's prefix sums would pass TEXTURE_SIZES_BUDGET,
     the raise, the larger of the two in proportion, is halved."""
     render = scene.render
     wanted_slices, wanted_gamma = texture_sizes(scene)
     raised_slices = slices if render.slices else max(slices, wanted_slices)
     raised_gamma = gamma_samples if render.gamma_samples else max(gamma_samples, wanted_gamma)
     textured = sum(light.texture is not None for light in scene.lights)
-    bytes_per_texel = textured * (4 * 3 * (render.svd_rank + 1) + 16)  # prefix sums; rectified float4
+    bytes_per_texel = textured * 4 * 3 * (render.svd_rank + 1)  # the prefix sums
     while (raised_slices * raised_gamma * bytes_per_texel > TEXTURE_SIZES_BUDGET
            and (raised_slices > slices or raised_gamma > gamma_samples)):
         if raised_gamma <= gamma_samples or (raised_slices > slices

@@ -78,13 +78,15 @@ def _minmax_against_exact(name, size, overrides=()):
     return _error(scene, minmax, exact), scene, exact
 
 
-def test_gobo_minmax_is_within_1_percent_of_exact():
-    """scenes/gobo.yaml at 1024 slices and γ texels: measured 0.950 % relative RMSE at 64×36
-    (0.986 % with γ texels even in γ), 0.232 % at 160×90 (0.239 %); the pixel next to the lamp
-    makes most of it at 64×36."""
-    error, _, _ = _minmax_against_exact("gobo.yaml", (64, 36), ["render.shadow_map=1024", "render.slices=1024",
-                                                                "render.gamma_samples=1024"])
-    assert error.rmse < 0.01, f"gobo: {error}"
+def test_gobo_minmax_at_1024_slices_follows_exact():
+    """scenes/gobo.yaml at 1024 slices and γ texels, 160×90: measured 0.215 % relative RMSE
+    (0.232 % with each γ cell's texture its centre's). At 64×36 one pixel next to the lamp,
+    whose ray sweeps a slice's whole row of the gobo, makes 58 % of the squared error, and
+    its two slices, 1.7 texels apart, decide it: 1.015 % there with the cell's mean (1.04 %
+    with 4 points a cell, the mean's limit; 0.950 % with its centre alone)."""
+    error, _, _ = _minmax_against_exact("gobo.yaml", (160, 90), ["render.shadow_map=1024", "render.slices=1024",
+                                                                 "render.gamma_samples=1024"])
+    assert error.rmse < 0.0025, f"gobo: {error}"
 
 
 def test_gobo_minmax_at_the_derived_sizes_is_within_half_a_percent_of_exact():
@@ -98,23 +100,35 @@ def test_gobo_minmax_at_the_derived_sizes_is_within_half_a_percent_of_exact():
     assert error.rmse < 0.005, f"gobo at derived sizes: {error}"
 
 
-def test_stained_glass_minmax_at_the_derived_sizes_follows_exact():
-    """scenes/stained_glass.yaml at 128×72 with every size derived: the sun's 1 cm texels,
-    seen up to 10.5 units from the eye's line along the light over a fan of 3.0 rad, ask for
-    4096 slices and 2048 γ texels, clamped to 2048 and 1024 (clrays.scene.costs.texture_sizes),
-    where the image alone derives 1024 and 1024: measured 0.569 % relative RMSE (1.101 %
-    at the image's 1024 × 1024)."""
-    error, scene, _ = _minmax_against_exact("stained_glass.yaml", (128, 72))
+@pytest.mark.parametrize("size, bound", [((128, 72), 0.005), ((160, 90), 0.0055)])
+def test_stained_glass_minmax_at_the_derived_sizes_follows_exact(size, bound):
+    """scenes/stained_glass.yaml with every size derived: the sun's 1 cm texels, seen up to
+    10.5 units from the eye's line along the light over a fan of 3.0 rad, ask for 4096
+    slices and 2048 γ texels, clamped to 4096 and 1024 (clrays.scene.costs.texture_sizes),
+    and each γ cell's texture is its mean over 3 points (its cells are 1.6 texels long:
+    γ reaches 16.5 through the window). Measured 0.454 % relative RMSE at 128×72 and 0.489 %
+    at 160×90; 0.569 % and 0.648 % at 2048 slices with each cell's centre alone, 1.10 % at
+    128×72 with the image's 1024 × 1024."""
+    error, scene, _ = _minmax_against_exact("stained_glass.yaml", size)
     assert scene.render.slices is None and scene.render.gamma_samples is None  # derived, not pinned
-    assert error.rmse < 0.0075, f"stained glass at derived sizes: {error}"
+    assert error.rmse < bound, f"stained glass at derived sizes, {size}: {error}"
+
+
+@pytest.mark.xfail(strict=True, reason="at 96×64 the image derives a 512² shadow map, and the mullions' and "
+                   "transom's shadows alone put the untextured scene at 0.65 % against exact (0.33 % with a 1024² "
+                   "map): the textured light at its derived 4096 × 1024 is 0.76 % there, 0.52 % with a 1024² map "
+                   "(bench/RESULTS.md, \"The stained glass within reach of 0.5 %\")")
+def test_stained_glass_minmax_at_96x64_within_half_a_percent():
+    error, _, _ = _minmax_against_exact("stained_glass.yaml", (96, 64))
+    assert error.rmse < 0.005, f"stained glass at 96×64: {error}"
 
 
 @pytest.mark.slow
 def test_stained_glass_minmax_is_within_1_percent_of_exact():
     """scenes/stained_glass.yaml: lead lines two texels (2 cm) wide, tiled every 2.5 m, seen
     across a room. At 1024 slices the slices are about a texel apart at the room's far
-    end and the blend of two slices misses the pattern between them: 1.15 % relative RMSE
-    at 160×90; 2048 slices give 0.62 % (docs/light-textures.md)."""
+    end and the blend of two slices misses the pattern between them: 1.17 % relative RMSE
+    at 160×90; 2048 slices give 0.56 % (docs/light-textures.md)."""
     error, _, _ = _minmax_against_exact("stained_glass.yaml", (160, 90), [
         "render.shadow_map=1024", "render.slices=2048", "render.gamma_samples=1024"])
     assert error.rmse < 0.01, f"stained glass: {error}"
@@ -140,7 +154,7 @@ def test_a_cube_texture_in_minmax_and_raymarch_follows_exact(tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason="a texture finer than the slice spacing: at 1024 slices (what the image "
-                   "alone derives from 640×360 up) stained_glass.yaml is 1.15 % relative RMSE against exact at "
+                   "alone derives from 640×360 up) stained_glass.yaml is 1.17 % relative RMSE against exact at "
                    "160×90 (0.28 % untextured); the two-slice blend misses its 2 cm lead lines at the far wall, "
                    "which is why the derived sizes follow the texture (docs/light-textures.md)")
 def test_stained_glass_at_1024_slices_misses_1_percent():

@@ -144,8 +144,8 @@ def test_a_textured_sun_gets_slices_and_texels_one_a_texel_at_its_reach():
     assert texture_sizes(scene) == (_power_of_two(fan * reach / texel), _power_of_two(reach / texel)) == (1024, 512)
     # The image (32×18) alone derives 256 of each; the texture raises them.
     assert _floor_sizes(32, 18, sun) == (256, 1024, 512)
-    # A tile half as tall halves the shorter texel: twice each, at the clamps.
-    assert _floor_sizes(32, 18, _sun(_texture(256), (10.0, 5.0))) == (256, MAX_TEXTURE_SLICES, MAX_TEXTURE_GAMMA_SAMPLES)
+    # A tile half as tall halves the shorter texel: twice each, the γ texels at their clamp.
+    assert _floor_sizes(32, 18, _sun(_texture(256), (10.0, 5.0))) == (256, 2048, MAX_TEXTURE_GAMMA_SAMPLES)
     # A far plane nearer than the floor's corner bounds the reach (every ray ends there).
     near = make_scene(grid_plane(), width=32, height=18, lights=[sun], far=5.0)
     assert directional_texture_reach(near, sun)[1] == pytest.approx(5.0)
@@ -156,19 +156,21 @@ def test_a_textured_sun_gets_slices_and_texels_one_a_texel_at_its_reach():
 
 
 def test_what_a_sun_texture_asks_for_stays_within_the_budget():
-    # scenes/stained_glass.yaml's texture (256² over 2.5 units: 1 cm texels) asks for the
-    # clamps over the floor, 2048 × 1024 (152 MiB of prefix sums and texels at rank 4).
-    assert _floor_sizes(320, 180, _sun(_texture(256), (2.5, 2.5))) == (1024, 2048, 1024)
-    # Four such suns would take 608 MiB: the raise halves, the larger first, to 512 × 1024
-    # (4 × 76 B × 524288 = 152 MiB) over a 32×18 image's 256 × 256, and back to the image's
-    # own 1024 × 1024 at 320×180.
+    # scenes/stained_glass.yaml's texture (256² over 2.5 units: 1 cm texels) asks over the
+    # floor for 2307 → 4096 slices and 1559 → 2048 γ texels, clamped to 4096 × 1024 (252 MiB
+    # of prefix sums at rank 4, 60 B a texel: within the budget).
+    assert _floor_sizes(320, 180, _sun(_texture(256), (2.5, 2.5))) == (1024, MAX_TEXTURE_SLICES, 1024)
+    assert MAX_TEXTURE_SLICES * 1024 * 12 * (4 + 1) <= TEXTURE_SIZES_BUDGET
+    # Four such suns would take 1008 MiB: the raise halves, the larger in proportion first, to
+    # 1024 × 1024 (4 × 60 B × 1048576 = 240 MiB) over a 32×18 image's 256 × 256, and at
+    # 320×180 to the image's own 1024 × 1024.
     four = [_sun(_texture(256), (2.5, 2.5), (0.1 * k, -1.0, 0.0)) for k in range(4)]
-    for (width, height), sizes in (((32, 18), (512, 1024)), ((320, 180), (1024, 1024))):
+    for (width, height), sizes in (((32, 18), (1024, 1024)), ((320, 180), (1024, 1024))):
         scene = make_scene(grid_plane(), width=width, height=height, lights=four, shadow_map=None, slices=None,
                            gamma_samples=None)
         resolved = with_derived_sizes(scene).render
         assert (resolved.slices, resolved.gamma_samples) == sizes
-    assert 512 * 1024 * 4 * (12 * (resolved.svd_rank + 1) + 16) <= TEXTURE_SIZES_BUDGET
+    assert 1024 * 1024 * 4 * 12 * (resolved.svd_rank + 1) <= TEXTURE_SIZES_BUDGET < 2048 * 1024 * 4 * 60
 
 
 @pytest.mark.parametrize("name", ["demo", "bunny", "behind", "sun"])
@@ -183,9 +185,11 @@ def test_the_bench_scenes_have_no_texture_and_keep_the_image_sizes(name):
 
 
 def test_what_textures_ask_for_stays_within_a_budget():
-    # 16 spot lights sharing a 4096² gobo in a 32×18 frame asked for 2048 × 1024 each: 2.4 GiB
-    # of prefix sums. Within TEXTURE_SIZES_BUDGET the raise halves, the larger first, to
-    # 256 slices × 512 γ texels (16 × 76 B × 131072 = 152 MiB); never below the image's.
-    assert _sizes(32, 18, lights=[_spot(_texture(4096), 30.0)] * 16) == (256, 256, 512)
-    # Two gobos at 320×180: 2 × 152 MiB is over, so the slices go back to the image's 1024.
-    assert _sizes(320, 180, lights=[_spot(_texture(256))] * 2) == (1024, 1024, 1024)
+    # 16 spot lights sharing a 4096² gobo in a 32×18 frame ask for 4096 × 1024 each: 3.9 GiB
+    # of prefix sums. Within TEXTURE_SIZES_BUDGET the raise halves, the larger in proportion
+    # first, to 512 slices × 512 γ texels (16 × 60 B × 262144 = 240 MiB); never below the image's.
+    assert _sizes(32, 18, lights=[_spot(_texture(4096), 30.0)] * 16) == (256, 512, 512)
+    # Two gobos at 320×180 keep their 2048 × 1024 (2 × 126 MiB); with three the slices go
+    # back to the image's 1024.
+    assert _sizes(320, 180, lights=[_spot(_texture(256))] * 2) == (1024, 2048, 1024)
+    assert _sizes(320, 180, lights=[_spot(_texture(256))] * 3) == (1024, 1024, 1024)
