@@ -4,6 +4,7 @@ cumulative sums of T·Γ_i, and the low-rank integrand in γ converges with the 
 (docs/light-textures.md)."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -29,6 +30,8 @@ LIGHTS = {
     "directional": DirectionalLight(v3(0.35, -1.0, -0.25) / np.linalg.norm([0.35, -1.0, -0.25]), np.full(3, 1.5),
                                     texture=LightTexture(TEXELS, "random"), texture_size=(1.3, 0.7)),
 }
+# The same sun with its edge texels extended (the kernel wraps a directional row's cells itself).
+LIGHTS["directional, clamp"] = dataclasses.replace(LIGHTS["directional"], texture_wrap="clamp")
 
 
 def _light_rays(scene, params, n, slices, at=0.5):
@@ -58,7 +61,7 @@ def test_rectified_texture_and_prefix_sums_match_numpy(device, kind):
     n, slices, rank = int(epipolar.params["gamma_samples"]), int(epipolar.params["slices"]), texture.rank
     params = device.read(epipolar.buffer, (), structs.epipolar_dtype)
     samples = cell_samples(scene.lights[0], epipolar.gamma_step, epipolar.gamma_warp)
-    assert samples > 1 or kind == "point"  # the spot's and the sun's cells are longer than a texel: a mean
+    assert samples > 1 or kind == "point"  # the spot's and the suns' cells are longer than a texel: a mean
     expected = np.mean([host_texture(scene.lights[0], _light_rays(scene, params, n, slices, (j + 0.5) / samples)
                                      .reshape(-1, 3)).reshape(slices, n, 3) for j in range(samples)], axis=0)
     # A record per cell boundary: [channel][term].
@@ -69,8 +72,9 @@ def test_rectified_texture_and_prefix_sums_match_numpy(device, kind):
     rectified = (np.diff(prefix[:, :, 0], axis=-1) / widths).transpose(0, 2, 1)  # term 0 is ∫T
     # Texel lookups of float32 coordinates: a texel of 2 changes by 2·Δx per texel of Δx.
     np.testing.assert_allclose(rectified, expected, atol=2e-3 * TEXELS.max())
-    basis = gamma_basis("directional" if kind == "directional" else "point", scene.medium,
-                        LIGHTS[kind].irradiance if kind == "directional" else LIGHTS[kind].intensity,
+    directional = isinstance(LIGHTS[kind], DirectionalLight)
+    basis = gamma_basis("directional" if directional else "point", scene.medium,
+                        LIGHTS[kind].irradiance if directional else LIGHTS[kind].intensity,
                         epipolar.d_el, epipolar.beta_min, epipolar.beta_max, step, n,
                         max(tables.tables.n_beta, 16), rank, warp)
     for term in range(1, rank + 1):
