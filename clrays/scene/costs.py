@@ -98,9 +98,9 @@ GAMMA_TEXELS_PER_PIXEL = 8
 #: 0.44 % at 320×180 and from 0.68 to 0.12 % at 96×64 (bench/RESULTS.md, "A light texture's
 #: slices and γ texels"). scenes/stained_glass.yaml's sun asks for 4096 × 2048 and gets
 #: 4096 × 1024: with each γ cell's texture its mean (clrays.stages.light_texture.cell_samples)
-#: 0.76 / 0.52 / 0.44 / 0.44 % against `exact` at 96×64 / 320×180 / 640×360 / 1280×720, where
-#: 2048 slices gave 0.90 / 0.68 / 0.65 / 0.69 %, for 1.4× the frame at 640×360; 2048 γ texels
-#: would pass the budget below (bench/RESULTS.md, "The stained glass within reach of 0.5 %").
+#: 0.76 / 0.53 / 0.45 / 0.45 % against `exact` at 96×64 / 320×180 / 640×360 / 1280×720, where
+#: 2048 slices gave 0.90 / 0.68 / 0.65 / 0.69 %, for 1.2–1.3× the frame; 2048 γ texels would
+#: pass the budget below (bench/RESULTS.md, "The stained glass within reach of 0.5 %").
 #: The prefix sums grow with slices × γ texels (252 MiB at 4096 × 1024, rank 4); a finer
 #: texture is left to `render.slices` and `render.gamma_samples`.
 MAX_TEXTURE_SLICES = 4096

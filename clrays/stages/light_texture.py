@@ -35,11 +35,12 @@ from .integrand import SVD_RELATIVE_CUTOFF, SVD_SAMPLES, _beta_nodes, integrand_
 
 #: Points per texel of a γ cell's length whose mean is the cell's texture
 #: (cl/light_texture.cl), at least 1 and at most MAX_CELL_SAMPLES: the cell's centre alone
-#: aliases a texture finer than the cell. scenes/stained_glass.yaml's cells are 1.6 of its
-#: texels long (γ_max ≈ 16.5 through the window, 1024 cells) and take 3 points; against
+#: aliases a texture finer than the cell. scenes/stained_glass.yaml's cells are 1.9 of its
+#: texels long (γ_max ≈ 19 through the window, 1024 cells) and take 2 points; against
 #: `exact` at 160×90, 2048 slices, 1 point gives 0.65 %, 2 0.58 %, 3 0.56 %, 4 0.56 %,
-#: 8 0.56 % (bench/RESULTS.md, "A γ cell's texture is its mean").
-CELL_SAMPLES_PER_TEXEL = 1.5
+#: 8 0.56 %, and at its 4096 slices 2 points 0.495 %, 3 0.489 % for about 1.15× the frame
+#: more at 640×360 (bench/RESULTS.md, "The stained glass within reach of 0.5 %").
+CELL_SAMPLES_PER_TEXEL = 1.0
 MAX_CELL_SAMPLES = 4
 
 
