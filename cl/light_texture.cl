@@ -1,6 +1,6 @@
 /* light_texture — each row's prefix sums of a textured light's texture T and of T·Γ_i,
  * rectified beside its shadow map (docs/light-textures.md, minmax).
- * Reads lights, epipolar, light_textures, texels, gamma_basis (Γ_i per γ cell); writes
+ * Reads lights, epipolar, light_textures, texels, textured, gamma_basis (Γ_i per γ cell); writes
  * prefix, which traverse reads.
  *
  *   prefix, one slice: n + 1 records, one per cell boundary (0 first), each
