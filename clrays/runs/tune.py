@@ -75,14 +75,19 @@ ANIMATION_FRAMES = 3
 @dataclass(frozen=True)
 class Knob:
     """One render setting and its ladder: `step(value, finer)` gives the next rung towards
-    less error (finer) or towards less time, ×2 or ÷2, None past the ladder's end."""
+    less error (finer) or towards less time, ×2 or ÷2 (or the next of `choices`, coarsest
+    first), None past the ladder's end."""
 
     key: str
-    low: float
-    high: float
+    low: float = 0
+    high: float = 0
     smaller_is_finer: bool = False  # initial_step, refine_threshold: a smaller value costs more
+    choices: tuple = ()  # a setting of words: its values from the fastest to the finest
 
     def step(self, value, finer: bool):
+        if self.choices:
+            index = self.choices.index(value) + (1 if finer else -1)
+            return self.choices[index] if 0 <= index < len(self.choices) else None
         up = finer != self.smaller_is_finer
         new = value * 2 if up else value / 2
         if isinstance(value, int):
@@ -103,6 +108,8 @@ def knobs_for(method: str, sampling: str) -> tuple[Knob, ...]:
     if method == "minmax" and sampling == "epipolar":
         knobs += (Knob("line_samples", 16, MOST_LINE_SAMPLES), Knob("initial_step", 1, MOST_INITIAL_STEP, True),
                   Knob("refine_threshold", LEAST_REFINE_THRESHOLD, MOST_REFINE_THRESHOLD, True))
+    if method == "minmax":  # the runs' ends at the texels are the faster, on the blockers the finer
+        knobs += (Knob("shaft_edges", choices=("texels", "blockers")),)
     return knobs
 
 
@@ -403,6 +410,10 @@ def _read_tuned(path: Path, target: float, knobs: tuple[Knob, ...]) -> Tuned | N
             return None
         for key, value in settings.items():
             field = RENDER[key]
+            if field.choices:
+                if value not in field.choices:
+                    return None
+                continue
             if isinstance(value, bool) or not isinstance(value, int if field.type == "integer" else (int, float)):
                 return None
             if not field.low <= value <= field.high:

@@ -267,7 +267,11 @@ def test_the_search_grows_finer_rungs_and_stops_at_the_ladders_end():
     step = tuning.Knob("initial_step", 1, 16, smaller_is_finer=True)
     assert step.step(3, True) == 1 and step.step(1, True) is None and step.step(3, False) == 6
     assert [knob.key for knob in tuning.knobs_for("raymarch", "epipolar")] == ["shadow_map", "steps"]
-    assert len(tuning.knobs_for("minmax", "pixel")) == 3
+    assert [knob.key for knob in tuning.knobs_for("minmax", "pixel")] == ["shadow_map", "slices", "gamma_samples",
+                                                                          "shaft_edges"]
+    ends = tuning.knobs_for("minmax", "pixel")[-1]  # a setting of words: texels the faster, blockers the finer
+    assert ends.step("texels", True) == "blockers" and ends.step("blockers", True) is None
+    assert ends.step("blockers", False) == "texels" and ends.step("texels", False) is None
 
 
 @pytest.mark.slow
