@@ -642,6 +642,18 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
         sizes.append((f"shadow map of light {index}", 4 * int((views["width"] * views["height"]).sum())))
     if len(inputs.light_views) > 1:
         sizes.append(("shadow maps of all lights together", 4 * inputs.shadow_texels))
+    if keeps_blockers(scene.render) and scene.lights:  # (stages/shaft_edges.py) each texel's nearest triangle,
+        # every light's and all together, and the largest map's packed keys while it is drawn
+        largest = max(int((inputs.views[first:first + count]["width"]
+                           * inputs.views[first:first + count]["height"]).sum())
+                      for first, count in inputs.light_views)
+        atlases = 2 if len(inputs.light_views) > 1 else 1
+        sizes += [("shadow maps' nearest triangles", 4 * inputs.shadow_texels * atlases),
+                  ("a shadow map's packed raster keys (64-bit)", 8 * largest),
+                  ("each triangle's neighbours", 12 * scene.geometry.count)]
+        if np.any(scene.medium.sigma_s > 0):
+            sizes += [(f"rows' blockers of light {index}", 4 * scene.render.slices
+                       * tree_gamma_samples(scene.render.gamma_samples)) for index in range(len(scene.lights))]
     if scene.render.method in ("minmax", "volume_moments") and np.any(scene.medium.sigma_s > 0):
         gamma_samples = tree_gamma_samples(scene.render.gamma_samples)
         tree = 8 * scene.render.slices * 2 * gamma_samples
