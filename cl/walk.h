@@ -220,23 +220,26 @@ inline float3 walk_row(global const epipolar_t* ep, global const float2* row, co
 #ifdef SHAFT_EDGES
     run_edges_t edges = run_edges_of(ep, span->dir, features, slice, position, gamma_begin, gamma_end);
 #endif
-    while (position < end) {
-        int size;
-        int lit;
+    /* Past `end` the open run, if any, closes without a shadowed texel after it. */
+    for (int done = position >= end;; done = position >= end) {
+        int size = 0;
+        int lit = 0;
+        if (!done) {
 #if TRAVERSAL == TRAVERSAL_TREE
-        /* The largest node starting at position: climb while the index is even. */
-        int level = position == 0 ? ep->levels : inline_min(ep->levels, 31 - __builtin_clz(position & -position));
-        for (;;) {
-            float2 node = row[level_offset(n, level) + (position >> level)];
-            if (node.x > beta) { lit = 1; break; }
-            if (node.y <= beta) { lit = 0; break; }
-            --level; /* mixed: descend to the left child */
-        }
-        size = 1 << level;
+            /* The largest node starting at position: climb while the index is even. */
+            int level = position == 0 ? ep->levels : inline_min(ep->levels, 31 - __builtin_clz(position & -position));
+            for (;;) {
+                float2 node = row[level_offset(n, level) + (position >> level)];
+                if (node.x > beta) { lit = 1; break; }
+                if (node.y <= beta) { lit = 0; break; }
+                --level; /* mixed: descend to the left child */
+            }
+            size = 1 << level;
 #else
-        lit = row[position].x > beta;
-        size = 1;
+            lit = row[position].x > beta;
+            size = 1;
 #endif
+        }
         if (lit) {
             if (run_start < 0) run_start = position;
             run_end = position + size;
@@ -244,20 +247,13 @@ inline float3 walk_row(global const epipolar_t* ep, global const float2* row, co
             float run0 = inline_fmax(gamma_at_texel(texels, (float)run_start), gamma_begin);
             float run1 = inline_fmin(gamma_at_texel(texels, (float)run_end), gamma_end);
 #ifdef SHAFT_EDGES
-            if (place_run_ends(&edges, features, texels, run_start, run_end, 1, &run0, &run1))
+            if (place_run_ends(&edges, features, texels, run_start, run_end, !done, &run0, &run1))
 #endif
             radiance += run_radiance(in, tables, frame, ray, features, row_prefix, texels, run0, run1);
             run_start = -1;
         }
+        if (done) break;
         position += size;
-    }
-    if (run_start >= 0) {
-        float run0 = inline_fmax(gamma_at_texel(texels, (float)run_start), gamma_begin);
-        float run1 = inline_fmin(gamma_at_texel(texels, (float)run_end), gamma_end);
-#ifdef SHAFT_EDGES
-        if (place_run_ends(&edges, features, texels, run_start, run_end, 0, &run0, &run1))
-#endif
-        radiance += run_radiance(in, tables, frame, ray, features, row_prefix, texels, run0, run1);
     }
     return radiance;
 }
