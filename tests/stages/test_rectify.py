@@ -11,7 +11,7 @@ from clrays.device import StageTimer
 from clrays.inputs import frame_inputs, upload
 from clrays.scene.geometry import box_triangles
 from clrays.scene.model import Phase
-from clrays.stages.raster import RasterResult, raster_camera, raster_shadow_map, shadow_atlas
+from clrays.stages.raster import raster
 from clrays.stages.rectify import rectify
 from conftest import DirectionalLight, PointLight, SpotLight, grid_plane, make_scene, v3
 
@@ -39,16 +39,19 @@ def _scene(light):
                       shadow_map=128, slices=48, gamma_samples=128)
 
 
-def _rectified(device, scene):
-    """Raster and rectify the first light, wired as a render session does; returns the frame
-    inputs, the epipolar params, the shadow depths and level 0 of the tree (slices × N)."""
+def _epipolar_of(device, scene):
+    """The frame's buffers, its raster stage (the camera and every light's map, as
+    `stages.raster.raster` wires them) and the first light rectified."""
     buffers = upload(device, frame_inputs(scene))
     timer = StageTimer()
-    camera_depth, tri_id = raster_camera(device, buffers, timer)
-    maps = [raster_shadow_map(device, buffers, 0, timer)]
-    rastered = RasterResult(camera_depth, tri_id, shadow_atlas(device, buffers, maps),
-                            shadow_atlas(device, buffers, maps, "triangle"))
-    epipolar = rectify(device, buffers, rastered, 0, timer)
+    rastered = raster(device, buffers, timer)
+    return buffers, rastered, rectify(device, buffers, rastered, 0, timer)
+
+
+def _rectified(device, scene):
+    """Raster and rectify the first light; returns the frame inputs, the epipolar params,
+    the shadow depths and level 0 of the tree (slices × N)."""
+    buffers, rastered, epipolar = _epipolar_of(device, scene)
     params = device.read(epipolar.buffer, (), structs.epipolar_dtype)  # as the kernels read it: γ step included
     n, slices = int(params["gamma_samples"]), int(params["slices"])
     tree = device.read(epipolar.tree, (slices, 2 * n, 2), np.float32)
@@ -191,14 +194,8 @@ def test_bounds_match_numpy_over_the_camera_samples(device, kind):
     from clrays.scene.camera import primary_rays
 
     scene = _scene(LIGHTS[kind])
-    buffers = upload(device, frame_inputs(scene))
-    timer = StageTimer()
-    camera_depth, tri_id = raster_camera(device, buffers, timer)
-    maps = [raster_shadow_map(device, buffers, 0, timer)]
-    rastered = RasterResult(camera_depth, tri_id, shadow_atlas(device, buffers, maps),
-                            shadow_atlas(device, buffers, maps, "triangle"))
-    epipolar = rectify(device, buffers, rastered, 0, timer)
-    depth = device.read(camera_depth, buffers.inputs.samples, np.uint32).view(np.float32).astype(np.float64)
+    buffers, rastered, epipolar = _epipolar_of(device, scene)
+    depth = device.read(rastered.camera_depth, buffers.inputs.samples, np.uint32).view(np.float32).astype(np.float64)
     distance = np.minimum(depth, float(buffers.inputs.params["far"]))
     dirs = primary_rays(scene.camera, scene.image).reshape(-1, 3)
     axis = _vector(epipolar.params["axis"])
@@ -222,16 +219,6 @@ def test_angle_of_pseudo_inverts_the_pseudo_angle():
     assert angle_of_pseudo(math.inf) == math.inf
 
 
-def _epipolar_of(device, scene):
-    buffers = upload(device, frame_inputs(scene))
-    timer = StageTimer()
-    camera_depth, tri_id = raster_camera(device, buffers, timer)
-    maps = [raster_shadow_map(device, buffers, 0, timer)]
-    rastered = RasterResult(camera_depth, tri_id, shadow_atlas(device, buffers, maps),
-                            shadow_atlas(device, buffers, maps, "triangle"))
-    return buffers, rectify(device, buffers, rastered, 0, timer)
-
-
 @pytest.mark.parametrize("kind", LIGHTS)
 def test_device_ranges_are_the_host_rules_bits(device, kind):
     """The β and γ ranges stay on the device (rectify_ranges, integrand_rows): the γ step,
@@ -241,7 +228,7 @@ def test_device_ranges_are_the_host_rules_bits(device, kind):
     from clrays.stages.rectify import _defines, texel_angles
 
     scene = _scene(LIGHTS[kind])
-    buffers, epipolar = _epipolar_of(device, scene)
+    buffers, _, epipolar = _epipolar_of(device, scene)
     beta_min, beta_max, gamma_max, gamma_step = epipolar.visible.host()
     assert 0.0 <= beta_min < beta_max <= math.pi and gamma_max > 0
     on_device = device.read(epipolar.buffer, (), structs.epipolar_dtype)
