@@ -2,7 +2,7 @@
  * Reads tri_vertices (3 float4 per triangle, eye space; the first row's w: its solid's
  * outward sign, solids.h), views[view_index], offsets;
  * writes depth (as_uint(t), atomic min) and, for the camera, the nearest triangle:
- * raster_nearest packs (depth, triangle) in one 64-bit atomic min and raster_split
+ * raster_nearest packs (depth, triangle) in one 64-bit atomic min and raster_split_runs
  * unpacks it; without 64-bit atomics, raster_resolve re-tests (ties: highest index).
  *
  * One work-item per triangle: it skips a closed solid's face turned away from the view
@@ -476,7 +476,7 @@ RASTER_KERNELS(raster_resolve, RESOLVE_TARGET,
 #ifdef RASTER_ATOMIC64
 #pragma OPENCL EXTENSION cl_khr_int64_extended_atomics : enable
 #ifndef RASTER_SPLIT_RUN
-#define RASTER_SPLIT_RUN 64
+#error "RASTER_SPLIT_RUN comes from clrays/stages/raster.py (raster_defines)"
 #endif
 /* One pass for depth and triangle: the key (as_uint(t) << 32 | tri) orders by depth
  * first (positive floats order like their bits), ties to the lowest index. The key's depth
@@ -489,7 +489,7 @@ RASTER_KERNELS(raster_resolve, RESOLVE_TARGET,
 #endif
 /* Pass 2's update of a whole run of RASTER_LANES columns, one sample per pixel, as
  * DEPTH_MIN_LANES's: the run's keys and the stored ones as one vector min. A lane the
- * triangle misses holds (DEPTH_EMPTY, tri), which raster_split reads as nothing hit, and
+ * triangle misses holds (DEPTH_EMPTY, tri), which raster_split_runs reads as nothing hit, and
  * which any hit beats. Two ulong4 halves: as one ulong8, PoCL 3.0 on a CPU with AVX-512
  * lost most of the run's stores (tests/stages/test_raster.py; docs/design.md §4.5, "Wide
  * vectors"). */
@@ -509,17 +509,9 @@ RASTER_KERNELS(raster_nearest, global ulong* nearest,
                ulong key = ((ulong)as_uint(t) << 32) | (ulong)tri; if (key < nearest[idx]) nearest[idx] = key;,
                NEAREST_MIN_LANES(nearest))
 
-kernel void raster_split(global const ulong* nearest, int samples, global uint* depth, global int* tri_id)
-{
-    int i = get_global_id(0);
-    if (i >= samples) return;
-    ulong key = nearest[i];
-    depth[i] = (uint)(key >> 32);
-    tri_id[i] = depth[i] == DEPTH_EMPTY ? -1 : (int)(uint)key;
-}
-
-/* raster_split over RASTER_SPLIT_RUN keys per work-item, four at a time as vectors: a
- * shadow map's millions of texels, where one per work-item cost PoCL 8 ms a cube map. */
+/* The keys split into depth and triangle (-1 where nothing was hit), RASTER_SPLIT_RUN keys
+ * per work-item, four at a time as vectors: a shadow map's millions of texels one per
+ * work-item cost PoCL 8 ms a cube map. */
 typedef uint4 __attribute__((aligned(4))) uint4_at_uint;
 typedef int4 __attribute__((aligned(4))) int4_at_int;
 kernel void raster_split_runs(global const ulong* nearest, int samples, global uint* depth, global int* tri_id)

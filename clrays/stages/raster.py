@@ -50,7 +50,7 @@ RASTER_ROWS_COLUMNS_GPU = 32
 RASTER_BIG_SAMPLES_GPU = 1024
 
 
-#: Keys a work-item of raster_split_runs splits (cl/raster.cl's default): a shadow map's
+#: Keys a work-item of raster_split_runs splits (every build of cl/raster.cl): a shadow map's
 #: millions of texels one per work-item cost PoCL 8 ms a 1024² cube map.
 RASTER_SPLIT_RUN = 64
 
@@ -82,7 +82,8 @@ def raster_defines(device: Device, defines: dict | None = None) -> dict | None:
     the lists' lengths: every kernel of the program takes the same, so the program is built
     once."""
     big_samples = raster_big_samples(device)
-    defines = {**(defines or {}), "RASTER_BIG_SAMPLES": big_samples} if big_samples else defines
+    defines = {**(defines or {}), "RASTER_SPLIT_RUN": RASTER_SPLIT_RUN}
+    defines = {**defines, "RASTER_BIG_SAMPLES": big_samples} if big_samples else defines
     return defines if raster_count_on_device(device) else {**(defines or {}), "RASTER_COUNT_ON_DEVICE": 0}
 
 
@@ -133,6 +134,12 @@ def _rasterize(device: Device, buffers: FrameBuffers, view_indices: list[int], o
     _launch(device, buffers, "raster_depth", None, view_indices, offsets, sample_count, (depth,), timer)
 
 
+def _split(device: Device, defines: dict, nearest, count: int, depth, triangle, timer: StageTimer) -> None:
+    """The packed keys `nearest` split into `depth` and `triangle` (raster_split_runs)."""
+    timer.add("raster", device.kernel("raster", "raster_split_runs", raster_defines(device, defines))(
+        device.queue, (-(-count // RASTER_SPLIT_RUN),), None, nearest, np.int32(count), depth, triangle))
+
+
 def _atomic64(device: Device) -> bool:
     return "cl_khr_int64_extended_atomics" in device.device.extensions
 
@@ -151,8 +158,7 @@ def raster_camera(device: Device, buffers: FrameBuffers, timer: StageTimer) -> t
         device.fill(nearest, np.uint64((int(structs.DEPTH_EMPTY) << 32) | 0xFFFFFFFF), 8 * samples, timer, "raster")
         _launch(device, buffers, "raster_nearest", defines, [0], buffers.offsets, spp, (nearest,), timer)
         reliefs.map("relief_map_nearest", defines, buffers.views, inputs.views, 0, buffers.offsets, spp, (nearest,))
-        timer.add("raster", device.kernel("raster", "raster_split", raster_defines(device, defines))(
-            device.queue, (samples,), None, nearest, np.int32(samples), camera_depth, tri_id))
+        _split(device, defines, nearest, samples, camera_depth, tri_id, timer)
         return camera_depth, tri_id
     device.fill(camera_depth, structs.DEPTH_EMPTY, 4 * samples, timer, "raster")
     device.fill(tri_id, np.int32(-1), 4 * samples, timer, "raster")
@@ -210,10 +216,7 @@ def raster_shadow_map(device: Device, buffers: FrameBuffers, light_index: int, t
         for view_index in drawn:
             reliefs.map("relief_map_nearest", defines, light_buffers.views, inputs.views, view_index, centre, 1,
                         (nearest,))
-        split = device.kernel("raster", "raster_split_runs",
-                              raster_defines(device, {**defines, "RASTER_SPLIT_RUN": RASTER_SPLIT_RUN}))
-        timer.add("raster", split(
-            device.queue, (-(-texels // RASTER_SPLIT_RUN),), None, nearest, np.int32(texels), depth, triangle))
+        _split(device, defines, nearest, texels, depth, triangle, timer)
     else:
         triangle = device.buffer(nbytes=4 * texels)
         device.fill(depth, structs.DEPTH_EMPTY, 4 * texels, timer, "raster")

@@ -44,8 +44,11 @@ def test_raster_any_on_known_maps(device, texels):
 
 def test_no_kernel_uses_16_wide_vectors():
     # The construct PoCL 3.0 miscompiled with AVX-512 (its library's 512-bit vectors are
-    # passed another way than the kernel's); 8-wide vectors are proven on both CPU types.
-    wide = re.compile(r"\b(?:u?char|u?short|u?int|u?long|float|double)16\b|\bv(?:load|store)16\b")
+    # passed another way than the kernel's); 8-wide vectors are proven on both CPU types,
+    # but not of 64-bit lanes: the raster rows pass's min of eight keys as one ulong8, also
+    # 512 bits, lost most of its stores (docs/design.md §4.5, "Wide vectors").
+    wide = re.compile(r"\b(?:u?char|u?short|u?int|u?long|float|double)16\b|\bv(?:load|store)16\b"
+                      r"|\b(?:u?long|double)8\b")
     comments = re.compile(r"/\*.*?\*/|//[^\n]*", re.S)
     found = [path.name for path in sorted(kernel_dir().glob("*.[ch]*"))
              if wide.search(comments.sub("", path.read_text()))]
