@@ -310,8 +310,10 @@ RENDER = Section("render", (
                 "([docs/design.md](design.md) §4.5)", read_by=("minmax",)),
     Field("shaft_edges", "string", Render.shaft_edges, choices=SHAFT_EDGES,
           notes="min-max: `blockers` ends each lit run on the silhouette of the triangle the shadow map found "
-                "there, in the ray's own plane; `texels` at the texel boundary, as raymarch does, 1.2–1.3 × faster "
-                "at 1280×720 ([docs/design.md](design.md) §4.5)", read_by=("minmax",)),
+                "there, in the ray's own plane; `texels` at the texel boundary, as raymarch does: on the bench "
+                "scenes at 1280×720 a frame 1.1–1.3 × faster for 1.3–4.7 × the error against `exact` "
+                "([docs/design.md](design.md) §4.5, bench/RESULTS.md \"Shaft edges on the blockers\"); e.g. "
+                "`--set render.shaft_edges=texels`", read_by=("minmax",)),
     Field("line_samples", "integer", Render.line_samples, 2, 16384,
           shown_default=f"from the image: half its diagonal in pixels, in [{MIN_LINE_SAMPLES}, {MAX_LINE_SAMPLES}]",
           notes="`sampling: epipolar`: samples along the slice's line that is longest on the screen; a "
