@@ -119,3 +119,13 @@ def test_texel_ends_keep_no_blockers(device):
     rastered = raster(device, buffers, timer)
     assert rastered.shadow_triangle is None
     assert rectify(device, buffers, rastered, 0, timer).triangles is None
+
+
+def test_an_unknown_shaft_edges_value_is_one_line(tmp_path):
+    from conftest import run_cli
+
+    code, out = run_cli("render", SCENES / "demo.yaml", "-o", tmp_path / "x.png", "--set", "render.shaft_edges=edges")
+    assert code == 1 and out.strip().splitlines() == [
+        "clrays: error: --set render.shaft_edges=edges: render.shaft_edges: expected one of 'blockers', 'texels', "
+        "got 'edges'"]
+    assert not (tmp_path / "x.png").exists()
