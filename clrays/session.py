@@ -427,11 +427,11 @@ class Renderer:
 
     def _shaft_edges(self, buffers: FrameBuffers, epipolar, keys: StageKeys, reuse: Reuse) -> ShaftEdges | None:
         """What places the walks' run ends on the blockers' silhouettes (stages/shaft_edges.py):
-        None for `render.shaft_edges: texels`, and where the frame does not carry every
-        triangle's vertices."""
+        None where the rows keep no blockers (`render.shaft_edges: texels`, `keeps_blockers`),
+        which is also where the frame may not carry every triangle's vertices
+        (`carries_relief_triangles`)."""
         geometry = buffers.inputs.scene.geometry
-        if buffers.inputs.scene.render.shaft_edges != "blockers" \
-                or len(buffers.inputs.tri_vertices) // 3 != geometry.count or epipolar.triangles is None:
+        if epipolar.triangles is None:
             return None
         neighbours = reuse.keep("edge_neighbours", lambda: digest("edge_neighbours", keys.geometry),
                                 lambda: self.device.buffer(edge_neighbours(geometry), writable=False))
