@@ -42,4 +42,3 @@ def feature_defines(features: tuple[WalkFeature, ...], defines: dict | None = No
 def feature_args(features: tuple[WalkFeature, ...]) -> tuple:
     """The kernel arguments every feature appends, in order."""
     return tuple(argument for feature in features for argument in feature.args())
-

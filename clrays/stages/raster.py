@@ -144,30 +144,44 @@ def _atomic64(device: Device) -> bool:
     return "cl_khr_int64_extended_atomics" in device.device.extensions
 
 
+def _draw(device: Device, buffers: FrameBuffers, reliefs: ReliefDrawer, views: list[int], offsets,
+          sample_count: int, count: int, nearest_triangles: bool, timer: StageTimer) -> tuple[object, object]:
+    """Depth of `count` samples over `views` (the triangles, then the reliefs), and, with
+    `nearest_triangles`, the triangle each depth belongs to (None without): in one pass of
+    64-bit keys (depth, triangle), split after, where the device has 64-bit atomics; else
+    the depths, then a pass that finds their triangles (ties: the highest index)."""
+    inputs = buffers.inputs
+    depth, triangle = device.buffer(nbytes=4 * count), None
+    if nearest_triangles and _atomic64(device):
+        triangle = device.buffer(nbytes=4 * count)
+        defines = {"RASTER_ATOMIC64": 1}
+        nearest = device.buffer(nbytes=8 * count)
+        device.fill(nearest, np.uint64((int(structs.DEPTH_EMPTY) << 32) | 0xFFFFFFFF), 8 * count, timer, "raster")
+        _launch(device, buffers, "raster_nearest", defines, views, offsets, sample_count, (nearest,), timer)
+        for view in views:
+            reliefs.map("relief_map_nearest", defines, buffers.views, inputs.views, view, offsets, sample_count,
+                        (nearest,))
+        _split(device, defines, nearest, count, depth, triangle, timer)
+        return depth, triangle
+    device.fill(depth, structs.DEPTH_EMPTY, 4 * count, timer, "raster")
+    _rasterize(device, buffers, views, offsets, sample_count, depth, timer)
+    for view in views:
+        reliefs.map("relief_map_depth", None, buffers.views, inputs.views, view, offsets, sample_count, (depth,))
+    if nearest_triangles:
+        triangle = device.buffer(nbytes=4 * count)
+        device.fill(triangle, np.int32(-1), 4 * count, timer, "raster")
+        _launch(device, buffers, "raster_resolve", None, views, offsets, sample_count, (depth, triangle), timer)
+        for view in views:
+            reliefs.map("relief_map_resolve", None, buffers.views, inputs.views, view, offsets, sample_count,
+                        (depth, triangle))
+    return depth, triangle
+
+
 def raster_camera(device: Device, buffers: FrameBuffers, timer: StageTimer) -> tuple[object, object]:
     """Camera depth and triangle id of every sample of every pixel."""
     inputs = buffers.inputs
-    samples, spp = inputs.samples, inputs.scene.image.spp
-    camera_depth = device.buffer(nbytes=4 * samples)
-    tri_id = device.buffer(nbytes=4 * samples)
     reliefs = ReliefDrawer(device, inputs.reliefs, inputs.eye_ws, timer)  # eye space, as the triangles
-    if _atomic64(device):
-        # One pass: depth and triangle packed into a 64-bit key, then split.
-        defines = {"RASTER_ATOMIC64": 1}
-        nearest = device.buffer(nbytes=8 * samples)
-        device.fill(nearest, np.uint64((int(structs.DEPTH_EMPTY) << 32) | 0xFFFFFFFF), 8 * samples, timer, "raster")
-        _launch(device, buffers, "raster_nearest", defines, [0], buffers.offsets, spp, (nearest,), timer)
-        reliefs.map("relief_map_nearest", defines, buffers.views, inputs.views, 0, buffers.offsets, spp, (nearest,))
-        _split(device, defines, nearest, samples, camera_depth, tri_id, timer)
-        return camera_depth, tri_id
-    device.fill(camera_depth, structs.DEPTH_EMPTY, 4 * samples, timer, "raster")
-    device.fill(tri_id, np.int32(-1), 4 * samples, timer, "raster")
-    _rasterize(device, buffers, [0], buffers.offsets, spp, camera_depth, timer)
-    reliefs.map("relief_map_depth", None, buffers.views, inputs.views, 0, buffers.offsets, spp, (camera_depth,))
-    _launch(device, buffers, "raster_resolve", None, [0], buffers.offsets, spp, (camera_depth, tri_id), timer)
-    reliefs.map("relief_map_resolve", None, buffers.views, inputs.views, 0, buffers.offsets, spp,
-                (camera_depth, tri_id))
-    return camera_depth, tri_id
+    return _draw(device, buffers, reliefs, [0], buffers.offsets, inputs.scene.image.spp, inputs.samples, True, timer)
 
 
 @dataclass
@@ -195,39 +209,13 @@ def raster_shadow_map(device: Device, buffers: FrameBuffers, light_index: int, t
                             views=device.buffer(inputs.views, writable=False),
                             lights=device.buffer(inputs.lights, writable=False),
                             tri_vertices=device.buffer(inputs.tri_vertices, writable=False))
-    texels = max(inputs.shadow_texels, 1)
-    depth, triangle = device.buffer(nbytes=4 * texels), None
     centre = device.buffer(np.array([[0.5, 0.5]], dtype=np.float32), writable=False)
     reliefs = ReliefDrawer(device, inputs.reliefs, inputs.light_anchor_ws[0], timer)  # anchored, as the triangles
     drawn = [view for view in range(1, len(inputs.views)) if inputs.view_needed[view]]  # (a face no sample reads stays empty)
-    # With the depths, the nearest triangle where minmax's walks place the shafts' edges on
-    # it (cl/shaft_edges.h), resolved as the camera's samples are in raster_camera.
-    if not keeps_blockers(inputs.scene.render):
-        device.fill(depth, structs.DEPTH_EMPTY, 4 * texels, timer, "raster")
-        _rasterize(device, light_buffers, drawn, centre, 1, depth, timer)
-        for view_index in drawn:
-            reliefs.map("relief_map_depth", None, light_buffers.views, inputs.views, view_index, centre, 1, (depth,))
-    elif _atomic64(device):
-        triangle = device.buffer(nbytes=4 * texels)
-        defines = {"RASTER_ATOMIC64": 1}
-        nearest = device.buffer(nbytes=8 * texels)
-        device.fill(nearest, np.uint64((int(structs.DEPTH_EMPTY) << 32) | 0xFFFFFFFF), 8 * texels, timer, "raster")
-        _launch(device, light_buffers, "raster_nearest", defines, drawn, centre, 1, (nearest,), timer)
-        for view_index in drawn:
-            reliefs.map("relief_map_nearest", defines, light_buffers.views, inputs.views, view_index, centre, 1,
-                        (nearest,))
-        _split(device, defines, nearest, texels, depth, triangle, timer)
-    else:
-        triangle = device.buffer(nbytes=4 * texels)
-        device.fill(depth, structs.DEPTH_EMPTY, 4 * texels, timer, "raster")
-        device.fill(triangle, np.int32(-1), 4 * texels, timer, "raster")
-        _rasterize(device, light_buffers, drawn, centre, 1, depth, timer)
-        for view_index in drawn:
-            reliefs.map("relief_map_depth", None, light_buffers.views, inputs.views, view_index, centre, 1, (depth,))
-        _launch(device, light_buffers, "raster_resolve", None, drawn, centre, 1, (depth, triangle), timer)
-        for view_index in drawn:
-            reliefs.map("relief_map_resolve", None, light_buffers.views, inputs.views, view_index, centre, 1,
-                        (depth, triangle))
+    # With the depths, minmax's walks take the nearest triangles, to place the shafts'
+    # edges on them (cl/shaft_edges.h).
+    depth, triangle = _draw(device, light_buffers, reliefs, drawn, centre, 1, max(inputs.shadow_texels, 1),
+                            keeps_blockers(inputs.scene.render), timer)
     shadow_map = ShadowMap(depth, triangle, inputs.shadow_texels, inputs.scene.geometry.count)
     if shadow_map.triangles and shadow_map.texels:
         shadow_map.reaches = _reaches_views(inputs)
