@@ -9,7 +9,8 @@ setting of a grid over the same knobs that meets each target (bench/RESULTS.md, 
 
 The grid: shadow_map 256–4096, slices and gamma_samples 256–2048 (×2 steps), and for
 minmax's epipolar sampling line_samples at ½, 1 and 2× the derived count with
-initial_step 1, 3 and 6 (refine_threshold at its default): 720 settings, each timed as
+initial_step 1, 3 and 6 (refine_threshold at its default), and minmax's shaft edges on
+the blockers or at the texels: 1440 settings, each timed as
 tune times them (median of 3 warm frames, after the frame whose error is measured). Both
 compare by `clrays tune`'s cost, the process's CPU time per frame on a CPU device (columns
 "CPU ms"), which the load of a shared machine moves far less than the wall time.
@@ -36,8 +37,11 @@ def grid(scene, method: str) -> list[dict]:
     start = tuning.start_settings(scene, method)
     maps, sizes = (256, 512, 1024, 2048, 4096), (256, 512, 1024, 2048)
     settings = []
-    for shadow_map, slices, gamma in itertools.product(maps, sizes, sizes):
+    edges = ("texels", "blockers") if "shaft_edges" in start else (None,)
+    for shadow_map, slices, gamma, edge in itertools.product(maps, sizes, sizes, edges):
         base = {**start, "shadow_map": shadow_map, "slices": slices, "gamma_samples": gamma}
+        if edge is not None:
+            base["shaft_edges"] = edge
         if "line_samples" not in start:
             settings.append(base)
             continue
