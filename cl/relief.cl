@@ -239,26 +239,30 @@ inline float relief_hit(float3 origin, float3 dir, float4 corner, float4 dual_a,
     return t;
 }
 
-#define RELIEF_MAP_ARGS global const view_t* views, int view_index, global const float2* offsets,              \
+#define RELIEF_MAP_ARGS global const view_t* views, int view_index, int x0, int y0, int columns,              \
+                        global const float2* offsets,                                                        \
                         int sample_count, float4 corner, float4 dual_a, float4 dual_b, float4 dual_f,        \
                         float u0, float v0, int target_rows, int target_cols, global const float4* warped,  \
                         int rows, int cols, global const int* cell_triangle, global const float* displacement, \
                         float4 axis_a, float4 axis_b, float4 axis_f, int first_triangle, float2 heights
 
-/* Mapping, one work-item per view sample (relief_hit); BODY sees idx, t and tri. */
+/* Mapping, one work-item per sample of the view's pixels from (x0, y0), `columns` wide, that
+ * may see the relief (clrays/stages/relief.py footprint; relief_hit); BODY sees idx, t and
+ * tri. */
 #define FOR_THE_RELIEF_HIT(BODY)                                                                      \
     global const view_t* view = views + view_index;                                                   \
     int id = get_global_id(0);                                                                        \
-    if (id >= view->width * view->height * sample_count) return;                                      \
-    int s = id % sample_count, pixel = id / sample_count;                                             \
+    int s = id % sample_count, placed = id / sample_count;                                            \
+    int x = x0 + placed % columns, y = y0 + placed / columns;                                         \
+    if (x >= view->width || y >= view->height) return;                                                \
     float3 origin, dir;                                                                               \
-    view_ray(view, view_screen(view, pixel % view->width, pixel / view->width, offsets[s]), &origin, &dir); \
+    view_ray(view, view_screen(view, x, y, offsets[s]), &origin, &dir);                               \
     int tri;                                                                                          \
     relief_surface_t surface = {corner.xyz, axis_a.xyz, axis_b.xyz, axis_f.xyz, displacement, cols};   \
     float t = relief_hit(origin, dir, corner, dual_a, dual_b, dual_f, u0, v0, target_rows, target_cols, warped, \
                          rows, cols, cell_triangle, &surface, first_triangle, heights, &tri);                  \
     if (tri < 0) return;                                                                              \
-    int idx = view->depth_offset + id;                                                                \
+    int idx = view->depth_offset + (y * view->width + x) * sample_count + s;                          \
     BODY
 
 kernel void relief_map_depth(RELIEF_MAP_ARGS, global uint* depth) { FOR_THE_RELIEF_HIT(atomic_min(depth + idx, as_uint(t));) }

@@ -199,25 +199,70 @@ class ReliefDrawer:
             if warp is None:
                 continue
             rows, cols = placed.displacement.shape
+            low, high = self._height_range(index)
+            x0, y0, columns, lines = footprint(view, frame, low, high, rows, cols)
+            if not columns or not lines:
+                continue
             dual = np.linalg.inv(np.stack([frame.a, frame.b, frame.f], axis=1))  # rows: dual_a, dual_b, dual_f
-            samples = int(view["width"]) * int(view["height"]) * sample_count
+            samples = columns * lines * sample_count
             self.timer.add("relief", self.device.kernel("relief", kernel, defines)(
-                self.device.queue, (samples,), None, views_buffer, np.int32(view_index), offsets,
+                self.device.queue, (samples,), None, views_buffer, np.int32(view_index), np.int32(x0), np.int32(y0),
+                np.int32(columns), offsets,
                 np.int32(sample_count), _vector(frame.corner), _vector(dual[0]), _vector(dual[1]),
                 _vector(dual[2]), np.float32(warp.u0), np.float32(warp.v0),
                 np.int32(warp.target_rows), np.int32(warp.target_cols), warp.warped, np.int32(rows),
                 np.int32(cols), self._texel_buffers(index)[2], self._texel_buffers(index)[0], _vector(frame.a),
                 _vector(frame.b), _vector(frame.f), np.int32(placed.first_triangle), self._heights(index), *targets))
 
-    def _heights(self, index: int):
-        """(lowest, highest) displacement of relief `index`'s solid texels, as a float2: the
-        slab its surface lies in, beyond which a ray's walk along its trace stops."""
-        from pyopencl import cltypes
-
+    def _height_range(self, index: int) -> tuple[float, float]:
+        """(lowest, highest) displacement of relief `index`'s solid texels: the slab its
+        surface lies in, beyond which a ray's walk along its trace stops."""
         if index not in self._slabs:
             placed = self.reliefs[index][0]
             solid = placed.displacement[placed.solid]
-            low, high = (float(solid.min()), float(solid.max())) if solid.size else (0.0, 0.0)
-            self._slabs[index] = cltypes.make_float2(low, high)
+            self._slabs[index] = (float(solid.min()), float(solid.max())) if solid.size else (0.0, 0.0)
         return self._slabs[index]
+
+    def _heights(self, index: int):
+        """`_height_range` as a float2."""
+        from pyopencl import cltypes
+
+        return cltypes.make_float2(*self._height_range(index))
+
+
+#: Pixels a relief's footprint (`footprint`) is widened by on each side: its corners are
+#: projected in float64, the device's rays cast in float32.
+FOOTPRINT_MARGIN = 2
+
+
+def footprint(view: np.ndarray, frame: ReliefFrame, low: float, high: float, rows: int,
+              cols: int) -> tuple[int, int, int, int]:
+    """(x0, y0, columns, rows) of the view's pixels whose rays may meet a relief: the box of
+    its cells (texel centres from ½ to cols − ½ along a, rows − ½ along b, heights [low,
+    high] along f, as relief_span bounds the walk), projected, widened by FOOTPRINT_MARGIN and
+    clipped to the view; every pixel where a perspective view has the box reaching behind
+    its eye. No ray outside it meets a cell, so relief_map leaves those pixels as they are:
+    a relief seen small in a large view (a window's lattice in a sun's map that spans the
+    scene) costs its own pixels, not the view's."""
+    width, height = int(view["width"]), int(view["height"])
+    pick = np.array([[(k >> axis) & 1 for axis in range(3)] for k in range(8)], dtype=np.float64)
+    lo, hi = np.array([0.5, 0.5, low]), np.array([cols - 0.5, rows - 0.5, high])
+    local = lo + pick * (hi - lo)  # (8, 3): along a, b, f
+    corners = frame.corner + local @ np.stack([frame.a, frame.b, frame.f])
+    q = corners - np.asarray(view["origin"][:3], np.float64)
+    x, y = q @ np.asarray(view["right"][:3], np.float64), q @ np.asarray(view["up"][:3], np.float64)
+    if int(view["projection"]) == structs.PROJECTION_PERSPECTIVE:
+        z = q @ np.asarray(view["forward"][:3], np.float64)
+        if not np.all(z > 1e-6 * np.linalg.norm(q, axis=1)):
+            return 0, 0, width, height
+        x, y = x / z, y / z
+    screen_x = (x / float(view["scale_x"]) + 1.0) * 0.5 * width  # a sample's x + its offset in [0, 1)
+    screen_y = (1.0 - y / float(view["scale_y"])) * 0.5 * height
+    if not (np.isfinite(screen_x).all() and np.isfinite(screen_y).all()):
+        return 0, 0, width, height
+    x0 = int(np.clip(np.floor(screen_x.min()) - FOOTPRINT_MARGIN, 0, width))
+    x1 = int(np.clip(np.ceil(screen_x.max()) + FOOTPRINT_MARGIN, 0, width))
+    y0 = int(np.clip(np.floor(screen_y.min()) - FOOTPRINT_MARGIN, 0, height))
+    y1 = int(np.clip(np.ceil(screen_y.max()) + FOOTPRINT_MARGIN, 0, height))
+    return x0, y0, x1 - x0, y1 - y0
 
