@@ -18,6 +18,7 @@ from .device import Device
 from .errors import ClraysError
 from .physics.radiometry import effective_far, lamp_radius
 from .scene.costs import SPOT_SINGLE_VIEW_MAX_DEG, with_derived_sizes
+from .scene.light_views import directional_map
 from .stages.cube_faces import sampled_cube_faces
 from .stages.light_texture import pack_light_textures
 from .scene.relief_frame import relief_faces
@@ -211,13 +212,13 @@ def frame_inputs(scene: Scene) -> FrameInputs:
             entry["type"] = structs.LIGHT_DIRECTIONAL
             entry["direction"] = structs.float4(light.direction)
             entry["power"] = structs.float4(light.irradiance)
-            # Orthographic map fitted to the bounding sphere of the scene.
-            centre, radius = (lo + hi) / 2, max(np.linalg.norm(hi - lo) / 2, 1e-6) * 1.01
-            anchors.append(centre - light.direction * radius)
+            # Orthographic, over the scene box's outline across the light (scene/light_views.py).
+            fitted = directional_map(lo, hi, light.direction)
+            anchors.append(fitted.anchor)
             needed.append(True)
-            views.append(_view(anchors[-1] - eye_ws, light.direction, _any_up(light.direction),
-                               radius, radius, n, n, structs.PROJECTION_ORTHOGRAPHIC, texels))
-            entry["texel_angle"] = 2 * radius / n
+            views.append(_view(anchors[-1] - eye_ws, light.direction, fitted.up, fitted.half_width,
+                               fitted.half_height, n, n, structs.PROJECTION_ORTHOGRAPHIC, texels))
+            entry["texel_angle"] = fitted.texel_side / n  # the longer side of its texels: the bias's scale
             texels += n * n
         else:
             anchors.append(np.asarray(light.position, dtype=np.float64))

@@ -30,6 +30,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from .light_views import directional_map
 from .model import DirectionalLight, Scene, SpotLight
 
 #: Upper clamps: the measured defaults (bench/RESULTS.md, "Choosing defaults").
@@ -156,7 +157,7 @@ def thinnest_solid(geometry, light) -> float | None:
     angle (a tangent on the plane one unit from the light, across the solid's direction),
     and the map's side the tangents a view spans: 2 for a cube face, whose texels are
     widest at its centre, 2·tan(cone) for a single-view spot; for a directional light a
-    length, and the side the scene's bounding sphere's. A solid that holds the light or
+    length, and the side the longer of the map's (clrays.scene.light_views). A solid that holds the light or
     reaches more than about 84° from its own direction is no thin occluder and is skipped."""
     lo, hi = geometry.solid_bounds()
     if not len(lo):
@@ -166,8 +167,7 @@ def thinnest_solid(geometry, light) -> float | None:
         direction = np.asarray(light.direction, dtype=np.float64)
         right, up = _plane_axes(direction)
         plane = np.stack([corners @ right, corners @ up], axis=-1)
-        scene_lo, scene_hi = geometry.bounds()
-        side = 2 * max(np.linalg.norm(scene_hi - scene_lo) / 2, 1e-6) * 1.01  # inputs.frame_inputs' sphere
+        side = directional_map(*geometry.bounds(), direction).texel_side  # the map's longer texels
     else:
         towards = corners - np.asarray(light.position, dtype=np.float64)
         if isinstance(light, SpotLight):  # a solid whose bounding sphere lies outside the cone casts nothing

@@ -93,8 +93,9 @@ def test_a_relief_blocks_with_its_own_triangles(device):
 def test_slat_shafts_have_their_edges_on_the_slats(renderer):
     """Slats 12 cm wide under a sun, seen across their shafts: with the shafts' edges on the
     slats a map gets closer to `exact` than the texels alone allow. Measured relative RMSE at
-    512² / 1024²: 0.318 / 0.162 % (with the runs' ends at the texels 0.512 / 0.265 %; at
-    4096², 0.118 and 0.143 %)."""
+    512² / 1024²: 0.214 / 0.127 % (with the runs' ends at the texels 0.365 / 0.212 %). With
+    the map over the bounding sphere instead of the bounds' outline (clrays.scene.light_views)
+    they were 0.318 / 0.162 and 0.512 / 0.265 %."""
     parts = [grid_plane(0.0, 8.0, 4)]
     parts += [box_triangles([x, 2.0, -3.0], [x + 0.12, 2.1, 3.0]) for x in np.arange(-3.0, 3.0, 0.5)]
     sun = DirectionalLight(v3(0.3, -1.0, 0.2) / np.linalg.norm([0.3, -1.0, 0.2]), np.full(3, 1.5))
@@ -106,7 +107,7 @@ def test_slat_shafts_have_their_edges_on_the_slats(renderer):
     errors = {(size, ends): image_error(renderer.render(make(size, ends), "minmax").image, reference, edges).rmse
               for size in (512, 1024) for ends in ("blockers", "texels")}
     print("slat shafts, relative RMSE:", errors)
-    assert errors[512, "blockers"] <= 0.004 and errors[1024, "blockers"] <= 0.002
+    assert errors[512, "blockers"] <= 0.003 and errors[1024, "blockers"] <= 0.0016
     for size in (512, 1024):  # `render.shaft_edges: texels`, the runs' ends at the texels
         assert errors[size, "blockers"] < 0.75 * errors[size, "texels"]
 
