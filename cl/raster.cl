@@ -531,6 +531,21 @@ kernel void raster_split_runs(global const ulong* nearest, int samples, global u
         tri_id[i] = depth[i] == DEPTH_EMPTY ? -1 : (int)(uint)key;
     }
 }
+
+/* The depths alone, as raster_split_runs's: a shadow map's keys stay, and rectify reads
+ * each texel's depth and triangle from its key in one load (RECTIFY_BLOCKER_KEYS), where
+ * two arrays cost it two cache misses per texel. */
+kernel void raster_split_depth_runs(global const ulong* nearest, int samples, global uint* depth)
+{
+    int first = get_global_id(0) * RASTER_SPLIT_RUN;
+    int end = min(first + RASTER_SPLIT_RUN, samples);
+    int i = first;
+    for (; i + 4 <= end; i += 4) {
+        ulong4 key = *(global const ulong4_at_ulong*)(nearest + i);
+        *(global uint4_at_uint*)(depth + i) = convert_uint4(key >> 32);
+    }
+    for (; i < end; ++i) depth[i] = (uint)(nearest[i] >> 32);
+}
 #endif
 
 /* Whether any texel of a depth buffer holds a depth (map_is_empty): a flag set on the

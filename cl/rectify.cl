@@ -219,11 +219,35 @@ ALWAYS_INLINE void store_level0(global float* row, int first, int n, float_lanes
 }
 
 /* With RECTIFY_BLOCKERS, each texel's blocking triangle too: the maps' nearest triangles
- * in, the rows' out. */
+ * in, the rows' out. With RECTIFY_BLOCKER_KEYS the maps' blockers are the 64-bit keys
+ * (depth << 32 | triangle) raster drew them with (clrays/stages/raster.py, ShadowMap): each
+ * texel's depth and triangle come from one load, where a depth array and a triangle array
+ * cost two cache misses per texel. */
 #ifdef RECTIFY_BLOCKERS
-#define RECTIFY_BLOCKER_ARGS , global const int* shadow_triangle, global int* row_triangles
+#if RECTIFY_BLOCKER_KEYS
+#define RECTIFY_BLOCKER_ARGS , global const ulong* shadow_keys, global int* row_triangles
 #else
+#define RECTIFY_BLOCKER_ARGS , global const int* shadow_triangle, global int* row_triangles
+#endif
+#endif
+#ifndef RECTIFY_BLOCKER_ARGS
 #define RECTIFY_BLOCKER_ARGS
+#endif
+
+#if defined(RECTIFY_BLOCKERS) && RECTIFY_BLOCKER_KEYS
+/* The depths and triangles of LANES keys, as raster_split_runs splits them (-1: none), in
+ * two ulong4 halves: no ulong8, whose stores PoCL 3.0 lost on a CPU with AVX-512
+ * (docs/design.md §4.5, "Wide vectors"). */
+ALWAYS_INLINE void gather_keys(global const ulong* keys, int_lanes index, float_lanes* depth, int_lanes* triangle)
+{
+    ulong4 low = (ulong4)(keys[index.s0], keys[index.s1], keys[index.s2], keys[index.s3]);
+    ulong4 high = (ulong4)(keys[index.s4], keys[index.s5], keys[index.s6], keys[index.s7]);
+    uint4 depth_low = convert_uint4(low >> 32), depth_high = convert_uint4(high >> 32);
+    int4 triangle_low = depth_low == (uint4)(DEPTH_EMPTY) ? (int4)(-1) : convert_int4(convert_uint4(low));
+    int4 triangle_high = depth_high == (uint4)(DEPTH_EMPTY) ? (int4)(-1) : convert_int4(convert_uint4(high));
+    *depth = as_float8((uint8)(depth_low, depth_high));
+    *triangle = (int8)(triangle_low, triangle_high);
+}
 #endif
 
 /* One work-item per RECTIFY_BATCHES·LANES texels of a slice, as float8 batches (lanes.h,
@@ -259,8 +283,14 @@ kernel void rectify(global const view_t* views, global const light_t* lights,
         }
         index[b] = rectify_lookup(views, light, ep, r, gamma[b], cos_gamma[b], sin_gamma[b], &meets[b]);
     }
+#if defined(RECTIFY_BLOCKERS) && RECTIFY_BLOCKER_KEYS
+    int_lanes key_triangle[RECTIFY_BATCHES];
+#pragma unroll
+    for (int b = 0; b < RECTIFY_BATCHES; ++b) gather_keys(shadow_keys, index[b], &depth[b], &key_triangle[b]);
+#else
 #pragma unroll
     for (int b = 0; b < RECTIFY_BATCHES; ++b) depth[b] = LOAD_LANES((global const float*)shadow_depth, index[b]);
+#endif
     global float* row = (global float*)(tree + (size_t)slice * 2 * n);
 #pragma unroll
     for (int b = 0; b < RECTIFY_BATCHES; ++b)
@@ -274,7 +304,11 @@ kernel void rectify(global const view_t* views, global const light_t* lights,
     for (int b = 0; b < RECTIFY_BATCHES; ++b) {
         int start = first + b * LANES;
         if (start >= n) continue;
+#if RECTIFY_BLOCKER_KEYS
+        int_lanes blocker = meets[b] ? key_triangle[b] : (int_lanes)(-1);
+#else
         int_lanes blocker = meets[b] ? GATHER_LANES(int_lanes, shadow_triangle, index[b]) : (int_lanes)(-1);
+#endif
         if (start + LANES <= n) {
             *(global int8_at_int*)(triangles + start) = blocker; /* one plain vector store */
         } else {

@@ -575,8 +575,8 @@ class Renderer:
                             lambda index=index: raster_shadow_map(device, buffers, index, timer), per_light=True)
                 for index in range(len(buffers.inputs.scene.lights))]
         atlas = reuse.keep("shadow_atlas", lambda: digest(tuple(keys.shadow)),
-                           lambda: (shadow_atlas(device, buffers, maps), shadow_atlas(device, buffers, maps, "triangle")))
-        return RasterResult(camera_depth, tri_id, *atlas), maps
+                           lambda: (shadow_atlas(device, buffers, maps), shadow_atlas(device, buffers, maps, "blockers")))
+        return RasterResult(camera_depth, tri_id, *atlas, bool(maps) and maps[0].keys), maps
 
     def _rectify(self, buffers: FrameBuffers, rastered: RasterResult, maps: list[ShadowMap], keys: StageKeys,
                  index: int, reuse: Reuse, timer: StageTimer) -> Epipolar:

@@ -22,8 +22,11 @@ class RasterResult:
     camera_depth: object  # uint[H·W·spp]: as_uint(distance along the sample ray)
     tri_id: object  # int[H·W·spp]: nearest triangle, -1 where nothing was hit
     shadow_depth: object  # uint[shadow_texels]: every light's views, back to back
-    # int[shadow_texels]: the triangle nearest the light at each texel (-1: none), as shadow_depth
-    shadow_triangle: object = None
+    # the blocker nearest the light at each texel, as shadow_depth (None: not kept): its
+    # triangle (int, -1: none), or with `blocker_keys` the 64-bit key (depth << 32 | triangle)
+    # it was drawn with (ShadowMap)
+    shadow_blockers: object = None
+    blocker_keys: bool = False
 
 
 def _launch(device: Device, buffers: FrameBuffers, name: str, defines: dict | None, view_indices: list[int],
@@ -135,9 +138,12 @@ def _rasterize(device: Device, buffers: FrameBuffers, view_indices: list[int], o
 
 
 def _split(device: Device, defines: dict, nearest, count: int, depth, triangle, timer: StageTimer) -> None:
-    """The packed keys `nearest` split into `depth` and `triangle` (raster_split_runs)."""
-    timer.add("raster", device.kernel("raster", "raster_split_runs", raster_defines(device, defines))(
-        device.queue, (-(-count // RASTER_SPLIT_RUN),), None, nearest, np.int32(count), depth, triangle))
+    """The packed keys `nearest` split into `depth` and `triangle` (raster_split_runs), or
+    into `depth` alone where `triangle` is None (raster_split_depth_runs)."""
+    name, targets = ("raster_split_runs", (depth, triangle)) if triangle is not None else \
+        ("raster_split_depth_runs", (depth,))
+    timer.add("raster", device.kernel("raster", name, raster_defines(device, defines))(
+        device.queue, (-(-count // RASTER_SPLIT_RUN),), None, nearest, np.int32(count), *targets))
 
 
 def _atomic64(device: Device) -> bool:
@@ -145,15 +151,17 @@ def _atomic64(device: Device) -> bool:
 
 
 def _draw(device: Device, buffers: FrameBuffers, reliefs: ReliefDrawer, views: list[int], offsets,
-          sample_count: int, count: int, nearest_triangles: bool, timer: StageTimer) -> tuple[object, object]:
+          sample_count: int, count: int, nearest_triangles: bool, timer: StageTimer,
+          keep_keys: bool = False) -> tuple[object, object, bool]:
     """Depth of `count` samples over `views` (the triangles, then the reliefs), and, with
     `nearest_triangles`, the triangle each depth belongs to (None without): in one pass of
     64-bit keys (depth, triangle), split after, where the device has 64-bit atomics; else
-    the depths, then a pass that finds their triangles (ties: the highest index)."""
+    the depths, then a pass that finds their triangles (ties: the highest index). With
+    `keep_keys`, where there are keys, the keys themselves stand for the triangles, and only
+    the depths are split out. The third value: whether the second is keys."""
     inputs = buffers.inputs
     depth, triangle = device.buffer(nbytes=4 * count), None
     if nearest_triangles and _atomic64(device):
-        triangle = device.buffer(nbytes=4 * count)
         defines = {"RASTER_ATOMIC64": 1}
         nearest = device.buffer(nbytes=8 * count)
         device.fill(nearest, np.uint64((int(structs.DEPTH_EMPTY) << 32) | 0xFFFFFFFF), 8 * count, timer, "raster")
@@ -161,8 +169,12 @@ def _draw(device: Device, buffers: FrameBuffers, reliefs: ReliefDrawer, views: l
         for view in views:
             reliefs.map("relief_map_nearest", defines, buffers.views, inputs.views, view, offsets, sample_count,
                         (nearest,))
+        if keep_keys:
+            _split(device, defines, nearest, count, depth, None, timer)
+            return depth, nearest, True
+        triangle = device.buffer(nbytes=4 * count)
         _split(device, defines, nearest, count, depth, triangle, timer)
-        return depth, triangle
+        return depth, triangle, False
     device.fill(depth, structs.DEPTH_EMPTY, 4 * count, timer, "raster")
     _rasterize(device, buffers, views, offsets, sample_count, depth, timer)
     for view in views:
@@ -174,14 +186,16 @@ def _draw(device: Device, buffers: FrameBuffers, reliefs: ReliefDrawer, views: l
         for view in views:
             reliefs.map("relief_map_resolve", None, buffers.views, inputs.views, view, offsets, sample_count,
                         (depth, triangle))
-    return depth, triangle
+    return depth, triangle, False
 
 
 def raster_camera(device: Device, buffers: FrameBuffers, timer: StageTimer) -> tuple[object, object]:
     """Camera depth and triangle id of every sample of every pixel."""
     inputs = buffers.inputs
     reliefs = ReliefDrawer(device, inputs.reliefs, inputs.eye_ws, timer)  # eye space, as the triangles
-    return _draw(device, buffers, reliefs, [0], buffers.offsets, inputs.scene.image.spp, inputs.samples, True, timer)
+    camera_depth, tri_id, _ = _draw(device, buffers, reliefs, [0], buffers.offsets, inputs.scene.image.spp,
+                                    inputs.samples, True, timer)
+    return camera_depth, tri_id
 
 
 @dataclass
@@ -189,7 +203,11 @@ class ShadowMap:
     """One light's shadow map, in its own buffer (views anchored at the light)."""
 
     depth: object  # uint[texels]
-    triangle: object  # int[texels]: the nearest triangle's index in the frame (-1: none); None: not kept
+    # the nearest triangle at each texel, its index in the frame (None: not kept): int[texels]
+    # (-1: none), or with `keys` the ulong[texels] keys it was drawn with (depth << 32 |
+    # triangle; a texel whose depth is DEPTH_EMPTY has none), which rectify reads in one load
+    blockers: object
+    keys: bool
     texels: int
     triangles: int  # scene triangles: with none, the map is empty without looking
     empty: bool | None = None  # nothing can be rasterized: filled in by `map_is_empty` when first asked
@@ -214,9 +232,9 @@ def raster_shadow_map(device: Device, buffers: FrameBuffers, light_index: int, t
     drawn = [view for view in range(1, len(inputs.views)) if inputs.view_needed[view]]  # (a face no sample reads stays empty)
     # With the depths, minmax's walks take the nearest triangles, to place the shafts'
     # edges on them (cl/shaft_edges.h).
-    depth, triangle = _draw(device, light_buffers, reliefs, drawn, centre, 1, max(inputs.shadow_texels, 1),
-                            keeps_blockers(inputs.scene.render), timer)
-    shadow_map = ShadowMap(depth, triangle, inputs.shadow_texels, inputs.scene.geometry.count)
+    depth, blockers, keys = _draw(device, light_buffers, reliefs, drawn, centre, 1, max(inputs.shadow_texels, 1),
+                                  keeps_blockers(inputs.scene.render), timer, keep_keys=True)
+    shadow_map = ShadowMap(depth, blockers, keys, inputs.shadow_texels, inputs.scene.geometry.count)
     if shadow_map.triangles and shadow_map.texels:
         shadow_map.reaches = _reaches_views(inputs)
     return shadow_map
@@ -295,17 +313,25 @@ def _triangles_reach(triangles: np.ndarray, anchor: np.ndarray, views: np.ndarra
 
 def shadow_atlas(device: Device, buffers: FrameBuffers, maps: list[ShadowMap], part: str = "depth"):
     """Every light's map back to back, at the depth offsets of the frame's views: their
-    depths, or (`part="triangle"`) their nearest triangles, None where the maps keep none."""
+    depths, or (`part="blockers"`) their nearest triangles or keys (ShadowMap), None where
+    the maps keep none."""
     if any(getattr(entry, part) is None for entry in maps):
         return None
     if len(maps) == 1:
         return getattr(maps[0], part)
-    atlas = device.buffer(nbytes=4 * max(buffers.inputs.shadow_texels, 1))
+    size = 8 if part == "blockers" and maps[0].keys else 4  # every map of a frame is drawn alike
+    atlas = device.buffer(nbytes=size * max(buffers.inputs.shadow_texels, 1))
     for (first, _), entry in zip(buffers.inputs.light_views, maps):
-        offset = 4 * int(buffers.inputs.views[first]["depth_offset"])
-        device.cl.enqueue_copy(device.queue, atlas, getattr(entry, part), byte_count=4 * entry.texels,
+        offset = size * int(buffers.inputs.views[first]["depth_offset"])
+        device.cl.enqueue_copy(device.queue, atlas, getattr(entry, part), byte_count=size * entry.texels,
                                dst_offset=offset)
     return atlas
+
+
+def raster_result(device: Device, buffers: FrameBuffers, camera_depth, tri_id, maps: list[ShadowMap]) -> RasterResult:
+    """The camera's and every light's maps as the later stages read them."""
+    return RasterResult(camera_depth, tri_id, shadow_atlas(device, buffers, maps),
+                        shadow_atlas(device, buffers, maps, "blockers"), bool(maps) and maps[0].keys)
 
 
 def raster(device: Device, buffers: FrameBuffers, timer: StageTimer) -> RasterResult:
@@ -313,5 +339,4 @@ def raster(device: Device, buffers: FrameBuffers, timer: StageTimer) -> RasterRe
     camera, and each light's map anchored at the light, as a render session wires them."""
     camera_depth, tri_id = raster_camera(device, buffers, timer)
     maps = [raster_shadow_map(device, buffers, index, timer) for index in range(len(buffers.inputs.scene.lights))]
-    return RasterResult(camera_depth, tri_id, shadow_atlas(device, buffers, maps),
-                        shadow_atlas(device, buffers, maps, "triangle"))
+    return raster_result(device, buffers, camera_depth, tri_id, maps)

@@ -207,10 +207,10 @@ def rectify(device: Device, buffers: FrameBuffers, rastered: RasterResult, light
         device.queue, (n,), None, bounds_buffer, buffers.lights, frame_buffer, angles, ranges))
     tree = device.buffer(nbytes=8 * slices * 2 * n)
     # each texel's blocking triangle beside it, where the maps keep them (cl/shaft_edges.h)
-    triangles = None if rastered.shadow_triangle is None else device.buffer(nbytes=4 * slices * n)
-    blockers = () if triangles is None else (rastered.shadow_triangle, triangles)
-    if triangles is not None:
-        defines = {**defines, "RECTIFY_BLOCKERS": 1}
+    triangles = None if rastered.shadow_blockers is None else device.buffer(nbytes=4 * slices * n)
+    blockers = () if triangles is None else (rastered.shadow_blockers, triangles)
+    if triangles is not None:  # the maps' triangles, or their keys, which hold depth and triangle in one load
+        defines = {**defines, "RECTIFY_BLOCKERS": 1, "RECTIFY_BLOCKER_KEYS": int(rastered.blocker_keys)}
     sides = device.buffer(slice_sides(params), writable=False)
     group = min(SLICES_PER_GROUP, slices)
     event = device.kernel("rectify", "rectify", defines)(

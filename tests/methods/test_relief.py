@@ -136,8 +136,14 @@ def test_lattice_sun_map_matches_its_triangles(device):
                                                         f"render.relief={mode}"]))
         buffers = upload(device, frame_inputs(scene))
         shadow_map = raster_shadow_map(device, buffers, 0, StageTimer())
-        maps.append((device.read(shadow_map.depth, shadow_map.texels, np.uint32).view(np.float32),
-                     device.read(shadow_map.triangle, shadow_map.texels, np.int32)))
+        depth = device.read(shadow_map.depth, shadow_map.texels, np.uint32)
+        if shadow_map.keys:  # depth << 32 | triangle, as raster drew them
+            keys = device.read(shadow_map.blockers, shadow_map.texels, np.uint64)
+            assert np.array_equal((keys >> np.uint64(32)).astype(np.uint32), depth)
+            triangle = np.where(depth == structs.DEPTH_EMPTY, -1, (keys & np.uint64(0xFFFFFFFF)).astype(np.int64))
+        else:
+            triangle = device.read(shadow_map.blockers, shadow_map.texels, np.int32)
+        maps.append((depth.view(np.float32), triangle))
         if mode == "prewarp":
             drawer = ReliefDrawer(device, buffers.inputs.reliefs, buffers.inputs.light_anchor_ws[0], StageTimer())
             placed, frame = drawer.reliefs[0]

@@ -79,6 +79,22 @@ def test_every_blocked_texel_keeps_its_blocker(device, monkeypatch, light):
     np.testing.assert_array_equal(blocker_resolved, blocker)
 
 
+def test_two_lights_blockers_from_keys_or_resolved_give_one_image(device, monkeypatch):
+    """Two lights' maps in one atlas: rectify reads each texel's blocker from the 64-bit keys
+    raster drew (8 bytes a texel in the atlas) or, on a device without 64-bit atomics, from
+    the triangles a second pass resolved; the images are the same bits."""
+    from clrays.session import Renderer
+
+    sun = DirectionalLight(v3(0.35, -1.0, -0.25) / np.linalg.norm([0.35, -1.0, -0.25]), np.full(3, 1.5))
+    scene = replace(_scene(PointLight(v3(0.4, 4.5, -0.6), np.full(3, 40.0))),
+                    lights=(PointLight(v3(0.4, 4.5, -0.6), np.full(3, 40.0)), sun))
+    keys = Renderer(device, reuse=False).render(scene, "minmax").image
+    monkeypatch.setattr(raster_stage, "_atomic64", lambda device: False)
+    resolved = Renderer(device, reuse=False).render(scene, "minmax").image
+    assert keys.max() > 0.0
+    np.testing.assert_array_equal(keys, resolved)
+
+
 def test_a_relief_blocks_with_its_own_triangles(device):
     scene = load_scene(SCENES / "lattice.yaml", ["image.width=32", "image.height=18", "render.shadow_map=256",
                                                  "render.slices=64", "render.gamma_samples=256"])
@@ -118,7 +134,7 @@ def test_texel_ends_keep_no_blockers(device):
     buffers = upload(device, frame_inputs(scene))
     timer = StageTimer()
     rastered = raster(device, buffers, timer)
-    assert rastered.shadow_triangle is None
+    assert rastered.shadow_blockers is None
     assert rectify(device, buffers, rastered, 0, timer).triangles is None
 
 
