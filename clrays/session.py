@@ -643,13 +643,10 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
     if len(inputs.light_views) > 1:
         sizes.append(("shadow maps of all lights together", 4 * inputs.shadow_texels))
     if keeps_blockers(scene.render) and scene.lights:  # (stages/shaft_edges.py) each texel's nearest triangle,
-        # every light's and all together, and the largest map's packed keys while it is drawn
-        largest = max(int((inputs.views[first:first + count]["width"]
-                           * inputs.views[first:first + count]["height"]).sum())
-                      for first, count in inputs.light_views)
+        # every light's and all together: the maps' packed raster keys (64-bit), which they keep where the
+        # device has 64-bit atomics (stages/raster.py, ShadowMap), else 32-bit triangles; counted as keys
         atlases = 2 if len(inputs.light_views) > 1 else 1
-        sizes += [("shadow maps' nearest triangles", 4 * inputs.shadow_texels * atlases),
-                  ("a shadow map's packed raster keys (64-bit)", 8 * largest),
+        sizes += [("shadow maps' packed raster keys (64-bit)", 8 * inputs.shadow_texels * atlases),
                   ("each triangle's neighbours", 12 * scene.geometry.count)]
         if np.any(scene.medium.sigma_s > 0):
             sizes += [(f"rows' blockers of light {index}", 4 * scene.render.slices

@@ -328,15 +328,10 @@ def shadow_atlas(device: Device, buffers: FrameBuffers, maps: list[ShadowMap], p
     return atlas
 
 
-def raster_result(device: Device, buffers: FrameBuffers, camera_depth, tri_id, maps: list[ShadowMap]) -> RasterResult:
-    """The camera's and every light's maps as the later stages read them."""
-    return RasterResult(camera_depth, tri_id, shadow_atlas(device, buffers, maps),
-                        shadow_atlas(device, buffers, maps, "blockers"), bool(maps) and maps[0].keys)
-
-
 def raster(device: Device, buffers: FrameBuffers, timer: StageTimer) -> RasterResult:
     """The whole stage without a session's reuse: every sample of every pixel from the
     camera, and each light's map anchored at the light, as a render session wires them."""
     camera_depth, tri_id = raster_camera(device, buffers, timer)
     maps = [raster_shadow_map(device, buffers, index, timer) for index in range(len(buffers.inputs.scene.lights))]
-    return raster_result(device, buffers, camera_depth, tri_id, maps)
+    return RasterResult(camera_depth, tri_id, shadow_atlas(device, buffers, maps),
+                        shadow_atlas(device, buffers, maps, "blockers"), bool(maps) and maps[0].keys)
