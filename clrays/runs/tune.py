@@ -5,7 +5,8 @@ The error is measured as `clrays bench` measures it (`clrays.runs.bench`): relat
 luminance RMSE against `exact` on a fixed, seeded subset of pixels, depth edges left
 out, the references kept on disk (`clrays.runs.references`), so a scene's `exact` is
 computed once and every setting tried is measured against it. A frame's cost is the
-median of a few warm frames in one session, every stage computed: of the process's CPU
+median of a few warm frames in one session (one where it is long: LONG_FRAME_MS), every
+stage computed: of the process's CPU
 time on a CPU device (a shared machine's load moves it by a few per cent, the wall time
 by 1–3×), of the wall time on a GPU.
 
@@ -47,6 +48,12 @@ from .references import EXACT, ReferenceCache
 TUNE_PIXELS = 4000
 #: Timed frames per setting, after the frame whose image is measured (which builds the kernels).
 TUNE_REPEATS = 3
+#: A setting whose first timed frame costs this much (ms, `Trial.cost_ms`) is timed once: the
+#: lattice's 640×360 frames of 242, 489 and 1159 ms of CPU spread by 1, 7 and 2 % over 7
+#: runs, their first within 2 % of the median, below TIME_MARGIN's 3 % but for one, where a
+#: search that times three takes the fine occluders' 0.5–1 s settings past the 2 minutes
+#: asked of a 640×360 search (bench/RESULTS.md, "Tuning the lattice at 640×360").
+LONG_FRAME_MS = 200.0
 #: The most settings one search measures: a survey tries 7 (each knob, and all at once), so
 #: this bounds a search at about 8 surveys; a 640×360 frame of the bench scenes costs 0.05–1 s, and a
 #: setting 4 of them (bench/RESULTS.md, "Fine occluders and tuning").
@@ -209,8 +216,10 @@ class Search:
                                   f"is left to compare against exact (each is dark or on a depth edge); tune it "
                                   f"at a larger image")
             worst = max(worst, error.rmse)
-            for _ in range(self.repeats):
+            for repeat in range(self.repeats):
                 times.append(self._timed(variant))
+                if repeat == 0 and times[-1][1] >= LONG_FRAME_MS:
+                    break  # a long frame: one is as good as the median of three
         walls, costs = zip(*times)
         trial = Trial(dict(settings), worst, statistics.median(walls), cost_ms=statistics.median(costs))
         self.trials[key] = trial

@@ -329,3 +329,23 @@ def test_a_start_that_does_not_render_is_searched_from_below(scene_file, tmp_pat
     assert result.default.failed and result.best is not None, [t.settings for t in result.trials]
     assert result.best.settings["shadow_map"] <= 64
     assert tuning.default_trial_line(result).startswith("as written: not rendered (the shadow map does not fit")
+
+
+@pytest.mark.parametrize("first_cost, timed", [(250.0, 1), (50.0, 3)])
+def test_a_long_frame_is_timed_once(scene_file, tmp_path, monkeypatch, first_cost, timed):
+    """A setting whose first timed frame costs LONG_FRAME_MS or more is timed once (one long
+    frame is as good as the median of three, bench/RESULTS.md); a shorter one three times."""
+    scene = load_scene(scene_file)
+    search = tuning.Search(scene, "minmax", ReferenceCache(tmp_path / "cache"), Renderer(reuse=False), pixels=200)
+    costs = iter([first_cost, first_cost + 10.0, first_cost + 20.0])
+    calls = []
+
+    def one_frame(variant):
+        calls.append(variant)
+        cost = next(costs)
+        return cost, cost
+
+    monkeypatch.setattr(search, "_timed", one_frame)
+    trial = search.measure(tuning.start_settings(scene, "minmax"))
+    assert len(calls) == timed
+    assert trial.cost_ms == (first_cost if timed == 1 else first_cost + 10.0)
