@@ -49,10 +49,10 @@ TUNE_PIXELS = 4000
 #: Timed frames per setting, after the frame whose image is measured (which builds the kernels).
 TUNE_REPEATS = 3
 #: A setting whose first timed frame costs this much (ms, `Trial.cost_ms`) is timed once: the
-#: lattice's 640×360 frames of 242, 489 and 1159 ms of CPU spread by 1, 7 and 2 % over 7
-#: runs, their first within 2 % of the median, below TIME_MARGIN's 3 % but for one, where a
-#: search that times three takes the fine occluders' 0.5–1 s settings past the 2 minutes
-#: asked of a 640×360 search (bench/RESULTS.md, "Tuning the lattice at 640×360").
+#: lattice's 640×360 frames of 242, 489 and 1159 ms of CPU spread by 1, 7 and 2 % over 7 runs
+#: (bench/frame_spread.py), their first within 2 % of the median, below TIME_MARGIN's 3 %;
+#: timed three times, the fine occluders' 0.5–1 s settings took the lattice's 640×360 search
+#: past the 2 minutes asked (bench/RESULTS.md, "Tuning the lattice at 640×360").
 LONG_FRAME_MS = 200.0
 #: The most settings one search measures: a survey tries 7 (each knob, and all at once), so
 #: this bounds a search at about 8 surveys; a 640×360 frame of the bench scenes costs 0.05–1 s, and a
