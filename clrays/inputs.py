@@ -18,7 +18,7 @@ from .device import Device
 from .errors import ClraysError
 from .physics.radiometry import effective_far, lamp_radius
 from .scene.costs import SPOT_SINGLE_VIEW_MAX_DEG, with_derived_sizes
-from .scene.light_views import directional_map
+from .scene.light_views import directional_map, up_hint
 from .stages.cube_faces import sampled_cube_faces
 from .stages.light_texture import pack_light_textures
 from .scene.relief_frame import relief_faces
@@ -87,12 +87,6 @@ def walled_off(geometry, eye_windings: np.ndarray, light) -> bool:
     outside = lambda windings: np.abs(windings) < 0.25
     return bool(np.any((inside(eye_windings) & outside(light_windings))
                        | (outside(eye_windings) & inside(light_windings))))
-
-
-def _any_up(forward) -> np.ndarray:
-    """An up vector not parallel to forward."""
-    forward = np.asarray(forward, float)
-    return np.array([0.0, 1.0, 0.0]) if abs(forward[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
 
 
 @dataclass
@@ -234,7 +228,7 @@ def frame_inputs(scene: Scene) -> FrameInputs:
             if isinstance(light, SpotLight) and light.cone_deg <= SPOT_SINGLE_VIEW_MAX_DEG:
                 scale = math.tan(math.radians(light.cone_deg))
                 needed.append(True)
-                views.append(_view(position, light.direction, _any_up(light.direction), scale, scale,
+                views.append(_view(position, light.direction, up_hint(light.direction), scale, scale,
                                    n, n, structs.PROJECTION_PERSPECTIVE, texels))
                 entry["texel_angle"] = 2 * scale / n
                 texels += n * n

@@ -164,10 +164,9 @@ def thinnest_solid(geometry, light) -> float | None:
         return None
     corners = _box_corners(lo, hi)  # (S, 8, 3)
     if isinstance(light, DirectionalLight):
-        direction = np.asarray(light.direction, dtype=np.float64)
-        right, up = _plane_axes(direction)
-        plane = np.stack([corners @ right, corners @ up], axis=-1)
-        side = directional_map(*geometry.bounds(), direction).texel_side  # the map's longer texels
+        fitted = directional_map(*geometry.bounds(), light.direction)  # the light's map, across the light
+        plane = np.stack([corners @ fitted.right, corners @ fitted.up], axis=-1)
+        side = fitted.texel_side  # the map's longer texels
     else:
         towards = corners - np.asarray(light.position, dtype=np.float64)
         if isinstance(light, SpotLight):  # a solid whose bounding sphere lies outside the cone casts nothing
@@ -201,14 +200,6 @@ def _box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """(S, 8, 3) the corners of S boxes."""
     pick = np.array([[(k >> axis) & 1 for axis in range(3)] for k in range(8)], dtype=bool)  # (8, 3)
     return np.where(pick[None], hi[:, None, :], lo[:, None, :])
-
-
-def _plane_axes(direction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(right, up) of an orthographic view along `direction` (any pair across it serves a width)."""
-    forward = direction / np.linalg.norm(direction)
-    right = np.cross(forward, [0.0, 1.0, 0.0] if abs(forward[1]) < 0.9 else [1.0, 0.0, 0.0])
-    right /= np.linalg.norm(right)
-    return right, np.cross(right, forward)
 
 
 def _min_width(points: np.ndarray) -> np.ndarray:

@@ -45,6 +45,13 @@ class DirectionalMap:
         return 2.0 * max(self.half_width, self.half_height)
 
 
+def up_hint(forward) -> np.ndarray:
+    """A light view's up before it is made square to `forward`: the world's y, or its x for
+    a view within about 25° of vertical (any vector not parallel to forward serves)."""
+    forward = np.asarray(forward, float)
+    return np.array([0.0, 1.0, 0.0]) if abs(forward[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+
+
 def directional_map(lo: np.ndarray, hi: np.ndarray, direction) -> DirectionalMap:
     """The map of a light shining along `direction` over the box [lo, hi] (module docstring)."""
     forward = np.asarray(direction, dtype=np.float64)
@@ -52,8 +59,7 @@ def directional_map(lo: np.ndarray, hi: np.ndarray, direction) -> DirectionalMap
     lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
     centre = (lo + hi) / 2
     radius = max(np.linalg.norm(hi - lo) / 2, 1e-6) * MAP_MARGIN
-    seed = np.array([0.0, 1.0, 0.0]) if abs(forward[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    right = np.cross(forward, seed)
+    right = np.cross(forward, up_hint(forward))
     right /= np.linalg.norm(right)
     up = np.cross(right, forward)
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
