@@ -49,8 +49,8 @@ TUNE_PIXELS = 4000
 #: Timed frames per setting, after the frame whose image is measured (which builds the kernels).
 TUNE_REPEATS = 3
 #: A setting whose first timed frame costs this much (ms, `Trial.cost_ms`) is timed once: the
-#: lattice's 640×360 frames of 242, 489 and 1159 ms of CPU spread by 1, 7 and 2 % over 7 runs
-#: (bench/frame_spread.py), their first within 2 % of the median, below TIME_MARGIN's 3 %;
+#: lattice's 640×360 frames of 249, 493 and 1161 ms of CPU spread by 4.5, 2.2 and 1.8 % over 7
+#: runs (bench/frame_spread.py), their first within 1.5 % of the median, below TIME_MARGIN's 3 %;
 #: timed three times, the fine occluders' 0.5–1 s settings took the lattice's 640×360 search
 #: past the 2 minutes asked (bench/RESULTS.md, "Tuning the lattice at 640×360").
 LONG_FRAME_MS = 200.0
