@@ -15,6 +15,9 @@
 #ifdef SHAFT_EDGES
 #include "shaft_edges.h"
 #endif
+#ifdef RELIEF_CUTS
+#include "relief_cuts.h"
+#endif
 
 /* TRAVERSAL_TREE and TRAVERSAL_SCAN come from clrays/structs.py (-D). */
 #ifndef TRAVERSAL
@@ -197,6 +200,30 @@ inline void nearest_slices(global const epipolar_t* ep, float3 dir, int* i0, int
     slices_around(ep, atan2_approx(inline_dot(dir, ep->w.xyz), inline_dot(dir, ep->u.xyz)), i0, i1, t);
 }
 
+#ifdef RELIEF_CUTS
+/* A lit run's radiance with the relief's shadow (relief_cuts.h) taken out of it: the runs
+ * come in rising γ, so the stretches wholly before one are passed for good. */
+inline float3 lit_run_radiance(global const integrand_t* in, global const float* tables, global const frame_t* frame,
+                               const integrand_row_t* ray, const walk_features_t* features,
+                               global const float* row_prefix, gamma_texels_t texels, relief_shadow_t* shadow,
+                               float gamma0, float gamma1)
+{
+    while (shadow->next < shadow->bounds && shadow->bound[shadow->next + 1] <= gamma0) shadow->next += 2;
+    float3 radiance = (float3)(0.0f);
+    float from = gamma0;
+    for (int k = shadow->next; from < gamma1; k += 2) {
+        if (k >= shadow->bounds || shadow->bound[k] >= gamma1) {
+            radiance += run_radiance(in, tables, frame, ray, features, row_prefix, texels, from, gamma1);
+            break;
+        }
+        if (shadow->bound[k] > from)
+            radiance += run_radiance(in, tables, frame, ray, features, row_prefix, texels, from, shadow->bound[k]);
+        from = inline_fmax(from, shadow->bound[k + 1]);
+    }
+    return radiance;
+}
+#endif
+
 /* Radiance of the lit part of [gamma_begin, gamma_end) of the ray along row `slice`.
  * Adjacent lit nodes merge into one run, so the integrand is evaluated once per run; with
  * SHAFT_EDGES a run's ends move onto its blockers' silhouettes (shaft_edges.h).
@@ -219,6 +246,10 @@ inline float3 walk_row(global const epipolar_t* ep, global const float2* row, co
     int position = inline_clamp_int((int)inline_floor(gamma_texel_coord(texels, gamma_begin)), 0, n);
 #ifdef SHAFT_EDGES
     run_edges_t edges = run_edges_of(ep, span->dir, features, slice, position, gamma_begin, gamma_end);
+#endif
+#ifdef RELIEF_CUTS
+    relief_shadow_t shadow;
+    relief_shadow_of(ep, &edges.plane, edges.planar, features, &shadow);
 #endif
     /* Past `end` the open run, if any, closes without a shadowed texel after it. */
     for (int done = position >= end;; done = position >= end) {
@@ -249,7 +280,11 @@ inline float3 walk_row(global const epipolar_t* ep, global const float2* row, co
 #ifdef SHAFT_EDGES
             if (place_run_ends(&edges, features, texels, run_start, run_end, !done, &run0, &run1))
 #endif
+#ifdef RELIEF_CUTS
+            radiance += lit_run_radiance(in, tables, frame, ray, features, row_prefix, texels, &shadow, run0, run1);
+#else
             radiance += run_radiance(in, tables, frame, ray, features, row_prefix, texels, run0, run1);
+#endif
             run_start = -1;
         }
         if (done) break;

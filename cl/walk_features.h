@@ -7,11 +7,15 @@
  *                        docs/light-textures.md): its integrand in γ and the prefix sums
  *   TRANSLUCENT_LAYERS   the light's translucent layers rectified along the rows (stage
  *                        translucency, translucent_walk.h), K of them per texel
+ *   SHAFT_EDGES          each texel's blocker and the frame's triangles, which place a lit
+ *                        run's ends on its blockers' silhouettes (shaft_edges.h)
+ *   RELIEF_CUTS          the reliefs' outline seen from the light, which the walk cuts in
+ *                        its ray's own half-plane (relief_cuts.h; with SHAFT_EDGES only)
  *   TRANSPARENCY_WEIGHTED_WALK  MBOIT's fog weight along the ray, in pieces (the kernel
  *                        fills them itself: transparency_walk.cl)
  *
  * A walking kernel takes WALK_FEATURE_ARGS after its own arguments, in this order: light
- * texture, then translucent layers; `walk_features_t features; ATTACH_WALK_FEATURES(features)`
+ * texture, translucent layers, shaft edges, relief cuts; `walk_features_t features; ATTACH_WALK_FEATURES(features)`
  * hands them on. Without a feature its arguments and members are not there at all, and the
  * kernel is the one it was before the feature existed. */
 #ifndef CLRAYS_WALK_FEATURES_H
@@ -36,6 +40,13 @@ typedef struct {
     global const float4* edge_vertices;  /* the frame's triangles, eye space */
     global const int* edge_neighbours;   /* each triangle's neighbour across each edge, -1: none */
 #endif
+#ifdef RELIEF_CUTS
+    global const float4* relief_edges;   /* the reliefs' outline, eye space: (lower end, change), higher end */
+    global const int* relief_bin_offsets; /* each α bin's first entry in relief_bin_edges */
+    global const int* relief_bin_edges;
+    int relief_bins;
+    int relief_eye_count; /* the reliefs' triangles between the eye and the light */
+#endif
 #ifdef TRANSPARENCY_WEIGHTED_WALK
     float piece_gamma[WALK_PIECES + 2];
     float4 piece_weight[WALK_PIECES + 1];
@@ -58,6 +69,12 @@ typedef struct {
 #define ATTACH_SHAFT_EDGES(f) (f).edge_rows = edge_rows; (f).edge_vertices = edge_vertices; \
     (f).edge_neighbours = edge_neighbours;
 #endif
+#ifdef RELIEF_CUTS
+#define RELIEF_CUT_ARGS , global const float4* relief_edges, global const int* relief_bin_offsets, \
+    global const int* relief_bin_edges, int relief_bins, int relief_eye_count
+#define ATTACH_RELIEF_CUTS(f) (f).relief_edges = relief_edges; (f).relief_bin_offsets = relief_bin_offsets; \
+    (f).relief_bin_edges = relief_bin_edges; (f).relief_bins = relief_bins; (f).relief_eye_count = relief_eye_count;
+#endif
 /* A feature not built: no arguments, nothing to hand on. */
 #ifndef LIGHT_TEXTURE_ARGS
 #define LIGHT_TEXTURE_ARGS
@@ -73,8 +90,13 @@ typedef struct {
 #define ATTACH_SHAFT_EDGES(f)
 #endif
 
-#define WALK_FEATURE_ARGS LIGHT_TEXTURE_ARGS RECTIFIED_LAYER_ARGS SHAFT_EDGE_ARGS
+#ifndef RELIEF_CUT_ARGS
+#define RELIEF_CUT_ARGS
+#define ATTACH_RELIEF_CUTS(f)
+#endif
+
+#define WALK_FEATURE_ARGS LIGHT_TEXTURE_ARGS RECTIFIED_LAYER_ARGS SHAFT_EDGE_ARGS RELIEF_CUT_ARGS
 #define ATTACH_WALK_FEATURES(features) ATTACH_LIGHT_TEXTURE(features) ATTACH_RECTIFIED_LAYERS(features) \
-    ATTACH_SHAFT_EDGES(features)
+    ATTACH_SHAFT_EDGES(features) ATTACH_RELIEF_CUTS(features)
 
 #endif

@@ -48,6 +48,7 @@ from .reuse import COMPUTED, REUSED, SKIPPED, Reuse, StageCache, StageRecord, di
 from .scene.costs import with_derived_sizes
 from .scene.model import METHODS, RENAMED_METHODS, Render, Scene
 from .stages.features import walk_features
+from .stages.relief_cuts import cuts_reliefs, relief_cuts
 from .stages.shaft_edges import ShaftEdges, edge_neighbours, keeps_blockers
 from .stages.integrand import integrand, integrand_table_size
 from .stages.lamp import eye_in_lamp, lamp_in_scatter
@@ -412,10 +413,14 @@ class Renderer:
                            walk_features(texture, None))
             return
         edges = None if epipolar.unshadowed else self._shaft_edges(buffers, epipolar, keys, reuse)
+        reliefs = None if edges is None or frame.rastered.volume_blockers is None else \
+            relief_cuts(device, buffers.inputs, index, epipolar.params)  # (the reliefs the volume's map left out)
         features = walk_features(  # what the walks carry (stages/features.py, cl/walk_features.h)
             texture, None if frame.layers is None else rectify_layers(device, buffers, frame.layers, epipolar, timer),
-            edges)
-        if frame.scene.render.sampling == "epipolar" and not epipolar.unshadowed:  # traverse: walk the trees
+            edges, reliefs)
+        # A relief's shafts, finer than the lines are apart, run along them: a camera sample
+        # between two lines is neither's, and walks its own rays (docs/design.md §4.5).
+        if frame.scene.render.sampling == "epipolar" and not epipolar.unshadowed and reliefs is None:  # traverse
             counts = epipolar_sampling(device, buffers, frame.rastered, epipolar, tables, *frame.in_scatter.writing(),
                                        timer, features)
             frame.samples = counts if frame.samples is None else frame.samples + counts
@@ -575,8 +580,8 @@ class Renderer:
                             lambda index=index: raster_shadow_map(device, buffers, index, timer), per_light=True)
                 for index in range(len(buffers.inputs.scene.lights))]
         atlas = reuse.keep("shadow_atlas", lambda: digest(tuple(keys.shadow)),
-                           lambda: (shadow_atlas(device, buffers, maps), shadow_atlas(device, buffers, maps, "blockers")))
-        return RasterResult(camera_depth, tri_id, *atlas, bool(maps) and maps[0].keys), maps
+                           lambda: tuple(shadow_atlas(device, buffers, maps, part) for part in ("depth", "blockers", "volume")))
+        return RasterResult(camera_depth, tri_id, *atlas[:2], bool(maps) and maps[0].keys, atlas[2]), maps
 
     def _rectify(self, buffers: FrameBuffers, rastered: RasterResult, maps: list[ShadowMap], keys: StageKeys,
                  index: int, reuse: Reuse, timer: StageTimer) -> Epipolar:
@@ -648,6 +653,8 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
         atlases = 2 if len(inputs.light_views) > 1 else 1
         sizes += [("shadow maps' packed raster keys (64-bit)", 8 * inputs.shadow_texels * atlases),
                   ("each triangle's neighbours", 12 * scene.geometry.count)]
+        if cuts_reliefs(inputs, True):  # the keys from before the reliefs, which the volume reads (relief_cuts.py)
+            sizes.append(("shadow maps' keys without the reliefs (64-bit)", 8 * inputs.shadow_texels * atlases))
         if np.any(scene.medium.sigma_s > 0):
             sizes += [(f"rows' blockers of light {index}", 4 * scene.render.slices
                        * tree_gamma_samples(scene.render.gamma_samples)) for index in range(len(scene.lights))]

@@ -14,6 +14,7 @@ from .. import structs
 from ..device import Device, StageTimer
 from ..inputs import FrameBuffers, FrameInputs, light_pass_inputs, opaque_occluders
 from .relief import ReliefDrawer
+from .relief_cuts import cuts_reliefs
 from .shaft_edges import keeps_blockers
 
 
@@ -27,6 +28,9 @@ class RasterResult:
     # it was drawn with (ShadowMap)
     shadow_blockers: object = None
     blocker_keys: bool = False
+    # the keys the volume reads where its walks cut the reliefs themselves (ShadowMap.volume);
+    # None: shadow_blockers
+    volume_blockers: object = None
 
 
 def _launch(device: Device, buffers: FrameBuffers, name: str, defines: dict | None, view_indices: list[int],
@@ -152,13 +156,14 @@ def _atomic64(device: Device) -> bool:
 
 def _draw(device: Device, buffers: FrameBuffers, reliefs: ReliefDrawer, views: list[int], offsets,
           sample_count: int, count: int, nearest_triangles: bool, timer: StageTimer,
-          keep_keys: bool = False) -> tuple[object, object, bool]:
+          keep_keys: bool = False, before_reliefs: list | None = None) -> tuple[object, object, bool]:
     """Depth of `count` samples over `views` (the triangles, then the reliefs), and, with
     `nearest_triangles`, the triangle each depth belongs to (None without): in one pass of
     64-bit keys (depth, triangle), split after, where the device has 64-bit atomics; else
     the depths, then a pass that finds their triangles (ties: the highest index). With
     `keep_keys`, where there are keys, the keys themselves stand for the triangles, and only
-    the depths are split out. The third value: whether the second is keys."""
+    the depths are split out. The third value: whether the second is keys. `before_reliefs`,
+    a list, gets a copy of the keys as the triangles alone drew them (where there are keys)."""
     inputs = buffers.inputs
     depth, triangle = device.buffer(nbytes=4 * count), None
     if nearest_triangles and _atomic64(device):
@@ -166,6 +171,10 @@ def _draw(device: Device, buffers: FrameBuffers, reliefs: ReliefDrawer, views: l
         nearest = device.buffer(nbytes=8 * count)
         device.fill(nearest, np.uint64((int(structs.DEPTH_EMPTY) << 32) | 0xFFFFFFFF), 8 * count, timer, "raster")
         _launch(device, buffers, "raster_nearest", defines, views, offsets, sample_count, (nearest,), timer)
+        if before_reliefs is not None:
+            kept = device.buffer(nbytes=8 * count)
+            timer.add("raster", device.cl.enqueue_copy(device.queue, kept, nearest, byte_count=8 * count))
+            before_reliefs.append(kept)
         for view in views:
             reliefs.map("relief_map_nearest", defines, buffers.views, inputs.views, view, offsets, sample_count,
                         (nearest,))
@@ -210,6 +219,9 @@ class ShadowMap:
     keys: bool
     texels: int
     triangles: int  # scene triangles: with none, the map is empty without looking
+    # the keys without the reliefs, which the volume reads where its walks cut the reliefs
+    # themselves (stages/relief_cuts.py); None: the volume reads `blockers`
+    volume: object = None
     empty: bool | None = None  # nothing can be rasterized: filled in by `map_is_empty` when first asked
     # whether a triangle may reach a view the pass draws, asked by `map_is_empty`
     # (`_reaches_views`), or None where the map is empty without looking
@@ -232,9 +244,14 @@ def raster_shadow_map(device: Device, buffers: FrameBuffers, light_index: int, t
     drawn = [view for view in range(1, len(inputs.views)) if inputs.view_needed[view]]  # (a face no sample reads stays empty)
     # With the depths, minmax's walks take the nearest triangles, to place the shafts'
     # edges on them (cl/shaft_edges.h).
+    # Where the walks cut the reliefs themselves (stages/relief_cuts.py), the volume reads the
+    # keys from before the reliefs were drawn.
+    before_reliefs = [] if cuts_reliefs(inputs, _atomic64(device)) else None
     depth, blockers, keys = _draw(device, light_buffers, reliefs, drawn, centre, 1, max(inputs.shadow_texels, 1),
-                                  keeps_blockers(inputs.scene.render), timer, keep_keys=True)
-    shadow_map = ShadowMap(depth, blockers, keys, inputs.shadow_texels, inputs.scene.geometry.count)
+                                  keeps_blockers(inputs.scene.render), timer, keep_keys=True,
+                                  before_reliefs=before_reliefs)
+    shadow_map = ShadowMap(depth, blockers, keys, inputs.shadow_texels, inputs.scene.geometry.count,
+                           volume=before_reliefs[0] if before_reliefs else None)
     if shadow_map.triangles and shadow_map.texels:
         shadow_map.reaches = _reaches_views(inputs)
     return shadow_map
@@ -313,13 +330,13 @@ def _triangles_reach(triangles: np.ndarray, anchor: np.ndarray, views: np.ndarra
 
 def shadow_atlas(device: Device, buffers: FrameBuffers, maps: list[ShadowMap], part: str = "depth"):
     """Every light's map back to back, at the depth offsets of the frame's views: their
-    depths, or (`part="blockers"`) their nearest triangles or keys (ShadowMap), None where
-    the maps keep none."""
+    depths, or (`part="blockers"`) their nearest triangles or keys, or (`"volume"`) their
+    keys without the reliefs (ShadowMap), None where the maps keep none."""
     if any(getattr(entry, part) is None for entry in maps):
         return None
     if len(maps) == 1:
         return getattr(maps[0], part)
-    size = 8 if part == "blockers" and maps[0].keys else 4  # every map of a frame is drawn alike
+    size = 8 if part == "volume" or (part == "blockers" and maps[0].keys) else 4  # every map of a frame is drawn alike
     atlas = device.buffer(nbytes=size * max(buffers.inputs.shadow_texels, 1))
     for (first, _), entry in zip(buffers.inputs.light_views, maps):
         offset = size * int(buffers.inputs.views[first]["depth_offset"])
@@ -334,4 +351,5 @@ def raster(device: Device, buffers: FrameBuffers, timer: StageTimer) -> RasterRe
     camera_depth, tri_id = raster_camera(device, buffers, timer)
     maps = [raster_shadow_map(device, buffers, index, timer) for index in range(len(buffers.inputs.scene.lights))]
     return RasterResult(camera_depth, tri_id, shadow_atlas(device, buffers, maps),
-                        shadow_atlas(device, buffers, maps, "blockers"), bool(maps) and maps[0].keys)
+                        shadow_atlas(device, buffers, maps, "blockers"), bool(maps) and maps[0].keys,
+                        shadow_atlas(device, buffers, maps, "volume"))

@@ -208,7 +208,9 @@ def rectify(device: Device, buffers: FrameBuffers, rastered: RasterResult, light
     tree = device.buffer(nbytes=8 * slices * 2 * n)
     # each texel's blocking triangle beside it, where the maps keep them (cl/shaft_edges.h)
     triangles = None if rastered.shadow_blockers is None else device.buffer(nbytes=4 * slices * n)
-    blockers = () if triangles is None else (rastered.shadow_blockers, triangles)
+    # (the keys without the reliefs where the walks cut those themselves: stages/relief_cuts.py)
+    volume = rastered.shadow_blockers if rastered.volume_blockers is None else rastered.volume_blockers
+    blockers = () if triangles is None else (volume, triangles)
     if triangles is not None:  # the maps' triangles, or their keys, which hold depth and triangle in one load
         defines = {**defines, "RECTIFY_BLOCKERS": 1, "RECTIFY_BLOCKER_KEYS": int(rastered.blocker_keys)}
     sides = device.buffer(slice_sides(params), writable=False)

@@ -1,0 +1,176 @@
+"""Relief shadows in the volume, cut per ray: the walk feature RELIEF_CUTS (cl/relief_cuts.h;
+docs/design.md §4.5, "A relief's shadow cut per ray").
+
+A relief's bars and holes are finer than the shadow map an image derives: a sliver of
+light between two bars falls between the texel centres of the map, of the γ row and of
+the slices, and a ray between two slices blends two different patterns. So where the walks
+place their runs on the blockers (minmax with `render.shaft_edges: blockers`), a relief
+drawn by its pre-warp stays out of the map the volume reads (raster keeps the keys from
+before the reliefs: `ShadowMap.volume`), and each walk cuts the relief in its ray's own
+half-plane instead.
+
+What the walk cuts is the relief's outline seen from the light: the edges of its triangles
+where the number of them that a light ray crosses changes (a border, a hole's rim, a fold
+where the surface turns from facing the light to facing away). Each keeps that change (±1
+or ±2 for passing it one way); the edges two triangles facing the same way share change
+nothing and are left out. Along the ray, a point is in the relief's shadow where the light
+ray through it crosses some triangle between it and the light: the walk starts from the
+eye's own count (`eye_layers`, float64 on the host) and adds each crossing's change in
+rising γ, where the crossing lies towards the light from the ray. The edges are binned by
+their angle α around the eye's light ray, so a ray reads only its bin's edges.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..scene.model import DirectionalLight
+
+#: Crossings one ray gathers at most (cl/relief_cuts.h): the bins are made fine enough that
+#: no bin holds more edges than this.
+RELIEF_CROSSINGS = 256
+#: Bins of α around the eye's light ray, at least and at most.
+MIN_BINS, MAX_BINS = 1024, 65536
+
+
+def cuts_reliefs(inputs, has_keys: bool) -> bool:
+    """Whether a frame's walks cut its reliefs themselves, the volume's map leaving them
+    out: minmax placing its runs on the blockers, reliefs drawn by their pre-warp, shadow
+    maps drawn with 64-bit keys (`has_keys`: the keys from before the reliefs are the
+    volume's map), and no translucent object (whose layers are walked texel by texel)."""
+    scene = inputs.scene
+    render = scene.render
+    return (render.method == "minmax" and render.shaft_edges == "blockers" and bool(inputs.reliefs)
+            and has_keys and not scene.geometry.translucent and bool(scene.lights))
+
+
+def relief_outline(triangles: np.ndarray, light, record=None) -> tuple[np.ndarray, np.ndarray]:
+    """The outline of one relief's triangles (T, 3, 3, float64) seen from `light`:
+    ((E, 2, 3) each edge's ends, lower vertex first; (E,) how the number of triangles a
+    light ray crosses changes when it passes the edge from its right to its left). A
+    triangle a, b, c lies left of its side a → b where det(b − a, c − a, t) > 0, t towards
+    the light (ω, or the light's position less a); one seen edge-on from the light lies on
+    neither side. `record`: the relief's record, which keeps the edges' topology."""
+    topology = None if record is None else record.memo.get("relief_cut_edges")
+    if topology is None:
+        corners = triangles.reshape(-1, 3)
+        _, vertex = np.unique(corners, axis=0, return_inverse=True)
+        vertex = vertex.reshape(-1, 3).astype(np.int64)
+        start, end = vertex.ravel(), vertex[:, [1, 2, 0]].ravel()
+        forward = start < end
+        key = np.minimum(start, end) * (int(vertex.max(initial=0)) + 1) + np.maximum(start, end)
+        _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
+        topology = {"forward": forward, "first": first, "inverse": inverse.ravel()}
+        if record is not None:
+            record.memo["relief_cut_edges"] = topology
+    a = triangles.reshape(-1, 3)
+    b = triangles[:, [1, 2, 0]].reshape(-1, 3)
+    c = triangles[:, [2, 0, 1]].reshape(-1, 3)
+    towards = -np.asarray(light.direction, np.float64) if isinstance(light, DirectionalLight) \
+        else np.asarray(light.position, np.float64) - a
+    side = np.sign(np.einsum("ij,ij->i", np.cross(b - a, c - a), np.broadcast_to(towards, a.shape)))
+    forward = topology["forward"]
+    change = np.bincount(topology["inverse"], weights=np.where(forward, side, -side),
+                         minlength=len(topology["first"]))
+    kept = topology["first"][change != 0]
+    low = np.where(forward[kept, None], a[kept], b[kept])
+    high = np.where(forward[kept, None], b[kept], a[kept])
+    return np.stack([low, high], axis=1), change[change != 0]
+
+
+def eye_layers(triangles: np.ndarray, eye: np.ndarray, light) -> int:
+    """How many of the triangles (T, 3, 3) the light ray from `eye` crosses on its way to the
+    light (float64): the relief's count where every ray of the eye begins."""
+    if isinstance(light, DirectionalLight):
+        direction, reach = -np.asarray(light.direction, np.float64), math.inf
+    else:
+        to_light = np.asarray(light.position, np.float64) - eye
+        reach = float(np.linalg.norm(to_light))
+        direction = to_light / reach
+    v0, edge1, edge2 = triangles[:, 0], triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]
+    p = np.cross(direction, edge2)
+    det = np.einsum("ij,ij->i", edge1, p)
+    usable = np.abs(det) > 1e-300
+    inv = np.where(usable, 1.0 / np.where(usable, det, 1.0), 0.0)
+    s = eye - v0
+    u = np.einsum("ij,ij->i", s, p) * inv
+    q = np.cross(s, edge1)
+    v = np.einsum("j,ij->i", direction, q) * inv
+    t = np.einsum("ij,ij->i", edge2, q) * inv
+    hit = usable & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0) & (t < reach)
+    return int(hit.sum())
+
+
+def alpha_bins(ends: np.ndarray, u: np.ndarray, w: np.ndarray) -> tuple[int, np.ndarray, np.ndarray]:
+    """The edges (E, 2, 3, eye space) binned by α = atan2(p·w, p·u), the angle around the
+    eye's light ray, over the whole turn: (bins, (bins + 1,) int32 offsets, int32 edge
+    indices, each bin's in order of the edges' distance from that ray). An edge goes
+    into every bin its shorter arc of α passes, and one more either side (a ray's α on the
+    device may round into the next bin). The bins double from MIN_BINS while one holds
+    more than RELIEF_CROSSINGS edges, up to MAX_BINS (past which a ray keeps the
+    RELIEF_CROSSINGS crossings nearest its eye's light ray: cl/relief_cuts.h)."""
+    x, y = ends @ u, ends @ w
+    alpha = np.arctan2(y, x)
+    sweep = np.remainder(alpha[:, 1] - alpha[:, 0] + math.pi, 2 * math.pi) - math.pi
+    low = np.minimum(alpha[:, 0], alpha[:, 0] + sweep)
+    high = np.maximum(alpha[:, 0], alpha[:, 0] + sweep)
+    distance = np.minimum(np.hypot(x[:, 0], y[:, 0]), np.hypot(x[:, 1], y[:, 1]))
+    bins = MIN_BINS
+    while True:
+        first = np.floor((low + math.pi) / (2 * math.pi) * bins).astype(np.int64) - 1
+        last = np.floor((high + math.pi) / (2 * math.pi) * bins).astype(np.int64) + 1
+        spans = np.minimum(last - first + 1, bins)
+        edge = np.repeat(np.arange(len(ends)), spans)
+        step = np.arange(len(edge)) - np.repeat(np.cumsum(spans) - spans, spans)
+        where = np.remainder(first[edge] + step, bins)
+        counts = np.bincount(where, minlength=bins)
+        if counts.max(initial=0) <= RELIEF_CROSSINGS or bins >= MAX_BINS:
+            break
+        bins *= 2
+    order = np.lexsort((distance[edge], where))
+    offsets = np.zeros(bins + 1, np.int32)
+    offsets[1:] = np.cumsum(counts)
+    return bins, offsets, edge[order].astype(np.int32)
+
+
+class ReliefCuts:
+    """The walk feature RELIEF_CUTS of one light: its reliefs' outline edges in eye space
+    (float4 pairs: the lower end and the edge's change, the higher end), their α bins and
+    the eye's count."""
+
+    def __init__(self, device, edges: np.ndarray, change: np.ndarray, bins: int, offsets: np.ndarray,
+                 bin_edges: np.ndarray, eye_count: int):
+        packed = np.zeros((len(edges), 2, 4), np.float32)
+        packed[:, :, :3] = edges
+        packed[:, 0, 3] = change
+        self.edges = device.buffer(packed.reshape(-1, 4) if len(packed) else np.zeros((2, 4), np.float32),
+                                   writable=False)
+        self.offsets = device.buffer(offsets, writable=False)
+        self.bin_edges = device.buffer(bin_edges if len(bin_edges) else np.zeros(1, np.int32), writable=False)
+        self.bins, self.eye_count = bins, eye_count
+
+    def defines(self) -> dict:
+        return {"RELIEF_CUTS": 1, "RELIEF_CROSSINGS": RELIEF_CROSSINGS}
+
+    def args(self) -> tuple:
+        return self.edges, self.offsets, self.bin_edges, np.int32(self.bins), np.int32(self.eye_count)
+
+
+def relief_cuts(device, inputs, light_index: int, params: np.ndarray) -> ReliefCuts:
+    """One light's RELIEF_CUTS for the frame's reliefs (their triangles in
+    `inputs.scene.geometry`), binned around the axis of its epipolar frame `params`."""
+    scene = inputs.scene
+    light = scene.lights[light_index]
+    eye = np.asarray(inputs.eye_ws, np.float64)
+    ends, changes, eye_count = [], [], 0
+    for record in scene.geometry.reliefs:
+        triangles = scene.geometry.triangles[record.rows].astype(np.float64)
+        edge_ends, change = relief_outline(triangles, light, record)
+        ends.append(edge_ends - eye)
+        changes.append(change)
+        eye_count += eye_layers(triangles, eye, light)
+    ends = np.concatenate(ends)
+    change = np.concatenate(changes)
+    u, w = params["u"][:3].astype(np.float64), params["w"][:3].astype(np.float64)
+    return ReliefCuts(device, ends.astype(np.float32), change, *alpha_bins(ends, u, w), eye_count)
