@@ -13,24 +13,22 @@
 #include "shaft_edges.h"
 
 /* The relief's shadow along a ray: γ stretches [bound[0], bound[1]), [bound[2], bound[3]) …
- * in rising order, and the first one not wholly before the last lit run the walk asked about. */
+ * in rising order. */
 typedef struct {
     float bound[RELIEF_CROSSINGS + 2];
     int bounds;
-    int next;
 } relief_shadow_t;
 
-/* The relief's shadow along the ray of half-plane `plane` (`planar` 0: a ray along the
- * eye's light ray, in no half-plane, shadowed throughout where the eye is). A bin past
+/* The relief's shadow along the ray of half-plane `plane` up to γ `reach` (`planar` 0: a ray
+ * along the eye's light ray, in no half-plane, shadowed throughout where the eye is). A bin past
  * RELIEF_CROSSINGS crossings (the host makes the bins that fine, up to its limit) keeps
  * the first crossings it meets, the edges nearest the eye's light ray. */
-inline void relief_shadow_of(global const epipolar_t* ep, const ray_plane_t* plane, int planar,
+inline void relief_shadow_of(global const epipolar_t* ep, const ray_plane_t* plane, int planar, float reach,
                              const walk_features_t* features, relief_shadow_t* shadow)
 {
     float crossing[RELIEF_CROSSINGS];
     int change[RELIEF_CROSSINGS];
     int count = 0;
-    shadow->next = 0;
     shadow->bounds = 0;
     if (planar) {
         float3 across = plane->across, normal = plane->normal, axis = plane->axis;
@@ -39,8 +37,10 @@ inline void relief_shadow_of(global const epipolar_t* ep, const ray_plane_t* pla
         int bin = inline_clamp_int((int)inline_floor((alpha + M_PI_F) * ((float)bins / (2.0f * M_PI_F))), 0, bins - 1);
         int first = features->relief_bin_offsets[bin], last = features->relief_bin_offsets[bin + 1];
         for (int k = first; k < last; ++k) {
-            int e = features->relief_bin_edges[k];
-            float4 low = features->relief_edges[2 * e], high = features->relief_edges[2 * e + 1];
+            float4 low = features->relief_edges[2 * k], high = features->relief_edges[2 * k + 1];
+            /* A directional light's γ is the distance from the eye's light ray: the bin's
+             * edges come nearest first, and none of the rest reaches the ray's extent. */
+            if (plane->directional && high.w > reach) break;
             float h0 = inline_dot(low.xyz, normal), h1 = inline_dot(high.xyz, normal);
             if ((h0 >= 0.0f) == (h1 >= 0.0f)) continue;
             float3 p = low.xyz + (high.xyz - low.xyz) * (h0 / (h0 - h1));

@@ -74,6 +74,10 @@ typedef struct {
 #ifdef SHAFT_EDGES
     float3 dir; /* the ray's unit direction, whose half-plane shaft_edges.h cuts the blockers with */
 #endif
+#ifdef RELIEF_CUTS
+    relief_shadow_t relief; /* the reliefs' shadow along the ray (relief_cuts.h), once the first walk found it */
+    int relief_found;
+#endif
 } ray_span_t;
 
 /* The unit direction of camera sample `sample` (its pixel's ray through its offset):
@@ -110,6 +114,9 @@ ALWAYS_INLINE int finish_span(global const epipolar_t* ep, global const frame_t*
                               global const integrand_t* integrand, int directional, float beta, float sin_beta,
                               float cos_beta, float distance, ray_span_t* span)
 {
+#ifdef RELIEF_CUTS
+    span->relief_found = 0;
+#endif
     if (!(span->gamma_end > span->gamma_begin) || integrand->no_extent) return 0;
     /* The lamp (lighting.h): a ray that passes within its radius of a point or spot light
      * leaves out the chord inside it, as exact does; this keeps a ray through the light
@@ -205,13 +212,13 @@ inline void nearest_slices(global const epipolar_t* ep, float3 dir, int* i0, int
  * come in rising γ, so the stretches wholly before one are passed for good. */
 inline float3 lit_run_radiance(global const integrand_t* in, global const float* tables, global const frame_t* frame,
                                const integrand_row_t* ray, const walk_features_t* features,
-                               global const float* row_prefix, gamma_texels_t texels, relief_shadow_t* shadow,
-                               float gamma0, float gamma1)
+                               global const float* row_prefix, gamma_texels_t texels,
+                               const relief_shadow_t* shadow, int* next, float gamma0, float gamma1)
 {
-    while (shadow->next < shadow->bounds && shadow->bound[shadow->next + 1] <= gamma0) shadow->next += 2;
+    while (*next < shadow->bounds && shadow->bound[*next + 1] <= gamma0) *next += 2;
     float3 radiance = (float3)(0.0f);
     float from = gamma0;
-    for (int k = shadow->next; from < gamma1; k += 2) {
+    for (int k = *next; from < gamma1; k += 2) {
         if (k >= shadow->bounds || shadow->bound[k] >= gamma1) {
             radiance += run_radiance(in, tables, frame, ray, features, row_prefix, texels, from, gamma1);
             break;
@@ -231,7 +238,7 @@ inline float3 lit_run_radiance(global const integrand_t* in, global const float*
  * TRAVERSAL_TREE walks the tree without a stack: a node whose min > β is wholly lit,
  * one whose max ≤ β wholly shadowed, else descend; after a node, move to the next
  * one and climb while its index is even. TRAVERSAL_SCAN reads every texel. */
-inline float3 walk_row(global const epipolar_t* ep, global const float2* row, const ray_span_t* span, int slice,
+inline float3 walk_row(global const epipolar_t* ep, global const float2* row, ray_span_t* span, int slice,
                        float gamma_begin, float gamma_end, global const integrand_t* in,
                        global const float* tables, global const frame_t* frame, const walk_features_t* features,
                        global const float* row_prefix)
@@ -248,8 +255,11 @@ inline float3 walk_row(global const epipolar_t* ep, global const float2* row, co
     run_edges_t edges = run_edges_of(ep, span->dir, features, slice, position, gamma_begin, gamma_end);
 #endif
 #ifdef RELIEF_CUTS
-    relief_shadow_t shadow;
-    relief_shadow_of(ep, &edges.plane, edges.planar, features, &shadow);
+    if (!span->relief_found) { /* once per ray: its rows share its half-plane */
+        relief_shadow_of(ep, &edges.plane, edges.planar, span->gamma_end, features, &span->relief);
+        span->relief_found = 1;
+    }
+    int relief_next = 0;
 #endif
     /* Past `end` the open run, if any, closes without a shadowed texel after it. */
     for (int done = position >= end;; done = position >= end) {
@@ -281,7 +291,8 @@ inline float3 walk_row(global const epipolar_t* ep, global const float2* row, co
             if (place_run_ends(&edges, features, texels, run_start, run_end, !done, &run0, &run1))
 #endif
 #ifdef RELIEF_CUTS
-            radiance += lit_run_radiance(in, tables, frame, ray, features, row_prefix, texels, &shadow, run0, run1);
+            radiance += lit_run_radiance(in, tables, frame, ray, features, row_prefix, texels, &span->relief,
+                                         &relief_next, run0, run1);
 #else
             radiance += run_radiance(in, tables, frame, ray, features, row_prefix, texels, run0, run1);
 #endif
@@ -296,7 +307,7 @@ inline float3 walk_row(global const epipolar_t* ep, global const float2* row, co
 #include "translucent_walk.h"
 
 /* The radiance of a ray's lit runs along slice i's row, the lamp's chord left out. */
-inline float3 row_radiance(global const epipolar_t* ep, global const float2* tree, int i, const ray_span_t* span,
+inline float3 row_radiance(global const epipolar_t* ep, global const float2* tree, int i, ray_span_t* span,
                            global const integrand_t* in, global const float* tables, global const frame_t* frame,
                            const walk_features_t* features)
 {

@@ -41,9 +41,9 @@ typedef struct {
     global const int* edge_neighbours;   /* each triangle's neighbour across each edge, -1: none */
 #endif
 #ifdef RELIEF_CUTS
-    global const float4* relief_edges;   /* the reliefs' outline, eye space: (lower end, change), higher end */
-    global const int* relief_bin_offsets; /* each α bin's first entry in relief_bin_edges */
-    global const int* relief_bin_edges;
+    global const float4* relief_edges;    /* the reliefs' outline by α bin, eye space: (lower end, change),
+                                             (higher end, nearest distance from the eye's light ray) */
+    global const int* relief_bin_offsets; /* each α bin's first edge in relief_edges */
     int relief_bins;
     int relief_eye_count; /* the reliefs' triangles between the eye and the light */
 #endif
@@ -71,9 +71,9 @@ typedef struct {
 #endif
 #ifdef RELIEF_CUTS
 #define RELIEF_CUT_ARGS , global const float4* relief_edges, global const int* relief_bin_offsets, \
-    global const int* relief_bin_edges, int relief_bins, int relief_eye_count
+    int relief_bins, int relief_eye_count
 #define ATTACH_RELIEF_CUTS(f) (f).relief_edges = relief_edges; (f).relief_bin_offsets = relief_bin_offsets; \
-    (f).relief_bin_edges = relief_bin_edges; (f).relief_bins = relief_bins; (f).relief_eye_count = relief_eye_count;
+    (f).relief_bins = relief_bins; (f).relief_eye_count = relief_eye_count;
 #endif
 /* A feature not built: no arguments, nothing to hand on. */
 #ifndef LIGHT_TEXTURE_ARGS

@@ -414,7 +414,7 @@ class Renderer:
             return
         edges = None if epipolar.unshadowed else self._shaft_edges(buffers, epipolar, keys, reuse)
         reliefs = None if edges is None or frame.rastered.volume_blockers is None else \
-            relief_cuts(device, buffers.inputs, index, epipolar.params)  # (the reliefs the volume's map left out)
+            self._relief_cuts(buffers, epipolar, keys, index, reuse)  # (the reliefs the volume's map left out)
         features = walk_features(  # what the walks carry (stages/features.py, cl/walk_features.h)
             texture, None if frame.layers is None else rectify_layers(device, buffers, frame.layers, epipolar, timer),
             edges, reliefs)
@@ -441,6 +441,15 @@ class Renderer:
         neighbours = reuse.keep("edge_neighbours", lambda: digest("edge_neighbours", keys.geometry),
                                 lambda: self.device.buffer(edge_neighbours(geometry), writable=False))
         return ShaftEdges(epipolar.triangles, buffers.tri_vertices, neighbours)
+
+    def _relief_cuts(self, buffers: FrameBuffers, epipolar, keys: StageKeys, index: int, reuse: Reuse):
+        """The reliefs' outline that the walks of light `index` cut (stages/relief_cuts.py), kept
+        while the geometry, the eye and the light's epipolar frame are (about 20 ms a frame of
+        host work on scenes/lattice.yaml)."""
+        params = epipolar.params
+        return reuse.keep("relief_cuts", lambda: digest("relief_cuts", keys.geometry, buffers.inputs.eye_ws,
+                                                        *(params[name] for name in ("axis", "u", "w", "d_el"))),
+                          lambda: relief_cuts(self.device, buffers.inputs, index, params), per_light=True)
 
     def _films_in_scatter(self, frame: Frame, per_film, weighted=None) -> None:
         """The in-scattering a volume stage just added for the camera samples, added for the

@@ -25,6 +25,7 @@ import math
 
 import numpy as np
 
+from ..errors import ClraysError
 from ..scene.model import DirectionalLight
 
 #: Crossings one ray gathers at most (cl/relief_cuts.h): the bins are made fine enough that
@@ -32,6 +33,12 @@ from ..scene.model import DirectionalLight
 RELIEF_CROSSINGS = 256
 #: Bins of α around the eye's light ray, at least and at most.
 MIN_BINS, MAX_BINS = 1024, 65536
+#: Fewest bins, where edges spanning wide angles (an eye beside a relief) would take more
+#: than MAX_BINNED_EDGES at MIN_BINS.
+FEWEST_BINS = 16
+#: Edges written into the bins at most (32 bytes each: 128 MiB). An edge is written into every
+#: bin its angle spans, so finer bins cost more of them; the bins stop doubling before this.
+MAX_BINNED_EDGES = 4 * 2**20
 
 
 def cuts_reliefs(inputs, has_keys: bool) -> bool:
@@ -102,59 +109,78 @@ def eye_layers(triangles: np.ndarray, eye: np.ndarray, light) -> int:
     return int(hit.sum())
 
 
-def alpha_bins(ends: np.ndarray, u: np.ndarray, w: np.ndarray) -> tuple[int, np.ndarray, np.ndarray]:
+def alpha_bins(ends: np.ndarray, u: np.ndarray, w: np.ndarray) -> tuple[int, np.ndarray, np.ndarray, np.ndarray] | None:
     """The edges (E, 2, 3, eye space) binned by α = atan2(p·w, p·u), the angle around the
-    eye's light ray, over the whole turn: (bins, (bins + 1,) int32 offsets, int32 edge
-    indices, each bin's in order of the edges' distance from that ray). An edge goes
+    eye's light ray, over the whole turn: (bins, (bins + 1,) int32 offsets, the edges of
+    every bin one after another, each bin's in order of their nearest distance from the
+    eye's light ray, and (E,) that distance, at most that of their ends). An edge goes
     into every bin its shorter arc of α passes, and one more either side (a ray's α on the
     device may round into the next bin). The bins double from MIN_BINS while one holds
-    more than RELIEF_CROSSINGS edges, up to MAX_BINS (past which a ray keeps the
-    RELIEF_CROSSINGS crossings nearest its eye's light ray: cl/relief_cuts.h)."""
+    more than RELIEF_CROSSINGS edges, up to MAX_BINS and MAX_BINNED_EDGES (past which a ray
+    keeps the first RELIEF_CROSSINGS crossings its bin gives, those nearest the eye's light
+    ray: cl/relief_cuts.h). Fewer than MIN_BINS where the edges would not fit at MIN_BINS;
+    None where they would not fit in FEWEST_BINS bins either."""
     x, y = ends @ u, ends @ w
     alpha = np.arctan2(y, x)
     sweep = np.remainder(alpha[:, 1] - alpha[:, 0] + math.pi, 2 * math.pi) - math.pi
     low = np.minimum(alpha[:, 0], alpha[:, 0] + sweep)
     high = np.maximum(alpha[:, 0], alpha[:, 0] + sweep)
-    distance = np.minimum(np.hypot(x[:, 0], y[:, 0]), np.hypot(x[:, 1], y[:, 1]))
-    bins = MIN_BINS
-    while True:
+    # each edge's nearest approach to the light ray, in the plane across it (its ends', or
+    # the foot of the perpendicular where that falls between them)
+    dx, dy = x[:, 1] - x[:, 0], y[:, 1] - y[:, 0]
+    along = np.clip(-(x[:, 0] * dx + y[:, 0] * dy) / np.maximum(dx * dx + dy * dy, 1e-300), 0.0, 1.0)
+    distance = np.hypot(x[:, 0] + along * dx, y[:, 0] + along * dy)
+    def spans_at(bins: int):
         first = np.floor((low + math.pi) / (2 * math.pi) * bins).astype(np.int64) - 1
         last = np.floor((high + math.pi) / (2 * math.pi) * bins).astype(np.int64) + 1
-        spans = np.minimum(last - first + 1, bins)
+        return first, np.minimum(last - first + 1, bins)
+
+    bins = MIN_BINS
+    while bins > FEWEST_BINS and int(spans_at(bins)[1].sum()) > MAX_BINNED_EDGES:  # (edges spanning wide angles)
+        bins //= 2
+    while True:
+        first, spans = spans_at(bins)
+        if int(spans.sum()) > MAX_BINNED_EDGES:
+            return None
         edge = np.repeat(np.arange(len(ends)), spans)
         step = np.arange(len(edge)) - np.repeat(np.cumsum(spans) - spans, spans)
         where = np.remainder(first[edge] + step, bins)
         counts = np.bincount(where, minlength=bins)
-        if counts.max(initial=0) <= RELIEF_CROSSINGS or bins >= MAX_BINS:
+        if counts.max(initial=0) <= RELIEF_CROSSINGS or bins >= MAX_BINS \
+                or int(spans_at(2 * bins)[1].sum()) > MAX_BINNED_EDGES:
             break
         bins *= 2
     order = np.lexsort((distance[edge], where))
     offsets = np.zeros(bins + 1, np.int32)
     offsets[1:] = np.cumsum(counts)
-    return bins, offsets, edge[order].astype(np.int32)
+    return bins, offsets, edge[order], distance
 
 
 class ReliefCuts:
-    """The walk feature RELIEF_CUTS of one light: its reliefs' outline edges in eye space
-    (float4 pairs: the lower end and the edge's change, the higher end), their α bins and
-    the eye's count."""
+    """The walk feature RELIEF_CUTS of one light: its reliefs' outline edges in eye space,
+    bin after bin of α (a float4 pair each: the lower end and the edge's change, the higher
+    end and a distance from the eye's light ray that none of the edge's points is under),
+    each bin's first entry, and the eye's count. An edge is written once in each of its
+    bins: a ray then reads its bin's edges one after another."""
 
     def __init__(self, device, edges: np.ndarray, change: np.ndarray, bins: int, offsets: np.ndarray,
-                 bin_edges: np.ndarray, eye_count: int):
-        packed = np.zeros((len(edges), 2, 4), np.float32)
-        packed[:, :, :3] = edges
-        packed[:, 0, 3] = change
+                 binned: np.ndarray, distance: np.ndarray, eye_count: int):
+        packed = np.zeros((len(binned), 2, 4), np.float32)
+        packed[:, :, :3] = edges[binned]
+        packed[:, 0, 3] = change[binned]
+        # rounded down to float32, so that the device's break on it is never too early
+        near = distance[binned].astype(np.float32)
+        packed[:, 1, 3] = np.where(near.astype(np.float64) > distance[binned], np.nextafter(near, np.float32(0)), near)
         self.edges = device.buffer(packed.reshape(-1, 4) if len(packed) else np.zeros((2, 4), np.float32),
                                    writable=False)
         self.offsets = device.buffer(offsets, writable=False)
-        self.bin_edges = device.buffer(bin_edges if len(bin_edges) else np.zeros(1, np.int32), writable=False)
         self.bins, self.eye_count = bins, eye_count
 
     def defines(self) -> dict:
         return {"RELIEF_CUTS": 1, "RELIEF_CROSSINGS": RELIEF_CROSSINGS}
 
     def args(self) -> tuple:
-        return self.edges, self.offsets, self.bin_edges, np.int32(self.bins), np.int32(self.eye_count)
+        return self.edges, self.offsets, np.int32(self.bins), np.int32(self.eye_count)
 
 
 def relief_cuts(device, inputs, light_index: int, params: np.ndarray) -> ReliefCuts:
@@ -173,4 +199,10 @@ def relief_cuts(device, inputs, light_index: int, params: np.ndarray) -> ReliefC
     ends = np.concatenate(ends)
     change = np.concatenate(changes)
     u, w = params["u"][:3].astype(np.float64), params["w"][:3].astype(np.float64)
-    return ReliefCuts(device, ends.astype(np.float32), change, *alpha_bins(ends, u, w), eye_count)
+    binned = alpha_bins(ends, u, w)
+    if binned is None:
+        objects = sorted({int(scene.geometry.object_id[record.rows.start]) for record in scene.geometry.reliefs})
+        raise ClraysError(f"relief objects {objects} seen from light {light_index}: their {len(ends)} outline edges "
+                          f"span more than {MAX_BINNED_EDGES} bins of angle around the eye's light ray (an eye "
+                          f"right beside a relief); move the camera, or set render.shaft_edges: texels")
+    return ReliefCuts(device, ends.astype(np.float32), change, *binned, eye_count)
