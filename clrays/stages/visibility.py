@@ -364,7 +364,11 @@ def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, pr
     entries = inputs.samples * max(len(inputs.scene.lights), 1)
     ray_entries = device.buffer(nbytes=4 * entries)
     ray_count = device.buffer(np.zeros(2, np.int32))  # rays, and those with no texel
-    timer.add("visibility", device.kernel("visibility", "visibility")(
+    # A relief's holes are finer than the map's texels, and the 3 × 3 test calls a sample seen
+    # through one shadowed (docs/design.md §4.6): with a relief, a sample the maps do not
+    # call lit casts its ray.
+    defines = {"VISIBILITY_SHADOWED_TEST": 0} if inputs.scene.geometry.reliefs else None
+    timer.add("visibility", device.kernel("visibility", "visibility", defines)(
         device.queue, (-(-inputs.samples // PREPARE_LANES),), None, buffers.params, buffers.views, buffers.lights,
         rastered.shadow_depth, bound.bound, bound.writer, prepared.map_read, rastered.camera_depth, rastered.tri_id,
         buffers.tri_vertices, buffers.tri_normal, buffers.offsets, prepared.visible, ray_entries, ray_count))
