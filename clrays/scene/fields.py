@@ -306,11 +306,14 @@ RENDER = Section("render", (
     Field("sampling", "string", Render.sampling, choices=SAMPLINGS,
           notes="min-max: `epipolar` computes in-scattering at samples along each slice's line on the screen and "
                 "interpolates it to the pixels, walking a pixel's own rays only where no sample lies at its "
-                "distance; `pixel` walks the two nearest slices' rows for every pixel sample "
-                "([docs/design.md](design.md) §4.5)", read_by=("minmax",)),
+                "distance (every pixel, for a light whose walks cut a relief: `shaft_edges`); `pixel` walks the "
+                "two nearest slices' rows for every pixel sample ([docs/design.md](design.md) §4.5)",
+          read_by=("minmax",)),
     Field("shaft_edges", "string", Render.shaft_edges, choices=SHAFT_EDGES,
           notes="min-max: `blockers` ends each lit run on the silhouette of the triangle the shadow map found "
-                "there, in the ray's own plane; `texels` at the texel boundary, as raymarch does: on the bench "
+                "there, in the ray's own plane, and cuts a relief's outline in that plane where the map would "
+                "miss its holes (the lattice at 1280×720: 0.20 % against `exact`, 1.56 % from the map); "
+                "`texels` at the texel boundary, as raymarch does: on the bench "
                 "scenes at 1280×720 a frame 1.1–1.3 × faster for 1.3–4.7 × the error against `exact` "
                 "([docs/design.md](design.md) §4.5, bench/RESULTS.md \"Shaft edges on the blockers\"); e.g. "
                 "`--set render.shaft_edges=texels`", read_by=("minmax",)),
