@@ -111,3 +111,23 @@ def test_the_lattices_sunlit_floor_matches_exact_pixel_for_pixel(renderer):
     ours = luminance(renderer.render(scene, "minmax").image)
     off = (np.abs(ours - exact) > 1e-3 * np.maximum(exact, 1e-2)) & ~depth_edges(depth_map(scene))
     assert exact.max() > 0 and int(off.sum()) == 0, np.argwhere(off)[:5].tolist()
+
+
+def test_an_outline_past_the_binned_edges_limit_is_one_line(renderer, monkeypatch):
+    """Where even FEWEST_BINS bins would take more than MAX_BINNED_EDGES entries (an eye right
+    beside a large relief), the frame stops with one line naming the reliefs and the light,
+    before anything is uploaded."""
+    import pytest
+
+    from clrays.errors import ClraysError
+    from clrays.stages import relief_cuts as cuts
+
+    monkeypatch.setattr(cuts, "MAX_BINNED_EDGES", 1000)  # the lattice's 13 k edges need 39 k at 16 bins
+    scene = load_scene(LATTICE, overrides=["image.width=32", "image.height=18"])
+    with pytest.raises(ClraysError) as raised:
+        renderer.render(scene, "minmax", reuse=False)
+    message = str(raised.value)
+    assert "\n" not in message and "relief objects [8]" in message and "light 0" in message
+    assert "render.shaft_edges: texels" in message
+    monkeypatch.setattr(cuts, "MAX_BINNED_EDGES", 4 * 2**20)
+    assert cuts.alpha_bins(np.zeros((0, 2, 3)), np.array([1.0, 0, 0]), np.array([0, 1.0, 0]))[0] == cuts.MIN_BINS
