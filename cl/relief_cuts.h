@@ -20,9 +20,8 @@ typedef struct {
 } relief_shadow_t;
 
 /* The relief's shadow along the ray of half-plane `plane` up to γ `reach` (`planar` 0: a ray
- * along the eye's light ray, in no half-plane, shadowed throughout where the eye is). A bin past
- * RELIEF_CROSSINGS crossings (the host makes the bins that fine, up to its limit) keeps
- * the first crossings it meets, the edges nearest the eye's light ray. */
+ * along the eye's light ray, in no half-plane, shadowed throughout where the eye is). No bin
+ * holds more than RELIEF_CROSSINGS edges (clrays/stages/relief_cuts.py alpha_bins). */
 inline void relief_shadow_of(global const epipolar_t* ep, const ray_plane_t* plane, int planar, float reach,
                              const walk_features_t* features, relief_shadow_t* shadow)
 {
@@ -47,8 +46,8 @@ inline void relief_shadow_of(global const epipolar_t* ep, const ray_plane_t* pla
             float a = inline_dot(p, axis), b = inline_dot(p, across);
             /* in the other half of the plane, or not towards the light from the ray */
             if (b < 0.0f || b * plane->cos_beta - a * plane->sin_beta > 0.0f) continue;
+            if (count == RELIEF_CROSSINGS) break; /* (the host's bins hold no more edges than this) */
             float gamma = plane->directional ? b : atan2_approx(b, plane->d_el - a);
-            if (count == RELIEF_CROSSINGS) break;
             /* passing from the edge's right to its left adds `low.w`: the lower end on the
              * normal's negative side is passing it from left to right */
             int step = h0 < 0.0f ? -(int)low.w : (int)low.w;

@@ -46,9 +46,9 @@ from .physics.radiometry import effective_far
 from .passes import assemble, per_light_indices, samples_to_pixels
 from .reuse import COMPUTED, REUSED, SKIPPED, Reuse, StageCache, StageRecord, digest, geometry_parts, scene_digest
 from .scene.costs import with_derived_sizes
-from .scene.model import METHODS, RENAMED_METHODS, Render, Scene
+from .scene.model import METHODS, RENAMED_METHODS, DirectionalLight, Render, Scene
 from .stages.features import walk_features
-from .stages.relief_cuts import cuts_reliefs, relief_cuts
+from .stages.relief_cuts import ReliefCuts, cuts_reliefs, relief_cuts, relief_outlines
 from .stages.shaft_edges import ShaftEdges, edge_neighbours, keeps_blockers
 from .stages.integrand import integrand, integrand_table_size
 from .stages.lamp import eye_in_lamp, lamp_in_scatter
@@ -57,7 +57,7 @@ from .physics.light_texture import textured
 from .stages.minmax import minmax
 from .stages.raster import RasterResult, ShadowMap, map_is_empty, raster_camera, raster_shadow_map, shadow_atlas
 from .stages.raymarch import raymarch
-from .stages.rectify import Epipolar, rectify, tree_gamma_samples
+from .stages.rectify import Epipolar, epipolar_frame, rectify, tree_gamma_samples
 from .stages.sampling import SampleCounts, epipolar_sampling
 from .stages.shade import shade
 from .stages.shadow_filter import depth_ranges, frame_filter, shadow_filter, shadow_filter_moments
@@ -399,7 +399,12 @@ class Renderer:
     def _light_volume(self, frame: Frame, index: int, light) -> None:
         """One light's rectify → minmax → integrand → traverse (or volume_moments)."""
         device, buffers, keys, reuse, timer = self.device, frame.buffers, frame.keys, frame.reuse, frame.timer
-        epipolar = self._rectify(buffers, frame.rastered, frame.maps, keys, index, reuse, timer)  # rectify: S[α, γ]
+        # A relief the walks cut per ray stays out of the volume's map (stages/relief_cuts.py);
+        # where its outline does not fit the bins, the map holds it.
+        reliefs = self._relief_cuts(buffers, frame.rastered, keys, index, reuse)
+        rastered = frame.rastered if reliefs is not None else replace(frame.rastered, volume_blockers=None)
+        epipolar = self._rectify(buffers, rastered, frame.maps, keys, index, reuse, timer,  # rectify: S[α, γ]
+                                 reliefs is not None)
         frame.textures.append((int(epipolar.params["slices"]), int(epipolar.params["gamma_samples"])))
         if frame.method == "minmax":
             self._minmax(epipolar, reuse, timer)  # minmax: the 1D min-max mipmap of every row
@@ -413,8 +418,6 @@ class Renderer:
                            walk_features(texture, None))
             return
         edges = None if epipolar.unshadowed else self._shaft_edges(buffers, epipolar, keys, reuse)
-        reliefs = None if edges is None or frame.rastered.volume_blockers is None else \
-            self._relief_cuts(buffers, epipolar, keys, index, reuse)  # (the reliefs the volume's map left out)
         features = walk_features(  # what the walks carry (stages/features.py, cl/walk_features.h)
             texture, None if frame.layers is None else rectify_layers(device, buffers, frame.layers, epipolar, timer),
             edges, reliefs)
@@ -442,14 +445,25 @@ class Renderer:
                                 lambda: self.device.buffer(edge_neighbours(geometry), writable=False))
         return ShaftEdges(epipolar.triangles, buffers.tri_vertices, neighbours)
 
-    def _relief_cuts(self, buffers: FrameBuffers, epipolar, keys: StageKeys, index: int, reuse: Reuse):
-        """The reliefs' outline that the walks of light `index` cut (stages/relief_cuts.py), kept
-        while the geometry, the eye and the light's epipolar frame are (about 20 ms a frame of
-        host work on scenes/lattice.yaml)."""
-        params = epipolar.params
-        return reuse.keep("relief_cuts", lambda: digest("relief_cuts", keys.geometry, buffers.inputs.eye_ws,
-                                                        *(params[name] for name in ("axis", "u", "w", "d_el"))),
-                          lambda: relief_cuts(self.device, buffers.inputs, index, params), per_light=True)
+    def _relief_cuts(self, buffers: FrameBuffers, rastered: RasterResult, keys: StageKeys, index: int,
+                     reuse: Reuse) -> ReliefCuts | None:
+        """What the walks of light `index` cut of the frame's reliefs (stages/relief_cuts.py);
+        None where the frame does not cut them (`cuts_reliefs`: no map without them) or their
+        outline does not fit the bins. The outline is kept while the geometry and the light
+        are, its bins while the eye is too (about 5 and 15 ms a frame of host work on
+        scenes/lattice.yaml)."""
+        if rastered.volume_blockers is None:
+            return None
+        scene = buffers.inputs.scene
+        light = scene.lights[index]
+        pose = np.asarray(light.direction if isinstance(light, DirectionalLight) else light.position, np.float64)
+        outline = reuse.keep("relief_outline", lambda: digest("relief_outline", keys.geometry, pose),
+                             lambda: relief_outlines(scene, light), per_light=True)
+        params = epipolar_frame(scene, buffers, index)
+        eye = np.asarray(buffers.inputs.eye_ws, np.float64)
+        return reuse.keep("relief_cuts", lambda: digest("relief_cuts", keys.geometry, pose, eye, params["u"],
+                                                        params["w"]),
+                          lambda: relief_cuts(self.device, scene, index, outline, eye, params), per_light=True)
 
     def _films_in_scatter(self, frame: Frame, per_film, weighted=None) -> None:
         """The in-scattering a volume stage just added for the camera samples, added for the
@@ -593,12 +607,13 @@ class Renderer:
         return RasterResult(camera_depth, tri_id, *atlas[:2], bool(maps) and maps[0].keys, atlas[2]), maps
 
     def _rectify(self, buffers: FrameBuffers, rastered: RasterResult, maps: list[ShadowMap], keys: StageKeys,
-                 index: int, reuse: Reuse, timer: StageTimer) -> Epipolar:
-        """The rectify stage of one light, kept while `keys.trees` is the same. A light whose
+                 index: int, reuse: Reuse, timer: StageTimer, cut_reliefs: bool = False) -> Epipolar:
+        """The rectify stage of one light, kept while `keys.trees` is the same and the walks
+        cut the reliefs or not (`cut_reliefs`: the map without them). A light whose
         map is empty casts no shadow anywhere: its texture is π everywhere and the tree walk
         finds one lit run at any texture size, so a minimal texture gives the same radiance
         (up to float32 rounding where the run is clipped) without rectifying the full one."""
-        device, key = self.device, lambda: keys.trees(index)
+        device, key = self.device, lambda: digest(keys.trees(index), cut_reliefs)
         # A textured light keeps its full texture size: the texture is rectified on its rows.
         # So does a light with translucent layers: its texture carries their transmittance.
         if not textured(buffers.inputs.scene.lights[index]) \
