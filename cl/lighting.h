@@ -222,12 +222,25 @@ ALWAYS_INLINE int light_view_index(global const light_t* light, float3 p)
     return light->first_view + 2 * axis + (component < 0.0f ? 1 : 0);
 }
 
+/* Where texel i's depth lies in the shadow depths: with SHADOW_DEPTH_IN_KEYS they are the
+ * maps' 64-bit keys (the depth's bits above the triangle, clrays/stages/raster.py
+ * depth_in_keys), whose depth word is read, else one uint a texel. */
+#if SHADOW_DEPTH_IN_KEYS
+#ifdef __ENDIAN_LITTLE__
+#define SHADOW_DEPTH_AT(i) (2 * (i) + 1)
+#else
+#define SHADOW_DEPTH_AT(i) (2 * (i))
+#endif
+#else
+#define SHADOW_DEPTH_AT(i) (i)
+#endif
+
 /* Stored blocker depth at integer texel (tx, ty) of a view, clamped to the map. */
 ALWAYS_INLINE float shadow_texel(global const view_t* view, global const uint* shadow_depth, int tx, int ty)
 {
     tx = inline_clamp_int(tx, 0, view->width - 1);
     ty = inline_clamp_int(ty, 0, view->height - 1);
-    return as_float(shadow_depth[view->depth_offset + ty * view->width + tx]);
+    return as_float(shadow_depth[SHADOW_DEPTH_AT(view->depth_offset + ty * view->width + tx)]);
 }
 
 /* World size of one shadow-map texel at depth d: the scale of the depth bias. */

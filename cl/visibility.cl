@@ -270,7 +270,7 @@ ALWAYS_INLINE int decide_lanes(global const frame_t* frame, global const view_t*
         for (int j = 0; j < 3; ++j)
             for (int i = 0; i < 3; ++i) {
                 float_lanes stored = LOAD_LANES((global const float*)shadow_depth,
-                                                v.depth_offset + cys[j] * v.width + cxs[i]);
+                                                SHADOW_DEPTH_AT(v.depth_offset + cys[j] * v.width + cxs[i]));
                 float_lanes t = perspective
                                     ? num * sqrt_lanes(1.0f + spread_x[i] + spread_y[j])
                                           / (along_forward + across_x[i] + across_y[j])

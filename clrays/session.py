@@ -55,7 +55,8 @@ from .stages.lamp import eye_in_lamp, lamp_in_scatter
 from .stages.light_texture import light_texture
 from .physics.light_texture import textured
 from .stages.minmax import minmax
-from .stages.raster import RasterResult, ShadowMap, map_is_empty, raster_camera, raster_shadow_map, shadow_atlas
+from .stages.raster import (RasterResult, ShadowMap, depth_in_keys, map_is_empty, raster_camera, raster_shadow_map,
+                             shadow_atlases)
 from .stages.raymarch import raymarch
 from .stages.rectify import Epipolar, epipolar_frame, rectify, tree_gamma_samples
 from .stages.sampling import SampleCounts, epipolar_sampling
@@ -603,8 +604,9 @@ class Renderer:
                             lambda index=index: raster_shadow_map(device, buffers, index, timer), per_light=True)
                 for index in range(len(buffers.inputs.scene.lights))]
         atlas = reuse.keep("shadow_atlas", lambda: digest(tuple(keys.shadow)),
-                           lambda: tuple(shadow_atlas(device, buffers, maps, part) for part in ("depth", "blockers", "volume")))
-        return RasterResult(camera_depth, tri_id, *atlas[:2], bool(maps) and maps[0].keys, atlas[2]), maps
+                           lambda: shadow_atlases(device, buffers, maps))
+        return RasterResult(camera_depth, tri_id, *atlas[:2], bool(maps) and maps[0].keys, atlas[2],
+                            bool(maps) and maps[0].depth_in_keys), maps
 
     def _rectify(self, buffers: FrameBuffers, rastered: RasterResult, maps: list[ShadowMap], keys: StageKeys,
                  index: int, reuse: Reuse, timer: StageTimer, cut_reliefs: bool = False) -> Epipolar:
@@ -788,15 +790,15 @@ class StageKeys:
     @cached_property
     def shadow(self) -> list[bytes]:
         """raster.shadow, per light: the geometry, the light's views relative to its anchor,
-        which of them the frame reads (cube faces outside the camera's view are left empty)
-        and whether the map keeps its blocking triangles."""
+        which of them the frame reads (cube faces outside the camera's view are left empty),
+        whether the map keeps its blocking triangles and whether its depths are read from them."""
         inputs, shadow = self.inputs, []
         for index, (first, count) in enumerate(inputs.light_views):
             views = inputs.views[first:first + count].copy()
             views["origin"], views["depth_offset"] = 0.0, 0
             shadow.append(digest("shadow", self.geometry, inputs.light_anchor_ws[index], views,
                                  inputs.lights[index]["type"], inputs.view_needed[first:first + count],
-                                 keeps_blockers(inputs.scene.render)))
+                                 keeps_blockers(inputs.scene.render), depth_in_keys(inputs.scene)))
         return shadow
 
     def _light_geometry(self, index: int) -> dict:

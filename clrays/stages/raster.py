@@ -31,6 +31,8 @@ class RasterResult:
     # the keys the volume reads where its walks cut the reliefs themselves (ShadowMap.volume);
     # None: shadow_blockers
     volume_blockers: object = None
+    # shadow_depth is the keys themselves, its depths every other word (`depth_in_keys`)
+    depth_in_keys: bool = False
 
 
 def _launch(device: Device, buffers: FrameBuffers, name: str, defines: dict | None, view_indices: list[int],
@@ -156,16 +158,19 @@ def _atomic64(device: Device) -> bool:
 
 def _draw(device: Device, buffers: FrameBuffers, reliefs: ReliefDrawer, views: list[int], offsets,
           sample_count: int, count: int, nearest_triangles: bool, timer: StageTimer,
-          keep_keys: bool = False, before_reliefs: list | None = None) -> tuple[object, object, bool]:
+          keep_keys: bool = False, before_reliefs: list | None = None,
+          depths_from_keys: bool = False) -> tuple[object, object, bool]:
     """Depth of `count` samples over `views` (the triangles, then the reliefs), and, with
     `nearest_triangles`, the triangle each depth belongs to (None without): in one pass of
     64-bit keys (depth, triangle), split after, where the device has 64-bit atomics; else
     the depths, then a pass that finds their triangles (ties: the highest index). With
     `keep_keys`, where there are keys, the keys themselves stand for the triangles, and only
-    the depths are split out. The third value: whether the second is keys. `before_reliefs`,
-    a list, gets a copy of the keys as the triangles alone drew them (where there are keys)."""
+    the depths are split out; with `depths_from_keys` too, not even those (the first value is
+    the keys: their readers take every other word). The third value: whether the second is
+    keys. `before_reliefs`, a list, gets a copy of the keys as the triangles alone drew them
+    (where there are keys)."""
     inputs = buffers.inputs
-    depth, triangle = device.buffer(nbytes=4 * count), None
+    triangle = None
     if nearest_triangles and _atomic64(device):
         defines = {"RASTER_ATOMIC64": 1}
         nearest = device.buffer(nbytes=8 * count)
@@ -178,12 +183,16 @@ def _draw(device: Device, buffers: FrameBuffers, reliefs: ReliefDrawer, views: l
         for view in views:
             reliefs.map("relief_map_nearest", defines, buffers.views, inputs.views, view, offsets, sample_count,
                         (nearest,))
+        if keep_keys and depths_from_keys:
+            return nearest, nearest, True
+        depth = device.buffer(nbytes=4 * count)
         if keep_keys:
             _split(device, defines, nearest, count, depth, None, timer)
             return depth, nearest, True
         triangle = device.buffer(nbytes=4 * count)
         _split(device, defines, nearest, count, depth, triangle, timer)
         return depth, triangle, False
+    depth = device.buffer(nbytes=4 * count)
     device.fill(depth, structs.DEPTH_EMPTY, 4 * count, timer, "raster")
     _rasterize(device, buffers, views, offsets, sample_count, depth, timer)
     for view in views:
@@ -196,6 +205,15 @@ def _draw(device: Device, buffers: FrameBuffers, reliefs: ReliefDrawer, views: l
             reliefs.map("relief_map_resolve", None, buffers.views, inputs.views, view, offsets, sample_count,
                         (depth, triangle))
     return depth, triangle, False
+
+
+def depth_in_keys(scene) -> bool:
+    """Whether a frame's readers of the shadow maps' depths read them from the maps' 64-bit
+    keys (every other word, `SHADOW_DEPTH_IN_KEYS`), so that no depth array is split out of
+    them: minmax keeping its blockers, with exact surface shadows and no translucent object,
+    whose only readers are rectify (which reads the keys anyway) and visibility. Split out,
+    the depths of demo's six 1024² faces cost 2.3 ms a frame and 24 MB (docs/design.md §4.5)."""
+    return keeps_blockers(scene.render) and scene.render.surface_shadows == "exact" and not scene.geometry.translucent
 
 
 def raster_camera(device: Device, buffers: FrameBuffers, timer: StageTimer) -> tuple[object, object]:
@@ -222,6 +240,8 @@ class ShadowMap:
     # the keys without the reliefs, which the volume reads where its walks cut the reliefs
     # themselves (stages/relief_cuts.py); None: the volume reads `blockers`
     volume: object = None
+    # `depth` is the keys (`depth_in_keys`): no depth array is split out of them
+    depth_in_keys: bool = False
     empty: bool | None = None  # nothing can be rasterized: filled in by `map_is_empty` when first asked
     # whether a triangle may reach a view the pass draws, asked by `map_is_empty`
     # (`_reaches_views`), or None where the map is empty without looking
@@ -249,9 +269,9 @@ def raster_shadow_map(device: Device, buffers: FrameBuffers, light_index: int, t
     before_reliefs = [] if cuts_reliefs(inputs, _atomic64(device)) else None
     depth, blockers, keys = _draw(device, light_buffers, reliefs, drawn, centre, 1, max(inputs.shadow_texels, 1),
                                   keeps_blockers(inputs.scene.render), timer, keep_keys=True,
-                                  before_reliefs=before_reliefs)
+                                  before_reliefs=before_reliefs, depths_from_keys=depth_in_keys(inputs.scene))
     shadow_map = ShadowMap(depth, blockers, keys, inputs.shadow_texels, inputs.scene.geometry.count,
-                           volume=before_reliefs[0] if before_reliefs else None)
+                           volume=before_reliefs[0] if before_reliefs else None, depth_in_keys=keys and depth is blockers)
     if shadow_map.triangles and shadow_map.texels:
         shadow_map.reaches = _reaches_views(inputs)
     return shadow_map
@@ -345,11 +365,28 @@ def shadow_atlas(device: Device, buffers: FrameBuffers, maps: list[ShadowMap], p
     return atlas
 
 
+def read_shadow_depth(device: Device, depth, texels: int, in_keys: bool) -> np.ndarray:
+    """A map's (or the atlas's) depths back to the host, float32 (texels,): from the keys'
+    depth words where those are the depths (`in_keys`: ShadowMap.depth_in_keys,
+    RasterResult.depth_in_keys). For tests and tools."""
+    if not in_keys:
+        return device.read(depth, texels, np.uint32).view(np.float32)
+    return (device.read(depth, texels, np.uint64) >> np.uint64(32)).astype(np.uint32).view(np.float32)
+
+
+def shadow_atlases(device: Device, buffers: FrameBuffers, maps: list[ShadowMap]) -> tuple:
+    """The atlases of the maps' depths, blockers and keys without the reliefs
+    (`shadow_atlas`); the depths are the blockers' where the maps' depths are their keys."""
+    blockers = shadow_atlas(device, buffers, maps, "blockers")
+    depth = blockers if maps and maps[0].depth_in_keys else shadow_atlas(device, buffers, maps)
+    return depth, blockers, shadow_atlas(device, buffers, maps, "volume")
+
+
 def raster(device: Device, buffers: FrameBuffers, timer: StageTimer) -> RasterResult:
     """The whole stage without a session's reuse: every sample of every pixel from the
     camera, and each light's map anchored at the light, as a render session wires them."""
     camera_depth, tri_id = raster_camera(device, buffers, timer)
     maps = [raster_shadow_map(device, buffers, index, timer) for index in range(len(buffers.inputs.scene.lights))]
-    return RasterResult(camera_depth, tri_id, shadow_atlas(device, buffers, maps),
-                        shadow_atlas(device, buffers, maps, "blockers"), bool(maps) and maps[0].keys,
-                        shadow_atlas(device, buffers, maps, "volume"))
+    depth, blockers, volume = shadow_atlases(device, buffers, maps)
+    return RasterResult(camera_depth, tri_id, depth, blockers, bool(maps) and maps[0].keys, volume,
+                        bool(maps) and maps[0].depth_in_keys)

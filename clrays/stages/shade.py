@@ -46,6 +46,8 @@ def shade(device: Device, buffers: FrameBuffers, rastered: RasterResult, scatter
         terms = device.buffer(nbytes=48 * pixels)
         defines, extra = {**(defines or {}), "SHADE_PASSES": 1}, extra + (terms,)
     work_items = -(-pixels // (LANES * GROUP)) * GROUP
+    if rastered.depth_in_keys:  # (read only by the map's own surface test: stages/raster.py depth_in_keys)
+        defines = {**(defines or {}), "SHADOW_DEPTH_IN_KEYS": 1}
     event = device.kernel("shade", "shade", {**(defines or {}), "LANES": LANES})(
         device.queue, (work_items,), (GROUP,), buffers.params, buffers.views, buffers.lights, rastered.shadow_depth,
         rastered.camera_depth, rastered.tri_id, buffers.tri_vertices, buffers.tri_normal, buffers.tri_vertex_normals,

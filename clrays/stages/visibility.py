@@ -367,7 +367,9 @@ def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, pr
     # A relief's holes are finer than the map's texels, and the 3 × 3 test calls a sample seen
     # through one shadowed (docs/design.md §4.6): with a relief, a sample the maps do not
     # call lit casts its ray.
-    defines = {"VISIBILITY_SHADOWED_TEST": 0} if inputs.scene.geometry.reliefs else None
+    defines = {"VISIBILITY_SHADOWED_TEST": 0} if inputs.scene.geometry.reliefs else {}
+    if rastered.depth_in_keys:  # the maps' depths are their keys' depth words (stages/raster.py depth_in_keys)
+        defines["SHADOW_DEPTH_IN_KEYS"] = 1
     timer.add("visibility", device.kernel("visibility", "visibility", defines)(
         device.queue, (-(-inputs.samples // PREPARE_LANES),), None, buffers.params, buffers.views, buffers.lights,
         rastered.shadow_depth, bound.bound, bound.writer, prepared.map_read, rastered.camera_depth, rastered.tri_id,

@@ -22,7 +22,7 @@ from clrays.scene.costs import with_derived_sizes
 from clrays.scene.load import load_scene
 from clrays.runs.relief_mesh import relief_to_mesh
 from clrays.scene.relief import Relief, relief_frame, relief_record
-from clrays.stages.raster import raster_camera, raster_shadow_map
+from clrays.stages.raster import raster_camera, raster_shadow_map, read_shadow_depth
 from clrays.stages.relief import PlacedRelief, ReliefDrawer, footprint
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -136,7 +136,7 @@ def test_lattice_sun_map_matches_its_triangles(device):
                                                         f"render.relief={mode}"]))
         buffers = upload(device, frame_inputs(scene))
         shadow_map = raster_shadow_map(device, buffers, 0, StageTimer())
-        depth = device.read(shadow_map.depth, shadow_map.texels, np.uint32)
+        depth = read_shadow_depth(device, shadow_map.depth, shadow_map.texels, shadow_map.depth_in_keys).view(np.uint32)
         if shadow_map.keys:  # depth << 32 | triangle, as raster drew them
             keys = device.read(shadow_map.blockers, shadow_map.texels, np.uint64)
             assert np.array_equal((keys >> np.uint64(32)).astype(np.uint32), depth)

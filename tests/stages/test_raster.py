@@ -7,7 +7,7 @@ from clrays.physics.geometry import raycast
 from clrays.inputs import frame_inputs, upload
 from clrays.device import StageTimer
 from clrays.scene.geometry import box_triangles, sphere_triangles
-from clrays.stages.raster import raster
+from clrays.stages.raster import raster, read_shadow_depth
 from conftest import DirectionalLight, PointLight, SpotLight, grid_plane, make_scene, v3
 
 
@@ -23,7 +23,7 @@ def _rasterized(device, scene):
     samples = buffers.inputs.samples
     depth = device.read(result.camera_depth, samples, np.uint32).view(np.float32)
     tri = device.read(result.tri_id, samples, np.int32)
-    shadow = device.read(result.shadow_depth, buffers.inputs.shadow_texels, np.uint32).view(np.float32)
+    shadow = read_shadow_depth(device, result.shadow_depth, buffers.inputs.shadow_texels, result.depth_in_keys)
     return buffers, depth, tri, shadow
 
 
@@ -114,7 +114,8 @@ def test_map_is_empty_from_the_geometry(device, light, triangles, empty):
     waits = device.host_waits
     assert map_is_empty(device, shadow_map) is empty
     assert device.host_waits == waits
-    drawn = device.read(shadow_map.depth, max(shadow_map.texels, 1), np.uint32)
+    drawn = read_shadow_depth(device, shadow_map.depth, max(shadow_map.texels, 1), shadow_map.depth_in_keys)
+    drawn = drawn.view(np.uint32)
     assert bool(np.all(drawn == structs.DEPTH_EMPTY)) is empty
 
 

@@ -11,7 +11,7 @@ from clrays.device import StageTimer
 from clrays.inputs import frame_inputs, upload
 from clrays.scene.geometry import box_triangles
 from clrays.scene.model import Phase
-from clrays.stages.raster import raster
+from clrays.stages.raster import raster, read_shadow_depth
 from clrays.stages.rectify import rectify
 from conftest import DirectionalLight, PointLight, SpotLight, grid_plane, make_scene, v3
 
@@ -55,7 +55,8 @@ def _rectified(device, scene):
     params = device.read(epipolar.buffer, (), structs.epipolar_dtype)  # as the kernels read it: γ step included
     n, slices = int(params["gamma_samples"]), int(params["slices"])
     tree = device.read(epipolar.tree, (slices, 2 * n, 2), np.float32)
-    shadow = device.read(rastered.shadow_depth, buffers.inputs.shadow_texels, np.uint32).view(np.float32)
+    shadow = read_shadow_depth(device, rastered.shadow_depth, buffers.inputs.shadow_texels,
+                               rastered.depth_in_keys)
     return buffers.inputs, params, shadow, tree[:, :n]
 
 
