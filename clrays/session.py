@@ -430,6 +430,9 @@ class Renderer:
             frame.samples = counts if frame.samples is None else frame.samples + counts
         else:  # per camera sample; and a light that casts no shadow, whose 16 slices are too few to sample
             traverse(device, buffers, frame.rastered, epipolar, tables, frame.in_scatter.adding(), timer, features)
+            if frame.scene.render.sampling == "epipolar" and reliefs is not None:  # (--stats: every one walked)
+                walked = SampleCounts(fixed_up=buffers.inputs.samples)
+                frame.samples = walked if frame.samples is None else frame.samples + walked
         self._films_in_scatter(frame, lambda r, s, t: traverse(device, buffers, r, epipolar, tables, s, t, features),
                                lambda: transparency_walk(device, buffers, frame.films, epipolar, tables, timer,
                                                          features))

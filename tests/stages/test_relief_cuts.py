@@ -144,3 +144,11 @@ def test_an_outline_the_bins_cannot_hold_is_read_from_the_map(renderer, monkeypa
     assert cuts.alpha_bins(np.random.default_rng(1).normal(size=(5000, 2, 3)), np.array([1.0, 0, 0]),
                            np.array([0, 1.0, 0])) is None
     assert cuts.alpha_bins(np.zeros((0, 2, 3)), np.array([1.0, 0, 0]), np.array([0, 1.0, 0]))[0] == cuts.MIN_BINS
+
+
+def test_a_light_that_cuts_a_relief_walks_every_camera_sample(renderer):
+    """The relief's shafts run along the epipolar lines and are finer than they are apart:
+    its light walks every camera sample's rays, and `--stats` counts them all fixed up."""
+    scene = load_scene(LATTICE, overrides=["image.width=32", "image.height=18"])
+    counts = renderer.render(scene, "minmax", reuse=False).samples
+    assert (counts.computed, counts.interpolated, counts.fixed_up) == (0, 0, 32 * 18)
