@@ -7,7 +7,9 @@
  * towards the light from the ray (its β at most the ray's: the ray never crosses the
  * relief, it would end there, so that holds all along the triangles beside it), passing it
  * changes how many triangles lie between the ray and the light. From the eye's own count,
- * the crossings in rising γ give the ray's shadowed stretches: where that count is above 0. */
+ * the crossings in rising γ give the ray's shadowed stretches: where that count is above 0.
+ * (The edges are placed around a point a hair beside the eye, where that count is one
+ * number: relief_cuts.py, nudged_eye.) */
 #ifndef CLRAYS_RELIEF_CUTS_H
 #define CLRAYS_RELIEF_CUTS_H
 #include "shaft_edges.h"
