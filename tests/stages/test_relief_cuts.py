@@ -152,3 +152,14 @@ def test_a_light_that_cuts_a_relief_walks_every_camera_sample(renderer):
     scene = load_scene(LATTICE, overrides=["image.width=32", "image.height=18"])
     counts = renderer.render(scene, "minmax", reuse=False).samples
     assert (counts.computed, counts.interpolated, counts.fixed_up) == (0, 0, 32 * 18)
+
+
+def test_a_moving_camera_keeps_only_what_holds(renderer):
+    """The outline is kept per light, its bins per eye: a session that keeps its stages gives
+    each frame of a camera moving past the lattice bit for bit as one that keeps none."""
+    from clrays.session import Renderer
+
+    keeping, fresh = Renderer(renderer.device), Renderer(renderer.device, reuse=False)
+    for x in (2.6, 1.0, 2.6):
+        scene = load_scene(LATTICE, overrides=["image.width=40", "image.height=24", f"camera.position=[{x}, 1.4, 3.2]"])
+        assert np.array_equal(keeping.render(scene, "minmax").image, fresh.render(scene, "minmax").image)
