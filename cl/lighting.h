@@ -222,15 +222,19 @@ ALWAYS_INLINE int light_view_index(global const light_t* light, float3 p)
     return light->first_view + 2 * axis + (component < 0.0f ? 1 : 0);
 }
 
-/* Where texel i's depth lies in the shadow depths: with SHADOW_DEPTH_IN_KEYS they are the
- * maps' 64-bit keys (the depth's bits above the triangle, clrays/stages/raster.py
- * depth_in_keys), whose depth word is read, else one uint a texel. */
-#if SHADOW_DEPTH_IN_KEYS
+/* A 64-bit shadow-map key (raster.cl raster_nearest: the depth's bits above the triangle)
+ * read as two uints: the one that holds the depth. */
 #ifdef __ENDIAN_LITTLE__
-#define SHADOW_DEPTH_AT(i) (2 * (i) + 1)
+#define KEY_DEPTH_WORD 1
 #else
-#define SHADOW_DEPTH_AT(i) (2 * (i))
+#define KEY_DEPTH_WORD 0
 #endif
+
+/* Where texel i's depth lies in the shadow depths: with SHADOW_DEPTH_IN_KEYS they are the
+ * maps' keys (clrays/stages/raster.py depth_in_keys), whose depth word is read, else one
+ * uint a texel. */
+#if SHADOW_DEPTH_IN_KEYS
+#define SHADOW_DEPTH_AT(i) (2 * (i) + KEY_DEPTH_WORD)
 #else
 #define SHADOW_DEPTH_AT(i) (i)
 #endif

@@ -481,12 +481,8 @@ RASTER_KERNELS(raster_resolve, RESOLVE_TARGET,
 /* One pass for depth and triangle: the key (as_uint(t) << 32 | tri) orders by depth
  * first (positive floats order like their bits), ties to the lowest index. The key's depth
  * word (32 bits, read whole on any device, unlike a plain 64-bit read) only ever decreases:
- * a sample whose depth is beyond it now cannot win the atomic later. */
-#ifdef __ENDIAN_LITTLE__
-#define KEY_DEPTH_WORD 1
-#else
-#define KEY_DEPTH_WORD 0
-#endif
+ * a sample whose depth is beyond it now cannot win the atomic later (KEY_DEPTH_WORD,
+ * lighting.h). */
 /* Pass 2's update of a whole run of RASTER_LANES columns, one sample per pixel, as
  * DEPTH_MIN_LANES's: the run's keys and the stored ones as one vector min. A lane the
  * triangle misses holds (DEPTH_EMPTY, tri), which raster_split_runs reads as nothing hit, and

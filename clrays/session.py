@@ -463,11 +463,10 @@ class Renderer:
         pose = np.asarray(light.direction if isinstance(light, DirectionalLight) else light.position, np.float64)
         outline = reuse.keep("relief_outline", lambda: digest("relief_outline", keys.geometry, pose),
                              lambda: relief_outlines(scene, light), per_light=True)
-        params = epipolar_frame(scene, buffers, index)
-        eye = np.asarray(buffers.inputs.eye_ws, np.float64)
-        return reuse.keep("relief_cuts", lambda: digest("relief_cuts", keys.geometry, pose, eye, params["u"],
-                                                        params["w"]),
-                          lambda: relief_cuts(self.device, scene, index, outline, eye, params), per_light=True)
+        eye = np.asarray(buffers.inputs.eye_ws, np.float64)  # (with the pose, it fixes the epipolar frame's axes)
+        return reuse.keep("relief_cuts", lambda: digest("relief_cuts", keys.geometry, pose, eye),
+                          lambda: relief_cuts(self.device, scene, index, outline, eye,
+                                              epipolar_frame(scene, buffers, index)), per_light=True)
 
     def _films_in_scatter(self, frame: Frame, per_film, weighted=None) -> None:
         """The in-scattering a volume stage just added for the camera samples, added for the

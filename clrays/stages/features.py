@@ -2,8 +2,8 @@
 cl/walk_features.h (docs/design.md §4.5, "Features of the walk"): a light's texture (stage
 light_texture: `TextureTables`), its rectified translucent layers (stage translucency:
 `RectifiedLayers`), the blockers that place its runs' ends (clrays/stages/shaft_edges.py:
-`ShaftEdges`) and the reliefs it cuts itself (clrays/stages/relief_cuts.py: `ReliefCuts`). Each offers its build defines (`defines()`) and its kernel arguments
-(`args()`); a walking kernel built with a feature's defines takes its arguments after its
+`ShaftEdges`) and the reliefs it cuts itself (clrays/stages/relief_cuts.py: `ReliefCuts`).
+Each offers its build defines (`defines()`) and its kernel arguments (`args()`); a walking kernel built with a feature's defines takes its arguments after its
 own, in the order of `walk_features` (the kernel's WALK_FEATURE_ARGS). A feature the frame
 does not have is None, adds nothing, and leaves the kernel as it was without it.
 """

@@ -88,11 +88,11 @@ def relief_outline(triangles: np.ndarray, light, record=None) -> tuple[np.ndarra
 #: Where the eye's light ray meets an edge or a vertex of a relief (a scene of round numbers
 #: can put it there), the count at the eye is ambiguous: the rays leaving it in different
 #: directions start in different triangles, or outside. The walks' rays are taken to start
-#: this fraction of the scene's size beside the eye instead, across its light ray, in a
+#: this fraction of the edges' reach from the eye beside it instead, across its light ray, in a
 #: direction no scene is likely to line up with: there the count is one number. Above
-#: float32's rounding of the edges around the eye (6e-8 of the scene's size), so that the
+#: float32's rounding of the edges around the eye (6e-8 of that reach), so that the
 #: walks see the point on the side the count took, and small enough to move no image: at
-#: 1e-5 of the scene's size the lattice's errors against `exact` rose in their third digit
+#: 1e-5 of it the lattice's errors against `exact` rose in their third digit
 #: (the shafts all shift one way, and a grazing ray adds up the shifts of 50 crossings).
 EYE_NUDGE = 1e-6
 _NUDGE_DIRECTION = np.array([0.5377, 0.3121, -0.7836])
@@ -100,7 +100,8 @@ _NUDGE_DIRECTION = np.array([0.5377, 0.3121, -0.7836])
 
 def nudged_eye(eye: np.ndarray, light, size: float) -> np.ndarray:
     """The point EYE_NUDGE × `size` beside `eye`, across its light ray, where the walks cut
-    the reliefs from (world space, float64)."""
+    the reliefs from (world space, float64); `size` is the reach of the edges around the
+    eye, whose float32 rounding in eye space the nudge must clear."""
     direction = -np.asarray(light.direction, np.float64) if isinstance(light, DirectionalLight) \
         else np.asarray(light.position, np.float64) - eye
     direction = direction / np.linalg.norm(direction)
@@ -153,6 +154,7 @@ def alpha_bins(ends: np.ndarray, u: np.ndarray, w: np.ndarray) -> tuple[int, np.
     dx, dy = x[:, 1] - x[:, 0], y[:, 1] - y[:, 0]
     along = np.clip(-(x[:, 0] * dx + y[:, 0] * dy) / np.maximum(dx * dx + dy * dy, 1e-300), 0.0, 1.0)
     distance = np.hypot(x[:, 0] + along * dx, y[:, 0] + along * dy)
+
     def spans_at(bins: int):
         first = np.floor((low + math.pi) / (2 * math.pi) * bins).astype(np.int64) - 1
         last = np.floor((high + math.pi) / (2 * math.pi) * bins).astype(np.int64) + 1
@@ -222,7 +224,8 @@ def relief_cuts(device, scene, light_index: int, outline: tuple[np.ndarray, np.n
     frame `params`, with the eye's count. None where the bins cannot hold the outline
     (`alpha_bins`)."""
     light = scene.lights[light_index]
-    size = float(np.ptp(outline[0].reshape(-1, 3), axis=0).max(initial=0.0)) + float(np.abs(eye).max())
+    # the scale of the edges' float32 coordinates around the eye, which the nudge must clear
+    size = float(np.abs(outline[0] - eye).max(initial=0.0))
     eye = nudged_eye(eye, light, size)
     ends = outline[0] - eye
     binned = alpha_bins(ends, params["u"][:3].astype(np.float64), params["w"][:3].astype(np.float64))

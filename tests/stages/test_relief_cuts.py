@@ -163,3 +163,19 @@ def test_a_moving_camera_keeps_only_what_holds(renderer):
     for x in (2.6, 1.0, 2.6):
         scene = load_scene(LATTICE, overrides=["image.width=40", "image.height=24", f"camera.position=[{x}, 1.4, 3.2]"])
         assert np.array_equal(keeping.render(scene, "minmax").image, fresh.render(scene, "minmax").image)
+
+
+def test_an_empty_outline_leaves_only_the_eyes_count(renderer):
+    """A relief seen edge-on from its light has no outline: no bin holds an edge, and the
+    walks keep the eye's count alone."""
+    from types import SimpleNamespace
+
+    from clrays.inputs import frame_inputs
+    from clrays.stages.rectify import epipolar_frame
+    from clrays.stages.relief_cuts import relief_cuts
+
+    inputs = frame_inputs(load_scene(LATTICE, overrides=["image.width=32", "image.height=18"]))
+    params = epipolar_frame(inputs.scene, SimpleNamespace(inputs=inputs), 0)
+    cuts = relief_cuts(renderer.device, inputs.scene, 0, (np.zeros((0, 2, 3)), np.zeros(0)),
+                       np.asarray(inputs.eye_ws, np.float64), params)
+    assert cuts is not None and cuts.eye_count == 0 and cuts.bins == 1024
