@@ -87,32 +87,64 @@ ALWAYS_INLINE float cut_gamma(const ray_plane_t* plane, cut_end_t end)
  * 1.96 / 2.16 (1.88 with texel ends): at 32 texels a texel is already that far. */
 #define SHAFT_EDGE_REACH 256
 
-/* Triangle `tri`'s cut with the ray's half-plane, its ends in rising γ; 0 when the triangle
- * misses the plane or reaches across the axis. */
-inline int triangle_cut(const ray_plane_t* plane, global const float4* vertices, int tri, cut_end_t ends[2])
+/* One end of the cut: where edge `edge` (from vertex a, at signed height ha off the
+ * half-plane's plane, to vertex b, at hb) crosses the plane. An end in the other
+ * half-plane (off < 0) gets edge -1, which triangle_cut refuses. */
+ALWAYS_INLINE cut_end_t cut_end(const ray_plane_t* plane, float3 a, float3 b, float ha, float hb, int edge)
 {
-    float3 v[3] = {vertices[3 * tri].xyz, vertices[3 * tri + 1].xyz, vertices[3 * tri + 2].xyz};
-    float h[3] = {inline_dot(v[0], plane->normal), inline_dot(v[1], plane->normal), inline_dot(v[2], plane->normal)};
-    int found = 0;
-    for (int i = 0; i < 3; ++i) {
-        int j = i == 2 ? 0 : i + 1;
-        if ((h[i] >= 0.0f) == (h[j] >= 0.0f)) continue;
-        float3 p = v[i] + (v[j] - v[i]) * (h[i] / (h[i] - h[j]));
-        float a = inline_dot(p, plane->axis), b = inline_dot(p, plane->across);
-        if (b < 0.0f || found == 2) return 0;
-        ends[found].g = plane->directional ? (float2)(1.0f, b) : (float2)(plane->d_el - a, b);
-        /* β_p = atan2(b, a) at most the ray's β */
-        ends[found].blocks = b * plane->cos_beta - a * plane->sin_beta <= 0.0f;
-        ends[found].edge = i;
-        ++found;
+    float3 p = a + (b - a) * (ha / (ha - hb));
+    float along = inline_dot(p, plane->axis), off = inline_dot(p, plane->across);
+    cut_end_t end;
+    end.g = plane->directional ? (float2)(1.0f, off) : (float2)(plane->d_el - along, off);
+    end.blocks = off * plane->cos_beta - along * plane->sin_beta <= 0.0f; /* β_p = atan2(off, along) at most the ray's β */
+    end.edge = off < 0.0f ? -1 : edge;
+    return end;
+}
+
+/* Triangle `tri`'s cut with the ray's half-plane, its ends in rising γ (*low, *high); 0 when
+ * the triangle misses the plane or reaches across the axis. The vertices lie on the
+ * plane's two sides (h ≥ 0 or not) one against two, or all on one: the cut, if any, runs
+ * over the two edges of the vertex alone on its side. Straight-line code without arrays
+ * indexed at run time, which PoCL kept in memory: a loop over the edges filling an array of
+ * ends cost the walks half as much again (bench/RESULTS.md, "The walks' run ends in
+ * straight-line code"). */
+ALWAYS_INLINE int triangle_cut(const ray_plane_t* plane, global const float4* vertices, int tri, cut_end_t* low,
+                               cut_end_t* high)
+{
+    float3 v0 = vertices[3 * tri].xyz, v1 = vertices[3 * tri + 1].xyz, v2 = vertices[3 * tri + 2].xyz;
+    float h0 = inline_dot(v0, plane->normal), h1 = inline_dot(v1, plane->normal), h2 = inline_dot(v2, plane->normal);
+    int s0 = h0 >= 0.0f, s1 = h1 >= 0.0f, s2 = h2 >= 0.0f;
+    if (s0 == s1 && s1 == s2) return 0;
+    cut_end_t first, second; /* in the edges' order (edge i: vertex i → vertex i + 1) */
+    if (s1 == s2) { /* v0 alone: edges 0 and 2 */
+        first = cut_end(plane, v0, v1, h0, h1, 0);
+        second = cut_end(plane, v2, v0, h2, h0, 2);
+    } else if (s0 == s2) { /* v1 alone: edges 0 and 1 */
+        first = cut_end(plane, v0, v1, h0, h1, 0);
+        second = cut_end(plane, v1, v2, h1, h2, 1);
+    } else { /* v2 alone: edges 1 and 2 */
+        first = cut_end(plane, v1, v2, h1, h2, 1);
+        second = cut_end(plane, v2, v0, h2, h0, 2);
     }
-    if (found != 2) return 0;
-    if (gamma_below(ends[1], ends[0])) {
-        cut_end_t swap = ends[0];
-        ends[0] = ends[1];
-        ends[1] = swap;
-    }
+    if (first.edge < 0 || second.edge < 0) return 0;
+    int swap = gamma_below(second, first);
+    *low = swap ? second : first;
+    *high = swap ? first : second;
     return 1;
+}
+
+/* Whether the surface turns back in γ from `tri` across its edge `edge` into `next`, in any
+ * half-plane through the light that cuts that edge: where one of the two faces the light and
+ * the other does not (their normals made to agree across the edge), the edge is a silhouette
+ * seen from the light. In a plane through the light the cut of a triangle runs along
+ * n × plane normal, and γ grows along it on the side the triangle faces the light from; so
+ * the cut goes on growing across the edge exactly where both face it alike. Read from two
+ * bytes, this spares the walk the neighbour's cut at most edges it stops at (bench/RESULTS.md,
+ * "The walks' run ends in straight-line code"). */
+ALWAYS_INLINE int surface_turns(global const uchar* sides, int tri, int next, int edge)
+{
+    uint own = sides[tri], other = sides[next];
+    return (((own ^ other) & FACES_LIGHT) != 0u) != ((own >> edge & 1u) != 0u);
 }
 
 /* Where a lit run ends before the shadowed texel whose blocker is `tri` (`begins`: where a
@@ -122,18 +154,19 @@ inline int triangle_cut(const ray_plane_t* plane, global const float4* vertices,
  * three per triangle, -1 at a border) towards the lit side for as long as its cut goes on
  * that way in front of the ray: where it turns back, or ends at a border, is the silhouette
  * in the ray's plane, and the shaft's edge. */
-inline float shaft_edge(const ray_plane_t* plane, global const float4* vertices, global const int* neighbours,
-                        int tri, int begins, float from, float to, float fallback)
+ALWAYS_INLINE float shaft_edge(const ray_plane_t* plane, global const float4* vertices, global const int* neighbours,
+                               global const uchar* sides, int tri, int begins, float from, float to, float fallback)
 {
-    cut_end_t ends[2];
-    if (tri < 0 || !triangle_cut(plane, vertices, tri, ends)) return fallback;
-    cut_end_t edge = ends[begins ? 1 : 0];
+    cut_end_t low, high;
+    if (tri < 0 || !triangle_cut(plane, vertices, tri, &low, &high)) return fallback;
+    cut_end_t edge = begins ? high : low;
     if (!edge.blocks) return fallback;
     for (int step = 0; step < SHAFT_EDGE_STEPS; ++step) {
         int next = neighbours[3 * tri + edge.edge];
-        if (next < 0 || !triangle_cut(plane, vertices, next, ends)) break;
+        if (next < 0 || surface_turns(sides, tri, next, edge.edge) || !triangle_cut(plane, vertices, next, &low, &high))
+            break;
         /* the neighbour's cut shares this end, on the edge that leads back; its other end goes on */
-        cut_end_t far = ends[neighbours[3 * next + ends[0].edge] == tri ? 1 : 0];
+        cut_end_t far = neighbours[3 * next + low.edge] == tri ? high : low;
         if (!(begins ? gamma_below(edge, far) : gamma_below(far, edge)) || !far.blocks) break;
         tri = next;
         edge = far;
@@ -180,12 +213,12 @@ inline int place_run_ends(run_edges_t* edges, const walk_features_t* features, g
     float window = edges->window;
     if (run_start > edges->first)
         *run0 = shaft_edge(&edges->plane, features->edge_vertices, features->edge_neighbours,
-                           edges->blockers[run_start - 1], 1,
+                           features->edge_sides, edges->blockers[run_start - 1], 1,
                            gamma_at_texel(texels, (float)run_start - window),
                            gamma_at_texel(texels, (float)run_start + window), *run0);
     if (closed)
         *run1 = shaft_edge(&edges->plane, features->edge_vertices, features->edge_neighbours,
-                           edges->blockers[run_end], 0,
+                           features->edge_sides, edges->blockers[run_end], 0,
                            gamma_at_texel(texels, (float)run_end - window),
                            gamma_at_texel(texels, (float)run_end + window), *run1);
     *run0 = clamp(*run0, edges->previous_end, edges->gamma_end);

@@ -23,6 +23,9 @@
 
 #include "common.h"
 
+/* edge_sides' bit for a triangle whose normal points to the light's side of its plane. */
+#define FACES_LIGHT 8u
+
 typedef struct {
     int none; /* (a struct needs a member when no feature is built) */
 #ifdef LIGHT_TEXTURE
@@ -39,6 +42,8 @@ typedef struct {
     global const int* edge_rows;         /* each texel's blocker, rectify's row_triangles */
     global const float4* edge_vertices;  /* the frame's triangles, eye space */
     global const int* edge_neighbours;   /* each triangle's neighbour across each edge, -1: none */
+    global const uchar* edge_sides;      /* per triangle: bit k, the neighbour across edge k wound the other
+                                          * way; FACES_LIGHT, its normal towards the light (shaft_edges.cl) */
 #endif
 #ifdef RELIEF_CUTS
     global const float4* relief_edges;    /* the reliefs' outline by α bin, eye space: (lower end, change),
@@ -65,9 +70,10 @@ typedef struct {
     (f).layer_beta = layer_beta; (f).layer_clear = layer_clear; (f).layer_rows = layer_rows;
 #endif
 #ifdef SHAFT_EDGES
-#define SHAFT_EDGE_ARGS , global const int* edge_rows, global const float4* edge_vertices, global const int* edge_neighbours
+#define SHAFT_EDGE_ARGS , global const int* edge_rows, global const float4* edge_vertices, \
+    global const int* edge_neighbours, global const uchar* edge_sides
 #define ATTACH_SHAFT_EDGES(f) (f).edge_rows = edge_rows; (f).edge_vertices = edge_vertices; \
-    (f).edge_neighbours = edge_neighbours;
+    (f).edge_neighbours = edge_neighbours; (f).edge_sides = edge_sides;
 #endif
 #ifdef RELIEF_CUTS
 #define RELIEF_CUT_ARGS , global const float4* relief_edges, global const int* relief_bin_offsets, \

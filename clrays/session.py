@@ -49,7 +49,7 @@ from .scene.costs import with_derived_sizes
 from .scene.model import METHODS, RENAMED_METHODS, DirectionalLight, Render, Scene
 from .stages.features import walk_features
 from .stages.relief_cuts import ReliefCuts, cuts_reliefs, relief_cuts, relief_outlines
-from .stages.shaft_edges import ShaftEdges, edge_neighbours, keeps_blockers
+from .stages.shaft_edges import ShaftEdges, edge_neighbours, edge_windings, keeps_blockers, shaft_edge_sides
 from .stages.integrand import integrand, integrand_table_size
 from .stages.lamp import eye_in_lamp, lamp_in_scatter
 from .stages.light_texture import light_texture
@@ -418,7 +418,7 @@ class Renderer:
             volume_moments(device, buffers, frame.rastered, epipolar, tables, frame.in_scatter.adding(), timer,
                            walk_features(texture, None))
             return
-        edges = None if epipolar.unshadowed else self._shaft_edges(buffers, epipolar, keys, reuse)
+        edges = None if epipolar.unshadowed else self._shaft_edges(buffers, epipolar, keys, reuse, timer)
         features = walk_features(  # what the walks carry (stages/features.py, cl/walk_features.h)
             texture, None if frame.layers is None else rectify_layers(device, buffers, frame.layers, epipolar, timer),
             edges, reliefs)
@@ -437,7 +437,8 @@ class Renderer:
                                lambda: transparency_walk(device, buffers, frame.films, epipolar, tables, timer,
                                                          features))
 
-    def _shaft_edges(self, buffers: FrameBuffers, epipolar, keys: StageKeys, reuse: Reuse) -> ShaftEdges | None:
+    def _shaft_edges(self, buffers: FrameBuffers, epipolar, keys: StageKeys, reuse: Reuse,
+                     timer: StageTimer) -> ShaftEdges | None:
         """What places the walks' run ends on the blockers' silhouettes (stages/shaft_edges.py):
         None where the rows keep no blockers (`render.shaft_edges: texels`, `keeps_blockers`),
         which is also where the frame may not carry every triangle's vertices
@@ -447,7 +448,10 @@ class Renderer:
             return None
         neighbours = reuse.keep("edge_neighbours", lambda: digest("edge_neighbours", keys.geometry),
                                 lambda: self.device.buffer(edge_neighbours(geometry), writable=False))
-        return ShaftEdges(epipolar.triangles, buffers.tri_vertices, neighbours)
+        windings = reuse.keep("edge_windings", lambda: digest("edge_windings", keys.geometry),
+                              lambda: self.device.buffer(edge_windings(geometry), writable=False))
+        sides = shaft_edge_sides(self.device, epipolar, buffers.tri_vertices, windings, geometry.count, timer)
+        return ShaftEdges(epipolar.triangles, buffers.tri_vertices, neighbours, sides)
 
     def _relief_cuts(self, buffers: FrameBuffers, rastered: RasterResult, keys: StageKeys, index: int,
                      reuse: Reuse) -> ReliefCuts | None:

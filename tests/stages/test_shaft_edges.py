@@ -16,7 +16,7 @@ from clrays.scene.load import load_scene
 from clrays.stages import raster as raster_stage
 from clrays.stages.raster import raster
 from clrays.stages.rectify import rectify
-from clrays.stages.shaft_edges import edge_neighbours
+from clrays.stages.shaft_edges import edge_neighbours, edge_windings
 from conftest import DirectionalLight, PointLight, grid_plane, make_scene, v3
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
@@ -41,6 +41,44 @@ def test_a_border_and_a_translucent_triangle_have_no_neighbour_there():
     opacity[2:] = 0.5  # the second square a pane: the light goes on through it
     linked = edge_neighbours(replace(geometry, opacity=opacity))
     assert (linked[:2] < 2).all() and (linked[2:] == -1).all()
+
+
+def test_windings_mark_a_neighbour_wound_the_other_way():
+    square = grid_plane(0.0, 1.0, 1)  # (a, b, c) and (a, c, d): their shared edge runs c → a, then a → c
+    assert edge_windings(make_scene(square).geometry).tolist() == [0, 0]
+    square[1] = square[1][[0, 2, 1]]  # (a, d, c): the shared edge, its edge 2, now runs c → a as in the first
+    assert edge_windings(make_scene(square).geometry).tolist() == [4, 4]
+    box = box_triangles([-1.0, 0.0, -1.0], [1.0, 2.0, 1.0])
+    assert not edge_windings(make_scene(box).geometry).any()  # a closed box, wound outward throughout
+    box[5] = box[5][[0, 2, 1]]
+    windings = edge_windings(make_scene(box).geometry)
+    assert windings[5] == 7 and sum(bin(w).count("1") for w in windings) == 6  # its three edges, seen from both sides
+
+
+def test_a_surface_wound_either_way_ends_its_shafts_alike(monkeypatch):
+    """A walk follows a blocker's surface across its edges until one triangle faces the light
+    and the next does not (cl/shaft_edges.h, surface_turns); a neighbour wound the other way
+    has its normal the other way, which its winding bit undoes. A slab of 72 coplanar
+    triangles, every other one wound the other way, casts the shafts the slab wound one way
+    casts. Read without the windings, the flipped slab's walks stop at its inner edges (the
+    test of the test: the images then differ)."""
+    import clrays.session as session
+    from clrays.session import Renderer
+
+    floor, slab = grid_plane(0.0, 8.0, 2), grid_plane(2.0, 1.5, 6)
+    flipped = slab.copy()
+    flipped[::2] = flipped[::2][:, [0, 2, 1]]
+    make = lambda occluder: make_scene(  # noqa: E731
+        np.concatenate([floor, occluder]), [PointLight(v3(0.3, 5.0, -0.4), np.full(3, 40.0))], width=48, height=32,
+        position=(0.0, 1.2, 7.0), look_at=(0.0, 1.8, 0.0), shadow_map=256, slices=64, gamma_samples=256)
+    image = lambda scene: Renderer(reuse=False).render(scene, "minmax").image  # noqa: E731
+    wound_one_way = image(make(slab))
+    assert wound_one_way.max() > 0.0
+    np.testing.assert_array_equal(image(make(flipped)), wound_one_way)
+    monkeypatch.setattr(session, "edge_windings", lambda geometry: np.zeros(geometry.count, np.uint8))
+    unwound = image(make(flipped))
+    apart = (np.abs(unwound - wound_one_way) > 1e-5 * wound_one_way.max()).any(axis=-1)
+    assert apart.sum() >= 10  # measured: 26 pixels of 1536, by up to 8e-5 of the brightest
 
 
 def _blockers(device, scene):
