@@ -263,6 +263,34 @@ ALWAYS_INLINE float3 shadow_lookup(global const light_t* light, float3 p, float3
     return p + n * shadow_texel_size(light, exact_length(p - light->position.xyz));
 }
 
+/* How far along its own ray a shadow ray's start may move to leave its surface: up to
+ * 1 / SHADOW_RAY_ALONG_MIN of the height it leaves by. */
+#define SHADOW_RAY_ALONG_MIN 0.05f
+
+/* Where the shadow ray leaves: `push` = SHADOW_RAY_OFFSET_REL·(|p| + distance to the light)
+ * above the surface, on the light's side (float32 rounding puts p up to a few ulps off its
+ * plane, and a ray from below would meet the plane's other triangles), reached by moving
+ * along the ray towards the light, push / cos θ: the ray's line still passes through p, as
+ * exact's (float64) does. Moved along the normal instead, the line passed push off p, and a
+ * point within push of a shadow's edge took the other side's answer: one floor pixel
+ * 6e-6 below the window's top edge in sun.yaml at 200×150, 9e-6 inside a slat's corner in
+ * grate.yaml at 128×72 (docs/stability.md, "A pixel on a hard shadow's edge"). Where the
+ * light grazes the surface (cos θ < SHADOW_RAY_ALONG_MIN) the start moves push /
+ * SHADOW_RAY_ALONG_MIN along the ray and the rest of the height along the normal, so it
+ * stays within 20·push of p. One start for every shadow ray (visibility's rays and
+ * lit tests, translucency's and the films' transmittance). */
+ALWAYS_INLINE float3 shadow_ray_start(global const light_t* light, float3 p, float3 n, float3 to_light)
+{
+    float to_light_distance = light->type == LIGHT_DIRECTIONAL ? 0.0f : exact_length(light->position.xyz - p);
+    float facing = inline_dot(n, to_light);
+    float3 side = facing >= 0.0f ? n : -n;
+    float cosine = inline_fabs(facing);
+    float push = SHADOW_RAY_OFFSET_REL * (exact_length(p) + to_light_distance);
+    float along = push / inline_fmax(cosine, SHADOW_RAY_ALONG_MIN);
+    float lift = push - along * cosine;
+    return p + to_light * along + side * lift;
+}
+
 /* 1 where p sees the light through the shadow map, else 0; averaged over a
  * (2·pcf + 1)² texel footprint when pcf > 0. Points outside the map are lit: a
  * map covers every occluder (cube, cone, or the scene bounds). bias is in texels. */

@@ -204,9 +204,7 @@ kernel void translucency_surface(global const frame_t* frame, global const view_
                 continue;
             }
         }
-        float to_light_distance = light->type == LIGHT_DIRECTIONAL ? 0.0f : length(light->position.xyz - p);
-        float3 side = dot(n, to_light) >= 0.0f ? n : -n;
-        float3 start = p + side * (SHADOW_RAY_OFFSET_REL * (length(p) + to_light_distance));
+        float3 start = shadow_ray_start(light, p, n, to_light);
         float3 ray = light->type == LIGHT_DIRECTIONAL ? to_light : light->position.xyz - start;
         float t_max = light->type == LIGHT_DIRECTIONAL ? INFINITY : 1.0f;
         out[l] = (float4)(bvh_transmittance(node_bounds, node_children, root, vertices, triangle_clear, start, ray,

@@ -152,9 +152,7 @@ inline float3 film_shadow_ray(global const light_t* light, float3 p, float3 n, f
                               global const float4* tri_vertices, global const float4* tri_opacity,
                               global const int* translucent, int translucent_count)
 {
-    float to_light_distance = light->type == LIGHT_DIRECTIONAL ? 0.0f : length(light->position.xyz - p);
-    float3 side = dot(n, to_light) >= 0.0f ? n : -n;
-    float3 start = p + side * (SHADOW_RAY_OFFSET_REL * (length(p) + to_light_distance));
+    float3 start = shadow_ray_start(light, p, n, to_light);
     float3 ray = light->type == LIGHT_DIRECTIONAL ? to_light : light->position.xyz - start;
     float t_max = light->type == LIGHT_DIRECTIONAL ? INFINITY : 1.0f;
     float3 through = (float3)(1.0f);

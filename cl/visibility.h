@@ -89,14 +89,6 @@ ALWAYS_INLINE int light_reaches(global const light_t* light, float3 sigma_t, flo
     return incident.x + incident.y + incident.z != 0.0f;
 }
 
-/* Where the shadow ray leaves: on the light's side of the surface, as the exact
- * reference's does. */
-ALWAYS_INLINE float3 shadow_ray_start(global const light_t* light, float3 p, float3 n, float3 to_light)
-{
-    float to_light_distance = light->type == LIGHT_DIRECTIONAL ? 0.0f : exact_length(light->position.xyz - p);
-    float3 side = inline_dot(n, to_light) >= 0.0f ? n : -n;
-    return p + side * (SHADOW_RAY_OFFSET_REL * (exact_length(p) + to_light_distance));
-}
 
 /* light_view_index, then view_project (lighting.h) on each lane: the view of p, its
  * continuous texel coordinates and its depth there; the lanes where p is behind a

@@ -162,10 +162,14 @@ ALWAYS_INLINE int prepare_lanes(global const frame_t* frame, global const view_t
         plain &= (to_light_squared >= 1.17549435e-38f) & (to_light_squared <= 3.40282347e38f);
     if (any_lanes(surface & !turned & !plain)) return 0; /* exact_length's library call */
     float_lanes to_light_distance = light->type == LIGHT_DIRECTIONAL ? 0.0f : sqrt_lanes(to_light_squared);
-    float_lanes push = SHADOW_RAY_OFFSET_REL * (sqrt_lanes(p_squared) + to_light_distance);
     int_lanes towards = facing >= 0.0f;
     float_lanes sx = towards ? nx : -nx, sy = towards ? ny : -ny, sz = towards ? nz : -nz;
-    float_lanes start_x = px + sx * push, start_y = py + sy * push, start_z = pz + sz * push;
+    float_lanes cosine = fabs_lanes(facing);
+    float_lanes push = SHADOW_RAY_OFFSET_REL * (sqrt_lanes(p_squared) + to_light_distance);
+    float_lanes along = push / fmax_lanes(cosine, (float_lanes)(SHADOW_RAY_ALONG_MIN));
+    float_lanes lift = push - along * cosine;
+    float_lanes start_x = px + lx * along + sx * lift, start_y = py + ly * along + sy * lift,
+                start_z = pz + lz * along + sz * lift;
     view_lanes_t v;
     float_lanes texel_x, texel_y, depth;
     int_lanes projects = light_project_lanes(views, light, start_x, start_y, start_z, &v, &texel_x, &texel_y, &depth);
