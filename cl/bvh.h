@@ -24,22 +24,57 @@ inline int ray_meets_box(float3 origin, float3 inv_dir, float t_max, float4 lo, 
     return near <= far;
 }
 
-/* Möller–Trumbore, two-sided, edges inclusive: whether the ray meets the triangle at
- * t ∈ (t_min, t_max). */
-inline int ray_meets_triangle(float3 origin, float3 dir, float t_min, float t_max, float3 v0, float3 v1, float3 v2)
+/* A ray set up for the watertight triangle test (Woop, Benthin and Wald, "Watertight
+ * Ray/Triangle Intersection", JCGT 2013): its direction's largest component names the
+ * test's z axis, and a shear takes the ray to that axis, so each edge of a triangle is
+ * tested in 2D by an edge function of its two ends alone. */
+typedef struct {
+    float3 origin;
+    int axis;       /* the largest |component| of the direction: 0, 1 or 2 */
+    float shear_x;  /* the direction's other two components over that one, */
+    float shear_y;  /* in the rotated order (ray_axes) */
+    float scale_z;  /* 1 over that component: t along origin + t·dir */
+} test_ray_t;
+
+/* v's components in the ray's rotated order, the test's z last. */
+ALWAYS_INLINE float3 ray_axes(float3 v, int axis)
 {
-    float3 e1 = v1 - v0, e2 = v2 - v0;
-    float3 pv = cross(dir, e2);
-    float det = dot(e1, pv);
+    return axis == 0 ? v.yzx : (axis == 1 ? v.zxy : v);
+}
+
+ALWAYS_INLINE test_ray_t test_ray(float3 origin, float3 dir)
+{
+    float3 size = (float3)(inline_fabs(dir.x), inline_fabs(dir.y), inline_fabs(dir.z));
+    test_ray_t ray;
+    ray.origin = origin;
+    ray.axis = size.x > size.y ? (size.x > size.z ? 0 : 2) : (size.y > size.z ? 1 : 2);
+    float3 d = ray_axes(dir, ray.axis);
+    ray.shear_x = d.x / d.z;
+    ray.shear_y = d.y / d.z;
+    ray.scale_z = 1.0f / d.z;
+    return ray;
+}
+
+/* Whether the ray meets the triangle at t ∈ (t_min, t_max), either side, edges inclusive.
+ * Each edge function is computed from the edge's two ends alone, unfused, so two triangles
+ * that share an edge compute it alike (one the other's negative): a ray through the edge
+ * meets one of them or both, never neither. Möller–Trumbore's barycentrics, each from a
+ * whole triangle, let a ray slip between two: one floor pixel of the bunny at 1280×720 saw
+ * its spot through the shared edge of two of the mesh's faces towards the light, the faces
+ * away from it left out of the texel's list (visibility_rays_listed; docs/design.md §4.6). */
+inline int ray_meets_triangle(const test_ray_t* ray, float t_min, float t_max, float3 v0, float3 v1, float3 v2)
+{
+#pragma OPENCL FP_CONTRACT OFF
+    float3 a = ray_axes(v0 - ray->origin, ray->axis), b = ray_axes(v1 - ray->origin, ray->axis),
+           c = ray_axes(v2 - ray->origin, ray->axis);
+    float ax = a.x - ray->shear_x * a.z, ay = a.y - ray->shear_y * a.z;
+    float bx = b.x - ray->shear_x * b.z, by = b.y - ray->shear_y * b.z;
+    float cx = c.x - ray->shear_x * c.z, cy = c.y - ray->shear_y * c.z;
+    float u = cx * by - cy * bx, v = ax * cy - ay * cx, w = bx * ay - by * ax;
+    if ((u < 0.0f || v < 0.0f || w < 0.0f) && (u > 0.0f || v > 0.0f || w > 0.0f)) return 0;
+    float det = u + v + w;
     if (det == 0.0f) return 0;
-    float inv = 1.0f / det;
-    float3 tv = origin - v0;
-    float u = dot(tv, pv) * inv;
-    if (u < 0.0f || u > 1.0f) return 0;
-    float3 qv = cross(tv, e1);
-    float v = dot(dir, qv) * inv;
-    if (v < 0.0f || u + v > 1.0f) return 0;
-    float t = dot(e2, qv) * inv;
+    float t = ((u * a.z + v * b.z) + w * c.z) * ray->scale_z / det;
     return t > t_min && t < t_max;
 }
 
@@ -50,6 +85,7 @@ inline int bvh_occluded(global const float4* node_bounds, global const int2* nod
                         int skip)
 {
     float3 inv_dir = 1.0f / dir;
+    test_ray_t ray = test_ray(origin, dir);
     int stack[BVH_STACK];
     int top = 0;
     stack[top++] = root;
@@ -58,8 +94,8 @@ inline int bvh_occluded(global const float4* node_bounds, global const int2* nod
         if (node < 0) {
             int tri = -node - 1;
             if (tri != skip
-                && ray_meets_triangle(origin, dir, t_min, t_max, tri_vertices[3 * tri].xyz,
-                                      tri_vertices[3 * tri + 1].xyz, tri_vertices[3 * tri + 2].xyz))
+                && ray_meets_triangle(&ray, t_min, t_max, tri_vertices[3 * tri].xyz, tri_vertices[3 * tri + 1].xyz,
+                                      tri_vertices[3 * tri + 2].xyz))
                 return 1;
             continue;
         }

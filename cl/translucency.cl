@@ -120,6 +120,7 @@ inline float3 bvh_transmittance(global const float4* node_bounds, global const i
                                 float3 origin, float3 dir, float t_max)
 {
     float3 inv_dir = 1.0f / dir;
+    test_ray_t ray = test_ray(origin, dir);
     float3 through = (float3)(1.0f);
     int stack[BVH_STACK];
     int top = 0;
@@ -128,7 +129,7 @@ inline float3 bvh_transmittance(global const float4* node_bounds, global const i
         int node = stack[--top];
         if (node < 0) {
             int tri = -node - 1;
-            if (ray_meets_triangle(origin, dir, 0.0f, t_max, vertices[3 * tri].xyz, vertices[3 * tri + 1].xyz,
+            if (ray_meets_triangle(&ray, 0.0f, t_max, vertices[3 * tri].xyz, vertices[3 * tri + 1].xyz,
                                    vertices[3 * tri + 2].xyz))
                 through *= triangle_clear[tri].xyz;
             continue;

@@ -71,9 +71,10 @@ kernel void visibility_rays_listed(global const frame_t* frame, global const vie
         listed_shadow_ray(frame, views, lights, camera_depth, tri_id, tri_normal, offsets, entry, &start, &ray,
                           &t_max);
         int skip = tri_id[entry / frame->light_count], occluded = 0;
+        test_ray_t tested = test_ray(start, ray);
         for (int node = touching_head[map_read[entry].x - first]; node >= 0 && !occluded; node = touching[node].y) {
             int tri = touching[node].x;
-            occluded = tri != skip && ray_meets_triangle(start, ray, 0.0f, t_max, tri_vertices[3 * tri].xyz,
+            occluded = tri != skip && ray_meets_triangle(&tested, 0.0f, t_max, tri_vertices[3 * tri].xyz,
                                                          tri_vertices[3 * tri + 1].xyz, tri_vertices[3 * tri + 2].xyz);
         }
         visible[entry] = occluded ? 0.0f : 1.0f;
