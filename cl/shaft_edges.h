@@ -51,9 +51,10 @@ ALWAYS_INLINE int ray_plane_of(global const epipolar_t* ep, float3 dir, ray_plan
     return 1;
 }
 
-/* One end of a triangle's cut with the half-plane: its γ as a direction g (γ = g.y for a
- * directional light, whose g.x is 1; atan2(g.y, g.x) for a point or spot light: ends
- * compare by a cross product, and only the one a run ends on takes an arc tangent),
+/* One end of a triangle's cut with the half-plane: its γ as a direction g, any positive
+ * multiple of (1, γ) for a directional light and of (d_el − along, across) for a point or
+ * spot light (γ = g.y / g.x, or atan2(g.y, g.x): ends compare by a cross product, and only
+ * the one a run ends on takes the division or the arc tangent),
  * whether it lies in front of the ray (its β at most the ray's), and the triangle's edge
  * (0: v0 → v1, 1: v1 → v2, 2: v2 → v0) it lies on. */
 typedef struct {
@@ -70,7 +71,7 @@ ALWAYS_INLINE int gamma_below(cut_end_t p, cut_end_t q)
 
 ALWAYS_INLINE float cut_gamma(const ray_plane_t* plane, cut_end_t end)
 {
-    return plane->directional ? end.g.y : atan2_approx(end.g.y, end.g.x);
+    return plane->directional ? end.g.y / end.g.x : atan2_approx(end.g.y, end.g.x);
 }
 
 /* Triangles a run's end follows across shared edges, at most. At 320×180, 4 / 8 / 16 steps:
@@ -92,10 +93,16 @@ ALWAYS_INLINE float cut_gamma(const ray_plane_t* plane, cut_end_t end)
  * half-plane (off < 0) gets edge -1, which triangle_cut refuses. */
 ALWAYS_INLINE cut_end_t cut_end(const ray_plane_t* plane, float3 a, float3 b, float ha, float hb, int edge)
 {
-    float3 p = a + (b - a) * (ha / (ha - hb));
+    /* the point (b·ha − a·hb) / (ha − hb), kept times w = |ha − hb| > 0: no division;
+     * unfused, so an edge's two triangles, which list its ends in either order, find one point */
+#pragma OPENCL FP_CONTRACT OFF
+    float w = ha - hb;
+    float3 p = b * ha - a * hb;
+    p = w < 0.0f ? -p : p;
+    w = inline_fabs(w);
     float along = inline_dot(p, plane->axis), off = inline_dot(p, plane->across);
     cut_end_t end;
-    end.g = plane->directional ? (float2)(1.0f, off) : (float2)(plane->d_el - along, off);
+    end.g = plane->directional ? (float2)(w, off) : (float2)(plane->d_el * w - along, off);
     end.blocks = off * plane->cos_beta - along * plane->sin_beta <= 0.0f; /* β_p = atan2(off, along) at most the ray's β */
     end.edge = off < 0.0f ? -1 : edge;
     return end;
