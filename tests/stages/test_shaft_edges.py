@@ -58,14 +58,14 @@ def test_windings_mark_a_neighbour_wound_the_other_way():
 def test_a_surface_wound_either_way_ends_its_shafts_alike(monkeypatch):
     """A walk follows a blocker's surface across its edges until one triangle faces the light
     and the next does not (cl/shaft_edges.h, surface_turns); a neighbour wound the other way
-    has its normal the other way, which its winding bit undoes. A slab of 72 coplanar
+    has its normal the other way, which its winding bit undoes. A slab of 128 coplanar
     triangles, every other one wound the other way, casts the shafts the slab wound one way
     casts. Read without the windings, the flipped slab's walks stop at its inner edges (the
     test of the test: the images then differ)."""
     import clrays.session as session
     from clrays.session import Renderer
 
-    floor, slab = grid_plane(0.0, 8.0, 2), grid_plane(2.0, 1.5, 6)
+    floor, slab = grid_plane(0.0, 8.0, 2), grid_plane(2.0, 1.5, 8)
     flipped = slab.copy()
     flipped[::2] = flipped[::2][:, [0, 2, 1]]
     make = lambda occluder: make_scene(  # noqa: E731
@@ -78,7 +78,7 @@ def test_a_surface_wound_either_way_ends_its_shafts_alike(monkeypatch):
     monkeypatch.setattr(session, "edge_windings", lambda geometry: np.zeros(geometry.count, np.uint8))
     unwound = image(make(flipped))
     apart = (np.abs(unwound - wound_one_way) > 1e-5 * wound_one_way.max()).any(axis=-1)
-    assert apart.sum() >= 10  # measured: 26 pixels of 1536, by up to 8e-5 of the brightest
+    assert apart.sum() >= 10  # measured: 37 pixels of 1536, by up to 6e-5 of the brightest
 
 
 def _blockers(device, scene):
