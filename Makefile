@@ -10,6 +10,10 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
 	$(BIN)/python -m pip install -q -e '.[test,bench,distributed,video]'
+	@# PoCL's compiler (LLVM 14) does not know the newest CPUs: Intel's CPU runtime serves there.
+	$(BIN)/python -c 'import sys; from clrays import runtimes; sys.exit(not runtimes.pocl_builds_here())' \
+	  || { echo "PoCL cannot build for this CPU: installing Intel's CPU runtime (clrays[intel-cpu])"; \
+	       $(BIN)/python -m pip install -q -e '.[test,bench,distributed,video,intel-cpu]'; }
 	touch $(STAMP)
 
 demo: $(STAMP)

@@ -139,8 +139,11 @@ def select_device(spec: str | None = None):
     """The device named by `spec` (or CLRAYS_DEVICE), else the first GPU, else PoCL's CPU
     device, else the first device."""
     spec = spec if spec is not None else os.environ.get("CLRAYS_DEVICE") or None
-    # The default device and one named as PoCL need no runtime pip installed beside it.
+    # The default device and one named as PoCL need no runtime pip installed beside it,
+    # unless PoCL cannot build for this CPU and one is there to serve instead.
     pip_runtimes = spec is not None and not any(name in spec.lower() for name in ("pocl", "portable"))
+    pocl_builds = spec is not None or not runtimes.pip_runtime_libraries() or runtimes.pocl_builds_here()
+    pip_runtimes = pip_runtimes or not pocl_builds
     cl = _import_cl(pip_runtimes)
     devices = list_devices(pip_runtimes)
     if not devices:
@@ -150,7 +153,8 @@ def select_device(spec: str | None = None):
         # images are for, comes before another CPU runtime (`--device intel` picks Intel's).
         gpus = [d for d in devices if d[3].type & cl.device_type.GPU]
         pocl = [d for d in devices if "pocl" in d[2].vendor.lower()]
-        return (gpus or pocl or devices)[0][3]
+        others = [d for d in devices if d not in pocl]
+        return (gpus or (pocl if pocl_builds else others + pocl) or devices)[0][3]
     # (isdecimal, not isdigit: "²".isdigit() is true, and int() refuses it)
     if ":" in spec and all(part.isdecimal() for part in spec.split(":", 1)):
         p, d = (int(part) for part in spec.split(":", 1))
@@ -312,11 +316,15 @@ class Device:
         return f"{self.device.platform.name.strip()} / {self.device.name.strip()}"
 
     def _unwritable_cache(self) -> str:
-        """Why PoCL's kernel cache cannot be written, where it cannot (then no kernel builds:
-        PoCL writes each program's source there first, so a full disk fails every build),
-        as the tail of a build error; "" otherwise."""
+        """Why PoCL cannot build here, where it is known, as the tail of a build error; ""
+        otherwise: its kernel cache cannot be written (PoCL writes each program's source
+        there first, so a full disk fails every build), or its compiler does not know this
+        CPU (runtimes.pocl_builds_here)."""
         if "portable" not in self.device.platform.name.lower():
             return ""
+        if not runtimes.pocl_builds_here():
+            return (": PoCL's compiler does not know this CPU; install Intel's CPU runtime, which clrays "
+                    "then uses by itself: pip install 'clrays[intel-cpu]' (make intel-cpu)")
         folder = Path(os.environ.get("POCL_CACHE_DIR")
                       or Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "pocl")
         try:

@@ -17,6 +17,9 @@ from __future__ import annotations
 
 import hashlib
 import os
+import platform
+import subprocess
+import sys
 import tempfile
 from importlib import metadata
 from pathlib import Path
@@ -114,3 +117,71 @@ def register() -> None:
         os.environ["OCL_ICD_VENDORS"] = str(_write_vendors(_vendor_entries(libraries)))
     except OSError:
         pass  # the runtime stays unseen; PoCL and the system's runtimes are there as before
+
+
+# --------------------------------------------------------------------------- PoCL on this CPU
+
+#: Builds a one-line kernel on PoCL's device: exit 0 when it builds, 1 when the build fails,
+#: 2 when there is no PoCL platform.
+_POCL_PROBE = """
+import sys
+import pyopencl as cl
+platforms = [p for p in cl.get_platforms() if "pocl" in p.vendor.lower()]
+if not platforms:
+    sys.exit(2)
+context = cl.Context(platforms[0].get_devices()[:1])
+try:
+    cl.Program(context, "__kernel void probe(__global float *a) { a[0] = 1.0f; }").build()
+except cl.RuntimeError:
+    sys.exit(1)
+"""
+
+
+def _cpu_identity() -> str:
+    """What names this CPU to a compiler: the vendor, family, model and model name of
+    /proc/cpuinfo's first processor (else the platform's description)."""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as cpuinfo:
+            first = cpuinfo.read(16384).split("\n\n", 1)[0]
+    except OSError:
+        return f"{platform.machine()} {platform.processor()}"
+    keys = ("vendor_id", "cpu family", "model", "model name", "CPU implementer", "CPU part")
+    fields = [line for line in first.splitlines() if line.split(":", 1)[0].strip() in keys]
+    return f"{platform.machine()} " + "; ".join(" ".join(line.split()) for line in fields)
+
+
+def pocl_builds_here() -> bool:
+    """Whether PoCL's compiler builds kernels for this CPU. The PoCL that pyopencl's wheel
+    carries (3.0, LLVM 14) names a CPU newer than its LLVM (AMD's Zen 5, say) 'generic',
+    which LLVM's x86 target refuses, so every build fails there; Intel's CPU runtime
+    (`clrays[intel-cpu]`) then serves instead. Found by building a one-line kernel in a
+    child process (this process's loader must not be called yet: see `register`), once per
+    CPU and pyopencl, and kept in the cache; a probe that cannot run at all says yes, so
+    that the build's own error speaks."""
+    try:
+        pyopencl = metadata.version("pyopencl")
+    except metadata.PackageNotFoundError:
+        return True
+    key = hashlib.sha256(f"{_cpu_identity()}|{pyopencl}|{sys.version_info[:2]}".encode()).hexdigest()[:16]
+    verdict = cache_root() / "pocl-builds" / key
+    try:
+        return verdict.read_text().strip() == "yes"
+    except OSError:
+        pass
+    environment = {k: v for k, v in os.environ.items() if k != "OCL_ICD_VENDORS"}
+    try:
+        code = subprocess.run([sys.executable, "-c", _POCL_PROBE], env=environment, timeout=120,
+                              stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL).returncode
+    except (OSError, subprocess.SubprocessError):
+        return True
+    if code not in (0, 1):
+        return True
+    try:
+        verdict.parent.mkdir(parents=True, exist_ok=True)
+        staging = verdict.with_name(f".{key}.{os.getpid()}")
+        staging.write_text("yes\n" if code == 0 else "no\n")
+        staging.replace(verdict)
+    except OSError:
+        pass  # an unwritable cache: probe again next time
+    return code == 0

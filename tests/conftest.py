@@ -7,6 +7,7 @@ import os
 import numpy as np
 import pytest
 
+from clrays import runtimes
 from clrays.scene.geometry import box_triangles
 
 from clrays.scene.model import (Camera, DirectionalLight, Geometry, Image, Medium, Phase, PointLight, Render, Scene,
@@ -15,9 +16,11 @@ from clrays.scene.model import (Camera, DirectionalLight, Geometry, Image, Mediu
 
 #: The test session's OpenCL device: `CLRAYS_TEST_DEVICE` (a `--device` spec, as `make
 #: test-device DEVICE=nvidia` sets it), else PoCL's CPU device whatever CLRAYS_DEVICE says,
-#: so that `make test` runs where CI does. Set as CLRAYS_DEVICE for the whole process, so
-#: the tests that make their own `Renderer()` or run the command line use it too.
-TEST_DEVICE = os.environ.get("CLRAYS_TEST_DEVICE") or "Portable Computing Language"
+#: so that `make test` runs where CI does; on a CPU that PoCL's compiler does not know,
+#: Intel's CPU runtime (which `make` then installs). Set as CLRAYS_DEVICE for the whole
+#: process, so the tests that make their own `Renderer()` or run the command line use it too.
+TEST_DEVICE = os.environ.get("CLRAYS_TEST_DEVICE") or (
+    "Portable Computing Language" if runtimes.pocl_builds_here() else "Intel")
 os.environ["CLRAYS_DEVICE"] = TEST_DEVICE
 #: Whether the spec names PoCL (tests whose bounds are PoCL's arithmetic mark themselves by it).
 TEST_ON_POCL = any(name in TEST_DEVICE.lower() for name in ("portable", "pocl"))
