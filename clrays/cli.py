@@ -36,6 +36,7 @@ from .runs.sweep import axes_from, format_table, run_sweep
 from .scene import files as scene_files
 from .scene.fields import unread_render_keys
 from .scene.limits import MAX_LIGHTS, MAX_SWEEP_POINTS
+from .scene import host_steps
 from .scene.load import load_scene
 from .scene.model import METHODS, RENAMED_METHODS, SHADOW_FILTERS
 from .session import Renderer
@@ -380,7 +381,8 @@ def render(context, scene: Path, method, overrides, camera, frame, output: Path,
     """Render SCENE (a YAML file, or glTF: .glb, .gltf) to an image."""
     check_output_path(output, folder_exists=False)
     check_exposure_applies(exposure, [output])
-    loaded = load_scene(scene, with_aovs(with_camera(overrides, camera), aovs))
+    with host_steps.timed("load"):
+        loaded = load_scene(scene, with_aovs(with_camera(overrides, camera), aovs))
     check_output_path(make_output_folder(output))  # created, as every command creates its output's folder
     for path in pass_paths(output, loaded.render.aovs):
         check_output_path(path)
@@ -449,6 +451,10 @@ def _print_stats(result) -> None:
     if result.shadow_rays is not None:
         click.echo(f"  shadows    {result.shadow_rays} shadow rays (surface samples × lights the maps left undecided)")
     click.echo(f"  device memory {result.device_bytes / 2**20:.1f} MiB")
+    steps = host_steps.taken()
+    if steps:
+        click.echo("  host steps " + ", ".join(f"{step} {ms:.1f} ms" for step, ms in steps.items())
+                   + (" (load holds the steps of reading the scene)" if "load" in steps else ""))
 
 
 def _stage_counts(results) -> str:

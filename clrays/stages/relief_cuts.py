@@ -25,6 +25,7 @@ import math
 
 import numpy as np
 
+from ..scene.geometry import weld
 from ..scene.model import DirectionalLight
 
 #: Crossings one ray gathers at most (cl/relief_cuts.h): the bins are made fine enough that
@@ -61,8 +62,7 @@ def relief_outline(triangles: np.ndarray, light, record=None) -> tuple[np.ndarra
     topology = None if record is None else record.memo.get("relief_cut_edges")
     if topology is None:
         corners = triangles.reshape(-1, 3)
-        _, vertex = np.unique(corners, axis=0, return_inverse=True)
-        vertex = vertex.reshape(-1, 3).astype(np.int64)
+        vertex = weld(corners, ordered=True)[0].reshape(-1, 3)  # "lower" below: first in (x, y, z) order
         start, end = vertex.ravel(), vertex[:, [1, 2, 0]].ravel()
         forward = start < end
         key = np.minimum(start, end) * (int(vertex.max(initial=0)) + 1) + np.maximum(start, end)

@@ -10,6 +10,8 @@ import numpy as np
 
 from ..device import Device, StageTimer
 from ..inputs import see_through
+from ..scene.geometry import weld
+from ..scene.host_steps import timed
 
 
 def keeps_blockers(render) -> bool:
@@ -51,8 +53,7 @@ def edge_windings(geometry) -> np.ndarray:
 def _edge_links(geometry) -> tuple[np.ndarray, np.ndarray]:
     def build() -> tuple[np.ndarray, np.ndarray]:
         corners = geometry.triangles.reshape(-1, 3)
-        _, vertex = np.unique(corners, axis=0, return_inverse=True)
-        vertex = vertex.reshape(-1, 3).astype(np.int64)
+        vertex = weld(corners)[0].reshape(-1, 3)
         start, end = vertex.ravel(), vertex[:, [1, 2, 0]].ravel()  # edge 3t + k: corner k → corner k + 1
         edge_key = np.minimum(start, end) * (int(vertex.max(initial=0)) + 1) + np.maximum(start, end)
         if geometry.translucent:  # no link to or from a translucent triangle
@@ -69,7 +70,7 @@ def _edge_links(geometry) -> tuple[np.ndarray, np.ndarray]:
         windings = (flipped.reshape(-1, 3) << np.arange(3)).sum(axis=1).astype(np.uint8)
         return neighbours.reshape(-1, 3), windings
 
-    return geometry.kept(("edge links",), build)
+    return geometry.kept(("edge links",), timed("edge links")(build))
 
 
 def shaft_edge_sides(device: Device, epipolar, vertices, windings, count: int, timer: StageTimer):
