@@ -9,7 +9,7 @@ STAMP  := $(VENV)/.installed
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e '.[test,bench,distributed,video]'
+	$(BIN)/python -m pip install -q -e '.[test,bench,distributed,video,web]'
 	touch $(STAMP)
 
 demo: $(STAMP)
@@ -30,7 +30,7 @@ INTEL_STAMP := $(VENV)/.intel-cpu
 NEEDS_INTEL := $(if $(findstring intel,$(shell echo '$(DEVICE)' | tr 'A-Z' 'a-z')),$(INTEL_STAMP))
 
 $(INTEL_STAMP): $(STAMP)
-	$(BIN)/python -m pip install -q -e '.[test,bench,distributed,video,intel-cpu]'
+	$(BIN)/python -m pip install -q -e '.[test,bench,distributed,video,web,intel-cpu]'
 	touch $(INTEL_STAMP)
 
 intel-cpu: $(INTEL_STAMP)
