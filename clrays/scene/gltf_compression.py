@@ -179,7 +179,7 @@ def decode_draco(reader: "_Reader", primitive: dict, path: str) -> None:
             return
         _missing(reader, DRACO, where)
     if reader.get(primitive, "mode", path, "int", _TRIANGLES) != _TRIANGLES:
-        reader.fail(f"{path}.mode", f"4 (TRIANGLES) for a Draco primitive (clrays decodes triangle lists)",
+        reader.fail(f"{path}.mode", "4 (TRIANGLES) for a Draco primitive (clrays decodes triangle lists)",
                     primitive["mode"])
     if "indices" not in accessors:
         reader.fail(path, "an indices accessor for the Draco primitive's faces", "none")
@@ -194,7 +194,7 @@ def decode_draco(reader: "_Reader", primitive: dict, path: str) -> None:
         reader.fail(f"accessors.{accessors['POSITION']}.count", f"at most {MAX_DECODED_VERTICES} vertices "
                     "(docs/limits.md)", vertices)
     _charge(reader, sum(size for _, size in declared.values()), where)
-    view, data, offset, length = reader.view(reader.index(extension, "bufferView", where, "bufferViews"))
+    _, data, offset, length = reader.view(reader.index(extension, "bufferView", where, "bufferViews"))
     stream = bytes(data[offset:offset + length])
     header = draco_header_counts(stream)
     if header is not None:  # checked before decoding: a few bytes of header may ask for millions of faces

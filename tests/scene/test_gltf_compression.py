@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import base64
 import importlib.util
-import math
 import sys
 from pathlib import Path
 
@@ -296,6 +295,16 @@ def test_a_draco_header_that_disagrees_with_the_accessors_is_refused_before_deco
     monkeypatch.setattr(DracoPy, "decode", lambda _: pytest.fail("decoded a stream its header already refused"))
     with pytest.raises(SceneError, match=rf"meshes.0.primitives.0.extensions.{DRACO}: expected 319 faces, as "
                                          rf"accessors.2.count says, got 320 in the Draco header"):
+        _import(tmp_path, builder.glb(), "draco.glb")
+
+
+def test_a_draco_strip_is_refused(tmp_path):
+    """Draco decodes triangle lists: a primitive of another mode is one line."""
+    pytest.importorskip("DracoPy")
+    builder = _draco()
+    builder.doc["meshes"][1]["primitives"][0]["mode"] = 5
+    with pytest.raises(SceneError, match=r"^draco.glb: meshes.1.primitives.0.mode: expected 4 \(TRIANGLES\) for a "
+                                         r"Draco primitive \(clrays decodes triangle lists\), got 5$"):
         _import(tmp_path, builder.glb(), "draco.glb")
 
 
