@@ -3,17 +3,19 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
+# The extras the suite needs (pyproject.toml): web is the Draco and meshopt decoders.
+EXTRAS := test,bench,distributed,video,web
 
 .PHONY: demo test test-device test-slow bench info intel-cpu clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e '.[test,bench,distributed,video]'
+	$(BIN)/python -m pip install -q -e '.[$(EXTRAS)]'
 	@# PoCL's compiler (LLVM 14) does not know the newest CPUs: Intel's CPU runtime serves there.
 	$(BIN)/python -c 'import sys; from clrays import runtimes; sys.exit(not runtimes.pocl_builds_here())' \
 	  || { echo "PoCL cannot build for this CPU: installing Intel's CPU runtime (clrays[intel-cpu])"; \
-	       $(BIN)/python -m pip install -q -e '.[test,bench,distributed,video,intel-cpu]'; }
+	       $(BIN)/python -m pip install -q -e '.[$(EXTRAS),intel-cpu]'; }
 	touch $(STAMP)
 
 demo: $(STAMP)
@@ -34,7 +36,7 @@ INTEL_STAMP := $(VENV)/.intel-cpu
 NEEDS_INTEL := $(if $(findstring intel,$(shell echo '$(DEVICE)' | tr 'A-Z' 'a-z')),$(INTEL_STAMP))
 
 $(INTEL_STAMP): $(STAMP)
-	$(BIN)/python -m pip install -q -e '.[test,bench,distributed,video,intel-cpu]'
+	$(BIN)/python -m pip install -q -e '.[$(EXTRAS),intel-cpu]'
 	touch $(INTEL_STAMP)
 
 intel-cpu: $(INTEL_STAMP)

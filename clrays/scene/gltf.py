@@ -34,6 +34,7 @@ import numpy as np
 
 from ..errors import SceneError
 from . import geometry as primitives
+from . import gltf_compression
 from .animation import Animation
 from .files import FileRefused, read_regular_file
 from .fields import ANIMATION, MAX_POWER
@@ -49,8 +50,8 @@ FLOAT32_MAX = float(np.finfo(np.float32).max)
 FLOAT64_MAX = float(np.finfo(np.float64).max)
 GLB_MAGIC = b"glTF"
 _CHUNK_JSON, _CHUNK_BIN = 0x4E4F534A, 0x004E4942
-#: Extensions a file may require: the only one clrays reads. Any other required one is refused by name.
-SUPPORTED_EXTENSIONS = ("KHR_lights_punctual",)
+#: Extensions a file may require: those clrays reads. Any other required one is refused by name.
+SUPPORTED_EXTENSIONS = ("KHR_lights_punctual",) + gltf_compression.EXTENSIONS
 
 #: componentType -> (numpy little-endian dtype, largest value for `normalized`)
 _COMPONENTS = {5120: ("<i1", 127.0), 5121: ("<u1", 255.0), 5122: ("<i2", 32767.0), 5123: ("<u2", 65535.0),
@@ -171,6 +172,7 @@ class _Reader:
         self._items: dict[str, list] = {}
         self._buffer_bytes = 0
         self.image_means: dict[int, np.ndarray] = {}  # images.i → its linear mean colour, decoded once
+        self.decoded: dict[tuple[str, int], Any] = {}  # compressed views and accessors, decoded (gltf_compression)
 
     def fail(self, path: str, expected: str, got: Any) -> NoReturn:
         raise SceneError(f"{self.file}: {path}: expected {expected}, got {_show(got)}")
@@ -291,13 +293,22 @@ class _Reader:
         byteLength), the view checked to lie within the buffer."""
         path = f"bufferViews.{index}"
         view = self.items("bufferViews")[index]
-        data = self.buffer(self.index(view, "buffer", path, "buffers"))
-        offset = self.get(view, "byteOffset", path, "int", 0, lo=0)
-        length = self.get(view, "byteLength", path, "int", lo=1)
+        decoded = gltf_compression.meshopt_view(self, index, view)  # EXT_meshopt_compression
+        if decoded is not None:
+            return decoded
+        return (view, *self.byte_range(view, path))
+
+    def byte_range(self, obj: dict, path: str) -> tuple[bytes, int, int]:
+        """The bytes obj's `buffer`, `byteOffset` and `byteLength` name (a view's, or a
+        compressed view's source): (the buffer's bytes, the offset, the length), checked to
+        lie within the buffer."""
+        data = self.buffer(self.index(obj, "buffer", path, "buffers"))
+        offset = self.get(obj, "byteOffset", path, "int", 0, lo=0)
+        length = self.get(obj, "byteLength", path, "int", lo=1)
         if offset + length > len(data):
             self.fail(f"{path}.byteLength", f"a view within its buffer's {len(data)} bytes (byteOffset {offset})",
                       length)
-        return view, data, offset, length
+        return data, offset, length
 
     def accessor(self, index: int, path: str, types: tuple[str, ...], components: tuple[int, ...]) -> np.ndarray:
         """Accessor `index` as float64 (count, width) (a SCALAR's (count,)), checked against its view's bytes."""
@@ -317,7 +328,9 @@ class _Reader:
         dtype, largest = _COMPONENTS[component]
         size = np.dtype(dtype).itemsize
         element = width * size
-        if "bufferView" not in acc:  # all zeros, by the spec; bounded by the same count as a view's
+        if ("accessors", index) in self.decoded:  # KHR_draco_mesh_compression (gltf_compression.decode_draco)
+            values = self.decoded[("accessors", index)]
+        elif "bufferView" not in acc:  # all zeros, by the spec; bounded by the same count as a view's
             if count * element > MAX_GLTF_BYTES:
                 self.fail(f"{where}.count", f"at most {MAX_GLTF_BYTES // element} elements", count)
             values = np.zeros((count, width))
@@ -426,6 +439,7 @@ def _check_header(reader: _Reader) -> None:
     if unsupported:
         reader.fail("extensionsRequired", f"only extensions clrays reads ({', '.join(SUPPORTED_EXTENSIONS)})",
                     ", ".join(map(str, unsupported)))
+    gltf_compression.check_required(reader, required)  # their decoders, optional extras
 
 
 # --------------------------------------------------------------------------- nodes
@@ -659,6 +673,7 @@ def _meshes(reader: _Reader, graph: NodeGraph, world: dict[int, np.ndarray], ani
 def _primitive(reader: _Reader, primitive: dict, path: str):
     """(local triangles, their smooth normals, albedo, vertices, faces) in spatial order, or None for no surface."""
     attributes = reader.get(primitive, "attributes", path, "dict")
+    gltf_compression.decode_draco(reader, primitive, path)  # KHR_draco_mesh_compression: its accessors' data
     position = reader.index(attributes, "POSITION", f"{path}.attributes", "accessors")
     vertices = reader.accessor(position, f"{path}.attributes.POSITION", ("VEC3",), (5126,))
     faces = _primitive_faces(reader, primitive, path, len(vertices))
