@@ -34,6 +34,7 @@ from .runs.sequence import (check_pattern, check_video_path, lock_folder, parse_
 from .runs.video import DEFAULT_CRF, VIDEO_OPTIONS, video_encoder_options
 from .runs.sweep import axes_from, format_table, run_sweep
 from .scene import files as scene_files
+from .scene import yaml_tree
 from .scene.fields import unread_render_keys
 from .scene.limits import MAX_LIGHTS, MAX_SWEEP_POINTS
 from .scene import host_steps
@@ -45,8 +46,10 @@ from .session import Renderer
 SCENE, SWEEP, BENCH, OUTPUT, RUN, DEVICE, OTHER = "Scene", "Sweep", "Bench", "Output", "Run", "Device", "Other"
 SECTIONS = (SCENE, SWEEP, BENCH, OUTPUT, RUN, DEVICE)
 
-#: Outputs that --exposure changes: 8-bit images; .exr and .npy keep linear radiance.
-EXPOSED_FORMATS = (".png", ".gif", ".webp")
+#: Outputs that --exposure changes, by what a command writes: 8-bit images and video; .exr
+#: and .npy keep linear radiance.
+EXPOSED_IMAGES = {".png": "PNG"}
+EXPOSED_VIDEO = {".mp4": "MP4", ".gif": "GIF", ".webp": "WebP"}
 #: `exact` runs estimated to take at least this long are announced up front.
 EXACT_ESTIMATE_MIN_S = 5.0
 
@@ -111,11 +114,10 @@ class Clrays(click.Group):
     def format_commands(self, context: click.Context, formatter: click.HelpFormatter) -> None:
         commands = [(name, self.commands[name]) for name in self.list_commands(context)
                     if not self.commands[name].hidden]
-        limit = formatter.width - 6 - max(len(name) for name, _ in commands)
         sections: dict[str, list[tuple[str, str]]] = {}
-        for name, command in commands:
+        for name, command in commands:  # each help's first sentence whole, wrapped rather than cut at "..."
             sections.setdefault(getattr(command, "section", "Commands"), []).append(
-                (name, command.get_short_help_str(limit)))
+                (name, command.get_short_help_str(limit=1000)))
         _write_sections(formatter, sections)
 
     def invoke(self, context: click.Context):
@@ -177,7 +179,9 @@ def camera_option():
 
 def with_camera(overrides, camera: str | None) -> tuple[str, ...]:
     """The overrides, and `gltf.camera` when --camera names one (JSON-quoted: any name is one YAML string)."""
-    return tuple(overrides) + ((f"gltf.camera={json.dumps(camera)}",) if camera is not None else ())
+    if camera is None:
+        return tuple(overrides)
+    return tuple(overrides) + (yaml_tree.Override(f"gltf.camera={json.dumps(camera)}", f"--camera {camera}"),)
 
 
 def aov_option():
@@ -196,7 +200,8 @@ def with_aovs(overrides, aovs: str | None) -> tuple[str, ...]:
         problem = pass_problem(name, MAX_LIGHTS)
         if problem is not None:
             raise ClraysError(f"--aov: expected {problem}, got {name!r}")
-    return tuple(overrides) + (f"render.aovs=[{', '.join(json.dumps(name) for name in names)}]",)
+    aovs_set = f"render.aovs=[{', '.join(json.dumps(name) for name in names)}]"
+    return tuple(overrides) + (yaml_tree.Override(aovs_set, f"--aov {aovs}"),)
 
 
 def _finite_exposure(context: click.Context, parameter, value: float) -> float:
@@ -213,11 +218,14 @@ def exposure_option(applies_to: str):
                   group=OUTPUT, help=f"{applies_to}: scale radiance by 2^EV before sRGB encoding.")
 
 
-def check_exposure_applies(exposure: float, outputs: list[str]) -> None:
+def check_exposure_applies(exposure: float, outputs: list[str], exposed: dict[str, str] = EXPOSED_IMAGES) -> None:
     """Refuse an --exposure that would change none of the outputs: .exr and .npy keep
-    linear radiance as rendered."""
-    if exposure != 0.0 and not any(Path(str(out)).suffix.lower() in EXPOSED_FORMATS for out in outputs):
-        raise OutputError(f"--exposure {exposure:g}: applies only to PNG, GIF and WebP output; "
+    linear radiance as rendered. `exposed`: the suffixes (and format names) of what the
+    command writes that --exposure changes."""
+    if exposure != 0.0 and not any(Path(str(out)).suffix.lower() in exposed for out in outputs):
+        names = list(exposed.values())
+        formats = names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
+        raise OutputError(f"--exposure {exposure:g}: applies only to {formats} output; "
                           f"{', '.join(str(out) for out in outputs)} keeps linear radiance (drop --exposure)")
 
 
@@ -334,7 +342,8 @@ def _resumable(context: click.Context, done: Callable[[], str]):
 @click.option("--debug", is_flag=True, expose_value=False, callback=_set_debug,
               help="Show the traceback of an error (also accepted after the command).")
 @click.version_option(package_name="clrays")
-def main() -> None:
+@click.pass_context
+def main(context: click.Context) -> None:
     """Render volumetric shadows (light shafts in fog) with OpenCL.
 
     \b
@@ -347,6 +356,9 @@ def main() -> None:
       clrays bench scenes/demo.yaml -r 640x360
       clrays info
     """
+    # An override's messages name the option that gave it (the Python API's are "override")
+    yaml_tree.override_origin = "--set"
+    context.call_on_close(lambda: setattr(yaml_tree, "override_origin", "override"))
 
 
 @main.command(section="Render", epilog="""
@@ -530,7 +542,8 @@ def sequence(context, scene, frames, method, overrides, camera, pattern, video, 
         if video is not None:
             check_video_path(video)
             encoder_options = video_encoder_options(video, crf, video_options)
-        check_exposure_applies(exposure, [pattern] + ([video] if video is not None else []))
+        check_exposure_applies(exposure, [pattern] + ([video] if video is not None else []),
+                               EXPOSED_IMAGES | EXPOSED_VIDEO)
         overrides = with_aovs(with_camera(overrides, camera), aovs)
         loaded = load_scene(scene, overrides)
         chosen = parse_frames(frames, scene_frames(loaded))
@@ -666,7 +679,8 @@ def sweep(context, scene, overrides, camera, reference, method, out_dir, image_f
                 host = ", ".join(f"{label} {float(row[column]):.0f} ms" for column, label in
                                  (("reference_ms", "reference"), ("edges_ms", "depth edges"), ("warmup_ms", "warm-up"))
                                  if float(row.get(column) or 0) > 0)
-                click.echo(f"clrays: point {point.index}: {point.label}: {float(row['wall_ms']):.0f} ms"
+                swept = f": {point.label}" if point.label else ""  # fixed values alone sweep nothing
+                click.echo(f"clrays: point {point.index}{swept}: {float(row['wall_ms']):.0f} ms"
                            + (f" (+ {host})" if host else ""), err=True)
 
         with _executor(scheduler, workers, device) as executor:

@@ -54,8 +54,9 @@ def _stderr_line(text: str) -> None:
     print(text, file=sys.stderr, flush=True)
 
 
-#: Where a Device says, once, that it is building kernels no earlier run on this device
-#: built (about 10 s on a 2-core CPU): one line on stderr by default; None says nothing.
+#: Where a Device says that it is building kernels no earlier run on this device built
+#: (about 10 s on a 2-core CPU at the first run; a new feature or size builds a few more
+#: programs, 10-50 s): one line on stderr by default; None says nothing.
 build_notice: Callable[[str], None] | None = _stderr_line
 #: Whether the OpenCL compiler's own output ("1 warning generated." and the like) reaches
 #: stderr; the CLI's --debug sets it. Otherwise it is kept out of the terminal.
@@ -305,7 +306,8 @@ class Device:
         #: frame's.
         self.host_waits = 0
         self._deferred_waits: list | None = None  # (deferred_waits)
-        self._announced = False
+        self._announced = False  # whether this build burst (builds until a frame ends) was announced
+        self._digest: str | None = None  # _kernels_digest, read once
 
     @property
     def is_cpu(self) -> bool:
@@ -345,7 +347,7 @@ class Device:
         if key not in self._programs:
             path = kernel_dir() / f"{stage}.cl"
             options = build_options(defines, self._constants)
-            marker = self._first_build()
+            marker = self._announce_build(stage, options)
             start = time.perf_counter()
             try:
                 with warnings.catch_warnings(), _compiler_output():
@@ -364,18 +366,28 @@ class Device:
                     marker.touch()
         return self._programs[key]
 
-    def _first_build(self) -> Path | None:
-        """At this Device's first build: announce it (build_notice) when no earlier run has
-        built these kernels for this device, and return the marker file that says one has
-        (to touch once the build succeeds); else None. The driver caches the binaries."""
-        if self._announced:
-            return None
-        self._announced = True
-        marker = runtimes.cache_root() / "built" / _kernels_digest(self.device)
+    def _announce_build(self, stage: str, options: list[str]) -> Path | None:
+        """Before building a program: the marker file that says an earlier run built it on this
+        device (to touch once the build succeeds), or None where one did (the driver's cache
+        holds its binary, and the build is quick). The first program of a burst (the builds
+        until the next frame ends) that no run built is announced with one line (build_notice):
+        the first run's, or what is new."""
+        if self._digest is None:
+            self._digest = _kernels_digest(self.device)
+        built = runtimes.cache_root() / "built-programs" / self._digest
+        marker = built / hashlib.sha256("\0".join([stage, *options]).encode()).hexdigest()[:24]
         if marker.exists():
             return None
-        if build_notice is not None:
-            build_notice(f"building OpenCL kernels for {self.name} (first run, cached after)")
+        if not self._announced and build_notice is not None:
+            if built.is_dir():
+                defines = [option[2:] for option in options[len(self._constants) + 1:]]  # the stage's own
+                what = f"{stage}{' with ' + ' '.join(defines) if defines else ''}"
+                what = what if len(what) <= 100 else what[:97] + "..."
+                build_notice(f"building OpenCL kernels for {self.name}: {what} and any more this frame needs "
+                             f"(new settings, cached after)")
+            else:
+                build_notice(f"building OpenCL kernels for {self.name} (first run, cached after)")
+        self._announced = True
         return marker
 
     def kernel(self, stage: str, name: str, defines: dict[str, object] | None = None):
@@ -450,7 +462,8 @@ class Device:
     def end_frame(self, frame_bytes: int) -> None:
         """After a frame that allocated `frame_bytes` device bytes: the pool lets go of the
         buffers it holds unused when they are more than POOL_HELD_FRAMES of the largest of
-        the last POOL_WINDOW frames."""
+        the last POOL_WINDOW frames. The next build starts a new burst (`_announce_build`)."""
+        self._announced = False
         if self._pool is None:
             return
         self._recent_frame_bytes.append(frame_bytes)

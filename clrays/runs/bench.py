@@ -44,7 +44,7 @@ from ..errors import ClraysError
 from ..image_io import make_folder
 from ..session import Renderer
 from ..scene.costs import with_derived_sizes
-from ..scene.model import Scene
+from ..scene.model import METHODS, Scene
 from ..scene.load import load_scene
 from .references import EXACT, ReferenceCache
 
@@ -262,8 +262,7 @@ def run(scene_paths=DEFAULT_SCENES, resolutions=((640, 360),), repeats: int = 5,
                                error.rmse, error.p99, error.mean, result.device_bytes / 2**20, stage_ms,
                                os.getloadavg()[0], cpu_ms)
             results.append(point)
-            log(f"  {method:8} {label:44} {frame_ms:9.1f} ms (cpu {cpu_ms:9.1f})  rmse {error.rmse:7.3%}  "
-                f"p99 {error.p99:7.3%}  load {point.load_average:4.1f}")
+            log(point_line(point))
             return point
 
         mine = [point_at(method, label, overrides) for method, label, overrides in points]
@@ -275,6 +274,12 @@ def run(scene_paths=DEFAULT_SCENES, resolutions=((640, 360),), repeats: int = 5,
                                                            {"steps": steps, "shadow_map": shadow_map}),
                         with_derived_sizes(scene).render.shadow_map, targets)
     return results
+
+
+def point_line(point: BenchPoint) -> str:
+    """A point's line of the console table, its columns aligned whatever the method."""
+    return (f"  {point.method:{max(map(len, METHODS))}} {point.setting:44} {point.frame_ms:9.1f} ms "
+            f"(cpu {point.cpu_ms:9.1f})  rmse {point.rmse:7.3%}  p99 {point.p99:7.3%}  load {point.load_average:4.1f}")
 
 
 def cheapest_at(points: list[BenchPoint], method: str, target: float) -> BenchPoint | None:
@@ -355,6 +360,9 @@ def figure_of(points: list[BenchPoint], targets=RMSE_TARGETS):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    def percent(fraction: float) -> float:  # the axis in percent, as the tables; 0 drawn at 0.001 % on the log scale
+        return 100 * max(fraction, 1e-5)
+
     groups = list(dict.fromkeys((p.scene, p.resolution) for p in points))
     columns = min(len(groups), 2)
     rows = math.ceil(len(groups) / columns)
@@ -367,19 +375,19 @@ def figure_of(points: list[BenchPoint], targets=RMSE_TARGETS):
         group = [p for p in points if (p.scene, p.resolution) == key]
         for method in dict.fromkeys(p.method for p in group):
             mine = sorted((p for p in group if p.method == method), key=lambda p: p.frame_ms)
-            axis.scatter([p.frame_ms for p in mine], [max(p.rmse, 1e-5) for p in mine], s=18,
+            axis.scatter([p.frame_ms for p in mine], [percent(p.rmse) for p in mine], s=18,
                          color=colours[method], label=method, alpha=0.8)
             front = pareto_front(mine)
-            axis.plot([p.frame_ms for p in front], [max(p.rmse, 1e-5) for p in front], color=colours[method], lw=1.2)
+            axis.plot([p.frame_ms for p in front], [percent(p.rmse) for p in front], color=colours[method], lw=1.2)
         overall = pareto_front(group)
-        axis.scatter([p.frame_ms for p in overall], [max(p.rmse, 1e-5) for p in overall], s=70,
+        axis.scatter([p.frame_ms for p in overall], [percent(p.rmse) for p in overall], s=70,
                      facecolors="none", edgecolors="black", label="Pareto front (all)")
         for target in targets:
-            axis.axhline(target, color="grey", ls=":", lw=0.8)
+            axis.axhline(percent(target), color="grey", ls=":", lw=0.8)
         axis.set_xscale("log")
         axis.set_yscale("log")
         axis.set_xlabel("frame time (ms, median)")
-        axis.set_ylabel("relative RMSE vs exact")
+        axis.set_ylabel("relative RMSE vs exact (%)")
         axis.set_title(f"{key[0]} {key[1]}")
         axis.legend(fontsize=8)
     for axis in axes.ravel()[len(groups):]:

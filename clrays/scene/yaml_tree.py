@@ -30,9 +30,8 @@ _MERGE_TAG = "tag:yaml.org,2002:merge"
 if yaml.__with_libyaml__:
     class _Loader(yaml.cyaml.CParser, yaml.constructor.SafeConstructor, yaml.resolver.Resolver):
         """The safe loader on libyaml's parser and composer (the parser alone is about 20
-        times faster than PyYAML's, with the same line and column), reading YAML 1.2 floats
-        without a dot (1e3, -2E-4) and none of YAML 1.1's base-60 numbers (`1:30` stays
-        text, not 90)."""
+        times faster than PyYAML's, with the same line and column), reading numbers as YAML
+        1.2's core schema does (`_CORE_INT`, `_CORE_FLOAT`)."""
 
         def __init__(self, text: str):
             yaml.cyaml.CParser.__init__(self, text)
@@ -40,30 +39,44 @@ if yaml.__with_libyaml__:
             yaml.resolver.Resolver.__init__(self)
 else:  # pragma: no cover - PyYAML built without libyaml
     class _Loader(yaml.SafeLoader):
-        """The safe loader, reading YAML 1.2 floats without a dot (1e3, -2E-4) and none of
-        YAML 1.1's base-60 numbers (`1:30` stays text, not 90)."""
+        """The safe loader, reading numbers as YAML 1.2's core schema does."""
 
 
-# YAML 1.1's int and float patterns (as PyYAML writes them) without their base-60 branch,
-# which reads `spp: 1:30` as 90; other resolvers (bool, null, ...) stay as they are.
-_NUMBERS = {
-    _INT_TAG: re.compile(r"""^(?:[-+]?0b[0-1_]+
-                    |[-+]?0[0-7_]+
-                    |[-+]?(?:0|[1-9][0-9_]*)
-                    |[-+]?0x[0-9a-fA-F_]+)$""", re.X),
-    _FLOAT_TAG: re.compile(r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+][0-9]+)?
-                    |\.[0-9][0-9_]*(?:[eE][-+][0-9]+)?
-                    |[-+]?\.(?:inf|Inf|INF)
-                    |\.(?:nan|NaN|NAN))$""", re.X),
-}
-_Loader.yaml_implicit_resolvers = {
-    first: [(tag, _NUMBERS.get(tag, regexp)) for tag, regexp in resolvers]
+# The one number grammar of scene files and `--set`: YAML 1.2's core schema (YAML 1.2.2 §10.3.2).
+# PyYAML resolves YAML 1.1's, whose floats need a dot and a signed exponent (`1.5e2` and `1e3`
+# were text), and which reads `1_000`, `0b1`, `010` (octal 8) and the base-60 `1:30` (90) as
+# numbers. Here those are text (then refused where a number belongs), `010` is ten and `0o10`
+# eight. Other tags (bool, null, ...) resolve as PyYAML does.
+_CORE_INT = re.compile(r"[-+]?[0-9]+|0o[0-7]+|0x[0-9a-fA-F]+")
+_CORE_FLOAT = re.compile(r"[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?"
+                         r"|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN)")
+
+
+def core_int(text: str) -> int:
+    """A YAML 1.2 core-schema integer: decimal with a sign or none, `0o` octal or `0x` hex."""
+    if not _CORE_INT.fullmatch(text):
+        raise ValueError("not a YAML 1.2 integer")
+    base = {"0o": 8, "0x": 16}.get(text[:2], 10)
+    return int(text if base == 10 else text[2:], base)
+
+
+def core_float(text: str) -> float:
+    """A YAML 1.2 core-schema float (`.5`, `1.`, `1.5e2`, `6.02e+23`, `-.inf`, `.nan`; every
+    integer too, as `!!float 3`)."""
+    if not _CORE_FLOAT.fullmatch(text):
+        raise ValueError("not a YAML 1.2 float")
+    special = text.lower().replace(".", "", 1) if text.lower().lstrip("+-") in (".inf", ".nan") else text
+    return float(special)
+
+
+_Loader.yaml_implicit_resolvers = {  # a copy without YAML 1.1's number resolvers (PyYAML's own stay as they are)
+    first: [(tag, regexp) for tag, regexp in resolvers if tag not in (_INT_TAG, _FLOAT_TAG)]
     for first, resolvers in yaml.resolver.Resolver.yaml_implicit_resolvers.items()}
-_Loader.add_implicit_resolver(
-    _FLOAT_TAG,
-    re.compile(r"^[-+]?[0-9][0-9_]*[eE][-+]?[0-9]+$"),
-    list("-+0123456789"),
-)
+# int before float: every integer also matches the float pattern.
+_Loader.add_implicit_resolver(_INT_TAG, re.compile(rf"(?:{_CORE_INT.pattern})\Z"), list("-+0123456789"))
+_Loader.add_implicit_resolver(_FLOAT_TAG, re.compile(rf"(?:{_CORE_FLOAT.pattern})\Z"), list("-+.0123456789"))
+_Loader.add_constructor(_INT_TAG, lambda loader, node: core_int(loader.construct_scalar(node)))
+_Loader.add_constructor(_FLOAT_TAG, lambda loader, node: core_float(loader.construct_scalar(node)))
 
 
 @dataclass(eq=False)
@@ -71,7 +84,8 @@ class Node:
     """One value of the tree and where it was written.
 
     value is a dict[str, Node] (mapping), a list[Node] (sequence) or a plain scalar
-    (int, float, str, bool, None, ...). where is "file:line:col" or "--set key=value";
+    (int, float, str, bool, None, ...). where is "file:line:col" or "--set key=value"
+    (`apply_override`);
     path is the dotted key path ("lights.0.cone_deg", "" for the top level).
     """
 
@@ -88,8 +102,25 @@ class Node:
         return join(self.path, key)
 
     def fail(self, expected: str, got: str | None = None) -> NoReturn:
-        raise SceneError(f"{self.where}: {self.label}: expected {expected}, "
-                         f"got {show(self) if got is None else got}")
+        got = show(self) + _hint(self.value, expected) if got is None else got
+        raise SceneError(f"{self.where}: {self.label}: expected {expected}, got {got}")
+
+
+_COMMA_NUMBERS = re.compile(r"\s*[-+.0-9eE]+(?:\s*,\s*[-+.0-9eE]+)+\s*")
+
+
+def _hint(value: Any, expected: str) -> str:
+    """What a text written where a list or a number belongs was meant as, as the tail of a
+    message: `260,230,190` is a list without its brackets; `1_000` a number only in YAML 1.1."""
+    if not isinstance(value, str):
+        return ""
+    if "list" in expected and _COMMA_NUMBERS.fullmatch(value):
+        return f" (a list is written in brackets: [{', '.join(part.strip() for part in value.split(','))}])"
+    # PyYAML's own resolver reads YAML 1.1: a number there is one this loader left as text
+    if ("number" in expected or "integer" in expected) and \
+            yaml.resolver.Resolver().resolve(yaml.ScalarNode, value, (True, False)) in (_INT_TAG, _FLOAT_TAG):
+        return " (a number in YAML 1.1 only: clrays reads YAML 1.2's, without `_`, `0b` or base 60)"
+    return ""
 
 
 def show(node: Node | Any, limit: int = 60) -> str:
@@ -351,9 +382,28 @@ def compose(text: str, path: str, where: Callable[[yaml.Mark], str | Place], fal
 # --------------------------------------------------------------------------- overrides
 
 
+#: What messages call a plain `key.path=value` override: the Python API's `overrides=` by
+#: default; the command line sets "--set".
+override_origin = "override"
+
+
+class Override(str):
+    """A `key.path=value` override that names what the user wrote to give it (`given`, such
+    as `--aov depth`), for messages to show instead of the override they never typed."""
+
+    def __new__(cls, text: str, given: str):
+        override = super().__new__(cls, text)
+        override.given = given
+        return override
+
+    def __reduce__(self):  # pickled (to a worker process) with what it names
+        return Override, (str(self), self.given)
+
+
 def apply_override(root: Node, text: str) -> None:
     """Splice one `key.path=value` override into the tree (creating missing mappings)."""
-    where = f"--set {text if len(text) <= 80 else text[:77] + '...'}"  # a message shows a value, not all of it
+    given = text.given if isinstance(text, Override) else f"{override_origin} {text}"
+    where = given if len(given) <= 90 else given[:87] + "..."  # a message shows a value, not all of it
     key, sep, value_text = text.partition("=")
     key = key.strip()
     parts = key.split(".")
@@ -420,6 +470,9 @@ def typed(node: Node, kinds: dict[str, tuple[tuple[str, ...], tuple[str, ...]]],
           common: tuple[str, ...] = ()) -> tuple[str, dict[str, Node]]:
     """A mapping whose `type` names one of `kinds` (type -> (required keys, optional keys));
     returns (type, mapping) with the keys checked against that type (plus `common`)."""
+    if isinstance(node.value, str) and node.value in kinds:  # `phase: hg` for `phase: {type: hg, g: 0.5}`
+        written = ", ".join([f"type: {node.value}"] + [f"{key}: ..." for key in kinds[node.value][0]])
+        node.fail("a mapping", f"{show(node)} (write {{{written}}})")
     if not isinstance(node.value, dict) or "type" not in node.value:
         everything = [k for req, opt in kinds.values() for k in req + opt] + list(common)
         mapping(node, required=("type",), optional=everything)
@@ -528,7 +581,9 @@ def rgb(node: Node | None, lo: float = 0.0, hi: float | None = None, *,
     if node is None:
         assert default is not None
         return np.full(3, float(default))
+    what = f"a list of 3 numbers (RGB) or a single {range_text('number', lo, hi)}"
     if isinstance(node.value, list):
-        what = f"a list of 3 numbers (RGB) or a single {range_text('number', lo, hi)}"
         return numbers(node, 3, what, lo, hi)
+    if isinstance(node.value, str) and _COMMA_NUMBERS.fullmatch(node.value):  # `260,230,190`: brackets left out
+        node.fail(what)
     return np.full(3, number(node, lo, hi))

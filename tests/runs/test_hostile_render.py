@@ -98,7 +98,7 @@ def test_exposure_must_be_a_finite_number_of_stops(tmp_path, value):
 def test_exposure_on_linear_output_is_refused(tmp_path, name):
     code, out = run("render", "scenes/demo.yaml", "-o", tmp_path / name, "--exposure", "2")
     assert code == 1
-    assert one_line(out).startswith("clrays: error: --exposure 2: applies only to PNG, GIF and WebP output")
+    assert one_line(out).startswith("clrays: error: --exposure 2: applies only to PNG output;")
     code, out = run("sequence", "scenes/demo.yaml", "-o", tmp_path / "f_{}.npy", "--exposure", "2")
     assert code == 1 and "applies only to PNG" in one_line(out)
 

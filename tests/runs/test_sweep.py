@@ -213,7 +213,7 @@ def test_errors_from_python():
 
 
 def test_bad_value_fails_before_rendering(scene_file, tmp_path):
-    with pytest.raises(SceneError, match=r"--set camera\.fov_deg=200"):
+    with pytest.raises(SceneError, match=r"^override camera\.fov_deg=200"):
         run_sweep(scene_file, {"medium.sigma_s": [0.01, 0.02], "camera.fov_deg": [40, 200]}, tmp_path / "o")
     assert not list((tmp_path / "o").glob("*.png")) if (tmp_path / "o").exists() else True
 

@@ -237,7 +237,7 @@ def test_g_needs_an_hg_medium():
 
 
 def test_error_from_an_override_names_it():
-    with pytest.raises(SceneError, match=r"^--set animation.frames=\[3,1\]: animation\.frames\.1: expected"):
+    with pytest.raises(SceneError, match=r"^override animation.frames=\[3,1\]: animation\.frames\.1: expected"):
         parse_scene(BASE + "animation: {frames: [0, 9]}\n", overrides=["animation.frames=[3,1]"])
 
 

@@ -327,19 +327,19 @@ def test_override_whitespace_and_equals_in_value():
 
 
 OVERRIDE_ERRORS = [
-    ("render.steps=abc", r"^--set render\.steps=abc: render\.steps: expected an integer in \[1, 65536\], got 'abc'$"),
-    ("render.stepz=4", r"^--set render\.stepz=4: render\.stepz: unknown key \(did you mean 'steps'\?\)"),
-    ("colour=1", r"^--set colour=1: colour: unknown key"),
-    ("lights.0.power=1", r"^--set lights\.0\.power=1: lights\.0\.power: unknown key"),
-    ("render.steps", r"^--set render\.steps: expected key\.path=value, got 'render\.steps'$"),
-    ("=3", r"^--set =3: expected key\.path=value"),
-    ("render..steps=3", r"^--set render\.\.steps=3: expected key\.path=value"),
-    ("lights.5.intensity=1", r"^--set lights\.5\.intensity=1: lights\.5: expected a list index in \[0, 0\]"),
+    ("render.steps=abc", r"^override render\.steps=abc: render\.steps: expected an integer in \[1, 65536\], got 'abc'$"),
+    ("render.stepz=4", r"^override render\.stepz=4: render\.stepz: unknown key \(did you mean 'steps'\?\)"),
+    ("colour=1", r"^override colour=1: colour: unknown key"),
+    ("lights.0.power=1", r"^override lights\.0\.power=1: lights\.0\.power: unknown key"),
+    ("render.steps", r"^override render\.steps: expected key\.path=value, got 'render\.steps'$"),
+    ("=3", r"^override =3: expected key\.path=value"),
+    ("render..steps=3", r"^override render\.\.steps=3: expected key\.path=value"),
+    ("lights.5.intensity=1", r"^override lights\.5\.intensity=1: lights\.5: expected a list index in \[0, 0\]"),
     ("lights.x=1", r"lights\.x: expected a list index"),
     ("image.width.fine=1", r"image\.width\.fine: expected a mapping or a list to set fine in, got 64$"),
-    ("lights.0.intensity=[1, 2", r"^--set lights\.0\.intensity=\[1, 2: lights\.0\.intensity: malformed YAML"),
-    ("version=2", r"^--set version=2: version: expected version 1, got 2$"),
-    ("camera.far=-1", r"^--set camera\.far=-1: camera\.far: expected a number > 0, got -1$"),
+    ("lights.0.intensity=[1, 2", r"^override lights\.0\.intensity=\[1, 2: lights\.0\.intensity: malformed YAML"),
+    ("version=2", r"^override version=2: version: expected version 1, got 2$"),
+    ("camera.far=-1", r"^override camera\.far=-1: camera\.far: expected a number > 0, got -1$"),
     ("render.steps=", r"render\.steps: expected an integer in \[1, 65536\], got null$"),
 ]
 
