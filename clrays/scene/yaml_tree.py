@@ -352,7 +352,8 @@ def compose(text: str, path: str, where: Callable[[yaml.Mark], str | Place], fal
 
 
 def apply_override(root: Node, text: str) -> None:
-    """Splice one `key.path=value` override into the tree (creating missing mappings)."""
+    """Splice one `key.path=value` override into the tree, creating missing mappings, and a
+    missing list where the next key is an index. An index equal to a list's length appends."""
     where = f"--set {text if len(text) <= 80 else text[:77] + '...'}"  # a message shows a value, not all of it
     key, sep, value_text = text.partition("=")
     key = key.strip()
@@ -375,8 +376,8 @@ def apply_override(root: Node, text: str) -> None:
                 node.value[part] = value
                 node.key_where[part] = where
             else:
-                if part not in node.value:
-                    node.value[part] = Node({}, where, path)
+                if part not in node.value:  # a list where the next key is an index: `lights.0={...}` starts one
+                    node.value[part] = Node([] if parts[depth + 1].isdecimal() else {}, where, path)
                     node.key_where[part] = where
                 node = node.value[part]
         elif isinstance(node.value, list):
