@@ -1107,8 +1107,11 @@ def suggested_light(lo: np.ndarray, hi: np.ndarray) -> str:
     centre, diagonal = (lo + hi) / 2.0, max(float(np.linalg.norm(hi - lo)), 1e-3)
     position = np.array([centre[0], hi[1] + diagonal / 4.0, centre[2]])
     intensity = SUGGESTED_IRRADIANCE * float(np.sum((position - centre) ** 2))
-    return (f"lights.0={{type: point, position: [{', '.join(f'{v:.4g}' for v in position)}], "
-            f"intensity: {intensity:.3g}}}")
+    def written(value: float, digits: int) -> str:  # without an exponent: YAML reads `1e+05` as a string
+        return np.format_float_positional(value, precision=digits, unique=False, fractional=False, trim="-")
+
+    return (f"lights.0={{type: point, position: [{', '.join(written(v, 4) for v in position)}], "
+            f"intensity: {written(intensity, 3)}}}")
 
 
 def _interpolated(triangles: np.ndarray, normals: np.ndarray) -> np.ndarray:

@@ -103,6 +103,12 @@ def test_a_file_without_lights_is_refused_with_the_set_that_adds_one(tmp_path):
     assert code == 0, out
     image = np.load(tmp_path / "lit.npy")
     assert np.isfinite(image).all() and np.percentile(image.mean(axis=2), 50) > 0.01
+    # Written without exponents, which YAML would read as strings: a floor 800 km across.
+    override = gltf.suggested_light(np.array([-4e5, 0, -4e5]), np.array([4e5, 1, 4e5]))
+    assert "e" not in override.replace("type", "").replace("intensity", "")
+    big = GltfBuilder()
+    big.node(mesh=big.mesh(np.array(FLOOR[0]) * 1e5, FLOOR[1]))
+    assert load_scene(_write(tmp_path, big, "big.glb"), [override]).lights[0].position[1] == pytest.approx(282800)
 
 
 # --------------------------------------------------------------------------- the default fog
