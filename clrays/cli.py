@@ -35,6 +35,7 @@ from .runs.video import DEFAULT_CRF, VIDEO_OPTIONS, video_encoder_options
 from .runs.sweep import axes_from, format_table, run_sweep
 from .scene import files as scene_files
 from .scene import yaml_tree
+from .scene import gltf as gltf_files
 from .scene.fields import unread_render_keys
 from .scene.limits import MAX_LIGHTS, MAX_SWEEP_POINTS
 from .scene import host_steps
@@ -172,8 +173,9 @@ def overrides_option(text: str, metavar: str = "KEY.PATH=VALUE", group: str = SC
 
 
 def camera_option():
-    return option("--camera", metavar="NAME", group=SCENE,
-                  help="A glTF scene's camera, by its name or its node's (default: the first); the same as "
+    return option("--camera", metavar="NAME|INDEX", group=SCENE,
+                  help="A glTF scene's camera, by its name or its node's, or by its index among the cameras the "
+                       "scene's nodes place, in node order (0, the default, is the first); the same as "
                        "--set gltf.camera=NAME.")
 
 
@@ -230,8 +232,15 @@ def check_exposure_applies(exposure: float, outputs: list[str], exposed: dict[st
 
 
 def verbose_option():
-    return option("--verbose", "-v", is_flag=True, group=RUN,
-                  help="Say which scene keys the chosen method does not read.")
+    return option("--verbose", "-v", is_flag=True, group=RUN, callback=_set_verbose,
+                  help="Say which scene keys the chosen method does not read, and what a glTF file carries that "
+                       "clrays does not render.")
+
+
+def _set_verbose(_context, _parameter, verbose: bool) -> bool:
+    """--verbose: a glTF import lists what it does not render (clrays.scene.gltf.verbose_notice)."""
+    gltf_files.verbose_notice = (lambda line: click.echo(line, err=True)) if verbose else None
+    return verbose
 
 
 def _notice_unread_keys(scene, method: str | None) -> None:

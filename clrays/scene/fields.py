@@ -102,7 +102,8 @@ TOP = Section("top", (
     Field("camera", "mapping", REQUIRED, notes="[camera](#camera); optional with `gltf`"),
     Field("lights", "list of mappings", REQUIRED, notes=f"1 to {MAX_LIGHTS} lights; [lights](#lights); optional "
                                                         f"with `gltf`"),
-    Field("medium", "mapping", shown_default="no medium: σs = σa = 0, isotropic", notes="[medium](#medium)"),
+    Field("medium", "mapping", shown_default="no medium: σs = σa = 0, isotropic",
+          notes="[medium](#medium); with `gltf`, the default fog ([glTF](#gltf-20-scenes))"),
     Field("background", "RGB", 0.0, low=0.0, notes="radiance of rays that leave the scene"),
     Field("objects", "list of mappings", shown_default="`[]`", notes=f"at most {MAX_OBJECTS}; [objects](#objects)"),
     Field("render", "mapping", shown_default="all defaults", notes="[render](#render)"),
@@ -425,9 +426,10 @@ GLTF = Section("gltf", (
     Field("file", "string", REQUIRED, notes="a `.glb` or `.gltf` file; a relative path starts at the YAML file's "
                                             "folder"),
     Field("camera", "string", shown_default="the first camera", notes="the name of the camera (or of its node) "
-          "to look through; `--camera NAME` sets it"),
+          "to look through, or its index among the cameras the scene's nodes place, in node order; "
+          "`--camera NAME` or `--camera INDEX` sets it"),
     Field("light_scale", "number", 1.0, 0.0, MAX_POWER, notes="multiplies every imported light's power "
-          "(`intensity` × `color`: cd as W/sr, lux as W/m²)"),
+          "(`intensity` / 683 lm/W × `color`: cd to W/sr, lux to W/m²)"),
     Field("fps", "number", 24.0, 0.0, 1000.0, low_open=True,
           notes="frames per second of the file's animation: frame f is at f / fps seconds"),
 ))

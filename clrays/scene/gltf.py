@@ -11,11 +11,13 @@ value:
 
     scenes/x.glb: accessors.2.count: expected at most 8 elements in bufferViews.1 (96 bytes, stride 12), got 1000
 
-Units: glTF's metres are scene units; a light's `intensity` (cd for point and spot
-lights, lux for directional ones) times its `color` is clrays's W/sr or W/m², times
-`light_scale`. A spot's cone falloff between `innerConeAngle` and `outerConeAngle` (the
-extension's smooth attenuation) becomes a light texture over the cone, which every method
-reads (docs/light-textures.md).
+Units: glTF's metres are scene units; a light's `intensity` is photometric, as the
+extension defines it (cd for point and spot lights, lux for directional ones): divided by
+683 lm/W it is clrays's W/sr or W/m², times its `color` and `light_scale`. A spot's cone
+falloff between `innerConeAngle` and `outerConeAngle` (the extension's smooth
+attenuation) becomes a light texture over the cone, which every method reads
+(docs/light-textures.md); a soft spot wider than that texture can span is a point light
+whose cube texture is the falloff, zero outside the cone.
 """
 from __future__ import annotations
 
@@ -25,10 +27,12 @@ import io
 import json
 import math
 import struct
+import sys
 import urllib.parse
+from collections import OrderedDict
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any, Callable, NoReturn
 
 import numpy as np
 
@@ -39,7 +43,8 @@ from .animation import Animation
 from .files import FileRefused, read_regular_file
 from .fields import ANIMATION, MAX_POWER
 from .limits import MAX_COORDINATE, MAX_GLTF_BYTES, MAX_GLTF_NODES, MAX_LIGHTS, MAX_OBJECTS, MAX_TRIANGLES
-from .model import Camera, DirectionalLight, Geometry, Light, LightTexture, PointLight, Scene, SpotLight
+from .model import (Camera, DirectionalLight, Geometry, Light, LightTexture, Medium, Phase, PointLight, Scene,
+                    SpotLight)
 from .textures import MAX_TEXTURE_SIDE, srgb_to_linear
 from .transforms import quat_to_matrix, slerp, transform_normals, transform_points
 
@@ -50,8 +55,16 @@ FLOAT32_MAX = float(np.finfo(np.float32).max)
 FLOAT64_MAX = float(np.finfo(np.float64).max)
 GLB_MAGIC = b"glTF"
 _CHUNK_JSON, _CHUNK_BIN = 0x4E4F534A, 0x004E4942
-#: Extensions a file may require: those clrays reads. Any other required one is refused by name.
+#: Extensions a file may require: those clrays reads. Any other required one is refused by name,
+#: unless it only changes materials (`material_only_extension`).
 SUPPORTED_EXTENSIONS = ("KHR_lights_punctual",) + gltf_compression.EXTENSIONS
+#: Required extensions that change only how surfaces look or where their texels come from:
+#: clrays's surfaces are diffuse with one albedo per primitive, so the file renders without
+#: them, with a notice naming them. Every `KHR_materials_*` is one too.
+MATERIAL_ONLY_EXTENSIONS = ("KHR_texture_transform", "KHR_texture_basisu", "EXT_texture_webp", "EXT_texture_avif")
+#: lm/W: the luminous efficacy that turns KHR_lights_punctual's cd and lux into W/sr and
+#: W/m², the factor Blender's exporter applies the other way in its default lighting mode.
+LUMENS_PER_WATT = 683.0
 
 #: componentType -> (numpy little-endian dtype, largest value for `normalized`)
 _COMPONENTS = {5120: ("<i1", 127.0), 5121: ("<u1", 255.0), 5122: ("<i2", 32767.0), 5123: ("<u2", 65535.0),
@@ -64,8 +77,10 @@ _TRIANGLES, _TRIANGLE_STRIP, _TRIANGLE_FAN = 4, 5, 6
 #: elsewhere (tests/scene/test_gltf.py), at 4 MiB per spot on the device.
 FALLOFF_TEXTURE_SIDE = 512
 #: The widest outer cone whose falloff fits the texture: the texture spans [-tan c, tan c],
-#: which grows without bound towards 90° (docs/limits.md).
+#: which grows without bound towards 90° (docs/limits.md). A wider soft spot (up to the
+#: spec's 90°) is a point light with its falloff as a cube texture of this side per face.
 MAX_SPOT_OUTER_DEG = 85.0
+CONE_CUBE_SIDE = 256
 #: How far from 1 a rotation quaternion's norm may be (exporters write float32; it is normalised).
 QUATERNION_TOLERANCE = 1e-3
 
@@ -75,6 +90,25 @@ DEFAULT_IMAGE = (640, 360)
 #: at the distance where their sphere fills this vertical field of view.
 DEFAULT_VIEW_DIRECTION = np.array([0.0, 0.5, 1.0]) / math.sqrt(1.25)
 DEFAULT_FOV_DEG = 50.0
+
+
+def _stderr_line(text: str) -> None:
+    print(text, file=sys.stderr, flush=True)
+
+
+#: Where an import says, in one line, what it chose for the user (the default fog) or
+#: renders without (material-only extensions); None says nothing.
+notice: Callable[[str], None] | None = _stderr_line
+#: Where it lists, in one line, what the file carries that clrays does not render (points,
+#: lines, emissive and transmissive materials, the cameras not chosen); the CLI's
+#: --verbose sets it, None (the default) says nothing.
+verbose_notice: Callable[[str], None] | None = None
+
+
+def _notify(line: str, verbose: bool = False) -> None:
+    say = verbose_notice if verbose else notice
+    if say is not None:
+        say(f"clrays: notice: {line}")
 
 
 def _finite_number(value: Any) -> bool:
@@ -435,11 +469,21 @@ def _check_header(reader: _Reader) -> None:
     if not version.startswith("2."):
         reader.fail("asset.version", "a glTF 2.x file", json.dumps(version))
     required = reader.get(reader.doc, "extensionsRequired", "", "list", [])
-    unsupported = [name for name in required if name not in SUPPORTED_EXTENSIONS]
+    unsupported = [name for name in required if name not in SUPPORTED_EXTENSIONS
+                   and not material_only_extension(name)]
     if unsupported:
-        reader.fail("extensionsRequired", f"only extensions clrays reads ({', '.join(SUPPORTED_EXTENSIONS)})",
-                    ", ".join(map(str, unsupported)))
+        reader.fail("extensionsRequired", f"only extensions clrays reads ({', '.join(SUPPORTED_EXTENSIONS)}) or "
+                    f"that only change materials", ", ".join(map(str, unsupported)))
     gltf_compression.check_required(reader, required)  # their decoders, optional extras
+    materials_only = [name for name in required if material_only_extension(name)]
+    if materials_only:
+        _notify(f"{reader.file}: requires {', '.join(materials_only)}, which only change materials: rendered "
+                f"with clrays's diffuse surfaces (albedo = baseColorFactor × the base colour texture's mean)")
+
+
+def material_only_extension(name: Any) -> bool:
+    """Whether a required extension changes only materials or textures (MATERIAL_ONLY_EXTENSIONS)."""
+    return isinstance(name, str) and (name.startswith("KHR_materials_") or name in MATERIAL_ONLY_EXTENSIONS)
 
 
 # --------------------------------------------------------------------------- nodes
@@ -671,7 +715,7 @@ def _meshes(reader: _Reader, graph: NodeGraph, world: dict[int, np.ndarray], ani
 
 
 def _primitive(reader: _Reader, primitive: dict, path: str):
-    """(local triangles, their smooth normals, albedo, vertices, faces) in spatial order, or None for no surface."""
+    """(local triangles, their normals, albedo, vertices, faces) in spatial order, or None for no surface."""
     attributes = reader.get(primitive, "attributes", path, "dict")
     gltf_compression.decode_draco(reader, primitive, path)  # KHR_draco_mesh_compression: its accessors' data
     position = reader.index(attributes, "POSITION", f"{path}.attributes", "accessors")
@@ -686,9 +730,11 @@ def _primitive(reader: _Reader, primitive: dict, path: str):
         if len(given) != len(vertices):
             reader.fail(f"accessors.{normal}.count", f"the POSITION count {len(vertices)}", len(given))
     triangles = primitives.indexed_triangles(vertices, faces)
-    smooth = primitives.smooth_normals(vertices, faces, given)  # the file's normals, else as for OBJ
+    # The file's normals; without them flat ones, as the spec requires ("client
+    # implementations must calculate flat normals"): each triangle its own face's normal.
+    normals = primitives.flat_normals(triangles) if given is None else primitives.smooth_normals(vertices, faces, given)
     order = primitives.spatial_order(triangles)
-    return triangles[order], smooth[order], _albedo(reader, primitive, path), vertices, faces
+    return triangles[order], normals[order], _albedo(reader, primitive, path), vertices, faces
 
 
 def _world_normals(matrix: np.ndarray, local_normals: np.ndarray, triangles: np.ndarray) -> np.ndarray:
@@ -730,10 +776,11 @@ def _lights(reader: _Reader, graph: NodeGraph, world: dict[int, np.ndarray], lig
 def _light(reader: _Reader, light: dict, path: str, matrix: np.ndarray, light_scale: float) -> Light:
     kind = reader.get(light, "type", path, "string")
     colour = reader.numbers(light, "color", path, 3, (1.0, 1.0, 1.0), 0.0)
-    power = colour * reader.get(light, "intensity", path, "number", 1.0, lo=0.0) * light_scale
+    # cd → W/sr, lux → W/m²: Blender's default export (cd = W / 4π × 683) renders at Cycles' brightness.
+    power = colour * (reader.get(light, "intensity", path, "number", 1.0, lo=0.0) / LUMENS_PER_WATT) * light_scale
     if not power.max() <= MAX_POWER:  # as a YAML light's: beyond it float32 radiance overflows
-        reader.fail(f"{path}.intensity", f"a power (intensity × color × light_scale) of at most {MAX_POWER:g}",
-                    f"{power.max():.3g}")
+        reader.fail(f"{path}.intensity", f"a power (intensity / {LUMENS_PER_WATT:g} lm/W × color × light_scale) "
+                    f"of at most {MAX_POWER:g}", f"{power.max():.3g}")
     reader.get(light, "range", path, "number", None, lo=0.0)  # checked, then ignored (docs/scene-format.md)
     position = matrix[:3, 3].copy()
     direction = matrix[:3, :3] @ np.array([0.0, 0.0, -1.0])  # lights shine along their node's -Z
@@ -748,17 +795,24 @@ def _light(reader: _Reader, light: dict, path: str, matrix: np.ndarray, light_sc
     if kind == "directional":
         return DirectionalLight(direction=direction, irradiance=power)
     spot = reader.get(light, "spot", path, "dict", {})
-    outer = reader.get(spot, "outerConeAngle", f"{path}.spot", "number", math.pi / 4, lo=0.0, hi=math.pi / 2)
-    inner = reader.get(spot, "innerConeAngle", f"{path}.spot", "number", 0.0, lo=0.0, hi=outer)
-    if outer <= 0.0 or math.degrees(outer) > MAX_SPOT_OUTER_DEG:
-        reader.fail(f"{path}.spot.outerConeAngle", f"an angle in (0, {math.radians(MAX_SPOT_OUTER_DEG):.4f}] "
-                    f"({MAX_SPOT_OUTER_DEG:g}°: the falloff texture spans tan of it, docs/limits.md)", outer)
+    # Up to π/2 as float32 writes it (Blender's 180° spot is 1.5707963705), taken as π/2.
+    written = reader.get(spot, "outerConeAngle", f"{path}.spot", "number", math.pi / 4, lo=0.0,
+                         hi=float(np.nextafter(np.float32(math.pi / 2), np.float32(2))))
+    inner = min(reader.get(spot, "innerConeAngle", f"{path}.spot", "number", 0.0, lo=0.0, hi=written), math.pi / 2)
+    outer = min(written, math.pi / 2)
+    if outer <= 0.0:
+        reader.fail(f"{path}.spot.outerConeAngle", "an angle in (0, π/2]", outer)
     # Inner and outer angles so close that the spec's clamp of 1 / (cos inner − cos outer) to 1000
     # engages: the falloff is a ring of Δcos = 0.001 at the outer edge, narrower than a texel
     # of the falloff texture: the hard cone at the outer angle is that edge.
     hard = math.cos(inner) - math.cos(outer) <= 0.001
-    return SpotLight(position=position, direction=direction, cone_deg=math.degrees(outer), intensity=power,
-                     texture=None if hard else falloff_texture(inner, outer))
+    if hard or math.degrees(outer) <= MAX_SPOT_OUTER_DEG:
+        return SpotLight(position=position, direction=direction, cone_deg=math.degrees(outer), intensity=power,
+                         texture=None if hard else falloff_texture(inner, outer))
+    # Wider than the spot's texture can span (it covers [-tan c, tan c]): the point light's
+    # cube carries the falloff, zero outside the cone, and its cube shadow map the shadows,
+    # as a YAML spot wider than 75° has anyway.
+    return PointLight(position=position, intensity=power, texture=cone_cube(inner, outer, direction))
 
 
 def spot_attenuation(cos_angle, inner: float, outer: float):
@@ -788,11 +842,58 @@ def falloff_texture(inner: float, outer: float, side: int = FALLOFF_TEXTURE_SIDE
     return _FALLOFF_TEXTURES[key]
 
 
+@dataclass(frozen=True, eq=False)
+class ConeCube(LightTexture):
+    """A wide spot's falloff as a point light's cube texture: the cone's axis and angles
+    (radians) are kept so that an animated node can turn it (`aimed`)."""
+
+    axis: tuple[float, float, float] = (0.0, 0.0, -1.0)
+    inner: float = 0.0
+    outer: float = math.pi / 2
+
+    def aimed(self, direction: np.ndarray) -> "ConeCube":
+        return cone_cube(self.inner, self.outer, direction, self.width)
+
+
+#: Six faces as the point light's cube reads them (docs/light-textures.md): axis F, up U, right F × U.
+_CUBE_FACES = (((1, 0, 0), (0, 1, 0)), ((-1, 0, 0), (0, 1, 0)), ((0, 1, 0), (0, 0, 1)), ((0, -1, 0), (0, 0, 1)),
+               ((0, 0, 1), (0, 1, 0)), ((0, 0, -1), (0, 1, 0)))
+#: The last cone cubes made: an animated spot that turns makes one a frame, so they are not all kept.
+_CONE_CUBES: OrderedDict[tuple, ConeCube] = OrderedDict()
+
+
+def cone_cube(inner: float, outer: float, direction, side: int = CONE_CUBE_SIDE) -> ConeCube:
+    """A spot's cone falloff (`spot_attenuation`) around `direction` as a point light's cube
+    texture: each texel the attenuation of the angle between the axis and the ray through
+    its centre, so zero outside the outer cone."""
+    axis = np.asarray(direction, dtype=np.float64) / np.linalg.norm(direction)
+    key = (float(inner), float(outer), side, *np.round(axis, 12).tolist())
+    if key in _CONE_CUBES:
+        _CONE_CUBES.move_to_end(key)
+        return _CONE_CUBES[key]
+    centres = (np.arange(side) + 0.5) / side * 2.0 - 1.0
+    sx, sy = np.meshgrid(centres, -centres)  # row 0 is the image's top: +up
+    faces = []
+    for forward, up in _CUBE_FACES:
+        forward, up = np.array(forward, float), np.array(up, float)
+        rays = forward + sx[..., None] * np.cross(forward, up) + sy[..., None] * up
+        cos_angle = rays @ axis / np.linalg.norm(rays, axis=-1)
+        faces.append(spot_attenuation(cos_angle, inner, outer))
+    texels = np.repeat(np.concatenate(faces)[:, :, None], 3, axis=2).astype(np.float32)
+    cube = ConeCube(texels, f"cone falloff {math.degrees(inner):g}° to {math.degrees(outer):g}° (cube)", smooth=True,
+                    axis=tuple(axis.tolist()), inner=float(inner), outer=float(outer))
+    _CONE_CUBES[key] = cube
+    while len(_CONE_CUBES) > 16:
+        _CONE_CUBES.popitem(last=False)
+    return cube
+
+
 # --------------------------------------------------------------------------- camera
 
 
 def _cameras(reader: _Reader, graph: NodeGraph, world: dict[int, np.ndarray]) -> list[tuple[str, int, dict, str]]:
-    """(name, node, camera definition, its path) for every node of the scene with a camera, in node order."""
+    """(names, node, camera definition, its path) for every node of the scene with a camera, in node
+    order (the order of `nodes`): the first is the default, and `--camera N` takes the N-th."""
     nodes, cameras = reader.items("nodes"), reader.items("cameras")
     found = []
     for index in sorted(graph.order):
@@ -807,10 +908,14 @@ def _camera(reader: _Reader, found, name: str | None, matrix_of: dict[int, np.nd
             bounds: tuple[np.ndarray, np.ndarray]) -> tuple[Camera, int | None]:
     if name is not None:
         chosen = [entry for entry in found if name in entry[0]]
+        if not chosen and name.isdecimal() and int(name) < len(found):  # an index, where no camera has that name
+            chosen = [found[int(name)]]
         if not chosen:
             names = sorted({n for entry in found for n in entry[0]})
+            indices = f"an index 0 to {len(found) - 1}" if found else "no index (the scene places no camera)"
             raise SceneError(f"{reader.file}: cameras: expected a camera named {name!r} (the camera's or its "
-                             f"node's name), got {', '.join(map(repr, names)) if names else 'no named camera'}")
+                             f"node's name) or {indices}, got "
+                             f"{', '.join(map(repr, names)) if names else 'no named camera'}")
         found = chosen
     if not found:
         return default_camera(*bounds), None
@@ -968,6 +1073,8 @@ class GltfAnimation(Animation):
             changes = {} if isinstance(light, DirectionalLight) else {"position": matrix[:3, 3].copy()}
             if not isinstance(light, PointLight) and np.linalg.norm(direction) > 0:
                 changes["direction"] = direction / np.linalg.norm(direction)
+            elif isinstance(light.texture, ConeCube) and np.linalg.norm(direction) > 0:  # a wide spot
+                changes["texture"] = light.texture.aimed(direction)
             lights[index] = replace(light, **changes)
         return tuple(lights)
 
@@ -980,6 +1087,93 @@ class GltfAnimation(Animation):
             triangles[rows] = transform_points(matrix, instance.local)
             normals[rows] = _world_normals(matrix, instance.local_normals, triangles[rows])
         return replace(scene.geometry, triangles=triangles, normals=normals)
+
+
+# --------------------------------------------------------------------------- defaults and notices
+
+#: The default fog's optical depth across the meshes' bounding box diagonal (`default_medium`).
+DEFAULT_FOG_DEPTH = 1.0
+#: The suggested light's irradiance at the bounds' centre, W/m² (`suggested_light`).
+SUGGESTED_IRRADIANCE = 4.0
+
+
+def mesh_bounds(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) of world-space points; [-1, 1]³ without any."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if not len(points):
+        return np.full(3, -1.0), np.full(3, 1.0)
+    return points.min(axis=0), points.max(axis=0)
+
+
+def default_medium(lo: np.ndarray, hi: np.ndarray) -> Medium:
+    """The fog of a glTF scene that gives no medium: isotropic, scattering only, σs such
+    that the bounding box's diagonal is DEFAULT_FOG_DEPTH optical depths long (glTF has no
+    media; without one there are no shafts, and the sample files want σs from 0.006 to 90
+    per unit, so no one number serves)."""
+    diagonal = max(float(np.linalg.norm(np.asarray(hi) - np.asarray(lo))), 1e-6)
+    return Medium(sigma_s=np.full(3, DEFAULT_FOG_DEPTH / diagonal), sigma_a=np.zeros(3), phase=Phase())
+
+
+def suggested_light(lo: np.ndarray, hi: np.ndarray) -> str:
+    """A `--set` override adding a point light to a scene without one: over the bounds'
+    centre, a quarter of their diagonal above their top, bright enough for SUGGESTED_IRRADIANCE W/m² at
+    the centre (a surface of albedo 0.8 facing it shows radiance ≈ 1)."""
+    lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
+    centre, diagonal = (lo + hi) / 2.0, max(float(np.linalg.norm(hi - lo)), 1e-3)
+    position = np.array([centre[0], hi[1] + diagonal / 4.0, centre[2]])
+    intensity = SUGGESTED_IRRADIANCE * float(np.sum((position - centre) ** 2))
+    def written(value: float, digits: int) -> str:  # without an exponent: YAML reads `1e+05` as a string
+        return np.format_float_positional(value, precision=digits, unique=False, fractional=False, trim="-")
+
+    return (f"lights.0={{type: point, position: [{', '.join(written(v, 4) for v in position)}], "
+            f"intensity: {written(intensity, 3)}}}")
+
+
+def _interpolated(triangles: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """Which triangles interpolate their vertex normals: those whose normals are not their
+    face's (a primitive without NORMAL has flat ones, and renders as a YAML solid)."""
+    if not len(triangles):
+        return np.zeros(0, bool)
+    flat = primitives.flat_normals(triangles)
+    return ~np.all(np.abs(normals - flat) <= 1e-6, axis=(1, 2))
+
+
+def _notify_unrendered(reader: _Reader, graph: NodeGraph, camera_count: int) -> None:
+    """One --verbose line listing what the file carries that clrays does not render."""
+    nodes, meshes, materials = reader.items("nodes"), reader.items("meshes"), reader.items("materials")
+    unsurfaced = []
+    for mesh in sorted({nodes[i]["mesh"] for i in graph.order if isinstance(nodes[i].get("mesh"), int)}):
+        if 0 <= mesh < len(meshes):
+            for p, primitive in enumerate(meshes[mesh].get("primitives") or []):
+                if isinstance(primitive, dict) and primitive.get("mode", _TRIANGLES) in (0, 1, 2, 3):
+                    unsurfaced.append(f"meshes.{mesh}.primitives.{p}")
+    emissive, blended, extensions = [], [], set()
+    for i, material in enumerate(materials):
+        factor = material.get("emissiveFactor")
+        if "emissiveTexture" in material or (isinstance(factor, list) and any(
+                _finite_number(v) and v > 0 for v in factor)):
+            emissive.append(f"materials.{i}")
+        if material.get("alphaMode", "OPAQUE") != "OPAQUE":
+            blended.append(f"materials.{i}")
+        if isinstance(material.get("extensions"), dict):
+            extensions.update(name for name in material["extensions"] if material_only_extension(name))
+    parts = []
+    if unsurfaced:
+        parts.append(f"{len(unsurfaced)} point or line primitive(s) ({_first_few(unsurfaced)}: no surface)")
+    if emissive:
+        parts.append(f"emission ({_first_few(emissive)}: surfaces do not glow)")
+    if blended:
+        parts.append(f"alphaMode ({_first_few(blended)}: every surface is opaque)")
+    if extensions:
+        parts.append(", ".join(sorted(extensions)))
+    if camera_count > 1:
+        parts.append(f"{camera_count - 1} camera(s) not chosen (--camera 0 to {camera_count - 1})")
+    if parts:
+        _notify(f"{reader.file}: not rendered: {'; '.join(parts)}", verbose=True)
+
+
+def _first_few(paths: list[str], count: int = 3) -> str:
+    return ", ".join(paths[:count]) + (f" and {len(paths) - count} more" if len(paths) > count else "")
 
 
 # --------------------------------------------------------------------------- entry points
@@ -1054,7 +1248,9 @@ def import_gltf(path: Path, file: str | None = None, camera: str | None = None, 
         bounds = (triangles.reshape(-1, 3).min(axis=0), triangles.reshape(-1, 3).max(axis=0))
     else:
         bounds = (np.full(3, -1.0), np.full(3, 1.0))
-    scene_camera, camera_node = _camera(reader, _cameras(reader, graph, world), camera, world, bounds)
+    cameras = _cameras(reader, graph, world)
+    scene_camera, camera_node = _camera(reader, cameras, camera, world, bounds)
+    _notify_unrendered(reader, graph, len(cameras))
     _check_coordinates(reader, triangles, lights, scene_camera)
     graph = NodeGraph(graph.parents, graph.order, graph.matrices, graph.trs, channels)
     _check_animated_poses(reader, graph, instances, light_nodes, camera_node)
@@ -1069,9 +1265,11 @@ def import_gltf(path: Path, file: str | None = None, camera: str | None = None, 
                     duration=duration)
 
 
-def merge(scene: Scene, imported: Imported, own_camera: bool, own_animation: bool, fps: float) -> Scene:
+def merge(scene: Scene, imported: Imported, own_camera: bool, own_animation: bool, fps: float,
+          own_medium: bool = True) -> Scene:
     """The scene with the imported meshes and lights after its own, and the file's animation
-    unless the scene has one of its own. Checks the limits over both."""
+    unless the scene has one of its own; without a medium of its own (`own_medium` False)
+    the default fog of the bounds (`default_medium`). Checks the limits over both."""
     geometry = scene.geometry
     objects = (int(geometry.object_id.max()) + 1 if geometry.count else 0)
     if objects + imported.object_count > MAX_OBJECTS:
@@ -1081,9 +1279,11 @@ def merge(scene: Scene, imported: Imported, own_camera: bool, own_animation: boo
         raise SceneError(f"{imported.file}: meshes: expected at most {MAX_TRIANGLES} triangles with the scene's "
                          f"own, got {geometry.count + len(imported.triangles)}")
     lights = scene.lights + imported.lights
+    bounds = mesh_bounds(np.concatenate([geometry.triangles.reshape(-1, 3), imported.triangles.reshape(-1, 3)]))
     if not lights:
         raise SceneError(f"{imported.file}: extensions.KHR_lights_punctual: expected at least 1 light "
-                         f"(KHR_lights_punctual, or the scene's lights), got none")
+                         f"(KHR_lights_punctual, or the scene's lights), got none; add one above the meshes with "
+                         f"--set '{suggested_light(*bounds)}'")
     if len(lights) > MAX_LIGHTS:
         raise SceneError(f"{imported.file}: extensions.KHR_lights_punctual: expected at most {MAX_LIGHTS} lights "
                          f"with the scene's own, got {len(lights)}")
@@ -1094,7 +1294,7 @@ def merge(scene: Scene, imported: Imported, own_camera: bool, own_animation: boo
         albedo=np.ascontiguousarray(np.concatenate([geometry.albedo, imported.albedo]), dtype=np.float64),
         object_id=np.concatenate([geometry.object_id, imported.object_id + objects]).astype(np.int32),
         normals=np.concatenate([geometry.normals, imported.normals]),
-        smooth=np.concatenate([geometry.smooth, np.ones(count, bool)]),
+        smooth=np.concatenate([geometry.smooth, _interpolated(imported.triangles, imported.normals)]),
         reliefs=geometry.reliefs, opacity=opacity,
         outward=np.concatenate([geometry.outward, imported.outward]),
         convex_part=np.concatenate([geometry.convex_part,
@@ -1112,4 +1312,10 @@ def merge(scene: Scene, imported: Imported, own_camera: bool, own_animation: boo
             graph=imported.graph, instances=imported.instances, first_row=geometry.count,
             light_nodes=tuple((first_light + i, node) for i, node in enumerate(imported.light_nodes)),
             camera_node=None if own_camera else imported.camera_node))
+    if not own_medium:  # last, so that a refused file says only why
+        scene = replace(scene, medium=default_medium(*bounds))
+        sigma = f"{float(scene.medium.sigma_s[0]):.3g}"
+        _notify(f"{imported.file}: no medium: the default fog, sigma_s = {sigma} per unit (optical depth 1 across "
+                f"the meshes' {float(np.linalg.norm(bounds[1] - bounds[0])):.3g}-unit bounding box diagonal); set "
+                f"one with --set medium.sigma_s={sigma} (0: clear air)")
     return scene

@@ -907,7 +907,8 @@ def _scene(root: Node, filename: str, source: Path | str | None, overrides: Sequ
         source=Path(source) if source is not None else None,
     )
     if imported is not None:
-        scene = gltf_files.merge(scene, imported, own_camera="camera" in m, own_animation="animation" in m, fps=fps)
+        scene = gltf_files.merge(scene, imported, own_camera="camera" in m, own_animation="animation" in m, fps=fps,
+                                 own_medium="medium" in m)
     if "render" in m and isinstance(m["render"].value, dict):
         _check_aovs(scene, m["render"].value.get("aovs"))
     if "animation" in m:
@@ -929,7 +930,7 @@ def _gltf(node: Node, base_dir: Path, own_camera: bool) -> tuple[gltf_files.Impo
         if own_camera:
             m["camera"].fail("no gltf.camera beside the scene's own camera (remove one of them)")
         if not isinstance(m["camera"].value, (str, int)) or isinstance(m["camera"].value, bool):
-            m["camera"].fail("a camera's name")
+            m["camera"].fail("a camera's name or index")
         camera = str(m["camera"].value)
     path = Path(file.value)
     path = path if path.is_absolute() else base_dir / path

@@ -401,7 +401,8 @@ class Override(str):
 
 
 def apply_override(root: Node, text: str) -> None:
-    """Splice one `key.path=value` override into the tree (creating missing mappings)."""
+    """Splice one `key.path=value` override into the tree, creating missing mappings, and a
+    missing list where the next key is an index. An index equal to a list's length appends."""
     given = text.given if isinstance(text, Override) else f"{override_origin} {text}"
     where = given if len(given) <= 90 else given[:87] + "..."  # a message shows a value, not all of it
     key, sep, value_text = text.partition("=")
@@ -425,8 +426,8 @@ def apply_override(root: Node, text: str) -> None:
                 node.value[part] = value
                 node.key_where[part] = where
             else:
-                if part not in node.value:
-                    node.value[part] = Node({}, where, path)
+                if part not in node.value:  # a list where the next key is an index: `lights.0={...}` starts one
+                    node.value[part] = Node([] if parts[depth + 1].isdecimal() else {}, where, path)
                     node.key_where[part] = where
                 node = node.value[part]
         elif isinstance(node.value, list):

@@ -39,7 +39,7 @@ def _spot_file(folder: Path) -> Path:
     b.mesh(vertices, faces, normals=normals, colour=(0.7, 0.6, 0.5))
     b.node(mesh=0)
     b.node(mesh=1, translation=[0.3, 1.2, 0.1])
-    spot = b.light(type="spot", intensity=60.0,
+    spot = b.light(type="spot", intensity=60.0 * 683,  # cd: 60 W/sr
                    spot={"innerConeAngle": math.radians(8), "outerConeAngle": math.radians(35)})
     b.node(extensions=tool.light_ref(spot), translation=[0.2, 5, 0.3], rotation=tool.quaternion([1, 0, 0.1], -85))
     path = folder / "spot.glb"
