@@ -154,10 +154,10 @@ def test_set_appends_at_a_lists_length_and_starts_a_missing_list(tmp_path):
     two = "lights.1={type: directional, direction: [0, -1, 0], irradiance: 0.5}"
     scene = load_scene(path, [one, two])
     assert [light.type for light in scene.lights] == ["point", "directional"]
-    with pytest.raises(SceneError, match=r"^--set lights\.3=\{type: point\}: lights\.3: expected a list index in "
+    with pytest.raises(SceneError, match=r"^override lights\.3=\{type: point\}: lights\.3: expected a list index in "
                                          r"\[0, 1\] or 2 to append, got '3'$"):
         load_scene(path, [one, two, "lights.3={type: point}"])
-    with pytest.raises(SceneError, match=r"^--set lights\.1=\{type: point\}: lights\.1: expected no index \(the list "
+    with pytest.raises(SceneError, match=r"^override lights\.1=\{type: point\}: lights\.1: expected no index \(the list "
                                          r"is empty\); set it whole or use 0 to append, got '1'$"):
         load_scene(path, ["lights.1={type: point}"])
     yaml = parse_scene("version: 1\nimage: {width: 8, height: 8}\ncamera: {position: [0, 1, 5], look_at: [0, 0, 0]}\n"
