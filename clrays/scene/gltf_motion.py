@@ -345,7 +345,8 @@ def _skin(reader, skin_index: int, world: dict[int, np.ndarray]) -> Skin:
 
 def _influences(reader, attributes: dict, path: str, vertex_count: int, joint_count: int) -> dict:
     """JOINTS_n and WEIGHTS_n, n = 0, 1, ... side by side: (V, 4n) joint indices and
-    weights, each vertex's weights divided by their sum."""
+    weights, each vertex's weights divided by their sum (the spec asks for a sum of 1, which
+    quantized and exported weights miss by their rounding)."""
     if "JOINTS_0" not in attributes or "WEIGHTS_0" not in attributes:
         reader.fail(f"{path}.attributes", "JOINTS_0 and WEIGHTS_0 on a mesh placed by a node with a skin",
                     ", ".join(sorted(attributes)))
@@ -367,11 +368,10 @@ def _influences(reader, attributes: dict, path: str, vertex_count: int, joint_co
             into.append(values)
         n += 1
     joints, weights = np.concatenate(joints, axis=1).astype(np.int64), np.concatenate(weights, axis=1)
-    sums = weights.sum(axis=1)
-    if not np.all(sums > 0):
-        row = int(np.argmin(sums))
-        reader.fail(f"{path}.attributes.WEIGHTS_0", "weights summing to 1 on every vertex", f"0 at vertex {row}")
-    return {"joints": joints, "joint_weights": weights / sums[:, None]}
+    # A vertex without weight (FBX2glTF writes them for vertices no bone holds) follows its
+    # first joint, as three.js places it, rather than collapsing to the origin.
+    weights[weights.sum(axis=1) == 0, 0] = 1.0
+    return {"joints": joints, "joint_weights": weights / weights.sum(axis=1, keepdims=True)}
 
 
 def moving_nodes(parents: np.ndarray, order: tuple[int, ...], animated: set[int]) -> set[int]:
