@@ -38,6 +38,8 @@ TARGET_COMPONENTS = (5126, 5120, 5122)
 #: An instance's attributes and their accessor types and component types (the extension's README).
 INSTANCE_ATTRIBUTES = {"TRANSLATION": ("VEC3", (5126,)), "ROTATION": ("VEC4", (5126, 5120, 5122)),
                        "SCALE": ("VEC3", (5126,))}
+#: JOINTS_n/WEIGHTS_n sets a vertex may have: 32 joints; each set is read as float64, 64 bytes a vertex.
+MAX_INFLUENCE_SETS = 8
 #: Vertices blended at once: the per-vertex 3×4 matrices of a chunk take 6 MiB.
 _SKIN_CHUNK = 1 << 16
 
@@ -294,25 +296,22 @@ def deformation(reader, node_index: int, primitive: dict, path: str, vertices: n
 
 
 def _morph(reader, node_index: int, node: dict, primitive: dict, path: str, targets: list, vertex_count: int):
+    for k, target in enumerate(targets):
+        if not isinstance(target, dict):
+            reader.fail(f"{path}.targets.{k}", "an object of attribute displacements", target)
+    has_normals = any("NORMAL" in target for target in targets)
     positions, normals = [], []
     for k, target in enumerate(targets):
-        where = f"{path}.targets.{k}"
-        if not isinstance(target, dict):
-            reader.fail(where, "an object of attribute displacements", target)
-        for name, into in (("POSITION", positions), ("NORMAL", normals)):
-            if name not in target:
-                into.append(np.zeros((vertex_count, 3)))
+        for name, into in (("POSITION", positions), ("NORMAL", normals if has_normals else None)):
+            if into is None:
                 continue
-            index = reader.index(target, name, where, "accessors")
-            values = reader.accessor(index, f"{where}.{name}", ("VEC3",), TARGET_COMPONENTS)
-            if len(values) != vertex_count:
-                reader.fail(f"accessors.{index}.count", f"the POSITION count {vertex_count}", len(values))
-            into.append(values)
+            into.append(np.zeros((vertex_count, 3)) if name not in target else
+                        _vertex_attribute(reader, target, name, f"{path}.targets.{k}", "VEC3", TARGET_COMPONENTS,
+                                          vertex_count))
     mesh = node["mesh"]
     defaults = reader.numbers(reader.items("meshes")[mesh], "weights", f"meshes.{mesh}", len(targets),
                               np.zeros(len(targets)))
     weights = reader.numbers(node, "weights", f"nodes.{node_index}", len(targets), defaults)
-    has_normals = any("NORMAL" in t for t in targets)
     return {"targets": np.stack(positions), "target_normals": np.stack(normals) if has_normals else None,
             "weights": np.asarray(weights, dtype=np.float64)}
 
@@ -324,9 +323,13 @@ def _skin(reader, skin_index: int, world: dict[int, np.ndarray]) -> Skin:
     nodes = len(reader.items("nodes"))
     if not joints:
         reader.fail(f"{path}.joints", "at least one joint node", "[]")
-    for j, joint in enumerate(joints):
+    seen = set()
+    for j, joint in enumerate(joints):  # unique nodes, as the spec asks: no more joints than nodes
         if not isinstance(joint, int) or isinstance(joint, bool) or not 0 <= joint < nodes:
             reader.fail(f"{path}.joints.{j}", f"a node index (0 to {nodes - 1})", joint)
+        if joint in seen:
+            reader.fail(f"{path}.joints.{j}", "a node not already a joint of the skin", f"node {joint}")
+        seen.add(joint)
         if joint not in world:
             reader.fail(f"{path}.joints.{j}", "a node of the scene being rendered", f"node {joint}")
     if "inverseBindMatrices" not in skin:  # identity matrices: the joints are in their bind pose
@@ -352,12 +355,14 @@ def _influences(reader, attributes: dict, path: str, vertex_count: int, joint_co
                     ", ".join(sorted(attributes)))
     joints, weights, n = [], [], 0
     while f"JOINTS_{n}" in attributes or f"WEIGHTS_{n}" in attributes:
+        if n == MAX_INFLUENCE_SETS:
+            reader.fail(f"{path}.attributes", f"at most {MAX_INFLUENCE_SETS} sets of JOINTS_n and WEIGHTS_n "
+                        f"({4 * MAX_INFLUENCE_SETS} joints a vertex)", f"JOINTS_{n} or WEIGHTS_{n}")
         for name, into, components in ((f"JOINTS_{n}", joints, JOINT_COMPONENTS),
                                        (f"WEIGHTS_{n}", weights, WEIGHT_COMPONENTS)):
-            index = reader.index(attributes, name, f"{path}.attributes", "accessors")
-            values = reader.accessor(index, f"{path}.attributes.{name}", ("VEC4",), components)
-            if len(values) != vertex_count:
-                reader.fail(f"accessors.{index}.count", f"the POSITION count {vertex_count}", len(values))
+            values = _vertex_attribute(reader, attributes, name, f"{path}.attributes", "VEC4", components,
+                                       vertex_count)
+            index = attributes[name]
             if name.startswith("JOINTS") and values.max() >= joint_count:
                 row = int(np.argmax(values.max(axis=1)))
                 reader.fail(f"accessors.{index}", f"joint indices below the skin's {joint_count} joints",
@@ -372,6 +377,17 @@ def _influences(reader, attributes: dict, path: str, vertex_count: int, joint_co
     # first joint, as three.js places it, rather than collapsing to the origin.
     weights[weights.sum(axis=1) == 0, 0] = 1.0
     return {"joints": joints, "joint_weights": weights / weights.sum(axis=1, keepdims=True)}
+
+
+def _vertex_attribute(reader, obj: dict, name: str, path: str, kind: str, components: tuple[int, ...],
+                      vertex_count: int) -> np.ndarray:
+    """obj[name], an accessor of one element per vertex: its count checked against the
+    POSITION count before it is read."""
+    index = reader.index(obj, name, path, "accessors")
+    count = reader.get(reader.items("accessors")[index], "count", f"accessors.{index}", "int", lo=1)
+    if count != vertex_count:
+        reader.fail(f"accessors.{index}.count", f"the POSITION count {vertex_count} for {path}.{name}", count)
+    return reader.accessor(index, f"{path}.{name}", (kind,), components)
 
 
 def moving_nodes(parents: np.ndarray, order: tuple[int, ...], animated: set[int]) -> set[int]:

@@ -175,6 +175,13 @@ def _skin_change(b: GltfBuilder, what: str) -> None:
     elif what == "a joint outside the scene":
         b.doc["nodes"].append({})
         b.doc["skins"][0]["joints"][1] = len(b.doc["nodes"]) - 1
+    elif what == "a joint twice":
+        b.doc["skins"][0]["joints"][1] = b.doc["skins"][0]["joints"][0]
+    elif what == "nine influence sets":
+        for n in range(1, 9):
+            attributes[f"JOINTS_{n}"], attributes[f"WEIGHTS_{n}"] = attributes["JOINTS_0"], attributes["WEIGHTS_0"]
+    elif what == "short weights":
+        attributes["WEIGHTS_0"] = b.accessor(np.zeros((3, 4)))
     elif what == "instanced":
         b.doc["nodes"][-1]["extensions"] = {"EXT_mesh_gpu_instancing": {
             "attributes": {"TRANSLATION": b.accessor([[0, 0, 0], [1, 0, 0]])}}}
@@ -190,6 +197,11 @@ def _skin_change(b: GltfBuilder, what: str) -> None:
                   r"with a skin"),
     ("one inverse bind matrix", r"accessors\.\d+\.count: expected one matrix per joint \(2\), got 1"),
     ("a joint outside the scene", r"skins\.0\.joints\.1: expected a node of the scene being rendered, got node \d+"),
+    ("a joint twice", r"skins\.0\.joints\.1: expected a node not already a joint of the skin, got node 1"),
+    ("nine influence sets", r"meshes\.0\.primitives\.0\.attributes: expected at most 8 sets of JOINTS_n and "
+                            r"WEIGHTS_n \(32 joints a vertex\), got JOINTS_8 or WEIGHTS_8"),
+    ("short weights", r"accessors\.\d+\.count: expected the POSITION count 10 for "
+                      r"meshes\.0\.primitives\.0\.attributes\.WEIGHTS_0, got 3"),
     ("instanced", r"nodes\.\d+\.extensions\.EXT_mesh_gpu_instancing: expected instances of a mesh without a skin"),
 ])
 def test_a_bad_skin_is_refused_in_one_line(tmp_path, what, pattern):
@@ -296,7 +308,8 @@ def test_morph_weights_with_the_wrong_count_are_refused(tmp_path):
         load_scene(_write(tmp_path, b))
     b, _, _ = _morph_cube()
     b.doc["meshes"][0]["primitives"][0]["targets"][1]["POSITION"] = b.accessor(np.zeros((3, 3)))
-    with pytest.raises(SceneError, match=r"accessors\.\d+\.count: expected the POSITION count 24, got 3$"):
+    with pytest.raises(SceneError, match=r"accessors\.\d+\.count: expected the POSITION count 24 for "
+                                         r"meshes\.0\.primitives\.0\.targets\.1\.POSITION, got 3$"):
         load_scene(_write(tmp_path, b))
 
 
