@@ -94,7 +94,7 @@ class Deformation:
         else:
             matrices = world[self.node][None] if self.instances is None else world[self.node] @ self.instances
             points, normals = _placed(matrices, points, normals)
-        faces = self.faces if self.instances is None or self.skin is not None else \
+        faces = self.faces if self.instances is None else \
             (self.faces[None] + len(self.vertices) * np.arange(len(self.instances))[:, None, None]).reshape(-1, 3)
         points, normals = points.reshape(-1, 3), None if normals is None else normals.reshape(-1, 3)
         largest = float(np.abs(points).max(initial=0.0))
