@@ -1,6 +1,7 @@
 """glTF 2.0 scenes (`.glb`, `.gltf` with external `.bin` files or data URIs): meshes,
 `KHR_lights_punctual` lights, a perspective camera and node animations, read into the
-parts of a `clrays.scene.model.Scene` (docs/scene-format.md, "glTF").
+parts of a `clrays.scene.model.Scene` (docs/scene-format.md, "glTF"); skins, morph
+targets and EXT_mesh_gpu_instancing are clrays.scene.gltf_motion's.
 
     imported = import_gltf(Path("scenes/lantern.glb"), "scenes/lantern.glb")
 
@@ -39,6 +40,7 @@ import numpy as np
 from ..errors import SceneError
 from . import geometry as primitives
 from . import gltf_compression
+from . import gltf_motion
 from .animation import Animation
 from .files import FileRefused, read_regular_file
 from .fields import ANIMATION, MAX_POWER
@@ -57,7 +59,7 @@ GLB_MAGIC = b"glTF"
 _CHUNK_JSON, _CHUNK_BIN = 0x4E4F534A, 0x004E4942
 #: Extensions a file may require: those clrays reads. Any other required one is refused by name,
 #: unless it only changes materials (`material_only_extension`).
-SUPPORTED_EXTENSIONS = ("KHR_lights_punctual",) + gltf_compression.EXTENSIONS
+SUPPORTED_EXTENSIONS = ("KHR_lights_punctual", gltf_motion.EXTENSION) + gltf_compression.EXTENSIONS
 #: Required extensions that change only how surfaces look or where their texels come from:
 #: clrays's surfaces are diffuse with one albedo per primitive, so the file renders without
 #: them, with a notice naming them. Every `KHR_materials_*` is one too.
@@ -131,15 +133,17 @@ class _Instance:
     local: np.ndarray | None  # (T, 3, 3); None in a file without animation
     local_normals: np.ndarray | None  # (T, 3, 3) smooth normals; None as `local`
     albedo: np.ndarray  # (3,)
+    motion: gltf_motion.Deformation | None = None  # a skinned or morphed primitive: its own pose per frame
 
 
 @dataclass(frozen=True)
 class _Channel:
     node: int
-    path: str  # translation, rotation, scale
+    path: str  # translation, rotation, scale, weights
     interpolation: str  # LINEAR, STEP, CUBICSPLINE
     times: np.ndarray  # (K,) seconds
-    values: np.ndarray  # (K, n), or (3K, n) for CUBICSPLINE: in-tangent, value, out-tangent; rotation [w, x, y, z]
+    values: np.ndarray  # (K, n), or (3K, n) for CUBICSPLINE: in-tangent, value, out-tangent; rotation [w, x, y, z];
+    # weights: n morph targets
 
 
 @dataclass(frozen=True, eq=False)
@@ -669,19 +673,23 @@ def _mean_image(reader: _Reader, image_index: int) -> np.ndarray:
     return np.array([count @ linear for count in counts]) / max(len(encoded), 1)
 
 
-def _meshes(reader: _Reader, graph: NodeGraph, world: dict[int, np.ndarray], animated: bool):
+def _meshes(reader: _Reader, graph: NodeGraph, world: dict[int, np.ndarray], channels: tuple[_Channel, ...]):
     """Each mesh primitive placed by each node of the scene: (instances, world triangles, normals,
-    albedo, outward). An instance keeps its own triangles only when the file is `animated`."""
+    albedo, outward). An instance keeps its own triangles only when the file has `channels`;
+    a skinned or morphed one keeps its Deformation (clrays.scene.gltf_motion)."""
     nodes, meshes = reader.items("nodes"), reader.items("meshes")
     placed = [(index, reader.index(nodes[index], "mesh", f"nodes.{index}", "meshes"))
               for index in graph.order if "mesh" in nodes[index]]
     total, objects = 0, 0
+    budget = gltf_motion.MotionBudget(reader)
     for node, mesh in placed:  # counted before anything is read: a few bytes of JSON may ask for millions
+        copies = gltf_motion.instance_count(reader, nodes[node], f"nodes.{node}")
         for p, primitive in enumerate(reader.get(meshes[mesh], "primitives", f"meshes.{mesh}", "list")):
             path = f"meshes.{mesh}.primitives.{p}"
             if not isinstance(primitive, dict):
                 reader.fail(path, "an object", primitive)
-            total += _triangle_count(reader, primitive, path)
+            total += _triangle_count(reader, primitive, path) * copies
+            budget.add(nodes[node], primitive, path, copies)
             objects += 1
             if total > MAX_TRIANGLES:
                 reader.fail(path, f"at most {MAX_TRIANGLES} triangles in the whole scene (docs/limits.md)",
@@ -689,9 +697,12 @@ def _meshes(reader: _Reader, graph: NodeGraph, world: dict[int, np.ndarray], ani
             if objects > MAX_OBJECTS:
                 reader.fail(path, f"at most {MAX_OBJECTS} placed primitives, each an object (docs/limits.md)",
                             f"{objects} with this one (placed by nodes.{node})")
+    animated = bool(channels)
+    weight_channels = {channel.node: channel for channel in channels if channel.path == "weights"}
     instances, tris, normals, albedo, outward = [], [], [], [], []
-    start, cache = 0, {}
+    start, cache, skins = 0, {}, {}
     for node, mesh in placed:
+        copies = gltf_motion.instance_matrices(reader, nodes[node], f"nodes.{node}")
         for p, primitive in enumerate(meshes[mesh]["primitives"]):
             path = f"meshes.{mesh}.primitives.{p}"
             if (mesh, p) not in cache:
@@ -701,15 +712,26 @@ def _meshes(reader: _Reader, graph: NodeGraph, world: dict[int, np.ndarray], ani
                 continue
             local, local_normals, colour, vertices, faces = shape
             matrix = world[node]
-            triangles = transform_points(matrix, local)
+            motion = gltf_motion.deformation(reader, node, primitive, path, vertices, faces, skins, weight_channels,
+                                             copies, world)
+            if motion is not None:  # its own pose: a skin's ignores the node's matrix
+                triangles, placed_normals = motion.pose(world)
+                placed_vertices, faces = triangles.reshape(-1, 3), np.arange(3 * len(triangles)).reshape(-1, 3)
+            else:
+                if copies is not None:
+                    local, local_normals, vertices, faces = gltf_motion.instanced(copies, local, local_normals,
+                                                                                  vertices, faces)
+                triangles = transform_points(matrix, local)
+                placed_normals = _world_normals(matrix, local_normals, triangles)
+                placed_vertices = transform_points(matrix, vertices)
             count = len(triangles)
-            instances.append(_Instance(node, slice(start, start + count), local if animated else None,
-                                       local_normals if animated else None, colour))
+            kept = animated and motion is None  # a Deformation keeps its own vertices
+            instances.append(_Instance(node, slice(start, start + count), local if kept else None,
+                                       local_normals if kept else None, colour, motion))
             tris.append(triangles)
-            normals.append(_world_normals(matrix, local_normals, triangles))
+            normals.append(placed_normals)
             albedo.append(np.broadcast_to(colour, (count, 3)))
-            outward.append(np.full(count, primitives.closed_outward(transform_points(matrix, vertices), faces),
-                                   np.int8))
+            outward.append(np.full(count, primitives.closed_outward(placed_vertices, faces), np.int8))
             start += count
     return instances, tris, normals, albedo, outward
 
@@ -734,7 +756,7 @@ def _primitive(reader: _Reader, primitive: dict, path: str):
     # implementations must calculate flat normals"): each triangle its own face's normal.
     normals = primitives.flat_normals(triangles) if given is None else primitives.smooth_normals(vertices, faces, given)
     order = primitives.spatial_order(triangles)
-    return triangles[order], normals[order], _albedo(reader, primitive, path), vertices, faces
+    return triangles[order], normals[order], _albedo(reader, primitive, path), vertices, faces[order]
 
 
 def _world_normals(matrix: np.ndarray, local_normals: np.ndarray, triangles: np.ndarray) -> np.ndarray:
@@ -966,12 +988,12 @@ def _channels(reader: _Reader, graph: NodeGraph) -> tuple[tuple[_Channel, ...], 
                 reader.fail(where, "an object", channel)
             target = reader.get(channel, "target", where, "dict")
             target_path = reader.get(target, "path", f"{where}.target", "string")
-            if target_path not in ("translation", "rotation", "scale"):
-                continue  # morph target weights and extensions' paths: not read (docs/scene-format.md)
+            if target_path not in ("translation", "rotation", "scale", "weights"):
+                continue  # extensions' paths (KHR_animation_pointer): not read (docs/scene-format.md)
             if "node" not in target:
                 continue  # an extension targets something else
             node = reader.index(target, "node", f"{where}.target", "nodes")
-            if "matrix" in nodes[node]:
+            if "matrix" in nodes[node] and target_path != "weights":
                 reader.fail(f"{where}.target.node", "a node with translation/rotation/scale (a matrix cannot be "
                             "animated)", node)
             sampler_index = reader.get(channel, "sampler", where, "int")
@@ -987,13 +1009,21 @@ def _channels(reader: _Reader, graph: NodeGraph) -> tuple[tuple[_Channel, ...], 
             if times.min() < 0 or np.any(np.diff(times) <= 0):
                 reader.fail(f"accessors.{input_index}", "key times >= 0 in increasing order", times[:8].tolist())
             output_index = reader.index(sampler, "output", sampler_path, "accessors")
-            width = 4 if target_path == "rotation" else 3
-            values = reader.accessor(output_index, f"{sampler_path}.output", ("VEC4" if width == 4 else "VEC3",),
-                                     (5126, 5120, 5121, 5122, 5123) if width == 4 else (5126,))
             expected = len(times) * (3 if interpolation == "CUBICSPLINE" else 1)
+            if target_path == "weights":  # a scalar per morph target and key (gltf_motion)
+                width = gltf_motion.target_count(reader, node, f"{where}.target.node")
+                values = reader.accessor(output_index, f"{sampler_path}.output", ("SCALAR",),
+                                         (5126, 5120, 5121, 5122, 5123))
+                expected *= width
+            else:
+                width = 4 if target_path == "rotation" else 3
+                values = reader.accessor(output_index, f"{sampler_path}.output", ("VEC4" if width == 4 else "VEC3",),
+                                         (5126, 5120, 5121, 5122, 5123) if width == 4 else (5126,))
             if len(values) != expected:
                 reader.fail(f"accessors.{output_index}.count", f"{expected} values for {len(times)} key times "
-                            f"({interpolation})", len(values))
+                            f"({interpolation}{f', {width} morph targets' if target_path == 'weights' else ''})",
+                            len(values))
+            values = values.reshape(-1, width)
             if width == 4:
                 keyed = values if interpolation != "CUBICSPLINE" else values[1::3]
                 norms = np.linalg.norm(keyed, axis=1)
@@ -1048,6 +1078,7 @@ class GltfAnimation(Animation):
     first_row: int = 0  # the imported triangles' first row in Scene.geometry
     light_nodes: tuple[tuple[int, int], ...] = ()  # (scene light index, node)
     camera_node: int | None = None
+    moving: tuple[int, ...] = ()  # the instances whose triangles some frame moves
     world_cache: dict = field(default_factory=dict, compare=False, repr=False)
 
     def _world(self, frame: float) -> dict[int, np.ndarray]:
@@ -1079,10 +1110,17 @@ class GltfAnimation(Animation):
         return tuple(lights)
 
     def _geometry(self, scene: Scene, frame: float) -> Geometry:
+        if not self.moving:  # the same Geometry each frame: its digest is made once (clrays.reuse)
+            return scene.geometry
         world = self._world(frame)
         triangles, normals = scene.geometry.triangles.copy(), scene.geometry.normals.copy()
-        for instance in self.instances:
+        for instance in (self.instances[i] for i in self.moving):
             rows = slice(instance.rows.start + self.first_row, instance.rows.stop + self.first_row)
+            if instance.motion is not None:
+                motion, time = instance.motion, self.time(frame)
+                weights = None if motion.weight_channel is None else _sample(motion.weight_channel, time)
+                triangles[rows], normals[rows] = motion.pose(world, weights, f"frame {frame:g} ({time:g} s)")
+                continue
             matrix = world[instance.node]
             triangles[rows] = transform_points(matrix, instance.local)
             normals[rows] = _world_normals(matrix, instance.local_normals, triangles[rows])
@@ -1176,6 +1214,14 @@ def _first_few(paths: list[str], count: int = 3) -> str:
     return ", ".join(paths[:count]) + (f" and {len(paths) - count} more" if len(paths) > count else "")
 
 
+def _moving_instances(graph: NodeGraph, instances: tuple[_Instance, ...]) -> tuple[int, ...]:
+    """The instances an animation moves: placed by an animated node or one below it, or
+    deformed by a moving joint or animated weights."""
+    moving = gltf_motion.moving_nodes(graph.parents, graph.order, {channel.node for channel in graph.channels})
+    return tuple(i for i, instance in enumerate(instances)
+                 if (instance.motion.moves(moving) if instance.motion is not None else instance.node in moving))
+
+
 # --------------------------------------------------------------------------- entry points
 
 
@@ -1240,7 +1286,7 @@ def import_gltf(path: Path, file: str | None = None, camera: str | None = None, 
             reader.fail(f"nodes.{node}", "a transform that, with its parents', stays finite in float32",
                         f"a world matrix entry of {float(np.abs(world[node]).max()):.3g}")
     channels, duration = _channels(reader, graph)
-    instances, tris, normals, albedo, outward = _meshes(reader, graph, world, bool(channels))
+    instances, tris, normals, albedo, outward = _meshes(reader, graph, world, channels)
     lights, light_nodes = _lights(reader, graph, world, light_scale)
     triangles = np.concatenate(tris) if tris else np.zeros((0, 3, 3))
     del tris
@@ -1252,8 +1298,11 @@ def import_gltf(path: Path, file: str | None = None, camera: str | None = None, 
     scene_camera, camera_node = _camera(reader, cameras, camera, world, bounds)
     _notify_unrendered(reader, graph, len(cameras))
     _check_coordinates(reader, triangles, lights, scene_camera)
-    graph = NodeGraph(graph.parents, graph.order, graph.matrices, graph.trs, channels)
-    _check_animated_poses(reader, graph, instances, light_nodes, camera_node)
+    # The nodes' channels; a weights channel is its Deformation's (gltf_motion).
+    graph = NodeGraph(graph.parents, graph.order, graph.matrices, graph.trs,
+                      tuple(channel for channel in channels if channel.path != "weights"))
+    _check_animated_poses(reader, graph, [i for i in instances if i.motion is None], light_nodes, camera_node)
+    gltf_motion.check_poses([i.motion for i in instances if i.motion is not None], graph, channels, _sample)
     object_id = np.concatenate([np.full(i.rows.stop - i.rows.start, k, np.int32) for k, i in enumerate(instances)]) \
         if instances else np.zeros(0, np.int32)
     return Imported(file=file, triangles=triangles,
@@ -1311,7 +1360,8 @@ def merge(scene: Scene, imported: Imported, own_camera: bool, own_animation: boo
             fps=fps, first=0, last=max(int(math.ceil(imported.duration * fps - 1e-9)), 0),
             graph=imported.graph, instances=imported.instances, first_row=geometry.count,
             light_nodes=tuple((first_light + i, node) for i, node in enumerate(imported.light_nodes)),
-            camera_node=None if own_camera else imported.camera_node))
+            camera_node=None if own_camera else imported.camera_node,
+            moving=_moving_instances(imported.graph, imported.instances)))
     if not own_medium:  # last, so that a refused file says only why
         scene = replace(scene, medium=default_medium(*bounds))
         sigma = f"{float(scene.medium.sigma_s[0]):.3g}"

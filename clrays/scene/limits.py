@@ -36,6 +36,14 @@ MAX_LIGHTS = 16
 #: per triangle (measured: 4 spheres of a million triangles peak at 570 MB), so 2 Mi
 #: triangles stay near 250 MB; the renderer's own copies come on top.
 MAX_TRIANGLES = 1 << 21
+#: Skinned or morphed vertices in one glTF scene (each instance's counted), posed again on
+#: the host every frame where they move: a skinned grid of 1 Mi vertices and 2 Mi triangles
+#: took 4.3 s a frame on the 2-core machine (docs/limits.md), a few times the frame's render.
+MAX_DEFORMED_VERTICES = 1 << 20
+#: Morph target vertices (targets × vertices, summed over the primitives): each target keeps
+#: its float64 displacements, 24 bytes a vertex (twice that with NORMAL displacements), so
+#: 4 Mi of them take about 100 to 200 MB.
+MAX_MORPH_VERTICES = 1 << 22
 #: Objects in one scene: each is read and transformed on its own in Python; meshes carry
 #: any number of triangles in one object.
 MAX_OBJECTS = 4096
