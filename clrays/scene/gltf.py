@@ -1160,31 +1160,27 @@ def _times(a: float, b: float) -> float:
     return 0.0 if a == 0.0 or b == 0.0 else a * b
 
 
-def _check_animated_poses(reader: "_Reader", graph: NodeGraph, instances, light_nodes, camera_node) -> None:
-    """Every animated pose within what the device holds, as a YAML animation's keys are:
-    every mesh vertex, light and the camera within ±MAX_COORDINATE at every time, and the
-    camera's frame not scaled to nothing (its direction would be 0/0). Proved, not sampled,
-    in time linear in the keys and nodes (sampling every key time costs keys × nodes:
-    65 536 nodes and 400 key times took minutes):
+def pose_bounds(graph: NodeGraph) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(animated, norm_hi, norm_lo, reach), per node, over every time of the animation: whether
+    the node or a parent is animated, bounds on its world matrix's largest and least
+    singular values, and on its world translation's length. From each node's own keys alone,
+    in time linear in keys and nodes:
 
-    - each node's local transform x -> L·x + t is bounded over all time from its own keys
-      (`_channel_extent`): ‖L‖ <= max |scale|, its least singular value >= min |scale| (a
-      rotation keeps lengths), |t| <= the translation's bound; a `matrix` is fixed;
+    - a node's local transform x -> L·x + t: ‖L‖ <= max |scale|, its least singular value
+      >= min |scale| (a rotation keeps lengths), |t| <= the translation's bound, over the
+      keys of the channels that replace its static parts (`_channel_extent`); a `matrix` is fixed;
     - composed down the hierarchy: ‖W‖ <= ‖W_parent‖·‖L‖, σ_min(W) >= σ_min(W_parent)·σ_min(L),
       |w| <= |w_parent| + ‖W_parent‖·|t| for the world matrix W and translation w;
-    - a vertex at distance r from its node's origin stays within |w| + ‖W‖·r of the world's.
 
-    Only nodes under an animated one are checked here: the static pose is checked exactly
-    (`_check_coordinates`). The bound is sound, so it may refuse a pose that the frames
-    never reach (a large scale at one time and a large translation at another)."""
-    if not graph.channels:
-        return
+    so a point at distance r from a node's origin stays within reach + norm_hi·r of the
+    world's. Sound at every time, so it may exceed what the frames reach (a large scale at
+    one time and a large translation at another)."""
     count = len(graph.parents)
     animated = np.zeros(count, dtype=bool)
-    translation_hi = np.linalg.norm(np.array([t for t, _, _ in graph.trs]), axis=1)
-    scales = np.abs(np.array([s for _, _, s in graph.trs]))
-    scale_hi, scale_lo = scales.max(axis=1), scales.min(axis=1)
-    moved, scaled = set(), set()  # a channel replaces the static part: the first one's bound replaces it
+    translation_hi = np.linalg.norm(np.array([t for t, _, _ in graph.trs]).reshape(-1, 3), axis=1)
+    scales = np.abs(np.array([s for _, _, s in graph.trs]).reshape(-1, 3))
+    scale_hi, scale_lo = scales.max(axis=1, initial=0.0), scales.min(axis=1, initial=np.inf)
+    moved, scaled = set(), set()  # nodes whose static part the channels' bounds (all of them) replace
     for channel in graph.channels:
         animated[channel.node] = True
         if channel.path == "rotation":
@@ -1215,6 +1211,19 @@ def _check_animated_poses(reader: "_Reader", graph: NodeGraph, instances, light_
             norm_hi[node] = _times(norm_hi[parent], scale_hi[node])
             norm_lo[node] = norm_lo[parent] * scale_lo[node]
             reach[node] = reach[parent] + _times(norm_hi[parent], translation_hi[node])
+    return animated, norm_hi, norm_lo, reach
+
+
+def _check_animated_poses(reader: "_Reader", graph: NodeGraph, instances, light_nodes, camera_node) -> None:
+    """Every animated pose within what the device holds, as a YAML animation's keys are:
+    every mesh vertex, light and the camera within ±MAX_COORDINATE at every time, and the
+    camera's frame not scaled to nothing (its direction would be 0/0), by `pose_bounds`:
+    proved, not sampled (sampling every key time cost key times × nodes: 65 536 nodes and
+    400 key times took minutes). Only what lies under an animated node is checked here: the
+    static pose is checked exactly (`_check_coordinates`)."""
+    if not graph.channels:
+        return
+    animated, norm_hi, norm_lo, reach = pose_bounds(graph)
     placed = [(instance.node, float(np.sqrt((instance.local.reshape(-1, 3) ** 2).sum(axis=1)).max(initial=0.0)),
                "mesh") for instance in instances]
     placed += [(node, 0.0, "light") for node in light_nodes]

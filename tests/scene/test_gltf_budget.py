@@ -186,6 +186,64 @@ def test_the_pose_bound_holds_between_keys(tmp_path, case, pattern):
             load_scene(path)
 
 
+def test_the_pose_bounds_hold_at_every_sampled_time(tmp_path):
+    """A random hierarchy of TRS and matrix nodes with LINEAR, STEP and CUBICSPLINE channels
+    on translations, rotations and scales (some through 0), sampled at 4001 times and every
+    key: every node's world matrix and translation lie within `pose_bounds`; and a root
+    moved by keys [0, 0, 0] and [3, 4, 0] alone is bounded by 5, what it reaches."""
+    from clrays.scene.gltf import NodeGraph, pose_bounds
+    from test_gltf import quaternion
+
+    rng = np.random.default_rng(7)
+    b = GltfBuilder()
+    nodes = [b.node(translation=[3.0, 4.0, 0.0])]
+    for k in range(1, 14):
+        parent = nodes[int(rng.integers(0, len(nodes)))]
+        if k % 5 == 0:
+            matrix = np.eye(4)
+            matrix[:3, :3] = rng.normal(size=(3, 3))
+            matrix[:3, 3] = rng.normal(size=3)
+            nodes.append(b.node(parent, matrix=matrix.T.reshape(-1).tolist()))
+        else:
+            nodes.append(b.node(parent, translation=rng.normal(size=3).tolist(),
+                                rotation=quaternion(rng.normal(size=3), float(rng.uniform(0, 180))),
+                                scale=rng.uniform(0.5, 2.0, 3).tolist()))
+    b.animate(nodes[0], "translation", [0.0, 1.0], [[0, 0, 0], [3, 4, 0]])
+    for k, node in enumerate(nodes[1:], 1):
+        if k % 5 == 0 or rng.uniform() < 0.2:
+            continue
+        path = ["translation", "rotation", "scale"][k % 3]
+        interpolation = ["LINEAR", "STEP", "CUBICSPLINE"][int(rng.integers(0, 3))]
+        times = np.sort(rng.uniform(0.0, 3.0, 5))
+        if path == "rotation":
+            values = np.array([quaternion(rng.normal(size=3), float(rng.uniform(0, 360))) for _ in times])
+        else:
+            values = rng.normal(size=(5, 3)) * (2.0 if path == "translation" else 1.0)  # scales through 0
+        if interpolation == "CUBICSPLINE":
+            tangents = rng.normal(size=(5, values.shape[1])) * 3.0
+            values = np.stack([tangents, values, -tangents], axis=1).reshape(-1, values.shape[1])
+        b.animate(node, path, times, values, interpolation)
+    path = _write(tmp_path, b)
+    reader = gltf._open(path, str(path))
+    graph = gltf._graph(reader)
+    channels, _ = gltf._channels(reader, graph)
+    graph = NodeGraph(graph.parents, graph.order, graph.matrices, graph.trs, channels)
+    animated, norm_hi, norm_lo, reach = pose_bounds(graph)
+    assert animated.sum() > 5 and reach[nodes[0]] == pytest.approx(5.0)
+    keys = np.concatenate([channel.times for channel in channels])
+    largest_reach = np.zeros(len(nodes))
+    for time in np.concatenate([np.linspace(-0.5, 3.5, 4001), keys]):
+        world = graph.world(float(time))
+        for node in nodes:
+            singular = np.linalg.svd(world[node][:3, :3], compute_uv=False)
+            moved = float(np.linalg.norm(world[node][:3, 3]))
+            largest_reach[node] = max(largest_reach[node], moved)
+            assert singular[0] <= norm_hi[node] * (1 + 1e-9), (node, time)
+            assert singular[-1] >= norm_lo[node] * (1 - 1e-9) - 1e-12, (node, time)
+            assert moved <= reach[node] * (1 + 1e-9), (node, time)
+    assert largest_reach[nodes[0]] == pytest.approx(5.0)
+
+
 # --------------------------------------------------------------------------- images
 
 
