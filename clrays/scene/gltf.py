@@ -44,7 +44,8 @@ from . import gltf_motion
 from .animation import Animation
 from .files import FileRefused, read_regular_file
 from .fields import ANIMATION, MAX_POWER
-from .limits import MAX_COORDINATE, MAX_GLTF_BYTES, MAX_GLTF_NODES, MAX_LIGHTS, MAX_OBJECTS, MAX_TRIANGLES
+from .limits import (MAX_COORDINATE, MAX_GLB_CHUNKS, MAX_GLTF_BYTES, MAX_GLTF_IMPORT_BYTES, MAX_GLTF_NODES,
+                     MAX_LIGHTS, MAX_OBJECTS, MAX_TRIANGLES)
 from .model import (Camera, DirectionalLight, Geometry, Light, LightTexture, Medium, Phase, PointLight, Scene,
                     SpotLight)
 from .textures import MAX_TEXTURE_SIDE, srgb_to_linear
@@ -59,7 +60,8 @@ GLB_MAGIC = b"glTF"
 _CHUNK_JSON, _CHUNK_BIN = 0x4E4F534A, 0x004E4942
 #: Extensions a file may require: those clrays reads. Any other required one is refused by name,
 #: unless it only changes materials (`material_only_extension`).
-SUPPORTED_EXTENSIONS = ("KHR_lights_punctual", gltf_motion.EXTENSION) + gltf_compression.EXTENSIONS
+SUPPORTED_EXTENSIONS = ("KHR_lights_punctual", "KHR_mesh_quantization", gltf_motion.EXTENSION) + \
+    gltf_compression.EXTENSIONS
 #: Required extensions that change only how surfaces look or where their texels come from:
 #: clrays's surfaces are diffuse with one albedo per primitive, so the file renders without
 #: them, with a notice naming them. Every `KHR_materials_*` is one too.
@@ -71,6 +73,10 @@ LUMENS_PER_WATT = 683.0
 #: componentType -> (numpy little-endian dtype, largest value for `normalized`)
 _COMPONENTS = {5120: ("<i1", 127.0), 5121: ("<u1", 255.0), 5122: ("<i2", 32767.0), 5123: ("<u2", 65535.0),
                5125: ("<u4", None), 5126: ("<f4", None)}
+#: KHR_mesh_quantization: the componentTypes an attribute may have (POSITION's normalized or
+#: not, NORMAL's normalized) in a file that declares it; FLOAT alone otherwise.
+QUANTIZATION = "KHR_mesh_quantization"
+_QUANTIZED = {"POSITION": (5126, 5120, 5121, 5122, 5123), "NORMAL": (5126, 5120, 5122)}
 _WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 _TRIANGLES, _TRIANGLE_STRIP, _TRIANGLE_FAN = 4, 5, 6
 
@@ -209,7 +215,10 @@ class _Reader:
         self._buffers: dict[int, bytes] = {}
         self._items: dict[str, list] = {}
         self._buffer_bytes = 0
-        self.image_means: dict[int, np.ndarray] = {}  # images.i → its linear mean colour, decoded once
+        self._accessors: dict[int, np.ndarray] = {}  # accessors.i, read once
+        self.charged = 0  # bytes counted against MAX_GLTF_IMPORT_BYTES
+        # an image's source (("uri", uri) or ("bufferView", i)) → its linear mean colour, decoded once
+        self.image_means: dict[tuple[str, Any], np.ndarray] = {}
         self.decoded: dict[tuple[str, int], Any] = {}  # compressed views and accessors, decoded (gltf_compression)
 
     def fail(self, path: str, expected: str, got: Any) -> NoReturn:
@@ -273,6 +282,17 @@ class _Reader:
                       f"no index ({array} is empty)", value)
         return value
 
+    # ------------------------------------------------------------------ the budget
+
+    def charge(self, count: int, path: str, what: str) -> None:
+        """Count `count` bytes that the import is about to materialize (`what`, for the field
+        at `path`) against its one budget, MAX_GLTF_IMPORT_BYTES, before they are allocated."""
+        if self.charged + count > MAX_GLTF_IMPORT_BYTES:
+            self.fail(path, f"at most {_size(MAX_GLTF_IMPORT_BYTES)} read and decoded by the import in all "
+                            f"(buffers, accessors as float64, images; docs/limits.md)",
+                      f"{count} bytes more for {what}, after {self.charged}")
+        self.charged += count
+
     # ------------------------------------------------------------------ buffers and accessors
 
     def buffer(self, index: int) -> bytes:
@@ -282,8 +302,9 @@ class _Reader:
         buffer = self.items("buffers")[index]
         length = self.get(buffer, "byteLength", path, "int", lo=1)
         if "uri" in buffer:
-            data = self._uri(self.get(buffer, "uri", path, "string"), f"{path}.uri")
+            data = self._uri(self.get(buffer, "uri", path, "string"), f"{path}.uri", "buffer")
         elif index == 0 and self.binary is not None:
+            self.charge(len(self.binary), path, "the GLB's BIN chunk")
             data = self.binary
         else:
             self.fail(path, "a uri (only the first buffer of a .glb may use its BIN chunk)", "no uri")
@@ -296,7 +317,9 @@ class _Reader:
         self._buffers[index] = memoryview(data)[:length]  # a view: a 128 MiB buffer is not copied
         return self._buffers[index]
 
-    def _uri(self, uri: str, path: str) -> bytes:
+    def _uri(self, uri: str, path: str, what: str) -> bytes:
+        """The bytes a buffer's or an image's `uri` names (`what`: buffer, image): a base64 data
+        URI or a file inside the glTF file's folder, charged to the budget."""
         if uri.startswith("data:"):
             head, comma, payload = uri.partition(",")
             if not comma or not head.endswith(";base64"):
@@ -305,6 +328,7 @@ class _Reader:
             if len(payload) > (MAX_GLTF_BYTES // 3 + 1) * 4:
                 self.fail(path, f"a data URI of at most {_size(MAX_GLTF_BYTES)} (docs/limits.md)",
                           f"{len(payload)} base64 characters")
+            self.charge(len(payload) // 4 * 3, path, f"the {what}'s data URI")
             try:
                 return base64.b64decode(payload, validate=True)
             except (binascii.Error, ValueError) as exc:
@@ -321,10 +345,15 @@ class _Reader:
             self.fail(path, "a file path that resolves", f"{uri!r} ({exc})")
         if folder != resolved and folder not in resolved.parents:  # `..` or a link that leaves it: refused
             self.fail(path, "a file inside the glTF file's folder", json.dumps(uri))
+        left = MAX_GLTF_IMPORT_BYTES - self.charged  # the read stops there: nothing past the budget is allocated
         try:
-            return read_regular_file(resolved, MAX_GLTF_BYTES)
+            data = read_regular_file(resolved, min(MAX_GLTF_BYTES, left),
+                                     "" if left >= MAX_GLTF_BYTES else
+                                     f"what is left of the import's budget of {_size(MAX_GLTF_IMPORT_BYTES)}")
         except FileRefused as exc:
-            self.fail(path, "a readable buffer file", f"{uri!r} ({exc})")
+            self.fail(path, f"a readable {what} file", f"{uri!r} ({exc})")
+        self.charge(len(data), path, f"the {what} file")
+        return data
 
     def view(self, index: int) -> tuple[dict, bytes, int, int]:
         """bufferViews[index]: (the view, its buffer's bytes, its byteOffset, its
@@ -348,8 +377,14 @@ class _Reader:
                       length)
         return data, offset, length
 
-    def accessor(self, index: int, path: str, types: tuple[str, ...], components: tuple[int, ...]) -> np.ndarray:
-        """Accessor `index` as float64 (count, width) (a SCALAR's (count,)), checked against its view's bytes."""
+    def accessor(self, index: int, path: str, types: tuple[str, ...], components: tuple[int, ...],
+                 normalized: bool = False, hint: str = "") -> np.ndarray:
+        """Accessor `index` for the field at `path`, as float64 (count, width) (a SCALAR's
+        (count,)): its view's elements, or zeros without a view, with its sparse
+        substitutions; normalized integers mapped to [0, 1] or [-1, 1] by the spec's formulas.
+        Its type must be one of `types`, its componentType one of `components` (`hint` says
+        why not), and, where `normalized`, an integer one normalized. Read once, however many
+        fields use it: later uses share the same read-only array."""
         where = f"accessors.{index}"
         acc = self.items("accessors")[index]
         kind = self.get(acc, "type", where, "string")
@@ -357,44 +392,109 @@ class _Reader:
             self.fail(f"{where}.type", f"one of {', '.join(types)} for {path}", json.dumps(kind))
         component = self.get(acc, "componentType", where, "int")
         if component not in components:
-            self.fail(f"{where}.componentType", f"one of {', '.join(map(str, components))} for {path}", component)
-        if "sparse" in acc:
-            self.fail(f"{where}.sparse", "an accessor without sparse storage (clrays reads dense accessors)",
-                      "a sparse accessor")
+            self.fail(f"{where}.componentType", f"one of {', '.join(map(str, components))} for {path}{hint}",
+                      component)
+        is_normalized = self.get(acc, "normalized", where, "bool", False)
+        if normalized and _COMPONENTS[component][1] is not None and not is_normalized:
+            self.fail(f"{where}.normalized", f"true for {path} (its integers stand for [-1, 1])", is_normalized)
+        if index not in self._accessors:
+            decoded = self.decoded.get(("accessors", index))  # KHR_draco_mesh_compression (gltf_compression)
+            values = decoded if decoded is not None else \
+                self._read_accessor(acc, where, path, _WIDTHS[kind], component, is_normalized)
+            values.flags.writeable = False  # shared by every use
+            self._accessors[index] = values[:, 0] if kind == "SCALAR" else values
+        return self._accessors[index]
+
+    def attribute(self, index: int, name: str, path: str) -> np.ndarray:
+        """Accessor `index` as the POSITION or NORMAL (`name`) of the primitive at `path`: VEC3 of
+        FLOAT or, in a file that declares KHR_mesh_quantization, of the integer types its
+        table allows (a NORMAL's normalized). The node's transform dequantizes positions, as
+        the extension intends; normals are made unit length where they are used."""
+        quantized = QUANTIZATION in self.extensions_declared()
+        return self.accessor(index, f"{path}.attributes.{name}", ("VEC3",),
+                             _QUANTIZED[name] if quantized else (5126,), normalized=name == "NORMAL",
+                             hint="" if quantized else f" (integer {name}s need {QUANTIZATION} in extensionsRequired)")
+
+    def extensions_declared(self) -> tuple[str, ...]:
+        """The names in extensionsUsed and extensionsRequired."""
+        names = [*self.get(self.doc, "extensionsUsed", "", "list", []),
+                 *self.get(self.doc, "extensionsRequired", "", "list", [])]
+        return tuple(name for name in names if isinstance(name, str))
+
+    def _read_accessor(self, acc: dict, where: str, path: str, width: int, component: int,
+                       is_normalized: bool) -> np.ndarray:
         count = self.get(acc, "count", where, "int", lo=1)
-        width = _WIDTHS[kind]
         dtype, largest = _COMPONENTS[component]
+        self.charge(count * width * 8, where, f"{count} elements of {width} float64s")
+        if "bufferView" in acc:
+            values = self._elements(acc, where, f"{where}.count", count, width, dtype, strided=True).astype(np.float64)
+        else:  # all zeros, by the spec (with sparse substitutions, or values an extension supplies)
+            values = np.zeros((count, width))
+        if "sparse" in acc:
+            self._substitute(acc, where, values, dtype)
+        if largest is not None and is_normalized:
+            values /= largest
+            np.maximum(values, -1.0, out=values)  # the spec's max(c / 127, -1) for signed types
+        if dtype == "<f4" and not np.isfinite(values).all():  # integers are always finite
+            row = int(np.flatnonzero(~np.isfinite(values).all(axis=1))[0])
+            self.fail(where, f"finite values for {path}", f"{values[row].tolist()} at element {row}")
+        return values
+
+    def _elements(self, holder: dict, where: str, count_path: str, count: int, width: int, dtype: str,
+                  strided: bool) -> np.ndarray:
+        """(count, width) elements of `dtype` in the view `holder` names (an accessor, or a
+        sparse accessor's indices or values: `where`) from its byteOffset: a numpy view of the
+        buffer's bytes, nothing copied, checked to lie within the view. Where `strided`, the
+        view's byteStride spaces them; a sparse accessor's views have none (tightly packed)."""
+        view_index = self.index(holder, "bufferView", where, "bufferViews")
+        view_path = f"bufferViews.{view_index}"
+        view, data, view_offset, view_length = self.view(view_index)
         size = np.dtype(dtype).itemsize
         element = width * size
-        if ("accessors", index) in self.decoded:  # KHR_draco_mesh_compression (gltf_compression.decode_draco)
-            values = self.decoded[("accessors", index)]
-        elif "bufferView" not in acc:  # all zeros, by the spec; bounded by the same count as a view's
-            if count * element > MAX_GLTF_BYTES:
-                self.fail(f"{where}.count", f"at most {MAX_GLTF_BYTES // element} elements", count)
-            values = np.zeros((count, width))
-        else:
-            view_index = self.index(acc, "bufferView", where, "bufferViews")
-            view_path = f"bufferViews.{view_index}"
-            view, data, view_offset, view_length = self.view(view_index)
+        if strided:
             stride = self.get(view, "byteStride", view_path, "int", element, lo=4, hi=252)
             if stride < element:
                 self.fail(f"{view_path}.byteStride", f"at least the element's {element} bytes", stride)
-            offset = self.get(acc, "byteOffset", where, "int", 0, lo=0)
-            if offset % size:
-                self.fail(f"{where}.byteOffset", f"a multiple of the component's {size} bytes", offset)
-            most = (view_length - offset - element) // stride + 1 if view_length >= offset + element else 0
-            if count > most:
-                self.fail(f"{where}.count", f"at most {most} elements in {view_path} ({view_length} bytes, "
-                          f"byteOffset {offset}, stride {stride})", count)
-            start = view_offset + offset
-            raw = np.ndarray((count, width), dtype=dtype, buffer=data, offset=start, strides=(stride, size))
-            values = raw.astype(np.float64)
-        if largest is not None and self.get(acc, "normalized", where, "bool", False):
-            values = np.maximum(values / largest, -1.0)
-        if not np.isfinite(values).all():
-            row = int(np.flatnonzero(~np.isfinite(values).all(axis=1))[0])
-            self.fail(where, f"finite values for {path}", f"{values[row].tolist()} at element {row}")
-        return values[:, 0] if kind == "SCALAR" else values
+        elif "byteStride" in view:
+            self.fail(f"{view_path}.byteStride", f"no byteStride (the view of {where} is tightly packed)",
+                      view["byteStride"])
+        else:
+            stride = element
+        offset = self.get(holder, "byteOffset", where, "int", 0, lo=0)
+        if offset % size:
+            self.fail(f"{where}.byteOffset", f"a multiple of the component's {size} bytes", offset)
+        most = (view_length - offset - element) // stride + 1 if view_length >= offset + element else 0
+        if count > most:
+            self.fail(count_path, f"at most {most} elements in {view_path} ({view_length} bytes, "
+                      f"byteOffset {offset}, stride {stride})", count)
+        return np.ndarray((count, width), dtype=dtype, buffer=data, offset=view_offset + offset,
+                          strides=(stride, size))
+
+    def _substitute(self, acc: dict, where: str, values: np.ndarray, dtype: str) -> None:
+        """Apply a sparse accessor's substitutions to `values` (its base, as float64): `count`
+        strictly increasing indices below the accessor's count, and as many elements of the
+        accessor's componentType, both tightly packed in their views (glTF 2.0 §3.6.2.3)."""
+        path = f"{where}.sparse"
+        count, width = values.shape
+        sparse = self.get(acc, "sparse", where, "dict")
+        replaced = self.get(sparse, "count", path, "int", lo=1, hi=count)
+        indices_at = self.get(sparse, "indices", path, "dict")
+        index_component = self.get(indices_at, "componentType", f"{path}.indices", "int")
+        if index_component not in (5121, 5123, 5125):
+            self.fail(f"{path}.indices.componentType", "one of 5121, 5123, 5125 (unsigned integers)", index_component)
+        values_at = self.get(sparse, "values", path, "dict")
+        self.charge(replaced * (1 + width) * 8, path, f"{replaced} sparse indices and elements")
+        indices = self._elements(indices_at, f"{path}.indices", f"{path}.count", replaced, 1,
+                                 _COMPONENTS[index_component][0], strided=False)[:, 0].astype(np.int64)
+        steps = np.diff(indices)
+        if np.any(steps <= 0):
+            k = int(np.argmax(steps <= 0))
+            self.fail(f"{path}.indices", "strictly increasing indices",
+                      f"{int(indices[k])} then {int(indices[k + 1])} at {k} and {k + 1}")
+        if indices[-1] >= count:
+            self.fail(f"{path}.indices", f"indices below the accessor's count {count}", int(indices[-1]))
+        values[indices] = self._elements(values_at, f"{path}.values", f"{path}.count", replaced, width, dtype,
+                                         strided=False)
 
 
 def _size(n: int) -> str:
@@ -435,22 +535,18 @@ def _open(path: Path, file: str) -> _Reader:
             raise SceneError(f"{file}: (GLB header): expected version 2, got {version}")
         if length != len(data):
             raise SceneError(f"{file}: (GLB header): expected the file's length, {len(data)} bytes, got {length}")
-        chunks, offset = [], 12
-        while offset < len(data):
-            if offset + 8 > len(data):
-                raise SceneError(f"{file}: (GLB chunk at byte {offset}): expected an 8-byte chunk header, "
-                                 f"got {len(data) - offset} bytes")
-            chunk_length, chunk_type = struct.unpack_from("<II", data, offset)
-            if offset + 8 + chunk_length > len(data):
-                raise SceneError(f"{file}: (GLB chunk at byte {offset}): expected a length within the file's "
-                                 f"{len(data) - offset - 8} remaining bytes, got {chunk_length}")
-            chunks.append((chunk_type, data[offset + 8:offset + 8 + chunk_length]))
-            offset += 8 + chunk_length
-        if not chunks or chunks[0][0] != _CHUNK_JSON:
-            raise SceneError(f"{file}: (GLB chunk at byte 12): expected the JSON chunk first, got "
-                             f"{'none' if not chunks else hex(chunks[0][0])}")
-        text = chunks[0][1]
-        binary = chunks[1][1] if len(chunks) > 1 and chunks[1][0] == _CHUNK_BIN else None
+        chunks = _glb_chunks(data, file)
+        if chunks[0][0] != _CHUNK_JSON:
+            raise SceneError(f"{file}: (GLB chunk at byte 12): expected the JSON chunk first, got {hex(chunks[0][0])}")
+        text = data[chunks[0][1]:chunks[0][2]]
+        for position, (kind, start, end) in enumerate(chunks[1:], 1):
+            if kind == _CHUNK_BIN and position == 1:
+                binary = memoryview(data)[start:end]  # a view: the buffer is not copied
+            elif kind in (_CHUNK_JSON, _CHUNK_BIN):
+                raise SceneError(f"{file}: (GLB chunk at byte {start - 8}): expected one JSON chunk, first, and at "
+                                 f"most one BIN chunk, second (glTF 2.0, GLB chunks), got a "
+                                 f"{'JSON' if kind == _CHUNK_JSON else 'BIN'} chunk as chunk {position + 1}")
+            # any other type: skipped, as the spec asks (an extension's own chunk)
     else:
         text = data
     try:
@@ -461,6 +557,28 @@ def _open(path: Path, file: str) -> _Reader:
     if not isinstance(document, dict):
         raise SceneError(f"{file}: (top level): expected a JSON object, got {_show(document)}")
     return _Reader(file, path.parent, document, binary)
+
+
+def _glb_chunks(data: bytes, file: str) -> list[tuple[int, int, int]]:
+    """(type, start, end) of each chunk of a GLB file, after its 12-byte header: at most
+    MAX_GLB_CHUNKS, each within the file, nothing copied."""
+    chunks, offset = [], 12
+    while offset < len(data):
+        if len(chunks) == MAX_GLB_CHUNKS:
+            raise SceneError(f"{file}: (GLB chunk at byte {offset}): expected at most {MAX_GLB_CHUNKS} chunks (JSON, "
+                             f"BIN and chunks of extensions; docs/limits.md), got more")
+        if offset + 8 > len(data):
+            raise SceneError(f"{file}: (GLB chunk at byte {offset}): expected an 8-byte chunk header, "
+                             f"got {len(data) - offset} bytes")
+        chunk_length, chunk_type = struct.unpack_from("<II", data, offset)
+        if offset + 8 + chunk_length > len(data):
+            raise SceneError(f"{file}: (GLB chunk at byte {offset}): expected a length within the file's "
+                             f"{len(data) - offset - 8} remaining bytes, got {chunk_length}")
+        chunks.append((chunk_type, offset + 8, offset + 8 + chunk_length))
+        offset += 8 + chunk_length
+    if not chunks:
+        raise SceneError(f"{file}: (GLB chunk at byte 12): expected the JSON chunk first, got none")
+    return chunks
 
 
 def _no_constant(name: str):
@@ -638,39 +756,52 @@ def _mean_texture(reader: _Reader, texture_info: dict, path: str) -> np.ndarray:
     if "source" not in texture:
         return np.ones(3)  # a texture of an extension's image format: not read
     image_index = reader.index(texture, "source", f"textures.{texture_index}", "images")
-    if image_index not in reader.image_means:  # materials sharing an image decode it once
-        reader.image_means[image_index] = _mean_image(reader, image_index)
-    return reader.image_means[image_index]
+    return _mean_image(reader, image_index)
 
 
 def _mean_image(reader: _Reader, image_index: int) -> np.ndarray:
-    """The linear mean colour of images[image_index] (PNG or JPEG, sRGB-encoded), its size
-    checked before it is decoded, its 8-bit values counted rather than converted: a 4096²
-    image costs its 48 MiB of bytes, not float copies of them."""
+    """The linear mean colour of images[image_index] (PNG or JPEG, sRGB-encoded), decoded
+    once per source (its URI or buffer view), however many images and materials name it.
+    Its size is read from its header and its decoded pixels charged to the import's budget
+    before it is decoded; its 8-bit values are counted (PIL's histogram) rather than
+    converted: a 4096² image costs its 48 MiB of pixels, not float copies of them."""
     where = f"images.{image_index}"
     image = reader.items("images")[image_index]
     if "uri" in image:
-        data = reader._uri(reader.get(image, "uri", where, "string"), f"{where}.uri")
+        uri = reader.get(image, "uri", where, "string")
+        source = ("uri", uri)
     else:
-        _, buffer, offset, length = reader.view(reader.index(image, "bufferView", where, "bufferViews"))
-        data = buffer[offset:offset + length]
+        view_index = reader.index(image, "bufferView", where, "bufferViews")
+        source = ("bufferView", view_index)
+    if source not in reader.image_means:
+        if "uri" in image:
+            data = reader._uri(uri, f"{where}.uri", "image")
+        else:
+            _, buffer, offset, length = reader.view(view_index)
+            data = buffer[offset:offset + length]
+        reader.image_means[source] = _decoded_mean(reader, where, data)
+    return reader.image_means[source]
+
+
+def _decoded_mean(reader: _Reader, where: str, data: bytes) -> np.ndarray:
     from PIL import Image, UnidentifiedImageError
 
     try:
         with Image.open(io.BytesIO(data)) as opened:
             if opened.format not in ("PNG", "JPEG"):
                 reader.fail(where, "a PNG or JPEG image", opened.format)
-            if max(opened.size) > MAX_TEXTURE_SIDE:  # before decoding: a small file may hold a huge image
-                reader.fail(where, f"an image with sides of at most {MAX_TEXTURE_SIDE} pixels",
-                            f"{opened.size[0]}×{opened.size[1]}")
-            encoded = np.asarray(opened.convert("RGB"), dtype=np.uint8).reshape(-1, 3)
+            width, height = opened.size
+            if max(width, height) > MAX_TEXTURE_SIDE:  # before decoding: a small file may hold a huge image
+                reader.fail(where, f"an image with sides of at most {MAX_TEXTURE_SIDE} pixels", f"{width}×{height}")
+            reader.charge(width * height * 4, where, f"its {width}×{height} pixels decoded")
+            rgb = opened if opened.mode == "RGB" else opened.convert("RGB")
+            counts = np.asarray(rgb.histogram(), dtype=np.float64).reshape(3, 256)  # per channel, per 8-bit value
     except Image.DecompressionBombError as exc:  # PIL's own limit, above ours: refused at its header
         reader.fail(where, f"an image with sides of at most {MAX_TEXTURE_SIDE} pixels", f"({exc})")
     except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as exc:
         reader.fail(where, "a readable PNG or JPEG image", f"({exc})")
     linear = srgb_to_linear(np.arange(256) / 255.0)
-    counts = [np.bincount(encoded[:, channel], minlength=256) for channel in range(3)]
-    return np.array([count @ linear for count in counts]) / max(len(encoded), 1)
+    return counts @ linear / max(width * height, 1)
 
 
 def _meshes(reader: _Reader, graph: NodeGraph, world: dict[int, np.ndarray], channels: tuple[_Channel, ...]):
@@ -741,22 +872,42 @@ def _primitive(reader: _Reader, primitive: dict, path: str):
     attributes = reader.get(primitive, "attributes", path, "dict")
     gltf_compression.decode_draco(reader, primitive, path)  # KHR_draco_mesh_compression: its accessors' data
     position = reader.index(attributes, "POSITION", f"{path}.attributes", "accessors")
-    vertices = reader.accessor(position, f"{path}.attributes.POSITION", ("VEC3",), (5126,))
+    vertices = reader.attribute(position, "POSITION", path)
     faces = _primitive_faces(reader, primitive, path, len(vertices))
     if faces is None or len(faces) == 0:
         return None
     given = None
     if "NORMAL" in attributes:
         normal = reader.index(attributes, "NORMAL", f"{path}.attributes", "accessors")
-        given = reader.accessor(normal, f"{path}.attributes.NORMAL", ("VEC3",), (5126,))
+        given = reader.attribute(normal, "NORMAL", path)
         if len(given) != len(vertices):
             reader.fail(f"accessors.{normal}.count", f"the POSITION count {len(vertices)}", len(given))
+    # A skinned or morphed primitive keeps every vertex: its per-vertex attributes
+    # (gltf_motion) are read whole, and their counts must match POSITION's.
+    deformable = "targets" in primitive or any(str(name).startswith("JOINTS_") for name in attributes)
+    used, faces = (None, faces) if deformable else _used_vertices(faces, len(vertices))
+    if used is not None:  # some vertices of a large or shared accessor: the rest cost nothing more
+        vertices, given = vertices[used], (given[used] if given is not None else None)
     triangles = primitives.indexed_triangles(vertices, faces)
     # The file's normals; without them flat ones, as the spec requires ("client
     # implementations must calculate flat normals"): each triangle its own face's normal.
     normals = primitives.flat_normals(triangles) if given is None else primitives.smooth_normals(vertices, faces, given)
     order = primitives.spatial_order(triangles)
     return triangles[order], normals[order], _albedo(reader, primitive, path), vertices, faces[order]
+
+
+def _used_vertices(faces: np.ndarray, count: int) -> tuple[np.ndarray | None, np.ndarray]:
+    """(the vertices `faces` use, in order, and the faces renumbered to them), or (None,
+    faces) where they use all `count`: in time that follows the faces, not the count (one
+    accessor of millions of vertices may serve many primitives of a few triangles each)."""
+    if count <= faces.size:
+        mask = np.zeros(count, dtype=bool)
+        mask[faces] = True
+        if mask.all():
+            return None, faces
+        return np.flatnonzero(mask), (np.cumsum(mask) - 1)[faces]
+    used = np.unique(faces)
+    return used, np.searchsorted(used, faces)
 
 
 def _world_normals(matrix: np.ndarray, local_normals: np.ndarray, triangles: np.ndarray) -> np.ndarray:
@@ -1236,40 +1387,115 @@ def _check_coordinates(reader: "_Reader", triangles: np.ndarray, lights, camera)
                               "beyond)", f"{largest:.3g}")
 
 
+#: On [0, 1] the cubic Hermite basis functions h00 and h01 lie in [0, 1] and sum to 1, while
+#: |h10| and |h11| are at most 4/27 (at u = 1/3 and 2/3): the bound on a spline's overshoot.
+_HERMITE_TANGENT_BOUND = 4.0 / 27.0
+
+
+def _channel_extent(channel: _Channel) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi): per component, lo <= |value(t)| <= hi at every time t, from the channel's
+    keys alone (`_sample` holds the first and last key outside them). Between two keys a and
+    b, LINEAR and STEP values lie between a and b; a CUBICSPLINE's is h00·a + h01·b (between
+    them too) plus h10·m0 + h11·m1, at most 4/27 (|m0| + |m1|) with the tangents m scaled by
+    the span. A component may reach 0 only where two keys differ in sign (or one is 0)."""
+    if channel.interpolation != "CUBICSPLINE":
+        keys = np.abs(channel.values)
+        overshoot = np.zeros((max(len(keys) - 1, 0), keys.shape[1]))
+    else:
+        keys = np.abs(channel.values[1::3])
+        spans = np.diff(channel.times)[:, None]
+        overshoot = _HERMITE_TANGENT_BOUND * spans * (np.abs(channel.values[2::3][:-1]) + np.abs(channel.values[3::3]))
+    signs = np.sign(channel.values[1::3] if channel.interpolation == "CUBICSPLINE" else channel.values)
+    hi = np.maximum(keys.max(axis=0), (np.maximum(keys[:-1], keys[1:]) + overshoot).max(axis=0, initial=0.0))
+    if channel.interpolation == "STEP" or len(keys) == 1:
+        return keys.min(axis=0), hi
+    one_sign = signs[:-1] * signs[1:] > 0
+    segment_lo = np.where(one_sign, np.maximum(np.minimum(keys[:-1], keys[1:]) - overshoot, 0.0), 0.0)
+    return segment_lo.min(axis=0), hi
+
+
+def _times(a: float, b: float) -> float:
+    """a·b for bounds >= 0, where 0 wins over infinity: a factor that is always 0 keeps the product 0."""
+    return 0.0 if a == 0.0 or b == 0.0 else a * b
+
+
+def pose_bounds(graph: NodeGraph) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(animated, norm_hi, norm_lo, reach), per node, over every time of the animation: whether
+    the node or a parent is animated, bounds on its world matrix's largest and least
+    singular values, and on its world translation's length. From each node's own keys alone,
+    in time linear in keys and nodes:
+
+    - a node's local transform x -> L·x + t: ‖L‖ <= max |scale|, its least singular value
+      >= min |scale| (a rotation keeps lengths), |t| <= the translation's bound, over the
+      keys of the channels that replace its static parts (`_channel_extent`); a `matrix` is fixed;
+    - composed down the hierarchy: ‖W‖ <= ‖W_parent‖·‖L‖, σ_min(W) >= σ_min(W_parent)·σ_min(L),
+      |w| <= |w_parent| + ‖W_parent‖·|t| for the world matrix W and translation w;
+
+    so a point at distance r from a node's origin stays within reach + norm_hi·r of the
+    world's. Sound at every time, so it may exceed what the frames reach (a large scale at
+    one time and a large translation at another)."""
+    count = len(graph.parents)
+    animated = np.zeros(count, dtype=bool)
+    translation_hi = np.linalg.norm(np.array([t for t, _, _ in graph.trs]).reshape(-1, 3), axis=1)
+    scales = np.abs(np.array([s for _, _, s in graph.trs]).reshape(-1, 3))
+    scale_hi, scale_lo = scales.max(axis=1, initial=0.0), scales.min(axis=1, initial=np.inf)
+    moved, scaled = set(), set()  # nodes whose static part the channels' bounds (all of them) replace
+    for channel in graph.channels:
+        animated[channel.node] = True
+        if channel.path == "rotation":
+            continue
+        lo, hi = _channel_extent(channel)
+        node = channel.node
+        if channel.path == "translation":
+            bound = float(np.linalg.norm(hi))
+            translation_hi[node] = bound if node not in moved else max(translation_hi[node], bound)
+            moved.add(node)
+        else:
+            scale_hi[node] = float(hi.max()) if node not in scaled else max(scale_hi[node], float(hi.max()))
+            scale_lo[node] = float(lo.min()) if node not in scaled else min(scale_lo[node], float(lo.min()))
+            scaled.add(node)
+    fixed = [i for i, matrix in enumerate(graph.matrices) if matrix is not None]
+    if fixed:
+        matrices = np.stack([graph.matrices[i] for i in fixed])
+        singular = np.linalg.svd(matrices[:, :3, :3], compute_uv=False)
+        scale_hi[fixed], scale_lo[fixed] = singular[:, 0], singular[:, -1]
+        translation_hi[fixed] = np.linalg.norm(matrices[:, :3, 3], axis=1)
+    norm_hi, norm_lo, reach = np.zeros(count), np.zeros(count), np.zeros(count)
+    for node in graph.order:  # parents first
+        parent = graph.parents[node]
+        if parent < 0:
+            norm_hi[node], norm_lo[node], reach[node] = scale_hi[node], scale_lo[node], translation_hi[node]
+        else:
+            animated[node] |= animated[parent]
+            norm_hi[node] = _times(norm_hi[parent], scale_hi[node])
+            norm_lo[node] = norm_lo[parent] * scale_lo[node]
+            reach[node] = reach[parent] + _times(norm_hi[parent], translation_hi[node])
+    return animated, norm_hi, norm_lo, reach
+
+
 def _check_animated_poses(reader: "_Reader", graph: NodeGraph, instances, light_nodes, camera_node) -> None:
-    """The animated poses within what the device holds, as a YAML animation's keys are: at
-    the key times where a channel reaches its largest value, and its first and last, every
-    mesh's bounds, every light and the camera within ±MAX_COORDINATE, the camera's frame
-    not scaled to nothing (its direction would be 0/0). Those times bound the linear and
-    step channels' poses between them; a cubic spline's may overshoot, as its tangents say."""
+    """Every animated pose within what the device holds, as a YAML animation's keys are:
+    every mesh vertex, light and the camera within ±MAX_COORDINATE at every time, and the
+    camera's frame not scaled to nothing (its direction would be 0/0), by `pose_bounds`:
+    proved, not sampled (sampling every key time cost key times × nodes: 65 536 nodes and
+    400 key times took minutes). Only what lies under an animated node is checked here: the
+    static pose is checked exactly (`_check_coordinates`)."""
     if not graph.channels:
         return
-    times = set()
-    for channel in graph.channels:
-        values = channel.values[1::3] if channel.interpolation == "CUBICSPLINE" else channel.values
-        times.update((float(channel.times[0]), float(channel.times[-1]),
-                      float(channel.times[int(np.abs(values).max(axis=1).argmax())])))
-    corners = {}
-    for instance in instances:
-        points = instance.local.reshape(-1, 3)
-        low, high = points.min(axis=0), points.max(axis=0)
-        corners[instance.node] = np.array([[x, y, z, 1.0] for x in (low[0], high[0]) for y in (low[1], high[1])
-                                           for z in (low[2], high[2])])
-    for time in sorted(times):
-        world = graph.world(time)
-        placed = [corners[node] @ world[node].T for node in corners]
-        placed += [world[node][:, 3] for node in light_nodes]
-        if camera_node is not None:
-            placed.append(world[camera_node][:, 3])
-        largest = max((float(np.abs(p[..., :3]).max()) for p in placed), default=0.0)
-        if not largest <= MAX_COORDINATE:
+    animated, norm_hi, norm_lo, reach = pose_bounds(graph)
+    placed = [(instance.node, float(np.sqrt((instance.local.reshape(-1, 3) ** 2).sum(axis=1)).max(initial=0.0)),
+               "mesh") for instance in instances]
+    placed += [(node, 0.0, "light") for node in light_nodes]
+    placed += [(camera_node, 0.0, "camera")] if camera_node is not None else []
+    for node, radius, what in placed:
+        bound = reach[node] + _times(norm_hi[node], radius)
+        if animated[node] and not bound <= MAX_COORDINATE:
             reader.fail("animations", f"poses within ±{MAX_COORDINATE:g} (float32 on the device overflows beyond)",
-                        f"a coordinate of {largest:.3g} at {time:g} s")
-        if camera_node is not None:
-            frame = world[camera_node][:3, 1:3]  # up (Y) and backwards (Z)
-            if not np.all(np.linalg.norm(frame, axis=0) > 1e-12):
-                reader.fail(f"nodes.{camera_node}", "a camera node whose animated scale leaves it a direction",
-                            f"a scale of 0 at {time:g} s")
+                        f"up to {bound:.3g} from the origin for the {what} of nodes.{node}, bounded from the keys of "
+                        f"it and its parents")
+    if camera_node is not None and animated[camera_node] and not norm_lo[camera_node] > 1e-12:
+        reader.fail(f"nodes.{camera_node}", "a camera node whose animated scale leaves it a direction",
+                    f"a scale that may reach {norm_lo[camera_node]:.3g}, bounded from the keys of it and its parents")
 
 
 def import_gltf(path: Path, file: str | None = None, camera: str | None = None, light_scale: float = 1.0) -> Imported:

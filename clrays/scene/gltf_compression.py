@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any, NoReturn
 import numpy as np
 
 from ..errors import SceneError
-from .limits import MAX_GLTF_BYTES, MAX_TRIANGLES
+from .limits import MAX_TRIANGLES
 
 if TYPE_CHECKING:
     from .gltf import _Reader
@@ -63,11 +63,8 @@ def _missing(reader: "_Reader", extension: str, path: str) -> NoReturn:
 
 
 def _charge(reader: "_Reader", size: int, path: str) -> None:
-    """Decoded bytes count against the file's budget (MAX_GLTF_BYTES) with its buffers, before they are made."""
-    reader._buffer_bytes += size
-    if reader._buffer_bytes > MAX_GLTF_BYTES:
-        reader.fail(path, f"buffers and decoded data of at most {MAX_GLTF_BYTES / 2**20:g} MiB in all "
-                          "(docs/limits.md)", f"{reader._buffer_bytes} bytes with this one")
+    """Decoded bytes count against the import's one budget with everything else it reads, before they are made."""
+    reader.charge(size, path, "decoded compressed data")
 
 
 def _extension(reader: "_Reader", obj: dict, name: str, path: str) -> dict | None:

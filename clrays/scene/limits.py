@@ -52,6 +52,19 @@ MAX_OBJECTS = 4096
 #: GLB's BIN chunk): as a mesh file's, room for `MAX_TRIANGLES` (float32 positions and
 #: normals, 32-bit indices: 60 bytes a triangle at worst, 120 MiB) read as arrays.
 MAX_GLTF_BYTES = MAX_MESH_BYTES
+#: Everything a glTF import materializes, counted against one budget before each allocation:
+#: the buffers it reads (.bin files, data URIs, the GLB's BIN chunk), each accessor it reads
+#: (once, however many primitives or channels use it) as float64 including its sparse
+#: indices and values, the image files it reads and their decoded pixels (4 bytes each, the
+#: most a PNG or JPEG decodes to). Buffers that fill their 128 MiB with float32 vertices need
+#: 384 MiB (the buffers, and their values again as float64), which leaves room for a dozen
+#: 4096² base colour textures (docs/limits.md). Without it, accessors without a view (all zeros),
+#: re-read per primitive, and one small PNG named by 200 images cost minutes and gigabytes.
+MAX_GLTF_IMPORT_BYTES = 1 << 30
+#: Chunks in a GLB file: the JSON chunk, the BIN chunk and chunks of unknown types, which the
+#: spec says to skip (extensions may add some; exporters write none). 19 million empty chunks after the
+#: JSON (a 150 MB file) took 52 s and 2.1 GB to walk.
+MAX_GLB_CHUNKS = 16
 #: Nodes in a glTF file: each is a Python dict and a 4×4 matrix per pose, and the checks
 #: of the hierarchy walk them all; exported scenes hold hundreds to a few thousand.
 MAX_GLTF_NODES = 65_536
