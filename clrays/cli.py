@@ -224,7 +224,7 @@ def exposure_option(applies_to: str, takes_auto: bool = True):
                       help=f"{applies_to}: scale radiance by 2^EV before sRGB encoding.")
     return option("--exposure", metavar="EV|auto", callback=_exposure(True), group=OUTPUT,
                   help=f"{applies_to}: scale radiance by 2^EV before sRGB encoding; `auto` maps the 99th "
-                       f"percentile of the lit pixels' brightest channel to white and prints the EV it chose. "
+                       f"percentile of the lit pixels' brightest channel to near white and prints the EV it chose. "
                        f"Default: the scene's render.exposure (0).")
 
 

@@ -3,12 +3,15 @@ a number of stops (EV; radiance × 2^EV before the sRGB curve), or `auto`, chose
 frame's own radiance.
 
 `auto` maps the 99th percentile of the pixels' brightest channel (max of R, G and B, over
-the pixels that are not black) to white, in tenths of a stop rounded down:
+the pixels that are not black) to just below white (AUTO_WHITE, which 8 bits write as
+254), in tenths of a stop rounded down:
 
-    EV = floor(10 · log2(1 / p99)) / 10
+    EV = floor(10 · log2(0.99 / p99)) / 10
 
 A pixel clips when its brightest channel reaches white, so at most 1 % of the lit pixels
 clip, whatever the light's colour; luminance would let a saturated channel clip below it.
+Below white, not at it: a frame lit flat (one radiance over much of it) would otherwise
+clip where its percentile lies.
 The black pixels (a background with no medium) are left out, or a small lit object on a
 black sky would have a p99 of 0. The log-average key of Reinhard et al. mapped to 0.18
 follows the dark majority of a frame instead: with a light in view its glow whitens a
@@ -34,8 +37,10 @@ EXPOSED_FORMATS = (".png", ".gif", ".webp", ".mp4")
 AUTO = "auto"
 #: Stops an exposure may take either way (beyond, float32 radiance × 2^EV under- or overflows).
 EV_LIMIT = 64.0
-#: `auto`: the percentile of the lit pixels' brightest channel that is mapped to white.
+#: `auto`: the percentile of the lit pixels' brightest channel that is mapped to AUTO_WHITE.
 AUTO_PERCENTILE = 99.0
+#: `auto`: the linear value that percentile is mapped to, 254 in 8 bits (255 is 0.9955 on).
+AUTO_WHITE = 0.99
 #: A frame warns when more of its pixels than this reach 255 in some channel.
 CLIPPED_WARNING = 0.5
 
@@ -62,14 +67,15 @@ def brightest_channel(radiance: np.ndarray) -> np.ndarray:
 
 def auto_ev(radiance: np.ndarray) -> float:
     """The `auto` exposure of (H, W, 3) linear radiance, in stops: its lit pixels' 99th
-    percentile of the brightest channel to white (module docstring), a multiple of 0.1,
+    percentile of the brightest channel to AUTO_WHITE (module docstring), a multiple of 0.1,
     within ±EV_LIMIT. A black frame gets 0: no exposure shows it."""
     brightest = brightest_channel(radiance).reshape(-1).astype(np.float64)
     lit = brightest[np.isfinite(brightest) & (brightest > 0)]
     if lit.size == 0:
         return 0.0
     high = float(np.percentile(lit, AUTO_PERCENTILE))
-    stops = math.floor(10 * -math.log2(high) + 1e-9) / 10  # + 1e-9: an exact tenth stays itself
+    # + 1e-6: a tenth that float32 rounding puts a hair below stays that tenth.
+    stops = math.floor(10 * math.log2(AUTO_WHITE / high) + 1e-6) / 10
     return min(max(stops, -EV_LIMIT), EV_LIMIT)
 
 

@@ -11,7 +11,7 @@ import stat
 from pathlib import Path
 
 from ..errors import OutputError
-from ..exposure import AUTO_PERCENTILE, EV_LIMIT
+from ..exposure import AUTO_PERCENTILE, AUTO_WHITE, EV_LIMIT
 from ..image_io import file_digest, write_atomic
 from ..reuse import digest, scene_digest
 from ..scene.files import FileRefused, read_regular_file
@@ -112,7 +112,7 @@ def sequence_exposure_key(scene: Scene, method: str | None) -> str:
     """What the frames of a sequence share, whichever of them are rendered: the scene, its
     animation and the method (and how `auto` chooses)."""
     return digest("sequence exposure", scene_digest(scene), scene.animation, method or scene.render.method,
-                  AUTO_PERCENTILE).hex()
+                  AUTO_PERCENTILE, AUTO_WHITE).hex()
 
 
 def recorded_exposure(folder: Path, key: str) -> float | None:

@@ -34,26 +34,34 @@ def clipped_fraction(png) -> float:
 # --------------------------------------------------------------------------- the statistic
 
 
-def test_auto_maps_the_99th_percentile_to_white():
-    assert auto_ev(grey([0.25])) == 2.0  # a flat grey of 1/4: two stops up
-    assert auto_ev(grey([4.0])) == -2.0
-    # 19 highlights of 100 among 2000 pixels (under 1 %): the 99th percentile is the 0.5 of the rest.
-    assert auto_ev(grey([100.0] * 19 + [0.5] * 1981, shape=(40, 50))) == 1.0
+def test_auto_maps_the_99th_percentile_to_near_white():
+    assert auto_ev(grey([0.99 / 4])) == 2.0  # a flat grey of 0.99 / 4: two stops up to 0.99
+    assert auto_ev(grey([0.99 * 4])) == -2.0
+    # 19 highlights of 100 among 2000 pixels (under 1 %): the 99th percentile is the rest's.
+    assert auto_ev(grey([100.0] * 19 + [0.99 / 2] * 1981, shape=(40, 50))) == 1.0
+
+
+def test_a_flat_frame_does_not_clip():
+    # Every pixel at the percentile: mapped within a tenth of a stop below 0.99 (246 to 254), not to white.
+    for value in (0.25, 0.3, 7.0, 0.99 / 4):
+        ev = auto_ev(grey([value]))
+        assert 246 <= to_srgb8(grey([value]), ev).max() <= 254
+        assert exposure_problem(grey([value]), ev) is None
 
 
 def test_auto_reads_the_brightest_channel_and_leaves_black_out():
     blue = np.zeros((10, 10, 3), np.float32)
-    blue[..., 2] = 0.125  # luminance 0.009: its blue channel clips first
+    blue[..., 2] = 0.99 / 8  # luminance 0.009: its blue channel clips first
     assert auto_ev(blue) == 3.0
     sky = np.zeros((100, 100, 3), np.float32)
-    sky[:10, :10] = 0.25  # a lit 1 % on a black background
+    sky[:10, :10] = 0.99 / 4  # a lit 1 % on a black background
     assert auto_ev(sky) == 2.0
 
 
 def test_auto_is_in_tenths_rounded_down_and_bounded():
-    value = 2.0 ** -2.35
-    assert auto_ev(grey([value])) == 2.3  # never brighter than the percentile to white
-    assert value * 2.0 ** auto_ev(grey([value])) <= 1.0
+    value = 0.99 * 2.0 ** -2.35
+    assert auto_ev(grey([value])) == 2.3  # never brighter than the percentile to 0.99
+    assert value * 2.0 ** auto_ev(grey([value])) <= 0.99
     assert auto_ev(np.zeros((4, 4, 3), np.float32)) == 0.0  # nothing lit: nothing to expose
     assert auto_ev(grey([1e-30])) == 64.0 and auto_ev(grey([1e30])) == -64.0
 
