@@ -22,6 +22,7 @@ from click.core import ParameterSource
 from . import device as device_settings
 from .device import list_devices, select_device
 from .errors import ClraysError, DeviceError, OutputError
+from .exposure import AUTO, EXPOSED_FORMATS, EV_LIMIT, exposure_setting, frame_exposure, parse_exposure
 from .image_io import check_folder, check_name_length, check_output_path, make_folder, make_output_folder
 from .passes import pass_paths, pass_problem, write_render
 from .reference.exact import estimate_seconds
@@ -48,7 +49,7 @@ SCENE, SWEEP, BENCH, OUTPUT, RUN, DEVICE, OTHER = "Scene", "Sweep", "Bench", "Ou
 SECTIONS = (SCENE, SWEEP, BENCH, OUTPUT, RUN, DEVICE)
 
 #: Outputs that --exposure changes, by what a command writes: 8-bit images and video; .exr
-#: and .npy keep linear radiance.
+#: and .npy keep linear radiance (clrays.exposure.EXPOSED_FORMATS holds them all).
 EXPOSED_IMAGES = {".png": "PNG"}
 EXPOSED_VIDEO = {".mp4": "MP4", ".gif": "GIF", ".webp": "WebP"}
 #: `exact` runs estimated to take at least this long are announced up front.
@@ -206,29 +207,52 @@ def with_aovs(overrides, aovs: str | None) -> tuple[str, ...]:
     return tuple(overrides) + (yaml_tree.Override(aovs_set, f"--aov {aovs}"),)
 
 
-def _finite_exposure(context: click.Context, parameter, value: float) -> float:
-    """--exposure in [-64, 64]; NaN slips through a FloatRange (every comparison is false)."""
-    if not (math.isfinite(value) and -64 <= value <= 64):
-        click.echo(f"clrays: error: --exposure: expected a finite number of stops in [-64, 64], got {value}",
-                   err=True)
-        context.exit(2)
-    return value
+def _exposure(takes_auto: bool):
+    """The callback of --exposure: stops in [-64, 64] (NaN slips through a FloatRange: every
+    comparison is false), or `auto` where the command takes it; None: the scene's
+    render.exposure."""
+
+    def parse(context: click.Context, parameter, value: str | None) -> float | str | None:
+        if value is None:
+            return None
+        exposure = parse_exposure(value)
+        if exposure is None or (exposure == AUTO and not takes_auto):
+            click.echo(f"clrays: error: --exposure: expected a finite number of stops in "
+                       f"[-{EV_LIMIT:g}, {EV_LIMIT:g}]{' or auto' if takes_auto else ''}, got {value}", err=True)
+            context.exit(2)
+        return exposure
+
+    return parse
 
 
-def exposure_option(applies_to: str):
-    return option("--exposure", type=float, default=0.0, show_default=True, metavar="EV", callback=_finite_exposure,
-                  group=OUTPUT, help=f"{applies_to}: scale radiance by 2^EV before sRGB encoding.")
+def exposure_option(applies_to: str, takes_auto: bool = True):
+    """--exposure; without `takes_auto`, stops alone (default 0), for an output compared
+    with another (`clrays compare`)."""
+    if not takes_auto:
+        return option("--exposure", default="0", show_default=True, metavar="EV", callback=_exposure(False),
+                      group=OUTPUT,
+                      help=f"{applies_to}: scale radiance by 2^EV before sRGB encoding.")
+    return option("--exposure", metavar="EV|auto", callback=_exposure(True), group=OUTPUT,
+                  help=f"{applies_to}: scale radiance by 2^EV before sRGB encoding; `auto` maps the 99th "
+                       f"percentile of the lit pixels' brightest channel to near white and prints the EV it chose. "
+                       f"Default: the scene's render.exposure (0).")
 
 
-def check_exposure_applies(exposure: float, outputs: list[str], exposed: dict[str, str] = EXPOSED_IMAGES) -> None:
-    """Refuse an --exposure that would change none of the outputs: .exr and .npy keep
-    linear radiance as rendered. `exposed`: the suffixes (and format names) of what the
-    command writes that --exposure changes."""
-    if exposure != 0.0 and not any(Path(str(out)).suffix.lower() in exposed for out in outputs):
+def check_exposure_applies(exposure: float | str | None, outputs: list[str],
+                           exposed: dict[str, str] = EXPOSED_IMAGES) -> None:
+    """Refuse an --exposure (a number or `auto`) that would change none of the outputs:
+    .exr and .npy keep linear radiance as rendered. `exposed`: the suffixes (and format
+    names) of what the command writes that --exposure changes."""
+    if exposure not in (None, 0.0) and not any(Path(str(out)).suffix.lower() in exposed for out in outputs):
         names = list(exposed.values())
         formats = names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
-        raise OutputError(f"--exposure {exposure:g}: applies only to {formats} output; "
+        shown = exposure if exposure == AUTO else f"{exposure:g}"
+        raise OutputError(f"--exposure {shown}: applies only to {formats} output; "
                           f"{', '.join(str(out) for out in outputs)} keeps linear radiance (drop --exposure)")
+
+
+def _echo_err(line: str) -> None:
+    click.echo(line, err=True)
 
 
 def verbose_option():
@@ -417,7 +441,8 @@ def render(context, scene: Path, method, overrides, camera, frame, output: Path,
             _notice_unread_keys(loaded, method)
         progress = _estimate_exact(loaded, method, progress)
         result = Renderer(device).render(loaded, method, progress=progress)
-        write_render(output, result, loaded, exposure, str(scene))
+        stops = frame_exposure(exposure_setting(exposure, loaded), result.image, output, _echo_err)
+        write_render(output, result, loaded, stops, str(scene))
     if stats:
         _print_stats(result)
         if tuned is not None:
@@ -533,7 +558,7 @@ there, so an interrupted run resumes where it stopped (--overwrite renders all a
         help=f"MP4: an encoding option for ffmpeg (repeatable), e.g. --video-option preset=slow or "
              f"pix_fmt=yuv444p; KEY is one of {', '.join(VIDEO_OPTIONS)}.")
 @aov_option()
-@exposure_option("PNG and video")
+@exposure_option("PNG and video, one EV for every frame")
 @overwrite_option("Render every frame, also those already written.")
 @reuse_option("frames")
 @option("--stats", is_flag=True, group=RUN, help="Print each frame's time and reused stages, then a summary.")
@@ -555,6 +580,7 @@ def sequence(context, scene, frames, method, overrides, camera, pattern, video, 
                                EXPOSED_IMAGES | EXPOSED_VIDEO)
         overrides = with_aovs(with_camera(overrides, camera), aovs)
         loaded = load_scene(scene, overrides)
+        exposure = exposure_setting(exposure, loaded)
         chosen = parse_frames(frames, scene_frames(loaded))
         # Kept beside the frames: their digests hold the tuned settings, so a run resumed from
         # anywhere must find the same ones, or it would take every frame for another scene's.
@@ -579,13 +605,13 @@ def sequence(context, scene, frames, method, overrides, camera, pattern, video, 
         with _executor(scheduler, workers, device) as executor:
             report = render_sequence(loaded, pattern, chosen, renderer=Renderer(device, reuse=reuse), method=method,
                                      exposure=exposure, overwrite=overwrite, progress=progress, on_frame=on_frame,
-                                     executor=executor)
+                                     executor=executor, echo=_echo_err)
         click.echo(report.summary())
         if stats and done:
             click.echo("stages over the rendered frames:\n" + _stage_counts(done))
         if video is not None:
             fps = loaded.animation.fps if loaded.animation is not None else 24.0
-            click.echo(f"wrote {write_video(report.paths, video, fps, exposure, encoder_options)}")
+            click.echo(f"wrote {write_video(report.paths, video, fps, exposure, encoder_options, _echo_err)}")
 
 
 @main.command(section="Render", epilog="""
@@ -629,8 +655,9 @@ def watch(context, scene: Path, output: Path, also, method, overrides, camera, a
 
     def echo(line: str) -> None:
         failed = line.startswith("clrays: error:")
-        counts[failed] += 1
-        click.echo(line, err=failed)
+        if failed or line.startswith("render "):  # not the exposure's lines
+            counts[failed] += 1
+        click.echo(line, err=line.startswith("clrays:"))
 
     click.echo(f"watching {', '.join(map(str, (scene, *also)))}; Ctrl-C to stop")
     with _stopped_by_signal(context, lambda: f": watch stopped after {counts[0]} render(s), {counts[1]} error(s)"):
@@ -666,7 +693,7 @@ the render's wall time, less the kernel builds during it (build_ms).
         help="Folder for the images, results.csv and contact_sheet.png (created).")
 @option("--format", "image_format", type=click.Choice(["png", "exr", "npy"]), default="png", show_default=True,
         group=OUTPUT, help="Image format of the points.")
-@exposure_option("PNG and contact sheet")
+@exposure_option("PNG and contact sheet, `auto` per point")
 @overwrite_option("Render every point, also those done by an earlier run.")
 @reuse_option("points")
 @progress_option("Progress bar (default: on a terminal; off one, a line per point rendered).")
@@ -926,7 +953,7 @@ blue: darker), reference_pcf.png, compare.csv and compare.md.
         help="Also measure each filter against `exact` on this many pixels (0: not).")
 @option("-o", "--output", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path), group=OUTPUT,
         help="Folder for the images, heat maps and tables (created).")
-@exposure_option("PNG images")
+@exposure_option("PNG images", takes_auto=False)
 @device_option()
 def compare(scene, overrides, camera, radius, filters, repeats, exact_pixels, out_dir, exposure, device) -> None:
     """Compare the surface shadow filters of SCENE with PCF at the same radius.

@@ -329,15 +329,20 @@ def read_srgb8(path: str | Path, exposure: float = 0.0) -> np.ndarray:
     """A written image as 8-bit sRGB (H, W, 3): a PNG as stored, a float format encoded
     with `to_srgb8` at `exposure` (what the PNG would have held)."""
     path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix == ".png":
+    if path.suffix.lower() == ".png":
         from PIL import Image
 
         with Image.open(path) as image:
             return np.asarray(image.convert("RGB"))
-    if suffix == ".npy":
-        return to_srgb8(np.load(path), exposure)
+    return to_srgb8(read_linear(path), exposure)
+
+
+def read_linear(path: str | Path) -> np.ndarray:
+    """A written .npy or .exr image's linear radiance (H, W, 3)."""
+    path = Path(path)
+    if path.suffix.lower() == ".npy":
+        return np.load(path)
     import OpenEXR
 
     with OpenEXR.File(str(path)) as exr:
-        return to_srgb8(np.asarray(exr.channels()["RGB"].pixels), exposure)
+        return np.asarray(exr.channels()["RGB"].pixels)

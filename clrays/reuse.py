@@ -9,9 +9,11 @@ result is the result the stage would compute again, and reuse never changes an i
 from __future__ import annotations
 
 from collections import OrderedDict
+from dataclasses import replace
 from typing import Any, Callable
 
 from .digest import digest
+from .scene.model import Render
 from .scene.relief_frame import other_rows, relief_digest_parts
 
 #: A stage's outcome in one frame, as `RenderResult.stage_status` reports it.
@@ -26,8 +28,11 @@ def scene_digest(scene, *, render: bool = True) -> bytes:
     translucent = (scene.geometry.opacity,) if scene.geometry.translucent else ()
     # What the renderer's kernels know of the triangles besides (clrays.inputs.vertex_rows): not the references'.
     carried = (scene.geometry.outward, scene.geometry.convex_part) if render else ()
+    # Exposure encodes the radiance in 8 bits and changes none of it: the files that hold
+    # it digest the stops they were written at (frame_manifest.frame_digest, sweep points).
+    settings = replace(scene.render, exposure=Render.exposure) if render else None
     return digest(scene.image, scene.camera, scene.lights, scene.medium, scene.background,
-                  *geometry_parts(scene.geometry), scene.render if render else None, *translucent, *carried)
+                  *geometry_parts(scene.geometry), settings, *translucent, *carried)
 
 
 def geometry_parts(geometry, triangles_only: bool = False) -> tuple:

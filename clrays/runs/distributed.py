@@ -334,17 +334,28 @@ def render_frame_task(item: tuple[int, str, str], *, scene, method: str | None, 
     when it was stopped, wrote it since) is rendered over."""
     from ..passes import write_render
     from .frame_manifest import FrameManifest, append_frame_line
+    from .sequence import scene_at
 
     frame, path, frame_digest_hex = item
     path = Path(path)
     if not overwrite and path.exists() and FrameManifest(path.parent).matches(path, frame_digest_hex):
         return None
     with _session_lock:
-        frame_scene = scene.animation.scene_at(scene, frame) if scene.animation is not None else scene
+        frame_scene = scene_at(scene, frame)
         result = _worker_renderer(reuse).render(frame_scene, method)
         content = write_render(path, result, frame_scene, exposure, f"frame {frame}")
         append_frame_line(path, frame_digest_hex, content)
     return result.without_pixels()  # only times travel: the worker has written the image
+
+
+def auto_exposure_task(frame: int, *, scene, method: str | None, reuse: bool) -> float:
+    """`auto_ev` of a sequence's frame `frame`, rendered on a worker: what
+    `sequence.sequence_exposure` takes the least of."""
+    from ..exposure import auto_ev
+    from .sequence import scene_at
+
+    with _session_lock:
+        return auto_ev(_worker_renderer(reuse).render(scene_at(scene, frame), method).image)
 
 
 def render_point_task(item, *, folder: str, exposure: float, against, reuse: bool, progress: bool = False):

@@ -11,6 +11,7 @@ import stat
 from pathlib import Path
 
 from ..errors import OutputError
+from ..exposure import AUTO_PERCENTILE, AUTO_WHITE, EV_LIMIT
 from ..image_io import file_digest, write_atomic
 from ..reuse import digest, scene_digest
 from ..scene.files import FileRefused, read_regular_file
@@ -98,3 +99,36 @@ def append_frame_line(path: Path, frame_digest_hex: str, content: str) -> None:
             os.close(fd)
     except OSError as exc:
         raise OutputError(f"{manifest}: cannot write: {exc.strerror or exc}") from None
+
+
+#: In the folder a sequence locks (`sequence.lock_folder`): the stops `--exposure auto` chose
+#: for its frames, {"sequence": `sequence_exposure_key`, "ev": stops}, so that a resumed run,
+#: or one of other frames of the same sequence, exposes its frames alike (and finds the
+#: frames already written to be its own).
+EXPOSURE_RECORD = ".clrays-exposure.json"
+
+
+def sequence_exposure_key(scene: Scene, method: str | None) -> str:
+    """What the frames of a sequence share, whichever of them are rendered: the scene, its
+    animation and the method (and how `auto` chooses)."""
+    return digest("sequence exposure", scene_digest(scene), scene.animation, method or scene.render.method,
+                  AUTO_PERCENTILE, AUTO_WHITE).hex()
+
+
+def recorded_exposure(folder: Path, key: str) -> float | None:
+    """The stops recorded in `folder` for the sequence `key`, or None: none recorded, of
+    another sequence, or unreadable (then `auto` chooses again, and the frames exposed
+    otherwise are rendered again)."""
+    try:
+        record = json.loads(read_regular_file(folder / EXPOSURE_RECORD, MAX_RUN_RECORD_BYTES))
+        if not isinstance(record, dict) or record.get("sequence") != key:
+            return None
+        stops = float(record["ev"])
+    except (FileRefused, ValueError, TypeError, KeyError):
+        return None
+    return stops if abs(stops) <= EV_LIMIT else None
+
+
+def record_exposure(folder: Path, key: str, stops: float) -> None:
+    text = json.dumps({"sequence": key, "ev": stops}) + "\n"
+    write_atomic(folder / EXPOSURE_RECORD, lambda temporary: Path(temporary).write_text(text, encoding="utf-8"))

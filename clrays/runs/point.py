@@ -7,6 +7,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..exposure import exposure_setting, resolve
 from ..image_io import check_finite, write_frame
 from ..scene.model import Scene
 from ..session import Renderer, RenderResult
@@ -84,17 +85,21 @@ def _warm_up(renderer: Renderer, scene: Scene, warmed: set) -> float:
 
 
 def render_point(renderer: Renderer, references: ReferenceCache | None, against, point: SweepPoint, scene: Scene,
-                 folder: Path, name: str, digest_hex: str, exposure: float, warmed: set) -> dict[str, str]:
+                 folder: Path, name: str, digest_hex: str, exposure: float | str | None,
+                 warmed: set) -> dict[str, str]:
     """Render one point (after a warm-up if its kernels are new to this session, `_warm_up`),
     write its image (atomically) and return its results.csv row; in this process or on a
-    dask worker (`clrays.runs.distributed`), each with its own `warmed` set."""
+    dask worker (`clrays.runs.distributed`), each with its own `warmed` set. exposure:
+    stops, AUTO (the point's own `auto_ev`), or None (its scene's render.exposure)."""
     warmup_ms = _warm_up(renderer, scene, warmed)
     # A program the warm-up's kinds did not cover (a shadow filter, a light texture, a relief)
     # is built during the render: its build is the session's cost, not the point's.
     built_before = _build_ms(renderer)
     result = renderer.render(scene)
     build_ms = _build_ms(renderer) - built_before
-    image_digest = write_frame(folder / name, check_finite(result.image, point.label), exposure)
+    setting = exposure_setting(exposure, scene)
+    stops = resolve(setting, result.image) if name.lower().endswith(".png") else 0.0
+    image_digest = write_frame(folder / name, check_finite(result.image, point.label), stops)
     error = references.error(scene, against, result.image) if references else None
     return _row(point, name, result, digest_hex, error, against.name if against else None, warmup_ms,
                 references.last_ms if references else {}, build_ms, image_digest)

@@ -10,7 +10,10 @@ from and the digest of its bytes. Running the same sequence again skips the fram
 scene is unchanged and whose file is the one written for it, and renders again those of
 a changed scene (another `--set`, an edited file) or replaced by another writer; an
 interrupted run loses nothing but the frame it was on. A run holds the lock of the folder
-above its frames (`lock_folder`), so a second run into it stops at once. One render
+above its frames (`lock_folder`), so a second run into it stops at once. `--exposure auto`
+exposes every frame alike, so that they do not flicker: at the stops chosen from the
+animation's first, middle and last frames, whichever frames a run renders, and recorded in
+that folder for the runs that resume it (`sequence_exposure`). One render
 session (`Renderer`) renders all frames, so what a frame shares with the previous one is
 not computed again (docs/design.md §7); on a GPU with two frames in flight: the next frame
 is prepared and enqueued before a frame's image is read and written (docs/design.md §4).
@@ -26,16 +29,24 @@ from pathlib import Path
 from typing import Callable
 
 from ..errors import ClraysError, OutputError
+from ..exposure import (AUTO, Problem, auto_ev, auto_line, brightest_channel, exposure_problem, exposure_setting,
+                        problem_of_8bit, warning_line)
 from ..image_io import (FORMATS, check_folder, check_name_length, check_output_path, folder_lock, make_folder,
-                        make_output_folder, read_srgb8, write_atomic)
+                        make_output_folder, read_linear, read_srgb8, write_atomic)
 from ..passes import pass_paths, write_render, written_pass_files
 from ..scene.limits import MAX_FRAME_FIELD_WIDTH
 from ..session import Renderer, RenderResult
 from ..scene.model import Scene
-from .frame_manifest import FrameManifest, frame_digest
+from .frame_manifest import (EXPOSURE_RECORD, FrameManifest, frame_digest, record_exposure, recorded_exposure,
+                             sequence_exposure_key)
 from .progress import Progress, counted
 
 VIDEO_FORMATS = (".mp4", ".gif", ".webp")
+
+
+def scene_at(scene: Scene, frame: int) -> Scene:
+    """Frame `frame` of `scene`'s animation; a still scene is its own frame."""
+    return scene.animation.scene_at(scene, frame) if scene.animation is not None else scene
 
 
 def scene_frames(scene: Scene) -> range:
@@ -135,6 +146,17 @@ class SequenceReport:
     # of the rendered frames, without their images (in the files): times, reuse, sizes
     results: dict[int, RenderResult] = field(default_factory=dict)
     wall_s: float = 0.0
+    exposure: float = 0.0  # the stops of the .png frames (`auto`: those chosen for the sequence)
+    problems: dict[int, Problem] = field(default_factory=dict)  # rendered .png frames black or mostly white
+
+    def problem_lines(self) -> list[str]:
+        """One warning per kind of problem (black, clipped), naming its first frame."""
+        lines = []
+        for kind in dict.fromkeys(problem.kind for problem in self.problems.values()):
+            frames = sorted(frame for frame, problem in self.problems.items() if problem.kind == kind)
+            more = f" and {len(frames) - 1} more of the {len(self.rendered)} rendered" if len(frames) > 1 else ""
+            lines.append(warning_line(f"frame {frames[0]}{more}", self.problems[frames[0]]))
+        return lines
 
     def summary(self) -> str:
         per = f", {self.wall_s / len(self.rendered):.2f} s per frame" if self.rendered else ""
@@ -144,10 +166,12 @@ class SequenceReport:
 
 
 def render_sequence(scene: Scene, pattern: str | Path, frames: range | None = None, *,
-                    renderer: Renderer | None = None, method: str | None = None, exposure: float = 0.0,
+                    renderer: Renderer | None = None, method: str | None = None,
+                    exposure: float | str | None = None,
                     overwrite: bool = False, progress: bool = False,
                     on_frame: Callable[[int, Path, RenderResult | None], None] | None = None,
-                    executor=None, in_flight: bool | None = None) -> SequenceReport:
+                    executor=None, in_flight: bool | None = None,
+                    echo: Callable[[str], None] | None = None) -> SequenceReport:
     """Render `frames` (default: all of the animation) of `scene` to `pattern`.
 
     pattern: a path with one `{}` field for the frame number, e.g. `out/frame_{:04d}.png`
@@ -159,7 +183,11 @@ def render_sequence(scene: Scene, pattern: str | Path, frames: range | None = No
     (each with its own session; `renderer` then only gives the reuse setting), in any
     order; the result's image is then empty, the frame being in its file. in_flight: whether
     the session prepares each frame while the device renders the one before
-    (`_frames_in_flight`); None (default): where that gains time (Renderer.frames_in_flight_win)."""
+    (`_frames_in_flight`); None (default): where that gains time (Renderer.frames_in_flight_win).
+    exposure: stops, or AUTO: one for every frame (`sequence_exposure`); None (default): the
+    scene's render.exposure. echo(line) gets
+    the EV `auto` chose and, at the end, a warning per kind of .png frame rendered black or
+    mostly white (clrays.exposure.exposure_problem)."""
     pattern = check_pattern(pattern)
     frames = scene_frames(scene) if frames is None else frames
     paths = [frame_path(pattern, frame) for frame in frames]
@@ -169,16 +197,57 @@ def render_sequence(scene: Scene, pattern: str | Path, frames: range | None = No
     renderer = renderer or Renderer()
     report = SequenceReport(paths)
     start = time.perf_counter()
+    echo = echo or (lambda line: None)
     with folder_lock(lock_folder(pattern)):
         try:
+            if paths and paths[0].suffix.lower() == ".png":  # float frames keep linear radiance
+                report.exposure = sequence_exposure(scene, pattern, renderer, method,
+                                                    exposure_setting(exposure, scene), overwrite, executor, echo)
             with Progress(progress, len(paths), "frame", "sequence") as bar:
-                _run_frames(scene, frames, paths, renderer, method, exposure, overwrite, progress, on_frame,
+                _run_frames(scene, frames, paths, renderer, method, report.exposure, overwrite, progress, on_frame,
                             executor, report, bar, in_flight)
         finally:
             report.wall_s = time.perf_counter() - start
             report.rendered.sort()
             report.kept.sort()
+    for line in report.problem_lines():
+        echo(line)
     return report
+
+
+def exposure_frames(scene: Scene) -> list[int]:
+    """The frames `auto` exposes a sequence from: its animation's first, middle and last."""
+    frames = scene_frames(scene)
+    return sorted({frames[0], frames[len(frames) // 2], frames[-1]})
+
+
+def sequence_exposure(scene: Scene, pattern: str, renderer: Renderer, method: str | None, exposure: float | str,
+                      overwrite: bool, executor, echo: Callable[[str], None]) -> float:
+    """The stops of every frame: `exposure` itself, or for AUTO the least `auto_ev` of the
+    `exposure_frames` (the brightest of them clips no more than `auto` lets a still frame),
+    whichever frames this run renders. Recorded in the locked folder (EXPOSURE_RECORD, for
+    the scene, its animation and the method), so that a resumed run reads it rather than
+    rendering those frames again; a frame among them that this run renders comes from the
+    session's kept frames where reuse is on."""
+    if exposure != AUTO:
+        return float(exposure)
+    folder, key = lock_folder(pattern), sequence_exposure_key(scene, method)
+    stops = None if overwrite else recorded_exposure(folder, key)
+    if stops is not None:
+        echo(auto_line(stops, f"recorded in {folder / EXPOSURE_RECORD}, for every frame"))
+        return stops
+    sampled = exposure_frames(scene)
+    if executor is None:
+        stops = min(auto_ev(renderer.render(scene_at(scene, frame), method).image) for frame in sampled)
+    else:
+        from .distributed import auto_exposure_task
+
+        stops = min(ev for _, ev in executor.run(auto_exposure_task, sampled,
+                                                 dict(scene=scene, method=method, reuse=renderer.reuse)))
+    record_exposure(folder, key, stops)
+    echo(auto_line(stops, f"from frame{'s' if len(sampled) > 1 else ''} {', '.join(map(str, sampled))}, "
+                          f"for every frame"))
+    return stops
 
 
 def _run_frames(scene, frames, paths, renderer, method, exposure, overwrite, progress, on_frame, executor,
@@ -197,7 +266,7 @@ def _run_frames(scene, frames, paths, renderer, method, exposure, overwrite, pro
         """(frame, path, frame digest, frame scene, whether its file is kept) of every frame,
         in order; a stale file removed before its frame is yielded."""
         for frame, path in zip(frames, paths):
-            frame_scene = scene.animation.scene_at(scene, frame) if scene.animation is not None else scene
+            frame_scene = scene_at(scene, frame)
             manifest = manifest_of(path)
             key = frame_digest(frame_scene, method, exposure, path.suffix.lower())
             if not overwrite and manifest.matches(path, key) and all(
@@ -286,6 +355,12 @@ def _done(report: SequenceReport, frame: int, path: Path, result, on_frame, bar:
         report.kept.append(frame)
     else:
         report.rendered.append(frame)
+        if path.suffix.lower() == ".png":
+            # A worker's result comes without its image: the frame is read back from its file.
+            problem = exposure_problem(result.image, report.exposure) if result.image.size else \
+                problem_of_8bit(brightest_channel(read_srgb8(path)))
+            if problem is not None:
+                report.problems[frame] = problem
         report.results[frame] = result.without_pixels()  # a long sequence keeps no images
     if on_frame:
         on_frame(frame, path, result)
@@ -302,11 +377,12 @@ def check_video_path(path: str | Path) -> Path:
     return check_folder(make_output_folder(path))  # created, as the frames' folders are
 
 
-def write_video(paths: list[Path], out: str | Path, fps: float, exposure: float = 0.0,
-                encoder_options: dict[str, str] | None = None) -> Path:
+def write_video(paths: list[Path], out: str | Path, fps: float, exposure: float | str = 0.0,
+                encoder_options: dict[str, str] | None = None, echo: Callable[[str], None] | None = None) -> Path:
     """An H.264 MP4 (`clrays.runs.video`; encoder_options: its ffmpeg options, default
     `video_encoder_options`), or an animated GIF or WebP that loops forever, of the frame
-    files; written atomically, like images."""
+    files; written atomically, like images. `exposure` encodes .exr and .npy frames (a .png
+    frame is as written); AUTO: `auto_ev` of the first frame, for all, said to `echo`."""
     from PIL import Image
 
     out = check_video_path(out)
@@ -315,6 +391,10 @@ def write_video(paths: list[Path], out: str | Path, fps: float, exposure: float 
         raise OutputError(f"{out}: frames missing: {', '.join(missing[:3])}{' ...' if len(missing) > 3 else ''}")
     if not paths:
         raise OutputError(f"{out}: no frames")
+    if exposure == AUTO:
+        exposure = 0.0 if paths[0].suffix.lower() == ".png" else auto_ev(read_linear(paths[0]))
+        if paths[0].suffix.lower() != ".png" and echo is not None:
+            echo(auto_line(exposure, f"from {paths[0]}, for {out}"))
     if out.suffix.lower() == ".mp4":
         from .video import video_encoder_options, write_mp4
 

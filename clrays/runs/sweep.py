@@ -33,7 +33,8 @@ from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 import yaml
 
 from ..errors import ClraysError, OutputError
-from ..image_io import file_digest, folder_lock, make_folder, read_srgb8, write_atomic
+from ..exposure import AUTO, auto_ev, exposure_setting
+from ..image_io import file_digest, folder_lock, make_folder, read_linear, read_srgb8, write_atomic
 from ..inputs import frame_inputs
 from ..session import STAGE_ORDER, Renderer, StageKeys
 from ..reuse import digest, scene_digest
@@ -288,7 +289,7 @@ def _write_rows(path: Path, rows: list[dict[str, str]], axes: Sequence[Axis]) ->
 
 def run_sweep(path: str | Path, spec, out_dir: str | Path, *, overrides: Sequence[str] = (),
               method: str | None = None, reference: str | None = None, renderer: Renderer | None = None,
-              exposure: float = 0.0, image_format: str = "png", contact_sheet: bool = True,
+              exposure: float | str | None = None, image_format: str = "png", contact_sheet: bool = True,
               overwrite: bool = False, progress: bool = False,
               on_point: Callable[[SweepPoint, dict], None] | None = None, executor=None) -> SweepReport:
     """Render every point of the sweep into `out_dir` (created): one image per point,
@@ -299,7 +300,8 @@ def run_sweep(path: str | Path, spec, out_dir: str | Path, *, overrides: Sequenc
     earlier run of the same scene and settings are kept unless `overwrite`.
     on_point(point, row) after each. executor: a `clrays.runs.distributed.DaskExecutor`
     to render the points on its workers (`renderer` then only gives the reuse setting);
-    results.csv is still written here, by the client alone."""
+    results.csv is still written here, by the client alone. exposure: stops for .png points and
+    the contact sheet, AUTO (each point its own), or None (each point's render.exposure)."""
     if image_format not in IMAGE_FORMATS:
         raise ClraysError(f"image format: expected one of {', '.join(IMAGE_FORMATS)}, got {image_format!r}")
     axes, fixed = axes_from(spec, overrides)
@@ -370,7 +372,8 @@ def _run_points(points, axes, value_keys, point_scene, folder: Path, renderer, r
             """(point, image name, scene digest, scene) of the points to render; the others kept."""
             for point in axes_execution_order(points, axes, value_keys):
                 scene = point_scene(point)
-                digest_hex = digest(scene_digest(scene), exposure).hex()  # what the point's image depends on
+                # What the point's image depends on (`auto`: its own radiance).
+                digest_hex = digest(scene_digest(scene), exposure_setting(exposure, scene)).hex()
                 name = _image_name(point, len(points), image_format)
                 old = earlier.get(point.index)
                 if (old is not None and old.get("scene_digest") == digest_hex and old.get("image") == name
@@ -416,10 +419,14 @@ def _run_points(points, axes, value_keys, point_scene, folder: Path, renderer, r
 # --------------------------------------------------------------------------- contact sheet
 
 
-def _thumbnail(path: Path, exposure: float, width: int):
+def _thumbnail(path: Path, exposure: float | str | None, width: int):
+    """A point's image, `width` wide at most: a .png as written, a float one at `exposure`
+    (None: 0; AUTO: its own `auto_ev`)."""
     from PIL import Image
 
-    image = Image.fromarray(read_srgb8(path, exposure), mode="RGB")
+    if exposure == AUTO and path.suffix.lower() != ".png":
+        exposure = auto_ev(read_linear(path))
+    image = Image.fromarray(read_srgb8(path, exposure or 0.0), mode="RGB")
     if image.width > width:
         image = image.resize((width, max(1, round(image.height * width / image.width))), Image.Resampling.LANCZOS)
     return image
@@ -433,7 +440,7 @@ def _label_lines(row: dict[str, str], axes: Sequence[Axis]) -> list[str]:
 
 
 def write_contact_sheet(path: Path, folder: Path, rows: list[dict[str, str]], axes: Sequence[Axis],
-                        exposure: float = 0.0, thumb_width: int = 240) -> Path:
+                        exposure: float | str | None = 0.0, thumb_width: int = 240) -> Path:
     """A grid of the sweep's images, each labelled with its parameters, time and error:
     one row per combination of the other axes, one column per value of the last axis."""
     from PIL import Image, ImageDraw, ImageFont

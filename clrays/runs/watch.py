@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Callable
 
 from ..errors import ClraysError
+from ..exposure import exposure_setting, frame_exposure
 from ..passes import write_render
 from ..scene.load import load_scene
 from ..session import Renderer
@@ -37,13 +38,16 @@ def _state(path: Path):
     return stat.st_mtime_ns, stat.st_size, stat.st_ino
 
 
-def watch(scene: Path, output: Path, *, overrides=(), method: str | None = None, exposure: float = 0.0,
+def watch(scene: Path, output: Path, *, overrides=(), method: str | None = None, exposure: float | str | None = None,
           renderer: Renderer | None = None, also=(), interval: float = POLL_SECONDS,
           stop: threading.Event | None = None, max_renders: int | None = None,
           echo: Callable[[str], None] = print) -> tuple[int, int]:
     """Render `scene` to `output` now and after every save of it or of a file in `also`,
     until `stop` is set or `max_renders` renders were written; returns (renders, errors).
-    Each render echoes `render N: T ms  reused: stages`; a failed one `clrays: error: ...`."""
+    Each render echoes `render N: T ms  reused: stages`, then (8-bit output) the EV `auto`
+    chose and a warning for a black or mostly white frame; a failed one `clrays: error: ...`.
+    exposure: stops or AUTO (clrays.exposure), each render's own; None: the scene's
+    render.exposure."""
     scene, output = Path(scene), Path(output)
     files = [scene, *(Path(path) for path in also)]
     renderer = renderer or Renderer()
@@ -57,7 +61,9 @@ def watch(scene: Path, output: Path, *, overrides=(), method: str | None = None,
             try:
                 loaded = load_scene(scene, overrides)
                 result = renderer.render(loaded, method)
-                write_render(output, result, loaded, exposure, str(scene))
+                notes: list[str] = []  # said after the render's line
+                stops = frame_exposure(exposure_setting(exposure, loaded), result.image, output, notes.append)
+                write_render(output, result, loaded, stops, str(scene))
             except ClraysError as exc:
                 errors += 1
                 echo(f"clrays: error: {exc}")
@@ -65,6 +71,8 @@ def watch(scene: Path, output: Path, *, overrides=(), method: str | None = None,
                 renders += 1
                 reused = " ".join(result.reused) or "-"
                 echo(f"render {renders}: {result.wall_ms:8.1f} ms  reused: {reused}")
+                for line in notes:
+                    echo(line)
                 if max_renders is not None and renders >= max_renders:
                     break
         stop.wait(interval)

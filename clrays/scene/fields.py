@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from ..exposure import EV_LIMIT
 from .animation import EASINGS
 from .limits import MAX_LIGHTS, MAX_MESH_BYTES, MAX_OBJECTS, MAX_SCENE_BYTES, MAX_TRIANGLES
 from .costs import (FULL_SHADOW_MAP_DIAGONAL, INITIAL_SAMPLES_PER_LINE, MAX_GAMMA_SAMPLES, MAX_INITIAL_STEP, MAX_LINE_SAMPLES,
@@ -357,6 +358,10 @@ RENDER = Section("render", (
           notes="percent relative RMSE against `exact` (as `clrays bench` measures it): `render`, `sequence` and "
                 "`sweep` first tune the sizes and sampling settings for the cheapest frame within it "
                 "(`clrays tune`; once per scene, kept in .cache/clrays or $CLRAYS_CACHE) and render with them"),
+    Field("exposure", "number or `auto`", Render.exposure, -EV_LIMIT, EV_LIMIT,
+          notes="stops for the 8-bit outputs (.png, and a sequence's .gif, .webp, .mp4): radiance × 2^EV before "
+                "the sRGB curve; `auto` chooses them from the frame ([Exposure](#exposure)). `--exposure` "
+                "overrides it; .exr and .npy keep linear radiance whatever it says"),
 ))
 
 

@@ -27,6 +27,7 @@ from . import geometry as primitives
 from . import gltf as gltf_files
 from . import relief as relief_images
 from ..errors import SceneError
+from ..exposure import parse_exposure
 from ..passes import pass_problem
 from ..structs import CONVEX_OUTSIDE_ONLY
 from .animation import Animation, Key, ObjectRig, Track
@@ -260,8 +261,9 @@ def _render(node: Node | None) -> Render:
     m = mapping(node, optional=RENDER.optional)
     # A size left out stays None: the renderer derives it from the image (clrays.scene.costs).
     values = {field.key: None if field.default is None and field.key not in m else _read(field, m.get(field.key))
-              for field in RENDER.fields if field.key not in ("shadow_filter", "transparency", "aovs")}
+              for field in RENDER.fields if field.key not in ("shadow_filter", "transparency", "aovs", "exposure")}
     values["aovs"] = _aovs(m.get("aovs"))
+    values["exposure"] = _exposure(m.get("exposure"))
     values["shadow_filter"] = _shadow_filter(m, values)
     values["transparency"] = _transparency(m.get("transparency"))
     if values["surface_shadows"] == "filtered" and values["shadow_filter"] is None:
@@ -273,6 +275,17 @@ def _render(node: Node | None) -> Render:
             m["pcf"].fail(f"0 with surface_shadows: {values['surface_shadows']} (a filter radius needs "
                           f"surface_shadows: pcf)", str(values["pcf"]))
     return Render(**values)
+
+
+def _exposure(node: Node | None) -> float | str:
+    """`render.exposure`: stops, or `auto` (clrays.exposure)."""
+    field = RENDER["exposure"]
+    if node is None:
+        return field.default
+    value = parse_exposure(node.value)
+    if value is None:
+        node.fail(f"a number of stops in [{field.low:g}, {field.high:g}] or auto")
+    return value
 
 
 def _aovs(node: Node | None) -> tuple[str, ...]:

@@ -226,6 +226,8 @@ class Render:
     aovs: tuple[str, ...] = ()  # render passes (clrays.passes): none unless asked for
     # Percent relative RMSE against `exact` to tune the settings for (clrays.runs.tune); None: as written.
     target_error: float | None = None
+    # 8-bit outputs: stops (radiance × 2^EV before the sRGB curve), or "auto" (clrays.exposure).
+    exposure: float | str = 0.0
 
 
 @dataclass(frozen=True)
