@@ -32,7 +32,9 @@ def pytest_addoption(parser):
 
 
 def pytest_report_header(config):
-    return f"clrays test device: {TEST_DEVICE!r} (CLRAYS_TEST_DEVICE)"
+    why = "CLRAYS_TEST_DEVICE" if os.environ.get("CLRAYS_TEST_DEVICE") else \
+        "PoCL" if TEST_ON_POCL else "PoCL cannot build for this CPU"
+    return f"clrays test device: {TEST_DEVICE!r} ({why})"
 
 
 @pytest.fixture(scope="session")
