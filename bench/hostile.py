@@ -1,4 +1,4 @@
-"""Every reproduction of the second hostile-input probe, each run by the command line in a
+"""Every reproduction of the second and third hostile-input probes, each run by the command line in a
 fresh process against the clrays of a given tree: exit code, lines of output, the last
 line, wall seconds and peak resident memory, as a markdown table.
 
@@ -45,6 +45,8 @@ from test_confine import FIELDS, outside_names, write_asset  # noqa: E402
 from test_distributed import Listener  # noqa: E402  (tests/runs/)
 from test_hostile_outputs import animated  # noqa: E402  (tests/runs/)
 from test_sequence import write_scene  # noqa: E402
+import test_gltf  # noqa: E402  (tests/scene/)
+import test_gltf_budget as gltf_inputs  # noqa: E402  (tests/scene/)
 
 SECONDS = 20.0
 PEAK_MB = 2000.0
@@ -451,6 +453,80 @@ def says(*wanted: str, never: tuple[str, ...] = ()) -> Callable[[Path, Result], 
     return check
 
 
+# --------------------------------------------------------------------------- round three: glTF
+
+
+def gltf_file(make: Callable[[Path], "test_gltf.GltfBuilder | bytes"], name: str = "scene.glb"):
+    """`render` of the glTF file `make` builds (a lit GltfBuilder, or a file's bytes), small."""
+    def args(d: Path) -> list:
+        made = make(d)
+        path = d / name
+        path.write_bytes(made if isinstance(made, bytes) else made.glb())
+        return ["render", path, "-o", d / "out.png", "--set", "image.width=32", "--set", "image.height=18"]
+    return args
+
+
+def accessors_without_views(d: Path):
+    b = test_gltf._lit(test_gltf.GltfBuilder())
+    indices = b.accessor([0, 1, 2], 5125)
+    for _ in range(24):
+        gltf_inputs._triangle_on(b, gltf_inputs._zeros(b), indices)
+    return b
+
+
+def one_accessor_many_primitives(d: Path):
+    b = test_gltf._lit(test_gltf.GltfBuilder())
+    shared = gltf_inputs._zeros(b)
+    b.doc["accessors"][shared]["sparse"] = {
+        "count": 3, "indices": {"bufferView": b.doc["accessors"][b.accessor([5, 70, 900], 5125)]["bufferView"],
+                                "componentType": 5125},
+        "values": {"bufferView": b.doc["accessors"][b.accessor(test_gltf.TRIANGLE)]["bufferView"]}}
+    indices = b.accessor([5, 70, 900], 5125)
+    for _ in range(24):
+        gltf_inputs._triangle_on(b, shared, indices)
+        gltf_inputs._triangle_on(b, shared, indices, mode=0)
+    return b
+
+
+def many_nodes_and_keys(d: Path):
+    b, first, _ = test_gltf.deep_chain()  # lit already
+    times = np.linspace(0.0, 4.0, 400)
+    for k in range(40):
+        b.animate(first + k * 1000, "translation", times,
+                  np.stack([np.full(400, 0.001), 0.01 * np.sin(times * (k + 1)), np.zeros(400)], axis=1))
+    return b
+
+
+def one_png_many_images(d: Path):
+    b = test_gltf._lit(test_gltf.GltfBuilder())
+    (d / "texture.png").write_bytes(gltf_inputs._png())
+    gltf_inputs._textured(b, [{"uri": "texture.png"}] * 200)
+    return b
+
+
+def many_decoded_images(d: Path):
+    data = gltf_inputs._png()
+    b = test_gltf._lit(test_gltf.GltfBuilder())
+    b.doc["bufferViews"] += [{"buffer": 0, "byteOffset": len(b.binary), "byteLength": len(data)}] * 200
+    b.binary += data
+    gltf_inputs._textured(b, [{"bufferView": k, "mimeType": "image/png"} for k in range(200)])
+    return b
+
+
+def empty_chunks(d: Path) -> bytes:
+    b = test_gltf._lit(test_gltf.GltfBuilder())
+    b.mesh(test_gltf.TRIANGLE, [[0, 1, 2]])
+    b.node(mesh=0)
+    return gltf_inputs._glb_with_chunks(b, struct.pack("<II", 0, 0x58595A57) * 19_000_000)
+
+
+def written(*names: str) -> Callable[[Path, Result], list[str]]:
+    """The case's folder holds each of `names` (globs)."""
+    def check(d: Path, result: Result) -> list[str]:
+        return [f"no {name}" for name in names if not list(d.glob(name))]
+    return check
+
+
 # --------------------------------------------------------------------------- the cases
 
 
@@ -572,6 +648,25 @@ def cases() -> list[Case]:
              check=says(never=("0 <= A <= B <= 0",))),
         Case("render -o into a missing folder", lambda d: ["render", animated(d, 1), "-o", d / "new" / "a.png"],
              expect="ok", check=lambda d, r: [] if (d / "new" / "a.png").exists() else ["no new/a.png"]),
+        # Round three: small glTF files that cost minutes or gigabytes
+        Case("glTF: 24 accessors without a view, 128 MiB each", gltf_file(accessors_without_views),
+             check=nothing_written("out.png")),
+        Case("glTF: one 128 MiB accessor named by 48 primitives", gltf_file(one_accessor_many_primitives),
+             expect="ok", check=written("out.png")),
+        Case("glTF: 65 536 nodes, 40 channels of 400 keys", gltf_file(many_nodes_and_keys), expect="ok",
+             check=written("out.png")),
+        Case("glTF: one 4096² PNG named by 200 images", gltf_file(one_png_many_images), expect="ok",
+             check=written("out.png")),
+        Case("glTF: 200 views of a 4096² PNG (12.8 GB decoded)", gltf_file(many_decoded_images),
+             check=nothing_written("out.png")),
+        Case("GLB: 19 M empty chunks after BIN (152 MB)", gltf_file(empty_chunks), check=nothing_written("out.png")),
+        # Round three: numbers and outputs
+        Case("YAML 1.2 floats: intensity [2.6e2, 2.3e2, 1.9e2], --set 6.02e-2", lambda d: [
+            "render", animated(d, 1), "-o", d / "a.png", "--set", "lights.0.intensity=[2.6e2, 2.3e2, 1.9e2]",
+            "--set", "medium.sigma_s=6.02e-2"], expect="ok", check=written("a.png")),
+        Case("tune -o out/t.png (a YAML file named .png)", lambda d: [
+            "tune", animated(d, 1), "--target-error", "5", "-o", d / "out" / "t.png"],
+             check=nothing_written("out")),
     ]
 
 
