@@ -17,9 +17,12 @@ from __future__ import annotations
 
 import hashlib
 import os
+import stat
 import tempfile
 from importlib import metadata
 from pathlib import Path
+
+from .outputs import cache_root, writes_confined
 
 #: Where the loader looks when neither OCL_ICD_VENDORS nor OPENCL_VENDOR_PATH says otherwise.
 SYSTEM_VENDORS = Path("/etc/OpenCL/vendors")
@@ -65,20 +68,15 @@ def _vendor_entries(libraries: list[Path]) -> dict[str, str]:
     return entries
 
 
-def cache_root() -> Path:
-    """clrays' folder in the user's cache (XDG_CACHE_HOME, else ~/.cache)."""
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "clrays"
-
-
 def _write_vendors(entries: dict[str, str]) -> Path:
     """A folder holding exactly `entries`, named by their digest, so processes that agree
     share it and none ever changes one another reads: written beside its final name, then
     renamed into place (the first rename wins; a later writer's copy is dropped)."""
     digest = hashlib.sha256(repr(sorted(entries.items())).encode()).hexdigest()[:16]
-    for root in (cache_root(), Path(tempfile.gettempdir()) / f"clrays-{os.getuid()}"):
+    fallback = () if writes_confined() else (Path(tempfile.gettempdir()) / f"clrays-{os.getuid()}",)
+    for root in (cache_root(), *fallback):  # confined (--confine): the cache alone
         folder = root / f"opencl-vendors-{digest}"
-        if folder.is_dir():
+        if _own_folder(folder):
             return folder
         try:
             root.mkdir(parents=True, exist_ok=True)
@@ -91,11 +89,22 @@ def _write_vendors(entries: dict[str, str]) -> Path:
                 for child in staging.iterdir():
                     child.unlink()
                 staging.rmdir()
-            if folder.is_dir():
+            if _own_folder(folder):
                 return folder
         except OSError:
             continue  # an unwritable cache: try the temporary folder
     raise OSError("no writable folder for the OpenCL vendors list")
+
+
+def _own_folder(folder: Path) -> bool:
+    """Whether `folder` is a directory of this user's, not a link: the libraries its `.icd`
+    files name are loaded, so a folder another user made (in the shared temporary folder)
+    or a link to one is never taken."""
+    try:
+        info = os.lstat(folder)
+    except OSError:
+        return False
+    return stat.S_ISDIR(info.st_mode) and info.st_uid == os.getuid()
 
 
 def register() -> None:
