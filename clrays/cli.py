@@ -24,6 +24,7 @@ from .device import list_devices, select_device
 from .errors import ClraysError, DeviceError, OutputError
 from .exposure import AUTO, EXPOSED_FORMATS, EV_LIMIT, exposure_setting, frame_exposure, parse_exposure
 from .image_io import check_folder, check_name_length, check_output_path, make_folder, make_output_folder
+from .outputs import allow_writes, cache_root, check_replaceable, end_writes
 from .passes import pass_paths, pass_problem, write_render
 from .reference.exact import estimate_seconds
 from .runs import bench as bench_run
@@ -150,13 +151,15 @@ def device_option():
 def _confine(context: click.Context, parameter, value: bool) -> None:
     scene_files.confine_scene_files(value)
     context.call_on_close(lambda: scene_files.confine_scene_files(False))  # for this command alone
+    context.call_on_close(end_writes)  # the outputs it declared (allow_writes) with it
 
 
 def confine_option():
     return option("--confine", is_flag=True, expose_value=False, callback=_confine, group=SCENE,
                   help=f"Refuse any file the scene names (meshes, relief maps, light textures) outside the scene "
-                       f"file's folder, symbolic links resolved; also {scene_files.CONFINE_ENV}=1. For a service "
-                       f"that renders scenes it receives.")
+                       f"file's folder, symbolic links resolved, and any write outside the outputs' folders and "
+                       f"the cache; also {scene_files.CONFINE_ENV}=1. For a service that renders scenes it "
+                       f"receives.")
 
 
 def _method(context: click.Context, parameter, value: str | None) -> str | None:
@@ -424,6 +427,7 @@ Examples:
 def render(context, scene: Path, method, overrides, camera, frame, output: Path, aovs, exposure, stats, verbose,
            progress, device) -> None:
     """Render SCENE (a YAML file, or glTF: .glb, .gltf) to an image."""
+    allow_writes(output.parent)
     check_output_path(output, folder_exists=False)
     check_exposure_applies(exposure, [output])
     with host_steps.timed("load"):
@@ -449,16 +453,16 @@ def render(context, scene: Path, method, overrides, camera, frame, output: Path,
             click.echo(f"  {tuned.line()}")
 
 
-def _tuned(scene, method: str | None, device: str | None, progress: bool, folder: Path | None = None):
+def _tuned(scene, method: str | None, device: str | None, progress: bool, below: Path | None = None):
     """(scene, Tuned or None): with the settings its `render.target_error` asks for
-    (clrays.runs.tune), tuned once per scene and kept in `folder` (default: the cache); a
-    line per setting tried when no bar shows."""
+    (clrays.runs.tune), tuned once per scene and kept in the cache, or in `below`/.references
+    where given; a line per setting tried when no bar shows."""
     if scene.render.target_error is None:
         return scene, None
     from .runs.tune import tuned_scene
 
-    return tuned_scene(scene, method, folder=folder, renderer=Renderer(device), progress=progress,
-                       log=lambda line: click.echo(line, err=True))
+    return tuned_scene(scene, method, folder=below / REFERENCES if below is not None else None, below=below,
+                       renderer=Renderer(device), progress=progress, log=lambda line: click.echo(line, err=True))
 
 
 def _stage_statuses(result) -> dict[str, str]:
@@ -573,6 +577,7 @@ def sequence(context, scene, frames, method, overrides, camera, pattern, video, 
     done = []
     with _resumable(context, lambda: counted(len(done), "new frame")):
         check_pattern(pattern)
+        allow_writes(lock_folder(pattern), *([video.parent] if video is not None else []))
         if video is not None:
             check_video_path(video)
             encoder_options = video_encoder_options(video, crf, video_options)
@@ -584,7 +589,7 @@ def sequence(context, scene, frames, method, overrides, camera, pattern, video, 
         chosen = parse_frames(frames, scene_frames(loaded))
         # Kept beside the frames: their digests hold the tuned settings, so a run resumed from
         # anywhere must find the same ones, or it would take every frame for another scene's.
-        loaded, tuned = _tuned(loaded, method, device, progress, lock_folder(str(pattern)) / REFERENCES)
+        loaded, tuned = _tuned(loaded, method, device, progress, lock_folder(str(pattern)))
         if stats and tuned is not None:
             click.echo(tuned.line())
         if stats or verbose:
@@ -645,8 +650,10 @@ def watch(context, scene: Path, output: Path, also, method, overrides, camera, a
     """Render SCENE to an image again on every save of it (or of an --also file)."""
     from .runs.watch import watch as watch_files
 
-    check_output_path(output)
+    allow_writes(output.parent)
+    check_output_path(output, folder_exists=False)
     check_exposure_applies(exposure, [output])
+    check_output_path(make_output_folder(output))  # created, as every command creates its output's folder
     overrides = with_aovs(with_camera(overrides, camera), aovs)
     renderer = Renderer(device)
     if method != "exact":
@@ -705,6 +712,7 @@ def sweep(context, scene, overrides, camera, reference, method, out_dir, image_f
     """Render SCENE at every combination of the --set values and tabulate the results."""
     done = []
     with _resumable(context, lambda: counted(len(done), "point")):
+        allow_writes(out_dir)
         _check_scene_file(scene)
         overrides = with_camera(overrides, camera)
         axes, _ = axes_from(list(overrides))
@@ -764,7 +772,8 @@ error counts). A scene may instead carry render.target_error: `render`, `sequenc
 @option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path), group=OUTPUT,
         help="The tuned scene: SCENE's YAML with the tuned settings in its render mapping.")
 @option("--cache", type=click.Path(file_okay=False, path_type=Path), default=None, group=OUTPUT,
-        help="Where exact references are cached (default: $CLRAYS_CACHE, else .cache/clrays).")
+        help="Where exact references are cached (default: clrays' cache: $CLRAYS_CACHE, else "
+             "~/.cache/clrays).")
 @progress_option()
 @device_option()
 @click.pass_context
@@ -775,15 +784,19 @@ def tune(context, scene: Path, target, method, overrides, camera, pixels, most_s
     from .runs.progress import Progress
     from .runs.references import ReferenceCache
 
+    if output.suffix.lower() not in (".yaml", ".yml"):
+        raise OutputError(f"{output}: the tuned scene is YAML: expected a .yaml or .yml output, got "
+                          f"{output.suffix or '(no extension)'!r}")
+    cache = cache or tuning.cache_folder()
+    allow_writes(output.parent, cache)
     _check_scene_file(scene)
-    check_folder(output)
+    check_replaceable(check_folder(output))  # before the search, not after it
     overrides = with_camera(overrides, camera)
     loaded = load_scene(scene, overrides)
     if target is None:
         if loaded.render.target_error is None:
             raise ClraysError(f"{scene}: no target: give --target-error PCT or set render.target_error")
         target = loaded.render.target_error
-    cache = cache or tuning.cache_folder()
     with _interruptible(context, f"{output} was not written"), \
             Progress(progress, most_settings, "setting", "tune") as bar:
         def on_trial(trial) -> None:
@@ -863,8 +876,8 @@ Examples:
         show_default=True, group=OUTPUT, help="Folder for bench.csv, bench.png, summary.md, machine.json.")
 @option("--out", "out_alias", type=click.Path(file_okay=False, path_type=Path), hidden=True, group=OUTPUT,
         help="The former name of --output.")
-@option("--cache", type=click.Path(file_okay=False, path_type=Path), default=Path(".cache/clrays"),
-        show_default=True, group=OUTPUT, help="Where exact references are cached.")
+@option("--cache", type=click.Path(file_okay=False, path_type=Path), default=None, group=OUTPUT,
+        help="Where exact references are cached (default: clrays' cache: $CLRAYS_CACHE, else ~/.cache/clrays).")
 @progress_option("Progress bar while an exact reference is computed (default: on a terminal).")
 @device_option()
 def bench(scenes, resolutions, repeats, pixels, targets, quick, volume, out, out_alias, cache, progress,
@@ -881,6 +894,8 @@ def bench(scenes, resolutions, repeats, pixels, targets, quick, volume, out, out
         if click.get_current_context().get_parameter_source("out") is not ParameterSource.DEFAULT:
             raise click.UsageError("give -o/--output or --out (its former name), not both")
         out = out_alias
+    cache = cache or cache_root()
+    allow_writes(out, cache)
     for folder in (out, cache):  # fail before the sweep, not after it
         make_folder(folder)
     paths = [str(path) for path in scenes] or list(bench_run.DEFAULT_SCENES)
@@ -914,6 +929,7 @@ def relief_to_mesh(scene: Path, index, overrides, output: Path) -> None:
     """Write a relief object of SCENE as its height-field triangles (two per texel cell)."""
     from .runs.relief_mesh import relief_to_mesh as convert
 
+    allow_writes(output.parent)
     check_name_length(output)
     index, count = convert(scene, check_folder(make_output_folder(output)), index, overrides)
     click.echo(f"objects.{index}: {count} triangles -> {output}")
@@ -963,6 +979,7 @@ def compare(scene, overrides, camera, radius, filters, repeats, exact_pixels, ou
     """
     from .runs.compare import compare as run_compare, markdown_table
 
+    allow_writes(out_dir)
     _check_scene_file(scene)
     loaded = load_scene(scene, with_camera(overrides, camera))
     rows = run_compare(loaded, out_dir, radius=radius, filters=filters, repeats=repeats, exact_pixels=exact_pixels,

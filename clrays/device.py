@@ -23,7 +23,8 @@ from typing import Callable
 import numpy as np
 
 from . import runtimes, structs
-from .errors import DeviceError
+from .errors import DeviceError, OutputError
+from .outputs import make_folders_below, open_file
 
 
 def kernel_dir() -> Path:
@@ -361,9 +362,9 @@ class Device:
             finally:
                 self.build_ms += (time.perf_counter() - start) * 1e3
             if marker is not None:
-                with contextlib.suppress(OSError):
-                    marker.parent.mkdir(parents=True, exist_ok=True)
-                    marker.touch()
+                with contextlib.suppress(OSError, OutputError):  # a mark that cannot be made: announced again
+                    make_folders_below(runtimes.cache_root(), marker.parent, "the cache")
+                    os.close(open_file(marker, os.O_WRONLY | os.O_CREAT))
         return self._programs[key]
 
     def _announce_build(self, stage: str, options: list[str]) -> Path | None:

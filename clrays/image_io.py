@@ -11,6 +11,7 @@ of its writer, so a later write in the folder removes those of a process that is
 (SIGKILL leaves no chance to clean up). The folder checks (`check_folder`, `make_folder`)
 run before rendering, so a bad path fails at once. A run that writes many files into a
 folder holds its lock (`folder_lock`), so that two runs never write into one folder.
+Every file written here follows `clrays.outputs`' rule: never through a symbolic link.
 """
 from __future__ import annotations
 
@@ -30,13 +31,15 @@ from typing import Callable, Iterator
 import numpy as np
 
 from .errors import ClraysError, OutputError
+from .outputs import check_replaceable, make_folder, open_file, same_file  # make_folder: for its callers
 
 FORMATS = (".png", ".exr", ".npy")
 
 
 def check_output_path(path: str | Path, folder_exists: bool = True) -> Path:
-    """Fail early (before rendering) on an unknown extension or an unwritable folder (with
-    `folder_exists` False, the folder may be missing yet: `make_output_folder` creates it)."""
+    """Fail early (before rendering) on an unknown extension, an unwritable folder (with
+    `folder_exists` False, the folder may be missing yet: `make_output_folder` creates it),
+    or a link or other non-regular file at `path` (clrays.outputs)."""
     path = Path(path)
     check_name_length(path)
     if path.is_dir():
@@ -45,6 +48,7 @@ def check_output_path(path: str | Path, folder_exists: bool = True) -> Path:
     if suffix not in FORMATS:
         raise OutputError(f"{path}: unknown output extension {path.suffix or '(none)'!r}; "
                           f"expected one of {', '.join(FORMATS)}")
+    check_replaceable(path)
     return check_folder(path) if folder_exists else path
 
 
@@ -75,19 +79,6 @@ def check_folder(path: Path) -> Path:
     if not os.access(folder, os.W_OK | os.X_OK):
         raise OutputError(f"{path}: folder {str(folder)!r} is not writable")
     return path
-
-
-def make_folder(folder: str | Path, name: str = "folder") -> Path:
-    """Create `folder` and its parents, and fail early (before any rendering) when that is
-    impossible or nothing can be written into it; `name` says what it is in messages."""
-    folder = Path(folder)
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(f"{folder}: cannot create {name}: {exc.strerror or exc}") from None
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise OutputError(f"{folder}: {name} is not writable")
-    return folder
 
 
 def check_finite(image: np.ndarray, subject: str) -> np.ndarray:
@@ -178,8 +169,8 @@ def temporary_beside(path: Path) -> str:
 def file_digest(path: str | Path) -> str | None:
     """The BLAKE2b of a regular file's bytes (hex), or None when there is no such file
     (missing, or a FIFO or device, which is never opened for long: O_NONBLOCK)."""
-    try:
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    try:  # a link is no file clrays wrote
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOFOLLOW", 0))
     except OSError:
         return None
     try:
@@ -211,6 +202,7 @@ def write_atomic(path: Path, write: Callable[[str], None], content_digest: bool 
     naming `path`. With `content_digest`, returns the `file_digest` of what was written,
     taken from the temporary before the rename (no other writer can have changed it)."""
     path = Path(path)
+    check_replaceable(path)  # a link or a FIFO there is refused, not replaced unseen
     # Named before it is created, so that the `finally` knows it whenever the interrupt comes.
     temporary = _temporary_name(path)
     try:
@@ -227,6 +219,15 @@ def write_atomic(path: Path, write: Callable[[str], None], content_digest: bool 
             os.unlink(temporary)  # gone after the rename; only ours (the name holds our pid and a random part)
 
 
+def write_text(path: str | Path, text: str, newline: str | None = None) -> None:
+    """Write `text` (UTF-8) to `path` atomically (`write_atomic`)."""
+    def write(temporary: str) -> None:
+        with open(temporary, "w", encoding="utf-8", newline=newline) as handle:
+            handle.write(text)
+
+    write_atomic(Path(path), write)
+
+
 def make_output_folder(path: str | Path) -> Path:
     """Create the folder of output file `path` (and its parents), as every command does."""
     path = Path(path)
@@ -238,33 +239,35 @@ def make_output_folder(path: str | Path) -> Path:
 LOCK = ".clrays-lock"
 
 
+#: Attempts at taking a lock whose file its holder removed meanwhile (`folder_lock`).
+_LOCK_ATTEMPTS = 50
+
+
 @contextlib.contextmanager
 def folder_lock(folder: str | Path) -> Iterator[Path]:
     """Hold `folder`'s lock (an flock on LOCK) while the block runs: a second run into the
     same folder fails at once with one line naming the first (its pid, host and command),
     rather than interleaving its files with the first's. The lock goes with the process,
-    also when it is killed; the file stays (removing it would race with a third run)."""
+    also when it is killed, and its file goes when the run ends.
+
+    Removing a lock file is safe only with both halves of this scheme: the holder unlinks
+    the file while it still holds the flock, then closes it; and whoever takes the flock
+    then checks that the name still leads to the file it locked (`same_file`). A run that
+    opened the file just before its holder unlinked it gets its flock on a file no one
+    will open again, sees the name gone or leading to another file, and opens the name
+    anew, so two runs never both hold a lock on the file the name leads to. Only the
+    holder unlinks, and only while the name is still its file; a file system without
+    flock runs unlocked and leaves the file."""
     folder = Path(folder)
     path = folder / LOCK
+    for _ in range(_LOCK_ATTEMPTS):
+        fd, locked = _lock(folder, path)
+        if not locked or same_file(fd, path):
+            break
+        os.close(fd)  # its holder removed it between our open and our flock: the name is another file now
+    else:
+        raise OutputError(f"{path}: cannot lock the folder: its lock file keeps being replaced")
     try:
-        fd = os.open(path, os.O_RDWR | os.O_CREAT | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOFOLLOW", 0),
-                     0o666)
-    except OSError as exc:
-        raise OutputError(f"{path}: cannot lock the folder: {exc.strerror or exc}") from None
-    try:
-        if not stat.S_ISREG(os.fstat(fd).st_mode):
-            raise OutputError(f"{path}: cannot lock the folder: not a regular file; remove it")
-        import fcntl
-
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            holder = os.pread(fd, 512, 0).decode("utf-8", "replace").strip().splitlines()
-            raise OutputError(f"{folder}: in use by another clrays run ({holder[0] if holder else 'unknown'}); "
-                              f"wait for it to end, or write elsewhere") from None
-        except OSError as exc:  # a file system without locks (ENOLCK, EOPNOTSUPP): run unlocked
-            if exc.errno not in (errno.ENOLCK, errno.EOPNOTSUPP, errno.ENOSYS):
-                raise OutputError(f"{path}: cannot lock the folder: {exc.strerror or exc}") from None
         command = shlex.join(["clrays", *sys.argv[1:]])
         holder = f"pid {os.getpid()} on {socket.gethostname()}: {command[:300]}\n".encode("utf-8", "replace")
         with contextlib.suppress(OSError):
@@ -272,7 +275,34 @@ def folder_lock(folder: str | Path) -> Iterator[Path]:
             os.pwrite(fd, holder, 0)
         yield path
     finally:
+        if locked and same_file(fd, path):
+            with contextlib.suppress(OSError):
+                os.unlink(path)  # while the flock is held: see above
         os.close(fd)  # releases the lock
+
+
+def _lock(folder: Path, path: Path) -> tuple[int, bool]:
+    """(fd, whether it is flocked) of the lock file `path`, opened as `clrays.outputs` asks; a
+    lock held by another run is one OutputError naming it."""
+    try:
+        fd = open_file(path, os.O_RDWR | os.O_CREAT)
+    except OSError as exc:
+        raise OutputError(f"{path}: cannot lock the folder: {exc.strerror or exc}") from None
+    import fcntl
+
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        return fd, True
+    except BlockingIOError:
+        holder = os.pread(fd, 512, 0).decode("utf-8", "replace").strip().splitlines()
+        os.close(fd)
+        raise OutputError(f"{folder}: in use by another clrays run ({holder[0] if holder else 'unknown'}); "
+                          f"wait for it to end, or write elsewhere") from None
+    except OSError as exc:  # a file system without locks (ENOLCK, EOPNOTSUPP): run unlocked
+        if exc.errno not in (errno.ENOLCK, errno.EOPNOTSUPP, errno.ENOSYS):
+            os.close(fd)
+            raise OutputError(f"{path}: cannot lock the folder: {exc.strerror or exc}") from None
+        return fd, False
 
 
 def write_image(path: str | Path, radiance: np.ndarray, exposure: float = 0.0) -> Path:

@@ -18,11 +18,15 @@ from __future__ import annotations
 import hashlib
 import os
 import platform
+import stat
 import subprocess
 import sys
 import tempfile
 from importlib import metadata
 from pathlib import Path
+
+from .errors import OutputError
+from .outputs import cache_root, open_file, writes_confined
 
 #: Where the loader looks when neither OCL_ICD_VENDORS nor OPENCL_VENDOR_PATH says otherwise.
 SYSTEM_VENDORS = Path("/etc/OpenCL/vendors")
@@ -68,20 +72,15 @@ def _vendor_entries(libraries: list[Path]) -> dict[str, str]:
     return entries
 
 
-def cache_root() -> Path:
-    """clrays' folder in the user's cache (XDG_CACHE_HOME, else ~/.cache)."""
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "clrays"
-
-
 def _write_vendors(entries: dict[str, str]) -> Path:
     """A folder holding exactly `entries`, named by their digest, so processes that agree
     share it and none ever changes one another reads: written beside its final name, then
     renamed into place (the first rename wins; a later writer's copy is dropped)."""
     digest = hashlib.sha256(repr(sorted(entries.items())).encode()).hexdigest()[:16]
-    for root in (cache_root(), Path(tempfile.gettempdir()) / f"clrays-{os.getuid()}"):
+    fallback = () if writes_confined() else (Path(tempfile.gettempdir()) / f"clrays-{os.getuid()}",)
+    for root in (cache_root(), *fallback):  # confined (--confine): the cache alone
         folder = root / f"opencl-vendors-{digest}"
-        if folder.is_dir():
+        if _own_folder(folder):
             return folder
         try:
             root.mkdir(parents=True, exist_ok=True)
@@ -94,11 +93,22 @@ def _write_vendors(entries: dict[str, str]) -> Path:
                 for child in staging.iterdir():
                     child.unlink()
                 staging.rmdir()
-            if folder.is_dir():
+            if _own_folder(folder):
                 return folder
         except OSError:
             continue  # an unwritable cache: try the temporary folder
     raise OSError("no writable folder for the OpenCL vendors list")
+
+
+def _own_folder(folder: Path) -> bool:
+    """Whether `folder` is a directory of this user's, not a link: the libraries its `.icd`
+    files name are loaded, so a folder another user made (in the shared temporary folder)
+    or a link to one is never taken."""
+    try:
+        info = os.lstat(folder)
+    except OSError:
+        return False
+    return stat.S_ISDIR(info.st_mode) and info.st_uid == os.getuid()
 
 
 def register() -> None:
@@ -177,11 +187,13 @@ def pocl_builds_here() -> bool:
         return True
     if code not in (0, 1):
         return True
-    try:
+    try:  # written beside its name, then renamed: a reader sees the whole verdict or none
         verdict.parent.mkdir(parents=True, exist_ok=True)
         staging = verdict.with_name(f".{key}.{os.getpid()}")
-        staging.write_text("yes\n" if code == 0 else "no\n")
+        fd = open_file(staging, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+        with os.fdopen(fd, "w") as file:
+            file.write("yes\n" if code == 0 else "no\n")
         staging.replace(verdict)
-    except OSError:
-        pass  # an unwritable cache: probe again next time
+    except (OSError, OutputError):
+        pass  # an unwritable cache, or something not ours in it: probe again next time
     return code == 0

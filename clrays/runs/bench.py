@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import io
 import json
 import math
 import os
@@ -41,7 +42,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ClraysError
-from ..image_io import make_folder
+from ..image_io import make_folder, write_atomic, write_text
+from ..outputs import cache_root
 from ..session import Renderer
 from ..scene.costs import with_derived_sizes
 from ..scene.model import METHODS, Scene
@@ -225,14 +227,14 @@ def measure(renderer: Renderer, scene: Scene, method: str, repeats: int, warm_up
 
 
 def run(scene_paths=DEFAULT_SCENES, resolutions=((640, 360),), repeats: int = 5, pixels: int = 4000,
-        cache: Path = Path(".cache/clrays"), device: str | None = None, progress: bool = False, log=print,
+        cache: Path | None = None, device: str | None = None, progress: bool = False, log=print,
         quick: bool = False, volume: bool = False, targets=RMSE_TARGETS) -> list[BenchPoint]:
     """The whole sweep; `cache`: the folder of the exact references; `progress`: a bar while
     one is computed; `log(line)` after each point; `volume`: surfaces black, so the error
     is the in-scattering's alone (`volume_only`); `targets`: the relative RMSEs that
     raymarch's ladder climbs to (down to the lowest)."""
     renderer = Renderer(device, reuse=False)  # every frame computed from scratch
-    references = ReferenceCache(cache, renderer, progress)
+    references = ReferenceCache(cache or cache_root(), renderer, progress)
     plan = []
     for path in scene_paths:
         for width, height in resolutions:
@@ -328,14 +330,15 @@ def summary(points: list[BenchPoint], targets=RMSE_TARGETS) -> list[dict]:
 
 def write_csv(points: list[BenchPoint], path: Path) -> None:
     stages = sorted({label for p in points for label in p.stage_ms})
-    with open(path, "w", newline="") as handle:
-        writer = csv.writer(handle)
-        writer.writerow(["scene", "resolution", "method", "setting", "frame_ms", "frame_ms_spread", "rel_rmse",
-                         "p99_rel_error", "mean_rel_error", "device_mib", "load_average", "cpu_ms"] + [f"{s}_ms" for s in stages])
-        for p in points:
-            writer.writerow([p.scene, p.resolution, p.method, p.setting, f"{p.frame_ms:.2f}", f"{p.frame_ms_spread:.3f}",
-                             f"{p.rmse:.6f}", f"{p.p99:.6f}", f"{p.mean_error:.6f}", f"{p.device_mib:.1f}", f"{p.load_average:.2f}", f"{p.cpu_ms:.1f}"]
-                            + [f"{p.stage_ms.get(s, 0.0):.2f}" for s in stages])
+    handle = io.StringIO(newline="")
+    writer = csv.writer(handle)
+    writer.writerow(["scene", "resolution", "method", "setting", "frame_ms", "frame_ms_spread", "rel_rmse",
+                     "p99_rel_error", "mean_rel_error", "device_mib", "load_average", "cpu_ms"] + [f"{s}_ms" for s in stages])
+    for p in points:
+        writer.writerow([p.scene, p.resolution, p.method, p.setting, f"{p.frame_ms:.2f}", f"{p.frame_ms_spread:.3f}",
+                         f"{p.rmse:.6f}", f"{p.p99:.6f}", f"{p.mean_error:.6f}", f"{p.device_mib:.1f}", f"{p.load_average:.2f}", f"{p.cpu_ms:.1f}"]
+                        + [f"{p.stage_ms.get(s, 0.0):.2f}" for s in stages])
+    write_text(path, handle.getvalue(), newline="")
 
 
 #: Colours of the methods the bench runs; a method not listed takes the next free one.
@@ -348,7 +351,7 @@ def plot(points: list[BenchPoint], path: Path, targets=RMSE_TARGETS) -> None:
     import matplotlib.pyplot as plt
 
     figure = figure_of(points, targets)
-    figure.savefig(path, dpi=110)
+    write_atomic(path, lambda temporary: figure.savefig(temporary, dpi=110, format="png"))
     plt.close(figure)
 
 
@@ -440,6 +443,6 @@ def save(points: list[BenchPoint], out: Path, extra: dict | None = None, device:
     make_folder(out)
     write_csv(points, out / "bench.csv")
     plot(points, out / "bench.png", targets)
-    (out / "summary.md").write_text(markdown_summary(points, targets) + "\n")
+    write_text(out / "summary.md", markdown_summary(points, targets) + "\n")
     info = {"machine": machine(device), "peak_host_mib": peak_host_mib(), **(extra or {})}
-    (out / "machine.json").write_text(json.dumps(info, indent=2) + "\n")
+    write_text(out / "machine.json", json.dumps(info, indent=2) + "\n")

@@ -369,7 +369,8 @@ def render_point_task(item, *, folder: str, exposure: float, against, reuse: boo
         renderer = _worker_renderer(reuse)
         references = None
         if against is not None:
-            references = _references.setdefault(folder, ReferenceCache(Path(folder) / REFERENCES, renderer))
+            references = _references.setdefault(folder, ReferenceCache(Path(folder) / REFERENCES, renderer,
+                                                                        below=folder))
         return render_point(renderer, references, against, point, scene, Path(folder), name, digest_hex, exposure,
                             _warmed)
 

@@ -4,15 +4,14 @@ a dask worker appends to once its frame is written (docs/limits.md, "finished fr
 sequence")."""
 from __future__ import annotations
 
-import errno
 import json
 import os
-import stat
 from pathlib import Path
 
 from ..errors import OutputError
 from ..exposure import AUTO_PERCENTILE, AUTO_WHITE, EV_LIMIT
 from ..image_io import file_digest, write_atomic
+from ..outputs import open_file
 from ..reuse import digest, scene_digest
 from ..scene.files import FileRefused, read_regular_file
 from ..scene.limits import MAX_RUN_RECORD_BYTES
@@ -57,7 +56,7 @@ class FrameManifest:
 
     def _read(self) -> str:
         try:
-            return read_regular_file(self.path, MAX_RUN_RECORD_BYTES).decode("utf-8", "replace")
+            return read_regular_file(self.path, MAX_RUN_RECORD_BYTES, follow_links=False).decode("utf-8", "replace")
         except FileRefused as exc:
             if not os.path.lexists(self.path):
                 return ""
@@ -86,14 +85,12 @@ class FrameManifest:
 def append_frame_line(path: Path, frame_digest_hex: str, content: str) -> None:
     """Append frame `path`'s line to the MANIFEST beside it, once the frame is written (here
     or on a dask worker): one write of one short line with O_APPEND, whatever the length
-    of the sequence. O_NONBLOCK: a FIFO put there fails, never waits."""
+    of the sequence; opened as `clrays.outputs` asks (a link or a FIFO there is one line)."""
     manifest = path.parent / MANIFEST
     line = json.dumps({"file": path.name, "digest": frame_digest_hex, "content": content}) + "\n"
     try:
-        fd = os.open(manifest, os.O_WRONLY | os.O_APPEND | os.O_CREAT | getattr(os, "O_NONBLOCK", 0), 0o666)
+        fd = open_file(manifest, os.O_WRONLY | os.O_APPEND | os.O_CREAT)
         try:
-            if not stat.S_ISREG(os.fstat(fd).st_mode):
-                raise OSError(errno.EINVAL, "not a regular file")
             os.write(fd, line.encode())
         finally:
             os.close(fd)

@@ -21,7 +21,8 @@ from typing import Callable, NamedTuple
 import numpy as np
 
 from ..errors import ClraysError
-from ..image_io import make_folder, write_atomic
+from ..image_io import write_atomic
+from ..outputs import check_replaceable, make_folders_below
 from ..reference.metrics import ImageError, depth_edges, depth_edges_at, depth_map, image_error
 from ..reuse import StageCache, digest, scene_digest
 from ..scene.files import FileRefused, read_regular_file
@@ -80,11 +81,17 @@ class ReferenceCache:
     renderer: renders whole-frame references (default: a new session); they are
     rendered with `reuse=False`, so they neither use nor evict what the renderer keeps
     for the study's own frames. progress: a progress bar while a reference renders. An
-    entry that cannot be read back (a corrupted file) is computed again and replaced."""
+    entry that cannot be read back (a corrupted file) is computed again and replaced.
+    below: the folder the user named that `folder` lies in (a sweep's), when clrays makes
+    `folder` itself (`.references`): then it must be a directory, not a link
+    (clrays.outputs); None: `folder` is the user's (the cache)."""
 
     def __init__(self, folder: str | Path, renderer: Renderer | None = None, progress: bool = False,
-                 memory_entries: int = 4, notice: Callable[[str], None] | None = None):
+                 memory_entries: int = 4, notice: Callable[[str], None] | None = None,
+                 below: str | Path | None = None):
         self.folder = Path(folder)
+        self.below = Path(below) if below is not None else self.folder
+        self._check_folder()  # a link planted there is one line before anything is rendered
         #: Says, in one line, that a kept entry was unreadable and is computed again (default: stderr).
         self.notice = notice or _stderr_notice
         self.renderer = renderer or Renderer()
@@ -139,20 +146,31 @@ class ReferenceCache:
             return array
         self._computed = True
         path = self.folder / f"{kind}-{key.hex()[:24]}.npy"
+        if self._check_folder():
+            check_replaceable(path)
         array = self._load(path, shape) if os.path.lexists(path) else None
         if array is None:
             array = compute()
-            make_folder(self.folder, "the reference folder")
+            make_folders_below(self.below, self.folder, "the reference folder")
             write_atomic(path, lambda temporary: np.save(temporary, array))
         self._memory.put(kind, key, array)
         return array
+
+    def _check_folder(self) -> bool:
+        """Whether `folder` is there; where it is, it must be a directory (not a link, where
+        clrays makes it: clrays.outputs)."""
+        if not os.path.lexists(self.folder):
+            return False
+        make_folders_below(self.below, self.folder, "the reference folder")
+        return True
 
     def _load(self, path: Path, shape: tuple[int, ...]) -> np.ndarray | None:
         """A kept entry, or None (with a notice) when it cannot be what was written: not a
         regular file, not an .npy, or of another shape or type; it is then computed again
         and replaced."""
         try:
-            data = read_regular_file(path, int(np.prod(shape)) * 8 + 4096)  # float64 at most, and the header
+            data = read_regular_file(path, int(np.prod(shape)) * 8 + 4096,  # float64 at most, and the header
+                                     follow_links=False)
             array = np.load(io.BytesIO(data), allow_pickle=False)
             if array.shape != shape or array.dtype.kind not in "fb" or not np.isfinite(array).all():
                 raise ValueError(f"a {array.dtype} array of shape {array.shape}, expected {shape}")

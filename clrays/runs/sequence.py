@@ -33,6 +33,7 @@ from ..exposure import (AUTO, Problem, auto_ev, auto_line, brightest_channel, ex
                         problem_of_8bit, warning_line)
 from ..image_io import (FORMATS, check_folder, check_name_length, check_output_path, folder_lock, make_folder,
                         make_output_folder, read_linear, read_srgb8, write_atomic)
+from ..outputs import check_replaceable, make_folders_below
 from ..passes import pass_paths, write_render, written_pass_files
 from ..scene.limits import MAX_FRAME_FIELD_WIDTH
 from ..session import Renderer, RenderResult
@@ -191,9 +192,9 @@ def render_sequence(scene: Scene, pattern: str | Path, frames: range | None = No
     pattern = check_pattern(pattern)
     frames = scene_frames(scene) if frames is None else frames
     paths = [frame_path(pattern, frame) for frame in frames]
-    make_folder(lock_folder(pattern))
+    locked = make_folder(lock_folder(pattern))
     for path in paths[:1]:  # the others' folders are created as the run reaches them
-        check_output_path(make_folder(path.parent) / path.name)
+        check_output_path(make_folders_below(locked, path.parent) / path.name)
     renderer = renderer or Renderer()
     report = SequenceReport(paths)
     start = time.perf_counter()
@@ -205,7 +206,7 @@ def render_sequence(scene: Scene, pattern: str | Path, frames: range | None = No
                                                     exposure_setting(exposure, scene), overwrite, executor, echo)
             with Progress(progress, len(paths), "frame", "sequence") as bar:
                 _run_frames(scene, frames, paths, renderer, method, report.exposure, overwrite, progress, on_frame,
-                            executor, report, bar, in_flight)
+                            executor, report, bar, in_flight, locked)
         finally:
             report.wall_s = time.perf_counter() - start
             report.rendered.sort()
@@ -251,14 +252,15 @@ def sequence_exposure(scene: Scene, pattern: str, renderer: Renderer, method: st
 
 
 def _run_frames(scene, frames, paths, renderer, method, exposure, overwrite, progress, on_frame, executor,
-                report: SequenceReport, bar: Progress, in_flight: bool | None = None) -> None:
+                report: SequenceReport, bar: Progress, in_flight: bool | None = None, locked: Path = Path(".")) -> None:
     """The frames in order, each checked against its folder's manifest just before it is
-    rendered: the first frame starts at once, and the run is linear in the frame count."""
+    rendered: the first frame starts at once, and the run is linear in the frame count.
+    `locked`: the folder locked, which holds every frame's."""
     manifests: dict[Path, FrameManifest] = {}
 
     def manifest_of(path: Path) -> FrameManifest:
         if path.parent not in manifests:
-            make_folder(path.parent)  # the frame number may be in a folder name
+            make_folders_below(locked, path.parent)  # the frame number may be in a folder name
             manifests[path.parent] = FrameManifest(path.parent)
         return manifests[path.parent]
 
@@ -276,8 +278,11 @@ def _run_frames(scene, frames, paths, renderer, method, exposure, overwrite, pro
             if os.path.lexists(path) and not (overwrite and manifest.matches(path, key)):
                 # A stale frame goes before its new one is rendered (here or by a worker, which
                 # skips a file that is there), so that no kill leaves it to be taken for new.
+                parts = (path, *written_pass_files(path))  # its passes go with it: they were its scene's
+                for part in parts:
+                    check_replaceable(part)  # a link or a FIFO there is refused, not removed unseen
                 try:
-                    for part in (path, *written_pass_files(path)):  # its passes go with it: they were its scene's
+                    for part in parts:
                         part.unlink(missing_ok=True)
                 except OSError as exc:
                     raise OutputError(f"{path}: cannot replace the stale frame: {exc.strerror or exc}") from None
@@ -374,6 +379,7 @@ def check_video_path(path: str | Path) -> Path:
         raise OutputError(f"{path}: unknown video extension {path.suffix or '(none)'!r}; "
                           f"expected one of {', '.join(VIDEO_FORMATS)}")
     check_name_length(path)
+    check_replaceable(path)  # a link there is one line before the frames, not after them
     return check_folder(make_output_folder(path))  # created, as the frames' folders are
 
 

@@ -35,6 +35,7 @@ import yaml
 from ..errors import ClraysError, OutputError
 from ..exposure import AUTO, auto_ev, exposure_setting
 from ..image_io import file_digest, folder_lock, make_folder, read_linear, read_srgb8, write_atomic
+from ..outputs import check_replaceable
 from ..inputs import frame_inputs
 from ..session import STAGE_ORDER, Renderer, StageKeys
 from ..reuse import digest, scene_digest
@@ -253,9 +254,9 @@ def _image_name(point: SweepPoint, count: int, fmt: str) -> str:
 
 def _read_rows(path: Path) -> dict[int, dict[str, str]]:
     """The rows of an earlier run's results.csv: none when it is missing or not a CSV;
-    a FIFO, a device or a file over MAX_RUN_RECORD_BYTES is one line (`read_regular_file`)."""
+    a link, a FIFO, a device or a file over MAX_RUN_RECORD_BYTES is one line (`read_regular_file`)."""
     try:
-        text = read_regular_file(path, MAX_RUN_RECORD_BYTES).decode("utf-8", "replace")
+        text = read_regular_file(path, MAX_RUN_RECORD_BYTES, follow_links=False).decode("utf-8", "replace")
     except FileRefused as exc:
         if not os.path.lexists(path):
             return {}
@@ -308,6 +309,7 @@ def run_sweep(path: str | Path, spec, out_dir: str | Path, *, overrides: Sequenc
     against = parse_reference(reference)
     value_keys = check_values(path, axes, fixed)
     folder = make_folder(out_dir, "the sweep folder")
+    check_replaceable(folder / CONTACT_SHEET)  # a link there is one line now, not after every point
 
     renderer = renderer or Renderer()
     swept_render_keys = {axis.key.removeprefix("render.") for axis in axes if axis.key.startswith("render.")}
@@ -322,9 +324,9 @@ def run_sweep(path: str | Path, spec, out_dir: str | Path, *, overrides: Sequenc
                 raise ClraysError(f"{path}: render.{sorted(swept_render_keys & tuned_keys)[0]} is swept, and "
                                   f"render.target_error tunes it: sweep it without a target, or sweep the target")
         # render.target_error: the point's tuned settings (searched once per scene, then read from the cache).
-        return tuned_scene(scene, folder=folder / REFERENCES, renderer=renderer, progress=progress)[0]
+        return tuned_scene(scene, folder=folder / REFERENCES, renderer=renderer, progress=progress, below=folder)[0]
 
-    references = ReferenceCache(folder / REFERENCES, renderer, progress) if against else None
+    references = ReferenceCache(folder / REFERENCES, renderer, progress, below=folder) if against else None
     points = sweep_points(axes)
     report = SweepReport(folder, [])
     start = time.perf_counter()
@@ -356,6 +358,7 @@ def _run_points(points, axes, value_keys, point_scene, folder: Path, renderer, r
     """Every point, in `axes_execution_order`, each scene loaded when its turn comes: the
     first point renders at once, and memory holds one scene at a time."""
     earlier = {} if overwrite else _read_rows(folder / RESULTS)
+    check_replaceable(folder / RESULTS)  # read or not, a link there is one line before any point
     warmed: set = set()
     rows: dict[int, dict[str, str]] = {}
     written = {"at": time.perf_counter(), "pending": False}

@@ -31,7 +31,8 @@ from typing import Callable
 
 from ..digest import digest
 from ..errors import ClraysError
-from ..image_io import make_folder, write_atomic
+from ..image_io import write_atomic
+from ..outputs import cache_root, make_folders_below
 from ..reuse import scene_digest
 from ..scene import gltf as gltf_files
 from ..scene.costs import with_derived_sizes
@@ -344,9 +345,9 @@ def unreachable(source: str, tuning: Tuning) -> ClraysError:
 
 
 def cache_folder() -> Path:
-    """Where the exact references and tuned settings are kept: $CLRAYS_CACHE, else
-    .cache/clrays (as `clrays bench --cache`)."""
-    return Path(os.environ.get("CLRAYS_CACHE") or ".cache/clrays")
+    """Where the exact references and tuned settings are kept: clrays' one cache
+    (`clrays.outputs.cache_root`: $CLRAYS_CACHE, else the user's cache folder)."""
+    return cache_root()
 
 
 @dataclass(frozen=True)
@@ -371,12 +372,13 @@ MAX_TUNED_BYTES = 64 << 10
 
 def tuned_scene(scene: Scene, method: str | None = None, folder: Path | None = None,
                 renderer: Renderer | None = None, progress: bool = False,
-                log: Callable[[str], None] | None = None) -> tuple[Scene, Tuned | None]:
+                log: Callable[[str], None] | None = None, below: Path | None = None) -> tuple[Scene, Tuned | None]:
     """`scene` with the settings its `render.target_error` asks for (unchanged, and None,
     where it sets none). Tuned once per scene: the result is kept in `folder` (default
     `cache_folder()`) as tuned-<digest>.json, the digest of the scene and the method, so
     every frame of a sequence and every later run reads it; a file that does not parse
-    is tuned again. An unreachable target is a ClraysError."""
+    is tuned again. An unreachable target is a ClraysError. below: the user's folder that
+    `folder` lies in, where clrays makes `folder` (ReferenceCache)."""
     percent = scene.render.target_error
     method = method or scene.render.method
     if percent is None or method == "exact":  # exact is the reference the target is measured against
@@ -387,6 +389,8 @@ def tuned_scene(scene: Scene, method: str | None = None, folder: Path | None = N
     untuned = replace(scene, source=None, render=replace(scene.render, aovs=()))
     key = digest("tuned", scene_digest(untuned), scene.animation, method).hex()[:24]
     path = folder / f"tuned-{key}.json"
+    if os.path.lexists(folder):  # a link where clrays makes the folder: one line before anything is read
+        make_folders_below(below or folder, folder, "the reference folder")
     tuned = _read_tuned(path, target, knobs_for(method, scene.render.sampling))
     if tuned is None:
         with Progress(progress, MOST_SETTINGS, "setting", "tune") as bar:
@@ -396,13 +400,13 @@ def tuned_scene(scene: Scene, method: str | None = None, folder: Path | None = N
                     log(trial_line(trial))
 
             timing = Renderer(renderer.device if renderer is not None else None, reuse=False)  # every stage computed
-            tuning = tune(scene, target, ReferenceCache(folder, renderer, progress), renderer=timing, method=method,
+            tuning = tune(scene, target, ReferenceCache(folder, renderer, progress, below=below), renderer=timing, method=method,
                           on_trial=on_trial)
         best = tuning.best
         if best is None:
             raise unreachable(f"{scene.source or 'scene'}: render.target_error", tuning)
         tuned = Tuned(best.settings, best.rmse, best.frame_ms, target, False)
-        make_folder(folder, "the reference folder")
+        make_folders_below(below or folder, folder, "the reference folder")
         text = json.dumps({**asdict(tuned), "cached": None}, indent=1)
         write_atomic(path, lambda temporary: Path(temporary).write_text(text, encoding="utf-8"))
     return with_settings(scene, tuned.settings), tuned
@@ -413,7 +417,7 @@ def _read_tuned(path: Path, target: float, knobs: tuple[Knob, ...]) -> Tuned | N
     holds anything but the method's knobs within the scene format's ranges (a hand edit, a
     file of another version): then the scene is tuned again."""
     try:
-        data = json.loads(read_regular_file(path, MAX_TUNED_BYTES).decode("utf-8"))
+        data = json.loads(read_regular_file(path, MAX_TUNED_BYTES, follow_links=False).decode("utf-8"))
         settings = data["settings"]
         if not isinstance(settings, dict) or set(settings) - {knob.key for knob in knobs}:
             return None

@@ -6,7 +6,9 @@ frames, so an edit re-runs only the stages whose inputs it changed: a new medium
 shadow maps and the camera depth, a moved camera the shadow maps. Each render writes the
 image atomically (and its passes, `render.aovs`) and prints one line: the frame's time and
 the stages it reused. An edit that does not load or render prints its one-line error and
-the image stays as it was, until the next save.
+the image stays as it was, until the next save. A render that writes fewer passes than the
+one before (an edit dropped `render.aovs`) removes the pass files that render wrote, so
+no stale pass stays beside the new image; files clrays did not write are left alone.
 
 Saves are found by polling each file's (mtime, size, inode) every `interval` seconds, which
 an editor's write-and-rename changes as well as a write in place: no file-watching package.
@@ -20,7 +22,7 @@ from typing import Callable
 
 from ..errors import ClraysError
 from ..exposure import exposure_setting, frame_exposure
-from ..passes import write_render
+from ..passes import pass_paths, write_render
 from ..scene.load import load_scene
 from ..session import Renderer
 
@@ -36,6 +38,27 @@ def _state(path: Path):
     except OSError:
         return None
     return stat.st_mtime_ns, stat.st_size, stat.st_ino
+
+
+def _identity(path: Path):
+    """What tells the file at `path` (not followed) from any other written later: (device,
+    inode, mtime, size); None where there is none."""
+    try:
+        info = os.lstat(path)
+    except OSError:
+        return None
+    return info.st_dev, info.st_ino, info.st_mtime_ns, info.st_size
+
+
+def _remove_dropped_passes(written: dict[Path, tuple], kept: set[Path]) -> None:
+    """Remove the pass files of `written` (path → `_identity` when written) that a new render
+    did not write again (not in `kept`), each only while it is still the file written then."""
+    for path, identity in written.items():
+        if path not in kept and identity is not None and _identity(path) == identity:
+            try:
+                os.unlink(path)
+            except OSError:
+                pass  # gone meanwhile, or the folder turned read-only: nothing of ours to report
 
 
 def watch(scene: Path, output: Path, *, overrides=(), method: str | None = None, exposure: float | str | None = None,
@@ -54,6 +77,7 @@ def watch(scene: Path, output: Path, *, overrides=(), method: str | None = None,
     stop = stop or threading.Event()
     renders = errors = 0
     seen = None
+    passes: dict[Path, tuple] = {}  # the pass files the last render wrote (path → `_identity`)
     while not stop.is_set():
         states = [_state(path) for path in files]
         if states != seen:
@@ -64,6 +88,9 @@ def watch(scene: Path, output: Path, *, overrides=(), method: str | None = None,
                 notes: list[str] = []  # said after the render's line
                 stops = frame_exposure(exposure_setting(exposure, loaded), result.image, output, notes.append)
                 write_render(output, result, loaded, stops, str(scene))
+                written = pass_paths(output, loaded.render.aovs)[1:]
+                _remove_dropped_passes(passes, set(written))
+                passes = {path: _identity(path) for path in written}
             except ClraysError as exc:
                 errors += 1
                 echo(f"clrays: error: {exc}")

@@ -357,7 +357,7 @@ RENDER = Section("render", (
           shown_default="none: the settings as written",
           notes="percent relative RMSE against `exact` (as `clrays bench` measures it): `render`, `sequence` and "
                 "`sweep` first tune the sizes and sampling settings for the cheapest frame within it "
-                "(`clrays tune`; once per scene, kept in .cache/clrays or $CLRAYS_CACHE) and render with them"),
+                "(`clrays tune`; once per scene, kept in clrays' cache: $CLRAYS_CACHE, else ~/.cache/clrays) and render with them"),
     Field("exposure", "number or `auto`", Render.exposure, -EV_LIMIT, EV_LIMIT,
           notes="stops for the 8-bit outputs (.png, and a sequence's .gif, .webp, .mp4): radiance × 2^EV before "
                 "the sRGB curve; `auto` chooses them from the frame ([Exposure](#exposure)). `--exposure` "

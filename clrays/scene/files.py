@@ -68,15 +68,18 @@ class FileRefused(Exception):
     """The file cannot be read; the message is one line, without the path."""
 
 
-def read_regular_file(path: Path | str, limit: int, too_big_hint: str = "") -> bytes:
+def read_regular_file(path: Path | str, limit: int, too_big_hint: str = "", follow_links: bool = True) -> bytes:
     """The bytes of a regular file of at most `limit` bytes.
 
     Raises FileRefused naming the problem: a missing or unreadable file, something other
     than a regular file (a device, a FIFO, a directory), a file over the limit (then
     `too_big_hint` says what to do instead), or, while a scene's files are confined, a file
-    outside its folder (`confined`).
+    outside its folder (`confined`). Not `follow_links`: a symbolic link is refused too (a
+    file clrays wrote and reads back: clrays.outputs).
     """
     flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0)
+    if not follow_links:
+        flags |= getattr(os, "O_NOFOLLOW", 0)
     if _scene_folder.get() is not None:
         # Open what was checked: a name swapped for a link since can only fail.
         path, flags = confined(path), flags | getattr(os, "O_NOFOLLOW", 0)
@@ -84,11 +87,13 @@ def read_regular_file(path: Path | str, limit: int, too_big_hint: str = "") -> b
         # O_NONBLOCK: opening a FIFO for reading would otherwise wait for a writer.
         fd = os.open(path, flags)
     except OSError as exc:
+        if flags & getattr(os, "O_NOFOLLOW", 0) and os.path.islink(path):
+            raise FileRefused("a symbolic link, which clrays does not follow here") from None
         raise FileRefused(exc.strerror or str(exc)) from None
     try:
         info = os.fstat(fd)  # of what was opened, not of what the name pointed to before
         if not stat.S_ISREG(info.st_mode):
-            raise FileRefused(f"not a regular file (a {_kind(info.st_mode)})")
+            raise FileRefused(f"not a regular file (a {kind_name(info.st_mode)})")
         if info.st_size > limit:
             raise FileRefused(f"{_size(info.st_size)}, more than the limit of {_size(limit)}"
                               + (f"; {too_big_hint}" if too_big_hint else ""))
@@ -109,7 +114,8 @@ def read_regular_file(path: Path | str, limit: int, too_big_hint: str = "") -> b
         os.close(fd)
 
 
-def _kind(mode: int) -> str:
+def kind_name(mode: int) -> str:
+    """What a file that is no regular file is, in words ("FIFO", "character device", ...)."""
     for test, name in ((stat.S_ISDIR, "directory"), (stat.S_ISCHR, "character device"),
                        (stat.S_ISBLK, "block device"), (stat.S_ISFIFO, "FIFO"), (stat.S_ISSOCK, "socket")):
         if test(mode):

@@ -107,6 +107,7 @@ def test_a_named_runtime_that_is_not_installed_says_how_to_install_it(monkeypatc
 
 
 def test_the_pocl_verdict_is_probed_once_and_kept(tmp_path, monkeypatch):
+    monkeypatch.delenv("CLRAYS_CACHE", raising=False)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     calls = []
 
@@ -123,6 +124,7 @@ def test_the_pocl_verdict_is_probed_once_and_kept(tmp_path, monkeypatch):
 
 
 def test_a_probe_that_cannot_run_says_yes_and_keeps_nothing(tmp_path, monkeypatch):
+    monkeypatch.delenv("CLRAYS_CACHE", raising=False)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     monkeypatch.setattr(runtimes.subprocess, "run",
                         lambda command, **kwargs: subprocess.CompletedProcess(command, -11))  # crashed
