@@ -334,7 +334,7 @@ def render_frame_task(item: tuple[int, str, str], *, scene, method: str | None, 
     when it was stopped, wrote it since) is rendered over."""
     from ..passes import write_render
     from .frame_manifest import FrameManifest, append_frame_line
-    from .sequence import scene_at
+    from ..scene.animation import scene_at
 
     frame, path, frame_digest_hex = item
     path = Path(path)
@@ -352,7 +352,7 @@ def auto_exposure_task(frame: int, *, scene, method: str | None, reuse: bool) ->
     """`auto_ev` of a sequence's frame `frame`, rendered on a worker: what
     `sequence.sequence_exposure` takes the least of."""
     from ..exposure import auto_ev
-    from .sequence import scene_at
+    from ..scene.animation import scene_at
 
     with _session_lock:
         return auto_ev(_worker_renderer(reuse).render(scene_at(scene, frame), method).image)

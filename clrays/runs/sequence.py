@@ -35,6 +35,7 @@ from ..image_io import (FORMATS, check_folder, check_name_length, check_output_p
                         make_output_folder, read_linear, read_srgb8, write_atomic)
 from ..outputs import check_replaceable, make_folders_below
 from ..passes import pass_paths, write_render, written_pass_files
+from ..scene.animation import scene_at
 from ..scene.limits import MAX_FRAME_FIELD_WIDTH
 from ..session import Renderer, RenderResult
 from ..scene.model import Scene
@@ -43,11 +44,6 @@ from .frame_manifest import (EXPOSURE_RECORD, FrameManifest, frame_digest, recor
 from .progress import Progress, counted
 
 VIDEO_FORMATS = (".mp4", ".gif", ".webp")
-
-
-def scene_at(scene: Scene, frame: int) -> Scene:
-    """Frame `frame` of `scene`'s animation; a still scene is its own frame."""
-    return scene.animation.scene_at(scene, frame) if scene.animation is not None else scene
 
 
 def scene_frames(scene: Scene) -> range:

@@ -209,3 +209,8 @@ def frame_scenes(scene: Scene, frames=None) -> Iterator[tuple[int, Scene]]:
         return
     for frame in (frames if frames is not None else scene.animation.frames):
         yield frame, scene.animation.scene_at(scene, frame)
+
+
+def scene_at(scene, frame: int):
+    """Frame `frame` of `scene`'s animation; a still scene is its own frame."""
+    return scene.animation.scene_at(scene, frame) if scene.animation is not None else scene
