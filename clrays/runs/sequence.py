@@ -140,6 +140,9 @@ class SequenceReport:
     rendered: list[int] = field(default_factory=list)  # frames rendered by this run
     kept: list[int] = field(default_factory=list)  # frames whose file was already there, of the same scene
     stale: list[int] = field(default_factory=list)  # rendered again: their file was of another scene
+    # rendered again: their file has no line in the manifest (a run stopped between writing
+    # it and recording it, or another program wrote it)
+    unrecorded: list[int] = field(default_factory=list)
     # of the rendered frames, without their images (in the files): times, reuse, sizes
     results: dict[int, RenderResult] = field(default_factory=dict)
     wall_s: float = 0.0
@@ -157,7 +160,11 @@ class SequenceReport:
 
     def summary(self) -> str:
         per = f", {self.wall_s / len(self.rendered):.2f} s per frame" if self.rendered else ""
-        stale = f" ({len(self.stale)} of them replacing frames of a changed scene)" if self.stale else ""
+        replaced = [f"{len(self.stale)} of them replacing frames of a changed scene"] if self.stale else []
+        if self.unrecorded:
+            replaced.append(f"{len(self.unrecorded)} {'' if replaced else 'of them '}replacing files no run "
+                            f"recorded as finished")
+        stale = f" ({', '.join(replaced)})" if replaced else ""
         return (f"{counted(len(self.rendered), 'frame')} rendered{stale}, {len(self.kept)} already there "
                 f"(of {len(self.paths)}) in {self.wall_s:.1f} s{per}")
 
@@ -283,7 +290,7 @@ def _run_frames(scene, frames, paths, renderer, method, exposure, overwrite, pro
                 except OSError as exc:
                     raise OutputError(f"{path}: cannot replace the stale frame: {exc.strerror or exc}") from None
                 if not overwrite:
-                    report.stale.append(frame)
+                    (report.stale if path.name in manifest.entries else report.unrecorded).append(frame)
             yield frame, path, key, frame_scene, False
 
     def kept(frame: int, path: Path) -> None:

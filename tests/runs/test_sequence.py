@@ -2,6 +2,8 @@
 midway (a real process, a real signal) that resumes to the frames of an unbroken run."""
 from __future__ import annotations
 
+import contextlib
+import json
 import os
 import signal
 import subprocess
@@ -184,10 +186,21 @@ def test_killed_sequence_resumes_to_the_frames_of_an_unbroken_run(tmp_path, unbr
     for name in written:  # what is there is complete
         np.testing.assert_array_equal(np.load(tmp_path / "out" / name), np.load(unbroken / name))
 
+    # A kill between a frame's write and its manifest line leaves a file no run recorded as
+    # finished: rendered again, and said so.
+    recorded = set()
+    for line in (tmp_path / "out" / ".clrays-frames.jsonl").read_text().splitlines():
+        with contextlib.suppress(ValueError):  # a line the kill cut short
+            recorded.add(json.loads(line)["file"])
+    unrecorded = sorted(set(written) - recorded)
+    assert len(unrecorded) <= 1, unrecorded  # only the frame the kill fell on
+
     resumed = _sequence_process(scene, pattern)
     stdout, stderr = resumed.communicate(timeout=300)
     assert resumed.returncode == 0, stderr
-    assert f"{FRAMES_KILLED - len(written)} frames rendered, {len(written)} already there" in stdout
+    again = " (1 of them replacing files no run recorded as finished)" if unrecorded else ""
+    kept = len(written) - len(unrecorded)
+    assert f"{FRAMES_KILLED - kept} frames rendered{again}, {kept} already there" in stdout, stdout
     assert frames_in(tmp_path / "out") == frames_in(unbroken)
     assert not list((tmp_path / "out").glob(".f_*"))
     for name in frames_in(unbroken):
