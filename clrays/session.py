@@ -42,6 +42,7 @@ import numpy as np
 from .device import Device, StageTimer
 from .errors import ClraysError
 from .inputs import FrameBuffers, FrameInputs, frame_inputs, upload, without_walled_off_light
+from .light_turns import RaysSum, add_visibility_column, lights_in_turn, one_light_buffers
 from .physics.radiometry import effective_far
 from .passes import assemble, per_light_indices, samples_to_pixels
 from .reuse import COMPUTED, REUSED, SKIPPED, Reuse, StageCache, StageRecord, digest, geometry_parts, scene_digest
@@ -334,12 +335,17 @@ class Renderer:
             return self._exact(scene, reuse, timer, progress)
         frame = self._upload(scene, method, reuse, timer)  # the scene in eye space, packed into device structs
         frame.progress, frame.reads = progress, reads
-        frame.rastered, frame.maps = self._raster(frame.buffers, frame.keys, reuse, timer)  # raster: depths, maps
+        in_turn = lights_in_turn(frame.scene, method)  # each light's maps, trees and visibility apart (light_turns.py)
+        frame.rastered, frame.maps = self._raster(frame.buffers, frame.keys, reuse, timer,  # raster: depths, maps
+                                                  maps=not in_turn)
         frame.layers = self._translucency(frame.buffers, frame.keys, reuse, timer)  # translucency: light side
         frame.films = self._films(frame.buffers, frame.rastered, reuse, timer)  # transparency: camera side
         frame.in_scatter = InScatter(self.device, frame.buffers.inputs.samples)  # in-scattering per camera sample
-        VOLUME_METHODS[method](self, frame)  # raymarch; or per light rectify → minmax → integrand → traverse
-        visible, rays = self._visibility(frame.occluders, frame.rastered, frame.keys, reuse, timer)  # visibility
+        if in_turn:  # per light: raster.shadow → rectify → minmax → integrand → traverse → visibility
+            visible, rays = self._lights_in_turn(frame)
+        else:
+            VOLUME_METHODS[method](self, frame)  # raymarch; or per light rectify → minmax → integrand → traverse
+            visible, rays = self._visibility(frame.occluders, frame.rastered, frame.keys, reuse, timer)  # visibility
         image, passes = self._shade(frame, visible)  # shade: surfaces, attenuation, + in-scattering
         # The stages that ran: a frame identical to this one counts them reused (not the skipped ones).
         ran = tuple(stage for stage, status in reuse.record.status().items() if status != SKIPPED)
@@ -373,16 +379,56 @@ class Renderer:
         """The volume stages of methods minmax and volume_moments, light by light."""
         if self._no_medium(frame):
             return
-        wanted = per_light_indices(frame.scene.render.aovs)  # render passes of single lights
-        for index, light in enumerate(frame.scene.lights):
-            before = frame.in_scatter.snapshot() if index in wanted else None
-            if eye_in_lamp(frame.scene, light):  # d_el → 0: no epipolar frame, nothing visible is shadowed
-                self._lamp_in_scatter(frame, light)
-            else:
-                self._light_volume(frame, index, light)
-            if before is not None:  # (float32 sums differ exactly in float64: the parts add up to the whole)
-                frame.light_scatter[index] = frame.in_scatter.snapshot() - before
+        for index in range(len(frame.scene.lights)):
+            self._epipolar_light(frame, index)
         frame.reuse.record.note(VOLUME_STAGES[frame.method][-1], COMPUTED)
+
+    def _epipolar_light(self, frame: Frame, index: int, alone: Frame | None = None) -> None:
+        """Light `index`'s volume stages, added to the frame's in-scattering: in `frame`, or
+        (lights in turn) in `alone`, the frame with that light alone."""
+        part, at = (frame, index) if alone is None else (alone, 0)
+        light = part.scene.lights[at]
+        # a render pass of this light alone (float32 sums differ exactly in float64: the parts add up to the whole)
+        before = frame.in_scatter.snapshot() if index in per_light_indices(frame.scene.render.aovs) else None
+        if eye_in_lamp(part.scene, light):  # d_el → 0: no epipolar frame, nothing visible is shadowed
+            self._lamp_in_scatter(part, light)
+        else:
+            self._light_volume(part, at, light)
+        if before is not None:
+            frame.light_scatter[index] = frame.in_scatter.snapshot() - before
+
+    def _lights_in_turn(self, frame: Frame):
+        """Each light's raster.shadow → volume → visibility through its own buffers, one
+        light at a time (clrays.light_turns): its in-scattering added to the frame's, its
+        visibility copied into the frame's column for it. Returns (visibility per sample
+        and light, shadow rays) as `_visibility`."""
+        lights, samples = len(frame.scene.lights), frame.buffers.inputs.samples
+        medium = not self._no_medium(frame)
+        visible = self.device.buffer(nbytes=4 * samples * lights)
+        rays = [self._light_in_turn(frame, index, medium, visible) for index in range(lights)]
+        if medium:
+            frame.reuse.record.note(VOLUME_STAGES[frame.method][-1], COMPUTED)
+        return visible, RaysSum(rays)
+
+    def _light_in_turn(self, frame: Frame, index: int, medium: bool, visible) -> int:
+        """One light of `_lights_in_turn`; what it allocates goes when it returns (on a
+        CPU device, back to the pool for the next light). Returns its shadow rays."""
+        device, reuse, timer = self.device, frame.reuse, frame.timer
+        shadow_map = reuse.stage("raster.shadow", lambda: frame.keys.shadow[index],
+                                 lambda: raster_shadow_map(device, frame.buffers, index, timer), per_light=True)
+        buffers = one_light_buffers(device, frame.buffers, index)
+        depth, blockers, volume = shadow_atlases(device, buffers, [shadow_map])  # (one map: its own buffers)
+        # shade reads no map with exact surface shadows: the flags alone, for the same build of its kernel
+        frame.rastered = replace(frame.rastered, blocker_keys=shadow_map.keys, depth_in_keys=shadow_map.depth_in_keys)
+        rastered = replace(frame.rastered, shadow_depth=depth, shadow_blockers=blockers, volume_blockers=volume)
+        alone = replace(frame, scene=buffers.inputs.scene, buffers=buffers, keys=StageKeys(buffers.inputs),
+                        occluders=buffers, rastered=rastered, maps=[shadow_map])
+        if medium:
+            self._epipolar_light(frame, index, alone)
+            frame.samples = alone.samples
+        part, rays = self._visibility(buffers, rastered, alone.keys, reuse, timer)
+        add_visibility_column(device, visible, part, index, len(frame.scene.lights), buffers.inputs.samples)
+        return rays
 
     def _no_medium(self, frame: Frame) -> bool:
         """Whether the scene has no medium: then no volume stage runs at all."""
@@ -556,8 +602,10 @@ class Renderer:
                              lambda index=index: visibility_bound(device, buffers, index, timer, prepared),
                              per_light=True)
                   for index in range(len(scene.lights))]
-        atlas = reuse.keep("bound_atlas", lambda: digest("bound", tuple(keys.shadow), keys.camera, keys.surfaces),
-                           lambda: bound_atlas(device, buffers, bounds))
+        # (one light's atlas is its own bound map, kept with it)
+        atlas = bounds[0] if len(bounds) == 1 else reuse.keep(
+            "bound_atlas", lambda: digest("bound", tuple(keys.shadow), keys.camera, keys.surfaces),
+            lambda: bound_atlas(device, buffers, bounds))
         reuse.record.note("visibility", COMPUTED)
         return visibility(device, buffers, rastered, prepared, atlas, lambda: self._bvh(buffers, keys, reuse, timer),
                           timer, bounds)
@@ -589,10 +637,11 @@ class Renderer:
                               parts["depth"], dict(enumerate(lights)))
         return image, ("exact",), (), None, None, passes
 
-    def _raster(self, buffers: FrameBuffers, keys: StageKeys, reuse: Reuse, timer: StageTimer):
+    def _raster(self, buffers: FrameBuffers, keys: StageKeys, reuse: Reuse, timer: StageTimer, maps: bool = True):
         """The raster stage, each part kept while its inputs are: the camera's depth and
         triangle ids, and each light's shadow map (anchored at the light, so a moving
-        camera keeps it). Returns the frame's RasterResult and the per-light maps."""
+        camera keeps it). Returns the frame's RasterResult and the per-light maps;
+        `maps=False` (lights in turn, which raster each map in its turn): the camera's alone."""
         device = self.device
         camera_buffers, camera_key = buffers, lambda: keys.camera
         if buffers.inputs.scene.geometry.translucent:  # the camera depth is the opaque one (stages/transparency.py)
@@ -606,6 +655,8 @@ class Renderer:
             return raster_camera(device, camera_buffers, timer)
 
         camera_depth, tri_id = reuse.stage("raster.camera", camera_key, camera)
+        if not maps:
+            return RasterResult(camera_depth, tri_id, device.buffer(nbytes=4)), []
         maps = [reuse.stage("raster.shadow", lambda index=index: keys.shadow[index],
                             lambda index=index: raster_shadow_map(device, buffers, index, timer), per_light=True)
                 for index in range(len(buffers.inputs.scene.lights))]
