@@ -712,9 +712,15 @@ VOLUME_METHODS = {"minmax": Renderer._epipolar_volume, "volume_moments": Rendere
 def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
     """(what, bytes) of the large device buffers one frame allocates, before allocating
     them: the per-sample buffers, every shadow map, each light's min-max tree and the
-    epipolar line samples."""
+    epipolar line samples. A frame that runs its lights in turn (clrays.light_turns) holds
+    one light's maps, trees and bound maps at a time: the largest light's are counted."""
     scene = with_derived_sizes(inputs.scene)
     samples, pixels = inputs.samples, scene.image.width * scene.image.height
+    in_turn = lights_in_turn(scene, scene.render.method)
+    light_texels = [int((inputs.views[first:first + count]["width"] * inputs.views[first:first + count]["height"]).sum())
+                    for first, count in inputs.light_views]
+    shadow_texels = max(light_texels, default=0) if in_turn else inputs.shadow_texels  # held at once
+    held = range(1) if in_turn else range(len(scene.lights))  # the lights whose per-light buffers are held at once
     # The one-pass raster (devices with 64-bit atomics) also keeps a packed depth–triangle
     # key per sample while it runs; counted always, so the check errs on the safe side.
     sizes = [("camera depth and triangle ids (64-bit)", 8 * samples), ("packed raster keys (64-bit)", 8 * samples),
@@ -725,50 +731,52 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
         sizes.append(("render passes", 48 * pixels))
         if scene.render.method == "raymarch" and per_light_indices(scene.render.aovs):
             sizes.append(("one light's in-scattering", 16 * samples))
-    for index, (first, count) in enumerate(inputs.light_views):
-        views = inputs.views[first:first + count]
-        sizes.append((f"shadow map of light {index}", 4 * int((views["width"] * views["height"]).sum())))
-    if len(inputs.light_views) > 1:
+    sizes += [(f"shadow map of light {index}", 4 * texels) for index, texels in enumerate(light_texels)
+              if not in_turn or texels == shadow_texels][:len(held)]
+    if len(inputs.light_views) > 1 and not in_turn:
         sizes.append(("shadow maps of all lights together", 4 * inputs.shadow_texels))
     if keeps_blockers(scene.render) and scene.lights:  # (stages/shaft_edges.py) each texel's nearest triangle,
         # every light's and all together: the maps' packed raster keys (64-bit), which they keep where the
         # device has 64-bit atomics (stages/raster.py, ShadowMap), else 32-bit triangles; counted as keys
-        atlases = 2 if len(inputs.light_views) > 1 else 1
-        sizes += [("shadow maps' packed raster keys (64-bit)", 8 * inputs.shadow_texels * atlases),
+        atlases = 2 if len(inputs.light_views) > 1 and not in_turn else 1
+        sizes += [("shadow maps' packed raster keys (64-bit)", 8 * shadow_texels * atlases),
                   ("each triangle's neighbours", 12 * scene.geometry.count)]
         if cuts_reliefs(inputs, True):  # the keys from before the reliefs, which the volume reads (relief_cuts.py)
-            sizes.append(("shadow maps' keys without the reliefs (64-bit)", 8 * inputs.shadow_texels * atlases))
+            sizes.append(("shadow maps' keys without the reliefs (64-bit)", 8 * shadow_texels * atlases))
         if np.any(scene.medium.sigma_s > 0):
             sizes += [(f"rows' blockers of light {index}", 4 * scene.render.slices
-                       * tree_gamma_samples(scene.render.gamma_samples)) for index in range(len(scene.lights))]
+                       * tree_gamma_samples(scene.render.gamma_samples)) for index in held]
     if scene.render.method in ("minmax", "volume_moments") and np.any(scene.medium.sigma_s > 0):
         gamma_samples = tree_gamma_samples(scene.render.gamma_samples)
         tree = 8 * scene.render.slices * 2 * gamma_samples
-        sizes += [(f"min-max tree of light {index}", tree) for index in range(len(scene.lights))]
+        sizes += [(f"min-max tree of light {index}", tree) for index in held]
         if scene.render.sampling == "epipolar":  # per line sample: (distance, weight) and radiance, one light at a time
             sizes.append(("epipolar line samples", 24 * scene.render.slices * scene.render.line_samples))
             sizes.append(("epipolar fix-up list", 4 * samples))
         # A textured light's prefix sums (clrays.stages.light_texture; the rectified texture is not stored).
         sizes += [(f"texture prefix sums of light {index}",
                    4 * scene.render.slices * 3 * (scene.render.svd_rank + 1) * (gamma_samples + 1))
-                  for index, light in enumerate(scene.lights) if textured(light)]
+                  for index, light in enumerate(scene.lights) if textured(light)][:len(held)]
     if inputs.texels is not None and any(textured(light) for light in scene.lights):
         sizes.append(("light textures", 16 * len(inputs.texels)))
         if scene.render.method == "volume_moments" and np.any(scene.medium.sigma_s > 0):  # double prefix sums
             prefix = 32 * scene.render.slices * (gamma_samples + 1)
             sizes.append(("moment prefix sums of one light", prefix))
     if scene.render.surface_shadows == "exact" and scene.lights:  # visibility's bound and writer maps, every light's
-        sizes.append(("bound and writer maps", 8 * inputs.shadow_texels))
+        sizes.append(("bound and writer maps", 8 * shadow_texels))
         # and per sample and light the texel its lit test reads (address, depth), a bit per texel
-        # read, its answer and its place in the list of shadow rays
-        entries = samples * len(scene.lights)
-        sizes += [("texels the visibility stage reads", 8 * entries + inputs.shadow_texels // 8),
+        # read, its answer and its place in the list of shadow rays; in turn, one light's, and
+        # every light's answers in the frame's (samples × lights) buffer
+        entries = samples * len(held)
+        sizes += [("texels the visibility stage reads", 8 * entries + shadow_texels // 8),
                   ("visibility's answers", 4 * entries), ("the list of shadow rays", 4 * entries)]
+        if in_turn:
+            sizes.append(("every light's visibility", 4 * samples * len(scene.lights)))
         # the lists of the triangles at the shadow rays' texels, made before the device knows
         # whether the rays take them: room for the most rays that may (stages/visibility.py)
         sizes += [(f"the shadow rays' lists of triangles of light {index}",
-                   8 * TOUCHING_NODES_PER_ENTRY * ray_list_limit(inputs)) for index in range(len(scene.lights))]
-        sizes.append(("the heads of the shadow rays' lists", 4 * inputs.shadow_texels))
+                   8 * TOUCHING_NODES_PER_ENTRY * ray_list_limit(inputs)) for index in held]
+        sizes.append(("the heads of the shadow rays' lists", 4 * shadow_texels))
     if scene.geometry.translucent and scene.lights:  # the translucency stage's layers (translucency.py)
         layers = scene.render.translucent_layers
         sizes.append(("translucent layers", 12 * layers * inputs.shadow_texels))
