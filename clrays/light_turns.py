@@ -1,4 +1,4 @@
-"""Lights in turn (docs/design.md §4.8): a frame of several lights runs each light's stages,
+"""Lights in turn (docs/design.md §4.9): a frame of several lights runs each light's stages,
 raster.shadow → volume → visibility, through one light's buffers at a time and adds what
 the light gives to the frame's in-scattering and visibility, so its device memory follows
 one light's shadow map, bound maps and trees, not the light count.

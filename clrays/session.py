@@ -6,6 +6,9 @@
                         volume_moments  per light: rectify → integrand → light_texture → volume_moments
                         raymarch        raymarch, every light at once
 
+    lights in turn (several lights, clrays.light_turns): raster.camera, then per light
+    raster.shadow → the volume stages → visibility through one light's buffers; then shade
+
 `Renderer._frame` is that figure, one line per stage. A stage with nothing to do in a frame
 returns at once: translucency (the light side of translucent objects) and transparency
 (their films before the camera) in an opaque scene and the volume without a medium, each
