@@ -117,9 +117,18 @@ class StageRecord:
         return status
 
 
+#: The most lights a frame may have and still keep its per-light stage results (shadow maps,
+#: trees, bound maps) for later frames. Each light's take tens of MB at the default sizes
+#: (a 1024² cube's keys alone are 48 MB), so a frame of more lights, which runs them in
+#: turn through one light's buffers (clrays.light_turns), keeps none: its memory stays one
+#: light's, and each frame recomputes every light's stages.
+LIGHTS_KEPT = 2
+
+
 class Reuse:
     """The reuse decisions of one frame: a cache (or None: compute everything), the record,
-    and the light count (per-light stages keep that many times more entries)."""
+    and the light count (per-light stages keep that many times more entries; none beyond
+    LIGHTS_KEPT lights)."""
 
     def __init__(self, cache: StageCache | None, record: StageRecord, lights: int = 1):
         self.cache, self.record, self.lights = cache, record, max(lights, 1)
@@ -142,8 +151,8 @@ class Reuse:
 
     def _get_or_compute(self, name: str, key: bytes | Callable[[], bytes], compute: Callable[[], Any],
                         per_light: bool) -> tuple[bool, Any]:
-        if self.cache is None:  # nothing kept: no key needed (digesting a mesh costs milliseconds)
-            return False, compute()
+        if self.cache is None or (per_light and self.lights > LIGHTS_KEPT):  # nothing kept: no key needed
+            return False, compute()  # (digesting a mesh costs milliseconds)
         key = key() if callable(key) else key
         found, value = self.cache.get(name, key)
         if not found:

@@ -6,6 +6,9 @@
                         volume_moments  per light: rectify → integrand → light_texture → volume_moments
                         raymarch        raymarch, every light at once
 
+    lights in turn (several lights, clrays.light_turns): raster.camera, then per light
+    raster.shadow → the volume stages → visibility through one light's buffers; then shade
+
 `Renderer._frame` is that figure, one line per stage. A stage with nothing to do in a frame
 returns at once: translucency (the light side of translucent objects) and transparency
 (their films before the camera) in an opaque scene and the volume without a medium, each
@@ -42,6 +45,7 @@ import numpy as np
 from .device import Device, StageTimer
 from .errors import ClraysError
 from .inputs import FrameBuffers, FrameInputs, frame_inputs, upload, without_walled_off_light
+from .light_turns import RaysSum, add_visibility_column, lights_in_turn, one_light_buffers
 from .physics.radiometry import effective_far
 from .passes import assemble, per_light_indices, samples_to_pixels
 from .reuse import COMPUTED, REUSED, SKIPPED, Reuse, StageCache, StageRecord, digest, geometry_parts, scene_digest
@@ -334,12 +338,17 @@ class Renderer:
             return self._exact(scene, reuse, timer, progress)
         frame = self._upload(scene, method, reuse, timer)  # the scene in eye space, packed into device structs
         frame.progress, frame.reads = progress, reads
-        frame.rastered, frame.maps = self._raster(frame.buffers, frame.keys, reuse, timer)  # raster: depths, maps
+        in_turn = lights_in_turn(frame.scene, method)  # each light's maps, trees and visibility apart (light_turns.py)
+        frame.rastered, frame.maps = self._raster(frame.buffers, frame.keys, reuse, timer,  # raster: depths, maps
+                                                  maps=not in_turn)
         frame.layers = self._translucency(frame.buffers, frame.keys, reuse, timer)  # translucency: light side
         frame.films = self._films(frame.buffers, frame.rastered, reuse, timer)  # transparency: camera side
         frame.in_scatter = InScatter(self.device, frame.buffers.inputs.samples)  # in-scattering per camera sample
-        VOLUME_METHODS[method](self, frame)  # raymarch; or per light rectify → minmax → integrand → traverse
-        visible, rays = self._visibility(frame.occluders, frame.rastered, frame.keys, reuse, timer)  # visibility
+        if in_turn:  # per light: raster.shadow → rectify → minmax → integrand → traverse → visibility
+            visible, rays = self._lights_in_turn(frame)
+        else:
+            VOLUME_METHODS[method](self, frame)  # raymarch; or per light rectify → minmax → integrand → traverse
+            visible, rays = self._visibility(frame.occluders, frame.rastered, frame.keys, reuse, timer)  # visibility
         image, passes = self._shade(frame, visible)  # shade: surfaces, attenuation, + in-scattering
         # The stages that ran: a frame identical to this one counts them reused (not the skipped ones).
         ran = tuple(stage for stage, status in reuse.record.status().items() if status != SKIPPED)
@@ -373,16 +382,56 @@ class Renderer:
         """The volume stages of methods minmax and volume_moments, light by light."""
         if self._no_medium(frame):
             return
-        wanted = per_light_indices(frame.scene.render.aovs)  # render passes of single lights
-        for index, light in enumerate(frame.scene.lights):
-            before = frame.in_scatter.snapshot() if index in wanted else None
-            if eye_in_lamp(frame.scene, light):  # d_el → 0: no epipolar frame, nothing visible is shadowed
-                self._lamp_in_scatter(frame, light)
-            else:
-                self._light_volume(frame, index, light)
-            if before is not None:  # (float32 sums differ exactly in float64: the parts add up to the whole)
-                frame.light_scatter[index] = frame.in_scatter.snapshot() - before
+        for index in range(len(frame.scene.lights)):
+            self._epipolar_light(frame, index)
         frame.reuse.record.note(VOLUME_STAGES[frame.method][-1], COMPUTED)
+
+    def _epipolar_light(self, frame: Frame, index: int, alone: Frame | None = None) -> None:
+        """Light `index`'s volume stages, added to the frame's in-scattering: in `frame`, or
+        (lights in turn) in `alone`, the frame with that light alone."""
+        part, at = (frame, index) if alone is None else (alone, 0)
+        light = part.scene.lights[at]
+        # a render pass of this light alone (float32 sums differ exactly in float64: the parts add up to the whole)
+        before = frame.in_scatter.snapshot() if index in per_light_indices(frame.scene.render.aovs) else None
+        if eye_in_lamp(part.scene, light):  # d_el → 0: no epipolar frame, nothing visible is shadowed
+            self._lamp_in_scatter(part, light)
+        else:
+            self._light_volume(part, at, light)
+        if before is not None:
+            frame.light_scatter[index] = frame.in_scatter.snapshot() - before
+
+    def _lights_in_turn(self, frame: Frame):
+        """Each light's raster.shadow → volume → visibility through its own buffers, one
+        light at a time (clrays.light_turns): its in-scattering added to the frame's, its
+        visibility copied into the frame's column for it. Returns (visibility per sample
+        and light, shadow rays) as `_visibility`."""
+        lights, samples = len(frame.scene.lights), frame.buffers.inputs.samples
+        medium = not self._no_medium(frame)
+        visible = self.device.buffer(nbytes=4 * samples * lights)
+        rays = [self._light_in_turn(frame, index, medium, visible) for index in range(lights)]
+        if medium:
+            frame.reuse.record.note(VOLUME_STAGES[frame.method][-1], COMPUTED)
+        return visible, RaysSum(rays)
+
+    def _light_in_turn(self, frame: Frame, index: int, medium: bool, visible) -> int:
+        """One light of `_lights_in_turn`; what it allocates goes when it returns (on a
+        CPU device, back to the pool for the next light). Returns its shadow rays."""
+        device, reuse, timer = self.device, frame.reuse, frame.timer
+        shadow_map = reuse.stage("raster.shadow", lambda: frame.keys.shadow[index],
+                                 lambda: raster_shadow_map(device, frame.buffers, index, timer), per_light=True)
+        buffers = one_light_buffers(device, frame.buffers, index)
+        depth, blockers, volume = shadow_atlases(device, buffers, [shadow_map])  # (one map: its own buffers)
+        # shade reads no map with exact surface shadows: the flags alone, for the same build of its kernel
+        frame.rastered = replace(frame.rastered, blocker_keys=shadow_map.keys, depth_in_keys=shadow_map.depth_in_keys)
+        rastered = replace(frame.rastered, shadow_depth=depth, shadow_blockers=blockers, volume_blockers=volume)
+        alone = replace(frame, scene=buffers.inputs.scene, buffers=buffers, keys=StageKeys(buffers.inputs),
+                        occluders=buffers, rastered=rastered, maps=[shadow_map])
+        if medium:
+            self._epipolar_light(frame, index, alone)
+            frame.samples = alone.samples
+        part, rays = self._visibility(buffers, rastered, alone.keys, reuse, timer)
+        add_visibility_column(device, visible, part, index, len(frame.scene.lights), buffers.inputs.samples)
+        return rays
 
     def _no_medium(self, frame: Frame) -> bool:
         """Whether the scene has no medium: then no volume stage runs at all."""
@@ -556,8 +605,10 @@ class Renderer:
                              lambda index=index: visibility_bound(device, buffers, index, timer, prepared),
                              per_light=True)
                   for index in range(len(scene.lights))]
-        atlas = reuse.keep("bound_atlas", lambda: digest("bound", tuple(keys.shadow), keys.camera, keys.surfaces),
-                           lambda: bound_atlas(device, buffers, bounds))
+        # (one light's atlas is its own bound map, kept with it)
+        atlas = bounds[0] if len(bounds) == 1 else reuse.keep(
+            "bound_atlas", lambda: digest("bound", tuple(keys.shadow), keys.camera, keys.surfaces),
+            lambda: bound_atlas(device, buffers, bounds))
         reuse.record.note("visibility", COMPUTED)
         return visibility(device, buffers, rastered, prepared, atlas, lambda: self._bvh(buffers, keys, reuse, timer),
                           timer, bounds)
@@ -589,10 +640,11 @@ class Renderer:
                               parts["depth"], dict(enumerate(lights)))
         return image, ("exact",), (), None, None, passes
 
-    def _raster(self, buffers: FrameBuffers, keys: StageKeys, reuse: Reuse, timer: StageTimer):
+    def _raster(self, buffers: FrameBuffers, keys: StageKeys, reuse: Reuse, timer: StageTimer, maps: bool = True):
         """The raster stage, each part kept while its inputs are: the camera's depth and
         triangle ids, and each light's shadow map (anchored at the light, so a moving
-        camera keeps it). Returns the frame's RasterResult and the per-light maps."""
+        camera keeps it). Returns the frame's RasterResult and the per-light maps;
+        `maps=False` (lights in turn, which raster each map in its turn): the camera's alone."""
         device = self.device
         camera_buffers, camera_key = buffers, lambda: keys.camera
         if buffers.inputs.scene.geometry.translucent:  # the camera depth is the opaque one (stages/transparency.py)
@@ -606,6 +658,8 @@ class Renderer:
             return raster_camera(device, camera_buffers, timer)
 
         camera_depth, tri_id = reuse.stage("raster.camera", camera_key, camera)
+        if not maps:
+            return RasterResult(camera_depth, tri_id, device.buffer(nbytes=4)), []
         maps = [reuse.stage("raster.shadow", lambda index=index: keys.shadow[index],
                             lambda index=index: raster_shadow_map(device, buffers, index, timer), per_light=True)
                 for index in range(len(buffers.inputs.scene.lights))]
@@ -661,9 +715,15 @@ VOLUME_METHODS = {"minmax": Renderer._epipolar_volume, "volume_moments": Rendere
 def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
     """(what, bytes) of the large device buffers one frame allocates, before allocating
     them: the per-sample buffers, every shadow map, each light's min-max tree and the
-    epipolar line samples."""
+    epipolar line samples. A frame that runs its lights in turn (clrays.light_turns) holds
+    one light's maps, trees and bound maps at a time: the largest light's are counted."""
     scene = with_derived_sizes(inputs.scene)
     samples, pixels = inputs.samples, scene.image.width * scene.image.height
+    in_turn = lights_in_turn(scene, scene.render.method)
+    light_texels = [int((inputs.views[first:first + count]["width"] * inputs.views[first:first + count]["height"]).sum())
+                    for first, count in inputs.light_views]
+    shadow_texels = max(light_texels, default=0) if in_turn else inputs.shadow_texels  # held at once
+    held = range(1) if in_turn else range(len(scene.lights))  # the lights whose per-light buffers are held at once
     # The one-pass raster (devices with 64-bit atomics) also keeps a packed depth–triangle
     # key per sample while it runs; counted always, so the check errs on the safe side.
     sizes = [("camera depth and triangle ids (64-bit)", 8 * samples), ("packed raster keys (64-bit)", 8 * samples),
@@ -674,50 +734,52 @@ def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
         sizes.append(("render passes", 48 * pixels))
         if scene.render.method == "raymarch" and per_light_indices(scene.render.aovs):
             sizes.append(("one light's in-scattering", 16 * samples))
-    for index, (first, count) in enumerate(inputs.light_views):
-        views = inputs.views[first:first + count]
-        sizes.append((f"shadow map of light {index}", 4 * int((views["width"] * views["height"]).sum())))
-    if len(inputs.light_views) > 1:
+    sizes += [(f"shadow map of light {index}", 4 * texels) for index, texels in enumerate(light_texels)
+              if not in_turn or texels == shadow_texels][:len(held)]
+    if len(inputs.light_views) > 1 and not in_turn:
         sizes.append(("shadow maps of all lights together", 4 * inputs.shadow_texels))
     if keeps_blockers(scene.render) and scene.lights:  # (stages/shaft_edges.py) each texel's nearest triangle,
         # every light's and all together: the maps' packed raster keys (64-bit), which they keep where the
         # device has 64-bit atomics (stages/raster.py, ShadowMap), else 32-bit triangles; counted as keys
-        atlases = 2 if len(inputs.light_views) > 1 else 1
-        sizes += [("shadow maps' packed raster keys (64-bit)", 8 * inputs.shadow_texels * atlases),
+        atlases = 2 if len(inputs.light_views) > 1 and not in_turn else 1
+        sizes += [("shadow maps' packed raster keys (64-bit)", 8 * shadow_texels * atlases),
                   ("each triangle's neighbours", 12 * scene.geometry.count)]
         if cuts_reliefs(inputs, True):  # the keys from before the reliefs, which the volume reads (relief_cuts.py)
-            sizes.append(("shadow maps' keys without the reliefs (64-bit)", 8 * inputs.shadow_texels * atlases))
+            sizes.append(("shadow maps' keys without the reliefs (64-bit)", 8 * shadow_texels * atlases))
         if np.any(scene.medium.sigma_s > 0):
             sizes += [(f"rows' blockers of light {index}", 4 * scene.render.slices
-                       * tree_gamma_samples(scene.render.gamma_samples)) for index in range(len(scene.lights))]
+                       * tree_gamma_samples(scene.render.gamma_samples)) for index in held]
     if scene.render.method in ("minmax", "volume_moments") and np.any(scene.medium.sigma_s > 0):
         gamma_samples = tree_gamma_samples(scene.render.gamma_samples)
         tree = 8 * scene.render.slices * 2 * gamma_samples
-        sizes += [(f"min-max tree of light {index}", tree) for index in range(len(scene.lights))]
+        sizes += [(f"min-max tree of light {index}", tree) for index in held]
         if scene.render.sampling == "epipolar":  # per line sample: (distance, weight) and radiance, one light at a time
             sizes.append(("epipolar line samples", 24 * scene.render.slices * scene.render.line_samples))
             sizes.append(("epipolar fix-up list", 4 * samples))
         # A textured light's prefix sums (clrays.stages.light_texture; the rectified texture is not stored).
         sizes += [(f"texture prefix sums of light {index}",
                    4 * scene.render.slices * 3 * (scene.render.svd_rank + 1) * (gamma_samples + 1))
-                  for index, light in enumerate(scene.lights) if textured(light)]
+                  for index, light in enumerate(scene.lights) if textured(light)][:len(held)]
     if inputs.texels is not None and any(textured(light) for light in scene.lights):
         sizes.append(("light textures", 16 * len(inputs.texels)))
         if scene.render.method == "volume_moments" and np.any(scene.medium.sigma_s > 0):  # double prefix sums
             prefix = 32 * scene.render.slices * (gamma_samples + 1)
             sizes.append(("moment prefix sums of one light", prefix))
     if scene.render.surface_shadows == "exact" and scene.lights:  # visibility's bound and writer maps, every light's
-        sizes.append(("bound and writer maps", 8 * inputs.shadow_texels))
+        sizes.append(("bound and writer maps", 8 * shadow_texels))
         # and per sample and light the texel its lit test reads (address, depth), a bit per texel
-        # read, its answer and its place in the list of shadow rays
-        entries = samples * len(scene.lights)
-        sizes += [("texels the visibility stage reads", 8 * entries + inputs.shadow_texels // 8),
+        # read, its answer and its place in the list of shadow rays; in turn, one light's, and
+        # every light's answers in the frame's (samples × lights) buffer
+        entries = samples * len(held)
+        sizes += [("texels the visibility stage reads", 8 * entries + shadow_texels // 8),
                   ("visibility's answers", 4 * entries), ("the list of shadow rays", 4 * entries)]
+        if in_turn:
+            sizes.append(("every light's visibility", 4 * samples * len(scene.lights)))
         # the lists of the triangles at the shadow rays' texels, made before the device knows
         # whether the rays take them: room for the most rays that may (stages/visibility.py)
         sizes += [(f"the shadow rays' lists of triangles of light {index}",
-                   8 * TOUCHING_NODES_PER_ENTRY * ray_list_limit(inputs)) for index in range(len(scene.lights))]
-        sizes.append(("the heads of the shadow rays' lists", 4 * inputs.shadow_texels))
+                   8 * TOUCHING_NODES_PER_ENTRY * ray_list_limit(inputs)) for index in held]
+        sizes.append(("the heads of the shadow rays' lists", 4 * shadow_texels))
     if scene.geometry.translucent and scene.lights:  # the translucency stage's layers (translucency.py)
         layers = scene.render.translucent_layers
         sizes.append(("translucent layers", 12 * layers * inputs.shadow_texels))

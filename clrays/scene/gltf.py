@@ -938,7 +938,7 @@ def _lights(reader: _Reader, graph: NodeGraph, world: dict[int, np.ndarray], lig
                         f"(0 to {len(definitions) - 1})" if definitions else "no light (the file defines none)",
                         which)
         if len(lights) == MAX_LIGHTS:
-            reader.fail(path, f"at most {MAX_LIGHTS} lights (each keeps its own shadow map and min-max tree)",
+            reader.fail(path, f"at most {MAX_LIGHTS} lights (each light costs its own raster, volume and visibility stages every frame)",
                         f"{len(lights) + 1} with this one")
         lights.append(_light(reader, definitions[which], f"extensions.KHR_lights_punctual.lights.{which}",
                              world[index], light_scale))

@@ -26,10 +26,12 @@ MAX_ALIAS_NODES = 100_000
 #: refuses to turn an integer of more than 4300 digits into text; no scene value needs 20.
 MAX_NUMBER_DIGITS = 100
 
-#: Lights in one scene. Each light keeps its own shadow map, epipolar texture and min-max
-#: tree: about 62 MB of memory at the default render settings, so 16 lights take about
-#: 1.2 GB (docs/limits.md).
-MAX_LIGHTS = 16
+#: Lights in one scene. A frame of several lights runs them in turn through one light's
+#: shadow map, trees and bound maps (clrays.light_turns), so its memory barely grows with
+#: the count; each light still costs its own raster, volume and visibility every frame, and
+#: a float per camera sample for its visibility: 64 point lights at 1280×720 peak under 1 GB,
+#: 256 at 3.5 MiB each of visibility (docs/limits.md).
+MAX_LIGHTS = 256
 #: Triangles in one scene, counted as each object is built (a sphere's or a plane's
 #: before it is tessellated): a 60-byte sphere with `segments: 1024` is a million of them,
 #: so without a cap a small file could ask for terabytes. Loading costs about 110 bytes

@@ -233,8 +233,8 @@ def _textured_power(m: dict[str, Node], light: Light, power: np.ndarray, cache: 
 
 def _lights(node: Node) -> list[Node]:
     items = sequence(node, "a list of at least 1 light", 1)
-    if len(items) > MAX_LIGHTS:  # checked before reading any: each light costs memory on its own
-        node.fail(f"at most {MAX_LIGHTS} lights (each keeps its own shadow map and min-max tree)",
+    if len(items) > MAX_LIGHTS:  # checked before reading any: each light costs a frame its own stages
+        node.fail(f"at most {MAX_LIGHTS} lights (each light costs its own raster, volume and visibility stages every frame)",
                   f"{len(items)} lights")
     return items
 

@@ -237,8 +237,8 @@ CASES = [
     ("the 50 MB scene of inline triangles", lambda d: (big_inline_scene(d / "big.yaml") or d / "big.yaml", []),
      rf"big\.yaml: cannot read scene file: 4\d\.\d MiB, more than the limit of {MAX_SCENE_BYTES >> 20}\.0 MiB; "
      r"put large geometry in a mesh file"),
-    ("201 lights", lambda d: (write(d, lights(201)), []),
-     rf"scene\.yaml:5:3: lights: expected at most {MAX_LIGHTS} lights .*, got 201 lights$"),
+    ("257 lights", lambda d: (write(d, lights(MAX_LIGHTS + 1)), []),
+     rf"scene\.yaml:5:3: lights: expected at most {MAX_LIGHTS} lights .*, got {MAX_LIGHTS + 1} lights$"),
     ("shadow maps past the views' int offsets", lambda d: (write(d, lights(6)), ["--set", "render.shadow_map=8192"]),
      r"scene\.yaml: the shadow maps of lights 0 to 5 at render\.shadow_map 8192 need more than 2147483647 texels"),
     ("too many objects", lambda d: (write(d, objects(MAX_OBJECTS + 1)), []),
@@ -482,7 +482,7 @@ def sixteen_gobo_lights(d: Path) -> Path:
     pixels[::64], pixels[:, ::64] = 255, 255
     Image.fromarray(pixels).save(d / "gobo.png")
     rows = "".join(f"  - {{type: spot, position: [{i * 0.5 - 4:.1f}, 8, 0], direction: [0, -1, 0], cone_deg: 30, "
-                   f"intensity: 50, texture: gobo.png}}\n" for i in range(MAX_LIGHTS))
+                   f"intensity: 50, texture: gobo.png}}\n" for i in range(16))
     return write(d, HEAD.replace("lights: [{type: point, position: [0, 8, 0], intensity: 100}]\n", "lights:\n" + rows)
                  + "objects: [{type: plane, center: [0, 0, 0], normal: [0, 1, 0], size: 20}]\n")
 
