@@ -313,7 +313,7 @@ def test_a_torn_manifest_line_costs_its_frame_alone(tmp_path):
     assert len(lines) == 3 and all(json.loads(line)["file"] == f"f_{n}.npy" for n, line in enumerate(lines))
     manifest.write_text("\n".join(lines[:2]) + "\n" + lines[2][:20])  # a crash in the middle of the last append
     code, out = run(*args)
-    assert code == 0 and "1 frame rendered (1 of them replacing frames of a changed scene), 2 already there" in out
+    assert code == 0 and "1 frame rendered (1 of them replacing files no run recorded as finished), 2 already there" in out
     assert manifest.read_text().endswith("\n") and len(manifest.read_text().splitlines()) == 3
 
 
