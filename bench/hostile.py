@@ -520,6 +520,48 @@ def empty_chunks(d: Path) -> bytes:
     return gltf_inputs._glb_with_chunks(b, struct.pack("<II", 0, 0x58595A57) * 19_000_000)
 
 
+# --------------------------------------------------------------------------- round three: writes through links
+
+
+VICTIM_TEXT = "the victim's own bytes\n"
+
+
+def linked_manifest(d: Path) -> list:
+    """out/.clrays-frames.jsonl -> ../victim.txt: the manifest's read and append."""
+    (d / "victim.txt").write_text(VICTIM_TEXT)
+    (d / "out").mkdir()
+    (d / "out" / ".clrays-frames.jsonl").symlink_to("../victim.txt")
+    return ["sequence", animated(d, 2), "-o", d / "out" / "f_{}.png", "--no-progress"]
+
+
+def linked_references(d: Path) -> list:
+    """out/.references -> ../elsewhere: a sweep's reference caches."""
+    (d / "out").mkdir()
+    (d / "elsewhere").mkdir()
+    (d / "out" / ".references").symlink_to("../elsewhere")
+    return ["sweep", animated(d, 1), "--set", "medium.sigma_s=0.02,0.05", "--reference", "raymarch:8", "-o",
+            d / "out", "--no-progress"]
+
+
+def victim_untouched(d: Path, result: Result) -> list[str]:
+    victim = d / "victim.txt"
+    problems = ["victim.txt changed"] if victim.exists() and victim.read_text() != VICTIM_TEXT else []
+    return problems + (["elsewhere/ written"] if (d / "elsewhere").exists() and any((d / "elsewhere").iterdir())
+                       else [])
+
+
+def target_error_scene(d: Path) -> Path:
+    """A 32×18 animated scene that asks for render.target_error: 0.5."""
+    scene = animated(d, 1)
+    scene.write_text(scene.read_text().replace("steps: 16}", "steps: 16, target_error: 0.5}"))
+    return scene
+
+
+def nothing_in_the_working_folder(d: Path, result: Result) -> list[str]:
+    """The case's folder is the process's working directory: no cache appears there."""
+    return [".cache written in the working directory"] if (d / ".cache").exists() else []
+
+
 def written(*names: str) -> Callable[[Path, Result], list[str]]:
     """The case's folder holds each of `names` (globs)."""
     def check(d: Path, result: Result) -> list[str]:
@@ -664,6 +706,12 @@ def cases() -> list[Case]:
         Case("YAML 1.2 floats: intensity [2.6e2, 2.3e2, 1.9e2], --set 6.02e-2", lambda d: [
             "render", animated(d, 1), "-o", d / "a.png", "--set", "lights.0.intensity=[2.6e2, 2.3e2, 1.9e2]",
             "--set", "medium.sigma_s=6.02e-2"], expect="ok", check=written("a.png")),
+        # Round three: writes that follow links, and caches
+        Case("out/.clrays-frames.jsonl -> ../victim.txt (sequence)", linked_manifest, check=victim_untouched),
+        Case("out/.references -> ../elsewhere (sweep --reference)", linked_references, check=victim_untouched),
+        Case("render.target_error in the scene, no consent (32×18)", lambda d: [
+            "render", target_error_scene(d), "-o", d / "t.png"], env={"CLRAYS_CACHE": ""},
+             check=lambda d, r: nothing_in_the_working_folder(d, r) + nothing_written("t.png")(d, r)),
         Case("tune -o out/t.png (a YAML file named .png)", lambda d: [
             "tune", animated(d, 1), "--target-error", "5", "-o", d / "out" / "t.png"],
              check=nothing_written("out")),
