@@ -7,7 +7,7 @@ one frame per light count and image size, from `/usr/bin/time -v` around `clrays
 
 Writes many_lights_<n>.yaml (scenes/demo.yaml with its one light split into n on a grid
 over the roof, each with 1/n of the power) into --out, renders each with the tree's own
-`.venv/bin/clrays render ... --device intel` and prints a markdown table.
+`.venv/bin/clrays render ...` (on its default device; `--device` names one) and prints a markdown table.
 """
 from __future__ import annotations
 
@@ -35,10 +35,12 @@ def scene_text(lights: int) -> str:
     return text.replace(DEMO_LIGHT, block)
 
 
-def measure(repo: Path, scene: Path, width: int, height: int, out: Path) -> tuple[float, float]:
+def measure(repo: Path, scene: Path, width: int, height: int, out: Path, device: str | None = None
+            ) -> tuple[float, float]:
     """(wall seconds, peak RSS in MiB) of one render in a fresh process."""
     command = ["/usr/bin/time", "-v", str(repo / ".venv" / "bin" / "clrays"), "render", str(scene), "-o",
-               str(out), "--device", "intel", "--set", f"image.width={width}", "--set", f"image.height={height}"]
+               str(out), *(["--device", device] if device else []), "--set", f"image.width={width}", "--set",
+               f"image.height={height}"]
     done = subprocess.run(command, capture_output=True, text=True, check=True)
     rss = int(re.search(r"Maximum resident set size \(kbytes\): (\d+)", done.stderr).group(1))
     clock = re.search(r"Elapsed \(wall clock\) time \(h:mm:ss or m:ss\): (?:(\d+):)?(\d+):([\d.]+)", done.stderr)
@@ -52,6 +54,7 @@ def main() -> None:
     parser.add_argument("--lights", type=int, nargs="+", default=[1, 16, 64])
     parser.add_argument("-r", "--resolution", nargs="+", default=["640x360", "1280x720"])
     parser.add_argument("--out", type=Path, default=Path("/tmp/many_lights"))
+    parser.add_argument("--device", help="a --device spec (default: the tree's default device)")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     print(f"tree: {args.repo.resolve()}\n\n| lights | resolution | wall (s) | peak RSS (MiB) |\n|---|---|---|---|")
@@ -60,7 +63,8 @@ def main() -> None:
         for lights in args.lights:
             scene = args.out / f"many_lights_{lights}.yaml"
             scene.write_text(scene_text(lights))
-            wall, rss = measure(args.repo, scene, width, height, args.out / f"many_lights_{lights}_{resolution}.npy")
+            wall, rss = measure(args.repo, scene, width, height, args.out / f"many_lights_{lights}_{resolution}.npy",
+                                args.device)
             print(f"| {lights} | {width}×{height} | {wall:.1f} | {rss:.0f} |", flush=True)
 
 
