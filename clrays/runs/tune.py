@@ -444,9 +444,8 @@ def trial_line(trial: Trial) -> str:
 
 def write_tuned_yaml(source: Path, output: Path, settings: dict, overrides=()) -> None:
     """Write the scene file `source` to `output` with `settings` in its `render` mapping
-    and no `target_error`; every other key as written. The top-level `render` key and its
-    value are replaced in the text (or appended where there is none), so the rest of the
-    file, comments included, stays as it is, unless `overrides` (`--set`) change it or
+    and no `target_error` (`with_render_settings`: only those keys' text changes, every
+    other byte of the file stays as written), unless `overrides` (`--set`) change it or
     `output` lies in another folder: then the file is written out again (comments at its
     top kept), with its overrides applied and its relative file paths (meshes, textures,
     depth maps) made relative to `output`'s folder. A glTF `source` is written as the YAML
@@ -469,27 +468,78 @@ def write_tuned_yaml(source: Path, output: Path, settings: dict, overrides=()) -
             _rebase_paths(data, source.parent, output.parent)
         header = "".join(line for line in text.splitlines(keepends=True)[:_leading_comments(text)])
         text = header + yaml.safe_dump(data, default_flow_style=None, sort_keys=False, width=100, allow_unicode=True)
-    root = yaml.compose(text, Loader=yaml.SafeLoader)
-    render, span = {}, None
-    for key, value in root.value:
-        if key.value == "render":
-            span = (key.start_mark.index, value.end_mark.index)
-            loaded = yaml.safe_load(text).get("render")
-            render = dict(loaded) if isinstance(loaded, dict) else {}
-    render.pop("target_error", None)
-    render.update(settings)
-    block = yaml.safe_dump({"render": render}, default_flow_style=None, sort_keys=False, width=1000)
-    if span is None:
-        new = text + ("" if text.endswith("\n") or not text else "\n") + block
-    else:
-        start, end = span
-        if not text[start:end].endswith("\n"):  # a one-line value: its line's comment spoke of the old one
-            line_end = text.find("\n", end)
-            rest = text[end:] if line_end < 0 else text[end:line_end]
-            if not rest.strip() or rest.strip().startswith("#"):
-                end = len(text) if line_end < 0 else line_end + 1
-        new = text[:start] + block + text[end:]
+    new = with_render_settings(text, settings)
     write_atomic(output, lambda temporary: Path(temporary).write_text(new, encoding="utf-8"))
+
+
+def with_render_settings(text: str, settings: dict) -> str:
+    """The scene text `text` with `settings` in its top-level `render` mapping and no
+    `render.target_error`, every other byte as written: ruamel.yaml's round-trip composer
+    gives each key's and value's place in the text, a value there is replaced by the new
+    one, a key not there is added after the mapping's last (`, key: value` in a flow
+    mapping, a line at the keys' indent in a block one), `target_error` is cut out (in a
+    block mapping with its line, whose comment spoke of it), and a file without `render`
+    (or with an empty one) gets `render: {...}`."""
+    from ruamel.yaml import YAML
+    from ruamel.yaml.nodes import MappingNode
+
+    root = YAML().compose(text)
+    pairs = root.value if isinstance(root, MappingNode) else []
+    found = [(key, value) for key, value in pairs if key.value == "render"]
+    flow = "{" + ", ".join(f"{key}: {_yaml_scalar(value)}" for key, value in settings.items()) + "}"
+    if not found:
+        return text + ("" if text.endswith("\n") or not text else "\n") + f"render: {flow}\n"
+    key_node, render = found[-1]
+    items = list(render.value) if isinstance(render, MappingNode) else []
+    kept = [(key, value) for key, value in items if key.value != "target_error"]
+    if not kept:  # `render:`, `render: {}`, `render: null`, or only a target: the mapping anew
+        end = render.end_mark.index
+        return (text[:key_node.start_mark.index] + f"render: {flow}"
+                + ("\n" if text[key_node.start_mark.index:end].endswith("\n") else "") + text[end:])
+    edits = []  # (start, end, new text), applied from the end of the file back
+    for index, (key, value) in enumerate(items):
+        if key.value in settings:
+            edits.append((value.start_mark.index, value.end_mark.index, _yaml_scalar(settings[key.value])))
+        elif key.value == "target_error":
+            edits.append(_cut(text, items, index, render.flow_style))
+    added = [(key, value) for key, value in settings.items() if key not in {key.value for key, _ in items}]
+    if added:
+        last = kept[-1][1].end_mark.index
+        if render.flow_style:
+            edits.append((last, last, "".join(f", {key}: {_yaml_scalar(value)}" for key, value in added)))
+        else:  # after the last kept key's line, at the keys' indent
+            indent = " " * kept[0][0].start_mark.column
+            line_end = _line_end(text, last)
+            edits.append((line_end, line_end, ("" if text[:line_end].endswith("\n") else "\n")
+                          + "".join(f"{indent}{key}: {_yaml_scalar(value)}\n" for key, value in added)))
+    for start, end, new in sorted(edits, key=lambda edit: edit[0], reverse=True):
+        text = text[:start] + new + text[end:]
+    return text
+
+
+def _cut(text: str, items: list, index: int, flow: bool) -> tuple[int, int, str]:
+    """The edit that removes the `index`th key and its value of a mapping's `items`."""
+    key, value = items[index]
+    if flow:  # with the comma before it, or after it where it is the first
+        if index > 0:
+            return items[index - 1][1].end_mark.index, value.end_mark.index, ""
+        if len(items) > 1:
+            return key.start_mark.index, items[1][0].start_mark.index, ""
+        return key.start_mark.index, value.end_mark.index, ""
+    return text.rfind("\n", 0, key.start_mark.index) + 1, _line_end(text, value.end_mark.index), ""
+
+
+def _line_end(text: str, index: int) -> int:
+    """Where the line that holds the character before `index` ends, its newline included."""
+    end = text.find("\n", max(index - 1, 0))
+    return len(text) if end < 0 else end + 1
+
+
+def _yaml_scalar(value) -> str:
+    """A setting as YAML reads it back: numbers as JSON spells them, words plain."""
+    if isinstance(value, str):
+        return value if value.replace("_", "").isalnum() else json.dumps(value)
+    return json.dumps(value)
 
 
 def _plain(node: Node):
