@@ -356,7 +356,7 @@ RENDER = Section("render", (
           notes="percent relative RMSE against `exact` (as `clrays bench` measures it): `render`, `sequence` and "
                 "`sweep` render with the cheapest sizes and sampling settings within it, as `clrays tune` finds "
                 "them (one search and one kept answer for both, in the cache). Where none is kept, they search "
-                "only with `--tune`, state its cost first, and refuse a search past 20 s in one line: run "
+                "only with `--tune`, state its cost first, and refuse a search past 15 s in one line (the command within 20 s): run "
                 "`clrays tune` first"),
 ))
 

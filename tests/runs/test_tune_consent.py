@@ -35,6 +35,13 @@ def scene_file(tmp_path):
     return path
 
 
+@pytest.fixture
+def roomy_budget(monkeypatch):
+    """Tests of what a search yields, not of its budget: 60 s, as a loaded 2-core machine
+    may estimate even a 32×18 search past the 15 s a render gives one."""
+    monkeypatch.setattr(tuning, "TUNE_BUDGET_S", 60.0)
+
+
 def errors(text: str) -> list[str]:
     return [line for line in text.splitlines() if line.startswith("clrays: error:")]
 
@@ -67,16 +74,16 @@ def test_a_search_needs_consent_and_its_refusal_is_one_line(scene_file, tmp_path
     assert not list(out.rglob("*.png"))
 
 
-def test_with_consent_the_cost_comes_first_and_then_the_cache_needs_none(scene_file, tmp_path, cache):
+def test_with_consent_the_cost_comes_first_and_then_the_cache_needs_none(scene_file, tmp_path, cache, roomy_budget):
     started = time.perf_counter()
     code, text = run("render", scene_file, "-o", tmp_path / "a.npy", "--tune", "--stats", "--no-progress", env=cache)
     assert code == 0, text
-    assert time.perf_counter() - started < 20
+    assert time.perf_counter() - started < 60
     lines = text.splitlines()
     cost = next(index for index, line in enumerate(lines) if line.startswith("clrays: tune: for 2 %: at most 60 "))
     assert cost < lines.index(trials(text)[0])  # stated before the first setting is measured
     seconds = float(lines[cost].split("about ")[-1].split(" s in all")[0])
-    assert 0 < seconds <= tuning.TUNE_BUDGET_S and "(refused past 20 s)" in lines[cost]
+    assert 0 < seconds <= tuning.TUNE_BUDGET_S and f"(refused past {tuning.TUNE_BUDGET_S:g} s)" in lines[cost]
     assert "576 pixels" in lines[cost]  # exact on the whole 32×18 image
     tuned_line = next(line for line in lines if "tuned for 2 %" in line)
     assert len(kept_tunings(tmp_path)) == 1
@@ -117,13 +124,13 @@ def test_a_search_running_past_the_budget_stops_in_one_line(scene_file, tmp_path
 @pytest.mark.slow
 def test_an_unreachable_target_with_consent_ends_in_one_line_within_the_budget(scene_file, tmp_path, cache):
     """The issue's case: 62 s and 60 progress lines on a 32×18 scene. Whichever comes first,
-    the budget or the search's end, the run ends in one line by about 20 s."""
+    the budget or the search's end, the run ends in one line within 20 s."""
     scene_file.write_text(SCENE.replace("target_error: 2}", "target_error: 0.001}"))
     started = time.perf_counter()
     code, text = run("render", scene_file, "-o", tmp_path / "x.png", "--tune", "--no-progress", env=cache)
-    assert time.perf_counter() - started < tuning.TUNE_BUDGET_S + 5  # the last setting measured, and the line
+    assert time.perf_counter() - started < 20
     assert code == 1 and len(errors(text)) == 1, text
-    assert re.search(r"ran past its budget after \d+ settings, 20 s: run `clrays tune|would take longer than the 20 s"
+    assert re.search(r"ran past its budget after \d+ settings, 15 s: run `clrays tune|would take longer than the 15 s"
                      r"|target error 0.001 %: not reached", errors(text)[0])
     assert not (tmp_path / "x.png").exists()
 
@@ -202,7 +209,7 @@ def test_a_kept_tuning_with_a_bad_field_is_ignored_with_a_notice(scene_file, tmp
     assert notice.endswith("the kept tuning is ignored") and "nan %" not in text
 
 
-def test_a_bad_kept_tuning_is_searched_again_with_consent(scene_file, tmp_path, cache):
+def test_a_bad_kept_tuning_is_searched_again_with_consent(scene_file, tmp_path, cache, roomy_budget):
     scene = load_scene(scene_file)
     write_kept(tmp_path / "cache", scene, kept(scene, rmse=math.nan, frame_ms=-1))
     code, text = run("render", scene_file, "-o", tmp_path / "x.png", "--tune", "--stats", "--no-progress", env=cache)
@@ -295,7 +302,7 @@ def test_tune_then_render_take_the_same_settings(scene_file, tmp_path, cache):
                                  for setting in found.split()}) == found
 
 
-def test_render_then_tune_take_the_same_settings(scene_file, tmp_path, cache):
+def test_render_then_tune_take_the_same_settings(scene_file, tmp_path, cache, roomy_budget):
     code, text = run("render", scene_file, "-o", tmp_path / "x.npy", "--tune", "--stats", "--no-progress", env=cache)
     assert code == 0, text
     line = next(line.strip() for line in text.splitlines() if "tuned for 2 %" in line)
