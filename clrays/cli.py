@@ -708,8 +708,8 @@ The error is as `clrays bench` measures it: relative RMSE of luminance against `
 a fixed subset of pixels, depth edges left out (`exact` is computed once and kept in
 --cache). From the sizes the image derives, the search grows the setting that buys the
 most error per millisecond while over the target, then shrinks settings while the target
-holds, aiming at 80 % of the target; the chosen settings are then checked on pixels (and
-an animation's frames) the search did not measure. An animated scene is measured on its
+holds, aiming at 80 % of the target; the settings within it are then checked, cheapest
+first, on pixels (and an animation's frames) the search did not measure. An animated scene is measured on its
 first, middle and last frames (the largest error counts). Only the render keys it sets
 change in the written file. A scene may instead carry render.target_error: `render`,
 `sequence` and `sweep` then take the settings this command keeps for it (one search, one
