@@ -5,7 +5,7 @@ measured against `exact` on every pixel of the image (depth edges out) (bench/RE
 "Tuning: the promise off the sample").
 
     .venv/bin/python bench/tune_held_out.py grate --size 128x72 --target 2 --pixels 800
-    .venv/bin/python bench/tune_held_out.py grate lattice --size 160x90 --target 1
+    .venv/bin/python bench/tune_held_out.py grate --size 160x90 --target 1 --most-settings 100
 """
 from __future__ import annotations
 
@@ -34,6 +34,7 @@ def main() -> None:
     parser.add_argument("--size", type=image_size, default="160x90")
     parser.add_argument("--target", type=float, default=1.0, help="percent")
     parser.add_argument("--pixels", type=int, default=tuning.TUNE_PIXELS, help="the search's sample")
+    parser.add_argument("--most-settings", type=int, default=tuning.MOST_SETTINGS)
     parser.add_argument("--cache", type=Path, default=REPO / ".cache" / "bench-references")
     args = parser.parse_args()
     width, height = map(int, args.size.split("x"))
@@ -53,7 +54,7 @@ def main() -> None:
                 search.held_out_pixels, search.held_out_frames = None, []
             started = time.perf_counter()
             result = tuning.tune(scene, target, references, renderer, method, args.pixels, repeats=1, search=search,
-                                 margin=margin)
+                                 most_settings=args.most_settings, margin=margin)
             seconds = time.perf_counter() - started
             best = result.best
             if best is None:
