@@ -35,6 +35,7 @@ from .runs.sequence import (check_pattern, check_video_path, lock_folder, parse_
                             scene_frames, write_video)
 from .runs.video import DEFAULT_CRF, VIDEO_OPTIONS, video_encoder_options
 from .runs.sweep import axes_from, format_table, run_sweep
+from .runs.tune import TUNE_BUDGET_S, Consent, cache_folder, tuned_scene
 from .scene import files as scene_files
 from .scene import yaml_tree
 from .scene import gltf as gltf_files
@@ -318,6 +319,13 @@ def _progress_default(context: click.Context, parameter, value: bool | None) -> 
     return sys.stderr.isatty() if value is None else value
 
 
+def tune_option():
+    """--tune: consent to search a scene's render.target_error settings where none are kept."""
+    return option("--tune", "tune_now", is_flag=True, group=RUN,
+                  help=f"Where the scene sets render.target_error and no tuning for it is kept: search now "
+                       f"(cost stated first; refused past {TUNE_BUDGET_S:g} s: then run `clrays tune` first).")
+
+
 def progress_option(text: str = "Progress bar (default: on a terminal)."):
     return option("--progress/--no-progress", default=None, callback=_progress_default, group=RUN, help=text)
 
@@ -419,13 +427,14 @@ Examples:
 @aov_option()
 @exposure_option("PNG only")
 @option("--stats", is_flag=True, group=RUN, help="Print per-stage device times and device memory.")
+@tune_option()
 @verbose_option()
 @progress_option("Progress bar for the slow methods, exact and raymarch (default: on a terminal; off one, a "
                  "line every 10 % of a long frame).")
 @device_option()
 @click.pass_context
-def render(context, scene: Path, method, overrides, camera, frame, output: Path, aovs, exposure, stats, verbose,
-           progress, device) -> None:
+def render(context, scene: Path, method, overrides, camera, frame, output: Path, aovs, exposure, stats, tune_now,
+           verbose, progress, device) -> None:
     """Render SCENE (a YAML file, or glTF: .glb, .gltf) to an image."""
     allow_writes(output.parent)
     check_output_path(output, folder_exists=False)
@@ -438,7 +447,7 @@ def render(context, scene: Path, method, overrides, camera, frame, output: Path,
     if frame is not None:
         parse_frames(str(frame), scene_frames(loaded), "--frame")
     with _interruptible(context, f"{output} was not written"):
-        loaded, tuned = _tuned(loaded, method, device, progress)
+        loaded, tuned = _tuned(loaded, method, device, progress, Consent(tune_now), scene)
         if frame is not None and loaded.animation is not None:
             loaded = loaded.animation.scene_at(loaded, frame)
         if stats or verbose:
@@ -453,16 +462,24 @@ def render(context, scene: Path, method, overrides, camera, frame, output: Path,
             click.echo(f"  {tuned.line()}")
 
 
-def _tuned(scene, method: str | None, device: str | None, progress: bool, below: Path | None = None):
+def _tuned(scene, method: str | None, device: str | None, progress: bool, consent: Consent, path: Path,
+           below: Path | None = None):
     """(scene, Tuned or None): with the settings its `render.target_error` asks for
-    (clrays.runs.tune), tuned once per scene and kept in the cache, or in `below`/.references
-    where given; a line per setting tried when no bar shows."""
+    (clrays.runs.tune.tuned_settings): kept in `below`/.references (where given) or the
+    cache, else searched with `consent` (`--tune`) and kept there; a line per setting tried
+    when no bar shows."""
     if scene.render.target_error is None:
         return scene, None
-    from .runs.tune import tuned_scene
+    folders = [below / REFERENCES] if below is not None else []
+    return tuned_scene(scene, method, folders=[*folders, cache_folder()], consent=consent, renderer=Renderer(device),
+                       progress=progress, log=lambda line: click.echo(line, err=True), how_to_tune=_how_to_tune(path),
+                       below=below)
 
-    return tuned_scene(scene, method, folder=below / REFERENCES if below is not None else None, below=below,
-                       renderer=Renderer(device), progress=progress, log=lambda line: click.echo(line, err=True))
+
+def _how_to_tune(path: Path) -> str:
+    """The way to run a search that a render may not: `clrays tune`, whose kept settings it reads."""
+    return (f"run `clrays tune {path} -o TUNED.yaml` with this run's --set, --camera and --method first (no time "
+            f"limit; this command then reads the settings it keeps)")
 
 
 def _stage_statuses(result) -> dict[str, str]:
@@ -566,13 +583,14 @@ there, so an interrupted run resumes where it stopped (--overwrite renders all a
 @overwrite_option("Render every frame, also those already written.")
 @reuse_option("frames")
 @option("--stats", is_flag=True, group=RUN, help="Print each frame's time and reused stages, then a summary.")
+@tune_option()
 @verbose_option()
 @progress_option("Progress bar (default: on a terminal; off one, a line per frame rendered).")
 @cluster_options
 @device_option()
 @click.pass_context
 def sequence(context, scene, frames, method, overrides, camera, pattern, video, crf, video_options, aovs, exposure,
-             overwrite, reuse, stats, verbose, progress, scheduler, workers, device) -> None:
+             overwrite, reuse, stats, tune_now, verbose, progress, scheduler, workers, device) -> None:
     """Render the frames of SCENE's animation to numbered images."""
     done = []
     with _resumable(context, lambda: counted(len(done), "new frame")):
@@ -589,7 +607,7 @@ def sequence(context, scene, frames, method, overrides, camera, pattern, video, 
         chosen = parse_frames(frames, scene_frames(loaded))
         # Kept beside the frames: their digests hold the tuned settings, so a run resumed from
         # anywhere must find the same ones, or it would take every frame for another scene's.
-        loaded, tuned = _tuned(loaded, method, device, progress, lock_folder(str(pattern)))
+        loaded, tuned = _tuned(loaded, method, device, progress, Consent(tune_now), scene, lock_folder(str(pattern)))
         if stats and tuned is not None:
             click.echo(tuned.line())
         if stats or verbose:
@@ -703,12 +721,13 @@ the render's wall time, less the kernel builds during it (build_ms).
 @exposure_option("PNG and contact sheet, `auto` per point")
 @overwrite_option("Render every point, also those done by an earlier run.")
 @reuse_option("points")
+@tune_option()
 @progress_option("Progress bar (default: on a terminal; off one, a line per point rendered).")
 @cluster_options
 @device_option()
 @click.pass_context
-def sweep(context, scene, overrides, camera, reference, method, out_dir, image_format, exposure, overwrite, reuse, progress,
-          scheduler, workers, device) -> None:
+def sweep(context, scene, overrides, camera, reference, method, out_dir, image_format, exposure, overwrite, reuse,
+          tune_now, progress, scheduler, workers, device) -> None:
     """Render SCENE at every combination of the --set values and tabulate the results."""
     done = []
     with _resumable(context, lambda: counted(len(done), "point")):
@@ -730,7 +749,8 @@ def sweep(context, scene, overrides, camera, reference, method, out_dir, image_f
         with _executor(scheduler, workers, device) as executor:
             report = run_sweep(scene, list(overrides), out_dir, method=method, reference=reference,
                                renderer=Renderer(device, reuse=reuse), exposure=exposure, image_format=image_format,
-                               overwrite=overwrite, progress=progress, on_point=on_point, executor=executor)
+                               overwrite=overwrite, progress=progress, on_point=on_point, executor=executor,
+                               tune=Consent(tune_now), how_to_tune=_how_to_tune(scene))
         click.echo(format_table(report.rows, axes), nl=False)
         click.echo(report.summary())
 
@@ -754,9 +774,12 @@ The error is as `clrays bench` measures it: relative RMSE of luminance against `
 a fixed subset of pixels, depth edges left out (`exact` is computed once and kept in
 --cache). From the sizes the image derives, the search grows the setting that buys the
 most error per millisecond while over the target, then shrinks settings while the target
-holds. An animated scene is measured on its first, middle and last frames (the largest
-error counts). A scene may instead carry render.target_error: `render`, `sequence` and
-`sweep` then tune it once and render with the result.
+holds, aiming at 80 % of the target; the settings within it are then checked, cheapest
+first, on pixels (and an animation's frames) the search did not measure. An animated scene is measured on its
+first, middle and last frames (the largest error counts). Only the render keys it sets
+change in the written file. A scene may instead carry render.target_error: `render`,
+`sequence` and `sweep` then take the settings this command keeps for it (one search, one
+answer), or search with --tune where none are kept.
 """)
 @click.argument("scene", type=click.Path(path_type=Path))
 @option("--target-error", "target", type=float, metavar="PCT", callback=_target_percent, group=SCENE,
@@ -772,8 +795,8 @@ error counts). A scene may instead carry render.target_error: `render`, `sequenc
 @option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path), group=OUTPUT,
         help="The tuned scene: SCENE's YAML with the tuned settings in its render mapping.")
 @option("--cache", type=click.Path(file_okay=False, path_type=Path), default=None, group=OUTPUT,
-        help="Where exact references are cached (default: clrays' cache: $CLRAYS_CACHE, else "
-             "~/.cache/clrays).")
+        help="Where exact references and tuned settings are kept (default: clrays' cache: $CLRAYS_CACHE, else "
+             "~/.cache/clrays, where render.target_error looks for them).")
 @progress_option()
 @device_option()
 @click.pass_context
@@ -781,8 +804,6 @@ def tune(context, scene: Path, target, method, overrides, camera, pixels, most_s
          progress, device) -> None:
     """Find the cheapest render settings of SCENE whose error against exact is at most PCT."""
     from .runs import tune as tuning
-    from .runs.progress import Progress
-    from .runs.references import ReferenceCache
 
     if output.suffix.lower() not in (".yaml", ".yml"):
         raise OutputError(f"{output}: the tuned scene is YAML: expected a .yaml or .yml output, got "
@@ -793,27 +814,28 @@ def tune(context, scene: Path, target, method, overrides, camera, pixels, most_s
     check_replaceable(check_folder(output))  # before the search, not after it
     overrides = with_camera(overrides, camera)
     loaded = load_scene(scene, overrides)
+    asked_by = "--target-error"
     if target is None:
         if loaded.render.target_error is None:
             raise ClraysError(f"{scene}: no target: give --target-error PCT or set render.target_error")
-        target = loaded.render.target_error
-    with _interruptible(context, f"{output} was not written"), \
-            Progress(progress, most_settings, "setting", "tune") as bar:
-        def on_trial(trial) -> None:
-            bar.advance(f"{tuning.settings_text(trial.settings)}: {100 * trial.rmse:.3f} %")
-            if not progress:
-                click.echo(tuning.trial_line(trial), err=True)
-
-        result = tuning.tune(loaded, target / 100, ReferenceCache(cache), renderer=Renderer(device, reuse=False),
-                             method=method, pixels=pixels, most_settings=most_settings, on_trial=on_trial)
-    best = result.best
-    if best is None:
-        raise tuning.unreachable(str(scene), result)
-    settings = {**({"method": method} if method else {}), **best.settings}
+        target, asked_by = loaded.render.target_error, "render.target_error"
+    with _interruptible(context, f"{output} was not written"):
+        # The one search and cache of render.target_error: a scene tuned here renders with these settings.
+        tuned, result = tuning.tuned_settings(
+            loaded, target / 100, [cache or tuning.cache_folder()], tuning.Consent(True, budget_s=None), method,
+            Renderer(device), progress, lambda line: click.echo(line, err=True), pixels, most_settings,
+            asked_by=asked_by)
+    settings = {**({"method": method} if method else {}), **tuned.settings}
     tuning.write_tuned_yaml(scene, output, settings, list(overrides))
-    click.echo(f"{tuning.settings_text(best.settings)}")
-    click.echo(f"error against exact {100 * best.rmse:.3f} % (target {target:g} %), {best.frame_ms:.0f} ms a frame")
-    click.echo(f"{tuning.default_trial_line(result)}; {len(result.trials)} settings tried in {result.seconds:.0f} s")
+    click.echo(f"{tuning.settings_text(tuned.settings)}")
+    held_out = "" if tuned.held_out is None else f", {100 * tuned.held_out:.3f} % on held-out pixels and frames"
+    click.echo(f"error against exact {100 * tuned.rmse:.3f} %{held_out} (target {target:g} %), "
+               f"{tuned.frame_ms:.0f} ms a frame")
+    if result is None:
+        click.echo("kept from an earlier search of this scene and target (clrays tune or render.target_error)")
+    else:
+        click.echo(f"{tuning.default_trial_line(result)}; {len(result.trials)} settings tried in "
+                   f"{result.seconds:.0f} s")
     click.echo(f"wrote {output}")
 
 

@@ -43,7 +43,7 @@ from ..scene.model import Scene
 from ..scene.files import FileRefused, read_regular_file
 from ..scene.limits import MAX_RUN_RECORD_BYTES, MAX_SWEEP_POINTS
 from ..scene.load import load_scene
-from .tune import knobs_for, tuned_scene
+from .tune import Consent, cache_folder, knobs_for, tuned_scene
 from .point import ERROR_COLUMNS, REFERENCE_COLUMNS, REFERENCES, SweepPoint, render_point
 from .progress import Progress, counted
 from .references import ReferenceCache, parse_reference
@@ -292,7 +292,8 @@ def run_sweep(path: str | Path, spec, out_dir: str | Path, *, overrides: Sequenc
               method: str | None = None, reference: str | None = None, renderer: Renderer | None = None,
               exposure: float | str | None = None, image_format: str = "png", contact_sheet: bool = True,
               overwrite: bool = False, progress: bool = False,
-              on_point: Callable[[SweepPoint, dict], None] | None = None, executor=None) -> SweepReport:
+              on_point: Callable[[SweepPoint, dict], None] | None = None, executor=None,
+              tune: Consent | None = None, how_to_tune: str = "") -> SweepReport:
     """Render every point of the sweep into `out_dir` (created): one image per point,
     results.csv and contact_sheet.png. `spec` as for `sweep_scenes`; `reference`:
     "exact" or "raymarch:N" adds error columns in percent
@@ -302,7 +303,10 @@ def run_sweep(path: str | Path, spec, out_dir: str | Path, *, overrides: Sequenc
     on_point(point, row) after each. executor: a `clrays.runs.distributed.DaskExecutor`
     to render the points on its workers (`renderer` then only gives the reuse setting);
     results.csv is still written here, by the client alone. exposure: stops for .png points and
-    the contact sheet, AUTO (each point its own), or None (each point's render.exposure)."""
+    the contact sheet, AUTO (each point its own), or None (each point's render.exposure). tune:
+    whether a point's render.target_error may be searched where no tuning is kept, in what
+    time for all points (`clrays.runs.tune.Consent`; default: not); how_to_tune: the
+    refusal's way to run it anyway."""
     if image_format not in IMAGE_FORMATS:
         raise ClraysError(f"image format: expected one of {', '.join(IMAGE_FORMATS)}, got {image_format!r}")
     axes, fixed = axes_from(spec, overrides)
@@ -324,7 +328,8 @@ def run_sweep(path: str | Path, spec, out_dir: str | Path, *, overrides: Sequenc
                 raise ClraysError(f"{path}: render.{sorted(swept_render_keys & tuned_keys)[0]} is swept, and "
                                   f"render.target_error tunes it: sweep it without a target, or sweep the target")
         # render.target_error: the point's tuned settings (searched once per scene, then read from the cache).
-        return tuned_scene(scene, folder=folder / REFERENCES, renderer=renderer, progress=progress, below=folder)[0]
+        return tuned_scene(scene, folders=[folder / REFERENCES, cache_folder()], consent=tune, renderer=renderer,
+                           progress=progress, how_to_tune=how_to_tune, below=folder)[0]
 
     references = ReferenceCache(folder / REFERENCES, renderer, progress, below=folder) if against else None
     points = sweep_points(axes)

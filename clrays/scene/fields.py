@@ -356,8 +356,10 @@ RENDER = Section("render", (
     Field("target_error", "number", Render.target_error, 0.0, 100.0, low_open=True, high_open=True,
           shown_default="none: the settings as written",
           notes="percent relative RMSE against `exact` (as `clrays bench` measures it): `render`, `sequence` and "
-                "`sweep` first tune the sizes and sampling settings for the cheapest frame within it "
-                "(`clrays tune`; once per scene, kept in clrays' cache: $CLRAYS_CACHE, else ~/.cache/clrays) and render with them"),
+                "`sweep` render with the cheapest sizes and sampling settings within it, as `clrays tune` finds "
+                "them (one search and one kept answer for both, in the cache). Where none is kept, they search "
+                "only with `--tune`, state its cost first, and refuse a search past 15 s in one line (the command within 20 s): run "
+                "`clrays tune` first"),
     Field("exposure", "number or `auto`", Render.exposure, -EV_LIMIT, EV_LIMIT,
           notes="stops for the 8-bit outputs (.png, and a sequence's .gif, .webp, .mp4): radiance × 2^EV before "
                 "the sRGB curve; `auto` chooses them from the frame ([Exposure](#exposure)). `--exposure` "

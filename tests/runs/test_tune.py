@@ -74,7 +74,7 @@ def without_trials(text: str) -> list[str]:
     return [line for line in text.splitlines() if not line.startswith(("clrays: tune:", "building OpenCL kernels"))]
 
 
-@pytest.mark.parametrize("percent", [2.0, 0.5])
+@pytest.mark.parametrize("percent", [2.5, 0.5])
 def test_tune_meets_the_target_and_the_written_scene_renders_within_it(scene_file, tmp_path, cache, percent):
     out = tmp_path / f"tuned_{percent}.yaml"
     code, text = run("tune", scene_file, "--target-error", percent, "-o", out, "--no-progress", env=cache)
@@ -84,10 +84,10 @@ def test_tune_meets_the_target_and_the_written_scene_renders_within_it(scene_fil
     assert tuned.render.target_error is None
     image = Renderer(reuse=False).render(tuned).image
     error = exact_error(tuned, image)
-    assert error <= percent / 100  # measured: 1.700 % at 2 % (the start holds), 0.358 % at 0.5 %
+    assert error <= percent / 100  # measured: 1.700 % at 2.5 % (the start holds), 0.358 % at 0.5 %
     assert f"{100 * error:.3f} %" in text  # the error it prints is the error the file renders with
     render = tuned.render
-    if percent == 2.0:  # the start (1.700 %) meets it: the search only takes coarser rungs
+    if percent == 2.5:  # the start (1.700 %) meets its aim, 80 % of it: the search only takes coarser rungs
         assert render.shadow_map <= 64 and render.slices <= 32 and render.gamma_samples <= 32
         assert render.line_samples <= 37 and render.initial_step >= 3 and render.refine_threshold >= 0.02
     if percent == 0.5:  # the start (1.700 %) is over it: something grew
@@ -106,7 +106,7 @@ def test_the_tuned_yaml_keeps_the_users_keys_and_comments(scene_file, tmp_path, 
     assert after["render"]["steps"] == 64  # a render key the search does not touch
     assert set(after["render"]) >= {"shadow_map", "slices", "gamma_samples", "line_samples", "initial_step",
                                     "refine_threshold"}
-    assert "coarse on purpose" not in written  # the old render line's comment went with it
+    assert "# coarse on purpose\n" in written  # only the keys tune sets change (test_tune_consent.py)
 
 
 def test_a_tuned_scene_written_elsewhere_keeps_its_files_and_overrides(tmp_path, cache):
@@ -147,7 +147,8 @@ def test_an_unreachable_target_is_one_line_naming_the_best_error(scene_file, tmp
     assert len(lines) == 1 and lines[0].startswith("clrays: error: ")
     assert "target error 0.001 %: not reached; the best error found is" in lines[0]
     best = float(lines[0].split("the best error found is ")[1].split(" %")[0])
-    tried = [float(line.split(": ")[-1].split(" %")[0]) for line in text.splitlines() if line.startswith("clrays: tune:")]
+    tried = [float(line.split(": ")[-1].split(" %")[0]) for line in text.splitlines()
+             if line.startswith("clrays: tune:") and not line.startswith("clrays: tune: for ")]  # not the cost
     assert best == min(tried)  # the best of the settings it tried
     assert not out.exists()
 
@@ -164,10 +165,11 @@ def test_a_scene_target_out_of_range_is_one_line(scene_file):
     assert text.strip().splitlines() == [text.strip()] and "render.target_error" in text
 
 
-def test_render_target_error_tunes_once_and_caches(scene_file, tmp_path, cache):
+def test_render_target_error_tunes_once_and_caches(scene_file, tmp_path, cache, monkeypatch):
+    monkeypatch.setattr(tuning, "TUNE_BUDGET_S", 1000.0)  # a worst case past the budget on a loaded machine
     scene_file.write_text(SCENE.replace("steps: 64}", "steps: 64, target_error: 0.5}"))
     first, second = tmp_path / "a.npy", tmp_path / "b.npy"
-    code, text = run("render", scene_file, "-o", first, "--stats", "--no-progress", env=cache)
+    code, text = run("render", scene_file, "-o", first, "--tune", "--stats", "--no-progress", env=cache)
     assert code == 0, text
     assert "clrays: tune:" in text  # searched
     tuned_line = next(line for line in text.splitlines() if "tuned for 0.5 %" in line)
@@ -181,19 +183,20 @@ def test_render_target_error_tunes_once_and_caches(scene_file, tmp_path, cache):
     files = list((tmp_path / "cache").glob("tuned-*.json"))
     assert len(files) == 1
     files[0].write_text("{not json")  # a corrupt entry is tuned again
-    code, third = run("render", scene_file, "-o", first, "--stats", "--no-progress", env=cache)
+    code, third = run("render", scene_file, "-o", first, "--tune", "--stats", "--no-progress", env=cache)
     assert code == 0 and "clrays: tune:" in third and "(cached)" not in third
     # So is one that names a setting the method has no knob for, or a value out of range.
     for settings in ({"bogus": 1}, {"shadow_map": True}, {"slices": -5}, {"refine_threshold": 1e9}):
         files[0].write_text(json.dumps({"settings": settings, "rmse": 0.001, "frame_ms": 1.0}))
-        code, again = run("render", scene_file, "-o", first, "--stats", "--no-progress", env=cache)
+        code, again = run("render", scene_file, "-o", first, "--tune", "--stats", "--no-progress", env=cache)
         assert code == 0 and "clrays: tune:" in again and "(cached)" not in again, (settings, again)
 
 
 @pytest.mark.slow
-def test_an_unreachable_scene_target_fails_render_in_one_line(scene_file, tmp_path, cache):
+def test_an_unreachable_scene_target_fails_render_in_one_line(scene_file, tmp_path, cache, monkeypatch):
+    monkeypatch.setattr(tuning, "TUNE_BUDGET_S", 1000.0)  # the climb to the ladders' ends takes a minute
     scene_file.write_text(SCENE.replace("steps: 64}", "steps: 64, target_error: 0.001}"))
-    code, text = run("render", scene_file, "-o", tmp_path / "x.png", "--no-progress", env=cache)
+    code, text = run("render", scene_file, "-o", tmp_path / "x.png", "--tune", "--no-progress", env=cache)
     assert code == 1
     lines = without_trials(text)
     assert len(lines) == 1 and "render.target_error: target error 0.001 %: not reached" in lines[0]
@@ -201,10 +204,11 @@ def test_an_unreachable_scene_target_fails_render_in_one_line(scene_file, tmp_pa
 
 
 @pytest.mark.slow
-def test_a_sequence_pays_for_the_tuning_once(scene_file, tmp_path, cache):
+def test_a_sequence_pays_for_the_tuning_once(scene_file, tmp_path, cache, monkeypatch):
+    monkeypatch.setattr(tuning, "TUNE_BUDGET_S", 1000.0)  # a worst case past the budget on a loaded machine
     scene_file.write_text(SCENE.replace("steps: 64}", "steps: 64, target_error: 2}") + ANIMATION)
     code, text = run("sequence", scene_file, "-o", tmp_path / "f_{:02d}.npy", "--frames", "0:2", "--stats",
-                     "--no-progress", env=cache)
+                     "--tune", "--no-progress", env=cache)
     assert code == 0, text
     assert "tuned for 2 %" in text
     code, again = run("sequence", scene_file, "-o", tmp_path / "g_{:02d}.npy", "--frames", "3:4", "--stats",
@@ -213,13 +217,14 @@ def test_a_sequence_pays_for_the_tuning_once(scene_file, tmp_path, cache):
 
 
 @pytest.mark.slow
-def test_a_sequence_keeps_its_tuning_beside_its_frames(scene_file, tmp_path, cache):
+def test_a_sequence_keeps_its_tuning_beside_its_frames(scene_file, tmp_path, cache, monkeypatch):
     """The frames' digests hold the tuned settings, so the tuning is kept with the frames
     (OUTPUT/.references), not in the cache: resumed with another cache (another folder,
     another node), the run takes the same settings and keeps every frame."""
+    monkeypatch.setattr(tuning, "TUNE_BUDGET_S", 1000.0)  # a worst case past the budget on a loaded machine
     scene_file.write_text(SCENE.replace("steps: 64}", "steps: 64, target_error: 2}") + ANIMATION)
     frames = tmp_path / "frames" / "f_{:02d}.npy"
-    code, text = run("sequence", scene_file, "-o", frames, "--frames", "0:2", "--no-progress", env=cache)
+    code, text = run("sequence", scene_file, "-o", frames, "--frames", "0:2", "--tune", "--no-progress", env=cache)
     assert code == 0 and list((tmp_path / "frames" / ".references").glob("tuned-*.json")), text
     code, again = run("sequence", scene_file, "-o", frames, "--frames", "0:2", "--no-progress",
                       env={"CLRAYS_CACHE": str(tmp_path / "another cache")})
@@ -276,11 +281,12 @@ def test_the_search_grows_finer_rungs_and_stops_at_the_ladders_end():
 
 
 @pytest.mark.slow
-def test_a_sweep_renders_each_point_with_its_tuned_settings(scene_file, tmp_path, cache):
+def test_a_sweep_renders_each_point_with_its_tuned_settings(scene_file, tmp_path, cache, monkeypatch):
+    monkeypatch.setattr(tuning, "TUNE_BUDGET_S", 1000.0)  # a worst case past the budget on a loaded machine
     scene_file.write_text(SCENE.replace("steps: 64}", "steps: 64, target_error: 0.5}"))
     out = tmp_path / "sweep"
     code, text = run("sweep", scene_file, "--set", "medium.sigma_s=0.06,0.08", "--format", "npy", "-o", out,
-                     "--no-progress", env=cache)
+                     "--tune", "--no-progress", env=cache)
     assert code == 0, text
     assert len(list((out / ".references").glob("tuned-*.json"))) == 2  # one per point's scene
     for index, sigma_s in enumerate(("0.06", "0.08")):
