@@ -44,8 +44,8 @@ from . import gltf_motion
 from .animation import Animation
 from .files import FileRefused, read_regular_file
 from .fields import ANIMATION, MAX_POWER
-from .limits import (MAX_COORDINATE, MAX_GLB_CHUNKS, MAX_GLTF_BYTES, MAX_GLTF_IMPORT_BYTES, MAX_GLTF_NODES,
-                     MAX_LIGHTS, MAX_OBJECTS, MAX_TRIANGLES)
+from .limits import (MAX_COORDINATE, MAX_GLB_CHUNKS, MAX_GLTF_BYTES, MAX_GLTF_IMPORT_BYTES, MAX_GLTF_JSON_VALUES,
+                     MAX_GLTF_NODES, MAX_LIGHTS, MAX_OBJECTS, MAX_TRIANGLES)
 from .model import (Camera, DirectionalLight, Geometry, Light, LightTexture, Medium, Phase, PointLight, Scene,
                     SpotLight)
 from .textures import MAX_TEXTURE_SIDE, srgb_to_linear
@@ -549,6 +549,10 @@ def _open(path: Path, file: str) -> _Reader:
             # any other type: skipped, as the spec asks (an extension's own chunk)
     else:
         text = data
+    values = sum(text.count(mark) for mark in (b",", b":", b"[", b"{")) + 1
+    if values > MAX_GLTF_JSON_VALUES:  # counted before parsing: each value costs a Python object
+        raise SceneError(f"{file}: (JSON): expected at most {MAX_GLTF_JSON_VALUES} values (docs/limits.md), got about "
+                         f"{values}")
     try:
         document = json.loads(text.decode("utf-8"), parse_constant=_no_constant)
     except (UnicodeDecodeError, ValueError, RecursionError) as exc:

@@ -67,6 +67,11 @@ MAX_GLTF_IMPORT_BYTES = 1 << 30
 #: spec says to skip (extensions may add some; exporters write none). 19 million empty chunks after the
 #: JSON (a 150 MB file) took 52 s and 2.1 GB to walk.
 MAX_GLB_CHUNKS = 16
+#: Values in a glTF file's JSON (counted from its commas, colons and brackets before it is
+#: parsed: strings that hold them only overcount): each becomes a Python object of 24 to 100
+#: bytes. 21 MB of `[],` took 540 MB to parse, and a file at the size limit would have taken
+#: 4 GB; exported files hold hundreds of thousands at most (their data is in buffers).
+MAX_GLTF_JSON_VALUES = 1 << 23
 #: Nodes in a glTF file: each is a Python dict and a 4×4 matrix per pose, and the checks
 #: of the hierarchy walk them all; exported scenes hold hundreds to a few thousand.
 MAX_GLTF_NODES = 65_536

@@ -357,3 +357,24 @@ def test_a_few_unknown_chunks_are_skipped_and_a_second_bin_chunk_refused(tmp_pat
     with pytest.raises(SceneError, match=r"\(GLB chunk at byte \d+\): expected one JSON chunk, first, and at most one "
                                          r"BIN chunk, second \(glTF 2\.0, GLB chunks\), got a BIN chunk as chunk 4"):
         load_scene(path)
+
+
+# --------------------------------------------------------------------------- the JSON itself
+
+
+def test_json_of_millions_of_small_values_is_refused_before_it_is_parsed(tmp_path):
+    """27 MB of `[],` in a .gltf's `extras` (9 million empty lists: 540 MB to parse at 21 MB,
+    4 GB at the file limit): counted before parsing and refused in one line, in a fraction
+    of the memory."""
+    path = tmp_path / "lists.gltf"
+    path.write_bytes(b'{"asset": {"version": "2.0"}, "extras": [' + b"[]," * 9_000_000 + b"[]]}")
+    result = _load_fresh(path)
+    assert result["error"] == f"{path}: (JSON): expected at most {gltf.MAX_GLTF_JSON_VALUES} values " \
+                              f"(docs/limits.md), got about 18000009", result  # 9 M commas and 9 M brackets, and the rest
+    assert result["peak_mb"] < 300, result
+
+
+def test_a_json_of_ordinary_size_is_parsed():
+    """scenes/colonnade.glb's JSON, far below the count, loads as before."""
+    scene = load_scene(ROOT / "scenes" / "colonnade.glb")
+    assert len(scene.geometry.triangles) > 0
