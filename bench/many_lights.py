@@ -3,7 +3,7 @@ one frame per light count and image size, from `/usr/bin/time -v` around `clrays
 (bench/RESULTS.md, "Many lights").
 
     .venv/bin/python bench/many_lights.py                               # this tree
-    .venv/bin/python bench/many_lights.py --repo /work/main --lights 1 16 # another tree
+    .venv/bin/python bench/many_lights.py --repo ../before --lights 1 16  # another tree
 
 Writes many_lights_<n>.yaml (scenes/demo.yaml with its one light split into n on a grid
 over the roof, each with 1/n of the power) into --out, renders each with the tree's own
