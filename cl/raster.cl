@@ -5,11 +5,11 @@
  * raster_nearest packs (depth, triangle) in one 64-bit atomic min and raster_split_runs
  * unpacks it; without 64-bit atomics, raster_resolve re-tests (ties: highest index).
  *
- * One work-item per triangle: it skips a closed solid's face turned away from the view
- * (solids.h), clips the triangle to the view's near side,
- * projects the polygon, and per pixel row ray-tests the samples in the row's span of
- * the polygon, 8 columns per test (intersect_columns); triangles taller than
- * RASTER_BIG_ROWS go to a second pass with one work-item per block of RASTER_ROWS_PER_ITEM
+ * One work-item per triangle the view lists (clrays/stages/raster_culling.py): it skips
+ * a closed solid's face turned away from the view (solids.h), clips the triangle to the
+ * view's near side, projects the polygon, and per pixel row ray-tests the samples in the
+ * row's span of the polygon, 8 columns per test (intersect_columns); triangles taller than
+ * RASTER_BIG_ROWS (and wider than RASTER_THIN_COLUMNS) go to a second pass with one work-item per block of RASTER_ROWS_PER_ITEM
  * rows (and, on a GPU, a few dozen columns) of the view, which owns it (`*_rows`). The
  * ray test (not interpolation) makes depth exact along the sample ray, and two-sided.
  * Depth buffer layout per view: [height][width][samples]. */
@@ -310,7 +310,13 @@ inline int misses_every_sample(global const view_t* view, global const float4* t
 }
 
 /* The triangle `tri` clipped and projected into the view; its rows are [y0, y1]. EXIT
- * leaves when nothing of it is in front of the view. */
+ * leaves when nothing of it is in front of the view, or when every row's span
+ * (row_span) would be empty because the polygon lies wholly left or right of the view:
+ * such a triangle cost all its rows (a pole beside a cube face, 133 rows of a 1024² face).
+ * A span's ends lie within the corners' columns, but for rounding of the edge points,
+ * at most a few ulps of the columns' range (SPAN_ROUNDING), and row_span widens them by a
+ * pixel and keeps columns [-1, width]: the polygon must lie more than 3 pixels beyond. */
+#define SPAN_ROUNDING 1e-5f
 #define PROJECT_TRIANGLE(EXIT)                                                              \
     global const view_t* view = views + view_index;                                         \
     float3 v0 = tri_vertices[3 * tri].xyz, v1 = tri_vertices[3 * tri + 1].xyz,              \
@@ -323,6 +329,11 @@ inline int misses_every_sample(global const view_t* view, global const float4* t
         if (k < count) { top = FMIN(top, corner[k].y); bottom = FMAX(bottom, corner[k].y); } \
     int y0 = MAX_INT(FLOOR_INT(FMAX(top, -1.0f)) - 1, 0);                                   \
     int y1 = MIN_INT(CEIL_INT(FMIN(bottom, (float)view->height)), view->height - 1);        \
+    float left = INFINITY, right = -INFINITY;                                               \
+    for (int k = 0; k < 4; ++k)                                                             \
+        if (k < count) { left = FMIN(left, corner[k].x); right = FMAX(right, corner[k].x); } \
+    float span_slack = 3.0f + SPAN_ROUNDING * (FABS(left) + FABS(right));                   \
+    if (right < -span_slack || left > (float)view->width + span_slack) EXIT;               \
     triangle_test_t test = triangle_test(view, v0, v1, v2);
 
 /* Every sample of row y in columns [column_lo, column_hi] that the triangle may cover,
@@ -372,20 +383,37 @@ inline int big_rectangle(const float2 corner[4], int count, int y0, int y1)
     return (right - left + 2.0f) * (float)(y1 - y0 + 1) > (float)RASTER_BIG_SAMPLES;
 }
 
-/* Pass 1, one work-item per triangle: it visits every covered sample of its rows, unless
- * it spans more than RASTER_BIG_ROWS rows (or, on a GPU, RASTER_BIG_SAMPLES pixels); then
- * it lists itself in `big` as (triangle, first row, last row) (while there is room) for
- * pass 2, so a floor plane does not keep one work-item busy for the whole view. The
- * samples are the same either way, and every update is a min (or max) that does not
- * depend on the order, so is the depth map. */
+/* A triangle narrower than this many columns is never listed for its rows alone: each of
+ * its rows is one or two ray tests of RASTER_LANES columns, and pass 2 would project it
+ * again for every block of RASTER_ROWS_PER_ITEM rows and make every work-item of the view
+ * walk past it (a thin pole 133 rows tall in a 1024² face: 33 projections for a few dozen
+ * texels; bench/RESULTS.md, "Raster culled per view"). */
+#ifndef RASTER_THIN_COLUMNS
+#define RASTER_THIN_COLUMNS RASTER_LANES
+#endif
+
+/* Pass 1, one work-item per triangle (of `drawn`, the view's list of the `drawn_blocks`
+ * blocks of `drawn_block` consecutive triangles that may reach it,
+ * clrays/stages/raster_culling.py; NULL: every triangle): it visits every covered sample
+ * of its rows, unless it spans more than RASTER_BIG_ROWS rows and RASTER_THIN_COLUMNS
+ * columns (or, on a GPU, RASTER_BIG_SAMPLES pixels); then it lists itself in `big` as
+ * (triangle, first row, last row) (while there is room) for pass 2, so a floor plane does
+ * not keep one work-item busy for the whole view. The samples are the same either way,
+ * and every update is a min (or max) that does not depend on the order, so is the depth
+ * map. */
 #define FOR_EACH_COVERED_SAMPLE(BODY)                                                       \
     int tri = get_global_id(0);                                                             \
+    if (drawn) {                                                                            \
+        if (tri >= drawn_blocks * drawn_block) return;                                      \
+        tri = drawn[tri / drawn_block] * drawn_block + tri % drawn_block;                   \
+    }                                                                                       \
     if (tri >= tri_count) return;                                                           \
     if (faces_away_from_view(views + view_index, tri_vertices[3 * tri], tri_vertices[3 * tri + 1].xyz, \
                              tri_vertices[3 * tri + 2].xyz)) return;                        \
     if (misses_every_sample(views + view_index, tri_vertices, tri, offsets, sample_count)) return; \
     PROJECT_TRIANGLE(return)                                                                \
-    if (y1 - y0 + 1 > RASTER_BIG_ROWS || (RASTER_BIG_SAMPLES > 0 && big_rectangle(corner, count, y0, y1))) { \
+    if ((y1 - y0 + 1 > RASTER_BIG_ROWS && right - left >= RASTER_THIN_COLUMNS)                \
+        || (RASTER_BIG_SAMPLES > 0 && big_rectangle(corner, count, y0, y1))) {              \
         uint slot = atomic_inc(big_count);                                                  \
         if (slot < RASTER_BIG_TRIANGLES) { vstore3((int3)(tri, y0, y1), slot, big); return; } \
     }                                                                                       \
@@ -433,7 +461,8 @@ inline int big_rectangle(const float2 corner[4], int count, int y0, int y1)
             COVERED_SAMPLES_OF_ROW(y, column0, column1, OWNED_BODY, LANES_BODY)             \
     }
 
-#define RASTER_ARGS global const float4* tri_vertices, int tri_count, global const view_t* views, \
+#define RASTER_ARGS global const float4* tri_vertices, int tri_count, global const int* drawn,   \
+                    int drawn_blocks, int drawn_block, global const view_t* views,             \
                     int view_index, global const float2* offsets, int sample_count,           \
                     global uint* big_count, global int* big
 
