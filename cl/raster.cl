@@ -9,7 +9,7 @@
  * a closed solid's face turned away from the view (solids.h), clips the triangle to the
  * view's near side, projects the polygon, and per pixel row ray-tests the samples in the
  * row's span of the polygon, 8 columns per test (intersect_columns); triangles taller than
- * RASTER_BIG_ROWS (and wider than RASTER_THIN_COLUMNS) go to a second pass with one work-item per block of RASTER_ROWS_PER_ITEM
+ * RASTER_BIG_ROWS go to a second pass with one work-item per block of RASTER_ROWS_PER_ITEM
  * rows (and, on a GPU, a few dozen columns) of the view, which owns it (`*_rows`). The
  * ray test (not interpolation) makes depth exact along the sample ray, and two-sided.
  * Depth buffer layout per view: [height][width][samples]. */
@@ -383,20 +383,11 @@ inline int big_rectangle(const float2 corner[4], int count, int y0, int y1)
     return (right - left + 2.0f) * (float)(y1 - y0 + 1) > (float)RASTER_BIG_SAMPLES;
 }
 
-/* A triangle narrower than this many columns is never listed for its rows alone: each of
- * its rows is one or two ray tests of RASTER_LANES columns, and pass 2 would project it
- * again for every block of RASTER_ROWS_PER_ITEM rows and make every work-item of the view
- * walk past it (a thin pole 133 rows tall in a 1024² face: 33 projections for a few dozen
- * texels; bench/RESULTS.md, "Raster culled per view"). */
-#ifndef RASTER_THIN_COLUMNS
-#define RASTER_THIN_COLUMNS RASTER_LANES
-#endif
-
 /* Pass 1, one work-item per triangle (of `drawn`, the view's list of the `drawn_blocks`
  * blocks of `drawn_block` consecutive triangles that may reach it,
  * clrays/stages/raster_culling.py; NULL: every triangle): it visits every covered sample
- * of its rows, unless it spans more than RASTER_BIG_ROWS rows and RASTER_THIN_COLUMNS
- * columns (or, on a GPU, RASTER_BIG_SAMPLES pixels); then it lists itself in `big` as
+ * of its rows, unless it spans more than RASTER_BIG_ROWS rows (or, on a GPU,
+ * RASTER_BIG_SAMPLES pixels); then it lists itself in `big` as
  * (triangle, first row, last row) (while there is room) for pass 2, so a floor plane does
  * not keep one work-item busy for the whole view. The samples are the same either way,
  * and every update is a min (or max) that does not depend on the order, so is the depth
@@ -412,8 +403,7 @@ inline int big_rectangle(const float2 corner[4], int count, int y0, int y1)
                              tri_vertices[3 * tri + 2].xyz)) return;                        \
     if (misses_every_sample(views + view_index, tri_vertices, tri, offsets, sample_count)) return; \
     PROJECT_TRIANGLE(return)                                                                \
-    if ((y1 - y0 + 1 > RASTER_BIG_ROWS && right - left >= RASTER_THIN_COLUMNS)                \
-        || (RASTER_BIG_SAMPLES > 0 && big_rectangle(corner, count, y0, y1))) {              \
+    if (y1 - y0 + 1 > RASTER_BIG_ROWS || (RASTER_BIG_SAMPLES > 0 && big_rectangle(corner, count, y0, y1))) { \
         uint slot = atomic_inc(big_count);                                                  \
         if (slot < RASTER_BIG_TRIANGLES) { vstore3((int3)(tri, y0, y1), slot, big); return; } \
     }                                                                                       \
