@@ -310,13 +310,7 @@ inline int misses_every_sample(global const view_t* view, global const float4* t
 }
 
 /* The triangle `tri` clipped and projected into the view; its rows are [y0, y1]. EXIT
- * leaves when nothing of it is in front of the view, or when every row's span
- * (row_span) would be empty because the polygon lies wholly left or right of the view:
- * such a triangle cost all its rows (a pole beside a cube face, 133 rows of a 1024² face).
- * A span's ends lie within the corners' columns, but for rounding of the edge points,
- * at most a few ulps of the columns' range (SPAN_ROUNDING), and row_span widens them by a
- * pixel and keeps columns [-1, width]: the polygon must lie more than 3 pixels beyond. */
-#define SPAN_ROUNDING 1e-5f
+ * leaves when nothing of it is in front of the view. */
 #define PROJECT_TRIANGLE(EXIT)                                                              \
     global const view_t* view = views + view_index;                                         \
     float3 v0 = tri_vertices[3 * tri].xyz, v1 = tri_vertices[3 * tri + 1].xyz,              \
@@ -329,12 +323,24 @@ inline int misses_every_sample(global const view_t* view, global const float4* t
         if (k < count) { top = FMIN(top, corner[k].y); bottom = FMAX(bottom, corner[k].y); } \
     int y0 = MAX_INT(FLOOR_INT(FMAX(top, -1.0f)) - 1, 0);                                   \
     int y1 = MIN_INT(CEIL_INT(FMIN(bottom, (float)view->height)), view->height - 1);        \
-    float left = INFINITY, right = -INFINITY;                                               \
-    for (int k = 0; k < 4; ++k)                                                             \
-        if (k < count) { left = FMIN(left, corner[k].x); right = FMAX(right, corner[k].x); } \
-    float span_slack = 3.0f + SPAN_ROUNDING * (FABS(left) + FABS(right));                   \
-    if (right < -span_slack || left > (float)view->width + span_slack) EXIT;               \
     triangle_test_t test = triangle_test(view, v0, v1, v2);
+
+/* Whether every row's span (row_span) of the projected polygon is empty because it lies
+ * wholly left or right of the view: pass 1 leaves such a triangle before its rows, which it
+ * cost one by one, or pass 2 a block at a time (a pole beside a cube face: 133 rows of a
+ * 1024² face). A span's ends lie within the corners' columns, but for the rounding of the
+ * edge points, at most a few ulps of the columns' range (SPAN_ROUNDING); row_span widens
+ * them by a pixel and keeps columns [-1, width]: the polygon lies more than 3 pixels beyond.
+ * A NaN corner counts as in the view. */
+#define SPAN_ROUNDING 1e-5f
+inline int beside_view(global const view_t* view, const float2 corner[4], int count)
+{
+    float left = INFINITY, right = -INFINITY;
+    for (int k = 0; k < 4; ++k) /* (a fixed count, as PROJECT_TRIANGLE's) */
+        if (k < count) { left = FMIN(left, corner[k].x); right = FMAX(right, corner[k].x); }
+    float slack = 3.0f + SPAN_ROUNDING * (FABS(left) + FABS(right));
+    return right < -slack || left > (float)view->width + slack;
+}
 
 /* Every sample of row y in columns [column_lo, column_hi] that the triangle may cover,
  * RASTER_LANES columns per ray test; BODY sees idx, t and tri for each sample the
@@ -385,7 +391,8 @@ inline int big_rectangle(const float2 corner[4], int count, int y0, int y1)
 
 /* Pass 1, one work-item per triangle (of `drawn`, the view's list of the `drawn_blocks`
  * blocks of `drawn_block` consecutive triangles that may reach it,
- * clrays/stages/raster_culling.py; NULL: every triangle): it visits every covered sample
+ * clrays/stages/raster_culling.py, over (drawn_block, listed blocks) work-items; NULL:
+ * every triangle, over (triangles)): it visits every covered sample
  * of its rows, unless it spans more than RASTER_BIG_ROWS rows (or, on a GPU,
  * RASTER_BIG_SAMPLES pixels); then it lists itself in `big` as
  * (triangle, first row, last row) (while there is room) for pass 2, so a floor plane does
@@ -394,15 +401,16 @@ inline int big_rectangle(const float2 corner[4], int count, int y0, int y1)
  * map. */
 #define FOR_EACH_COVERED_SAMPLE(BODY)                                                       \
     int tri = get_global_id(0);                                                             \
-    if (drawn) {                                                                            \
-        if (tri >= drawn_blocks * drawn_block) return;                                      \
-        tri = drawn[tri / drawn_block] * drawn_block + tri % drawn_block;                   \
+    if (drawn) { /* (triangle of its block, listed block) */                                \
+        if ((int)get_global_id(1) >= drawn_blocks) return;                                  \
+        tri += drawn[get_global_id(1)] * drawn_block;                                       \
     }                                                                                       \
     if (tri >= tri_count) return;                                                           \
     if (faces_away_from_view(views + view_index, tri_vertices[3 * tri], tri_vertices[3 * tri + 1].xyz, \
                              tri_vertices[3 * tri + 2].xyz)) return;                        \
     if (misses_every_sample(views + view_index, tri_vertices, tri, offsets, sample_count)) return; \
     PROJECT_TRIANGLE(return)                                                                \
+    if (beside_view(view, corner, count)) return;                                           \
     if (y1 - y0 + 1 > RASTER_BIG_ROWS || (RASTER_BIG_SAMPLES > 0 && big_rectangle(corner, count, y0, y1))) { \
         uint slot = atomic_inc(big_count);                                                  \
         if (slot < RASTER_BIG_TRIANGLES) { vstore3((int3)(tri, y0, y1), slot, big); return; } \

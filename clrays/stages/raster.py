@@ -55,6 +55,11 @@ def _drawn_count(inputs: FrameInputs) -> int:
 #: Whether each view draws only the triangles that may reach it (`_drawn_lists`); False:
 #: every view draws every triangle, as a yardstick for tests and benches.
 CULL_PER_VIEW = True
+#: A view whose list keeps more than this share of the triangles draws them all, without
+#: the list: pass 1 over a list of blocks (a 2-D launch, its triangles read through the
+#: list) took up to 1.2× the time of the plain launch where the list kept every block (the
+#: bunny's spot light at 1280×720; bench/RESULTS.md, "Raster culled per view").
+LIST_AT_MOST = 0.9
 
 
 def _drawn_lists(device: Device, inputs: FrameInputs, view_indices: list[int], anchor_ws: np.ndarray) -> list | None:
@@ -65,9 +70,12 @@ def _drawn_lists(device: Device, inputs: FrameInputs, view_indices: list[int], a
     if not CULL_PER_VIEW:
         return None
     count, geometry = _drawn_count(inputs), inputs.scene.geometry
+    block = raster_culling.CULL_BLOCK
     with timed("raster culling"):
         lists = [raster_culling.view_blocks(geometry, count, anchor_ws, inputs.views[view]) for view in view_indices]
-    return [(device.buffer(blocks, writable=False), len(blocks), raster_culling.CULL_BLOCK) for blocks in lists]
+    # A list that keeps nearly every triangle saves less than its launch costs: every triangle, as without one.
+    return [(None, count, 1) if len(blocks) * block >= LIST_AT_MOST * count else
+            (device.buffer(blocks, writable=False), len(blocks), block) for blocks in lists]
 
 
 #: The columns a work-item of a raster rows pass owns on a device other than a CPU: with
@@ -119,6 +127,19 @@ def raster_defines(device: Device, defines: dict | None = None) -> dict | None:
     return defines if raster_count_on_device(device) else {**(defines or {}), "RASTER_COUNT_ON_DEVICE": 0}
 
 
+def _blocks_launch(device: Device, block_count: int, block: int) -> tuple[tuple, tuple | None]:
+    """(global size, work-group shape) of pass 1 over `block_count` listed blocks of `block`
+    triangles: (block, listed blocks), so that a block's triangles are one run of dimension
+    0 under one list entry (consecutive loads). On a CPU device the list's length is padded
+    to whole work-groups of a power of two of blocks (Device.counted_launch): a view's list
+    changes with the camera, and PoCL compiles a kernel for each new work-group shape."""
+    (padded,), group = device.counted_launch(block_count * block)
+    if group is None:
+        return (block, block_count), None
+    blocks_per_group = max(1, group[0] // block)
+    return (block, -(-block_count // blocks_per_group) * blocks_per_group), (block, blocks_per_group)
+
+
 def raster_passes(device: Device, program: str, name: str, defines: dict | None, vertices, count: int, views,
                   view_indices: list[int], view_sizes: list[tuple[int, int]], offsets, sample_count: int, target: tuple,
                   timer: StageTimer, stage: str = "raster", drawn: list | None = None) -> None:
@@ -150,10 +171,12 @@ def raster_passes(device: Device, program: str, name: str, defines: dict | None,
     first_pass = device.kernel(program, name, defines)
     lists = []  # per view: its count of big triangles, and their (triangle, first row, last row)
     for view_index, (blocks, block_count, block) in zip(view_indices, drawn):
-        items = block_count * block
-        capacity = min(items, count, structs.RASTER_BIG_TRIANGLES)  # a triangle lists itself at most once
+        capacity = min(block_count * block, count, structs.RASTER_BIG_TRIANGLES)  # a triangle lists itself at most once
         lists.append((device.buffer(np.zeros(1, np.uint32)), device.buffer(nbytes=12 * capacity)))
-        timer.add(stage, first_pass(device.queue, (items,), None, vertices, np.int32(count), blocks,
+        global_size, local_size = (count,), None
+        if blocks is not None:
+            global_size, local_size = _blocks_launch(device, block_count, block)
+        timer.add(stage, first_pass(device.queue, global_size, local_size, vertices, np.int32(count), blocks,
                                     np.int32(block_count), np.int32(block), views, np.int32(view_index), offsets,
                                     np.int32(sample_count), *lists[-1], *target))
     rows_pass = device.kernel(program, f"{name}_rows", defines)
