@@ -140,3 +140,24 @@ def test_a_triangle_beside_the_view_costs_no_rows(device):
                buffers.views, np.int32(0), buffers.offsets, np.int32(1), counter, big, depth)
     assert int(device.read(counter, 1, np.uint32)[0]) == 0
     assert (device.read(depth, samples, np.uint32) == structs.DEPTH_EMPTY).all()
+
+
+def test_a_long_list_pads_to_whole_work_groups(device, monkeypatch):
+    # 151 listed blocks of 64 on a CPU device: work-groups of several blocks, the list padded
+    # to whole groups, and the padding's work-items draw nothing.
+    global_size, local_size = raster_stage._blocks_launch(device, 151, 64)
+    assert global_size[0] == 64 and global_size[1] >= 151
+    if device.is_cpu:
+        assert local_size[0] == 64 and global_size[1] % local_size[1] == 0
+        assert global_size[1] > 151  # (an odd count of blocks in groups of a power of two)
+    # A floor of 20 000 triangles under a point light and the camera: each view lists part of it.
+    monkeypatch.setattr(raster_stage, "LIST_AT_MOST", 2.0)
+    triangles = np.concatenate([grid_plane(0.0, 30.0, 100), box_triangles([-1, 0, -1], [1, 1.5, 1])])
+    scene = make_scene(triangles, [PointLight(LIGHT, np.full(3, 30.0))], width=48, height=32, shadow_map=64)
+    counts = [len(drawn) for drawn in _lists(scene)]
+    assert min(counts) < len(triangles) // 2 and max(counts) > 8000
+    culled = _maps(device, scene)
+    monkeypatch.setattr(raster_stage, "CULL_PER_VIEW", False)
+    every = _maps(device, scene)
+    for name, values in every.items():
+        assert np.array_equal(culled[name], values), f"{name} differs"
