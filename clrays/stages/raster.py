@@ -133,7 +133,7 @@ def _blocks_launch(device: Device, block_count: int, block: int) -> tuple[tuple,
     0 under one list entry (consecutive loads). On a CPU device the list's length is padded
     to whole work-groups of a power of two of blocks (Device.counted_launch): a view's list
     changes with the camera, and PoCL compiles a kernel for each new work-group shape."""
-    (padded,), group = device.counted_launch(block_count * block)
+    _, group = device.counted_launch(block_count * block)
     if group is None:
         return (block, block_count), None
     blocks_per_group = max(1, group[0] // block)
@@ -171,7 +171,8 @@ def raster_passes(device: Device, program: str, name: str, defines: dict | None,
     first_pass = device.kernel(program, name, defines)
     lists = []  # per view: its count of big triangles, and their (triangle, first row, last row)
     for view_index, (blocks, block_count, block) in zip(view_indices, drawn):
-        capacity = min(block_count * block, count, structs.RASTER_BIG_TRIANGLES)  # a triangle lists itself at most once
+        # a triangle lists itself at most once
+        capacity = min(block_count * block, count, structs.RASTER_BIG_TRIANGLES)
         lists.append((device.buffer(np.zeros(1, np.uint32)), device.buffer(nbytes=12 * capacity)))
         global_size, local_size = (count,), None
         if blocks is not None:
@@ -212,8 +213,8 @@ def _atomic64(device: Device) -> bool:
     return "cl_khr_int64_extended_atomics" in device.device.extensions
 
 
-def _draw(device: Device, buffers: FrameBuffers, reliefs: ReliefDrawer, anchor_ws: np.ndarray, views: list[int], offsets,
-          sample_count: int, count: int, nearest_triangles: bool, timer: StageTimer,
+def _draw(device: Device, buffers: FrameBuffers, reliefs: ReliefDrawer, anchor_ws: np.ndarray, views: list[int],
+          offsets, sample_count: int, count: int, nearest_triangles: bool, timer: StageTimer,
           keep_keys: bool = False, before_reliefs: list | None = None,
           depths_from_keys: bool = False) -> tuple[object, object, bool]:
     """Depth of `count` samples over `views` (the triangles, then the reliefs), and, with
@@ -278,8 +279,8 @@ def raster_camera(device: Device, buffers: FrameBuffers, timer: StageTimer) -> t
     """Camera depth and triangle id of every sample of every pixel."""
     inputs = buffers.inputs
     reliefs = ReliefDrawer(device, inputs.reliefs, inputs.eye_ws, timer)  # eye space, as the triangles
-    camera_depth, tri_id, _ = _draw(device, buffers, reliefs, inputs.eye_ws, [0], buffers.offsets, inputs.scene.image.spp,
-                                    inputs.samples, True, timer)
+    camera_depth, tri_id, _ = _draw(device, buffers, reliefs, inputs.eye_ws, [0], buffers.offsets,
+                                    inputs.scene.image.spp, inputs.samples, True, timer)
     return camera_depth, tri_id
 
 
@@ -325,9 +326,10 @@ def raster_shadow_map(device: Device, buffers: FrameBuffers, light_index: int, t
     # Where the walks cut the reliefs themselves (stages/relief_cuts.py), the volume reads the
     # keys from before the reliefs were drawn.
     before_reliefs = [] if cuts_reliefs(inputs, _atomic64(device)) else None
-    depth, blockers, keys = _draw(device, light_buffers, reliefs, inputs.light_anchor_ws[0], drawn, centre, 1, max(inputs.shadow_texels, 1),
-                                  keeps_blockers(inputs.scene.render), timer, keep_keys=True,
-                                  before_reliefs=before_reliefs, depths_from_keys=depth_in_keys(inputs.scene))
+    depth, blockers, keys = _draw(device, light_buffers, reliefs, inputs.light_anchor_ws[0], drawn, centre, 1,
+                                  max(inputs.shadow_texels, 1), keeps_blockers(inputs.scene.render), timer,
+                                  keep_keys=True, before_reliefs=before_reliefs,
+                                  depths_from_keys=depth_in_keys(inputs.scene))
     shadow_map = ShadowMap(depth, blockers, keys, inputs.shadow_texels, inputs.scene.geometry.count,
                            volume=before_reliefs[0] if before_reliefs else None, depth_in_keys=keys and depth is blockers)
     if shadow_map.triangles and shadow_map.texels:

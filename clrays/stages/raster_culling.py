@@ -76,7 +76,8 @@ def culled_blocks(boxes: tuple[np.ndarray, np.ndarray], origin: np.ndarray, view
     # each plane's normal in the boxes' frame: normal · (basisᵀ (p - origin)) = (basis normal) · (p - origin)
     world_normals = normals @ basis.T  # (5, 3)
     centre, half = 0.5 * (lo + hi) - np.asarray(origin, np.float64), 0.5 * (hi - lo)
-    farthest = centre @ world_normals.T + half @ np.abs(world_normals).T + offsets  # (B, 5): the box's point deepest inside
+    # (B, 5): each plane's value at the box's corner deepest inside it
+    farthest = centre @ world_normals.T + half @ np.abs(world_normals).T + offsets
     slack = CULL_SLACK * 2 * (np.abs(centre) + half).max(axis=1)
     return np.flatnonzero(~(farthest < -slack[:, None]).any(axis=1)).astype(np.int32)
 
