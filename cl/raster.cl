@@ -309,6 +309,33 @@ inline int misses_every_sample(global const view_t* view, global const float4* t
     return 1;
 }
 
+/* Whether the projected polygon's columns lie within one pixel's, (n, n + 1), with the
+ * rounding of row_span's edge points (SPAN_ROUNDING): then every row whose strip meets the
+ * polygon has the span row_span finds, [max(n - 1, 0), min(n + 2, width - 1)] (its ends'
+ * floor and ceiling are n and n + 1, less and more one), and a sliver of a pole, a fraction
+ * of a pixel wide and a hundred rows tall, skips row_span's edge cuts on each row: half
+ * its cost (bench/RESULTS.md, "Raster culled per view"). Only corners finite and within
+ * 2^20 pixels, where the edge points cannot overflow: a row that meets such a polygon
+ * always has one (a corner in its strip, or an edge across the strip's top). */
+#define SPAN_ROUNDING 1e-5f
+#define ONE_COLUMN_REACH 1048576.0f
+inline int one_column(const float2 corner[4], int count, int width, int* x0, int* x1)
+{
+    float left = INFINITY, right = -INFINITY;
+    for (int k = 0; k < 4; ++k) /* (a fixed count, as PROJECT_TRIANGLE's) */
+        if (k < count) {
+            if (!(FABS(corner[k].x) < ONE_COLUMN_REACH && FABS(corner[k].y) < ONE_COLUMN_REACH)) return 0;
+            left = FMIN(left, corner[k].x);
+            right = FMAX(right, corner[k].x);
+        }
+    float slack = SPAN_ROUNDING * (FABS(left) + FABS(right)) + 1e-6f;
+    float column = FLOOR(left - slack);
+    if (!(left - slack > column && right + slack < column + 1.0f)) return 0;
+    *x0 = MAX_INT((int)column - 1, 0);
+    *x1 = MIN_INT((int)column + 2, width - 1);
+    return 1;
+}
+
 /* The triangle `tri` clipped and projected into the view; its rows are [y0, y1]. EXIT
  * leaves when nothing of it is in front of the view. */
 #define PROJECT_TRIANGLE(EXIT)                                                              \
@@ -323,6 +350,8 @@ inline int misses_every_sample(global const view_t* view, global const float4* t
         if (k < count) { top = FMIN(top, corner[k].y); bottom = FMAX(bottom, corner[k].y); } \
     int y0 = MAX_INT(FLOOR_INT(FMAX(top, -1.0f)) - 1, 0);                                   \
     int y1 = MIN_INT(CEIL_INT(FMIN(bottom, (float)view->height)), view->height - 1);        \
+    int one_x0 = 0, one_x1 = -1; /* (one_column) */                                         \
+    int in_one_column = one_column(corner, count, view->width, &one_x0, &one_x1);          \
     triangle_test_t test = triangle_test(view, v0, v1, v2);
 
 /* Whether every row's span (row_span) of the projected polygon is empty because it lies
@@ -332,7 +361,6 @@ inline int misses_every_sample(global const view_t* view, global const float4* t
  * edge points, at most a few ulps of the columns' range (SPAN_ROUNDING); row_span widens
  * them by a pixel and keeps columns [-1, width]: the polygon lies more than 3 pixels beyond.
  * A NaN corner counts as in the view. */
-#define SPAN_ROUNDING 1e-5f
 inline int beside_view(global const view_t* view, const float2 corner[4], int count)
 {
     float left = INFINITY, right = -INFINITY;
@@ -351,8 +379,8 @@ inline int beside_view(global const view_t* view, const float2 corner[4], int co
  * below a polygon that ends a hair above y = 0, which row_span is left to decide). */
 #define COVERED_SAMPLES_OF_ROW(y, column_lo, column_hi, BODY, LANES_BODY)                  \
     if (!((float)(y + 1) < top || ((float)y > bottom && y > 0))) {                          \
-        int x0, x1;                                                                         \
-        if (row_span(corner, count, y, view->width, &x0, &x1)                               \
+        int x0 = one_x0, x1 = one_x1;                                                       \
+        if ((in_one_column && (float)y <= bottom ? 1 : row_span(corner, count, y, view->width, &x0, &x1)) \
             && (x0 = max(x0, column_lo)) <= (x1 = min(x1, column_hi)))                      \
             for (int s = 0; s < sample_count; ++s) {                                        \
                 float2 offset = offsets[s];                                                 \
