@@ -319,8 +319,12 @@ inline int misses_every_sample(global const view_t* view, global const float4* t
  * always has one (a corner in its strip, or an edge across the strip's top). */
 #define SPAN_ROUNDING 1e-5f
 #define ONE_COLUMN_REACH 1048576.0f
+#ifndef RASTER_ONE_COLUMN
+#define RASTER_ONE_COLUMN 1 /* 0: every row asks row_span (a test's yardstick) */
+#endif
 inline int one_column(const float2 corner[4], int count, int width, int* x0, int* x1)
 {
+    if (!RASTER_ONE_COLUMN) return 0;
     float left = INFINITY, right = -INFINITY;
     for (int k = 0; k < 4; ++k) /* (a fixed count, as PROJECT_TRIANGLE's) */
         if (k < count) {

@@ -161,3 +161,38 @@ def test_a_long_list_pads_to_whole_work_groups(device, monkeypatch):
     every = _maps(device, scene)
     for name, values in every.items():
         assert np.array_equal(culled[name], values), f"{name} differs"
+
+
+def _slivers(seed: int) -> np.ndarray:
+    """Thin poles' sides: upright quads 0.001–0.05 wide and 1–3 tall, turned at random."""
+    rng = np.random.default_rng(seed)
+    quads = []
+    for _ in range(150):
+        base = rng.uniform([-3.0, 0.0, -3.0], [3.0, 0.5, 3.0])
+        across = rng.uniform(0.001, 0.05) * np.array([np.cos(angle := rng.uniform(0, np.pi)), 0.0, np.sin(angle)])
+        up = np.array([rng.uniform(-0.05, 0.05), rng.uniform(1.0, 3.0), 0.0])
+        a, b, c, d = base, base + across, base + across + up, base + up
+        quads += [[a, b, c], [a, c, d]]
+    return np.array(quads)
+
+
+def test_slivers_within_one_column_keep_the_bits(device, monkeypatch):
+    # A polygon whose columns lie within one pixel's skips row_span on every row
+    # (cl/raster.cl, one_column): a device built without the shortcut asks row_span on each,
+    # and the camera's depths and triangles and the maps of a point light, a spot and a sun
+    # must be the same bits.
+    from clrays.device import Device
+    from conftest import TEST_DEVICE
+
+    monkeypatch.setitem(structs.KERNEL_CONSTANTS, "RASTER_ONE_COLUMN", 0)
+    every_row = Device(TEST_DEVICE)
+    monkeypatch.undo()
+    triangles = np.concatenate([_slivers(3), grid_plane(0.0, 6.0, 4)])
+    for light in LIGHTS.values():
+        for width, height, spp in [(160, 90, 1), (96, 54, 4)]:
+            scene = make_scene(triangles, light, width=width, height=height, spp=spp, shadow_map=256,
+                               position=(0, 1.5, 7), look_at=(0, 1.2, 0))
+            ours, theirs = _maps(device, scene), _maps(every_row, scene)
+            assert (ours["triangle"] >= 0).sum() > 100
+            for name, values in theirs.items():
+                assert np.array_equal(ours[name], values), (name, width, height, spp)
