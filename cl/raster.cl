@@ -314,9 +314,10 @@ inline int misses_every_sample(global const view_t* view, global const float4* t
  * polygon has the span row_span finds, [max(n - 1, 0), min(n + 2, width - 1)] (its ends'
  * floor and ceiling are n and n + 1, less and more one), and a sliver of a pole, a fraction
  * of a pixel wide and a hundred rows tall, skips row_span's edge cuts on each row: half
- * its cost (bench/RESULTS.md, "Raster culled per view"). Only corners finite and within
- * 2^20 pixels, where the edge points cannot overflow: a row that meets such a polygon
- * always has one (a corner in its strip, or an edge across the strip's top). */
+ * its cost (bench/RESULTS.md, "Raster culled per view"). Only for corners finite and within
+ * 2^20 pixels, where the edge points cannot overflow, and only on a row whose strip meets
+ * the polygon's rows (COVERED_SAMPLES_OF_ROW): there row_span always finds a point (a
+ * corner in the strip, or an edge across its top line), and so a span. */
 #define SPAN_ROUNDING 1e-5f
 #define ONE_COLUMN_REACH 1048576.0f
 #ifndef RASTER_ONE_COLUMN
@@ -380,7 +381,9 @@ inline int beside_view(global const view_t* view, const float2 corner[4], int co
  * [y, y + 1] lies wholly above or below the polygon is skipped before row_span, which
  * would find it empty: no corner lies in the strip, and no edge reaches it (the products
  * of its sign test are at least 2^-48, no underflow to 0, except for the strip [0, 1]
- * below a polygon that ends a hair above y = 0, which row_span is left to decide). */
+ * below a polygon that ends a hair above y = 0, which row_span is left to decide). A
+ * polygon within one pixel's columns takes its span from one_column on the rows its strip
+ * meets (not that strip [0, 1]). */
 #define COVERED_SAMPLES_OF_ROW(y, column_lo, column_hi, BODY, LANES_BODY)                  \
     if (!((float)(y + 1) < top || ((float)y > bottom && y > 0))) {                          \
         int x0 = one_x0, x1 = one_x1;                                                       \

@@ -8,9 +8,10 @@ spatial order, clrays.scene.geometry.spatial_order, so a block is a small part o
 each block's box against the view's planes (perspective: the four sides and the eye's
 plane; orthographic: the four sides and the plane the rays start from), and lists the
 blocks not wholly outside one of them; the raster passes launch over the listed blocks'
-triangles (cl/raster.cl, RASTER_ARGS's `drawn`). The test costs the host a few
-milliseconds for a million triangles (15 k blocks), where one per triangle cost seconds
-of numpy; the listed triangles that still miss the view leave pass 1 at once on the device.
+triangles (cl/raster.cl, RASTER_ARGS's `drawn`). The test costs the host a millisecond or
+two a view for a million triangles (15 k blocks), where one per triangle cost hundreds of
+milliseconds of numpy; the listed triangles that still miss the view leave pass 1 early on
+the device.
 
 A dropped block reaches no texel, so the maps keep their bits: every sample ray of a view
 lies inside its planes (sample positions inside the view's pixels), and a ray's hit lies
