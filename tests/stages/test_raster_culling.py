@@ -22,7 +22,7 @@ def _small(centre, size=0.3):
     return np.array([centre + [-size, -size, 0.0], centre + [size, -size, 0.0], centre + [0.0, size, size]])
 
 
-def _lists(scene, view_indices=None):
+def _lists(scene):
     """Per view of the light pass (0: the camera, then the light's), the triangles its list draws."""
     inputs = frame_inputs(scene)
     light = light_pass_inputs(inputs, 0)
@@ -44,7 +44,7 @@ def one_per_block(monkeypatch):
 
 def test_a_triangle_inside_one_face_is_drawn_there_alone(one_per_block):
     # Around the light: one triangle well inside +x, one across the seam of +x and +z (on
-    # the light's plane x = z), one inside -y; the camera looks down -z from z = 8.
+    # the light's plane x = z), one inside -y; the camera looks down -z from z = 20.
     triangles = np.stack([_small(LIGHT + [5.0, 0.0, 0.0]), _small(LIGHT + [4.0, 0.0, 4.0]),
                           _small(LIGHT + [0.2, -5.0, 0.1])])
     scene = make_scene(triangles, [PointLight(LIGHT, np.full(3, 30.0))], position=(0, 3, 20), look_at=(0, 3, 0))
