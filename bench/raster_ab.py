@@ -3,6 +3,7 @@ their depth maps are the same bits (bench/RESULTS.md, "Raster: lanes").
 
     .venv/bin/python bench/raster_ab.py --repo ../main --size 1280x720 --rounds 11
     .venv/bin/python bench/raster_ab.py --repo ../main --size 16x9 --rounds 15 demo bunny
+    .venv/bin/python bench/raster_ab.py --repo ../main --size 640x360 --rounds 3 /tmp/poles.yaml
 
 Each tree runs in its own process (its own clrays and cl/), and the two draw the same scene
 in turn, A then B, then B then A, so a load that comes and goes falls on both; a frame is the
@@ -61,7 +62,8 @@ def child(tree: Path, size: str, names: list[str]) -> None:
     width, height = size.split("x")
     frames = {}
     for name in names:
-        scene = load_scene(tree / "scenes" / f"{name}.yaml", overrides=[f"image.width={width}", f"image.height={height}"])
+        path = Path(name) if name.endswith(".yaml") else tree / "scenes" / f"{name}.yaml"  # a bench scene, or a file
+        scene = load_scene(path, overrides=[f"image.width={width}", f"image.height={height}"])
         frames[name] = (scene, upload(device, frame_inputs(scene)))
 
     def frame(name: str, digest: bool) -> dict:
@@ -92,7 +94,7 @@ def main() -> int:
     parser.add_argument("--repo", type=Path, required=True, help="the other source tree (A); this one is B")
     parser.add_argument("--size", type=image_size, default="1280x720", help="image WxH (default 1280x720)")
     parser.add_argument("--rounds", type=frame_count, default=11, help="frames per scene and tree (default 11)")
-    parser.add_argument("scenes", nargs="*", default=list(SCENES))
+    parser.add_argument("scenes", nargs="*", default=list(SCENES), help="bench scenes' names, or .yaml files")
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:

@@ -5,10 +5,10 @@
  * raster_nearest packs (depth, triangle) in one 64-bit atomic min and raster_split_runs
  * unpacks it; without 64-bit atomics, raster_resolve re-tests (ties: highest index).
  *
- * One work-item per triangle: it skips a closed solid's face turned away from the view
- * (solids.h), clips the triangle to the view's near side,
- * projects the polygon, and per pixel row ray-tests the samples in the row's span of
- * the polygon, 8 columns per test (intersect_columns); triangles taller than
+ * One work-item per triangle the view lists (clrays/stages/raster_culling.py): it skips
+ * a closed solid's face turned away from the view (solids.h), clips the triangle to the
+ * view's near side, projects the polygon, and per pixel row ray-tests the samples in the
+ * row's span of the polygon, 8 columns per test (intersect_columns); triangles taller than
  * RASTER_BIG_ROWS go to a second pass with one work-item per block of RASTER_ROWS_PER_ITEM
  * rows (and, on a GPU, a few dozen columns) of the view, which owns it (`*_rows`). The
  * ray test (not interpolation) makes depth exact along the sample ray, and two-sided.
@@ -309,6 +309,38 @@ inline int misses_every_sample(global const view_t* view, global const float4* t
     return 1;
 }
 
+/* Whether the projected polygon's columns lie within one pixel's, (n, n + 1), with the
+ * rounding of row_span's edge points (SPAN_ROUNDING): then every row whose strip meets the
+ * polygon has the span row_span finds, [max(n - 1, 0), min(n + 2, width - 1)] (its ends'
+ * floor and ceiling are n and n + 1, less and more one), and a sliver of a pole, a fraction
+ * of a pixel wide and a hundred rows tall, skips row_span's edge cuts on each row: half
+ * its cost (bench/RESULTS.md, "Raster culled per view"). Only for corners finite and within
+ * 2^20 pixels, where the edge points cannot overflow, and only on a row whose strip meets
+ * the polygon's rows (COVERED_SAMPLES_OF_ROW): there row_span always finds a point (a
+ * corner in the strip, or an edge across its top line), and so a span. */
+#define SPAN_ROUNDING 1e-5f
+#define ONE_COLUMN_REACH 1048576.0f
+#ifndef RASTER_ONE_COLUMN
+#define RASTER_ONE_COLUMN 1 /* 0: every row asks row_span (a test's yardstick) */
+#endif
+inline int one_column(const float2 corner[4], int count, int width, int* x0, int* x1)
+{
+    if (!RASTER_ONE_COLUMN) return 0;
+    float left = INFINITY, right = -INFINITY;
+    for (int k = 0; k < 4; ++k) /* (a fixed count, as PROJECT_TRIANGLE's) */
+        if (k < count) {
+            if (!(FABS(corner[k].x) < ONE_COLUMN_REACH && FABS(corner[k].y) < ONE_COLUMN_REACH)) return 0;
+            left = FMIN(left, corner[k].x);
+            right = FMAX(right, corner[k].x);
+        }
+    float slack = SPAN_ROUNDING * (FABS(left) + FABS(right)) + 1e-6f;
+    float column = FLOOR(left - slack);
+    if (!(left - slack > column && right + slack < column + 1.0f)) return 0;
+    *x0 = MAX_INT((int)column - 1, 0);
+    *x1 = MIN_INT((int)column + 2, width - 1);
+    return 1;
+}
+
 /* The triangle `tri` clipped and projected into the view; its rows are [y0, y1]. EXIT
  * leaves when nothing of it is in front of the view. */
 #define PROJECT_TRIANGLE(EXIT)                                                              \
@@ -323,7 +355,25 @@ inline int misses_every_sample(global const view_t* view, global const float4* t
         if (k < count) { top = FMIN(top, corner[k].y); bottom = FMAX(bottom, corner[k].y); } \
     int y0 = MAX_INT(FLOOR_INT(FMAX(top, -1.0f)) - 1, 0);                                   \
     int y1 = MIN_INT(CEIL_INT(FMIN(bottom, (float)view->height)), view->height - 1);        \
+    int one_x0 = 0, one_x1 = -1; /* (one_column) */                                         \
+    int in_one_column = one_column(corner, count, view->width, &one_x0, &one_x1);          \
     triangle_test_t test = triangle_test(view, v0, v1, v2);
+
+/* Whether every row's span (row_span) of the projected polygon is empty because it lies
+ * wholly left or right of the view: pass 1 leaves such a triangle before its rows, which it
+ * cost one by one, or pass 2 a block at a time (a pole beside a cube face: 133 rows of a
+ * 1024² face). A span's ends lie within the corners' columns, but for the rounding of the
+ * edge points, at most a few ulps of the columns' range (SPAN_ROUNDING); row_span widens
+ * them by a pixel and keeps columns [-1, width]: the polygon lies more than 3 pixels beyond.
+ * A NaN corner counts as in the view. */
+inline int beside_view(global const view_t* view, const float2 corner[4], int count)
+{
+    float left = INFINITY, right = -INFINITY;
+    for (int k = 0; k < 4; ++k) /* (a fixed count, as PROJECT_TRIANGLE's) */
+        if (k < count) { left = FMIN(left, corner[k].x); right = FMAX(right, corner[k].x); }
+    float slack = 3.0f + SPAN_ROUNDING * (FABS(left) + FABS(right));
+    return right < -slack || left > (float)view->width + slack;
+}
 
 /* Every sample of row y in columns [column_lo, column_hi] that the triangle may cover,
  * RASTER_LANES columns per ray test; BODY sees idx, t and tri for each sample the
@@ -331,11 +381,13 @@ inline int misses_every_sample(global const view_t* view, global const float4* t
  * [y, y + 1] lies wholly above or below the polygon is skipped before row_span, which
  * would find it empty: no corner lies in the strip, and no edge reaches it (the products
  * of its sign test are at least 2^-48, no underflow to 0, except for the strip [0, 1]
- * below a polygon that ends a hair above y = 0, which row_span is left to decide). */
+ * below a polygon that ends a hair above y = 0, which row_span is left to decide). A
+ * polygon within one pixel's columns takes its span from one_column on the rows its strip
+ * meets (not that strip [0, 1]). */
 #define COVERED_SAMPLES_OF_ROW(y, column_lo, column_hi, BODY, LANES_BODY)                  \
     if (!((float)(y + 1) < top || ((float)y > bottom && y > 0))) {                          \
-        int x0, x1;                                                                         \
-        if (row_span(corner, count, y, view->width, &x0, &x1)                               \
+        int x0 = one_x0, x1 = one_x1;                                                       \
+        if ((in_one_column && (float)y <= bottom ? 1 : row_span(corner, count, y, view->width, &x0, &x1)) \
             && (x0 = max(x0, column_lo)) <= (x1 = min(x1, column_hi)))                      \
             for (int s = 0; s < sample_count; ++s) {                                        \
                 float2 offset = offsets[s];                                                 \
@@ -372,19 +424,28 @@ inline int big_rectangle(const float2 corner[4], int count, int y0, int y1)
     return (right - left + 2.0f) * (float)(y1 - y0 + 1) > (float)RASTER_BIG_SAMPLES;
 }
 
-/* Pass 1, one work-item per triangle: it visits every covered sample of its rows, unless
- * it spans more than RASTER_BIG_ROWS rows (or, on a GPU, RASTER_BIG_SAMPLES pixels); then
- * it lists itself in `big` as (triangle, first row, last row) (while there is room) for
- * pass 2, so a floor plane does not keep one work-item busy for the whole view. The
- * samples are the same either way, and every update is a min (or max) that does not
- * depend on the order, so is the depth map. */
+/* Pass 1, one work-item per triangle (of `drawn`, the view's list of the `drawn_blocks`
+ * blocks of `drawn_block` consecutive triangles that may reach it,
+ * clrays/stages/raster_culling.py, over (drawn_block, listed blocks) work-items; NULL:
+ * every triangle, over (triangles)): it visits every covered sample
+ * of its rows, unless it spans more than RASTER_BIG_ROWS rows (or, on a GPU,
+ * RASTER_BIG_SAMPLES pixels); then it lists itself in `big` as
+ * (triangle, first row, last row) (while there is room) for pass 2, so a floor plane does
+ * not keep one work-item busy for the whole view. The samples are the same either way,
+ * and every update is a min (or max) that does not depend on the order, so is the depth
+ * map. */
 #define FOR_EACH_COVERED_SAMPLE(BODY)                                                       \
     int tri = get_global_id(0);                                                             \
+    if (drawn) { /* (triangle of its block, listed block) */                                \
+        if ((int)get_global_id(1) >= drawn_blocks) return;                                  \
+        tri += drawn[get_global_id(1)] * drawn_block;                                       \
+    }                                                                                       \
     if (tri >= tri_count) return;                                                           \
     if (faces_away_from_view(views + view_index, tri_vertices[3 * tri], tri_vertices[3 * tri + 1].xyz, \
                              tri_vertices[3 * tri + 2].xyz)) return;                        \
     if (misses_every_sample(views + view_index, tri_vertices, tri, offsets, sample_count)) return; \
     PROJECT_TRIANGLE(return)                                                                \
+    if (beside_view(view, corner, count)) return;                                           \
     if (y1 - y0 + 1 > RASTER_BIG_ROWS || (RASTER_BIG_SAMPLES > 0 && big_rectangle(corner, count, y0, y1))) { \
         uint slot = atomic_inc(big_count);                                                  \
         if (slot < RASTER_BIG_TRIANGLES) { vstore3((int3)(tri, y0, y1), slot, big); return; } \
@@ -433,7 +494,8 @@ inline int big_rectangle(const float2 corner[4], int count, int y0, int y1)
             COVERED_SAMPLES_OF_ROW(y, column0, column1, OWNED_BODY, LANES_BODY)             \
     }
 
-#define RASTER_ARGS global const float4* tri_vertices, int tri_count, global const view_t* views, \
+#define RASTER_ARGS global const float4* tri_vertices, int tri_count, global const int* drawn,   \
+                    int drawn_blocks, int drawn_block, global const view_t* views,             \
                     int view_index, global const float2* offsets, int sample_count,           \
                     global uint* big_count, global int* big
 

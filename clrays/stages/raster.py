@@ -13,6 +13,8 @@ import numpy as np
 from .. import structs
 from ..device import Device, StageTimer
 from ..inputs import FrameBuffers, FrameInputs, light_pass_inputs, opaque_occluders
+from ..scene.host_steps import timed
+from . import raster_culling
 from .relief import ReliefDrawer
 from .relief_cuts import cuts_reliefs
 from .shaft_edges import keeps_blockers
@@ -36,15 +38,44 @@ class RasterResult:
 
 
 def _launch(device: Device, buffers: FrameBuffers, name: str, defines: dict | None, view_indices: list[int],
-            offsets, sample_count: int, target: tuple, timer: StageTimer) -> None:
-    """Both passes of one raster kernel over every triangle the frame draws, for some views."""
-    count = buffers.inputs.tri_vertices.shape[0] // 3
-    if buffers.inputs.raster_triangles is not None:  # the reliefs' triangles, last, are pre-warped instead
-        count = buffers.inputs.raster_triangles
+            offsets, sample_count: int, target: tuple, timer: StageTimer, drawn: list) -> None:
+    """Both passes of one raster kernel over the triangles each view draws (`drawn`,
+    `_drawn_lists`), for some views."""
     sizes = [(int(buffers.inputs.views[view]["height"]), int(buffers.inputs.views[view]["width"]))
              for view in view_indices]
-    raster_passes(device, "raster", name, defines, buffers.tri_vertices, count, buffers.views, view_indices,
-                  sizes, offsets, sample_count, target, timer)
+    raster_passes(device, "raster", name, defines, buffers.tri_vertices, _drawn_count(buffers.inputs),
+                  buffers.views, view_indices, sizes, offsets, sample_count, target, timer, drawn=drawn)
+
+
+def _drawn_count(inputs: FrameInputs) -> int:
+    """The triangles the frame rasterizes: the reliefs' triangles, last, are pre-warped instead."""
+    return inputs.tri_vertices.shape[0] // 3 if inputs.raster_triangles is None else inputs.raster_triangles
+
+
+#: Whether each view draws only the triangles that may reach it (`_drawn_lists`); False:
+#: every view draws every triangle, as a yardstick for tests and benches.
+CULL_PER_VIEW = True
+#: A view whose list keeps more than this share of the triangles draws them all, without
+#: the list: pass 1 over a list of blocks (a 2-D launch, its triangles read through the
+#: list) took up to 1.2× the time of the plain launch where the list kept every block (the
+#: bunny's spot light at 1280×720; bench/RESULTS.md, "Raster culled per view").
+LIST_AT_MOST = 0.9
+
+
+def _drawn_lists(device: Device, inputs: FrameInputs, view_indices: list[int], anchor_ws: np.ndarray) -> list | None:
+    """Per view, (its list on the device of the blocks of CULL_BLOCK triangles that may
+    reach it, their count, CULL_BLOCK) (clrays.stages.raster_culling), for vertices anchored
+    at `anchor_ws` (world space); the host's time is `--stats`'s host step `raster culling`.
+    None without CULL_PER_VIEW."""
+    if not CULL_PER_VIEW:
+        return None
+    count, geometry = _drawn_count(inputs), inputs.scene.geometry
+    block = raster_culling.CULL_BLOCK
+    with timed("raster culling"):
+        lists = [raster_culling.view_blocks(geometry, count, anchor_ws, inputs.views[view]) for view in view_indices]
+    # A list that keeps nearly every triangle saves less than its launch costs: every triangle, as without one.
+    return [(None, count, 1) if len(blocks) * block >= LIST_AT_MOST * count else
+            (device.buffer(blocks, writable=False), len(blocks), block) for blocks in lists]
 
 
 #: The columns a work-item of a raster rows pass owns on a device other than a CPU: with
@@ -96,9 +127,22 @@ def raster_defines(device: Device, defines: dict | None = None) -> dict | None:
     return defines if raster_count_on_device(device) else {**(defines or {}), "RASTER_COUNT_ON_DEVICE": 0}
 
 
+def _blocks_launch(device: Device, block_count: int, block: int) -> tuple[tuple, tuple | None]:
+    """(global size, work-group shape) of pass 1 over `block_count` listed blocks of `block`
+    triangles: (block, listed blocks), so that a block's triangles are one run of dimension
+    0 under one list entry (consecutive loads). On a CPU device the list's length is padded
+    to whole work-groups of a power of two of blocks (Device.counted_launch): a view's list
+    changes with the camera, and PoCL compiles a kernel for each new work-group shape."""
+    _, group = device.counted_launch(block_count * block)
+    if group is None:
+        return (block, block_count), None
+    blocks_per_group = max(1, group[0] // block)
+    return (block, -(-block_count // blocks_per_group) * blocks_per_group), (block, blocks_per_group)
+
+
 def raster_passes(device: Device, program: str, name: str, defines: dict | None, vertices, count: int, views,
                   view_indices: list[int], view_sizes: list[tuple[int, int]], offsets, sample_count: int, target: tuple,
-                  timer: StageTimer, stage: str = "raster") -> None:
+                  timer: StageTimer, stage: str = "raster", drawn: list | None = None) -> None:
     """The two passes of one raster kernel (cl/raster.cl's RASTER_KERNELS, built in
     `program`) over `count` triangles for each view of `view_indices` (`view_sizes`:
     (rows, columns)): `name`, one work-item per triangle, lists the triangles taller than
@@ -113,21 +157,34 @@ def raster_passes(device: Device, program: str, name: str, defines: dict | None,
     its rows pass, whose work-items return at once. On a CPU device the host waits once for
     every view's count and launches the rows passes of the views that listed any. Pass 1
     lists every view before any rows pass runs; the views have texels of their own, and
-    every update is a min or a max, which no order changes."""
-    if count == 0 or not view_indices:
+    every update is a min or a max, which no order changes.
+    `drawn`: per view, (a device list of the blocks of triangles pass 1 visits, its length,
+    the triangles per block), the blocks that may reach the view
+    (clrays.stages.raster_culling); None: all `count`. A view whose list is empty launches
+    nothing."""
+    drawn = drawn or [(None, count, 1)] * len(view_indices)
+    kept = [(view, size, listed) for view, size, listed in zip(view_indices, view_sizes, drawn) if listed[1]]
+    if not kept:
         return
-    capacity = min(count, structs.RASTER_BIG_TRIANGLES)  # a triangle lists itself at most once
+    view_indices, view_sizes, drawn = (list(column) for column in zip(*kept))
     defines = raster_defines(device, defines)
     first_pass = device.kernel(program, name, defines)
     lists = []  # per view: its count of big triangles, and their (triangle, first row, last row)
-    for view_index in view_indices:
+    for view_index, (blocks, block_count, block) in zip(view_indices, drawn):
+        # a triangle lists itself at most once
+        capacity = min(block_count * block, count, structs.RASTER_BIG_TRIANGLES)
         lists.append((device.buffer(np.zeros(1, np.uint32)), device.buffer(nbytes=12 * capacity)))
-        timer.add(stage, first_pass(device.queue, (count,), None, vertices, np.int32(count), views,
-                                    np.int32(view_index), offsets, np.int32(sample_count), *lists[-1], *target))
+        global_size, local_size = (count,), None
+        if blocks is not None:
+            global_size, local_size = _blocks_launch(device, block_count, block)
+        timer.add(stage, first_pass(device.queue, global_size, local_size, vertices, np.int32(count), blocks,
+                                    np.int32(block_count), np.int32(block), views, np.int32(view_index), offsets,
+                                    np.int32(sample_count), *lists[-1], *target))
     rows_pass = device.kernel(program, f"{name}_rows", defines)
     on_device = raster_count_on_device(device)
     counts = [counter for counter, _ in lists] if on_device else \
-        [np.int32(min(int(listed[0]), capacity)) for listed in device.read_all([(c, 1) for c, _ in lists], np.uint32)]
+        [np.int32(min(int(listed[0]), structs.RASTER_BIG_TRIANGLES))
+         for listed in device.read_all([(c, 1) for c, _ in lists], np.uint32)]
     for view_index, (height, width), (_, big), big_count in zip(view_indices, view_sizes, lists, counts):
         if not on_device and not big_count:
             continue
@@ -139,8 +196,8 @@ def raster_passes(device: Device, program: str, name: str, defines: dict | None,
 
 
 def _rasterize(device: Device, buffers: FrameBuffers, view_indices: list[int], offsets, sample_count: int,
-               depth, timer: StageTimer) -> None:
-    _launch(device, buffers, "raster_depth", None, view_indices, offsets, sample_count, (depth,), timer)
+               depth, timer: StageTimer, drawn: list) -> None:
+    _launch(device, buffers, "raster_depth", None, view_indices, offsets, sample_count, (depth,), timer, drawn)
 
 
 def _split(device: Device, defines: dict, nearest, count: int, depth, triangle, timer: StageTimer) -> None:
@@ -156,8 +213,8 @@ def _atomic64(device: Device) -> bool:
     return "cl_khr_int64_extended_atomics" in device.device.extensions
 
 
-def _draw(device: Device, buffers: FrameBuffers, reliefs: ReliefDrawer, views: list[int], offsets,
-          sample_count: int, count: int, nearest_triangles: bool, timer: StageTimer,
+def _draw(device: Device, buffers: FrameBuffers, reliefs: ReliefDrawer, anchor_ws: np.ndarray, views: list[int],
+          offsets, sample_count: int, count: int, nearest_triangles: bool, timer: StageTimer,
           keep_keys: bool = False, before_reliefs: list | None = None,
           depths_from_keys: bool = False) -> tuple[object, object, bool]:
     """Depth of `count` samples over `views` (the triangles, then the reliefs), and, with
@@ -168,14 +225,16 @@ def _draw(device: Device, buffers: FrameBuffers, reliefs: ReliefDrawer, views: l
     the depths are split out; with `depths_from_keys` too, not even those (the first value is
     the keys: their readers take every other word). The third value: whether the second is
     keys. `before_reliefs`, a list, gets a copy of the keys as the triangles alone drew them
-    (where there are keys)."""
+    (where there are keys). `anchor_ws`: where the frame's vertices are anchored (world space),
+    for the views' lists of the triangles that may reach them (`_drawn_lists`)."""
     inputs = buffers.inputs
     triangle = None
+    drawn = _drawn_lists(device, inputs, views, anchor_ws)
     if nearest_triangles and _atomic64(device):
         defines = {"RASTER_ATOMIC64": 1}
         nearest = device.buffer(nbytes=8 * count)
         device.fill(nearest, np.uint64((int(structs.DEPTH_EMPTY) << 32) | 0xFFFFFFFF), 8 * count, timer, "raster")
-        _launch(device, buffers, "raster_nearest", defines, views, offsets, sample_count, (nearest,), timer)
+        _launch(device, buffers, "raster_nearest", defines, views, offsets, sample_count, (nearest,), timer, drawn)
         if before_reliefs is not None:
             kept = device.buffer(nbytes=8 * count)
             timer.add("raster", device.cl.enqueue_copy(device.queue, kept, nearest, byte_count=8 * count))
@@ -194,13 +253,13 @@ def _draw(device: Device, buffers: FrameBuffers, reliefs: ReliefDrawer, views: l
         return depth, triangle, False
     depth = device.buffer(nbytes=4 * count)
     device.fill(depth, structs.DEPTH_EMPTY, 4 * count, timer, "raster")
-    _rasterize(device, buffers, views, offsets, sample_count, depth, timer)
+    _rasterize(device, buffers, views, offsets, sample_count, depth, timer, drawn)
     for view in views:
         reliefs.map("relief_map_depth", None, buffers.views, inputs.views, view, offsets, sample_count, (depth,))
     if nearest_triangles:
         triangle = device.buffer(nbytes=4 * count)
         device.fill(triangle, np.int32(-1), 4 * count, timer, "raster")
-        _launch(device, buffers, "raster_resolve", None, views, offsets, sample_count, (depth, triangle), timer)
+        _launch(device, buffers, "raster_resolve", None, views, offsets, sample_count, (depth, triangle), timer, drawn)
         for view in views:
             reliefs.map("relief_map_resolve", None, buffers.views, inputs.views, view, offsets, sample_count,
                         (depth, triangle))
@@ -220,8 +279,8 @@ def raster_camera(device: Device, buffers: FrameBuffers, timer: StageTimer) -> t
     """Camera depth and triangle id of every sample of every pixel."""
     inputs = buffers.inputs
     reliefs = ReliefDrawer(device, inputs.reliefs, inputs.eye_ws, timer)  # eye space, as the triangles
-    camera_depth, tri_id, _ = _draw(device, buffers, reliefs, [0], buffers.offsets, inputs.scene.image.spp,
-                                    inputs.samples, True, timer)
+    camera_depth, tri_id, _ = _draw(device, buffers, reliefs, inputs.eye_ws, [0], buffers.offsets,
+                                    inputs.scene.image.spp, inputs.samples, True, timer)
     return camera_depth, tri_id
 
 
@@ -267,9 +326,10 @@ def raster_shadow_map(device: Device, buffers: FrameBuffers, light_index: int, t
     # Where the walks cut the reliefs themselves (stages/relief_cuts.py), the volume reads the
     # keys from before the reliefs were drawn.
     before_reliefs = [] if cuts_reliefs(inputs, _atomic64(device)) else None
-    depth, blockers, keys = _draw(device, light_buffers, reliefs, drawn, centre, 1, max(inputs.shadow_texels, 1),
-                                  keeps_blockers(inputs.scene.render), timer, keep_keys=True,
-                                  before_reliefs=before_reliefs, depths_from_keys=depth_in_keys(inputs.scene))
+    depth, blockers, keys = _draw(device, light_buffers, reliefs, inputs.light_anchor_ws[0], drawn, centre, 1,
+                                  max(inputs.shadow_texels, 1), keeps_blockers(inputs.scene.render), timer,
+                                  keep_keys=True, before_reliefs=before_reliefs,
+                                  depths_from_keys=depth_in_keys(inputs.scene))
     shadow_map = ShadowMap(depth, blockers, keys, inputs.shadow_texels, inputs.scene.geometry.count,
                            volume=before_reliefs[0] if before_reliefs else None, depth_in_keys=keys and depth is blockers)
     if shadow_map.triangles and shadow_map.texels:
