@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from clrays.scene import gltf
 from clrays.scene.load import load_scene
 from clrays.scene.model import DirectionalLight, PointLight, SpotLight
 
@@ -103,3 +104,76 @@ def test_the_other_lighting_modes_with_their_documented_light_scale(tmp_path, mo
     for light, expected in zip((point, hard, soft), reference):
         np.testing.assert_allclose(light.intensity, expected.intensity, rtol=1e-12)
     np.testing.assert_allclose(_export(tmp_path, mode, sun_scale)[3].irradiance, reference[3].irradiance, rtol=1e-12)
+
+
+# --------------------------------------------------------------------------- the spot's blend
+
+#: `asset` of the same export, as written.
+EXPORTED_ASSET = {"generator": "Khronos glTF Blender I/O v4.5.51", "version": "2.0"}
+SPOT_SOFT = 2  # its index in EXPORTED_LIGHTS: spot_size 70°, spot_blend 0.15
+
+
+def _soft_spot(tmp_path, asset: dict, outer: float | None = None):
+    """The exported soft spot, alone over a floor, in a file with this `asset` (and this outer cone)."""
+    b = GltfBuilder()
+    b.doc["asset"] = dict(asset)
+    b.node(mesh=b.mesh([[-4, 0, -4], [4, 0, -4], [4, 0, 4], [-4, 0, 4]], [[0, 2, 1], [0, 3, 2]]))
+    light = json.loads(EXPORTED_LIGHTS)[SPOT_SOFT]
+    if outer is not None:
+        light["spot"] = {"innerConeAngle": outer * 0.85, "outerConeAngle": outer}
+    b.light(**light)
+    b.node(**{**json.loads(EXPORTED_NODES)[SPOT_SOFT], "extensions": {"KHR_lights_punctual": {"light": 0}}})
+    path = tmp_path / "soft.glb"
+    path.write_bytes(b.glb())
+    return load_scene(path).lights[0]
+
+
+def test_cycles_spot_blend_by_hand():
+    """Blender's falloff of a 70° spot of blend 0.15 as exported (inner = outer × 0.85): Cycles fades
+    in over the outer 0.15 × (1 − cos 35°) of cosθ along smoothstep: 0 at 35°, 0.15625 a quarter
+    of the way in, ½ halfway, 1 from there on; the spec's curve, from 29.75°, is dimmer there."""
+    spot = json.loads(EXPORTED_LIGHTS)[SPOT_SOFT]["spot"]
+    inner, outer = spot["innerConeAngle"], spot["outerConeAngle"]
+    assert inner == pytest.approx(outer * (1 - 0.15), rel=1e-7)
+    ring = 0.15 * (1 - math.cos(outer))
+    cosines = math.cos(outer) + ring * np.array([-0.5, 0.0, 0.25, 0.5, 1.0, 1.5])
+    np.testing.assert_allclose(gltf.spot_attenuation(cosines, inner, outer, "blender"),
+                               [0, 0, 0.15625, 0.5, 1, 1], atol=1e-12)
+    halfway = (cosines[3] - math.cos(outer)) / (math.cos(inner) - math.cos(outer))
+    assert gltf.spot_attenuation(cosines[3], inner, outer) == pytest.approx(halfway ** 2, rel=1e-12)
+    assert halfway ** 2 < 0.5 / 2
+
+
+def test_a_file_blender_wrote_gets_cycles_falloff_and_others_the_specs(tmp_path):
+    """The soft spot of Blender's export, looked up as every method looks it up, follows Cycles'
+    blend (a render of it matches Cycles within its noise, tools/blender_scenes.py); the same
+    light in a file another exporter wrote has the spec's falloff texture."""
+    from clrays.physics.light_texture import light_texture
+
+    inner, outer = 0.5192354463883326, 0.6108652353286743
+    spot = _soft_spot(tmp_path, EXPORTED_ASSET)
+    assert isinstance(spot, SpotLight) and spot.cone_deg == pytest.approx(35.0, abs=1e-5)
+    rng = np.random.default_rng(5)
+    angles, azimuths = rng.uniform(0, outer, 4000), rng.uniform(0, 2 * math.pi, 4000)
+    directions = np.stack([np.sin(angles) * np.cos(azimuths), -np.cos(angles), np.sin(angles) * np.sin(azimuths)], 1)
+    looked_up = light_texture(spot, spot.position + directions * 3.0)[:, 0]
+    cycles = gltf.spot_attenuation(np.cos(angles), inner, outer, "blender")
+    # bilinear between texels 0.11° apart: within 2e-3 where smoothstep's curvature jumps
+    assert np.abs(looked_up - cycles).max() < 2e-3
+    assert np.abs(looked_up - gltf.spot_attenuation(np.cos(angles), inner, outer)).max() > 0.3  # not the spec's
+
+    other = _soft_spot(tmp_path, {"generator": "another exporter", "version": "2.0"})
+    assert other.texture is gltf.falloff_texture(inner, outer)  # the spec's, shared
+
+
+def test_a_wide_soft_spot_blender_wrote_keeps_cycles_falloff_in_its_cube(tmp_path):
+    """Wider than 85°, the spot is a point light whose cube texture carries the falloff: Cycles'
+    for a file Blender wrote, kept when an animated node turns it."""
+    outer = math.radians(88.0)
+    light = _soft_spot(tmp_path, EXPORTED_ASSET, outer)
+    assert isinstance(light, PointLight) and light.texture.falloff == "blender"
+    assert light.texture.aimed(np.array([1.0, 0.0, 0.0])).falloff == "blender"
+    # the -Y face's centre texel looks down the spot's axis, in the full beam; its ring of Cycles' fade
+    # lies at cosθ ∈ [cos 88°, cos 88° + 0.15 (1 − cos 88°)], within the cube
+    assert light.texture.texels[3 * light.texture.width + light.texture.width // 2,
+                                light.texture.width // 2, 0] == pytest.approx(1.0, abs=1e-3)
