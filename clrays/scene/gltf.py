@@ -18,7 +18,8 @@ extension defines it (cd for point and spot lights, lux for directional ones): d
 falloff between `innerConeAngle` and `outerConeAngle` (the extension's smooth
 attenuation) becomes a light texture over the cone, which every method reads
 (docs/light-textures.md); a soft spot wider than that texture can span is a point light
-whose cube texture is the falloff, zero outside the cone.
+whose cube texture is the falloff, zero outside the cone. A file Blender wrote gets the
+falloff Cycles gives the spot it came from (`spot_attenuation`'s "blender").
 """
 from __future__ import annotations
 
@@ -66,6 +67,8 @@ SUPPORTED_EXTENSIONS = ("KHR_lights_punctual", "KHR_mesh_quantization", gltf_mot
 #: clrays's surfaces are diffuse with one albedo per primitive, so the file renders without
 #: them, with a notice naming them. Every `KHR_materials_*` is one too.
 MATERIAL_ONLY_EXTENSIONS = ("KHR_texture_transform", "KHR_texture_basisu", "EXT_texture_webp", "EXT_texture_avif")
+#: How `asset.generator` of a file Blender's exporter wrote begins: its spots get Cycles' falloff.
+BLENDER_GENERATOR = "Khronos glTF Blender I/O"
 #: lm/W: the luminous efficacy that turns KHR_lights_punctual's cd and lux into W/sr and
 #: W/m², the factor Blender's exporter applies the other way in its default lighting mode.
 LUMENS_PER_WATT = 683.0
@@ -928,6 +931,8 @@ def _lights(reader: _Reader, graph: NodeGraph, world: dict[int, np.ndarray], lig
     extension = reader.get(reader.get(reader.doc, "extensions", "", "dict", {}), "KHR_lights_punctual",
                            "extensions", "dict", {})
     definitions = reader.get(extension, "lights", "extensions.KHR_lights_punctual", "list", [])
+    generator = reader.doc["asset"].get("generator")  # asset: a dict, checked on reading
+    falloff = "blender" if isinstance(generator, str) and generator.startswith(BLENDER_GENERATOR) else "gltf"
     nodes = reader.items("nodes")
     lights, light_nodes = [], []
     for index in graph.order:
@@ -945,12 +950,13 @@ def _lights(reader: _Reader, graph: NodeGraph, world: dict[int, np.ndarray], lig
             reader.fail(path, f"at most {MAX_LIGHTS} lights (each light costs its own raster, volume and visibility stages every frame)",
                         f"{len(lights) + 1} with this one")
         lights.append(_light(reader, definitions[which], f"extensions.KHR_lights_punctual.lights.{which}",
-                             world[index], light_scale))
+                             world[index], light_scale, falloff))
         light_nodes.append(index)
     return lights, light_nodes
 
 
-def _light(reader: _Reader, light: dict, path: str, matrix: np.ndarray, light_scale: float) -> Light:
+def _light(reader: _Reader, light: dict, path: str, matrix: np.ndarray, light_scale: float,
+           falloff: str = "gltf") -> Light:
     kind = reader.get(light, "type", path, "string")
     colour = reader.numbers(light, "color", path, 3, (1.0, 1.0, 1.0), 0.0)
     # cd → W/sr, lux → W/m²: Blender's default export (cd = W / 4π × 683) renders at Cycles' brightness.
@@ -985,34 +991,44 @@ def _light(reader: _Reader, light: dict, path: str, matrix: np.ndarray, light_sc
     hard = math.cos(inner) - math.cos(outer) <= 0.001
     if hard or math.degrees(outer) <= MAX_SPOT_OUTER_DEG:
         return SpotLight(position=position, direction=direction, cone_deg=math.degrees(outer), intensity=power,
-                         texture=None if hard else falloff_texture(inner, outer))
+                         texture=None if hard else falloff_texture(inner, outer, falloff=falloff))
     # Wider than the spot's texture can span (it covers [-tan c, tan c]): the point light's
     # cube carries the falloff, zero outside the cone, and its cube shadow map the shadows,
     # as a YAML spot wider than 75° has anyway.
-    return PointLight(position=position, intensity=power, texture=cone_cube(inner, outer, direction))
+    return PointLight(position=position, intensity=power, texture=cone_cube(inner, outer, direction, falloff=falloff))
 
 
-def spot_attenuation(cos_angle, inner: float, outer: float):
-    """KHR_lights_punctual's recommended smooth falloff between the cone angles (radians):
-    clamp(cosθ·scale + offset, 0, 1)² with scale = 1/max(0.001, cos inner − cos outer),
-    offset = −cos outer·scale."""
+def spot_attenuation(cos_angle, inner: float, outer: float, falloff: str = "gltf"):
+    """A spot's falloff between the cone angles (radians). "gltf": KHR_lights_punctual's
+    recommended one, clamp(cosθ·scale + offset, 0, 1)² with scale = 1/max(0.001, cos inner −
+    cos outer), offset = −cos outer·scale. "blender": Cycles' (and EEVEE's) spot blend, which
+    the extension's angles came from: Blender's exporter writes inner = outer·(1 − blend), and
+    Cycles fades in over the outer (1 − cos outer)·blend of cosθ, smoothstep(x) = x²(3 − 2x) with
+    x = (cosθ − cos outer) / ((1 − cos outer)·blend) clamped to [0, 1]."""
+    if falloff == "blender":
+        blend = 1.0 - inner / outer
+        ring = max((1.0 - math.cos(outer)) * blend, 1e-12)
+        x = np.clip((np.asarray(cos_angle, dtype=np.float64) - math.cos(outer)) / ring, 0.0, 1.0)
+        return x * x * (3.0 - 2.0 * x)
     scale = 1.0 / max(0.001, math.cos(inner) - math.cos(outer))
     offset = -math.cos(outer) * scale
     return np.clip(np.asarray(cos_angle, dtype=np.float64) * scale + offset, 0.0, 1.0) ** 2
 
 
-_FALLOFF_TEXTURES: dict[tuple[float, float], LightTexture] = {}
+_FALLOFF_TEXTURES: dict[tuple, LightTexture] = {}
 
 
-def falloff_texture(inner: float, outer: float, side: int = FALLOFF_TEXTURE_SIDE) -> LightTexture:
-    """A spot's cone falloff as its light texture: the texture fills [−tan outer, tan outer]²
-    of the plane at distance 1 along the axis (docs/light-textures.md), so texel centre
-    (sx, sy) lies at tanθ = tan(outer)·|(sx, sy)|. One texture per cone pair, shared."""
-    key = (float(inner), float(outer), side)
+def falloff_texture(inner: float, outer: float, side: int = FALLOFF_TEXTURE_SIDE,
+                    falloff: str = "gltf") -> LightTexture:
+    """A spot's cone falloff (`spot_attenuation`) as its light texture: the texture fills
+    [−tan outer, tan outer]² of the plane at distance 1 along the axis (docs/light-textures.md),
+    so texel centre (sx, sy) lies at tanθ = tan(outer)·|(sx, sy)|. One texture per cone pair and
+    falloff, shared."""
+    key = (float(inner), float(outer), side, falloff)
     if key not in _FALLOFF_TEXTURES:
         centres = (np.arange(side) + 0.5) / side * 2.0 - 1.0
         radius = np.hypot(centres[None, :], centres[:, None]) * math.tan(outer)
-        values = spot_attenuation(1.0 / np.sqrt(1.0 + radius * radius), inner, outer)
+        values = spot_attenuation(1.0 / np.sqrt(1.0 + radius * radius), inner, outer, falloff)
         texels = np.repeat(values[:, :, None], 3, axis=2).astype(np.float32)
         _FALLOFF_TEXTURES[key] = LightTexture(texels, f"cone falloff {math.degrees(inner):g}° to "
                                                       f"{math.degrees(outer):g}°", smooth=True)
@@ -1027,9 +1043,10 @@ class ConeCube(LightTexture):
     axis: tuple[float, float, float] = (0.0, 0.0, -1.0)
     inner: float = 0.0
     outer: float = math.pi / 2
+    falloff: str = "gltf"
 
     def aimed(self, direction: np.ndarray) -> "ConeCube":
-        return cone_cube(self.inner, self.outer, direction, self.width)
+        return cone_cube(self.inner, self.outer, direction, self.width, self.falloff)
 
 
 #: Six faces as the point light's cube reads them (docs/light-textures.md): axis F, up U, right F × U.
@@ -1039,12 +1056,12 @@ _CUBE_FACES = (((1, 0, 0), (0, 1, 0)), ((-1, 0, 0), (0, 1, 0)), ((0, 1, 0), (0, 
 _CONE_CUBES: OrderedDict[tuple, ConeCube] = OrderedDict()
 
 
-def cone_cube(inner: float, outer: float, direction, side: int = CONE_CUBE_SIDE) -> ConeCube:
+def cone_cube(inner: float, outer: float, direction, side: int = CONE_CUBE_SIDE, falloff: str = "gltf") -> ConeCube:
     """A spot's cone falloff (`spot_attenuation`) around `direction` as a point light's cube
     texture: each texel the attenuation of the angle between the axis and the ray through
     its centre, so zero outside the outer cone."""
     axis = np.asarray(direction, dtype=np.float64) / np.linalg.norm(direction)
-    key = (float(inner), float(outer), side, *np.round(axis, 12).tolist())
+    key = (float(inner), float(outer), side, falloff, *np.round(axis, 12).tolist())
     if key in _CONE_CUBES:
         _CONE_CUBES.move_to_end(key)
         return _CONE_CUBES[key]
@@ -1055,10 +1072,10 @@ def cone_cube(inner: float, outer: float, direction, side: int = CONE_CUBE_SIDE)
         forward, up = np.array(forward, float), np.array(up, float)
         rays = forward + sx[..., None] * np.cross(forward, up) + sy[..., None] * up
         cos_angle = rays @ axis / np.linalg.norm(rays, axis=-1)
-        faces.append(spot_attenuation(cos_angle, inner, outer))
+        faces.append(spot_attenuation(cos_angle, inner, outer, falloff))
     texels = np.repeat(np.concatenate(faces)[:, :, None], 3, axis=2).astype(np.float32)
     cube = ConeCube(texels, f"cone falloff {math.degrees(inner):g}° to {math.degrees(outer):g}° (cube)", smooth=True,
-                    axis=tuple(axis.tolist()), inner=float(inner), outer=float(outer))
+                    axis=tuple(axis.tolist()), inner=float(inner), outer=float(outer), falloff=falloff)
     _CONE_CUBES[key] = cube
     while len(_CONE_CUBES) > 16:
         _CONE_CUBES.popitem(last=False)
