@@ -408,14 +408,22 @@ class Renderer:
         lights, samples = len(frame.scene.lights), frame.buffers.inputs.samples
         medium = not self._no_medium(frame)
         visible = self.device.buffer(nbytes=4 * samples * lights)
-        rays = [self._light_in_turn(frame, index, medium, visible) for index in range(lights)]
+        kept = {}  # the BVH: over the frame's triangles, the same for every light, built once a frame
+
+        def frame_bvh(buffers: FrameBuffers, keys: StageKeys):
+            if "bvh" not in kept:
+                kept["bvh"] = self._bvh(buffers, keys, frame.reuse, frame.timer)
+            return kept["bvh"]
+
+        rays = [self._light_in_turn(frame, index, medium, visible, frame_bvh) for index in range(lights)]
         if medium:
             frame.reuse.record.note(VOLUME_STAGES[frame.method][-1], COMPUTED)
         return visible, RaysSum(rays)
 
-    def _light_in_turn(self, frame: Frame, index: int, medium: bool, visible) -> int:
+    def _light_in_turn(self, frame: Frame, index: int, medium: bool, visible, frame_bvh) -> int:
         """One light of `_lights_in_turn`; what it allocates goes when it returns (on a
-        CPU device, back to the pool for the next light). Returns its shadow rays."""
+        CPU device, back to the pool for the next light), but the frame's BVH (`frame_bvh`).
+        Returns its shadow rays."""
         device, reuse, timer = self.device, frame.reuse, frame.timer
         shadow_map = reuse.stage("raster.shadow", lambda: frame.keys.shadow[index],
                                  lambda: raster_shadow_map(device, frame.buffers, index, timer), per_light=True)
@@ -429,7 +437,8 @@ class Renderer:
         if medium:
             self._epipolar_light(frame, index, alone)
             frame.samples = alone.samples
-        part, rays = self._visibility(buffers, rastered, alone.keys, reuse, timer)
+        part, rays = self._visibility(buffers, rastered, alone.keys, reuse, timer,
+                                      bvh=lambda: frame_bvh(buffers, alone.keys))
         add_visibility_column(device, visible, part, index, len(frame.scene.lights), buffers.inputs.samples)
         return rays
 
@@ -586,9 +595,9 @@ class Renderer:
                           lambda: upload_bvh(self.device, buffers, topology, timer))
 
     def _visibility(self, buffers: FrameBuffers, rastered: RasterResult, keys: StageKeys, reuse: Reuse,
-                    timer: StageTimer):
+                    timer: StageTimer, bvh=None):
         """The visibility stage: each light's bound map kept while its shadow map is, and the
-        frame's BVH (`_bvh`) when a shadow ray needs it. Returns (visibility, shadow rays
+        frame's BVH (`_bvh`, or `bvh` where given) when a shadow ray needs it. Returns (visibility, shadow rays
         cast); visibility is None unless `render.surface_shadows` is exact (or filtered:
         then the shadow_filter stage answers instead), and the rays None but for exact."""
         scene = buffers.inputs.scene
@@ -610,8 +619,8 @@ class Renderer:
             "bound_atlas", lambda: digest("bound", tuple(keys.shadow), keys.camera, keys.surfaces),
             lambda: bound_atlas(device, buffers, bounds))
         reuse.record.note("visibility", COMPUTED)
-        return visibility(device, buffers, rastered, prepared, atlas, lambda: self._bvh(buffers, keys, reuse, timer),
-                          timer, bounds)
+        bvh = bvh or (lambda: self._bvh(buffers, keys, reuse, timer))
+        return visibility(device, buffers, rastered, prepared, atlas, bvh, timer, bounds)
 
     def _shadow_filter(self, buffers: FrameBuffers, rastered: RasterResult, keys: StageKeys, reuse: Reuse,
                        timer: StageTimer):
