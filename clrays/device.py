@@ -11,7 +11,9 @@ import collections
 import contextlib
 import hashlib
 import os
+import signal
 import sys
+import threading
 import tempfile
 import time
 import warnings
@@ -85,6 +87,15 @@ def _compiler_output():
         finally:
             os.dup2(saved, 2)
             os.close(saved)
+
+
+def _ignore_file_size_signal() -> None:
+    """Put back Python's SIG_IGN for SIGXFSZ, which a runtime built on LLVM (Intel's) replaces
+    with LLVM's crash handler when it starts or compiles: a write past a file-size limit then
+    printed LLVM's "PLEASE submit a bug report" line before the write's own error (EFBIG),
+    which clrays reports in one line. Only the main thread may set a handler."""
+    if hasattr(signal, "SIGXFSZ") and threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
 
 
 def _kernels_digest(device) -> str:
@@ -283,6 +294,7 @@ class Device:
         self.cl = cl
         self.device = select_device(spec)
         self.context = cl.Context([self.device])
+        _ignore_file_size_signal()
         self.queue = cl.CommandQueue(self.context, properties=cl.command_queue_properties.PROFILING_ENABLE)
         self._programs: dict[tuple, object] = {}
         #: Milliseconds spent building programs so far: a sweep leaves them out of a point's time.
@@ -354,6 +366,7 @@ class Device:
                 with warnings.catch_warnings(), _compiler_output():
                     warnings.simplefilter("ignore", self.cl.CompilerWarning)
                     self._programs[key] = self.cl.Program(self.context, path.read_text()).build(options=options)
+                _ignore_file_size_signal()
             except self.cl.RuntimeError as exc:
                 if show_compiler_output:  # --debug: the options and the compiler's log
                     raise DeviceError(f"{path}: build failed with options {' '.join(options)}:\n{exc}") from exc

@@ -315,3 +315,24 @@ def test_a_kernel_cache_that_cannot_be_written_is_one_line(tmp_path):
     assert re.fullmatch(rf"clrays: error: .*\.cl: the OpenCL compiler could not build it: PoCL cannot write its kernel "
                         rf"cache {re.escape(str(cache))} \(File too large; .*POCL_CACHE_DIR\) \(run with --debug .*\)",
                         lines[0]), lines[0]
+
+
+def test_a_write_past_a_file_size_limit_is_one_line_on_any_runtime(tmp_path):
+    """Under a 16 KiB file-size limit the .exr write fails with EFBIG: one line, on every
+    runtime (Intel's installs LLVM's crash handler for SIGXFSZ, which printed its own line
+    first; clrays puts Python's SIG_IGN back)."""
+    import resource
+
+    args = ["render", "scenes/demo.yaml", "-o", tmp_path / "a.exr", "--set", "image.width=160", "--set",
+            "image.height=90"]
+    assert run(*args)[0] == 0  # kernels built and cached, unlimited
+    (tmp_path / "a.exr").unlink()
+
+    def limited():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (16384, 16384))
+
+    done = subprocess.run([sys.executable, "-m", "clrays.cli", *map(str, args)], capture_output=True, text=True,
+                          preexec_fn=limited, timeout=300, cwd=Path(__file__).resolve().parents[2])
+    assert done.returncode == 1
+    assert done.stdout + done.stderr == f"clrays: error: {tmp_path / 'a.exr'}: cannot write: File too large\n"
+    assert not list(tmp_path.iterdir())
