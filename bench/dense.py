@@ -77,8 +77,8 @@ def write_ply(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
 def timed(command: list[str], repo: Path) -> tuple[float, float, str]:
     """(wall seconds, peak RSS in MiB, output) of `command` under /usr/bin/time -v, with
     `repo`'s clrays first on the path."""
-    done = subprocess.run(["/usr/bin/time", "-v", *command], capture_output=True, text=True,
-                          env={**os.environ, "PYTHONPATH": str(repo.resolve())})
+    done = subprocess.run(["/usr/bin/time", "-v", *command], capture_output=True, text=True, cwd=repo,
+                          env={**os.environ, "PYTHONPATH": str(repo.resolve())})  # (-m puts cwd first)
     if done.returncode != 0:
         raise SystemExit(f"{' '.join(command)} failed:\n{done.stderr[-2000:]}")
     rss = int(re.search(r"Maximum resident set size \(kbytes\): (\d+)", done.stderr).group(1))
