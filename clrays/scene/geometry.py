@@ -179,21 +179,25 @@ def closed_outward(vertices: np.ndarray, faces: np.ndarray) -> int:
     f = joined[f]
     if np.any((f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])):
         return 0  # a face with two corners at one point
+    # Each edge a -> b as its undirected key (one integer) and its direction; edge k is face
+    # k // 3's. Closed: every key twice, once each way. Sorted by key, the edges then pair
+    # off, 2j with 2j + 1 (one sort: a binary search per edge for its reverse cost a
+    # million-triangle mesh 1.2 s in cache misses).
     n = np.int64(len(unique))
-    edges = (f * n + np.roll(f, -1, axis=1)).reshape(-1)  # a -> b, as one integer; edge k is face k // 3's
-    reversed_edges = (np.roll(f, -1, axis=1) * n + f).reshape(-1)
-    order = np.argsort(edges)
-    ordered = edges[order]
-    if np.any(ordered[1:] == ordered[:-1]):
-        return 0
-    found = np.minimum(np.searchsorted(ordered, reversed_edges), len(ordered) - 1)
-    if not np.array_equal(ordered[found], reversed_edges):  # (the edges unique: each reverse once)
-        return 0
+    start, end = f.reshape(-1), np.roll(f, -1, axis=1).reshape(-1)
+    key = np.minimum(start, end) * n + np.maximum(start, end)
+    order = np.argsort(key)
+    first, second = order[0::2], order[1::2]
+    if len(first) != len(second) or np.any(key[first] != key[second]) \
+            or np.any(key[second[:-1]] == key[first[1:]]) or np.any((start < end)[first] == (start < end)[second]):
+        return 0  # an edge of one face, of three or more, or of two wound the same way
+    found = np.empty_like(order)  # each edge's reverse
+    found[first], found[second] = second, first
     # the face across each edge (its reverse's), then the connected parts, each named by
     # its least face: every pair of neighbours joins their parts' names (the larger name
     # takes the smaller), and every name then follows its chain to the end, until nothing
     # changes (a few rounds)
-    face, across = np.arange(len(edges)) // 3, order[found] // 3
+    face, across = np.arange(len(key)) // 3, found // 3
     part = np.arange(len(f))
     while True:
         mine, theirs = part[face], part[across]
