@@ -49,11 +49,16 @@ animation:
 """
 
 
+def written_scene(folder, text: str = SCENE):
+    """`text` as folder/scene.yaml."""
+    path = folder / "scene.yaml"
+    path.write_text(text)
+    return path
+
+
 @pytest.fixture
 def scene_file(tmp_path):
-    path = tmp_path / "scene.yaml"
-    path.write_text(SCENE)
-    return path
+    return written_scene(tmp_path)
 
 
 @pytest.fixture

@@ -22,7 +22,7 @@ from clrays.scene.load import load_scene
 from clrays.session import Renderer
 from conftest import run_cli as run
 
-from test_tune import ANIMATION, SCENE as SLATS, cache  # noqa: F401 (a fixture: CLRAYS_CACHE in tmp_path)
+from test_tune import ANIMATION, SCENE as SLATS, cache, written_scene  # noqa: F401 (a fixture: CLRAYS_CACHE in tmp_path)
 
 #: test_tune.py's slats under a lamp at 32×18, with a target: a search of it takes a few seconds.
 SCENE = SLATS.replace("width: 64, height: 36", "width: 32, height: 18").replace(", steps: 64}", ", target_error: 2}")
@@ -30,9 +30,7 @@ SCENE = SLATS.replace("width: 64, height: 36", "width: 32, height: 18").replace(
 
 @pytest.fixture
 def scene_file(tmp_path):
-    path = tmp_path / "scene.yaml"
-    path.write_text(SCENE)
-    return path
+    return written_scene(tmp_path, SCENE)
 
 
 @pytest.fixture
