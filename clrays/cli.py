@@ -22,7 +22,8 @@ from click.core import ParameterSource
 from . import device as device_settings
 from .device import list_devices, select_device
 from .errors import ClraysError, DeviceError, OutputError
-from .exposure import AUTO, EXPOSED_FORMATS, EV_LIMIT, exposure_setting, frame_exposure, parse_exposure
+from .exposure import (AUTO, EV_LIMIT, EXPOSED_IMAGES, EXPOSED_VIDEO, exposure_setting, frame_exposure,
+                       parse_exposure)
 from .image_io import check_folder, check_name_length, check_output_path, make_folder, make_output_folder
 from .outputs import allow_writes, cache_root, check_replaceable, end_writes
 from .passes import pass_paths, pass_problem, write_render
@@ -50,10 +51,6 @@ from .session import Renderer
 SCENE, SWEEP, BENCH, OUTPUT, RUN, DEVICE, OTHER = "Scene", "Sweep", "Bench", "Output", "Run", "Device", "Other"
 SECTIONS = (SCENE, SWEEP, BENCH, OUTPUT, RUN, DEVICE)
 
-#: Outputs that --exposure changes, by what a command writes: 8-bit images and video; .exr
-#: and .npy keep linear radiance (clrays.exposure.EXPOSED_FORMATS holds them all).
-EXPOSED_IMAGES = {".png": "PNG"}
-EXPOSED_VIDEO = {".mp4": "MP4", ".gif": "GIF", ".webp": "WebP"}
 #: `exact` runs estimated to take at least this long are announced up front.
 EXACT_ESTIMATE_MIN_S = 5.0
 

@@ -31,8 +31,11 @@ import numpy as np
 
 from .image_io import to_srgb8
 
-#: The outputs an exposure changes: 8-bit images and videos; .exr and .npy keep linear radiance.
-EXPOSED_FORMATS = (".png", ".gif", ".webp", ".mp4")
+#: The outputs an exposure changes, suffix → format name: 8-bit images and videos (a
+#: sequence's); .exr and .npy keep linear radiance.
+EXPOSED_IMAGES = {".png": "PNG"}
+EXPOSED_VIDEO = {".mp4": "MP4", ".gif": "GIF", ".webp": "WebP"}
+EXPOSED_FORMATS = tuple(EXPOSED_IMAGES | EXPOSED_VIDEO)
 #: The exposure that chooses itself from the frame (`auto_ev`).
 AUTO = "auto"
 #: Stops an exposure may take either way (beyond, float32 radiance × 2^EV under- or overflows).
