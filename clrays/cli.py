@@ -36,7 +36,7 @@ from .runs.sequence import (check_pattern, check_video_path, lock_folder, parse_
                             scene_frames, write_video)
 from .runs.video import DEFAULT_CRF, VIDEO_OPTIONS, video_encoder_options
 from .runs.sweep import axes_from, format_table, run_sweep
-from .runs.tune import TUNE_BUDGET_S, Consent, cache_folder, tuned_scene
+from .runs.tune import TUNE_BUDGET_S, Consent, tuned_scene
 from .scene import files as scene_files
 from .scene import yaml_tree
 from .scene import gltf as gltf_files
@@ -468,7 +468,7 @@ def _tuned(scene, method: str | None, device: str | None, progress: bool, consen
     if scene.render.target_error is None:
         return scene, None
     folders = [below / REFERENCES] if below is not None else []
-    return tuned_scene(scene, method, folders=[*folders, cache_folder()], consent=consent, renderer=Renderer(device),
+    return tuned_scene(scene, method, folders=[*folders, cache_root()], consent=consent, renderer=Renderer(device),
                        progress=progress, log=lambda line: click.echo(line, err=True), how_to_tune=_how_to_tune(path),
                        below=below)
 
@@ -805,7 +805,7 @@ def tune(context, scene: Path, target, method, overrides, camera, pixels, most_s
     if output.suffix.lower() not in (".yaml", ".yml"):
         raise OutputError(f"{output}: the tuned scene is YAML: expected a .yaml or .yml output, got "
                           f"{output.suffix or '(no extension)'!r}")
-    cache = cache or tuning.cache_folder()
+    cache = cache or cache_root()
     allow_writes(output.parent, cache)
     _check_scene_file(scene)
     check_replaceable(check_folder(output))  # before the search, not after it
@@ -819,7 +819,7 @@ def tune(context, scene: Path, target, method, overrides, camera, pixels, most_s
     with _interruptible(context, f"{output} was not written"):
         # The one search and cache of render.target_error: a scene tuned here renders with these settings.
         tuned, result = tuning.tuned_settings(
-            loaded, target / 100, [cache or tuning.cache_folder()], tuning.Consent(True, budget_s=None), method,
+            loaded, target / 100, [cache], tuning.Consent(True, budget_s=None), method,
             Renderer(device), progress, lambda line: click.echo(line, err=True), pixels, most_settings,
             asked_by=asked_by)
     settings = {**({"method": method} if method else {}), **tuned.settings}

@@ -35,7 +35,7 @@ import yaml
 from ..errors import ClraysError, OutputError
 from ..exposure import AUTO, auto_ev, exposure_setting
 from ..image_io import file_digest, folder_lock, make_folder, read_linear, read_srgb8, write_atomic
-from ..outputs import check_replaceable
+from ..outputs import cache_root, check_replaceable
 from ..inputs import frame_inputs
 from ..session import STAGE_ORDER, Renderer, StageKeys
 from ..reuse import digest, scene_digest
@@ -43,7 +43,7 @@ from ..scene.model import Scene
 from ..scene.files import FileRefused, read_regular_file
 from ..scene.limits import MAX_RUN_RECORD_BYTES, MAX_SWEEP_POINTS
 from ..scene.load import load_scene
-from .tune import Consent, cache_folder, knobs_for, tuned_scene
+from .tune import Consent, knobs_for, tuned_scene
 from .point import ERROR_COLUMNS, REFERENCE_COLUMNS, REFERENCES, SweepPoint, render_point
 from .progress import Progress, counted
 from .references import ReferenceCache, parse_reference
@@ -328,7 +328,7 @@ def run_sweep(path: str | Path, spec, out_dir: str | Path, *, overrides: Sequenc
                 raise ClraysError(f"{path}: render.{sorted(swept_render_keys & tuned_keys)[0]} is swept, and "
                                   f"render.target_error tunes it: sweep it without a target, or sweep the target")
         # render.target_error: the point's tuned settings (searched once per scene, then read from the cache).
-        return tuned_scene(scene, folders=[folder / REFERENCES, cache_folder()], consent=tune, renderer=renderer,
+        return tuned_scene(scene, folders=[folder / REFERENCES, cache_root()], consent=tune, renderer=renderer,
                            progress=progress, how_to_tune=how_to_tune, below=folder)[0]
 
     references = ReferenceCache(folder / REFERENCES, renderer, progress, below=folder) if against else None

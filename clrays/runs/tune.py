@@ -522,12 +522,6 @@ def unreachable(source: str, tuning: Tuning) -> ClraysError:
 # --------------------------------------------------------------------------- render.target_error
 
 
-def cache_folder() -> Path:
-    """Where the exact references and tuned settings are kept: clrays' one cache
-    (`clrays.outputs.cache_root`: $CLRAYS_CACHE, else the user's cache folder)."""
-    return cache_root()
-
-
 @dataclass
 class Consent:
     """Whether a run may search for settings it finds no kept tuning for (`--tune`), and what
@@ -653,12 +647,12 @@ def tuned_scene(scene: Scene, method: str | None = None, folders: list[Path] | N
                 below: Path | None = None) -> tuple[Scene, Tuned | None]:
     """`scene` with the settings its `render.target_error` asks for (unchanged, and None,
     where it sets none, or renders with exact, the reference the target is measured
-    against), by `tuned_settings` (default folders: `cache_folder()`; default consent: none;
+    against), by `tuned_settings` (default folders: clrays' cache, `cache_root()`; default consent: none;
     `below` as there)."""
     percent = scene.render.target_error
     if percent is None or (method or scene.render.method) == "exact":
         return scene, None
-    tuned, _ = tuned_settings(scene, percent / 100, folders or [cache_folder()], consent or Consent(), method,
+    tuned, _ = tuned_settings(scene, percent / 100, folders or [cache_root()], consent or Consent(), method,
                               renderer, progress, log or (lambda line: print(line, file=sys.stderr)),
                               how_to_tune=how_to_tune, below=below)
     return with_settings(scene, tuned.settings), tuned

@@ -229,11 +229,10 @@ def no_cache_set(tmp_path, monkeypatch):
 def test_every_cache_is_in_one_folder(tmp_path, monkeypatch, no_cache_set):
     from clrays import runtimes
     from clrays.outputs import cache_root
-    from clrays.runs.tune import cache_folder
 
-    assert cache_root() == cache_folder() == runtimes.cache_root() == no_cache_set
+    assert cache_root() == runtimes.cache_root() == no_cache_set
     monkeypatch.setenv("CLRAYS_CACHE", str(tmp_path / "mine"))
-    assert cache_root() == cache_folder() == tmp_path / "mine"
+    assert cache_root() == tmp_path / "mine"
     monkeypatch.delenv("CLRAYS_CACHE")
     monkeypatch.delenv("XDG_CACHE_HOME")
     monkeypatch.setenv("HOME", str(tmp_path / "home"))
