@@ -157,10 +157,50 @@ class Phase:
 
 
 @dataclass(frozen=True)
+class Box:
+    """An axis-aligned box, `min` ≤ `max` per axis (scene units)."""
+
+    min: Vec3
+    max: Vec3
+
+
+@dataclass(frozen=True)
+class HeightDensity:
+    """`medium.density: {type: height}`: exp(−(y − base)/scale_height), y up."""
+
+    base: float
+    scale_height: float  # > 0, scene units
+    type: Literal["height"] = "height"
+
+
+@dataclass(frozen=True)
+class GridDensity:
+    """`medium.density: {type: grid}` (and `noise`, baked to a grid): a dense grid of density
+    factors, float32 (nz, ny, nx), finite and ≥ 0, over the box `bounds`; trilinear between
+    voxel centres, 0 outside `bounds`."""
+
+    values: np.ndarray
+    bounds: Box
+    type: Literal["grid"] = "grid"
+
+
+Density = Union[HeightDensity, GridDensity]
+
+
+@dataclass(frozen=True)
 class Medium:
     sigma_s: RGB  # scattering coefficient, 1/unit
     sigma_a: RGB  # absorption coefficient, 1/unit
     phase: Phase = field(default_factory=Phase)
+    # Where the medium is: everywhere (None) or inside a box. Its density: a factor on σs
+    # and σa, 1 everywhere (None) or a HeightDensity / GridDensity.
+    bounds: Box | None = None
+    density: Density | None = None
+
+    @property
+    def homogeneous(self) -> bool:
+        """One constant σ everywhere: the kernels and tables of the unbounded medium."""
+        return self.bounds is None and self.density is None
 
     @property
     def sigma_t(self) -> RGB:
