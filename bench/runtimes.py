@@ -1,6 +1,6 @@
 """The bench scenes on every CPU OpenCL runtime installed, in one run: each runtime's image
 against PoCL's (minmax and raymarch), and warm minmax frame times taken in turns
-(bench/RESULTS.md, "Every CPU runtime"; the README's table of runtimes).
+(bench/RESULTS.md, "Every CPU runtime"; docs/devices.md's table of runtimes).
 
     .venv/bin/python bench/runtimes.py --size 1280x720 --rounds 7
     .venv/bin/python bench/runtimes.py --size 320x180 --rounds 3 demo

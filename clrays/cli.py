@@ -143,7 +143,7 @@ class Clrays(click.Group):
 def device_option():
     return option("--device", envvar="CLRAYS_DEVICE", show_envvar=True, metavar="P:D|NAME", group=DEVICE,
                   help="OpenCL device: 'P:D' or a name substring (see `clrays info`). Default: the first GPU, "
-                       "else PoCL's CPU device.")
+                       "else PoCL's CPU device (Intel's CPU runtime where PoCL cannot build).")
 
 
 def _confine(context: click.Context, parameter, value: bool) -> None:

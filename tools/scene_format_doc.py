@@ -9,15 +9,16 @@ markers is left as written.
 """
 from __future__ import annotations
 
-import argparse
 import re
 import sys
 from pathlib import Path
 
 from clrays.scene.fields import SECTIONS, Field, Section
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # the tools' shared helpers, also when loaded by path
+import doc_blocks  # noqa: E402
+
 DOC = Path(__file__).resolve().parents[1] / "docs" / "scene-format.md"
-_BLOCK = re.compile(r"(<!-- fields:(?P<name>[\w.]+) -->\n)(?P<body>.*?)(<!-- /fields -->)", re.DOTALL)
 
 
 def _number(value: float) -> str:
@@ -78,41 +79,14 @@ def table(section: Section) -> str:
 def generate(text: str) -> str:
     """The document with every marked table written afresh. Raises ValueError for a
     marker naming no section, and for a section (with keys) that no marker names."""
-    named = set()
-
-    def fill(match: re.Match) -> str:
-        name = match["name"]
-        if name not in SECTIONS:
-            raise ValueError(f"<!-- fields:{name} -->: no such section; expected one of {', '.join(SECTIONS)}")
-        named.add(name)
-        return f"{match[1]}\n{table(SECTIONS[name])}\n{match[4]}"
-
-    result = _BLOCK.sub(fill, text)
-    missing = [name for name, section in SECTIONS.items() if section.fields and name not in named]
-    if missing:
-        raise ValueError(f"sections without a table in the document: {', '.join(missing)}")
-    return result
+    return doc_blocks.fill(text, "fields", list(SECTIONS), lambda name: f"\n{table(SECTIONS[name])}\n",
+                           needed=[name for name, section in SECTIONS.items() if section.fields], kind="section",
+                           missing="sections without a table")
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--check", action="store_true", help="exit 1 if the document's tables are stale")
-    parser.add_argument("--doc", type=Path, default=DOC, help=f"the document (default: {DOC})")
-    args = parser.parse_args(argv)
-    text = args.doc.read_text(encoding="utf-8")
-    try:
-        fresh = generate(text)
-    except ValueError as exc:
-        print(f"{args.doc}: {exc}", file=sys.stderr)
-        return 1
-    if args.check:
-        if fresh != text:
-            print(f"{args.doc}: the key tables are stale; run tools/scene_format_doc.py", file=sys.stderr)
-            return 1
-        return 0
-    if fresh != text:
-        args.doc.write_text(fresh, encoding="utf-8")
-    return 0
+    return doc_blocks.main(argv, description=__doc__.split("\n\n")[0], doc=DOC, generate=generate,
+                           blocks="key tables", tool="tools/scene_format_doc.py")
 
 
 if __name__ == "__main__":

@@ -266,7 +266,7 @@ _EPIPOLAR_METHODS = ("minmax", "volume_moments")  # the methods with a rectified
 
 RENDER = Section("render", (
     Field("method", "string", Render.method, choices=METHODS, renamed=tuple(RENAMED_METHODS.items()),
-          notes="volumetric integrator (README: Methods); `moments`, its former name, reads as `volume_moments`"),
+          notes="volumetric integrator (docs/methods.md); `moments`, its former name, reads as `volume_moments`"),
     Field("steps", "integer", Render.steps, 1, 65536, notes="raymarch samples per pixel ray", read_by=("raymarch",)),
     Field("jitter", "boolean", Render.jitter, notes="raymarch: jitter sample positions (seeded per pixel)",
           read_by=("raymarch",)),
