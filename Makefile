@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.installed
 # The extras the suite needs (pyproject.toml): web is the Draco and meshopt decoders.
 EXTRAS := test,bench,distributed,video,web
 
-.PHONY: demo test test-device test-slow bench info intel-cpu clean
+.PHONY: demo test test-device test-slow bench results info intel-cpu clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -48,12 +48,18 @@ test-device: $(STAMP) $(NEEDS_INTEL)
 test-slow: $(STAMP)
 	$(BIN)/python -m pytest -m slow
 
-# The run-time/error benchmark behind bench/RESULTS.md (tens of minutes on 2 cores).
+# The run-time/error benchmark on every bench scene (tens of minutes on 2 cores), into out/bench/.
 bench: $(STAMP)
-	$(BIN)/clrays bench -r 1280x720 --volume-only --repeats 3 --out bench/results-volume/1280x720
-	$(BIN)/clrays bench -r 1280x720 --repeats 3 --out bench/results/1280x720
-	$(BIN)/clrays bench -r 640x360 --repeats 3 --out bench/results/640x360
-	$(BIN)/clrays bench -r 640x360 --volume-only --repeats 3 --out bench/results-volume/640x360
+	$(BIN)/clrays bench -r 1280x720 --volume-only --repeats 3 --out out/bench/volume-1280x720
+	$(BIN)/clrays bench -r 1280x720 --repeats 3 --out out/bench/1280x720
+	$(BIN)/clrays bench -r 640x360 --repeats 3 --out out/bench/640x360
+	$(BIN)/clrays bench -r 640x360 --volume-only --repeats 3 --out out/bench/volume-640x360
+
+# Rewrite bench/RESULTS.md's tables from the maintained benchmarks (bench/scoreboard.py; hours
+# on 2 cores). RESULTS_ARGS="--only stages,accuracy" runs some, "--device intel" names the
+# device, "--quick" is a smoke run at thumbnail sizes into out/RESULTS.quick.md.
+results: $(STAMP)
+	$(BIN)/python bench/scoreboard.py $(RESULTS_ARGS)
 
 info: $(STAMP)
 	$(BIN)/clrays info

@@ -1,7 +1,7 @@
 """A dense scene made at run time: a forest of thin poles (64-sided closed cylinders, about a
 million triangles) with a point light behind it, as a PLY mesh in a YAML scene and as a
 glTF file. Per tree: the first frame in a fresh process (load included: wall seconds and
-peak RSS from `/usr/bin/time -v`, the host steps and the raster's device time from
+peak RSS from GNU time, the host steps and the raster's device time from
 `--stats`), then the per-frame cost of a camera pan (a sequence, whose geometry and edge
 links are kept across frames) (bench/RESULTS.md, "Dense scenes").
 
@@ -15,15 +15,15 @@ Prints a markdown table.
 from __future__ import annotations
 
 import argparse
-import os
 import re
-import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from harness import REPO, image_size, markdown_table, timed_process, tree_python, width_height  # noqa: E402
+
 SIDES = 64
 SPACING = 0.25  # between poles, units
 RADIUS, HEIGHT = 0.03, 3.0
@@ -74,29 +74,16 @@ def write_ply(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
     path.write_bytes(header + vertices.astype("<f4").tobytes() + rows.tobytes())
 
 
-def timed(command: list[str], repo: Path) -> tuple[float, float, str]:
-    """(wall seconds, peak RSS in MiB, output) of `command` under /usr/bin/time -v, with
-    `repo`'s clrays first on the path."""
-    done = subprocess.run(["/usr/bin/time", "-v", *command], capture_output=True, text=True, cwd=repo,
-                          env={**os.environ, "PYTHONPATH": str(repo.resolve())})  # (-m puts cwd first)
-    if done.returncode != 0:
-        raise SystemExit(f"{' '.join(command)} failed:\n{done.stderr[-2000:]}")
-    rss = int(re.search(r"Maximum resident set size \(kbytes\): (\d+)", done.stderr).group(1))
-    clock = re.search(r"Elapsed \(wall clock\) time \(h:mm:ss or m:ss\): (?:(\d+):)?(\d+):([\d.]+)", done.stderr)
-    seconds = 3600 * int(clock.group(1) or 0) + 60 * int(clock.group(2)) + float(clock.group(3))
-    return seconds, rss / 1024, done.stdout + done.stderr
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--repo", type=Path, default=REPO, help="the source tree whose clrays renders")
     parser.add_argument("--rows", type=int, default=62, help="poles a side (62: 3844 poles, 984 k triangles)")
-    parser.add_argument("--size", default="640x360", help="WxH (default 640x360)")
+    parser.add_argument("--size", type=image_size, default="640x360", help="WxH (default 640x360)")
     parser.add_argument("--pan", type=int, default=4, help="frames of the camera pan (default 4)")
     parser.add_argument("--device", help="a --device spec (default: the tree's default device)")
     parser.add_argument("--out", type=Path, default=Path("/tmp/clrays-dense"))
     args = parser.parse_args()
-    width, height = (int(v) for v in args.size.split("x"))
+    width, height = width_height(args.size)
     args.out.mkdir(parents=True, exist_ok=True)
     vertices, faces = poles(args.rows)
     write_ply(args.out / "poles.ply", vertices, faces)
@@ -106,18 +93,20 @@ def main() -> None:
     panned.write_text(still.read_text() + PAN.format(last=args.pan - 1))
     clrays = [sys.executable, "-m", "clrays.cli"]
     device = ["--device", args.device] if args.device else []
-    wall, rss, output = timed(clrays + ["render", str(still), "-o", str(args.out / "poles.png"), "--stats", *device],
-                              args.repo)
+    wall, rss, output = timed_process(clrays + ["render", str(still), "-o", str(args.out / "poles.png"), "--stats",
+                                                *device], cwd=args.repo, env=tree_python(args.repo))
     raster = re.search(r"raster\s+([\d.]+) ms", output)
     host = re.search(r"host steps (.*?)(?: \(load holds|$)", output, re.M)
-    pan_wall, pan_rss, pan_output = timed(clrays + ["sequence", str(panned), "-o", str(args.out / "pan_{}.png"),
-                                                    "--no-progress", "--overwrite", *device], args.repo)
+    pan_wall, pan_rss, pan_output = timed_process(clrays + ["sequence", str(panned), "-o", str(args.out / "pan_{}.png"),
+                                                            "--no-progress", "--overwrite", *device],
+                                                  cwd=args.repo, env=tree_python(args.repo))
     per_frame = re.search(r"([\d.]+) s per frame", pan_output)
     print(f"tree: {args.repo.resolve()}; {len(faces)} triangles at {args.size}\n")
-    print("| first frame, load included (s) | peak RSS (MiB) | raster (ms) | host steps | pan: s a frame | pan peak "
-          "RSS (MiB) |\n|---|---|---|---|---|---|")
-    print(f"| {wall:.1f} | {rss:.0f} | {raster.group(1) if raster else '-'} | "
-          f"{host.group(1) if host else '(not listed)'} | {per_frame.group(1) if per_frame else '-'} | {pan_rss:.0f} |")
+    print(markdown_table(["first frame, load included (s)", "peak RSS (MiB)", "raster (ms)", "host steps",
+                          "pan: s a frame", "pan peak RSS (MiB)"],
+                         [[f"{wall:.1f}", f"{rss:.0f}", raster.group(1) if raster else "-",
+                           host.group(1) if host else "(not listed)", per_frame.group(1) if per_frame else "-",
+                           f"{pan_rss:.0f}"]]))
 
 
 if __name__ == "__main__":

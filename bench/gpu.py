@@ -1,8 +1,8 @@
 """A frame's cost on one device at the sizes the published anchors used, with the error that
 goes with it: per bench scene, size and method, the device time per kernel, the wall time
 per frame in a warm session and in a sequence, the host's share, the host's waits, and the
-error against `exact` measured from this device's images (bench/RESULTS.md, "Frames on a
-GPU").
+error against `exact` measured from this device's images (bench/RESULTS.md, "The GPU
+table").
 
     CLRAYS_DEVICE=nvidia .venv/bin/python bench/gpu.py                      # the whole table
     .venv/bin/python bench/gpu.py demo --sizes 320x180 --frames 3          # a quick look on a CPU
@@ -29,7 +29,6 @@ as `clrays render` derives them (docs/scene-format.md). Columns:
 from __future__ import annotations
 
 import argparse
-import collections
 import math
 import statistics
 import sys
@@ -39,27 +38,15 @@ from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-
-from arguments import frame_count, image_size  # noqa: E402  (bench/, beside this script)
-from kernel_times import record_launches  # noqa: E402
-from stage_times import check_scenes  # noqa: E402
-from clrays.errors import ClraysError  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from harness import REPO, SCENES, KernelClock, check_scenes, frame_count, image_sizes, load  # noqa: E402
 from clrays.runs.bench import error_pixels  # noqa: E402
 from clrays.runs.references import EXACT, ReferenceCache  # noqa: E402
-from clrays.scene.load import load_scene  # noqa: E402
 from clrays.session import Renderer  # noqa: E402
 
-SCENES = ("demo", "bunny", "behind", "sun")
 SIZES = "1280x720,1920x1080,2560x1600,3840x2160"
 #: The camera's turn per frame of the timed sequence, about its target.
 TURN_DEGREES = 0.5
-
-
-def sizes_list(text: str) -> list[str]:
-    """`--sizes`: comma-separated WxH."""
-    return [image_size(part) for part in text.split(",") if part]
 
 
 def turned(scene, frame: int):
@@ -96,8 +83,8 @@ def sequence_ms(renderer: Renderer, scene, frames: int) -> tuple[float, float]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("scenes", nargs="*", default=SCENES, help="scene names in scenes/ (default: the bench four)")
-    parser.add_argument("--sizes", type=sizes_list, default=sizes_list(SIZES), help=f"WxH,... (default {SIZES})")
+    parser.add_argument("scenes", nargs="*", default=list(SCENES), help="scene names in scenes/ (default: the bench four)")
+    parser.add_argument("--sizes", type=image_sizes, default=image_sizes(SIZES), help=f"WxH,... (default {SIZES})")
     parser.add_argument("--methods", default="minmax,volume_moments", help="comma-separated methods (default "
                                                                            "minmax,volume_moments)")
     parser.add_argument("--frames", type=frame_count, default=5, help="timed frames (default 5)")
@@ -107,8 +94,7 @@ def main() -> None:
     args = parser.parse_args()
     check_scenes("gpu.py", args.scenes)
     methods = [method for method in args.methods.split(",") if method]
-    launches: list[tuple[str, object]] = []
-    record_launches(launches)
+    clock = KernelClock()
     references = ReferenceCache(Path(args.cache))
     renderer = Renderer()
     print(f"{renderer.device.name}; median of {args.frames} frames\n")
@@ -118,15 +104,11 @@ def main() -> None:
         for size in args.sizes:
             width, height = (int(v) for v in size.split("x"))
             for method in methods:
-                try:
-                    scene = load_scene(REPO / "scenes" / f"{name}.yaml", overrides=[
-                        f"image.width={width}", f"image.height={height}", f"render.method={method}"])
-                except ClraysError as exc:
-                    sys.exit(f"gpu.py: {exc}")
+                scene = load("gpu.py", name, width, height, [f"render.method={method}"])
                 renderer.clear()
                 renderer.render(scene, reuse=False)  # kernels built, buffers pooled
-                launches.clear()
-                device, walls, kernels, waits = [], [], collections.defaultdict(list), []
+                clock.frame_done(keep=False)
+                device, walls, waits = [], [], []
                 result = None
                 for _ in range(args.frames):
                     start = time.perf_counter()
@@ -134,25 +116,20 @@ def main() -> None:
                     walls.append((time.perf_counter() - start) * 1e3)
                     device.append(sum(result.stage_ms.values()))
                     waits.append(result.host_waits)
-                    sums = collections.defaultdict(float)
-                    for kernel, event in launches:
-                        sums[kernel] += (event.profile.end - event.profile.start) * 1e-6
-                    launches.clear()
-                    for kernel, total in sums.items():
-                        kernels[kernel].append(total)
+                    clock.frame_done()
                 image = result.image
                 renderer.clear()
                 renderer.render(turned(scene, 0))  # the sequence's first frame: what it keeps is kept
                 sequence, sequence_device = sequence_ms(renderer, scene, args.frames)
-                launches.clear()
+                kernels = clock.medians()
+                clock.frame_done(keep=False)
                 error = references.error(scene, EXACT, image, error_pixels(width, height, args.pixels))
                 device_ms = statistics.median(device)
                 print(f"| {name} | {width}×{height} | {method} | {device_ms:.2f} | {statistics.median(walls):.2f} | "
                       f"{sequence:.2f} | {sequence - sequence_device:.2f} | {statistics.median(waits):.0f} | "
                       f"{100 * error.rmse:.4f} | {100 * error.p99:.4f} |", flush=True)
                 if args.kernels:
-                    largest = sorted(((statistics.median(v), k) for k, v in kernels.items()), reverse=True)[:8]
-                    print("  " + ", ".join(f"{k} {m:.2f}" for m, k in largest), flush=True)
+                    print("  " + ", ".join(f"{k} {m:.2f}" for m, k in kernels[:8]), flush=True)
 
 
 if __name__ == "__main__":

@@ -780,6 +780,8 @@ def main() -> None:
                                                                 "script's)")
     parser.add_argument("--only", default="", metavar="SUBSTRING", help="run the cases whose name contains it")
     parser.add_argument("--out", type=Path, help="build the inputs here and keep them (default: a temporary folder)")
+    parser.add_argument("--summary", action="store_true", help="list only the flagged cases and the slowest and "
+                                                               "largest three (bench/RESULTS.md's table)")
     args = parser.parse_args()
     global PROBE
     out = args.out or Path(tempfile.mkdtemp(prefix="clrays-hostile-"))
@@ -792,18 +794,26 @@ def main() -> None:
     print(f"clrays from {imported}; {len(chosen)} cases; peak RSS by {TIME or 'RUSAGE_CHILDREN'}\n", file=sys.stderr)
     print("| case | exit | lines | last line | s | peak MB | flags |")
     print("|---|---:|---:|---|---:|---:|---|")
-    results = []
+    results, rows = [], []
     started = time.perf_counter()
     try:
         for index, case in enumerate(chosen):
             result, lines = run_case(PROBE, case, index)
             results.append((case, result))
             flags = ("; ".join(result.problems) or "ok") + (f" ({result.note})" if result.note else "")
-            print(f"| {cell(case.name, 80)} | {result.code} | {lines} | {cell(_last_line(result.output))} | "
-                  f"{result.seconds:.1f} | {result.peak_mb:.0f} | {cell(flags, 200)} |", flush=True)
+            rows.append(f"| {cell(case.name, 80)} | {result.code} | {lines} | "
+                        f"{cell(_last_line(result.output), 100 if args.summary else 170)} | "
+                        f"{result.seconds:.1f} | {result.peak_mb:.0f} | {cell(flags, 200)} |")
+            if not args.summary:
+                print(rows[-1], flush=True)
     finally:
         if not args.out:
             shutil.rmtree(out, ignore_errors=True)
+    if args.summary:  # the flagged cases, then the three slowest and the three largest, in run order
+        by = lambda key: sorted(range(len(results)), key=lambda i: -key(results[i][1]))[:3]  # noqa: E731
+        shown = {i for i, (_, r) in enumerate(results) if r.problems} | set(by(lambda r: r.seconds)) | \
+            set(by(lambda r: r.peak_mb))
+        print("\n".join(rows[i] for i in sorted(shown)), flush=True)
     failed = [(case, result) for case, result in results if result.problems]
     errors = [result for case, result in results if case.expect == "error"]
     print(f"\n{len(results)} cases in {time.perf_counter() - started:.0f} s: {len(failed)} flagged; "

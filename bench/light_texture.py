@@ -1,6 +1,6 @@
 """Textured lights (docs/light-textures.md): minmax's error against exact by SVD rank and
 integrand mode, and the frame time of the textured light against the same light without
-its texture; prints markdown tables (bench/RESULTS.md, "Textured lights").
+its texture; prints markdown tables (bench/RESULTS.md history, "Textured lights").
 
     .venv/bin/python bench/light_texture.py --size 160x90 --error     # error by rank (exact: ~1 min a scene)
     .venv/bin/python bench/light_texture.py --size 640x360 --frames 5  # time cost

@@ -1,23 +1,24 @@
 """The demo room lit by many point lights of the same total power: peak RSS and wall time of
-one frame per light count and image size, from `/usr/bin/time -v` around `clrays render`
+one frame per light count and image size, from GNU time around `clrays render`
 (bench/RESULTS.md, "Many lights").
 
     .venv/bin/python bench/many_lights.py                               # this tree
     .venv/bin/python bench/many_lights.py --repo ../before --lights 1 16  # another tree
 
 Writes many_lights_<n>.yaml (scenes/demo.yaml with its one light split into n on a grid
-over the roof, each with 1/n of the power) into --out, renders each with the tree's own
-`.venv/bin/clrays render ...` (on its default device; `--device` names one) and prints a markdown table.
+over the roof, each with 1/n of the power) into --out, renders each with the tree's
+clrays (`python -m clrays.cli render ...`, the tree first on PYTHONPATH; on the default
+device, `--device` names one) and prints a markdown table.
 """
 from __future__ import annotations
 
 import argparse
 import math
-import re
-import subprocess
+import sys
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from harness import REPO, image_size, timed_process, tree_python, width_height  # noqa: E402
 DEMO_LIGHT = "  - {type: point, position: [0.3, 7.5, -1.0], intensity: [260, 230, 190]}\n"
 
 
@@ -38,28 +39,25 @@ def scene_text(lights: int) -> str:
 def measure(repo: Path, scene: Path, width: int, height: int, out: Path, device: str | None = None
             ) -> tuple[float, float]:
     """(wall seconds, peak RSS in MiB) of one render in a fresh process."""
-    command = ["/usr/bin/time", "-v", str(repo / ".venv" / "bin" / "clrays"), "render", str(scene), "-o",
-               str(out), *(["--device", device] if device else []), "--set", f"image.width={width}", "--set",
+    command = [sys.executable, "-m", "clrays.cli", "render", str(scene), "-o", str(out),
+               *(["--device", device] if device else []), "--set", f"image.width={width}", "--set",
                f"image.height={height}"]
-    done = subprocess.run(command, capture_output=True, text=True, check=True)
-    rss = int(re.search(r"Maximum resident set size \(kbytes\): (\d+)", done.stderr).group(1))
-    clock = re.search(r"Elapsed \(wall clock\) time \(h:mm:ss or m:ss\): (?:(\d+):)?(\d+):([\d.]+)", done.stderr)
-    hours, minutes, seconds = int(clock.group(1) or 0), int(clock.group(2)), float(clock.group(3))
-    return 3600 * hours + 60 * minutes + seconds, rss / 1024
+    seconds, peak, _ = timed_process(command, cwd=repo, env=tree_python(repo))
+    return seconds, peak
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--repo", type=Path, default=REPO, help="the source tree whose .venv renders")
     parser.add_argument("--lights", type=int, nargs="+", default=[1, 16, 64])
-    parser.add_argument("-r", "--resolution", nargs="+", default=["640x360", "1280x720"])
+    parser.add_argument("-r", "--resolution", type=image_size, nargs="+", default=["640x360", "1280x720"])
     parser.add_argument("--out", type=Path, default=Path("/tmp/many_lights"))
     parser.add_argument("--device", help="a --device spec (default: the tree's default device)")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     print(f"tree: {args.repo.resolve()}\n\n| lights | resolution | wall (s) | peak RSS (MiB) |\n|---|---|---|---|")
     for resolution in args.resolution:
-        width, height = (int(v) for v in resolution.split("x"))
+        width, height = width_height(resolution)
         for lights in args.lights:
             scene = args.out / f"many_lights_{lights}.yaml"
             scene.write_text(scene_text(lights))

@@ -1,5 +1,5 @@
 """Peak host and device memory of one frame at 720p, 1080p and 4K (bench/RESULTS.md,
-"Big frames").
+"Memory: big frames").
 
     .venv/bin/python bench/memory.py                       # scenes/demo.yaml, minmax and raymarch
     .venv/bin/python bench/memory.py -r 3840x2160 --method minmax
@@ -18,7 +18,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from harness import REPO, image_size, width_height  # noqa: E402
 
 ONE_POINT = """
 import json, resource, sys, time
@@ -51,11 +52,11 @@ def measure(scene: str, width: int, height: int, method: str) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("scene", nargs="?", default=str(REPO / "scenes" / "demo.yaml"))
-    parser.add_argument("-r", "--resolution", action="append", help="WxH (repeatable); default 720p, 1080p, 4K")
+    parser.add_argument("-r", "--resolution", type=image_size, action="append",
+                        help="WxH (repeatable); default 720p, 1080p, 4K")
     parser.add_argument("--method", action="append", choices=["minmax", "raymarch"])
     args = parser.parse_args()
-    sizes = [tuple(int(v) for v in text.split("x")) for text in args.resolution or
-             ["1280x720", "1920x1080", "3840x2160"]]
+    sizes = [width_height(text) for text in args.resolution or ["1280x720", "1920x1080", "3840x2160"]]
     print("| resolution | method | frame time (s) | device memory (MiB) | predicted (MiB) | host peak (MiB) "
           "| host before the frame (MiB) |")
     print("|---|---|---|---|---|---|---|")

@@ -1,6 +1,6 @@
 """The gathered list (the default) and MBOIT against depth peeling at 1, 2, 4 and 8 layers on scenes/glass_row.yaml (five
-overlapping coloured panes in fog), timed in the same run (bench/RESULTS.md, "Translucent
-objects: the camera side"):
+overlapping coloured panes in fog), timed in the same run (bench/RESULTS.md history, "Translucent
+objects"):
 
     .venv/bin/python bench/transparency.py --methods minmax raymarch --repeats 5
 
@@ -72,7 +72,7 @@ def main() -> None:
     parser.add_argument("--pieces", type=int, nargs="*", default=[], help="also MBOIT's walk in these many pieces")
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                         help="a scene override, as clrays render --set (repeatable)")
-    parser.add_argument("--images", type=Path, default=REPO / "bench" / "results-transparency",
+    parser.add_argument("--images", type=Path, default=REPO / "out" / "transparency",
                         help="folder of the images and heat maps; '' writes none")
     args = parser.parse_args()
     overrides = list(args.overrides)

@@ -23,10 +23,8 @@ import sys
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-
-from arguments import image_size  # noqa: E402  (bench/, beside this script)
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from harness import REPO, image_size  # noqa: E402
 from clrays.runs import tune as tuning  # noqa: E402
 from clrays.runs.references import ReferenceCache  # noqa: E402
 from clrays.scene.load import load_scene  # noqa: E402

@@ -266,7 +266,8 @@ class Renderer:
     def frames_in_flight_win(self) -> bool:
         """Whether a frame in flight beside the next gains time on this session's device: on
         one that works beside the host (a GPU), not on a CPU device, whose kernels take the
-        host's own cores (PoCL on two cores: level within the noise, bench/frames_in_flight.py);
+        host's own cores (PoCL on two cores: level within the noise, bench/RESULTS.md
+        history, "The host's waits inside a frame");
         False before the session has a device (`exact` needs none)."""
         return self._device is not None and not self._device.is_cpu
 

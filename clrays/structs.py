@@ -72,7 +72,7 @@ SIN_BETA_MIN = 1e-9
 # next to the eye's light ray (γ = 0) 0.3× the even width and those at γ_max 1.7×. Along a
 # camera ray at angle β from the light, ds/dγ = d²/(d_el·sin β): rays close to the light's
 # direction cover long stretches with the first texels (orbit.yaml frame 10, 0.80 → 0.49 %
-# at 640×360; bench/RESULTS.md, "γ texels finer near the eye's light ray, kept"). A
+# at 640×360; bench/RESULTS.md history, "γ texels finer near the eye's light ray, kept"). A
 # quadratic, not γ0·(e^{K·u/N} − 1): the walks evaluate it and its inverse (a square root)
 # at every run, and log1p and expm1 there cost traverse about a third more on PoCL. A
 # directional light's γ is a length with ds/dγ = 1/sin β, the same all along: its texels

@@ -65,9 +65,9 @@ RAYMARCH_MOST_STEPS = 2048
 #: ... and a frame's CPU time past which it stops doubling (the next rung would take over
 #: twice as long): the ladder's cost stays bounded on a frame whose error falls slowly.
 #: CPU time, not wall time: on a shared machine the wall time of the same frame varied 3×
-#: with the load (bench/RESULTS.md, the re-run), its CPU time by a few per cent.
+#: with the load (bench/RESULTS.md history, the re-run), its CPU time by a few per cent.
 #: 30 s, not 20: equiangular raymarch reaches 0.5 % on the demo at 1280×720 at 184 steps,
-#: a 23 s frame (bench/RESULTS.md), one rung past a 20 s cap.
+#: a 23 s frame (bench/RESULTS.md history), one rung past a 20 s cap.
 RAYMARCH_MOST_FRAME_CPU_MS = 30_000
 #: The largest shadow map the ladder and the minmax points go up to.
 MOST_SHADOW_MAP = 2048
@@ -113,7 +113,7 @@ def sweep(scene: Scene, quick: bool = False, volume: bool = False) -> list[tuple
     step counts are searched instead (`raymarch_ladder`). `quick`: a handful of fixed
     points of every method (two of raymarch's) for a smoke run. `volume` (volume-only
     error) and frames larger than 640×360 leave out the integrand and traversal variants,
-    to keep the large runs short (the first run in bench/RESULTS.md compares them)."""
+    to keep the large runs short (the first run in bench/RESULTS.md's history compares them)."""
     from ..scene.model import DirectionalLight
 
     if quick:
@@ -158,7 +158,7 @@ def raymarch_ladder(measure_at, shadow_map: int, targets=RMSE_TARGETS, first: in
     their geometric mean, so the cheapest point at or under a target costs at most √2× the
     steps it needs. The climb also stops after a frame of more than `most_cpu_ms` of CPU
     time. The uniform steps' error falls until the shadow map's remains (the volume-only
-    sun of bench/RESULTS.md), so it also stops at a doubling that cuts the error by less
+    sun of bench/RESULTS.md history), so it also stops at a doubling that cuts the error by less
     than 1.25× within 2× of the lowest target; a ladder that ends there, short of the
     lowest target, is climbed again at twice the map, from its first rung within 2× of
     that target."""

@@ -377,6 +377,6 @@ def render_point_task(item, *, folder: str, exposure: float, against, reuse: boo
 
 def pin_to_core(core: int) -> None:
     """Pin this process (every thread, and those it starts later) to one CPU core: for the
-    benchmark of bench/dask_workers.py."""
+    benchmark in bench/RESULTS.md history, "Sequences on Dask workers"."""
     for thread in os.listdir("/proc/self/task"):
         os.sched_setaffinity(int(thread), {core})

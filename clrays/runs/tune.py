@@ -68,13 +68,13 @@ TUNE_PIXELS = 4000
 TUNE_REPEATS = 3
 #: A setting whose first timed frame costs this much (ms, `Trial.cost_ms`) is timed once: the
 #: lattice's 640×360 frames of 249, 493 and 1161 ms of CPU spread by 4.5, 2.2 and 1.8 % over 7
-#: runs (bench/frame_spread.py), their first within 1.5 % of the median, below TIME_MARGIN's 3 %;
+#: runs (the since-removed bench/frame_spread.py), their first within 1.5 % of the median, below TIME_MARGIN's 3 %;
 #: timed three times, the fine occluders' 0.5–1 s settings took the lattice's 640×360 search
-#: past the 2 minutes asked (bench/RESULTS.md, "Tuning the lattice at 640×360").
+#: past the 2 minutes asked (bench/RESULTS.md history, "Tuning the lattice at 640×360").
 LONG_FRAME_MS = 200.0
 #: The most settings one search measures: a survey tries 7 (each knob, and all at once), so
 #: this bounds a search at about 8 surveys; a 640×360 frame of the bench scenes costs 0.05–1 s, and a
-#: setting 4 of them (bench/RESULTS.md, "Fine occluders and tuning").
+#: setting 4 of them (bench/RESULTS.md history, "Fine occluders and tuning").
 MOST_SETTINGS = 60
 #: Along the chosen knob, a finer rung is taken without a new survey while it cuts the error by this fraction.
 LINE_GAIN = 0.15
@@ -172,7 +172,7 @@ class Trial:
     failed: str = ""  # why the setting did not render (its error and times are then inf)
     #: What the search compares: the process's CPU time per frame on a CPU device (every
     #: OpenCL thread's; other processes on a shared machine move it by a few per cent, the
-    #: wall time by 1-3x: bench/RESULTS.md), the wall time on a GPU. Median, as frame_ms.
+    #: wall time by 1-3x: bench/RESULTS.md history), the wall time on a GPU. Median, as frame_ms.
     cost_ms: float = math.nan
 
 
@@ -402,7 +402,7 @@ def tune(scene: Scene, target: float, references: ReferenceCache, renderer: Rend
     `method`: the method to tune (default: the scene's). `on_trial(trial)` after each
     setting; `search`: one already made (`tuned_settings`, which times a frame first);
     `log(line)` when the held-out check sends the search lower; `margin`: the fraction of
-    the target aimed at (bench/tune_held_out.py compares 1 without the held-out check)."""
+    the target aimed at (bench/RESULTS.md, "Tuning", compares 1 without the held-out check)."""
     method = _method_of(scene, method)
     renderer = renderer or Renderer(reuse=False)
     search = search or Search(scene, method, references, renderer, pixels, repeats, on_trial)

@@ -11,7 +11,7 @@ texels. Why the factors are that large: on the spot-light slats of tests/stages 
 slices = perimeter (256) gives a p99 error of 6.5 % against `exact` and γ texels =
 diagonal (128) 11.7 %, where 1024 × 1024 gives 2.4 %. Every size is rounded up to a power
 of two (sizes change in steps, not with every pixel) and clamped: below by what a shadow
-or a slice still resolves, above by the measured defaults of bench/RESULTS.md ("Choosing
+or a slice still resolves, above by the measured defaults of bench/RESULTS.md history ("Choosing
 defaults"). An image whose diagonal is 100 pixels or more (96×64 and larger) gets the full
 1024 map whatever the texels per pixel give: there the map's texel across the scene, not the
 pixel, sets the error against `exact` (FULL_SHADOW_MAP_DIAGONAL). So 96×64 and larger get
@@ -33,7 +33,7 @@ import numpy as np
 from .light_views import directional_map
 from .model import DirectionalLight, Scene, SpotLight
 
-#: Upper clamps: the measured defaults (bench/RESULTS.md, "Choosing defaults").
+#: Upper clamps: the measured defaults (bench/RESULTS.md history, "Choosing defaults").
 MAX_SHADOW_MAP = 1024
 MAX_SLICES = 1024
 MAX_GAMMA_SAMPLES = 1024
@@ -47,7 +47,7 @@ MIN_GAMMA_SAMPLES = 16
 #: most the diagonal, so a sample per two pixels of the diagonal puts them no further apart
 #: than two pixels on any line. One per pixel computes about twice the samples for 1.4× the traverse
 #: time and brings behind.yaml's p99 against `exact` from 0.324 to 0.289 % at 1280×720
-#: (bench/RESULTS.md, "Epipolar sampling").
+#: (bench/RESULTS.md history, "Epipolar sampling").
 LINE_SAMPLES_PER_PIXEL = 0.5
 MIN_LINE_SAMPLES = 16
 MAX_LINE_SAMPLES = 4096
@@ -56,7 +56,7 @@ MAX_LINE_SAMPLES = 4096
 #: image as on a large one, measured along the line, so the step shrinks with the image: 6 at
 #: 1280×720 (the largest within 10 % of the per-pixel walk's error there), 3 at 640×360,
 #: where 6 put behind.yaml's RMSE and p99 against `exact` 19 % and 35 % over the per-pixel
-#: walk's and 3 puts them 4 % and 7 % over (bench/RESULTS.md, "The initial step follows the
+#: walk's and 3 puts them 4 % and 7 % over (bench/RESULTS.md history, "The initial step follows the
 #: image"). Below 640×360 it stays 3: there the 1024 slices' lines already hold more
 #: samples than the image has pixels, and a smaller step would only compute more of them.
 INITIAL_SAMPLES_PER_LINE = 120
@@ -71,7 +71,7 @@ SHADOW_TEXELS_PER_PIXEL = 4
 #: and 0.94 % at 80×60, 0.65 and 0.84 % at 96×64; orbit's frame 10 1.53 % at 96×64). 1024²,
 #: with the 1024 slices and γ texels it lets the image derive, brings every scene of scenes/
 #: at 96×64 within it (sun 0.34, room 0.28, orbit's frame 10 0.42 %) but the lattice and the
-#: stained glass, which miss it at every size (bench/RESULTS.md, "The full map from a
+#: stained glass, which miss it at every size (bench/RESULTS.md history, "The full map from a
 #: diagonal of 100 pixels"). Both halves count: the map alone reads sun 0.51, room 0.57 %,
 #: the slices and γ texels alone 0.59, 0.75 %. 8 texels per pixel would give 96×64 the same
 #: but double every smaller image's map too, for 1.4–4× the frame (64×48: sun 11 → 35 ms,
@@ -83,7 +83,7 @@ FULL_SHADOW_MAP_DIAGONAL = 100
 SPOT_SINGLE_VIEW_MAX_DEG = 75.0
 #: Texels across the thinnest closed solid, seen from its light, that a derived map gives at
 #: least. scenes/grate.yaml's 1 cm slats 2.8 below a point light at 320×180, against `exact`
-#: (bench/RESULTS.md, "Volume visibility"): 1.8 texels of a 1024² cube face 3.26 %, 3.7 texels
+#: (bench/RESULTS.md history, "Volume visibility"): 1.8 texels of a 1024² cube face 3.26 %, 3.7 texels
 #: (2048²) 2.22 %, 7.4 (4096²) 0.24 %; the slices and γ texels moved it by under 0.06.
 OCCLUDER_TEXELS = 6
 #: A derived map grows for thin solids to at most this many times the image's size, and
@@ -96,12 +96,12 @@ SLICES_PER_BORDER_PIXEL = 4
 GAMMA_TEXELS_PER_PIXEL = 8
 #: Upper clamps of what a light texture asks for. scenes/gobo.yaml (a 256² gobo over a 28°
 #: cone) asks for 2048 × 1024; against `exact` that takes its minmax error from 1.47 to
-#: 0.44 % at 320×180 and from 0.68 to 0.12 % at 96×64 (bench/RESULTS.md, "A light texture's
+#: 0.44 % at 320×180 and from 0.68 to 0.12 % at 96×64 (bench/RESULTS.md history, "A light texture's
 #: slices and γ texels"). scenes/stained_glass.yaml's sun asks for 4096 × 2048 and gets
 #: 4096 × 1024: with each γ cell's texture its mean (clrays.stages.light_texture.cell_samples)
 #: 0.76 / 0.53 / 0.45 / 0.45 % against `exact` at 96×64 / 320×180 / 640×360 / 1280×720, where
 #: 2048 slices gave 0.90 / 0.68 / 0.65 / 0.69 %, for 1.2–1.3× the frame; 2048 γ texels would
-#: pass the budget below (bench/RESULTS.md, "The stained glass within reach of 0.5 %").
+#: pass the budget below (bench/RESULTS.md history, "The stained glass within reach of 0.5 %").
 #: The prefix sums grow with slices × γ texels (252 MiB at 4096 × 1024, rank 4); a finer
 #: texture is left to `render.slices` and `render.gamma_samples`.
 MAX_TEXTURE_SLICES = 4096

@@ -317,7 +317,7 @@ RENDER = Section("render", (
                 "miss its holes (the lattice at 1280×720: 0.20 % against `exact`, 1.56 % from the map); "
                 "`texels` at the texel boundary, as raymarch does: on the bench "
                 "scenes at 1280×720 a frame 1.1–1.3 × faster for 1.3–4.7 × the error against `exact` "
-                "([docs/design.md](design.md) §4.5, bench/RESULTS.md \"Shaft edges on the blockers\"); e.g. "
+                "([docs/design.md](design.md) §4.5, bench/RESULTS.md \"Accuracy: every scene at every size\"); e.g. "
                 "`--set render.shaft_edges=texels`", read_by=("minmax",)),
     Field("line_samples", "integer", Render.line_samples, 2, 16384,
           shown_default=f"from the image: half its diagonal in pixels, in [{MIN_LINE_SAMPLES}, {MAX_LINE_SAMPLES}]",
@@ -379,7 +379,7 @@ SHADOW_FILTER = Section("render.shadow_filter", (
           notes="texels at the receiver's depth, taken off it before the test"),
     Field("moment_bias", "number", ShadowFilter.moment_bias, 0.0, 0.5,
           notes="`msm_*`: how far the moments are pulled towards those of depth 0.5; `vsm`: the least variance "
-                "(normalised depth²). Measured in bench/RESULTS.md"),
+                "(normalised depth²). Measured in bench/RESULTS.md history"),
 ), rules=("With `shadow_filter` set, `surface_shadows` is `filtered` (or left out) and `pcf` is 0.",))
 
 TRANSPARENCY = Section("render.transparency", (
@@ -399,7 +399,7 @@ TRANSPARENCY = Section("render.transparency", (
                 "the farthest distance of the translucent objects from the camera"),
     Field("moment_bias", "number", Transparency.moment_bias, 0.0, 0.5,
           notes="`mboit`: how far the normalised moments are pulled towards those of depth 0.5. "
-                "Measured in bench/RESULTS.md"),
+                "Measured in bench/RESULTS.md history"),
 ))
 
 

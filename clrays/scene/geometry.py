@@ -332,7 +332,7 @@ def spatial_order(triangles: np.ndarray) -> np.ndarray:
     work-item per triangle (raster, the visibility stage's bound maps) then write nearby
     texels from nearby work-items: a scanned mesh in its file's order scatters them over
     the map, and each visit was a cache miss (the bunny at 1280×720, those three passes:
-    56.6 → 52.2 ms, bench/RESULTS.md, "Fewer waits, parallel fills, meshes in spatial
+    56.6 → 52.2 ms, bench/RESULTS.md history, "Fewer waits, parallel fills, meshes in spatial
     order")."""
     centroids = triangles.mean(axis=1)
     low, extent = centroids.min(axis=0), np.ptp(centroids, axis=0)

@@ -215,7 +215,7 @@ class ShadowFilter:
     radius: int = 2  # texels: the (2·radius + 1)² box of PCF, and of the moment maps' prefilter
     depth_bias: float = 1.5  # texels (at the receiver's depth), taken off the receiver's depth
     # msm: weight pulling the moments towards 0.5; vsm: the least variance. The smallest that keeps the
-    # float32 reconstruction within 1e-3 of its bound (bench/RESULTS.md, "Filtered surface shadows").
+    # float32 reconstruction within 1e-3 of its bound (bench/RESULTS.md history, "Filtered surface shadows").
     moment_bias: float = 3e-6
 
 
@@ -226,14 +226,14 @@ class Transparency:
 
     # The gathered list by default: on glass_row as accurate as 8-layer peeling and as fast as MBOIT
     # (its fog is one walk per pixel, peeling's one per film), where MBOIT's 4-moment estimate of
-    # the transmittance costs 1 % (bench/RESULTS.md, docs/design.md).
+    # the transmittance costs 1 % (bench/RESULTS.md history, docs/design.md).
     type: str = "gathered"  # one of TRANSPARENCY_TYPES
     # The nearest layers composited; those behind them are dropped. Peeling stops where no sample
     # finds another layer, so a frame with fewer films pays for those only.
     layers: int = 8
     warp: str = "log"  # mboit: one of TRANSPARENCY_WARPS
     # mboit: weight pulling the normalised moments towards those of depth 0.5 (cl/moments.h),
-    # measured on scenes/glass_row.yaml (bench/RESULTS.md, "Translucent objects: the camera side").
+    # measured on scenes/glass_row.yaml (bench/RESULTS.md history, "Translucent objects: the camera side").
     moment_bias: float = 5e-3
 
 

@@ -71,11 +71,11 @@ SVD_RELATIVE_CUTOFF = 1e-13
 # scale (the one exception, the last cell of a point row, gets halving panels): 3 nodes
 # agree with 8 to 6e-9 of the table's largest value, and the bench scenes' float32 tables with
 # 8 nodes' but for 1 ulp in at most 3 of 65 536 entries (4 nodes: none), for 0.75× the
-# build time (bench/RESULTS.md, "Integrand build").
+# build time (bench/RESULTS.md history, "Integrand build").
 QUAD_NODES = 3
 # Integrand values per chunk of rows: chunks that stay in the CPU's L2 cache build a 128 × 512
 # table in 0.6× the time of one 400 000-value chunk in a plain Python process (in the
-# renderer's, where PoCL is loaded, about the same time; bench/RESULTS.md, host stages).
+# renderer's, where PoCL is loaded, about the same time; bench/RESULTS.md history, host stages).
 ROW_CHUNK_VALUES = 32768
 # Directional rows end at this optical depth (of the least attenuating channel) when
 # no s_max is given: the light beyond carries e^{-20} ≈ 2e-9 of the ray's radiance.
@@ -218,7 +218,7 @@ def _row_integrand(kind, consts, beta, x, cells=None) -> np.ndarray:
     cosines of centres·δ/2 and offsets·δ/2 by the angle-sum formulas (`_point_half_sines`):
     an eighth of the trigonometry. The prefix rows move by at most 2e-15 of their largest
     value against a direct evaluation, and no float32 entry of the bench scenes' tables
-    moves (bench/RESULTS.md, host stages)."""
+    moves (bench/RESULTS.md history, host stages)."""
     amplitude, sigma_t = consts[:, C_AMPLITUDE], consts[:, C_SIGMA_T]
     g = float(consts[0, C_G])
     beta = np.asarray(beta, dtype=np.float64)[:, None]

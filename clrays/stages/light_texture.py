@@ -39,7 +39,7 @@ from .integrand import SVD_RELATIVE_CUTOFF, SVD_SAMPLES, _beta_nodes, integrand_
 #: texels long (γ_max ≈ 19 through the window, 1024 cells) and take 2 points; against
 #: `exact` at 160×90, 2048 slices, 1 point gives 0.65 %, 2 0.58 %, 3 0.56 %, 4 0.56 %,
 #: 8 0.56 %, and at its 4096 slices 2 points 0.495 %, 3 0.489 % for about 1.15× the frame
-#: more at 640×360 (bench/RESULTS.md, "The stained glass within reach of 0.5 %").
+#: more at 640×360 (bench/RESULTS.md history, "The stained glass within reach of 0.5 %").
 CELL_SAMPLES_PER_TEXEL = 1.0
 MAX_CELL_SAMPLES = 4
 

@@ -58,7 +58,7 @@ CULL_PER_VIEW = True
 #: A view whose list keeps more than this share of the triangles draws them all, without
 #: the list: pass 1 over a list of blocks (a 2-D launch, its triangles read through the
 #: list) took up to 1.2× the time of the plain launch where the list kept every block (the
-#: bunny's spot light at 1280×720; bench/RESULTS.md, "Raster culled per view").
+#: bunny's spot light at 1280×720; bench/RESULTS.md history, "Raster culled per view").
 LIST_AT_MOST = 0.9
 
 
@@ -111,7 +111,7 @@ def raster_count_on_device(device: Device) -> bool:
     both passes without waiting (a GPU, which a wait leaves idle), or the host reads the
     lengths, once for every view, and passes each as an argument (a CPU device: PoCL runs
     a loop over an argument uniformly across the work-items it runs together, and over a
-    length read on the device the camera's rows pass took 1.6× its time; bench/RESULTS.md,
+    length read on the device the camera's rows pass took 1.6× its time; bench/RESULTS.md history,
     "The host's waits inside a frame")."""
     return not device.is_cpu
 

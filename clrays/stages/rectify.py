@@ -24,7 +24,7 @@ from ..scene.model import DirectionalLight
 LANES = 8
 # Batches of LANES texels one rectify work-item computes on a CPU device, every batch's
 # shadow-map reads issued before any is used: the reads miss the cache, and a core waits
-# on 64 of them at once about as long as on 8 (bench/RESULTS.md, "Column blocks on a GPU,
+# on 64 of them at once about as long as on 8 (bench/RESULTS.md history, "Column blocks on a GPU,
 # fewer and earlier loads on a CPU"). A GPU hides the wait with other work-items, and keeps
 # one batch each.
 RECTIFY_BATCHES_CPU = 8

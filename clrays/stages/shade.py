@@ -10,7 +10,7 @@ from .raster import RasterResult
 
 LANES = 8  # pixels per work-item, as float8 vectors (cl/shade.cl, cl/lanes.h)
 # Work-items per work-group: PoCL's own choice ran about 10 % slower at 1280×720 than 64, and
-# 256 no faster (bench/RESULTS.md, "shade in lanes"). The last group's extra items return.
+# 256 no faster (bench/RESULTS.md history, "shade in lanes"). The last group's extra items return.
 GROUP = 64
 
 

@@ -19,7 +19,7 @@ from .rectify import Epipolar
 from .transparency import FOG_LABEL, Films, depth_range, transparency_of
 
 #: Pieces of the ray between a sample's nearest and farthest film, even in MBOIT's warp, over
-#: each of which the fog takes one weight (bench/RESULTS.md, the camera side: the error against
+#: each of which the fog takes one weight (bench/RESULTS.md history, the camera side: the error against
 #: 8-layer peeling by piece count).
 WALK_PIECES = 4
 

@@ -1,6 +1,6 @@
 """Big frames: a frame the device cannot hold is refused in one line before any device
 allocation (session.check_device_memory); a 4K frame renders with both GPU methods
-within the memory it is predicted to need (slow: bench/RESULTS.md, "Big frames")."""
+within the memory it is predicted to need (slow: bench/RESULTS.md, "Memory: big frames")."""
 from __future__ import annotations
 
 import time
@@ -54,7 +54,7 @@ def test_a_frame_over_global_memory_names_the_total_and_the_limit():
 @pytest.mark.parametrize("method", ["minmax", "raymarch"])
 def test_4k_renders_within_its_predicted_memory(method):
     """3840×2160 of the demo. Measured on the 2-core PoCL machine under a load of 6-8:
-    minmax 25 s (this test) to 47 s, raymarch 409 s (bench/RESULTS.md, "Big frames")."""
+    minmax 25 s (this test) to 47 s, raymarch 409 s (bench/RESULTS.md, "Memory: big frames")."""
     renderer = Renderer(Device(TEST_DEVICE), reuse=False)
     scene = load_scene(DEMO, UHD + [f"render.method={method}"])
     start = time.perf_counter()

@@ -38,7 +38,7 @@ def _minmax_error(scene, exact, edges, **render):
 def test_finer_gamma_texels_bring_the_orbit_frame_within_half_a_percent(orbit_frame_10):
     """The error is mostly the γ texels': 4096 of them (a quarter of the derived texel's mean)
     bring it to a measured 0.398 % relative RMSE (0.427 % with texels even in γ;
-    bench/RESULTS.md, "orbit's frame 10")."""
+    bench/RESULTS.md history, "orbit's frame 10")."""
     error = _minmax_error(*orbit_frame_10, gamma_samples=4096)
     print(f"orbit frame 10, 160×90, 4096 γ texels: {error}")
     assert error.rmse < 0.005, f"{error}"
@@ -46,7 +46,7 @@ def test_finer_gamma_texels_bring_the_orbit_frame_within_half_a_percent(orbit_fr
 
 def test_orbit_frame_10_at_the_derived_sizes_is_within_half_a_percent(orbit_frame_10):
     """Measured 0.491 % relative RMSE against exact at 160×90, whole image, depth
-    edges out (0.776 % with γ texels even in γ; bench/RESULTS.md, "γ texels finer near the
+    edges out (0.776 % with γ texels even in γ; bench/RESULTS.md history, "γ texels finer near the
     eye's light ray, kept")."""
     error = _minmax_error(*orbit_frame_10)
     print(f"orbit frame 10, 160×90, derived sizes: {error}")

@@ -129,7 +129,7 @@ def test_lattice_sun_map_matches_its_triangles(device):
     its footprint covers (clrays.stages.relief.footprint), holds the depths and nearest
     triangles its triangles give every texel. The footprint is a small part of a map fitted
     to the whole room: 3.8 % of it here, where mapping every texel took the lattice's
-    320×180 frame 37 of its 125 ms (bench/RESULTS.md, "A relief maps its footprint only")."""
+    320×180 frame 37 of its 125 ms (bench/RESULTS.md history, "A relief maps its footprint only")."""
     maps = []
     for mode in ("prewarp", "triangles"):
         scene = with_derived_sizes(load_scene(LATTICE, ["image.width=96", "image.height=72", "render.shadow_map=512",

@@ -2,7 +2,7 @@
 (96×64) the image derives the full 1024² shadow map, and with it 1024 slices and γ texels
 (clrays.scene.costs.FULL_SHADOW_MAP_DIAGONAL), which keeps the scenes whose error the map
 sets within 0.5 % relative RMSE; the 512² map that 4 texels per pixel of the diagonal gave
-96×64 missed it (bench/RESULTS.md, "The full map from a diagonal of 100 pixels")."""
+96×64 missed it (bench/RESULTS.md history, "The full map from a diagonal of 100 pixels")."""
 from __future__ import annotations
 
 from pathlib import Path

@@ -188,7 +188,7 @@ def test_exact_lit_pieces_match_a_product_per_point():
 def test_glass_pane_agrees_with_exact(renderer, method, sampling):
     """minmax and raymarch within 1 % relative RMSE of exact on scenes/glass_pane.yaml,
     depth edges out, the pixels that see the pane in (the camera side composites them).
-    Measured at 160×90: raymarch 0.18 %, minmax 0.34 % (bench/RESULTS.md)."""
+    Measured at 160×90: raymarch 0.18 %, minmax 0.34 % (bench/RESULTS.md history)."""
     if method == "raymarch" and sampling == "pixel":
         pytest.skip("raymarch does not sample epipolar lines")
     scene = load_scene(REPO / "scenes" / "glass_pane.yaml",

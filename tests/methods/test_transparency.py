@@ -128,7 +128,7 @@ def test_peeling_drops_the_layers_behind_the_last(renderer):
 
 def test_moments_come_close_to_eight_layer_peeling(renderer):
     """MBOIT (4 moments, log warp, the defaults) against 8-layer peeling on the five-pane row:
-    bench/RESULTS.md has the figures at full size; measured here at 64×36: 1.07 % (the fog
+    bench/RESULTS.md's history has the figures at full size; measured here at 64×36: 1.07 % (the fog
     walked once per sample, transparency_walk.cl; 1.07 % too with the fog run up to each film)."""
     peeled = renderer.render(small_row("render.transparency={type: depth_peeling, layers: 8}")).image
     moments = renderer.render(small_row("render.transparency=mboit")).image

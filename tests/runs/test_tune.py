@@ -346,7 +346,7 @@ def test_a_start_that_does_not_render_is_searched_from_below(scene_file, tmp_pat
 @pytest.mark.parametrize("first_cost, timed", [(250.0, 1), (50.0, 3)])
 def test_a_long_frame_is_timed_once(scene_file, tmp_path, monkeypatch, first_cost, timed):
     """A setting whose first timed frame costs LONG_FRAME_MS or more is timed once (one long
-    frame is as good as the median of three, bench/RESULTS.md); a shorter one three times."""
+    frame is as good as the median of three, bench/RESULTS.md history); a shorter one three times."""
     scene = load_scene(scene_file)
     search = tuning.Search(scene, "minmax", ReferenceCache(tmp_path / "cache"), Renderer(reuse=False), pixels=200)
     costs = iter([first_cost, first_cost + 10.0, first_cost + 20.0])

@@ -163,7 +163,7 @@ def test_identical_frame_is_kept_whole(renderer):
 
 
 def test_a_frame_that_keeps_nothing_digests_nothing(device, monkeypatch):
-    """Without reuse no key is made: digesting a mesh costs milliseconds a frame (bench/RESULTS.md,
+    """Without reuse no key is made: digesting a mesh costs milliseconds a frame (bench/RESULTS.md history,
     host stages); the image is the one a keeping session renders."""
     import clrays.digest
 
