@@ -288,9 +288,9 @@ def translucent_radiance(scene: Scene, eye: np.ndarray, dirs: np.ndarray, prepar
             out[:, ch] += np.bincount(cam_ray, weights=films[:, ch], minlength=n)
     if np.any(sigma_s > 0):
         for light, halfspaces in prepared:
-            ray, a, b, transmittance = from_ray_starts(
-                *queries.lit_pieces(eye, dirs, D, light, halfspaces, radiometry.lamp_radius(scene),
-                                    (cam_ray, cam_t, cam_clear)), starts)
+            ray, a, b, transmittance = queries.lit_pieces(eye, dirs, D, light, halfspaces,
+                                                          radiometry.lamp_radius(scene), (cam_ray, cam_t, cam_clear))
+            ray, a, b, transmittance = from_ray_starts(ray, a, b, starts, transmittance)
             if textured(light):
                 seg = textured_in_scatter(light, medium, eye, dirs[ray], a, b)
             else:
