@@ -87,6 +87,7 @@ typedef struct {
     float4 sigma_s;    /* scattering coefficient, rgb, 1/unit */
     float4 sigma_t;    /* extinction coefficient, rgb, 1/unit */
     float4 background; /* radiance of rays that hit nothing, rgb */
+    float4 near_plane; /* the camera's unit view axis (xyz) and camera.near (w): lighting.h's camera_ray_start */
     float phase_g;     /* Henyey-Greenstein asymmetry */
     int phase_type;    /* PHASE_* */
     float far;         /* rays that hit nothing end here (camera.far, clamped: radiometry.effective_far) */

@@ -46,6 +46,15 @@ ALWAYS_INLINE void view_ray(global const view_t* view, float2 s, float3* origin,
     }
 }
 
+/* Where the camera ray along unit dir starts (camera.near, docs/scene-format.md): at the plane
+ * near in front of the eye along its view axis, t0 = near / cos θ, as Cycles' Clip Start. The
+ * walks clip their lit runs to [t0, D] and shade measures the eye's transmittance from t0,
+ * only when near > 0: with near = 0 no kernel computes it, and the images keep their bits. */
+ALWAYS_INLINE float camera_ray_start(global const frame_t* frame, float3 dir)
+{
+    return frame->near_plane.w / inline_dot(dir, frame->near_plane.xyz);
+}
+
 /* A camera sample's surface point p, its ray direction and its normal turned to face the
  * camera (surfaces are two-sided, as shade has them). Returns 0 where the sample sees no
  * surface (no triangle, or beyond far). */

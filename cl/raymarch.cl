@@ -90,6 +90,12 @@ kernel void raymarch(global const frame_t* frame, global const view_t* views,
          * no step is spent where the light does not reach. */
         float begin = 0.0f, end = distance;
         if (light->type == LIGHT_SPOT && !spot_interval(light, dir, distance, &begin, &end)) continue;
+        /* camera.near: the ray starts at t0 (lighting.h's camera_ray_start); shade scales what
+         * it gathers by e^{σt·t0}. */
+        if (frame->near_plane.w > 0.0f) {
+            begin = fmax(begin, camera_ray_start(frame, dir));
+            if (!(end > begin)) continue;
+        }
         float dt = (end - begin) / (float)frame->steps;
         int directional = light->type == LIGHT_DIRECTIONAL;
         int unshadowed = eye_in_lamp(light, frame->lamp_radius);

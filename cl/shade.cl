@@ -330,8 +330,29 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
         else
             in_scatter = gather_xyz(scatter, sample, 0);
         vec_lanes to_eye = attenuation_lanes(sigma_t, distance);
+        /* camera.near: the sample's ray starts at t0 (lighting.h's camera_ray_start), where the
+         * eye's transmittance is measured from: the surface is attenuated over D − t0, and what
+         * the volume stage gathered from t0 on (attenuated from the eye) is times e^{σt·t0}. A
+         * surface nearer than t0 is seen, unattenuated (docs/limits.md). */
+        int from_near = frame->near_plane.w > 0.0f;
+        vec_lanes near_gain;
+        if (from_near) {
+            float_lanes start = fmin_lanes(frame->near_plane.w / dot_lanes(dir.x, dir.y, dir.z, frame->near_plane.x,
+                                                                           frame->near_plane.y, frame->near_plane.z),
+                                           distance);
+            to_eye = attenuation_lanes(sigma_t, distance - start);
+            near_gain = attenuation_lanes(sigma_t, -start);
+            in_scatter.x *= near_gain.x;
+            in_scatter.y *= near_gain.y;
+            in_scatter.z *= near_gain.z;
+        }
 #ifdef SHADE_TRANSPARENCY
         vec_lanes through = gather_xyz(transmittance, sample, 0), front = gather_xyz(in_front, sample, 0);
+        if (from_near) { /* the films' light and the fog in front of them, from t0 too */
+            front.x *= near_gain.x;
+            front.y *= near_gain.y;
+            front.z *= near_gain.z;
+        }
         total.x += through.x * (surface.x * to_eye.x + in_scatter.x) + front.x;
         total.y += through.y * (surface.y * to_eye.y + in_scatter.y) + front.y;
         total.z += through.z * (surface.z * to_eye.z + in_scatter.z) + front.z;

@@ -111,12 +111,20 @@ ALWAYS_INLINE float ray_beta(global const epipolar_t* ep, float3 dir, float* sin
  * visible ray has extent in γ (the bounds rectify reduced, which the host does not read)
  * every span is empty, and the light adds nothing. */
 ALWAYS_INLINE int finish_span(global const epipolar_t* ep, global const frame_t* frame,
-                              global const integrand_t* integrand, int directional, float beta, float sin_beta,
-                              float cos_beta, float distance, ray_span_t* span)
+                              global const integrand_t* integrand, int directional, float3 dir, float beta,
+                              float sin_beta, float cos_beta, float distance, ray_span_t* span)
 {
 #ifdef RELIEF_CUTS
     span->relief_found = 0;
 #endif
+    /* camera.near (lighting.h's camera_ray_start): the ray's lit γ begins at its start t0, so
+     * every run [a, b] is [max(a, t0), b]; shade scales the in-scattering by e^{σt·t0}. */
+    if (frame->near_plane.w > 0.0f) {
+        float start = camera_ray_start(frame, dir);
+        float gamma_start = directional ? start * sin_beta
+                                        : atan2_approx(start * sin_beta, ep->d_el - start * cos_beta);
+        span->gamma_begin = inline_fmax(span->gamma_begin, gamma_start);
+    }
     if (!(span->gamma_end > span->gamma_begin) || integrand->no_extent) return 0;
     /* The lamp (lighting.h): a ray that passes within its radius of a point or spot light
      * leaves out the chord inside it, as exact does; this keeps a ray through the light
@@ -151,7 +159,7 @@ inline int ray_span_in_wedge(global const epipolar_t* ep, global const frame_t* 
     float2 lit = lit_sweep(atan2_approx(distance * sin_beta, ep->d_el - distance * cos_beta), wedge);
     span->gamma_begin = lit.x;
     span->gamma_end = lit.y;
-    return finish_span(ep, frame, integrand, 0, beta, sin_beta, cos_beta, distance, span);
+    return finish_span(ep, frame, integrand, 0, dir, beta, sin_beta, cos_beta, distance, span);
 }
 
 /* The γ extent of the ray along dir up to distance; 0 when it has none (it misses a
@@ -174,7 +182,7 @@ inline int ray_span(global const epipolar_t* ep, global const light_t* light, gl
     /* The ray from the eye starts at γ = atan2(+0, d_el) = +0: no arc tangent for it. */
     span->gamma_begin = 0.0f;
     span->gamma_end = directional ? distance * sin_beta : atan2_approx(distance * sin_beta, ep->d_el - distance * cos_beta);
-    return finish_span(ep, frame, integrand, directional, beta, sin_beta, cos_beta, distance, span);
+    return finish_span(ep, frame, integrand, directional, dir, beta, sin_beta, cos_beta, distance, span);
 }
 
 /* The two slices whose centres bracket the angle α, and the weight t of the second. The

@@ -253,6 +253,7 @@ def frame_inputs(scene: Scene) -> FrameInputs:
     params["phase_type"] = structs.PHASE_HG if medium.phase.type == "hg" else structs.PHASE_ISOTROPIC
     params["far"] = effective_far(scene)  # camera.far, clamped where it changes nothing
     params["lamp_radius"] = lamp_radius(scene)  # from the scene's size, not far (docs/design.md §1)
+    params["near_plane"] = structs.float4(forward, camera.near)  # the camera view's axis: camera_ray_start
     params["light_count"] = len(lights)
     params["width"], params["height"], params["spp"] = image.width, image.height, image.spp
     params["steps"] = scene.render.steps

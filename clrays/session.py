@@ -49,6 +49,7 @@ from .light_turns import RaysSum, add_visibility_column, lights_in_turn, one_lig
 from .physics.radiometry import effective_far
 from .passes import assemble, per_light_indices, samples_to_pixels
 from .reuse import COMPUTED, REUSED, SKIPPED, Reuse, StageCache, StageRecord, digest, geometry_parts, scene_digest
+from .scene.camera import primary_rays, ray_starts
 from .scene.costs import with_derived_sizes
 from .scene.model import METHODS, RENAMED_METHODS, DirectionalLight, Render, Scene
 from .stages.features import walk_features
@@ -560,7 +561,8 @@ class Renderer:
             return image, None
         image, terms = image
         size = frame.scene.image
-        per_light = {index: samples_to_pixels(frame.light_scatter.get(index, np.zeros((frame.in_scatter.samples, 4))),
+        gain = _near_gain(frame.scene)  # (shade scales the frame's in-scattering so, cl/shade.cl)
+        per_light = {index: samples_to_pixels(gain * frame.light_scatter.get(index, np.zeros((frame.in_scatter.samples, 4))),
                                               size.height, size.width, size.spp)
                      for index in per_light_indices(aovs)}
         return image, lambda: assemble(aovs, terms[..., 0, :3], terms[..., 1, :3], terms[..., 2, :3],
@@ -832,6 +834,18 @@ def check_device_memory(device: Device, inputs: FrameInputs) -> None:
         raise ClraysError(f"{where}the frame ({what}) needs {total / 2**30:.1f} GiB of device memory, more than "
                           f"the device's {memory / 2**30:.1f} GiB ({device.name}); lower the image size, the "
                           f"light count or render.shadow_map")
+
+
+def _near_gain(scene: Scene) -> np.ndarray | float:
+    """(samples, 4), e^{σt·t0} per camera sample and channel (w: 1): what makes in-scattering
+    gathered from each ray's start t0 (`camera.near`), attenuated from the eye, attenuated from
+    t0. 1.0 without near."""
+    if scene.camera.near == 0.0:
+        return 1.0
+    starts = ray_starts(scene.camera, primary_rays(scene.camera, scene.image).reshape(-1, 3))
+    gain = np.ones((len(starts), 4))
+    gain[:, :3] = np.exp(np.outer(starts, scene.medium.sigma_t))
+    return gain
 
 
 class StageKeys:

@@ -176,7 +176,7 @@ light_dtype = np.dtype([
 ])
 
 frame_dtype = np.dtype([
-    ("sigma_s", _f4), ("sigma_t", _f4), ("background", _f4),
+    ("sigma_s", _f4), ("sigma_t", _f4), ("background", _f4), ("near_plane", _f4),
     ("phase_g", np.float32), ("phase_type", np.int32),
     ("far", np.float32), ("light_count", np.int32),
     ("width", np.int32), ("height", np.int32), ("spp", np.int32), ("steps", np.int32),

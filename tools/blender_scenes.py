@@ -5,8 +5,8 @@ direct-light-only model clrays renders (docs/design.md §1). clrays never import
 runs in Blender's Python (the `bpy` wheel needs Python 3.11, in a virtualenv of its own):
 
     python3.11 -m venv /tmp/bpyenv && /tmp/bpyenv/bin/pip install 'bpy==4.5.*'
-    /tmp/bpyenv/bin/python tools/blender_scenes.py point out/ --samples 1024 --seed 1 --clip-start 0.001
-    /tmp/bpyenv/bin/python tools/blender_scenes.py point out/ --samples 1024 --seed 2 --clip-start 0.001
+    /tmp/bpyenv/bin/python tools/blender_scenes.py point out/ --samples 1024 --seed 1
+    /tmp/bpyenv/bin/python tools/blender_scenes.py point out/ --samples 1024 --seed 2
 
 writes out/point.glb and out/point.cycles.s1.npy, .s2.npy (linear RGB, H×W×3 float32, row 0
 at the top, as clrays's .npy), and prints the clrays command that renders the same file
@@ -26,10 +26,10 @@ Scenes (Blender's Z up; the exporter writes glTF's Y up):
 Cycles is set up as clrays renders: Diffuse BSDF (Lambert) of the glTF base colour, one
 homogeneous isotropic medium in the World (Volume Scatter + Volume Absorption, densities σs
 and σa per metre), direct light only (every bounce count 0), no light threshold, a box
-pixel filter, no denoising. Two differences of model need settings:
-* Cycles' camera rays, and so its fog, begin at the camera's Clip Start (Blender's 0.1 m),
-  clrays's at the eye: in fog of extinction σt Cycles is e^(σt·clip start) brighter, so
-  `--clip-start 0.001` for a comparison (docs/scene-format.md, "Camera").
+pixel filter, no denoising. Cycles' camera rays, and so its fog, begin at the camera's Clip
+Start (Blender's 0.1 m, `--clip-start`), which the exporter writes as the camera's `znear`
+and clrays reads as `camera.near` (docs/scene-format.md, "Camera"). One difference of model
+needs a setting:
 * clrays does not attenuate sunlight on its way in (docs/design.md), and Cycles' World
   volume, infinite, absorbs a sun whole; in the sun scene the medium is left out of shadow
   rays (Light Path "Is Shadow Ray"), unless --sun-through-fog. Point and spot light is

@@ -79,8 +79,8 @@ class GltfBuilder:
         lights.append(definition)
         return len(lights) - 1
 
-    def camera(self, yfov: float, zfar: float | None = None, name: str | None = None) -> int:
-        perspective = {"yfov": yfov, "znear": 0.05, **({"zfar": zfar} if zfar is not None else {})}
+    def camera(self, yfov: float, zfar: float | None = None, name: str | None = None, znear: float = 0.05) -> int:
+        perspective = {"yfov": yfov, "znear": znear, **({"zfar": zfar} if zfar is not None else {})}
         self.doc.setdefault("cameras", []).append({"type": "perspective", "perspective": perspective,
                                                    **({"name": name} if name else {})})
         return len(self.doc["cameras"]) - 1

@@ -17,6 +17,10 @@ channel (docs/design.md §1, §4),
   the lit set its complement (for a spot light: within the ray's interval inside the cone),
   less the lamp: the medium-free ball of `radiometry.lamp_radius` around a point or spot
   light, which keeps a ray through the light, and the eye at the light, finite.
+- With `camera.near` each ray starts at t0 = near / cos θ (`camera.ray_starts`), as Cycles'
+  Clip Start: the lit intervals are cut to [t0, D] and the eye's transmittance is measured
+  from t0, e^{-σt·(s - t0)}, so the sum above is times e^{σt·t0}. The first hit is still
+  searched from the eye (as the device's camera depth): a surface nearer than t0 is seen.
 - Each lit interval is integrated by `radiometry.in_scatter_segments`: closed form for a
   directional light, adaptive composite Gauss–Legendre in the angle φ of
   s = s0 + h·tanφ for point and spot lights. A textured light's (docs/light-textures.md)
@@ -43,7 +47,7 @@ import time
 import numpy as np
 
 from ..physics import radiometry
-from ..scene.camera import primary_rays, sample_offsets
+from ..scene.camera import from_ray_starts, near_gain, primary_rays, ray_starts, sample_offsets
 from ..physics.geometry import (BUDGET_BYTES, CLIP_PAIR_BYTES, dot, lit_intervals, occluded, raycast, shading_normals,
                                 shadow_halfspaces, triangle_normals)
 from .bvh_queries import SceneBvh
@@ -112,6 +116,8 @@ def _radiance(scene: Scene, eye: np.ndarray, dirs: np.ndarray, prepared, quad: d
     t, idx = queries.raycast(eye, dirs, t_max=far)
     hit = idx >= 0
     D = np.where(hit, t, far)
+    starts = ray_starts(scene.camera, dirs)  # camera.near: each ray starts at t0 (0 without)
+    gain = near_gain(starts, D, sigma_t)  # e^{σt·t0}: light attenuated from t0, not from the eye
     surf = np.zeros((n, 3))
     surf[~hit] = rgb(scene.background)
     hits = np.flatnonzero(hit)
@@ -137,20 +143,21 @@ def _radiance(scene: Scene, eye: np.ndarray, dirs: np.ndarray, prepared, quad: d
                 lin[lit[blocked]] = 0.0
             irradiance += lin
         surf[hits] = np.asarray(scene.geometry.albedo, dtype=np.float64)[idx[hits]] / math.pi * irradiance
-    out = surf * np.exp(-sigma_t * D[:, None])
+    out = surf * np.exp(-sigma_t * (D - np.minimum(starts, D))[:, None])
     if parts is not None:
-        parts["transmittance"] = np.exp(-sigma_t * D[:, None])
+        parts["transmittance"] = np.exp(-sigma_t * (D - np.minimum(starts, D))[:, None])
         parts["attenuated_surface"] = out.copy()
         parts["depth"] = np.where(hit, t, np.inf)
         parts["lights"] = np.zeros((len(prepared), n, 3))
     if np.any(sigma_s > 0):
         for index, (light, halfspaces) in enumerate(prepared):
-            ray, a, b = queries.lit_intervals(eye, dirs, D, light, halfspaces,
-                                              lamp_radius=radiometry.lamp_radius(scene))
+            ray, a, b = from_ray_starts(*queries.lit_intervals(eye, dirs, D, light, halfspaces,
+                                                               lamp_radius=radiometry.lamp_radius(scene)), starts)
             if textured(light):  # cut at the texture's texel centres (clrays.physics.light_texture)
                 seg = textured_in_scatter(light, medium, eye, dirs[ray], a, b)
             else:
                 seg = in_scatter_segments(light, medium, eye, dirs[ray], a, b, **quad)
+            seg = seg * gain[ray]
             for ch in range(3):
                 light_part = np.bincount(ray, weights=seg[:, ch], minlength=n)
                 out[:, ch] += light_part

@@ -35,6 +35,7 @@ from ..physics.geometry import (_SHADOW_OFFSET_REL, _T_MIN_REL, _ray_range, _sca
                                 shadow_halfspaces, triangle_normals)
 from ..physics.light_texture import light_texture, textured, textured_in_scatter
 from ..physics.radiometry import (in_scatter_segments, light_incident, light_position, propagation_direction, rgb)
+from ..scene.camera import from_ray_starts, near_gain, ray_starts
 from ..scene.model import Light, Scene
 
 
@@ -266,6 +267,7 @@ def translucent_radiance(scene: Scene, eye: np.ndarray, dirs: np.ndarray, prepar
     t, idx = queries.first_opaque_hit(eye, dirs, far)
     hit = idx >= 0
     D = np.where(hit, t, far)
+    starts = ray_starts(scene.camera, dirs)  # camera.near, as exact._radiance
     cam_ray, cam_t, cam_tri = queries.crossings(eye, dirs, D)
     cam_clear = queries.clear[cam_tri]
     before, after = _camera_transmittance(n, cam_ray, cam_clear)
@@ -288,6 +290,7 @@ def translucent_radiance(scene: Scene, eye: np.ndarray, dirs: np.ndarray, prepar
         for light, halfspaces in prepared:
             ray, a, b, transmittance = queries.lit_pieces(eye, dirs, D, light, halfspaces,
                                                           radiometry.lamp_radius(scene), (cam_ray, cam_t, cam_clear))
+            ray, a, b, transmittance = from_ray_starts(ray, a, b, starts, transmittance)
             if textured(light):
                 seg = textured_in_scatter(light, medium, eye, dirs[ray], a, b)
             else:
@@ -295,6 +298,8 @@ def translucent_radiance(scene: Scene, eye: np.ndarray, dirs: np.ndarray, prepar
             seg = seg * transmittance
             for ch in range(3):
                 out[:, ch] += np.bincount(ray, weights=seg[:, ch], minlength=n)
+    if scene.camera.near > 0.0:  # light attenuated from each ray's start (as cl/shade.cl)
+        out *= near_gain(starts, D, sigma_t)
     return out
 
 

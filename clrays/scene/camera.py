@@ -65,6 +65,32 @@ def primary_rays(camera: Camera, image: Image, offsets: np.ndarray | None = None
     return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
 
+def ray_starts(camera: Camera, dirs: np.ndarray) -> np.ndarray:
+    """Where camera rays along unit `dirs` (..., 3) start (`camera.near`, as Cycles' Clip
+    Start): at the plane `near` in front of the eye along the view axis, t0 = near / cos θ
+    (θ the ray's angle to the axis). Zeros for near = 0. The device's twin is
+    `camera_ray_start` (cl/lighting.h)."""
+    if camera.near == 0.0:
+        return np.zeros(dirs.shape[:-1])
+    return camera.near / (dirs @ camera_basis(camera)[2])
+
+
+def from_ray_starts(ray: np.ndarray, a: np.ndarray, b: np.ndarray, starts: np.ndarray, *more: np.ndarray):
+    """Intervals [a, b] of rays `ray` (indices into `starts`, `ray_starts`) cut to begin no
+    earlier than their ray's start, the empty ones dropped: (ray, a, b, *more), each of
+    `more` an array per interval kept alongside."""
+    a = np.maximum(a, starts[ray])
+    keep = b > a
+    return (ray[keep], a[keep], b[keep], *(values[keep] for values in more))
+
+
+def near_gain(starts: np.ndarray, depth: np.ndarray, sigma_t: np.ndarray) -> np.ndarray:
+    """(N, 3) e^{σt·min(t0, D)}: what turns light attenuated from the eye into light
+    attenuated from the ray's start t0 (`ray_starts`), as a surface at D (or the fog in front
+    of it) has it. A surface nearer than t0 stays as seen from the eye, unattenuated."""
+    return np.exp(sigma_t * np.minimum(starts, depth)[:, None])
+
+
 def slice_basis(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unit u, w with (u, w, axis) orthonormal: α = atan2(v·w, v·u)."""
     helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])

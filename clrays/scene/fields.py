@@ -130,6 +130,11 @@ CAMERA = Section("camera", (
           notes="degrees, vertical field of view"),
     Field("far", "number", Camera.far, 0.0, low_open=True,
           notes="scene units; a ray that hits nothing runs through the medium this far"),
+    Field("near", "number", Camera.near, 0.0, rule="< `far`",
+          notes="scene units along the view axis: each camera ray starts where it crosses the plane this far "
+                "in front of the eye (near / cos θ along a ray at θ to the view axis), as Blender's Clip Start, "
+                "and the fog and its attenuation begin there. With `gltf`, the file camera's `znear` unless "
+                "set; there a `camera` of `near` alone keeps the file's camera (`--set camera.near=0`)"),
 ))
 
 _POSITION = Field("position", "vec3", REQUIRED, notes="scene units")

@@ -1131,8 +1131,14 @@ def _camera(reader: _Reader, found, name: str | None, matrix_of: dict[int, np.nd
             * np.linalg.norm(up)):
         reader.fail(f"nodes.{node}", "a camera node whose matrix keeps -Z and +Y apart", "a degenerate matrix")
     forward = forward / np.linalg.norm(forward)
+    far = far if far is not None else Camera.far
+    # Camera rays start at znear (Blender writes its Clip Start there), as Cycles starts them. The
+    # spec requires it; a file without one starts them at the eye.
+    near = reader.get(perspective, "znear", f"{path}.perspective", "number", 0.0, lo=0.0)
+    if not near < far:
+        reader.fail(f"{path}.perspective.znear", f"a distance in [0, {far:g}) (below the camera's far)", near)
     return Camera(position=position, look_at=position + forward, up=up / np.linalg.norm(up),
-                  fov_deg=math.degrees(yfov), far=far if far is not None else Camera.far), node
+                  fov_deg=math.degrees(yfov), far=far, near=near), node
 
 
 def default_camera(lo: np.ndarray, hi: np.ndarray) -> Camera:
@@ -1595,8 +1601,8 @@ def merge(scene: Scene, imported: Imported, own_camera: bool, own_animation: boo
         outward=np.concatenate([geometry.outward, imported.outward]),
         convex_part=np.concatenate([geometry.convex_part,
                                     geometry.count + np.arange(count, dtype=np.int32)]).astype(np.int32))
-    scene = replace(scene, lights=lights, geometry=merged,
-                    camera=scene.camera if own_camera else imported.camera)
+    # The scene's camera is the file's unless own_camera (the loader took it, its near maybe set).
+    scene = replace(scene, lights=lights, geometry=merged)
     if imported.duration is not None and not own_animation:
         frames = imported.duration * fps
         if not frames <= MAX_ANIMATION_FRAME:  # as a YAML animation's frames (fields.ANIMATION)

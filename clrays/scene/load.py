@@ -133,8 +133,31 @@ def _camera(node: Node) -> Camera:
         up_node = m.get("up") or Node(list(default_up), node.where, node.child_path("up"))
         up_node.fail("a direction not parallel to look_at - position",
                      None if "up" in m else f"{show(up_node)} (default)")
-    return Camera(position=position, look_at=look_at, up=up,
-                  fov_deg=_read(CAMERA["fov_deg"], m.get("fov_deg")), far=_read(CAMERA["far"], m.get("far")))
+    far = _read(CAMERA["far"], m.get("far"))
+    return Camera(position=position, look_at=look_at, up=up, fov_deg=_read(CAMERA["fov_deg"], m.get("fov_deg")),
+                  far=far, near=_near(m.get("near"), far))
+
+
+def _near(node: Node | None, far: float) -> float:
+    """camera.near: a number in [0, far): a camera ray that starts beyond far has no length."""
+    near = _read(CAMERA["near"], node)
+    if node is not None and not near < far:
+        node.fail(f"a number in [0, {far:g}) (below camera.far)")
+    return near
+
+
+def _near_alone(node: Node) -> bool:
+    """A `camera` of `near` alone: beside `gltf`, it sets the near of the file's camera."""
+    return isinstance(node.value, dict) and set(node.value) == {"near"}
+
+
+def _scene_camera(node: Node | None, own_camera: bool, imported) -> Camera:
+    """The scene's own camera, or the glTF file's (its near set by a `camera` of `near` alone)."""
+    if own_camera:
+        return _camera(node)
+    if node is None:
+        return imported.camera
+    return dataclasses.replace(imported.camera, near=_near(node.value["near"], imported.camera.far))
 
 
 def _texture_path(node: Node, base_dir: Path) -> Path:
@@ -906,12 +929,14 @@ def _scene(root: Node, filename: str, source: Path | str | None, overrides: Sequ
     m = mapping(root, tuple(key for key in TOP.required if key not in imports), TOP.optional + imports)
 
     base_dir = Path(source).parent if source is not None else Path.cwd()
-    imported, fps = _gltf(m["gltf"], base_dir, "camera" in m) if "gltf" in m else (None, None)
+    # With gltf, a camera of `near` alone adjusts the file's camera rather than replacing it.
+    own_camera = "camera" in m and not ("gltf" in m and _near_alone(m["camera"]))
+    imported, fps = _gltf(m["gltf"], base_dir, own_camera) if "gltf" in m else (None, None)
     rigs: list[ObjectRig] = []
     textures = TextureCache()  # a file that several lights name is read once, and shared
     scene = Scene(  # sections are read (and fail) in the order the format lists them
         image=_image(m["image"]),
-        camera=_camera(m["camera"]) if "camera" in m else imported.camera,
+        camera=_scene_camera(m.get("camera"), own_camera, imported),
         lights=tuple(_light(n, base_dir, textures) for n in _lights(m["lights"])) if "lights" in m else (),
         medium=_medium(m.get("medium")),
         background=_read(TOP["background"], m.get("background")),
@@ -920,7 +945,7 @@ def _scene(root: Node, filename: str, source: Path | str | None, overrides: Sequ
         source=Path(source) if source is not None else None,
     )
     if imported is not None:
-        scene = gltf_files.merge(scene, imported, own_camera="camera" in m, own_animation="animation" in m, fps=fps,
+        scene = gltf_files.merge(scene, imported, own_camera=own_camera, own_animation="animation" in m, fps=fps,
                                  own_medium="medium" in m)
     if "render" in m and isinstance(m["render"].value, dict):
         _check_aovs(scene, m["render"].value.get("aovs"))

@@ -70,6 +70,9 @@ class Camera:
     up: Vec3
     fov_deg: float = 50.0  # vertical field of view
     far: float = 1000.0  # a ray that hits nothing runs through the medium to here
+    # Camera rays start this far from the eye along the view axis (t0 = near / cos θ), as Cycles'
+    # Clip Start: the fog begins there (docs/scene-format.md, camera).
+    near: float = 0.0
 
 
 @dataclass(frozen=True, eq=False)

@@ -11,7 +11,7 @@ from ..device import Device, StageTimer
 from ..inputs import FrameBuffers
 from ..physics.light_texture import textured, textured_in_scatter
 from ..physics.radiometry import effective_far, in_scatter_segments, lamp_radius
-from ..scene.camera import primary_rays
+from ..scene.camera import from_ray_starts, primary_rays, ray_starts
 from ..scene.model import DirectionalLight
 from .raster import RasterResult
 
@@ -43,6 +43,7 @@ def lamp_in_scatter(device: Device, buffers: FrameBuffers, rastered: RasterResul
     distance = np.minimum(depth.astype(np.float64), effective_far(scene))
     dirs = primary_rays(scene.camera, scene.image).reshape(-1, 3)  # sample order: pixel·spp + sample
     ray, a, b = lit_intervals(eye, dirs, distance, light, np.zeros((0, 3, 3)), lamp_radius=lamp_radius(scene))
+    ray, a, b = from_ray_starts(ray, a, b, ray_starts(scene.camera, dirs))  # camera.near (shade: e^{σt·t0})
     if textured(light):  # docs/light-textures.md: exact's integral, cut at texel centres
         segments = textured_in_scatter(light, scene.medium, eye, dirs[ray], a, b)
     else:

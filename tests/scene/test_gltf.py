@@ -309,7 +309,7 @@ def _moving_box_yaml(tmp_path) -> str:
     return f"""
 version: 1
 image: {{width: 48, height: 32}}
-camera: {{position: [0, 1, 6], look_at: [0, 1, 5], fov_deg: 45}}
+camera: {{position: [0, 1, 6], look_at: [0, 1, 5], fov_deg: 45, near: 0.05}}
 lights: [{{type: point, position: [0, 5, 0], intensity: 50}}]
 medium: {{sigma_s: 0.08}}
 objects:
@@ -602,7 +602,7 @@ def test_a_file_claiming_millions_of_triangles_is_refused_quickly_and_small(tmp_
 YARDSTICK = """
 version: 1
 image: {width: 64, height: 40}
-camera: {position: [1, 3, 8], look_at: [0, 1, 0], up: [0, 1, 0], fov_deg: 45, far: 30}
+camera: {position: [1, 3, 8], look_at: [0, 1, 0], up: [0, 1, 0], fov_deg: 45, far: 30, near: 0.1}
 lights:
   - {type: point, position: [-2, 4, 1], intensity: [40, 30, 20]}
   - {type: spot, position: [1.5, 5, 0.5], direction: [-0.2, -1, -0.1], cone_deg: 25, intensity: 120}
