@@ -19,10 +19,10 @@ from .errors import ClraysError
 from .physics.radiometry import effective_far, lamp_radius
 from .scene.costs import SPOT_SINGLE_VIEW_MAX_DEG, with_derived_sizes
 from .scene.light_views import directional_map, up_hint
-from .stages.cube_faces import sampled_cube_faces
-from .stages.light_texture import pack_light_textures
+from .physics.cube_faces import sampled_cube_faces
+from .physics.light_texture import pack_light_textures
 from .scene.relief_frame import relief_faces
-from .stages.relief import carries_relief_triangles, place_reliefs
+from .scene.relief_placement import carries_relief_triangles, place_reliefs
 from .scene.model import DirectionalLight, Scene, SpotLight
 
 #: All lights' shadow maps share one depth buffer, indexed by an int offset per view.
@@ -106,11 +106,11 @@ class FrameInputs:
     shadow_texels: int  # size of the shared shadow depth buffer
     light_anchor_ws: np.ndarray  # (L, 3) float64: each light's shadow-map origin, world space
     # (V,) bool per view: whether the frame can read it; raster skips the others (the cube
-    # faces that the camera's view misses, clrays.stages.cube_faces)
+    # faces that the camera's view misses, clrays.physics.cube_faces)
     view_needed: np.ndarray = None
-    light_textures: np.ndarray = None  # light_texture_t[] per light (clrays.stages.light_texture)
+    light_textures: np.ndarray = None  # light_texture_t[] per light (clrays.physics.light_texture)
     texels: np.ndarray = None  # (N, 4) float32: every light's texture texels
-    # Relief objects drawn by their pre-warp (clrays.stages.relief): their triangles come
+    # Relief objects drawn by their pre-warp (clrays.scene.relief_placement): their triangles come
     # last, and the raster stage draws only the first `raster_triangles` (None: all).
     reliefs: tuple = ()
     raster_triangles: int | None = None
