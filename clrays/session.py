@@ -64,7 +64,7 @@ from .stages.raster import (RasterResult, ShadowMap, depth_in_keys, map_is_empty
 from .stages.raymarch import raymarch
 from .stages.rectify import Epipolar, epipolar_frame, rectify, tree_gamma_samples
 from .stages.sampling import SampleCounts, epipolar_sampling
-from .stages.shade import shade
+from .stages.shade import shade, shade_features
 from .stages.shadow_filter import depth_ranges, frame_filter, shadow_filter, shadow_filter_moments
 from .stages.traverse import traverse
 from .stages.translucency import (opaque_occluder_buffers, rectify_layers, refuse_translucency,
@@ -549,11 +549,12 @@ class Renderer:
         device, buffers, rastered, layers, timer = self.device, frame.buffers, frame.rastered, frame.layers, frame.timer
         through = None if layers is None or frame.scene.render.surface_shadows != "exact" else \
             surface_transmittance(device, buffers, rastered, layers, timer)  # (translucent shadows' exact edges)
-        transparency = None if frame.films is None else composite(device, buffers, rastered, frame.films, timer, layers)
+        films = None if frame.films is None else composite(device, buffers, rastered, frame.films, timer, layers)
+        features = shade_features(device, buffers, layers, through, films)  # (stages/shade.py, cl/shade_features.h)
         aovs = frame.scene.render.aovs
         with device.deferred_waits(frame.reads):  # the image is read when the frame's result is asked for
-            image = shade(device, buffers, rastered, frame.in_scatter.adding(), timer, visible, layers, through,
-                          transparency, passes=bool(aovs))
+            image = shade(device, buffers, rastered, frame.in_scatter.adding(), timer, visible, features,
+                          passes=bool(aovs))
         frame.reuse.record.note("shade", COMPUTED)
         if not aovs:
             return image, None
