@@ -28,6 +28,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .. import structs
+from ..buffers import BufferDecl
+from ..inputs import FrameBuffers, frame_sizes
 from ..scene.costs import texture_texel_angle, texture_texel_length
 from ..scene.model import DirectionalLight
 from .integrand import SVD_RELATIVE_CUTOFF, SVD_SAMPLES, _beta_nodes, integrand_exact
@@ -41,6 +43,9 @@ from .integrand import SVD_RELATIVE_CUTOFF, SVD_SAMPLES, _beta_nodes, integrand_
 #: more at 640×360 (bench/RESULTS.md, "The stained glass within reach of 0.5 %").
 CELL_SAMPLES_PER_TEXEL = 1.0
 MAX_CELL_SAMPLES = 4
+#: A textured light's prefix sums: per slice and γ cell boundary, 3 channels of T and T·Γ_i.
+TEXTURE_PREFIX = BufferDecl("texture prefix sums", 4,
+                            lambda sizes: sizes.slices * 3 * (sizes.svd_rank + 1) * (sizes.tree_gamma + 1))
 
 
 def cell_samples(light, gamma_step: float, gamma_warp: float) -> int:
@@ -56,7 +61,6 @@ def cell_samples(light, gamma_step: float, gamma_warp: float) -> int:
 
 if TYPE_CHECKING:
     from ..device import Device, StageTimer
-    from ..inputs import FrameBuffers
     from .integrand import DeviceIntegrand
     from .rectify import Epipolar
 
@@ -174,7 +178,7 @@ def light_texture(device: Device, buffers: FrameBuffers, light_index: int, epipo
     gamma_buffer = device.buffer(np.ascontiguousarray(basis.gamma.transpose(2, 0, 1), dtype=np.float32),
                                  writable=False)
     timer.add_host("light_texture", (time.perf_counter() - start) * 1e3)
-    prefix = device.buffer(nbytes=4 * slices * 3 * (rank + 1) * (n + 1))
+    prefix = TEXTURE_PREFIX.allocate(device, frame_sizes(buffers.inputs))  # (rank, n and slices: the scene's)
     event = device.kernel("light_texture", "light_texture_prefix", {"TEXTURE_RANK": rank})(
         device.queue, (slices,), None, buffers.lights, epipolar.buffer, buffers.light_textures, buffers.texels,
         params_buffer, gamma_buffer, np.int32(cell_samples(light, gamma_step, epipolar.gamma_warp)), prefix)

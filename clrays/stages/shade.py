@@ -13,8 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..buffers import BufferDecl
 from ..device import Device, StageTimer
-from ..inputs import FrameBuffers
+from ..inputs import FrameBuffers, frame_sizes
 from ..physics.light_texture import textured
 from .features import WalkFeature, feature_args, feature_defines, present
 from .raster import RasterResult
@@ -23,6 +24,11 @@ LANES = 8  # pixels per work-item, as float8 vectors (cl/shade.cl, cl/lanes.h)
 # Work-items per work-group: PoCL's own choice ran about 10 % slower at 1280×720 than 64, and
 # 256 no faster (bench/RESULTS.md, "shade in lanes"). The last group's extra items return.
 GROUP = 64
+
+#: The image, where a pixel has several samples (with one, it takes the in-scattering's buffer).
+IMAGE = BufferDecl("image", 16, lambda sizes: sizes.pixels)
+#: The render passes' terms: three float4 per pixel (PassTerms).
+PASS_TERMS = BufferDecl("render passes", 48, lambda sizes: sizes.pixels)
 
 
 @dataclass(frozen=True)
@@ -108,15 +114,15 @@ def shade(device: Device, buffers: FrameBuffers, rastered: RasterResult, scatter
     render passes (clrays.passes) as (H, W, 3, 4) float32: (mean transmittance, nearest
     depth), (mean attenuated surface radiance, 0), (mean in-scattering, 0); only then is
     their buffer allocated."""
-    image = buffers.inputs.scene.image
+    image, sizes = buffers.inputs.scene.image, frame_sizes(buffers.inputs)
     pixels = image.width * image.height
     # With one sample per pixel each work-item writes its pixels where it read their
     # in-scattering, and nothing reads that after: the image takes the buffer over, which
     # spares a frame 16 bytes a pixel of fresh memory (on a CPU device, its page faults).
-    out = scatter if image.spp == 1 else device.buffer(nbytes=16 * pixels)
+    out = scatter if image.spp == 1 else IMAGE.allocate(device, sizes)
     if visible is None:
         visible = device.buffer(nbytes=4)  # never read: the map decides
-    terms = device.buffer(nbytes=48 * pixels) if passes else None
+    terms = PASS_TERMS.allocate(device, sizes) if passes else None
     features = features + present(None if terms is None else PassTerms(terms))
     defines = {"LANES": LANES}
     if rastered.depth_in_keys:  # (read only by the map's own surface test: stages/raster.py depth_in_keys)

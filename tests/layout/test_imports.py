@@ -106,9 +106,9 @@ def test_no_module_imports_one_that_imports_it():
 
 def test_the_mutual_finder_finds_a_pair_and_reads_annotations():
     assert _mutual({"a": {"b"}, "b": {"a", "c"}, "c": set(), "d": {"a"}}) == [("a", "b")]
-    # (stages.light_texture names FrameBuffers for its annotations alone)
-    assert "clrays.inputs" in _graph(annotations=True)["clrays.stages.light_texture"]
-    assert "clrays.inputs" not in _graph()["clrays.stages.light_texture"]
+    # (stages.light_texture names rectify's Epipolar for its annotations alone)
+    assert "clrays.stages.rectify" in _graph(annotations=True)["clrays.stages.light_texture"]
+    assert "clrays.stages.rectify" not in _graph()["clrays.stages.light_texture"]
 
 
 def test_what_a_frame_runs_imports_no_reference():
