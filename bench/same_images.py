@@ -9,6 +9,7 @@ Renders, at 96×54 with every stage computed: demo, bunny, behind and sun (opaqu
 minmax, raymarch and volume_moments; glass_row, glass_pane, stained_glass with their default
 transparency (MBOIT) and with depth peeling at 1, 4 and 8 layers, minmax and raymarch; the
 textured lights of gobo and stained_glass and the relief of lattice, minmax and raymarch;
+the other scenes (colonnade, grate, room), minmax and raymarch;
 demo with pixel sampling and bunny with filtered surface shadows; then orbit's first four
 frames as a sequence (one session, stages reused between frames) and a sweep of gobo over
 two σs and two slice counts (one session, reused between points). Saves each as .npy in
@@ -27,6 +28,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 OPAQUE = ("demo", "bunny", "behind", "sun")
 TRANSLUCENT = ("glass_row", "glass_pane", "stained_glass")
+OTHERS = ("colonnade", "grate", "room")
 METHODS = ("minmax", "raymarch")
 
 
@@ -42,6 +44,7 @@ def jobs() -> list[tuple[str, str, str, list[str]]]:
                  [*SIZE, f"render.transparency={{type: depth_peeling, layers: {layers}}}"])
                 for scene in TRANSLUCENT for method in METHODS]
     out += [(f"{scene}_{method}", scene, method, SIZE) for scene in ("gobo", "lattice") for method in METHODS]
+    out += [(f"{scene}_{method}", scene, method, SIZE) for scene in OTHERS for method in METHODS]
     out += [("demo_pixel", "demo", "minmax", [*SIZE, "render.sampling=pixel"]),
             ("bunny_filtered", "bunny", "minmax", [*SIZE, "render.surface_shadows=filtered"])]
     return out
