@@ -2,8 +2,8 @@
 (`BufferDecl`): what it holds, its element's bytes and its length as a function of the
 frame's sizes (`FrameSizes`, which clrays.inputs.frame_sizes takes from a frame's inputs).
 A stage allocates the buffer through its declaration, and
-clrays.session.frame_buffer_bytes sums the declarations of the stages a frame runs before
-anything is allocated, so that the prediction the refusal check reads and the allocation
+clrays.frame_memory.frame_buffer_bytes sums the declarations of the stages a frame runs
+before anything is allocated, so that the prediction the refusal check reads and the allocation
 cannot drift apart. The device counts the bytes allocated under each declaration's name
 (Device.allocated_by_name), which tests/stages/test_frame_buffers.py holds against the
 prediction.
@@ -19,21 +19,21 @@ from typing import Callable
 
 @dataclass(frozen=True)
 class FrameSizes:
-    """The sizes a frame's buffers follow, from its inputs (`frame_sizes`)."""
+    """The sizes a frame's buffers follow, from its inputs (`frame_sizes`, which gives each);
+    one left out is 0 (a stage's test that sizes a buffer by its samples alone)."""
 
-    samples: int  # camera samples: pixels × spp
-    pixels: int
-    lights: int  # the lights of these inputs (one for a light in its turn: clrays.light_turns)
-    shadow_texels: int  # every shadow map of these inputs, back to back (one light's: `for_light`)
-    light_texels: tuple[int, ...]  # each light's shadow-map texels
-    slices: int  # epipolar slices (render.slices)
-    tree_gamma: int  # γ texels of a min-max tree's row (tree_gamma_samples)
-    line_samples: int  # epipolar sampling's samples per line
-    svd_rank: int  # a textured light's γ basis (render.svd_rank)
-    layers: int  # translucent layers per shadow-map texel (render.translucent_layers)
-    triangles: int  # the scene's
-    texture_texels: int  # every light's texture texels, packed (clrays.inputs.FrameInputs.texels)
-
+    samples: int = 0  # camera samples: pixels × spp
+    pixels: int = 0
+    lights: int = 0  # the lights of these inputs (one for a light in its turn: clrays.light_turns)
+    shadow_texels: int = 0  # every shadow map of these inputs, back to back (one light's: `for_light`)
+    light_texels: tuple[int, ...] = ()  # each light's shadow-map texels
+    slices: int = 0  # epipolar slices (render.slices)
+    tree_gamma: int = 0  # γ texels of a min-max tree's row (tree_gamma_samples)
+    line_samples: int = 0  # epipolar sampling's samples per line
+    svd_rank: int = 0  # a textured light's γ basis (render.svd_rank)
+    layers: int = 0  # translucent layers per shadow-map texel (render.translucent_layers)
+    triangles: int = 0  # the scene's
+    texture_texels: int = 0  # every light's texture texels, packed (clrays.inputs.FrameInputs.texels)
     film_slots: int = 0  # the camera's translucent films per sample (clrays.stages.transparency)
 
     @property

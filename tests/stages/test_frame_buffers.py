@@ -49,8 +49,7 @@ def test_the_predicted_buffers_are_the_ones_allocated(renderer, scene, overrides
 
 
 def test_a_declaration_sizes_its_upload():
-    sizes = FrameSizes(samples=4, pixels=4, lights=1, shadow_texels=0, light_texels=(0,), slices=8, tree_gamma=8,
-                       line_samples=8, svd_rank=1, layers=1, triangles=0, texture_texels=1)
+    sizes = FrameSizes(samples=4)
     decl = BufferDecl("one int per sample", 4, lambda sizes: sizes.samples)
     bound = BufferDecl("at most one int per sample", 4, lambda sizes: sizes.samples, bound=True)
     assert decl.nbytes(sizes) == bound.nbytes(sizes) == 16
