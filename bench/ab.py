@@ -23,7 +23,7 @@ the options.
   bench/kernel_times.py), 3 frames a run, median over the rounds in turns.
 - **images**: renders, at 96×54 with every stage computed, the bench scenes (minmax,
   raymarch, volume_moments), the translucent scenes (MBOIT and depth peeling at 1, 4 and
-  8 layers), the textured lights and the relief, pixel sampling, filtered surface shadows,
+  8 layers), the textured lights and the relief, the other scenes (colonnade, grate, room), pixel sampling, filtered surface shadows,
   orbit's first four frames as a sequence and a sweep of gobo, in one session each, and
   says of each image whether B's is A's bit for bit; exits 1 if any is not. With `--out`
   it renders one tree (--repo) into that folder as .npy, and with `--against` compares it
@@ -146,6 +146,7 @@ def kernels(args, sides) -> None:
 
 OPAQUE = ("demo", "bunny", "behind", "sun")
 TRANSLUCENT = ("glass_row", "glass_pane", "stained_glass")
+OTHERS = ("colonnade", "grate", "room")
 METHODS = ("minmax", "raymarch")
 SIZE = ["image.width=96", "image.height=54"]
 
@@ -160,6 +161,7 @@ def image_jobs() -> list[tuple[str, str, str, list[str]]]:
                  [*SIZE, f"render.transparency={{type: depth_peeling, layers: {layers}}}"])
                 for scene in TRANSLUCENT for method in METHODS]
     out += [(f"{scene}_{method}", scene, method, SIZE) for scene in ("gobo", "lattice") for method in METHODS]
+    out += [(f"{scene}_{method}", scene, method, SIZE) for scene in OTHERS for method in METHODS]
     out += [("demo_pixel", "demo", "minmax", [*SIZE, "render.sampling=pixel"]),
             ("bunny_filtered", "bunny", "minmax", [*SIZE, "render.surface_shadows=filtered"])]
     return out

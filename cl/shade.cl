@@ -4,12 +4,12 @@
  * Reads frame, views, lights, shadow_depth, camera_depth, tri_id, tri_vertices,
  * tri_normal, tri_vertex_normals, tri_albedo, offsets, scatter, visible (the visibility
  * stage's answer per sample and light, with surface_shadows exact; the shadow_filter stage's
- * with surface_shadows filtered), light_textures and texels (a light's texture,
- * docs/light-textures.md), and with translucent objects the translucency stage's layers
- * (translucency.h); writes image (one float4 per pixel, linear rgb) and, built with
- * SHADE_PASSES, passes (the render passes' terms). With one sample per pixel, image is scatter's own buffer
- * (clrays/stages/shade.py): each work-item reads its samples' in-scattering before it
- * writes their pixels, and no other reads them.
+ * with surface_shadows filtered) and its feature groups (shade_features.h: the lights'
+ * textures, the translucency stage's layers, the camera's films); writes image (one float4
+ * per pixel, linear rgb) and, built with SHADE_PASSES, passes (the render passes' terms).
+ * With one sample per pixel, image is scatter's own buffer (clrays/stages/shade.py): each
+ * work-item reads its samples' in-scattering before it writes their pixels, and no other
+ * reads them.
  *
  * Each work-item shades LANES (8) neighbouring pixels as float8 vectors (lanes.h), with the
  * built-ins written out (inline_math.h): PoCL would run one pixel at a time, each dot,
@@ -17,31 +17,10 @@
  * the operations of the one-pixel code in the same order, so the image is the same bit for
  * bit; the rare paths (a textured light, the shadow map's test, translucent layers) call
  * the shared functions lane by lane. */
-#include "light_texture.h"
-#include "translucency.h"
+#include "shade_features.h"
 #include "lanes.h"
 
 /* SURFACE_BIAS_TEXELS, the surface shadow test's depth tolerance: clrays/structs.py (-D). */
-
-/* A scene with translucent objects builds shade with SHADE_TRANSPARENCY: the transparency stage's
- * T(D) and the light of the layers in front of each sample (docs/design.md, translucent surfaces:
- * the camera side) come as two more buffers. Opaque-only scenes build it without, and their
- * images are unchanged. */
-#ifdef SHADE_TRANSPARENCY
-#define TRANSPARENCY_ARGS , global const float4* transmittance, global const float4* in_front
-#else
-#define TRANSPARENCY_ARGS
-#endif
-
-/* Render passes (clrays/passes.py) build shade with SHADE_PASSES: per pixel, three float4 of
- * `passes` take the mean transmittance to the first surface (w: the nearest sample's depth, +inf
- * where none meets a surface), the mean attenuated surface radiance and the mean in-scattering.
- * A frame without passes builds shade without, and nothing of it is compiled. */
-#ifdef SHADE_PASSES
-#define PASSES_ARGS , global float4* passes
-#else
-#define PASSES_ARGS
-#endif
 
 /* A vector quantity over the lanes: each component a float8. */
 typedef struct {
@@ -159,9 +138,7 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                   global const float4* tri_vertices, global const float4* tri_normal,
                   global const float4* tri_vertex_normals, global const float4* tri_albedo,
                   global const float2* offsets, global const float4* scatter,
-                  global const float* visible_exact, global const light_texture_t* light_textures,
-                  global const float4* texels, global float4* image TRANSLUCENCY_ARGS SURFACE_THROUGH_ARGS
-                  TRANSPARENCY_ARGS PASSES_ARGS)
+                  global const float* visible_exact, global float4* image SHADE_FEATURE_ARGS)
 {
     int pixels = frame->width * frame->height, first = get_global_id(0) * LANES;
     if (first >= pixels) return;
@@ -272,6 +249,7 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                         incident = select_lanes(outside, splat_lanes((float3)(0.0f)), incident);
                     }
                 }
+#ifdef LIGHT_TEXTURE_LOOKUP
                 if (light_textures[l].textured)
                     for (int k = 0; k < LANES; ++k) {
                         if (background[k]) continue;
@@ -280,6 +258,7 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                         incident.y[k] *= factor.y;
                         incident.z[k] *= factor.z;
                     }
+#endif
                 float_lanes cosine = dot_vec_lanes(shading, to_light);
                 int_lanes lit = !background & !((cosine <= 0.0f) | (incident.x + incident.y + incident.z == 0.0f));
                 if (!any_lanes(lit)) continue;

@@ -21,8 +21,6 @@
 
 #define TRANSLUCENCY_ARGS , global const float* layer_depth, global const uint2* layer_clear, int layer_stride
 #define TRANSLUCENCY_PASS , layer_depth, layer_clear, layer_stride
-/* shade's: the translucency_surface answer per sample and light, when given (exact surface shadows). */
-#define SURFACE_THROUGH_ARGS , global const float4* surface_through, int has_surface_through
 
 inline float3 unpack_clear(uint2 packed)
 {
@@ -55,7 +53,6 @@ inline float3 light_transmittance(global const light_t* light, global const view
 #else
 #define TRANSLUCENCY_ARGS
 #define TRANSLUCENCY_PASS
-#define SURFACE_THROUGH_ARGS
 #endif
 
 #endif

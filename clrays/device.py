@@ -313,6 +313,9 @@ class Device:
         self._max_group = max(min(MAX_CPU_GROUP, int(self.device.max_work_group_size)), 1)
         self._local_sizes: dict[tuple, tuple] = {}
         self.allocated_bytes = 0
+        #: Bytes allocated under each declared buffer's name (clrays.stages.buffers.BufferDecl)
+        #: since the session's frame began, beside `allocated_bytes`.
+        self.allocated_by_name: dict[str, int] = {}
         #: Times the host has waited for this device's queue to reach a point (a blocking
         #: read, a mapped buffer, a flag): each one drains the queue, and on a GPU leaves
         #: the device idle while the host enqueues again. RenderResult.host_waits counts a
@@ -452,19 +455,25 @@ class Device:
         group = min(LIST_GROUP, self._max_group)
         return (GROUPS_PER_UNIT * self._units * group,), (group,)
 
-    def buffer(self, array: np.ndarray | None = None, nbytes: int | None = None, writable: bool = True):
+    def buffer(self, array: np.ndarray | None = None, nbytes: int | None = None, writable: bool = True,
+               name: str | None = None):
         """A device buffer, filled from `array` or of `nbytes` uninitialised bytes; on a CPU
-        device a large one of `nbytes` comes from the pool (POOLED_BYTES)."""
+        device a large one of `nbytes` comes from the pool (POOLED_BYTES). `name`: the
+        declaration it is allocated by (clrays.stages.buffers), whose bytes it counts."""
         mf = self.cl.mem_flags
         flags = mf.READ_WRITE if writable else mf.READ_ONLY
         if array is not None:
             array = np.ascontiguousarray(array)
             size = max(array.nbytes, 1)
             self.allocated_bytes += size
+            if name is not None:
+                self.allocated_by_name[name] = self.allocated_by_name.get(name, 0) + array.nbytes
             if array.nbytes == 0:
                 return self.cl.Buffer(self.context, flags, 16)
             return self.cl.Buffer(self.context, flags | mf.COPY_HOST_PTR, hostbuf=array)
         self.allocated_bytes += nbytes
+        if name is not None:
+            self.allocated_by_name[name] = self.allocated_by_name.get(name, 0) + int(nbytes)
         if self._pool is not None and nbytes >= POOLED_BYTES:
             return self._pool.allocate(int(nbytes))
         return self.cl.Buffer(self.context, flags, max(int(nbytes), 16))

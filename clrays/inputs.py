@@ -13,22 +13,25 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from . import structs
+from .buffers import BufferDecl, FrameSizes
 from .scene.camera import camera_basis, sample_offsets
 from .device import Device
 from .errors import ClraysError
 from .physics.radiometry import effective_far, lamp_radius
-from .scene.costs import SPOT_SINGLE_VIEW_MAX_DEG, with_derived_sizes
+from .scene.costs import SPOT_SINGLE_VIEW_MAX_DEG, tree_gamma_samples, with_derived_sizes
 from .scene.light_views import directional_map, up_hint
-from .stages.cube_faces import sampled_cube_faces
-from .stages.light_texture import pack_light_textures
+from .physics.cube_faces import sampled_cube_faces
+from .physics.light_texture import pack_light_textures
 from .scene.relief_frame import relief_faces
-from .stages.relief import carries_relief_triangles, place_reliefs
+from .scene.relief_placement import carries_relief_triangles, place_reliefs
 from .scene.model import DirectionalLight, Scene, SpotLight
 
 #: All lights' shadow maps share one depth buffer, indexed by an int offset per view.
 MAX_SHADOW_TEXELS = 2**31 - 1
 #: Light-anchored vertex sets a geometry keeps (light_pass_inputs): a few static lights' own.
 ANCHORED_KEPT = 4
+#: Every light's texture, packed (float4 texels: pack_light_textures).
+TEXTURE_TEXELS = BufferDecl("light textures", 16, lambda sizes: sizes.texture_texels)
 
 #: Cube faces in the order `light_view_index` expects: +x, -x, +y, -y, +z, -z, with an up vector each.
 _CUBE_FACES = [
@@ -106,11 +109,11 @@ class FrameInputs:
     shadow_texels: int  # size of the shared shadow depth buffer
     light_anchor_ws: np.ndarray  # (L, 3) float64: each light's shadow-map origin, world space
     # (V,) bool per view: whether the frame can read it; raster skips the others (the cube
-    # faces that the camera's view misses, clrays.stages.cube_faces)
+    # faces that the camera's view misses, clrays.physics.cube_faces)
     view_needed: np.ndarray = None
-    light_textures: np.ndarray = None  # light_texture_t[] per light (clrays.stages.light_texture)
+    light_textures: np.ndarray = None  # light_texture_t[] per light (clrays.physics.light_texture)
     texels: np.ndarray = None  # (N, 4) float32: every light's texture texels
-    # Relief objects drawn by their pre-warp (clrays.stages.relief): their triangles come
+    # Relief objects drawn by their pre-warp (clrays.scene.relief_placement): their triangles come
     # last, and the raster stage draws only the first `raster_triangles` (None: all).
     reliefs: tuple = ()
     raster_triangles: int | None = None
@@ -306,6 +309,25 @@ class FrameBuffers:
     texels: object = None
 
 
+def frame_sizes(inputs: FrameInputs) -> FrameSizes:
+    """The sizes of the frame `inputs` packs (inputs.scene has its derived sizes); kept on
+    `inputs`, which every stage of the frame asks."""
+    kept = inputs.__dict__.get("_frame_sizes")  # not a field: `replace` starts afresh
+    if kept is None:
+        scene, render = inputs.scene, inputs.scene.render
+        light_texels = tuple(int((inputs.views[first:first + count]["width"]
+                                  * inputs.views[first:first + count]["height"]).sum())
+                             for first, count in inputs.light_views)
+        kept = inputs.__dict__["_frame_sizes"] = FrameSizes(
+            samples=inputs.samples, pixels=scene.image.width * scene.image.height, lights=len(scene.lights),
+            shadow_texels=inputs.shadow_texels, light_texels=light_texels, slices=render.slices,
+            tree_gamma=tree_gamma_samples(render.gamma_samples), line_samples=render.line_samples,
+            svd_rank=render.svd_rank, layers=render.translucent_layers, triangles=scene.geometry.count,
+            texture_texels=0 if inputs.texels is None else len(inputs.texels))
+    return kept
+
+
+
 def upload(device: Device, inputs: FrameInputs) -> FrameBuffers:
     return FrameBuffers(
         inputs=inputs,
@@ -318,7 +340,7 @@ def upload(device: Device, inputs: FrameInputs) -> FrameBuffers:
         tri_vertex_normals=device.buffer(inputs.tri_vertex_normals, writable=False),
         tri_albedo=device.buffer(inputs.tri_albedo, writable=False),
         light_textures=device.buffer(inputs.light_textures, writable=False),
-        texels=device.buffer(inputs.texels, writable=False),
+        texels=TEXTURE_TEXELS.upload(device, inputs.texels, frame_sizes(inputs)),
     )
 
 

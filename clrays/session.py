@@ -44,7 +44,8 @@ import numpy as np
 
 from .device import Device, StageTimer
 from .errors import ClraysError
-from .inputs import FrameBuffers, FrameInputs, frame_inputs, upload, without_walled_off_light
+from .frame_memory import EVERY_LIGHT_VISIBILITY, IN_SCATTER, ONE_LIGHT_IN_SCATTER, frame_buffer_bytes
+from .inputs import FrameBuffers, FrameInputs, frame_inputs, frame_sizes, upload, without_walled_off_light
 from .light_turns import RaysSum, add_visibility_column, lights_in_turn, one_light_buffers
 from .physics.radiometry import effective_far
 from .passes import assemble, per_light_indices, samples_to_pixels
@@ -53,8 +54,9 @@ from .scene.camera import primary_rays, ray_starts
 from .scene.costs import with_derived_sizes
 from .scene.model import METHODS, RENAMED_METHODS, DirectionalLight, Render, Scene
 from .stages.features import walk_features
-from .stages.relief_cuts import ReliefCuts, cuts_reliefs, relief_cuts, relief_outlines
-from .stages.shaft_edges import ShaftEdges, edge_neighbours, edge_windings, keeps_blockers, shaft_edge_sides
+from .stages.relief_cuts import ReliefCuts, relief_cuts, relief_outlines
+from .stages.shaft_edges import (EDGE_NEIGHBOURS, ShaftEdges, edge_neighbours, edge_windings, keeps_blockers,
+                                  shaft_edge_sides)
 from .stages.integrand import integrand, integrand_table_size
 from .stages.lamp import eye_in_lamp, lamp_in_scatter
 from .stages.light_texture import light_texture
@@ -63,19 +65,18 @@ from .stages.minmax import minmax
 from .stages.raster import (RasterResult, ShadowMap, depth_in_keys, map_is_empty, raster_camera, raster_shadow_map,
                              shadow_atlases)
 from .stages.raymarch import raymarch
-from .stages.rectify import Epipolar, epipolar_frame, rectify, tree_gamma_samples
+from .stages.rectify import Epipolar, epipolar_frame, rectify
 from .stages.sampling import SampleCounts, epipolar_sampling
-from .stages.shade import shade
+from .stages.shade import shade, shade_features
 from .stages.shadow_filter import depth_ranges, frame_filter, shadow_filter, shadow_filter_moments
 from .stages.traverse import traverse
 from .stages.translucency import (opaque_occluder_buffers, rectify_layers, refuse_translucency,
                                   surface_transmittance, translucency)
-from .stages.transparency import (Films, composite, opaque_camera_vertices, translucent_films, translucent_triangles,
-                                  transparency_of)
+from .stages.transparency import Films, composite, opaque_camera_vertices, translucent_films, translucent_triangles
 from .stages.transparency_walk import transparency_march, transparency_walk
 from .stages.volume_moments import volume_moments
-from .stages.visibility import (TOUCHING_NODES_PER_ENTRY, bound_atlas, bvh_topology_of, ray_list_limit, upload_bvh,
-                                visibility, visibility_bound, visibility_prepare)
+from .stages.visibility import (bound_atlas, bvh_topology_of, upload_bvh, visibility, visibility_bound,
+                                visibility_prepare)
 
 #: The rectified texture of a light whose shadow map is empty (nothing casts a shadow)
 #: is π everywhere whatever its size, so it is built at this size (the minimum).
@@ -98,9 +99,9 @@ class InScatter:
     writes every sample of the first light it takes instead of adding, which spares a
     1280×720 frame a 14.7 MB clear and gather as many bytes of reads."""
 
-    def __init__(self, device: Device, samples: int):
-        self.device, self.samples = device, samples
-        self.buffer = device.buffer(nbytes=16 * samples)
+    def __init__(self, device: Device, inputs: FrameInputs):
+        self.device, self.samples = device, inputs.samples
+        self.buffer = IN_SCATTER.allocate(device, frame_sizes(inputs))
         self.holds_values = False  # zeros, or a stage's values in every sample
 
     def adding(self):
@@ -309,7 +310,7 @@ class Renderer:
         reuse = Reuse(self.cache if use_cache else None, record, max(len(scene.lights), 1))
         waits_before = self._device.host_waits if self._device is not None else 0
         if self._device is not None:
-            self._device.allocated_bytes = 0
+            self._device.allocated_bytes, self._device.allocated_by_name = 0, {}
         # A frame identical to a kept one: its image, and every stage counts as reused.
         found, kept = self.cache.get("frame", key) if key is not None else (False, None)
         reads = []  # the events of the frame's reads left for `result()` (Device.deferred_waits)
@@ -345,7 +346,7 @@ class Renderer:
                                                   maps=not in_turn)
         frame.layers = self._translucency(frame.buffers, frame.keys, reuse, timer)  # translucency: light side
         frame.films = self._films(frame.buffers, frame.rastered, reuse, timer)  # transparency: camera side
-        frame.in_scatter = InScatter(self.device, frame.buffers.inputs.samples)  # in-scattering per camera sample
+        frame.in_scatter = InScatter(self.device, frame.buffers.inputs)  # in-scattering per camera sample
         if in_turn:  # per light: raster.shadow → rectify → minmax → integrand → traverse → visibility
             visible, rays = self._lights_in_turn(frame)
         else:
@@ -374,7 +375,7 @@ class Renderer:
         frame.reuse.record.note("raymarch", COMPUTED)
         raymarch(device, buffers, frame.rastered, frame.in_scatter.adding(), timer, layers, progress=frame.progress)
         for index in per_light_indices(frame.scene.render.aovs):  # a render pass per light: that light marched alone
-            alone = device.buffer(nbytes=16 * frame.in_scatter.samples)
+            alone = ONE_LIGHT_IN_SCATTER.allocate(device, frame_sizes(buffers.inputs))
             raymarch(device, buffers, frame.rastered, alone, timer, layers, only_light=index)
             frame.light_scatter[index] = device.read(alone, (frame.in_scatter.samples, 4), np.float32)
         self._films_in_scatter(frame, lambda r, s, t: raymarch(device, buffers, r, s, t, layers),
@@ -407,9 +408,9 @@ class Renderer:
         light at a time (clrays.light_turns): its in-scattering added to the frame's, its
         visibility copied into the frame's column for it. Returns (visibility per sample
         and light, shadow rays) as `_visibility`."""
-        lights, samples = len(frame.scene.lights), frame.buffers.inputs.samples
+        lights = len(frame.scene.lights)
         medium = not self._no_medium(frame)
-        visible = self.device.buffer(nbytes=4 * samples * lights)
+        visible = EVERY_LIGHT_VISIBILITY.allocate(self.device, frame_sizes(frame.buffers.inputs))
         kept = {}  # the BVH: over the frame's triangles, the same for every light, built once a frame
 
         def frame_bvh(buffers: FrameBuffers, keys: StageKeys):
@@ -507,7 +508,8 @@ class Renderer:
         if epipolar.triangles is None:
             return None
         neighbours = reuse.keep("edge_neighbours", lambda: digest("edge_neighbours", keys.geometry),
-                                lambda: self.device.buffer(edge_neighbours(geometry), writable=False))
+                                lambda: EDGE_NEIGHBOURS.upload(self.device, edge_neighbours(geometry),
+                                                               frame_sizes(buffers.inputs)))
         windings = reuse.keep("edge_windings", lambda: digest("edge_windings", keys.geometry),
                               lambda: self.device.buffer(edge_windings(geometry), writable=False))
         sides = shaft_edge_sides(self.device, epipolar, buffers.tri_vertices, windings, geometry.count, timer)
@@ -551,11 +553,12 @@ class Renderer:
         device, buffers, rastered, layers, timer = self.device, frame.buffers, frame.rastered, frame.layers, frame.timer
         through = None if layers is None or frame.scene.render.surface_shadows != "exact" else \
             surface_transmittance(device, buffers, rastered, layers, timer)  # (translucent shadows' exact edges)
-        transparency = None if frame.films is None else composite(device, buffers, rastered, frame.films, timer, layers)
+        films = None if frame.films is None else composite(device, buffers, rastered, frame.films, timer, layers)
+        features = shade_features(device, buffers, layers, through, films)  # (stages/shade.py, cl/shade_features.h)
         aovs = frame.scene.render.aovs
         with device.deferred_waits(frame.reads):  # the image is read when the frame's result is asked for
-            image = shade(device, buffers, rastered, frame.in_scatter.adding(), timer, visible, layers, through,
-                          transparency, passes=bool(aovs))
+            image = shade(device, buffers, rastered, frame.in_scatter.adding(), timer, visible, features,
+                          passes=bool(aovs))
         frame.reuse.record.note("shade", COMPUTED)
         if not aovs:
             return image, None
@@ -722,96 +725,6 @@ class Renderer:
 #: Each method's volume stages (`exact` renders on the host instead: Renderer._exact).
 VOLUME_METHODS = {"minmax": Renderer._epipolar_volume, "volume_moments": Renderer._epipolar_volume,
                   "raymarch": Renderer._raymarch_volume}
-
-
-def frame_buffer_bytes(inputs: FrameInputs) -> list[tuple[str, int]]:
-    """(what, bytes) of the large device buffers one frame allocates, before allocating
-    them: the per-sample buffers, every shadow map, each light's min-max tree and the
-    epipolar line samples. A frame that runs its lights in turn (clrays.light_turns) holds
-    one light's maps, trees and bound maps at a time: the largest light's are counted."""
-    scene = with_derived_sizes(inputs.scene)
-    samples, pixels = inputs.samples, scene.image.width * scene.image.height
-    in_turn = lights_in_turn(scene, scene.render.method)
-    light_texels = [int((inputs.views[first:first + count]["width"] * inputs.views[first:first + count]["height"]).sum())
-                    for first, count in inputs.light_views]
-    shadow_texels = max(light_texels, default=0) if in_turn else inputs.shadow_texels  # held at once
-    held = range(1) if in_turn else range(len(scene.lights))  # the lights whose per-light buffers are held at once
-    # The one-pass raster (devices with 64-bit atomics) also keeps a packed depth–triangle
-    # key per sample while it runs; counted always, so the check errs on the safe side.
-    sizes = [("camera depth and triangle ids (64-bit)", 8 * samples), ("packed raster keys (64-bit)", 8 * samples),
-             ("in-scattering", 16 * samples)]
-    if scene.image.spp > 1:  # (with one sample per pixel the image takes the in-scattering's buffer)
-        sizes.append(("image", 16 * pixels))
-    if scene.render.aovs:  # render passes: shade's terms per pixel; raymarch marches a light alone into its own
-        sizes.append(("render passes", 48 * pixels))
-        if scene.render.method == "raymarch" and per_light_indices(scene.render.aovs):
-            sizes.append(("one light's in-scattering", 16 * samples))
-    sizes += [(f"shadow map of light {index}", 4 * texels) for index, texels in enumerate(light_texels)
-              if not in_turn or texels == shadow_texels][:len(held)]
-    if len(inputs.light_views) > 1 and not in_turn:
-        sizes.append(("shadow maps of all lights together", 4 * inputs.shadow_texels))
-    if keeps_blockers(scene.render) and scene.lights:  # (stages/shaft_edges.py) each texel's nearest triangle,
-        # every light's and all together: the maps' packed raster keys (64-bit), which they keep where the
-        # device has 64-bit atomics (stages/raster.py, ShadowMap), else 32-bit triangles; counted as keys
-        atlases = 2 if len(inputs.light_views) > 1 and not in_turn else 1
-        sizes += [("shadow maps' packed raster keys (64-bit)", 8 * shadow_texels * atlases),
-                  ("each triangle's neighbours", 12 * scene.geometry.count)]
-        if cuts_reliefs(inputs, True):  # the keys from before the reliefs, which the volume reads (relief_cuts.py)
-            sizes.append(("shadow maps' keys without the reliefs (64-bit)", 8 * shadow_texels * atlases))
-        if np.any(scene.medium.sigma_s > 0):
-            sizes += [(f"rows' blockers of light {index}", 4 * scene.render.slices
-                       * tree_gamma_samples(scene.render.gamma_samples)) for index in held]
-    if scene.render.method in ("minmax", "volume_moments") and np.any(scene.medium.sigma_s > 0):
-        gamma_samples = tree_gamma_samples(scene.render.gamma_samples)
-        tree = 8 * scene.render.slices * 2 * gamma_samples
-        sizes += [(f"min-max tree of light {index}", tree) for index in held]
-        if scene.render.sampling == "epipolar":  # per line sample: (distance, weight) and radiance, one light at a time
-            sizes.append(("epipolar line samples", 24 * scene.render.slices * scene.render.line_samples))
-            sizes.append(("epipolar fix-up list", 4 * samples))
-        # A textured light's prefix sums (clrays.stages.light_texture; the rectified texture is not stored).
-        sizes += [(f"texture prefix sums of light {index}",
-                   4 * scene.render.slices * 3 * (scene.render.svd_rank + 1) * (gamma_samples + 1))
-                  for index, light in enumerate(scene.lights) if textured(light)][:len(held)]
-    if inputs.texels is not None and any(textured(light) for light in scene.lights):
-        sizes.append(("light textures", 16 * len(inputs.texels)))
-        if scene.render.method == "volume_moments" and np.any(scene.medium.sigma_s > 0):  # double prefix sums
-            prefix = 32 * scene.render.slices * (gamma_samples + 1)
-            sizes.append(("moment prefix sums of one light", prefix))
-    if scene.render.surface_shadows == "exact" and scene.lights:  # visibility's bound and writer maps, every light's
-        sizes.append(("bound and writer maps", 8 * shadow_texels))
-        # and per sample and light the texel its lit test reads (address, depth), a bit per texel
-        # read, its answer and its place in the list of shadow rays; in turn, one light's, and
-        # every light's answers in the frame's (samples × lights) buffer
-        entries = samples * len(held)
-        sizes += [("texels the visibility stage reads", 8 * entries + shadow_texels // 8),
-                  ("visibility's answers", 4 * entries), ("the list of shadow rays", 4 * entries)]
-        if in_turn:
-            sizes.append(("every light's visibility", 4 * samples * len(scene.lights)))
-        # the lists of the triangles at the shadow rays' texels, made before the device knows
-        # whether the rays take them: room for the most rays that may (stages/visibility.py)
-        sizes += [(f"the shadow rays' lists of triangles of light {index}",
-                   8 * TOUCHING_NODES_PER_ENTRY * ray_list_limit(inputs)) for index in held]
-        sizes.append(("the heads of the shadow rays' lists", 4 * shadow_texels))
-    if scene.geometry.translucent and scene.lights:  # the translucency stage's layers (translucency.py)
-        layers = scene.render.translucent_layers
-        sizes.append(("translucent layers", 12 * layers * inputs.shadow_texels))
-        if scene.render.method == "minmax":
-            texels = scene.render.slices * tree_gamma_samples(scene.render.gamma_samples)
-            sizes.append(("rectified translucent layers of one light", 12 * layers * texels))
-        if scene.render.surface_shadows == "exact":
-            sizes.append(("surface transmittance", 16 * samples * len(scene.lights)))
-    if scene.geometry.translucent:  # the transparency stage's films (transparency.py): depth, triangle, fog per slot
-        # Peeling's layers bound its slots; gathered and mboit take every film a ray meets, counted as at
-        # most 64 (the most layers peeling takes) or the translucent triangles, the fewer.
-        settings = transparency_of(scene)
-        slots = settings.layers if settings.type == "depth_peeling" else min(len(translucent_triangles(scene)), 64)
-        sizes += [("translucent films seen by the camera", 24 * slots * samples),
-                  ("films' transmittance and light", 32 * samples)]
-        if settings.type != "depth_peeling":  # the weighted walk's sample list and fog (transparency_walk.py)
-            sizes.append(("samples with films and their walked fog", 20 * samples))
-    if scene.render.surface_shadows == "filtered":  # the moment maps and their blur's scratch (shadow_filter.py)
-        sizes += [("moment maps", 16 * inputs.shadow_texels), ("moment maps' blur scratch", 16 * inputs.shadow_texels)]
-    return sizes
 
 
 def check_device_memory(device: Device, inputs: FrameInputs) -> None:

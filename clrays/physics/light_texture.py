@@ -25,6 +25,9 @@ light ray through a point of a camera ray moves monotonically across the image: 
 line in the image for a spot light or a cube face, a straight line in the plane for a
 directional one; a cube texture is cut where the ray changes face first) and every piece
 is integrated by Gauss–Legendre, where the integrand is smooth.
+
+`pack_light_textures` writes that mapping as the device's light_texture_t per light, for
+the frame's inputs (clrays.inputs) and the kernels that look a texture up per point.
 """
 from __future__ import annotations
 
@@ -32,6 +35,7 @@ import math
 
 import numpy as np
 
+from .. import structs
 from ..scene.model import DirectionalLight, Light, Medium, SpotLight
 from ..scene.textures import TexelCrossingsError
 from .radiometry import phase, rgb
@@ -309,3 +313,42 @@ def textured_in_scatter(light: Light, medium: Medium, origins, dirs, a, b) -> np
         for channel in range(3):
             out[:, channel] += np.bincount(seg, weights=value[:, channel], minlength=m)
     return out * sigma_s * power
+
+
+def pack_light_textures(scene, eye_ws: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(light_texture_t per light, float4 texels of every texture one after another) for a
+    scene in eye space (at least one texel, so the buffer exists). Lights that share a
+    texture (the loader gives them one array: clrays.scene.textures.TextureCache) share its
+    texels here too: 16 spot lights with one 4096² gobo hold 256 MiB, not 4 GiB."""
+    entries = np.zeros(max(len(scene.lights), 1), dtype=structs.light_texture_dtype)
+    first_of: dict[int, int] = {}  # id(texels) -> its first texel in the packed buffer
+    unique, total = [], 0
+    for index, light in enumerate(scene.lights):
+        if not textured(light):
+            continue
+        entry = entries[index]
+        right, up = texture_frame(light.direction) if hasattr(light, "direction") else (np.zeros(3), np.zeros(3))
+        entry["right"], entry["up"] = structs.float4(right), structs.float4(up)
+        entry["origin"] = structs.float4(-np.asarray(eye_ws, dtype=np.float64))  # the world origin
+        if isinstance(light, SpotLight):
+            entry["scale_x"] = entry["scale_y"] = 1.0 / math.tan(math.radians(light.cone_deg))
+            entry["wrap"] = structs.TEXTURE_WRAP_CLAMP
+        elif not isinstance(light, DirectionalLight):  # a point light's cube: its faces fix the frame
+            entry["scale_x"] = entry["scale_y"] = 1.0
+            entry["wrap"] = structs.TEXTURE_WRAP_CLAMP
+        else:
+            entry["scale_x"], entry["scale_y"] = 1.0 / light.texture_size[0], 1.0 / light.texture_size[1]
+            entry["wrap"] = structs.TEXTURE_WRAP_REPEAT if light.texture_wrap == "repeat" else structs.TEXTURE_WRAP_CLAMP
+        texels = light.texture.texels
+        if id(texels) not in first_of:
+            first_of[id(texels)] = total
+            unique.append(texels)
+            total += light.texture.height * light.texture.width
+        entry["first_texel"], entry["width"], entry["height"] = first_of[id(texels)], light.texture.width, \
+            light.texture.height
+        entry["textured"] = 1
+    packed = np.zeros((max(total, 1), 4), dtype=np.float32)  # one array: no per-texture copies to join
+    for texels in unique:
+        first = first_of[id(texels)]
+        packed[first:first + texels.shape[0] * texels.shape[1], :3] = texels.reshape(-1, 3)
+    return entries, packed

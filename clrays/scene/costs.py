@@ -221,6 +221,12 @@ def derived_slices(width: int, height: int, shadow_map: int) -> int:
     return _clamped(min(SLICES_PER_BORDER_PIXEL * 2 * (width + height), shadow_map), MIN_SLICES, MAX_SLICES)
 
 
+def tree_gamma_samples(requested: int) -> int:
+    """The γ texels of a row of the epipolar texture and its min-max tree: `render.gamma_samples`
+    rounded up to a power of two, at least 2 (the tree halves the row at every level)."""
+    return 1 << max(int(math.ceil(math.log2(requested))), 1)
+
+
 def derived_gamma_samples(width: int, height: int, shadow_map: int) -> int:
     """γ texels per slice: 8 × the image diagonal or the shadow map side, the smaller."""
     return _clamped(min(GAMMA_TEXELS_PER_PIXEL * math.hypot(width, height), shadow_map),

@@ -22,15 +22,15 @@ values `decode_draco` left in `reader.decoded`).
 from __future__ import annotations
 
 import importlib
-from typing import TYPE_CHECKING, Any, NoReturn
+from typing import Any, NoReturn
 
 import numpy as np
 
 from ..errors import SceneError
 from .limits import MAX_TRIANGLES
 
-if TYPE_CHECKING:
-    from .gltf import _Reader
+#: gltf.py's _Reader, which calls in here: it imports this module, so this one does not name it.
+Reader = Any
 
 DRACO = "KHR_draco_mesh_compression"
 MESHOPT = "EXT_meshopt_compression"
@@ -56,18 +56,18 @@ def _decoder(extension: str):
         return None
 
 
-def _missing(reader: "_Reader", extension: str, path: str) -> NoReturn:
+def _missing(reader: Reader, extension: str, path: str) -> NoReturn:
     _, package, extra = DECODERS[extension]
     raise SceneError(f"{reader.file}: {path}: {extension} needs {package}, not installed: "
                      f"pip install 'clrays[{extra}]'")
 
 
-def _charge(reader: "_Reader", size: int, path: str) -> None:
+def _charge(reader: Reader, size: int, path: str) -> None:
     """Decoded bytes count against the import's one budget with everything else it reads, before they are made."""
     reader.charge(size, path, "decoded compressed data")
 
 
-def _extension(reader: "_Reader", obj: dict, name: str, path: str) -> dict | None:
+def _extension(reader: Reader, obj: dict, name: str, path: str) -> dict | None:
     """obj.extensions[name] (an object), or None where obj does not use it."""
     extensions = obj.get("extensions")
     if not isinstance(extensions, dict) or name not in extensions:
@@ -75,7 +75,7 @@ def _extension(reader: "_Reader", obj: dict, name: str, path: str) -> dict | Non
     return reader.get(extensions, name, f"{path}.extensions", "dict")
 
 
-def check_required(reader: "_Reader", required: list) -> None:
+def check_required(reader: Reader, required: list) -> None:
     """A required compression extension needs its decoder: said once, at the top, naming the extra."""
     for extension in EXTENSIONS:
         if extension in required and _decoder(extension) is None:
@@ -85,7 +85,7 @@ def check_required(reader: "_Reader", required: list) -> None:
 # --------------------------------------------------------------------------- EXT_meshopt_compression
 
 
-def meshopt_view(reader: "_Reader", index: int, view: dict) -> tuple[dict, Any, int, int] | None:
+def meshopt_view(reader: Reader, index: int, view: dict) -> tuple[dict, Any, int, int] | None:
     """bufferViews[index] as `_Reader.view` gives it (the view, its bytes, byteOffset, byteLength),
     decoded from its EXT_meshopt_compression data; None where the view has none, or where
     meshopt is not installed and the view's own buffer holds the uncompressed fallback."""
@@ -128,7 +128,7 @@ def meshopt_view(reader: "_Reader", index: int, view: dict) -> tuple[dict, Any, 
     return reader.decoded[key]
 
 
-def _check_meshopt_layout(reader: "_Reader", where: str, mode: str, filter_name: str, stride: int,
+def _check_meshopt_layout(reader: Reader, where: str, mode: str, filter_name: str, stride: int,
                           count: int) -> None:
     """The extension's rules on stride, count and filter for each mode (its README, "JSON schema updates")."""
     if mode == "ATTRIBUTES":
@@ -146,7 +146,7 @@ def _check_meshopt_layout(reader: "_Reader", where: str, mode: str, filter_name:
         reader.fail(f"{where}.count", "a multiple of 3 for TRIANGLES", count)
 
 
-def _has_fallback(reader: "_Reader", view: dict, path: str) -> bool:
+def _has_fallback(reader: Reader, view: dict, path: str) -> bool:
     """Whether the view's own buffer holds data (a uri, or the GLB's BIN chunk), not a placeholder."""
     buffer_index = reader.index(view, "buffer", path, "buffers")
     return "uri" in reader.items("buffers")[buffer_index] or (buffer_index == 0 and reader.binary is not None)
@@ -155,7 +155,7 @@ def _has_fallback(reader: "_Reader", view: dict, path: str) -> bool:
 # --------------------------------------------------------------------------- KHR_draco_mesh_compression
 
 
-def decode_draco(reader: "_Reader", primitive: dict, path: str) -> None:
+def decode_draco(reader: Reader, primitive: dict, path: str) -> None:
     """Decode a primitive's Draco stream, if it has one, into `reader.decoded`, where
     `_Reader.accessor` finds its attributes and indices in place of their bufferViews. Without
     DracoPy, a primitive whose accessors keep their bufferViews (the fallback) is read from
@@ -222,7 +222,7 @@ def decode_draco(reader: "_Reader", primitive: dict, path: str) -> None:
         reader.decoded[("accessors", index)] = values.astype(np.float64)
 
 
-def _declared(reader: "_Reader", index: int) -> tuple[int, int]:
+def _declared(reader: Reader, index: int) -> tuple[int, int]:
     """Accessor `index`'s count and the bytes it would take stored plainly."""
     accessor = reader.items("accessors")[index]
     where = f"accessors.{index}"

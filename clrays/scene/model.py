@@ -10,14 +10,11 @@ from __future__ import annotations
 import weakref
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal, Union
+from typing import Literal, Protocol, Union
 
 import numpy as np
 
 from .geometry import flat_normals
-
-if TYPE_CHECKING:
-    from .animation import Animation
 
 Vec3 = np.ndarray
 RGB = np.ndarray
@@ -436,6 +433,20 @@ class Geometry:
         return float(np.sqrt(max(squared)))
 
 
+class Keyframes(Protocol):
+    """What a scene's animation is to the scene: clrays.scene.animation.Animation, which
+    builds on this module (so this one names it only by what it offers)."""
+
+    fps: float
+    first: int
+    last: int
+
+    @property
+    def frames(self) -> range: ...
+
+    def scene_at(self, scene: Scene, frame: float) -> Scene: ...
+
+
 @dataclass(frozen=True)
 class Scene:
     image: Image
@@ -446,4 +457,4 @@ class Scene:
     geometry: Geometry
     render: Render
     source: Path | None = None  # the YAML file, for messages and relative paths
-    animation: Animation | None = None  # keyframes (clrays.scene.animation): `animation.scene_at(scene, frame)`
+    animation: Keyframes | None = None  # keyframes (clrays.scene.animation): `animation.scene_at(scene, frame)`

@@ -184,7 +184,7 @@ def _file_key(path: Path) -> tuple | None:
 class TextureCache:
     """The light textures of one scene as it is loaded: each file decoded once, however
     many lights use it, and each texture the lights share one array (which the device
-    then holds once: `stages.light_texture.pack_light_textures`). 16 spot lights sharing
+    then holds once: `physics.light_texture.pack_light_textures`). 16 spot lights sharing
     a 4096² gobo decoded it 16 times (7.4 GB). The texels the scene's textures send to
     the device are counted against MAX_SCENE_TEXTURE_TEXELS from each file's header,
     before it is decoded.

@@ -15,8 +15,8 @@ Per frame and textured light:
 3. traverse turns a lit run into radiance with `textured_run_radiance` (cl/light_texture.h):
    N lookups per run, whatever the texture holds.
 
-`pack_light_textures` packs every light's texture for the kernels that look one up per
-point (raymarch, shade).
+The kernels that look a texture up per point (raymarch, shade) read every light's texture
+as the frame's inputs pack it (clrays.physics.light_texture.pack_light_textures).
 """
 from __future__ import annotations
 
@@ -28,9 +28,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .. import structs
-from ..physics.light_texture import texture_frame, textured
+from ..buffers import BufferDecl
+from ..inputs import FrameBuffers, frame_sizes
 from ..scene.costs import texture_texel_angle, texture_texel_length
-from ..scene.model import DirectionalLight, SpotLight
+from ..scene.model import DirectionalLight
 from .integrand import SVD_RELATIVE_CUTOFF, SVD_SAMPLES, _beta_nodes, integrand_exact
 
 #: Points per texel of a γ cell's length whose mean is the cell's texture
@@ -42,6 +43,9 @@ from .integrand import SVD_RELATIVE_CUTOFF, SVD_SAMPLES, _beta_nodes, integrand_
 #: more at 640×360 (bench/RESULTS.md history, "The stained glass within reach of 0.5 %").
 CELL_SAMPLES_PER_TEXEL = 1.0
 MAX_CELL_SAMPLES = 4
+#: A textured light's prefix sums: per slice and γ cell boundary, 3 channels of T and T·Γ_i.
+TEXTURE_PREFIX = BufferDecl("texture prefix sums", 4,
+                            lambda sizes: sizes.slices * 3 * (sizes.svd_rank + 1) * (sizes.tree_gamma + 1))
 
 
 def cell_samples(light, gamma_step: float, gamma_warp: float) -> int:
@@ -57,48 +61,8 @@ def cell_samples(light, gamma_step: float, gamma_warp: float) -> int:
 
 if TYPE_CHECKING:
     from ..device import Device, StageTimer
-    from ..inputs import FrameBuffers
     from .integrand import DeviceIntegrand
     from .rectify import Epipolar
-
-
-def pack_light_textures(scene, eye_ws: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(light_texture_t per light, float4 texels of every texture one after another) for a
-    scene in eye space (at least one texel, so the buffer exists). Lights that share a
-    texture (the loader gives them one array: clrays.scene.textures.TextureCache) share its
-    texels here too: 16 spot lights with one 4096² gobo hold 256 MiB, not 4 GiB."""
-    entries = np.zeros(max(len(scene.lights), 1), dtype=structs.light_texture_dtype)
-    first_of: dict[int, int] = {}  # id(texels) -> its first texel in the packed buffer
-    unique, total = [], 0
-    for index, light in enumerate(scene.lights):
-        if not textured(light):
-            continue
-        entry = entries[index]
-        right, up = texture_frame(light.direction) if hasattr(light, "direction") else (np.zeros(3), np.zeros(3))
-        entry["right"], entry["up"] = structs.float4(right), structs.float4(up)
-        entry["origin"] = structs.float4(-np.asarray(eye_ws, dtype=np.float64))  # the world origin
-        if isinstance(light, SpotLight):
-            entry["scale_x"] = entry["scale_y"] = 1.0 / math.tan(math.radians(light.cone_deg))
-            entry["wrap"] = structs.TEXTURE_WRAP_CLAMP
-        elif not isinstance(light, DirectionalLight):  # a point light's cube: its faces fix the frame
-            entry["scale_x"] = entry["scale_y"] = 1.0
-            entry["wrap"] = structs.TEXTURE_WRAP_CLAMP
-        else:
-            entry["scale_x"], entry["scale_y"] = 1.0 / light.texture_size[0], 1.0 / light.texture_size[1]
-            entry["wrap"] = structs.TEXTURE_WRAP_REPEAT if light.texture_wrap == "repeat" else structs.TEXTURE_WRAP_CLAMP
-        texels = light.texture.texels
-        if id(texels) not in first_of:
-            first_of[id(texels)] = total
-            unique.append(texels)
-            total += light.texture.height * light.texture.width
-        entry["first_texel"], entry["width"], entry["height"] = first_of[id(texels)], light.texture.width, \
-            light.texture.height
-        entry["textured"] = 1
-    packed = np.zeros((max(total, 1), 4), dtype=np.float32)  # one array: no per-texture copies to join
-    for texels in unique:
-        first = first_of[id(texels)]
-        packed[first:first + texels.shape[0] * texels.shape[1], :3] = texels.reshape(-1, 3)
-    return entries, packed
 
 
 # --------------------------------------------------------------------------- the low-rank integrand in γ
@@ -214,7 +178,7 @@ def light_texture(device: Device, buffers: FrameBuffers, light_index: int, epipo
     gamma_buffer = device.buffer(np.ascontiguousarray(basis.gamma.transpose(2, 0, 1), dtype=np.float32),
                                  writable=False)
     timer.add_host("light_texture", (time.perf_counter() - start) * 1e3)
-    prefix = device.buffer(nbytes=4 * slices * 3 * (rank + 1) * (n + 1))
+    prefix = TEXTURE_PREFIX.allocate(device, frame_sizes(buffers.inputs))  # (rank, n and slices: the scene's)
     event = device.kernel("light_texture", "light_texture_prefix", {"TEXTURE_RANK": rank})(
         device.queue, (slices,), None, buffers.lights, epipolar.buffer, buffers.light_textures, buffers.texels,
         params_buffer, gamma_buffer, np.int32(cell_samples(light, gamma_step, epipolar.gamma_warp)), prefix)

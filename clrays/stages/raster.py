@@ -11,13 +11,50 @@ from typing import Callable
 import numpy as np
 
 from .. import structs
+from ..buffers import BufferDecl, FrameSizes
 from ..device import Device, StageTimer
-from ..inputs import FrameBuffers, FrameInputs, light_pass_inputs, opaque_occluders
+from ..inputs import FrameBuffers, FrameInputs, frame_sizes, light_pass_inputs, opaque_occluders
 from ..scene.host_steps import timed
 from . import raster_culling
 from .relief import ReliefDrawer
 from .relief_cuts import cuts_reliefs
 from .shaft_edges import keeps_blockers
+
+
+@dataclass(frozen=True)
+class RasterTarget:
+    """The buffers a raster pass writes, declared once (clrays.buffers): its depths, its
+    nearest triangles, or the 64-bit keys (depth << 32 | triangle) it draws both with where
+    the device has 64-bit atomics, and a copy of those keys from before the reliefs."""
+
+    depth: BufferDecl
+    triangles: BufferDecl
+    keys: BufferDecl
+    keys_before_reliefs: BufferDecl | None = None
+
+
+#: The camera's: per sample.
+CAMERA = RasterTarget(BufferDecl("camera depth", 4, lambda sizes: sizes.samples),
+                      BufferDecl("camera triangle ids", 4, lambda sizes: sizes.samples),
+                      BufferDecl("camera raster keys (64-bit)", 8, lambda sizes: sizes.samples))
+
+
+def _map_texels(sizes: FrameSizes) -> int:
+    """The texels of the maps (a buffer even where there is none)."""
+    return max(sizes.shadow_texels, 1)
+
+
+#: One light's map: per texel of its views.
+SHADOW_MAP = RasterTarget(BufferDecl("shadow map", 4, _map_texels),
+                          BufferDecl("shadow map's nearest triangles", 4, _map_texels),
+                          BufferDecl("shadow map's raster keys (64-bit)", 8, _map_texels),
+                          BufferDecl("shadow map's keys without the reliefs (64-bit)", 8, _map_texels))
+#: Every light's maps back to back (shadow_atlas), by part: depths, nearest triangles or their keys,
+#: the keys without the reliefs.
+ATLAS = {"depth": BufferDecl("shadow maps of all lights together", 4, _map_texels),
+         "triangles": BufferDecl("shadow maps' nearest triangles together", 4, _map_texels),
+         "keys": BufferDecl("shadow maps' raster keys together (64-bit)", 8, _map_texels),
+         "volume": BufferDecl("shadow maps' keys without the reliefs together (64-bit)", 8, _map_texels)}
 
 
 @dataclass
@@ -214,10 +251,12 @@ def _atomic64(device: Device) -> bool:
 
 
 def _draw(device: Device, buffers: FrameBuffers, reliefs: ReliefDrawer, anchor_ws: np.ndarray, views: list[int],
-          offsets, sample_count: int, count: int, nearest_triangles: bool, timer: StageTimer,
+          offsets, sample_count: int, target: RasterTarget, sizes: FrameSizes, nearest_triangles: bool,
+          timer: StageTimer,
           keep_keys: bool = False, before_reliefs: list | None = None,
           depths_from_keys: bool = False) -> tuple[object, object, bool]:
-    """Depth of `count` samples over `views` (the triangles, then the reliefs), and, with
+    """Depth of the `target`'s samples over `views` (the triangles, then the reliefs; as many
+    as its declarations give for `sizes`), and, with
     `nearest_triangles`, the triangle each depth belongs to (None without): in one pass of
     64-bit keys (depth, triangle), split after, where the device has 64-bit atomics; else
     the depths, then a pass that finds their triangles (ties: the highest index). With
@@ -229,14 +268,15 @@ def _draw(device: Device, buffers: FrameBuffers, reliefs: ReliefDrawer, anchor_w
     for the views' lists of the triangles that may reach them (`_drawn_lists`)."""
     inputs = buffers.inputs
     triangle = None
+    count = target.depth.length(sizes)
     drawn = _drawn_lists(device, inputs, views, anchor_ws)
     if nearest_triangles and _atomic64(device):
         defines = {"RASTER_ATOMIC64": 1}
-        nearest = device.buffer(nbytes=8 * count)
+        nearest = target.keys.allocate(device, sizes)
         device.fill(nearest, np.uint64((int(structs.DEPTH_EMPTY) << 32) | 0xFFFFFFFF), 8 * count, timer, "raster")
         _launch(device, buffers, "raster_nearest", defines, views, offsets, sample_count, (nearest,), timer, drawn)
         if before_reliefs is not None:
-            kept = device.buffer(nbytes=8 * count)
+            kept = target.keys_before_reliefs.allocate(device, sizes)
             timer.add("raster", device.cl.enqueue_copy(device.queue, kept, nearest, byte_count=8 * count))
             before_reliefs.append(kept)
         for view in views:
@@ -244,20 +284,20 @@ def _draw(device: Device, buffers: FrameBuffers, reliefs: ReliefDrawer, anchor_w
                         (nearest,))
         if keep_keys and depths_from_keys:
             return nearest, nearest, True
-        depth = device.buffer(nbytes=4 * count)
+        depth = target.depth.allocate(device, sizes)
         if keep_keys:
             _split(device, defines, nearest, count, depth, None, timer)
             return depth, nearest, True
-        triangle = device.buffer(nbytes=4 * count)
+        triangle = target.triangles.allocate(device, sizes)
         _split(device, defines, nearest, count, depth, triangle, timer)
         return depth, triangle, False
-    depth = device.buffer(nbytes=4 * count)
+    depth = target.depth.allocate(device, sizes)
     device.fill(depth, structs.DEPTH_EMPTY, 4 * count, timer, "raster")
     _rasterize(device, buffers, views, offsets, sample_count, depth, timer, drawn)
     for view in views:
         reliefs.map("relief_map_depth", None, buffers.views, inputs.views, view, offsets, sample_count, (depth,))
     if nearest_triangles:
-        triangle = device.buffer(nbytes=4 * count)
+        triangle = target.triangles.allocate(device, sizes)
         device.fill(triangle, np.int32(-1), 4 * count, timer, "raster")
         _launch(device, buffers, "raster_resolve", None, views, offsets, sample_count, (depth, triangle), timer, drawn)
         for view in views:
@@ -280,7 +320,7 @@ def raster_camera(device: Device, buffers: FrameBuffers, timer: StageTimer) -> t
     inputs = buffers.inputs
     reliefs = ReliefDrawer(device, inputs.reliefs, inputs.eye_ws, timer)  # eye space, as the triangles
     camera_depth, tri_id, _ = _draw(device, buffers, reliefs, inputs.eye_ws, [0], buffers.offsets,
-                                    inputs.scene.image.spp, inputs.samples, True, timer)
+                                    inputs.scene.image.spp, CAMERA, frame_sizes(inputs), True, timer)
     return camera_depth, tri_id
 
 
@@ -327,7 +367,7 @@ def raster_shadow_map(device: Device, buffers: FrameBuffers, light_index: int, t
     # keys from before the reliefs were drawn.
     before_reliefs = [] if cuts_reliefs(inputs, _atomic64(device)) else None
     depth, blockers, keys = _draw(device, light_buffers, reliefs, inputs.light_anchor_ws[0], drawn, centre, 1,
-                                  max(inputs.shadow_texels, 1), keeps_blockers(inputs.scene.render), timer,
+                                  SHADOW_MAP, frame_sizes(inputs), keeps_blockers(inputs.scene.render), timer,
                                   keep_keys=True, before_reliefs=before_reliefs,
                                   depths_from_keys=depth_in_keys(inputs.scene))
     shadow_map = ShadowMap(depth, blockers, keys, inputs.shadow_texels, inputs.scene.geometry.count,
@@ -416,8 +456,10 @@ def shadow_atlas(device: Device, buffers: FrameBuffers, maps: list[ShadowMap], p
         return None
     if len(maps) == 1:
         return getattr(maps[0], part)
-    size = 8 if part == "volume" or (part == "blockers" and maps[0].keys) else 4  # every map of a frame is drawn alike
-    atlas = device.buffer(nbytes=size * max(buffers.inputs.shadow_texels, 1))
+    # every map of a frame is drawn alike
+    declared = ATLAS[("keys" if maps[0].keys else "triangles") if part == "blockers" else part]
+    size = declared.element_bytes
+    atlas = declared.allocate(device, frame_sizes(buffers.inputs))
     for (first, _), entry in zip(buffers.inputs.light_views, maps):
         offset = size * int(buffers.inputs.views[first]["depth_offset"])
         device.cl.enqueue_copy(device.queue, atlas, getattr(entry, part), byte_count=size * entry.texels,

@@ -15,8 +15,10 @@ import numpy as np
 from .. import structs
 from ..scene.camera import slice_basis, slice_fan
 from ..device import Device, StageTimer
-from ..inputs import FrameBuffers
+from ..buffers import BufferDecl
+from ..inputs import FrameBuffers, frame_sizes
 from .raster import RasterResult
+from ..scene.costs import tree_gamma_samples
 from ..scene.model import DirectionalLight
 
 # Camera samples (rectify_bounds) and texels (rectify) one work-item computes at a time, as
@@ -35,6 +37,11 @@ BOUNDS_CHUNK = 64
 # neighbouring shadow-map texels, so a group that sweeps across slices, rather than along
 # one slice's row, finds them in cache (PoCL runs a group's work-items in turn).
 SLICES_PER_GROUP = 64
+
+#: Per slice, the (min, max) of its row's γ texels and of the levels above them (float2).
+TREE = BufferDecl("min-max tree", 8, lambda sizes: sizes.slices * 2 * sizes.tree_gamma)
+#: Each texel's blocking triangle, where the maps keep them (cl/shaft_edges.h).
+ROW_BLOCKERS = BufferDecl("rows' blockers", 4, lambda sizes: sizes.slices * sizes.tree_gamma)
 
 
 def rectify_batches(device: Device) -> int:
@@ -119,12 +126,6 @@ class Epipolar:
         return float(self.params["gamma_warp"])
 
 
-def tree_gamma_samples(requested: int) -> int:
-    """The γ texels of a row of the epipolar texture and its min-max tree: `render.gamma_samples`
-    rounded up to a power of two, at least 2 (the tree halves the row at every level)."""
-    return 1 << max(int(math.ceil(math.log2(requested))), 1)
-
-
 def epipolar_frame(scene, buffers: FrameBuffers, light_index: int) -> np.ndarray:
     """epipolar_t for one light, without the ranges that need the depth map."""
     light = scene.lights[light_index]
@@ -205,9 +206,9 @@ def rectify(device: Device, buffers: FrameBuffers, rastered: RasterResult, light
     angles, ranges = device.buffer(nbytes=16 * n), device.buffer(nbytes=16)
     timer.add("rectify", device.kernel("rectify", "rectify_ranges", defines)(
         device.queue, (n,), None, bounds_buffer, buffers.lights, frame_buffer, angles, ranges))
-    tree = device.buffer(nbytes=8 * slices * 2 * n)
-    # each texel's blocking triangle beside it, where the maps keep them (cl/shaft_edges.h)
-    triangles = None if rastered.shadow_blockers is None else device.buffer(nbytes=4 * slices * n)
+    sizes = frame_sizes(buffers.inputs)  # (slices and n are the scene's: epipolar_frame)
+    tree = TREE.allocate(device, sizes)
+    triangles = None if rastered.shadow_blockers is None else ROW_BLOCKERS.allocate(device, sizes)
     # (the keys without the reliefs where the walks cut those themselves: stages/relief_cuts.py)
     volume = rastered.shadow_blockers if rastered.volume_blockers is None else rastered.volume_blockers
     blockers = () if triangles is None else (volume, triangles)

@@ -14,8 +14,9 @@ from __future__ import annotations
 import numpy as np
 
 from .. import structs
+from ..buffers import BufferDecl, FrameSizes
 from ..device import Device, StageTimer
-from ..inputs import FrameBuffers
+from ..inputs import FrameBuffers, frame_sizes
 from ..scene.model import TRAVERSALS, DirectionalLight, SpotLight
 from ..scene.camera import camera_basis, half_extents
 from .integrand import DeviceIntegrand
@@ -214,6 +215,11 @@ LANES = 8
 FIXUP_BLOCK = 1024
 #: Work-items of fixup_offsets' one work-group (cl/sampling.cl FIXUP_SCAN_ITEMS).
 FIXUP_SCAN_ITEMS = 256
+#: Per line sample: (distance, lit extent), and (r, g, b times radiance_scale, distance).
+LINE_SAMPLES = BufferDecl("epipolar line samples", 8, lambda sizes: sizes.slices * sizes.line_samples)
+LINE_RADIANCE = BufferDecl("epipolar line samples' radiance", 16, lambda sizes: sizes.slices * sizes.line_samples)
+#: The camera samples listed for fix_up: room for every one.
+FIXUP_LIST = BufferDecl("epipolar fix-up list", 4, lambda sizes: sizes.samples)
 
 
 def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterResult, epipolar: Epipolar,
@@ -231,9 +237,10 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
     ranges_buffer = device.buffer(ranges, writable=False)
     sides = device.buffer(slice_sides(epipolar.params), writable=False)
     lengths = device.buffer(line_lengths(inputs.scene, epipolar.params, ranges, n), writable=False)
-    line = device.buffer(nbytes=8 * slices * n)  # (distance, lit extent) per line sample
+    sizes = frame_sizes(inputs)  # (slices: the scene's, as the epipolar frame's)
+    line = LINE_SAMPLES.allocate(device, sizes)
     wedges = device.buffer(nbytes=8 * slices)  # a spot light's lit wedge of γ per slice (cl/spot_wedge.h)
-    radiance = device.buffer(nbytes=16 * slices * n)  # (r, g, b times radiance_scale, distance) per line sample
+    radiance = LINE_RADIANCE.allocate(device, sizes)
     state = device.buffer(nbytes=slices * n)  # per line sample: left, computed or refined (cl/sampling.cl LINE_*)
     samples, n32 = inputs.samples, np.int32(n)
     light = inputs.scene.lights[int(epipolar.params["light_index"])]
@@ -260,14 +267,14 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
     run("gather", (-(-samples // LANES),), None, buffers.params, buffers.views, buffers.lights,
         epipolar.buffer, rastered.camera_depth, buffers.offsets, ranges_buffer, line, radiance, n32, lengths, threshold,
         np.float32(epipole_sin(inputs.scene, light)), np.int32(samples), np.int32(overwrite), scatter, fixup_flags)
-    fixups, counts = fixup_list(device, fixup_flags, samples, walks, runs * slices, run)
+    fixups, counts = fixup_list(device, fixup_flags, sizes, walks, runs * slices, run)
     run("fix_up", *device.list_launch(samples), buffers.params, buffers.views, buffers.lights, epipolar.buffer,
         epipolar.tree, integrand.params, integrand.data, rastered.camera_depth, buffers.offsets, fixups, counts,
         scatter, *walked)
     return SampleCounts.on_device(device, counts, samples)
 
 
-def fixup_list(device: Device, fixup_flags, samples: int, walks, walk_entries: int, run) -> tuple[object, object]:
+def fixup_list(device: Device, fixup_flags, sizes: FrameSizes, walks, walk_entries: int, run) -> tuple[object, object]:
     """(the fix-up list, its counts) from gather's flags: each block of FIXUP_BLOCK camera
     samples counts its flagged ones, and lists them from the prefix sum of the counts
     before it. An atomic append in gather costs about as much (measured); the flags keep
@@ -275,6 +282,7 @@ def fixup_list(device: Device, fixup_flags, samples: int, walks, walk_entries: i
     on the device (fixup_offsets), which also sums `walks` (its first `walk_entries`): the
     counts (uint[2], cl/sampling.cl COUNT_*) stay there, and the list has room for every
     camera sample, so the host waits for neither."""
+    samples = sizes.samples
     blocks, samples32 = -(-samples // FIXUP_BLOCK), np.int32(samples)
     block_counts = device.buffer(nbytes=4 * blocks)
     block_offsets = device.buffer(nbytes=4 * blocks)
@@ -282,6 +290,6 @@ def fixup_list(device: Device, fixup_flags, samples: int, walks, walk_entries: i
     run("fixup_count", (blocks,), None, samples32, fixup_flags, block_counts)
     run("fixup_offsets", (FIXUP_SCAN_ITEMS,), (FIXUP_SCAN_ITEMS,), np.int32(blocks), block_counts,
         np.int32(walk_entries), walks, block_offsets, counts)
-    fixups = device.buffer(nbytes=4 * samples)  # camera samples listed for fix_up, at most every one
+    fixups = FIXUP_LIST.allocate(device, sizes)
     run("fixup_list", (blocks,), None, samples32, fixup_flags, block_offsets, fixups)
     return fixups, counts

@@ -16,8 +16,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import structs
+from ..buffers import BufferDecl
 from ..device import Device, StageTimer
-from ..inputs import FrameBuffers, FrameInputs
+from ..inputs import FrameBuffers, FrameInputs, frame_sizes
 from ..scene.model import ShadowFilter
 from .raster import RasterResult
 
@@ -26,6 +27,11 @@ FILTER_CODES = {"hard": structs.SHADOW_FILTER_HARD, "pcf": structs.SHADOW_FILTER
                 "vsm": structs.SHADOW_FILTER_VSM, "msm_hamburger": structs.SHADOW_FILTER_MSM_HAMBURGER,
                 "msm_hausdorff": structs.SHADOW_FILTER_MSM_HAUSDORFF}
 MOMENT_FILTERS = ("vsm", "msm_hamburger", "msm_hausdorff")
+#: Every light's moment maps (float4 per texel of the shadow atlas), and their blur's scratch.
+MOMENT_MAPS = BufferDecl("moment maps", 16, lambda sizes: sizes.shadow_texels)
+MOMENT_SCRATCH = BufferDecl("moment maps' blur scratch", 16, lambda sizes: sizes.shadow_texels)
+#: The lit fraction of each camera sample for each light.
+FILTERED_VISIBILITY = BufferDecl("filtered visibility", 4, lambda sizes: sizes.entries)
 
 #: The normalised far end sits this much past the farthest vertex, so that an empty
 #: texel (z = 1) is behind every receiver, even one on the farthest vertex.
@@ -85,8 +91,9 @@ def shadow_filter_moments(device: Device, buffers: FrameBuffers, rastered: Raste
     depth_range = device.buffer(ranges, writable=False)
     if chosen.type not in MOMENT_FILTERS or not inputs.shadow_texels:
         return MomentMaps(device.buffer(nbytes=16), depth_range)
-    moments = device.buffer(nbytes=16 * inputs.shadow_texels)
-    scratch = device.buffer(nbytes=16 * inputs.shadow_texels) if chosen.radius else None
+    sizes = frame_sizes(inputs)
+    moments = MOMENT_MAPS.allocate(device, sizes)
+    scratch = MOMENT_SCRATCH.allocate(device, sizes) if chosen.radius else None
     needed = view_needed_buffer(device, inputs)
     write = device.kernel("shadow_filter", "shadow_filter_moments")
     blur = device.kernel("shadow_filter", "shadow_filter_blur")
@@ -116,8 +123,7 @@ def shadow_filter(device: Device, buffers: FrameBuffers, rastered: RasterResult,
     """float[samples × lights]: the lit fraction of each camera sample for each light."""
     inputs = buffers.inputs
     chosen = frame_filter(inputs)
-    lights = max(len(inputs.scene.lights), 1)
-    visible = device.buffer(nbytes=4 * inputs.samples * lights)
+    visible = FILTERED_VISIBILITY.allocate(device, frame_sizes(inputs))
     kernel = device.kernel("shadow_filter", "shadow_filter_visibility", {"SHADOW_FILTER": FILTER_CODES[chosen.type]})
     event = kernel(device.queue, (inputs.samples,), None, buffers.params, buffers.views,
                    view_needed_buffer(device, inputs), buffers.lights,

@@ -8,11 +8,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..buffers import BufferDecl
 from ..device import Device, StageTimer
 from ..inputs import see_through
 from ..scene.geometry import weld
 from ..scene.host_steps import timed
 
+
+#: Each triangle's neighbour across each of its edges (int3: `edge_neighbours`).
+EDGE_NEIGHBOURS = BufferDecl("each triangle's neighbours", 12, lambda sizes: sizes.triangles)
 
 def keeps_blockers(render) -> bool:
     """Whether a frame's shadow maps and epipolar rows keep each texel's blocking triangle:

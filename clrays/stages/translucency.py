@@ -22,10 +22,25 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .. import structs
+from ..buffers import BufferDecl
 from ..device import Device, StageTimer
 from ..errors import ClraysError
-from ..inputs import FrameBuffers, FrameInputs, light_pass_inputs, opaque_occluders, see_through
+from ..inputs import FrameBuffers, FrameInputs, frame_sizes, light_pass_inputs, opaque_occluders, see_through
 from .raster import raster_passes
+
+
+#: Every light's layers in the shadow atlas's layout: K per texel, their depths and transmittance
+#: (cl/translucency.h).
+LAYER_DEPTH = BufferDecl("translucent layers' depths", 4, lambda sizes: sizes.layers * max(sizes.shadow_texels, 1))
+LAYER_CLEAR = BufferDecl("translucent layers' transmittance", 8,
+                         lambda sizes: sizes.layers * max(sizes.shadow_texels, 1))
+#: One light's layers rectified: K per texel of its epipolar texture (cl/translucent_walk.h).
+RECTIFIED_BETA = BufferDecl("rectified translucent layers", 4,
+                            lambda sizes: sizes.slices * sizes.tree_gamma * sizes.layers)
+RECTIFIED_CLEAR = BufferDecl("rectified translucent layers' transmittance", 8,
+                             lambda sizes: sizes.slices * sizes.tree_gamma * sizes.layers)
+#: With exact surface shadows: what reaches each camera sample's surface of each light (float4).
+SURFACE_THROUGH = BufferDecl("surface transmittance", 16, lambda sizes: sizes.entries)
 
 
 @dataclass
@@ -105,9 +120,8 @@ def translucency(device: Device, buffers: FrameBuffers, timer: StageTimer) -> La
     # one build of cl/translucency.cl for its kernels (on a GPU its raster passes add
     # RASTER_BIG_SAMPLES, clrays.stages.raster.raster_defines: a second build)
     defines = {"TRANSLUCENT_LAYERS": count}
-    stride = max(inputs.shadow_texels, 1)
-    layer_depth = device.buffer(nbytes=4 * count * stride)
-    layer_clear = device.buffer(nbytes=8 * count * stride)
+    stride, sizes = max(inputs.shadow_texels, 1), frame_sizes(inputs)
+    layer_depth, layer_clear = LAYER_DEPTH.allocate(device, sizes), LAYER_CLEAR.allocate(device, sizes)
     # A layer's transmittance is read only where its depth is finite: no need to clear it.
     device.fill(layer_depth, structs.DEPTH_EMPTY, 4 * count * stride, timer, "translucency")
     for light_index in range(len(inputs.scene.lights)):
@@ -173,8 +187,8 @@ def rectify_layers(device: Device, buffers: FrameBuffers, layers: Layers, epipol
     """The layers of the light of `epipolar` (stage rectify's), resampled at the texels of
     its rectified texture (timed with the translucency stage)."""
     slices, n = int(epipolar.params["slices"]), int(epipolar.params["gamma_samples"])
-    beta = device.buffer(nbytes=4 * slices * n * layers.count)
-    clear = device.buffer(nbytes=8 * slices * n * layers.count)
+    sizes = frame_sizes(buffers.inputs)  # (slices, n: the scene's; layers.count: its render.translucent_layers)
+    beta, clear = RECTIFIED_BETA.allocate(device, sizes), RECTIFIED_CLEAR.allocate(device, sizes)
     rows = device.buffer(np.zeros(slices, np.int32))
     timer.add("translucency", device.kernel("translucency", "translucency_rectify", layers.defines())(
         device.queue, (n, slices), None, buffers.views, buffers.lights, layers.depth, layers.clear,
@@ -197,8 +211,7 @@ def surface_transmittance(device: Device, buffers: FrameBuffers, rastered, layer
     clear = np.zeros((len(rows), 4), np.float32)
     clear[:, :3] = 1.0 - geometry.opacity_or_ones()[rows]
     bvh = build_bvh(vertices[:, :3].reshape(-1, 3, 3))
-    lights = max(len(inputs.scene.lights), 1)
-    out = device.buffer(nbytes=16 * inputs.samples * lights)
+    out = SURFACE_THROUGH.allocate(device, frame_sizes(inputs))
     timer.add("translucency", device.kernel("translucency", "translucency_surface", layers.defines())(
         device.queue, (inputs.samples,), None, buffers.params, buffers.views, buffers.lights, rastered.camera_depth,
         rastered.tri_id, buffers.tri_normal, buffers.offsets, device.buffer(vertices, writable=False),

@@ -18,8 +18,9 @@ from typing import Callable
 
 import numpy as np
 
+from ..buffers import BufferDecl, FrameSizes
 from ..device import Device, StageTimer
-from ..inputs import FrameBuffers
+from ..inputs import FrameBuffers, frame_sizes
 from ..scene.model import Scene, Transparency
 from .features import feature_args, feature_defines, present
 from .raster import RasterResult
@@ -32,11 +33,41 @@ FOG_LABEL = "transparency.fog"  # the in-scatter stages run up to each layer, ti
 #: (glass_row's panes split into 640 triangles: 529 against 405 ms of the stage through the
 #: lookup, docs/design.md), and a translucent mesh of a million would not finish.
 FILM_SHADOW_RAY_TRIANGLES = 1024
+#: Most slots gathered and mboit films are counted as (`film_slots_bound`): the most layers peeling takes.
+GATHERED_SLOTS_COUNTED = 64
+
+#: Per slot and camera sample, slot-major: a film's depth, its triangle and the in-scattering up to it
+#: (`FrameSizes.film_slots`: the slots the frame finds, at most peeling's layers).
+FILM_DEPTH = BufferDecl("translucent films' depths", 4, lambda sizes: sizes.film_slots * sizes.samples, bound=True)
+FILM_TRIANGLES = BufferDecl("translucent films' triangles", 4, lambda sizes: sizes.film_slots * sizes.samples,
+                            bound=True)
+FILM_SCATTER = BufferDecl("translucent films' in-scattering", 16, lambda sizes: sizes.film_slots * sizes.samples,
+                          bound=True)
+#: gathered and mboit: the films each camera sample meets, and the samples that meet one (MBOIT's walk).
+FILM_COUNTS = BufferDecl("translucent films per sample", 4, lambda sizes: sizes.samples)
+WALK_SAMPLES = BufferDecl("samples with films", 4, lambda sizes: sizes.samples, bound=True)
+WALKED_FOG = BufferDecl("films' walked fog", 16, lambda sizes: sizes.samples)
+#: One slot's depth and in-scattering at a time, where the in-scatter stages run per slot.
+SLOT_DEPTH = BufferDecl("one film slot's depth", 4, lambda sizes: sizes.samples)
+SLOT_SCATTER = BufferDecl("one film slot's in-scattering", 16, lambda sizes: sizes.samples)
+#: What shade composites: T(D) of each sample's films, and the light they add in front.
+FILM_TRANSMITTANCE = BufferDecl("films' transmittance", 16, lambda sizes: sizes.samples)
+FILM_IN_FRONT = BufferDecl("films' light in front", 16, lambda sizes: sizes.samples)
 
 
 def transparency_of(scene: Scene) -> Transparency:
     """The scene's `render.transparency`, its defaults when left out."""
     return scene.render.transparency or Transparency()
+
+
+def film_slots_bound(scene: Scene) -> int:
+    """The film slots a frame is counted to take per camera sample before it runs: peeling's
+    layers bound them; gathered and mboit take every film a ray meets, counted as at most
+    GATHERED_SLOTS_COUNTED or the translucent triangles, the fewer."""
+    settings = transparency_of(scene)
+    if settings.type == "depth_peeling":
+        return settings.layers
+    return min(len(translucent_triangles(scene)), GATHERED_SLOTS_COUNTED)
 
 
 def translucent_triangles(scene: Scene) -> np.ndarray:
@@ -112,6 +143,7 @@ class Films:
     samples: int
     rastered: RasterResult
     opacity: object  # float4[triangles]: every triangle's opacity (rgb), 1 for an opaque one
+    sizes: FrameSizes  # the frame's (its slot scratch: add_in_scatter)
     # MBOIT's one weighted walk (stages/transparency_walk.py; None: the in-scatter runs per slot):
     walked: object = None  # float4[samples]: ∫(T(s) − T(D)) dL(0, s), summed over the walked lights
     walk_samples: object = None  # int[walk_count]: the samples that meet a film
@@ -123,8 +155,7 @@ class Films:
         timer)` is the method's own stage (raymarch, traverse…) run with each slot's depths as
         the camera depth, so the layers see the fog exactly as the opaque depth does."""
         relabelled = _Relabelled(timer, FOG_LABEL)
-        depth = device.buffer(nbytes=4 * self.samples)
-        scatter = device.buffer(nbytes=16 * self.samples)
+        depth, scatter = SLOT_DEPTH.allocate(device, self.sizes), SLOT_SCATTER.allocate(device, self.sizes)
         for slot in range(self.slots):
             device.cl.enqueue_copy(device.queue, depth, self.depth, byte_count=4 * self.samples,
                                    src_offset=4 * slot * self.samples)
@@ -148,7 +179,7 @@ def translucent_films(device: Device, buffers: FrameBuffers, rastered: RasterRes
     False: the in-scatter runs per slot, as peeling's (the tests' reference)."""
     inputs = buffers.inputs
     settings = transparency_of(inputs.scene)
-    samples = inputs.samples
+    samples, sizes = inputs.samples, frame_sizes(inputs)
     indices = film_triangles(inputs)
     translucent = device.buffer(indices, writable=False)
     args = _layer_args(buffers, rastered, translucent, len(indices))
@@ -156,40 +187,47 @@ def translucent_films(device: Device, buffers: FrameBuffers, rastered: RasterRes
     walk = {}
     if settings.type == "depth_peeling":
         slots = settings.layers
-        depth, tri = device.buffer(nbytes=4 * slots * samples), device.buffer(nbytes=4 * slots * samples)
+        depth, tri = _film_slots(device, sizes, slots)
         timer.add(LABEL, device.kernel("transparency", "transparency_peel")(
             device.queue, (samples,), None, *args, np.int32(slots), depth, tri, used))
         slots = int(device.read(used, 1, np.int32)[0])  # peeling stops where no sample finds another layer
     else:
-        counts = device.buffer(nbytes=4 * samples)
+        counts = FILM_COUNTS.allocate(device, sizes)
         timer.add(LABEL, device.kernel("transparency", "transparency_count")(
             device.queue, (samples,), None, *args, counts, used))
         slots = int(device.read(used, 1, np.int32)[0])
-        depth, tri = device.buffer(nbytes=4 * slots * samples), device.buffer(nbytes=4 * slots * samples)
+        depth, tri = _film_slots(device, sizes, slots)
         if slots:
             timer.add(LABEL, device.kernel("transparency", "transparency_gather")(
                 device.queue, (samples,), None, *args, counts, np.int32(slots), depth, tri))
         if slots and weighted_walk:
-            walk = films_to_walk(device, counts, samples, timer)
-    scatter = device.buffer(nbytes=16 * slots * samples)
+            walk = films_to_walk(device, counts, sizes, timer)
+    scatter = FILM_SCATTER.allocate(device, replace(sizes, film_slots=slots))
     if slots:
         device.fill(scatter, np.float32(0), 16 * slots * samples, timer, LABEL)
     # The in-scatter stages read the layers' depths as the camera depth: the same shadow maps,
     # the same camera, a slot's depth instead of the opaque one.
     opacity = np.zeros((inputs.scene.geometry.count, 4), np.float32)
     opacity[:, :3] = inputs.scene.geometry.opacity_or_ones()
-    return Films(slots, depth, tri, scatter, samples, rastered, device.buffer(opacity, writable=False), **walk)
+    return Films(slots, depth, tri, scatter, samples, rastered, device.buffer(opacity, writable=False), sizes,
+                 **walk)
 
 
-def films_to_walk(device: Device, counts, samples: int, timer: StageTimer) -> dict:
+def _film_slots(device: Device, sizes: FrameSizes, slots: int) -> tuple[object, object]:
+    """The films' depths and triangles, `slots` per camera sample."""
+    slotted = replace(sizes, film_slots=slots)
+    return FILM_DEPTH.allocate(device, slotted), FILM_TRIANGLES.allocate(device, slotted)
+
+
+def films_to_walk(device: Device, counts, sizes: FrameSizes, timer: StageTimer) -> dict:
     """The Films fields of MBOIT's weighted walk: the samples whose count of hits is not 0, in
     order (a host compaction of one int per sample: the fog is walked for these only), and
     their fog, zero until the walks add each light's. (The compaction counts in the frame's
     wall time, not in a stage's device time.)"""
-    listed = np.flatnonzero(device.read(counts, samples, np.int32)).astype(np.int32)
-    walked = device.buffer(nbytes=16 * samples)
-    device.fill(walked, np.float32(0), 16 * samples, timer, LABEL)
-    return {"walked": walked, "walk_samples": device.buffer(listed, writable=False), "walk_count": len(listed)}
+    listed = np.flatnonzero(device.read(counts, sizes.samples, np.int32)).astype(np.int32)
+    walked = WALKED_FOG.allocate(device, sizes)
+    device.fill(walked, np.float32(0), WALKED_FOG.nbytes(sizes), timer, LABEL)
+    return {"walked": walked, "walk_samples": WALK_SAMPLES.upload(device, listed, sizes), "walk_count": len(listed)}
 
 
 def composite(device: Device, buffers: FrameBuffers, rastered: RasterResult, layers: Films,
@@ -212,7 +250,8 @@ def composite(device: Device, buffers: FrameBuffers, rastered: RasterResult, lay
     if layers.walked is not None:  # the films' fog, walked once per sample (stages/transparency_walk.py)
         defines["TRANSPARENCY_WEIGHTED_WALK"] = 1
         light_args = (*light_args, layers.walked)
-    transmittance, in_front = device.buffer(nbytes=16 * samples), device.buffer(nbytes=16 * samples)
+    sizes = frame_sizes(inputs)
+    transmittance, in_front = FILM_TRANSMITTANCE.allocate(device, sizes), FILM_IN_FRONT.allocate(device, sizes)
     near, far = depth_range(inputs)
     timer.add(LABEL, device.kernel("transparency", "transparency_composite", defines)(
         device.queue, (samples,), None, buffers.params, buffers.views, buffers.offsets, buffers.lights,

@@ -36,8 +36,9 @@ from .. import structs
 from ..bvh import Bvh, BvhTopology, bvh_topology, refit_bvh
 from ..relief_bvh import JoinedTopology, geometry_bvh_topology, refit_frame_bvh
 from .bvh_build import DeviceBvhTree, bvh_build_refit, bvh_build_tree
+from ..buffers import BufferDecl, FrameSizes
 from ..device import Device, StageTimer
-from ..inputs import FrameBuffers, FrameInputs, light_pass_inputs
+from ..inputs import FrameBuffers, FrameInputs, frame_sizes, light_pass_inputs
 from .raster import RasterResult
 
 #: `visibility_bound` does a triangle's texel rectangle of up to this many rows in one
@@ -69,6 +70,37 @@ TOUCHING_NODES_PER_ENTRY = 64
 #: triangles, lists the triangles touching the texels of those rays alone (`ray_lists`: the
 #: bound passes again over those texels) rather than building the BVH.
 RAY_LIST_ENTRIES = 1 << 17
+
+
+def _map_texels(sizes: FrameSizes) -> int:
+    return max(sizes.shadow_texels, 1)
+
+
+def _mask_words(sizes: FrameSizes) -> int:
+    return max((sizes.shadow_texels + 31) // 32, 1)
+
+
+#: Per camera sample and light: the answer, the texel its lit test reads (address, depth),
+#: and its place in the list of shadow rays; a bit per texel of the maps read.
+VISIBLE = BufferDecl("visibility's answers", 4, lambda sizes: sizes.entries)
+MAP_READ = BufferDecl("texels the visibility stage reads", 8, lambda sizes: sizes.entries)
+READ_MASK = BufferDecl("the shadow maps' texels read", 4, _mask_words)
+RAY_ENTRIES = BufferDecl("the list of shadow rays", 4, lambda sizes: sizes.entries)
+#: A light's bound and writer maps (BoundMap), and every light's back to back.
+BOUND = BufferDecl("bound map", 4, _map_texels)
+WRITER = BufferDecl("writer map", 4, _map_texels)
+BOUND_ATLAS = BufferDecl("bound maps together", 4, _map_texels)
+WRITER_ATLAS = BufferDecl("writer maps together", 4, _map_texels)
+#: A thumbnail's lists of the triangles touching each texel read (at most TOUCHING_ENTRIES entries).
+TOUCHING_HEADS = BufferDecl("the heads of the texels' lists", 4, _map_texels)
+TOUCHING_NODES = BufferDecl("the texels' lists of triangles", 8,
+                            lambda sizes: max(TOUCHING_NODES_PER_ENTRY * sizes.entries, 1))
+#: A larger frame's lists for its shadow rays' texels alone (ray_lists): a bit per texel of
+#: the maps a listed ray reads, and per light the lists' heads and nodes.
+RAY_LIST_MASK = BufferDecl("the shadow rays' texels", 4, _mask_words)
+RAY_LIST_HEADS = BufferDecl("the heads of the shadow rays' lists", 4, _map_texels)
+RAY_LIST_NODES = BufferDecl("the shadow rays' lists of triangles", 8,
+                            lambda sizes: max(TOUCHING_NODES_PER_ENTRY * ray_list_length(sizes), 1))
 #: Work-items of the one work-group that orders a view's list of tall triangles nearest
 #: first (cl/visibility_bound.cl, visibility_order: a bitonic sort in local memory of up to
 #: ORDER_LONGEST, 2048; a longer list stays in the order it was listed in, which gives the
@@ -134,13 +166,10 @@ def visibility_prepare(device: Device, buffers: FrameBuffers, rastered: RasterRe
     """The part of the decision that needs no bound map (no light, turned away, or pending),
     and the texels that the pending samples will read."""
     inputs = buffers.inputs
-    lights = max(len(inputs.scene.lights), 1)
-    entries = inputs.samples * lights
-    visible = device.buffer(nbytes=4 * entries)
-    map_read = device.buffer(nbytes=8 * entries)
-    words = max((inputs.shadow_texels + 31) // 32, 1)
-    read_mask = device.buffer(nbytes=4 * words)
-    device.fill(read_mask, np.uint32(0), 4 * words, timer, "visibility")
+    lights, sizes = max(len(inputs.scene.lights), 1), frame_sizes(inputs)
+    visible, map_read = VISIBLE.allocate(device, sizes), MAP_READ.allocate(device, sizes)
+    read_mask = READ_MASK.allocate(device, sizes)
+    device.fill(read_mask, np.uint32(0), READ_MASK.nbytes(sizes), timer, "visibility")
     timer.add("visibility", device.kernel("visibility_prepare", "visibility_prepare")(
         device.queue, (-(-inputs.samples // PREPARE_LANES), lights), None, buffers.params, buffers.views,
         buffers.lights, rastered.camera_depth, rastered.tri_id, buffers.tri_normal,
@@ -182,13 +211,12 @@ def visibility_bound(device: Device, buffers: FrameBuffers, light_index: int, ti
     # the frame's address of this light's texel 0 (read_mask is by frame addresses)
     first = int(buffers.inputs.views[buffers.inputs.light_views[light_index][0]]["depth_offset"])
     texels = max(inputs.shadow_texels, 1)
-    bound = device.buffer(nbytes=4 * texels)
-    writer = device.buffer(nbytes=4 * texels)
-    entries = buffers.inputs.samples * max(len(buffers.inputs.scene.lights), 1)
+    sizes = frame_sizes(buffers.inputs).for_light(light_index)
+    bound, writer = BOUND.allocate(device, sizes), WRITER.allocate(device, sizes)
     touching = None
-    if prepared is not None and entries <= TOUCHING_ENTRIES:
-        capacity = max(TOUCHING_NODES_PER_ENTRY * entries, 1)  # (0 would read as lists left whole)
-        touching = TouchingLists(device.buffer(nbytes=4 * texels), device.buffer(nbytes=8 * capacity),
+    if prepared is not None and sizes.entries <= TOUCHING_ENTRIES:
+        capacity = TOUCHING_NODES.length(sizes)  # (at least 1: 0 would read as lists left whole)
+        touching = TouchingLists(TOUCHING_HEADS.allocate(device, sizes), TOUCHING_NODES.allocate(device, sizes),
                                  device.buffer(np.zeros(1, np.int32)), capacity)
     lists = ((touching.head, touching.nodes, touching.count, np.int32(touching.capacity)) if touching is not None
              else (device.buffer(nbytes=4), device.buffer(nbytes=8), device.buffer(nbytes=4), np.int32(0)))
@@ -288,21 +316,22 @@ def ray_lists(device: Device, buffers: FrameBuffers, prepared: Prepared, ray_ent
     room for TOUCHING_NODES_PER_ENTRY nodes per ray of the most rays that take this way
     (visibility_route's list limit); visibility_reroute sends the rays to the BVH where a
     list holds more than TOUCHING_NODES_PER_ENTRY per ray of this frame's."""
-    inputs = buffers.inputs
-    words = max((inputs.shadow_texels + 31) // 32, 1)
+    inputs, sizes = buffers.inputs, frame_sizes(buffers.inputs)
     gate = (route, np.int32(structs.VISIBILITY_ROUTE_RAY_LISTS))
-    mask = device.buffer(nbytes=4 * words)
-    device.fill(mask, np.uint32(0), 4 * words, timer, "visibility")
+    mask = RAY_LIST_MASK.allocate(device, sizes)
+    device.fill(mask, np.uint32(0), RAY_LIST_MASK.nbytes(sizes), timer, "visibility")
     timer.add("visibility", device.kernel("visibility_prepare", "visibility_mark_listed")(
         device.queue, *device.list_launch(ray_list_limit(inputs)), ray_entries, ray_count, prepared.map_read, mask,
         *gate))
-    capacity = max(TOUCHING_NODES_PER_ENTRY * ray_list_limit(inputs), 1)
+    capacity = RAY_LIST_NODES.length(sizes)
     lists = []
     for index, light in enumerate(bounds):
         light_inputs = light_pass_inputs(inputs, index)
         first = int(inputs.views[inputs.light_views[index][0]]["depth_offset"])
-        touching = TouchingLists(device.buffer(nbytes=4 * max(light.texels, 1)), device.buffer(nbytes=8 * capacity),
-                                 device.buffer(np.zeros(1, np.int32)), capacity)
+        light_sizes = sizes.for_light(index)
+        touching = TouchingLists(RAY_LIST_HEADS.allocate(device, light_sizes),
+                                 RAY_LIST_NODES.allocate(device, light_sizes), device.buffer(np.zeros(1, np.int32)),
+                                 capacity)
         arguments = (touching.head, touching.nodes, touching.count, np.int32(capacity))
         if light.texels:
             light_words = (first + light.texels - 1) // 32 - first // 32 + 1
@@ -320,7 +349,12 @@ def ray_lists(device: Device, buffers: FrameBuffers, prepared: Prepared, ray_ent
 def ray_list_limit(inputs: FrameInputs) -> int:
     """The most shadow rays that ray_lists lists the texels of: RAY_LIST_ENTRIES, and no more
     than the frame has triangles (more rays, and the BVH is the cheaper way) or entries."""
-    return min(RAY_LIST_ENTRIES, inputs.scene.geometry.count, inputs.samples * max(len(inputs.scene.lights), 1))
+    return ray_list_length(frame_sizes(inputs))
+
+
+def ray_list_length(sizes: FrameSizes) -> int:
+    """`ray_list_limit` from the frame's sizes."""
+    return min(RAY_LIST_ENTRIES, sizes.triangles, sizes.entries)
 
 
 def list_counts(device: Device, lists: list[TouchingLists]):
@@ -335,8 +369,8 @@ def bound_atlas(device: Device, buffers: FrameBuffers, bounds: list[BoundMap]) -
     """Every light's bound and writer maps back to back, at the depth offsets of the frame's views."""
     if len(bounds) == 1:
         return bounds[0]
-    texels = max(buffers.inputs.shadow_texels, 1)
-    atlas = BoundMap(device.buffer(nbytes=4 * texels), device.buffer(nbytes=4 * texels), texels)
+    sizes = frame_sizes(buffers.inputs)
+    atlas = BoundMap(BOUND_ATLAS.allocate(device, sizes), WRITER_ATLAS.allocate(device, sizes), _map_texels(sizes))
     for (first, _), light in zip(buffers.inputs.light_views, bounds):
         offset = 4 * int(buffers.inputs.views[first]["depth_offset"])
         for whole, part in ((atlas.bound, light.bound), (atlas.writer, light.writer)):
@@ -362,7 +396,7 @@ def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, pr
     gated on the route, and the count is read after the image (`RayCount`)."""
     inputs = buffers.inputs
     entries = inputs.samples * max(len(inputs.scene.lights), 1)
-    ray_entries = device.buffer(nbytes=4 * entries)
+    ray_entries = RAY_ENTRIES.allocate(device, frame_sizes(inputs))
     ray_count = device.buffer(np.zeros(2, np.int32))  # rays, and those with no texel
     # A relief's holes are finer than the map's texels, and the 3 × 3 test calls a sample seen
     # through one shadowed (docs/design.md §4.6): with a relief, a sample the maps do not

@@ -11,8 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..buffers import BufferDecl
 from ..device import Device, StageTimer
-from ..inputs import FrameBuffers
+from ..inputs import FrameBuffers, frame_sizes
 from .features import WalkFeature, feature_args, feature_defines
 from .integrand import DeviceIntegrand
 from .raster import RasterResult
@@ -28,6 +29,11 @@ VOLUME_MOMENT_BIAS = 3e-6
 #: point / spot: 1 part 42 / 13 / 11 %, 4 parts 4.1 / 3.1 / 3.5 %, 8 parts 1.3 / 2.1 /
 #: 1.1 %, 16 parts 0.5 / 0.9 / 0.9 %; the cost grows with the parts.
 MOMENT_CHUNKS = 8
+#: Per slice and γ cell boundary, the prefix sums of the moment vector: double where the
+#: device has it, else float.
+MOMENT_PREFIX = {
+    True: BufferDecl("moment prefix sums (double)", 32, lambda sizes: sizes.slices * (sizes.tree_gamma + 1)),
+    False: BufferDecl("moment prefix sums", 16, lambda sizes: sizes.slices * (sizes.tree_gamma + 1))}
 
 
 def _double_prefix(device: Device) -> bool:
@@ -40,11 +46,11 @@ def volume_moments(device: Device, buffers: FrameBuffers, rastered: RasterResult
     """Add one light's in-scattered radiance into `scatter` (float4 per camera sample); a
     textured light's tables (`features`, stage light_texture) weight each part's radiance."""
     params = epipolar.params
-    slices, gamma_samples = int(params["slices"]), int(params["gamma_samples"])
+    slices = int(params["slices"])
     double = _double_prefix(device)
     defines = {"PREFIX_DOUBLE": int(double), "MOMENT_CHUNKS": chunks}
     scatter_defines = feature_defines(features, defines)
-    prefix = device.buffer(nbytes=(32 if double else 16) * slices * (gamma_samples + 1))
+    prefix = MOMENT_PREFIX[double].allocate(device, frame_sizes(buffers.inputs))
     # z = (S − β_min) / (β_max − β_min): the visible rays' β range, as wide as [0, 1] can hold
     # it, which the kernels read on the device (`epipolar.visible`).
     event = device.kernel("volume_moments", "volume_moments_prefix", defines)(

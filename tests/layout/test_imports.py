@@ -3,7 +3,8 @@ scene ← physics ← {stages, reference}, no cycle anywhere, and the float64 re
 every test trusts kept apart from what a frame runs.
 
 Every import counts, those inside functions too; only `if TYPE_CHECKING:` blocks, which
-never run, are left out.
+never run, are left out, but where a test says otherwise: no two modules import each other,
+even for an annotation (the frame's inputs hold data, and the stages read them).
 """
 from __future__ import annotations
 
@@ -21,13 +22,14 @@ def _modules() -> dict[str, Path]:
     return modules
 
 
-def _imports(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
+def _imports(name: str, path: Path, modules: dict[str, Path], annotations: bool = False) -> set[str]:
     """The clrays modules that module `name` imports (a name imported from a package counts
-    as its module where it is one, else as the package)."""
+    as its module where it is one, else as the package); `annotations`: those of its
+    `if TYPE_CHECKING:` blocks too."""
     tree = ast.parse(path.read_text())
-    unused = {id(node) for block in ast.walk(tree)
-              if isinstance(block, ast.If) and "TYPE_CHECKING" in ast.unparse(block.test)
-              for statement in block.body for node in ast.walk(statement)}
+    unused = set() if annotations else {
+        id(node) for block in ast.walk(tree) if isinstance(block, ast.If) and "TYPE_CHECKING" in ast.unparse(block.test)
+        for statement in block.body for node in ast.walk(statement)}
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
     found = set()
     for node in ast.walk(tree):
@@ -44,9 +46,15 @@ def _imports(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
     return {module for module in found if module in modules and module != name}
 
 
-def _graph() -> dict[str, set[str]]:
+def _graph(annotations: bool = False) -> dict[str, set[str]]:
     modules = _modules()
-    return {name: _imports(name, path, modules) for name, path in modules.items()}
+    return {name: _imports(name, path, modules, annotations) for name, path in modules.items()}
+
+
+def _mutual(graph: dict[str, set[str]]) -> list[tuple[str, str]]:
+    """The pairs of modules that import each other."""
+    return sorted((module, other) for module, imported in graph.items() for other in imported
+                  if module < other and module in graph.get(other, ()))
 
 
 def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
@@ -86,6 +94,21 @@ def test_no_import_cycle():
 
 def test_the_cycle_finder_finds_one():
     assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+
+
+def test_no_module_imports_one_that_imports_it():
+    # Annotations included: a module that names another's types only under TYPE_CHECKING
+    # still leans on it, and the imports run one way (scene ← physics ← inputs ← stages).
+    graph = _graph(annotations=True)
+    assert _mutual(graph) == []
+    assert sorted(other for other in graph["clrays.inputs"] if other.startswith("clrays.stages")) == []
+
+
+def test_the_mutual_finder_finds_a_pair_and_reads_annotations():
+    assert _mutual({"a": {"b"}, "b": {"a", "c"}, "c": set(), "d": {"a"}}) == [("a", "b")]
+    # (stages.light_texture names rectify's Epipolar for its annotations alone)
+    assert "clrays.stages.rectify" in _graph(annotations=True)["clrays.stages.light_texture"]
+    assert "clrays.stages.rectify" not in _graph()["clrays.stages.light_texture"]
 
 
 def test_what_a_frame_runs_imports_no_reference():

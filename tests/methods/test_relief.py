@@ -23,7 +23,8 @@ from clrays.scene.load import load_scene
 from clrays.runs.relief_mesh import relief_to_mesh
 from clrays.scene.relief import Relief, relief_frame, relief_record
 from clrays.stages.raster import raster_camera, raster_shadow_map, read_shadow_depth
-from clrays.stages.relief import PlacedRelief, ReliefDrawer, footprint
+from clrays.scene.relief_placement import PlacedRelief
+from clrays.stages.relief import ReliefDrawer, footprint
 
 ROOT = Path(__file__).resolve().parents[2]
 LATTICE = ROOT / "scenes" / "lattice.yaml"

@@ -490,7 +490,7 @@ def sixteen_gobo_lights(d: Path) -> Path:
 def test_lights_sharing_a_texture_share_its_texels(tmp_path):
     """The file is decoded once and the lights hold one array, which the device holds once."""
     from clrays.scene.load import load_scene
-    from clrays.stages.light_texture import pack_light_textures
+    from clrays.physics.light_texture import pack_light_textures
 
     scene = load_scene(sixteen_gobo_lights(tmp_path))
     first = scene.lights[0].texture.texels

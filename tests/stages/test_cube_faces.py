@@ -1,4 +1,4 @@
-"""Cube faces the camera cannot see are not rasterized (clrays.stages.cube_faces), and
+"""Cube faces the camera cannot see are not rasterized (clrays.physics.cube_faces), and
 that never changes an image: each frame is compared with one that rasterizes all six."""
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import pytest
 import clrays.session
 from clrays.inputs import frame_inputs
 from clrays.session import Renderer
-from clrays.stages.cube_faces import sampled_cube_faces
+from clrays.physics.cube_faces import sampled_cube_faces
 
 from conftest import PointLight, box_triangles, grid_plane, make_scene, v3
 

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from clrays.buffers import FrameSizes
 from clrays.device import Device
 from clrays.scene.load import load_scene
 from clrays.stages.sampling import FIXUP_BLOCK, FIXUP_SCAN_ITEMS, SampleCounts, fixup_list
@@ -99,7 +100,8 @@ def test_fixup_list_and_counts_match_numpy(device, samples):
         device.kernel("sampling", name, {"FIXUP_BLOCK": FIXUP_BLOCK, "FIXUP_SCAN_ITEMS": FIXUP_SCAN_ITEMS})(
             device.queue, global_size, local_size, *args)
 
-    fixups, counts = fixup_list(device, device.buffer(flags), samples, device.buffer(walks), 997, run)
+    fixups, counts = fixup_list(device, device.buffer(flags), FrameSizes(samples=samples), device.buffer(walks), 997,
+                                run)
     listed = np.flatnonzero(flags)
     computed, fixed_up = device.read(counts, 2, np.uint32)
     assert fixed_up == len(listed) and computed == int(walks[:997].sum())
