@@ -17,7 +17,7 @@ from .scene.camera import camera_basis, sample_offsets
 from .device import Device
 from .errors import ClraysError
 from .physics.radiometry import effective_far, lamp_radius
-from .scene.costs import SPOT_SINGLE_VIEW_MAX_DEG, view_map_sides, with_derived_sizes
+from .scene.costs import MIN_SHADOW_MAP, SPOT_SINGLE_VIEW_MAX_DEG, view_map_sides, with_derived_sizes
 from .scene.light_views import directional_map, up_hint
 from .stages.cube_faces import sampled_cube_faces
 from .stages.light_texture import pack_light_textures
@@ -239,6 +239,8 @@ def frame_inputs(scene: Scene) -> FrameInputs:
             else:
                 faces_needed = sampled_cube_faces(scene, light.position, scene.render.slices)
                 needed += faces_needed
+                # A face the frame never reads is never drawn either: it keeps a token side.
+                sides = [side if read else min(side, MIN_SHADOW_MAP) for side, read in zip(sides, faces_needed)]
                 for (face_forward, face_up), side in zip(_CUBE_FACES, sides):
                     views.append(_view(position, face_forward, face_up, 1.0, 1.0, side, side,
                                        structs.PROJECTION_PERSPECTIVE, texels))
@@ -247,7 +249,7 @@ def frame_inputs(scene: Scene) -> FrameInputs:
                 # frame reads, so that no face's surfaces shadow themselves (a finer face gets a
                 # larger bias than its own texel).
                 entry["texel_angle"] = 2.0 / min((side for side, read in zip(sides, faces_needed) if read),
-                                                 default=min(sides))
+                                                 default=max(sides))
         entry["view_count"] = len(views) - entry["first_view"]
         outside = isinstance(light, DirectionalLight) or not scene.geometry.inside_a_solid(light.position)
         for view in views[entry["first_view"]:]:

@@ -12,7 +12,7 @@ import pytest
 
 from clrays.inputs import frame_inputs
 from clrays.reference.metrics import depth_edges, depth_map, image_error
-from clrays.scene.costs import _cube_faces_reached, view_map_sides, with_derived_sizes
+from clrays.scene.costs import MIN_SHADOW_MAP, _cube_faces_reached, view_map_sides, with_derived_sizes
 from clrays.scene.geometry import box_triangles
 from clrays.scene.load import load_scene
 from conftest import DirectionalLight, PointLight, SpotLight, grid_plane, make_scene, v3, with_closed_solid
@@ -53,9 +53,12 @@ def test_only_the_face_below_grows_for_a_slat_below_a_point_light():
     render = with_derived_sizes(scene).render
     assert (render.shadow_map, render.shadow_map_floor) == (4096, 1024)
     inputs = frame_inputs(scene)
-    assert [int(view["width"]) for view in inputs.views[1:]] == [1024, 1024, 1024, 4096, 1024, 1024]
-    assert [int(view["height"]) for view in inputs.views[1:]] == [1024, 1024, 1024, 4096, 1024, 1024]
-    assert inputs.shadow_texels == 4096 ** 2 + 5 * 1024 ** 2
+    # the +y face's cone misses the camera's view: never read, a token side (below)
+    assert inputs.view_needed[1:].tolist() == [True, True, False, True, True, True]
+    sides = [1024, 1024, MIN_SHADOW_MAP, 4096, 1024, 1024]
+    assert [int(view["width"]) for view in inputs.views[1:]] == sides
+    assert [int(view["height"]) for view in inputs.views[1:]] == sides
+    assert inputs.shadow_texels == sum(side * side for side in sides)
     # the views lie back to back
     offsets = np.cumsum([0] + [int(v["width"]) * int(v["height"]) for v in inputs.views[1:-1]])
     assert inputs.views[1:]["depth_offset"].tolist() == offsets.tolist()
@@ -130,20 +133,35 @@ def test_the_depth_bias_follows_the_coarsest_face_read():
 
 
 def test_the_grate_grows_its_light_s_face_below_alone():
-    """scenes/grate.yaml: every slat and the frame lie in the −y face of its point light."""
+    """scenes/grate.yaml: every slat and the frame lie in the −y face of its point light; the
+    +y face, which the camera cannot read, keeps a token side."""
     inputs = frame_inputs(load_scene(SCENES / "grate.yaml", overrides=["image.width=160", "image.height=90"]))
-    assert [int(view["width"]) for view in inputs.views[1:]] == [1024, 1024, 1024, 4096, 1024, 1024]
+    assert [int(view["width"]) for view in inputs.views[1:]] == [1024, 1024, MIN_SHADOW_MAP, 4096, 1024, 1024]
+    assert inputs.view_needed[1:].tolist() == [True, True, False, True, True, True]
+
+
+def test_a_face_the_frame_never_reads_keeps_a_token_side():
+    """scenes/behind.yaml's camera reads two faces of its light's cube: the four others are
+    never drawn nor read, and take MIN_SHADOW_MAP² texels each, also where the scene sets
+    the map's side."""
+    for overrides in ([], ["render.shadow_map=512"]):
+        inputs = frame_inputs(load_scene(SCENES / "behind.yaml", overrides=["image.width=160", "image.height=90",
+                                                                            *overrides]))
+        read, widths = inputs.view_needed[1:], inputs.views[1:]["width"]
+        assert 0 < read.sum() < 6
+        assert set(widths[read].tolist()) == {inputs.scene.render.shadow_map}
+        assert set(widths[~read].tolist()) == {MIN_SHADOW_MAP}
 
 
 def test_no_other_scene_changes_its_map():
     """The scenes of scenes/ without solids thinner than 6 texels of 1024² keep one side in
-    every view (clrays.scene.costs.OCCLUDER_TEXELS)."""
+    every view the frame reads (clrays.scene.costs.OCCLUDER_TEXELS)."""
     for path in sorted(SCENES.glob("*.yaml")):
         if path.stem == "grate":
             continue
         scene = load_scene(path, overrides=["image.width=160", "image.height=90"])
         inputs = frame_inputs(scene)
-        widths = set(inputs.views[1:]["width"].tolist())
+        widths = set(inputs.views[1:][inputs.view_needed[1:]]["width"].tolist())
         assert widths == {inputs.scene.render.shadow_map}, path.stem
 
 
