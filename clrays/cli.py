@@ -506,8 +506,10 @@ def _print_stats(result) -> None:
     if result.render is not None:
         render = result.render
         textures = ", ".join(f"{slices}×{texels}" for slices, texels in result.textures) or "none"
-        click.echo(f"  sizes      shadow map {render.shadow_map}², {render.slices} slices × {render.gamma_samples} γ "
-                   f"texels; rectified (slices×texels per light): {textures}")
+        floor = render.shadow_map_floor or render.shadow_map
+        coarser = f" ({floor}² in views without thin solids)" if floor < render.shadow_map else ""
+        click.echo(f"  sizes      shadow map {render.shadow_map}²{coarser}, {render.slices} slices × "
+                   f"{render.gamma_samples} γ texels; rectified (slices×texels per light): {textures}")
     if result.samples is not None:
         counts = result.samples
         click.echo(f"  samples    {counts.computed} line samples computed; camera samples: {counts.interpolated} "

@@ -18,7 +18,8 @@ from .scene.camera import camera_basis, sample_offsets
 from .device import Device
 from .errors import ClraysError
 from .physics.radiometry import effective_far, lamp_radius
-from .scene.costs import SPOT_SINGLE_VIEW_MAX_DEG, tree_gamma_samples, with_derived_sizes
+from .scene.costs import (MIN_SHADOW_MAP, SPOT_SINGLE_VIEW_MAX_DEG, tree_gamma_samples, view_map_sides,
+                          with_derived_sizes)
 from .scene.light_views import directional_map, up_hint
 from .physics.cube_faces import sampled_cube_faces
 from .physics.light_texture import pack_light_textures
@@ -198,7 +199,9 @@ def frame_inputs(scene: Scene) -> FrameInputs:
     n = scene.render.shadow_map
     texels = 0
     for index, light in enumerate(scene.lights):
-        if texels + 6 * n * n > MAX_SHADOW_TEXELS:  # a light takes at most a cube: 6 views
+        # Each view as fine as the thin solids it holds need (scene/costs.py), checked before any allocation.
+        sides = view_map_sides(scene.geometry, light, scene.render.shadow_map_floor or n, n)
+        if texels + sum(side * side for side in sides) > MAX_SHADOW_TEXELS:
             where = f"{scene.source}: " if scene.source else ""
             raise ClraysError(f"{where}the shadow maps of lights 0 to {index} at render.shadow_map {n} need more than "
                               f"{MAX_SHADOW_TEXELS} texels, the most a view's int depth_offset (cl/common.h) "
@@ -213,10 +216,11 @@ def frame_inputs(scene: Scene) -> FrameInputs:
             fitted = directional_map(lo, hi, light.direction)
             anchors.append(fitted.anchor)
             needed.append(True)
+            side = sides[0]
             views.append(_view(anchors[-1] - eye_ws, light.direction, fitted.up, fitted.half_width,
-                               fitted.half_height, n, n, structs.PROJECTION_ORTHOGRAPHIC, texels))
-            entry["texel_angle"] = fitted.texel_side / n  # the longer side of its texels: the bias's scale
-            texels += n * n
+                               fitted.half_height, side, side, structs.PROJECTION_ORTHOGRAPHIC, texels))
+            entry["texel_angle"] = fitted.texel_side / side  # the longer side of its texels: the bias's scale
+            texels += side * side
         else:
             anchors.append(np.asarray(light.position, dtype=np.float64))
             position = light.position - eye_ws
@@ -231,17 +235,25 @@ def frame_inputs(scene: Scene) -> FrameInputs:
             if isinstance(light, SpotLight) and light.cone_deg <= SPOT_SINGLE_VIEW_MAX_DEG:
                 scale = math.tan(math.radians(light.cone_deg))
                 needed.append(True)
+                side = sides[0]
                 views.append(_view(position, light.direction, up_hint(light.direction), scale, scale,
-                                   n, n, structs.PROJECTION_PERSPECTIVE, texels))
-                entry["texel_angle"] = 2 * scale / n
-                texels += n * n
+                                   side, side, structs.PROJECTION_PERSPECTIVE, texels))
+                entry["texel_angle"] = 2 * scale / side
+                texels += side * side
             else:
-                needed += sampled_cube_faces(scene, light.position, scene.render.slices)
-                for face_forward, face_up in _CUBE_FACES:
-                    views.append(_view(position, face_forward, face_up, 1.0, 1.0, n, n,
+                faces_needed = sampled_cube_faces(scene, light.position, scene.render.slices)
+                needed += faces_needed
+                # A face the frame never reads is never drawn either: it keeps a token side.
+                sides = [side if read else min(side, MIN_SHADOW_MAP) for side, read in zip(sides, faces_needed)]
+                for (face_forward, face_up), side in zip(_CUBE_FACES, sides):
+                    views.append(_view(position, face_forward, face_up, 1.0, 1.0, side, side,
                                        structs.PROJECTION_PERSPECTIVE, texels))
-                    texels += n * n
-                entry["texel_angle"] = 2.0 / n
+                    texels += side * side
+                # One texel size per light scales every face's depth bias: the coarsest face the
+                # frame reads, so that no face's surfaces shadow themselves (a finer face gets a
+                # larger bias than its own texel).
+                entry["texel_angle"] = 2.0 / min((side for side, read in zip(sides, faces_needed) if read),
+                                                 default=max(sides))
         entry["view_count"] = len(views) - entry["first_view"]
         outside = isinstance(light, DirectionalLight) or not scene.geometry.inside_a_solid(light.position)
         for view in views[entry["first_view"]:]:

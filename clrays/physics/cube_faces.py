@@ -7,7 +7,8 @@ point of such a ray (or of its neighbour slice, at most one slice step away; or
 half a γ texel past its far end), shade reads
 visible surface points, raymarch its samples. So a face whose cone from the light misses
 the camera's view pyramid (apex at the eye, base 10 % past `far`, widened by one slice step) is
-never read and need not be rasterized; its texels stay empty.
+never read and need not be rasterized; its texels stay empty, and it takes a token
+MIN_SHADOW_MAP² of them (clrays.inputs.frame_inputs).
 
 The test is exact for the two convex bodies: the view pyramid and the face's cone
 truncated beyond the pyramid's farthest point are disjoint exactly when some axis

@@ -151,6 +151,22 @@ def occluder_shadow_map(scene: Scene, image_map: int) -> int:
     return max(min(_power_of_two_at_least(needed), OCCLUDER_MAP_GROWTH * image_map, largest), image_map)
 
 
+def view_map_sides(geometry, light, floor: int, ceiling: int) -> list[int]:
+    """The side of each view of the light's map (`light_view_count`): `floor`, raised for
+    the thinnest closed solid reaching into that view to span OCCLUDER_TEXELS texels, as a
+    power of two, at most `ceiling` (`render.shadow_map_floor` and `render.shadow_map`,
+    texels). A cube face that holds no thin solid keeps the floor: scenes/grate.yaml's slats
+    lie in its light's −y face, and the other five faces at 1024² cost a fifth of their
+    texels at 4096² (docs/design.md §8, "Sizes from the occluders")."""
+    if floor >= ceiling:  # every view at one side: nothing to measure
+        return [ceiling] * light_view_count(light)
+    sides = []
+    for width in thinnest_solid_per_view(geometry, light):
+        needed = floor if width is None else _power_of_two_at_least(OCCLUDER_TEXELS / width)
+        sides.append(max(min(needed, ceiling), floor))
+    return sides
+
+
 def thinnest_solid(geometry, light) -> float | None:
     """The narrowest width of a closed solid's box as the light's map sees it, as a fraction
     of the map's side (None: no solid counts). For a point or spot light the width is an
@@ -159,6 +175,52 @@ def thinnest_solid(geometry, light) -> float | None:
     widest at its centre, 2·tan(cone) for a single-view spot; for a directional light a
     length, and the side the longer of the map's (clrays.scene.light_views). A solid that holds the light or
     reaches more than about 84° from its own direction is no thin occluder and is skipped."""
+    widths = thinnest_solid_per_view(geometry, light)
+    counted = [width for width in widths if width is not None]
+    return min(counted) if counted else None
+
+
+def light_view_count(light) -> int:
+    """The views of a light's map: one for a directional light or a spot light of at most
+    SPOT_SINGLE_VIEW_MAX_DEG, else a cube's six faces (clrays.inputs builds them in this order)."""
+    if isinstance(light, DirectionalLight) or (isinstance(light, SpotLight)
+                                               and light.cone_deg <= SPOT_SINGLE_VIEW_MAX_DEG):
+        return 1
+    return 6
+
+
+def thinnest_solid_per_view(geometry, light) -> tuple[float | None, ...]:
+    """`thinnest_solid` for each view of the light's map (`light_view_count`): the narrowest
+    width among the solids whose box reaches into that view (a cube face's cone from the
+    light; a single view holds every solid counted), None where none does."""
+    views = light_view_count(light)
+    measured = _solid_widths(geometry, light)
+    if measured is None:
+        return (None,) * views
+    widths, reached = measured
+    return tuple(float(widths[reached[:, view]].min()) if reached[:, view].any() else None for view in range(views))
+
+
+def _cube_faces_reached(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(S, 6) bool: whether each box [lo, hi] (S, 3), relative to the light, reaches into each
+    cube face's cone (+x, -x, +y, -y, +z, -z, clrays.inputs' order), that of the points
+    whose coordinate along the face's axis, signed, is at least the other two's magnitudes.
+    Exact for a box whose sides lie along the axes, as a solid's box does: the box's
+    farthest extent along the axis against the others' least magnitudes within it."""
+    nearest_to_axis = np.abs(np.clip(0.0, lo, hi))  # (S, 3): the least |coordinate| within the box
+    reached = []
+    for axis in range(3):
+        others = [k for k in range(3) if k != axis]
+        across = nearest_to_axis[:, others].max(axis=1)
+        for along in (hi[:, axis], -lo[:, axis]):  # the face's sign: + then -
+            reached.append((along > 0) & (along >= across))
+    return np.stack(reached, axis=1)
+
+
+def _solid_widths(geometry, light) -> tuple[np.ndarray, np.ndarray] | None:
+    """(widths (S,), reached (S, views) bool) of the closed solids the light's map counts
+    (`thinnest_solid`), as fractions of a view's side, and the views each reaches; None
+    when no solid counts."""
     lo, hi = geometry.solid_bounds()
     if not len(lo):
         return None
@@ -167,6 +229,7 @@ def thinnest_solid(geometry, light) -> float | None:
         fitted = directional_map(*geometry.bounds(), light.direction)  # the light's map, across the light
         plane = np.stack([corners @ fitted.right, corners @ fitted.up], axis=-1)
         side = fitted.texel_side  # the map's longer texels
+        reached = np.ones((len(lo), 1), dtype=bool)
     else:
         towards = corners - np.asarray(light.position, dtype=np.float64)
         if isinstance(light, SpotLight):  # a solid whose bounding sphere lies outside the cone casts nothing
@@ -191,9 +254,11 @@ def thinnest_solid(geometry, light) -> float | None:
         up = np.cross(right, centre)
         tangent = towards / along[..., None]  # on the plane one unit from the light: texels are tangents
         plane = np.stack([np.einsum("sci,si->sc", tangent, right), np.einsum("sci,si->sc", tangent, up)], axis=-1)
-        spot_view = isinstance(light, SpotLight) and light.cone_deg <= SPOT_SINGLE_VIEW_MAX_DEG
+        spot_view = light_view_count(light) == 1
         side = 2 * math.tan(math.radians(light.cone_deg)) if spot_view else 2.0
-    return float(_min_width(plane).min() / side)
+        reached = np.ones((len(towards), 1), dtype=bool) if spot_view else \
+            _cube_faces_reached(towards.min(axis=1), towards.max(axis=1))
+    return _min_width(plane) / side, reached
 
 
 def _box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -345,14 +410,30 @@ def with_derived_sizes(scene: Scene) -> Scene:
     """The scene with every unset (None) size of `scene.render` filled in from its image;
     sizes the scene sets are kept as written."""
     render, image = scene.render, scene.image
-    if None not in (render.shadow_map, render.slices, render.gamma_samples, render.line_samples,
-                    render.initial_step):
+    if None not in (render.shadow_map, render.shadow_map_floor, render.slices, render.gamma_samples,
+                    render.line_samples, render.initial_step):
         return scene
-    shadow_map = render.shadow_map or occluder_shadow_map(scene, derived_shadow_map(image.width, image.height))
+    shadow_map, floor = derived_map_sides(scene)
     slices, gamma_samples = texture_raised_sizes(
         scene, render.slices or derived_slices(image.width, image.height, shadow_map),
         render.gamma_samples or derived_gamma_samples(image.width, image.height, shadow_map))
     line_samples = render.line_samples or derived_line_samples(image.width, image.height)
     initial_step = render.initial_step or derived_initial_step(line_samples)
-    return replace(scene, render=replace(render, shadow_map=shadow_map, slices=slices, gamma_samples=gamma_samples,
-                                         line_samples=line_samples, initial_step=initial_step))
+    return replace(scene, render=replace(render, shadow_map=shadow_map, shadow_map_floor=floor, slices=slices,
+                                         gamma_samples=gamma_samples, line_samples=line_samples,
+                                         initial_step=initial_step))
+
+
+def derived_map_sides(scene: Scene) -> tuple[int, int]:
+    """(shadow_map, shadow_map_floor): the largest side a light's view may have and the
+    side of a view that needs no more (`view_map_sides`), each as the scene sets it or
+    derived. Derived, the floor is the image's map and the largest its growth for the
+    thinnest solid (`occluder_shadow_map`), at least the floor; a scene that sets
+    `shadow_map` alone gets every view at that side, as it asks; a floor is at most the
+    largest side."""
+    render, image = scene.render, scene.image
+    image_map = derived_shadow_map(image.width, image.height)
+    if render.shadow_map is None:
+        floor = render.shadow_map_floor or image_map
+        return max(occluder_shadow_map(scene, image_map), floor), floor
+    return render.shadow_map, min(render.shadow_map_floor or render.shadow_map, render.shadow_map)

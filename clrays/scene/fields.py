@@ -279,8 +279,14 @@ RENDER = Section("render", (
           shown_default=f"from the image: 4 × its diagonal, as a power of two in [{MIN_SHADOW_MAP}, {MAX_SHADOW_MAP}], "
                         f"{MAX_SHADOW_MAP} from a diagonal of {FULL_SHADOW_MAP_DIAGONAL} pixels; "
                         f"larger where a closed solid seen from its light is under {OCCLUDER_TEXELS} texels wide "
-                        f"(up to {OCCLUDER_MAP_GROWTH} × that and {MAX_OCCLUDER_SHADOW_MAP})",
+                        f"(up to {OCCLUDER_MAP_GROWTH} × that and {MAX_OCCLUDER_SHADOW_MAP}; only the views that "
+                        "hold it grow: `shadow_map_floor`)",
           notes="shadow map side in texels (cube maps: per face)", read_by=_RASTER_METHODS),
+    Field("shadow_map_floor", "integer", Render.shadow_map_floor, 16, 8192,
+          shown_default="`shadow_map` where the scene sets it, else the side the image derives",
+          notes="side of a light's view (a cube face) that holds no closed solid under "
+                f"{OCCLUDER_TEXELS} texels wide; the others grow, as a power of two, until it is, up to "
+                "`shadow_map` (at most `shadow_map`)", read_by=_RASTER_METHODS),
     Field("surface_shadows", "string", Render.surface_shadows, choices=SURFACE_SHADOWS,
           notes="hard shadows on surfaces: `exact` casts a shadow ray (through a BVH) wherever the shadow map "
                 "cannot decide and matches the `exact` reference; `map` is the shadow-map test alone; `pcf` "

@@ -244,6 +244,9 @@ class Render:
     jitter: bool = False  # raymarch: jitter sample positions (seeded per pixel)
     # Sizes left None are derived from the image when a frame is rendered (clrays.scene.costs).
     shadow_map: int | None = None  # shadow map side, texels (cube maps: per face)
+    # the side of a light's view (a cube face) that holds no solid thinner than the map resolves;
+    # the others grow up to shadow_map (clrays.scene.costs.view_map_sides)
+    shadow_map_floor: int | None = None
     surface_shadows: str = "exact"  # one of SURFACE_SHADOWS
     pcf: int = 0  # surface_shadows `pcf`: filter radius in texels
     shadow_filter: ShadowFilter | None = None  # surface_shadows `filtered`: None until it is set
