@@ -203,7 +203,7 @@ typedef struct {
     int grid_nx;          /* density voxels, x fastest: values[(k·ny + j)·nx + i] */
     int grid_ny;
     int grid_nz;
-    int depth_nx;         /* optical-depth grid per light, over the grid's bounds: */
+    int depth_nx;         /* optical-depth grid per light: nodes spanning the grid's bounds, */
     int depth_ny;         /*   light l's voxels start at l·depth_nx·depth_ny·depth_nz */
     int depth_nz;
 } medium_t;

@@ -1,15 +1,17 @@
-/* light_depth — each light's optical depth ∫ρ ds (unit density) from every voxel centre of
- * its optical-depth grid to the light, by a march through the density grid (medium.h), so
- * that a sample in the grid finds its T_l = e^{-σt·depth} by one trilinear lookup.
+/* light_depth — each light's optical depth ∫ρ ds (unit density) from every node of its
+ * optical-depth grid to the light, by a march through the density grid (medium.h), so that a
+ * sample in the grid finds its T_l = e^{-σt·depth} by one trilinear lookup (nodes_trilinear).
  * Reads medium, density_grid, lights; writes light_depth_grid (light l's depth_nx·depth_ny·
- * depth_nz floats from l·count, x fastest, over the density grid's bounds).
+ * depth_nz floats from l·count, x fastest; the nodes span the density grid's bounds corner
+ * to corner, so a lookup anywhere inside them interpolates and never holds a value).
  *
- *     light *                    voxel centre c ── march ──> the light, clipped to the
- *            \                   box and the grid's bounds (ρ = 0 beyond them)
- *         +---\-------+
- *         |  · \ ·  · |
- *         |  ·  c·  · |
- *         +-----------+ */
+ *     light *                    node c ── march ──> the light, clipped to the box and
+ *            \                   the grid's bounds (ρ = 0 beyond them)
+ *         c---\--c---c
+ *         |    \  |   |
+ *         c---c-\-c---c
+ *         |   |  \|   |
+ *         c---c---c---c */
 #include "medium.h"
 
 kernel void light_depth(global const medium_t* medium, global const float* density_grid,
@@ -18,9 +20,9 @@ kernel void light_depth(global const medium_t* medium, global const float* densi
     int voxel = get_global_id(0), light_index = get_global_id(1);
     int nx = medium->depth_nx, ny = medium->depth_ny, count = nx * ny * medium->depth_nz;
     if (voxel >= count) return;
-    float3 cell = (float3)((float)(voxel % nx), (float)((voxel / nx) % ny), (float)(voxel / (nx * ny))) + 0.5f;
-    float3 size = (float3)((float)nx, (float)ny, (float)medium->depth_nz);
-    float3 centre = medium->grid_min.xyz + cell / size * (medium->grid_max.xyz - medium->grid_min.xyz);
+    float3 node = (float3)((float)(voxel % nx), (float)((voxel / nx) % ny), (float)(voxel / (nx * ny)));
+    float3 last = (float3)((float)(nx - 1), (float)(ny - 1), (float)(medium->depth_nz - 1));
+    float3 centre = medium->grid_min.xyz + node / last * (medium->grid_max.xyz - medium->grid_min.xyz);
     global const light_t* light = lights + light_index;
     float3 towards;
     float reach;

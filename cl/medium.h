@@ -86,6 +86,22 @@ inline float grid_trilinear(global const float* values, int nx, int ny, int nz, 
     return mix(mix(x00, x10, f.y), mix(x01, x11, f.y), f.z);
 }
 
+/* Trilinear lookup of a grid of nx·ny·nz values (x fastest) at nodes spanning [lo, hi]
+ * corner to corner (node i at lo + i·(hi - lo)/(n - 1), n ≥ 2), p clamped into it. */
+inline float nodes_trilinear(global const float* values, int nx, int ny, int nz, float3 lo, float3 hi, float3 p)
+{
+    float3 last = (float3)((float)(nx - 1), (float)(ny - 1), (float)(nz - 1));
+    float3 c = clamp((p - lo) / (hi - lo) * last, 0.0f, last);
+    float3 cell = fmin(floor(c), last - 1.0f);
+    float3 f = c - cell;
+    int i = (int)cell.x, j = (int)cell.y, k = (int)cell.z;
+    int dj = nx, dk = nx * ny;
+    global const float* v = values + (k * ny + j) * nx + i;
+    float x00 = mix(v[0], v[1], f.x), x10 = mix(v[dj], v[dj + 1], f.x);
+    float x01 = mix(v[dk], v[dk + 1], f.x), x11 = mix(v[dk + dj], v[dk + dj + 1], f.x);
+    return mix(mix(x00, x10, f.y), mix(x01, x11, f.y), f.z);
+}
+
 /* ρ(p): the box's indicator × the height or grid factor. */
 inline float medium_density(global const medium_t* medium, global const float* density_grid, float3 p)
 {
@@ -145,7 +161,7 @@ inline float segment_depth(global const medium_t* medium, global const float* de
 
 /* ∫ρ ds from p to light `light_index` (to infinity against a directional light's direction):
  * closed form for box and height fog; in a grid, the light's optical-depth grid looked up
- * trilinearly (cl/light_depth.cl), or, for a point outside the grid's bounds (a surface),
+ * trilinearly between its nodes (cl/light_depth.cl), or, for a point outside the grid's bounds (a surface),
  * a march through it. */
 inline float light_path_depth(MEDIUM_PARAMS, global const light_t* light, int light_index, float3 p)
 {
@@ -163,8 +179,8 @@ inline float light_path_depth(MEDIUM_PARAMS, global const light_t* light, int li
 #ifdef MEDIUM_GRID
     if (all(p >= medium->grid_min.xyz) && all(p <= medium->grid_max.xyz)) {
         int count = medium->depth_nx * medium->depth_ny * medium->depth_nz;
-        return grid_trilinear(light_depth_grid + light_index * count, medium->depth_nx, medium->depth_ny,
-                              medium->depth_nz, medium->grid_min.xyz, medium->grid_max.xyz, p);
+        return nodes_trilinear(light_depth_grid + light_index * count, medium->depth_nx, medium->depth_ny,
+                               medium->depth_nz, medium->grid_min.xyz, medium->grid_max.xyz, p);
     }
 #endif
     return segment_depth(medium, density_grid, p, towards, 0.0f, reach);

@@ -1,11 +1,13 @@
 """Stage light_depth: for a medium with a density grid, each light's optical depth ∫ρ ds from
-every voxel centre of a grid over the density grid's bounds to the light (docs/media.md), so
-the kernels find a sample's light transmittance e^{-σt·depth} by one trilinear lookup
+every node of a grid spanning the density grid's bounds to the light (docs/media.md), so the
+kernels find a sample's light transmittance e^{-σt·depth} by one trilinear lookup
 (cl/medium.h `light_path_depth`). Host side of `cl/light_depth.cl`.
 
-The optical-depth grid has the density grid's voxels, each side at most LIGHT_DEPTH_SIDE_MAX
-(a coarser grid over the same bounds beyond it): optical depth along light rays is smoother
-than the density (an integral of it), and the march per voxel crosses the whole grid.
+Along each axis the optical-depth grid has one node more than the density grid has voxels,
+the first and last on the bounds, with between LIGHT_DEPTH_SIDE_MIN and LIGHT_DEPTH_SIDE_MAX
+intervals: optical depth along light rays is smoother than the density (an integral of it), so
+a large grid's is coarser (the march per node crosses the whole grid), and a coarse grid's is
+finer (its depth still bends within a voxel where light rays cross it obliquely).
 """
 from __future__ import annotations
 
@@ -13,13 +15,14 @@ import numpy as np
 
 from ..device import Device, StageTimer
 
-#: The most voxels along a side of a light's optical-depth grid.
+#: The fewest and most intervals between nodes along a side of a light's optical-depth grid.
+LIGHT_DEPTH_SIDE_MIN = 16
 LIGHT_DEPTH_SIDE_MAX = 64
 
 
 def light_depth_shape(grid_shape: tuple[int, int, int]) -> tuple[int, int, int]:
-    """(nz, ny, nx) of a light's optical-depth grid for a density grid of `grid_shape`."""
-    return tuple(min(int(n), LIGHT_DEPTH_SIDE_MAX) for n in grid_shape)
+    """(nz, ny, nx) nodes of a light's optical-depth grid for a density grid of `grid_shape`."""
+    return tuple(min(max(int(n), LIGHT_DEPTH_SIDE_MIN), LIGHT_DEPTH_SIDE_MAX) + 1 for n in grid_shape)
 
 
 def light_depth(device: Device, params, density_grid, lights, light_count: int,
