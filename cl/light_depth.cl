@@ -17,22 +17,14 @@
 kernel void light_depth(global const medium_t* medium, global const float* density_grid,
                         global const light_t* lights, global float* light_depth_grid)
 {
-    int voxel = get_global_id(0), light_index = get_global_id(1);
+    int node_index = get_global_id(0), light_index = get_global_id(1);
     int nx = medium->depth_nx, ny = medium->depth_ny, count = nx * ny * medium->depth_nz;
-    if (voxel >= count) return;
-    float3 node = (float3)((float)(voxel % nx), (float)((voxel / nx) % ny), (float)(voxel / (nx * ny)));
+    if (node_index >= count) return;
+    float3 node = (float3)((float)(node_index % nx), (float)((node_index / nx) % ny), (float)(node_index / (nx * ny)));
     float3 last = (float3)((float)(nx - 1), (float)(ny - 1), (float)(medium->depth_nz - 1));
-    float3 centre = medium->grid_min.xyz + node / last * (medium->grid_max.xyz - medium->grid_min.xyz);
-    global const light_t* light = lights + light_index;
+    float3 node_position = medium->grid_min.xyz + node / last * (medium->grid_max.xyz - medium->grid_min.xyz);
     float3 towards;
-    float reach;
-    if (light->type == LIGHT_DIRECTIONAL) {
-        towards = -light->direction.xyz;
-        reach = INFINITY;
-    } else {
-        float3 w = light->position.xyz - centre;
-        reach = length(w);
-        towards = reach > 0.0f ? w / reach : (float3)(0.0f, 1.0f, 0.0f);
-    }
-    light_depth_grid[light_index * count + voxel] = segment_depth(medium, density_grid, centre, towards, 0.0f, reach);
+    float reach = toward_light(lights + light_index, node_position, &towards);
+    light_depth_grid[light_index * count + node_index] =
+        segment_depth(medium, density_grid, node_position, towards, 0.0f, reach);
 }

@@ -159,6 +159,20 @@ inline float segment_depth(global const medium_t* medium, global const float* de
 #endif
 }
 
+/* The unit direction from p towards the light (*towards), and how far the light is: +inf for a
+ * directional light, 0 at a point light's own position (then *towards is up). */
+inline float toward_light(global const light_t* light, float3 p, float3* towards)
+{
+    if (light->type == LIGHT_DIRECTIONAL) {
+        *towards = -light->direction.xyz;
+        return INFINITY;
+    }
+    float3 w = light->position.xyz - p;
+    float reach = length(w);
+    *towards = reach > 0.0f ? w / reach : (float3)(0.0f, 1.0f, 0.0f);
+    return reach;
+}
+
 /* ∫ρ ds from p to light `light_index` (to infinity against a directional light's direction):
  * closed form for box and height fog; in a grid, the light's optical-depth grid looked up
  * trilinearly between its nodes (cl/light_depth.cl), or, for a point outside the grid's bounds (a surface),
@@ -166,16 +180,7 @@ inline float segment_depth(global const medium_t* medium, global const float* de
 inline float light_path_depth(MEDIUM_PARAMS, global const light_t* light, int light_index, float3 p)
 {
     float3 towards;
-    float reach;
-    if (light->type == LIGHT_DIRECTIONAL) {
-        towards = -light->direction.xyz;
-        reach = INFINITY;
-    } else {
-        float3 w = light->position.xyz - p;
-        reach = length(w);
-        if (reach == 0.0f) return 0.0f;
-        towards = w / reach;
-    }
+    float reach = toward_light(light, p, &towards);
 #ifdef MEDIUM_GRID
     if (all(p >= medium->grid_min.xyz) && all(p <= medium->grid_max.xyz)) {
         int count = medium->depth_nx * medium->depth_ny * medium->depth_nz;

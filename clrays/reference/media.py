@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..physics.light_texture import light_texture
-from ..physics.radiometry import light_incident, phase, propagation_direction, rgb
+from ..physics.radiometry import light_incident, phase, propagation_direction, refined, rgb
 from ..scene.model import Box, DirectionalLight, GridDensity, HeightDensity, Light, Medium
 
 #: Gauss–Legendre nodes per piece of a grid's optical depth: ρ is cubic there, 2 would do.
@@ -248,15 +248,7 @@ def in_scatter_media(light: Light, medium: Medium, origin, dirs, a, b, *, tol: f
                                                   rays[k:k + batch], p)
         return res
 
-    est = estimate(live, panels)
-    p, todo = panels, np.arange(len(live))
-    while tol is not None and len(todo) and 2 * p <= MAX_PANELS:
-        p *= 2
-        finer = estimate(live[todo], p)
-        moved = np.any(np.abs(finer - est[todo]) > tol * np.abs(finer), axis=1)
-        est[todo] = finer
-        todo = todo[moved]
-    out[live] = est
+    out[live] = refined(estimate, live, panels, tol, MAX_PANELS)
     return out
 
 
