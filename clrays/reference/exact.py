@@ -32,7 +32,8 @@ chunks so memory stays around 100 MB.
 
 A bounded or heterogeneous medium (`Medium.bounds`, `Medium.density`) replaces e^{-σt·s} by
 T_e(s) = e^{-σt·∫ρ}, Lin by Lin·T_l and σs by σs·ρ (`media.py`, docs/media.md): surfaces take
-`light_incident_media`, the surface radiance T_e(D), each lit interval `in_scatter_media`.
+`light_incident_media`, the surface radiance T_e(D), each lit interval `in_scatter_media`; so
+does the translucent path below.
 
 A scene with translucent objects (`Geometry.translucent`) goes through
 `translucency.translucent_radiance` instead: light through translucent occluders is
@@ -51,10 +52,10 @@ from ..scene.camera import primary_rays, sample_offsets
 from ..physics.geometry import (BUDGET_BYTES, CLIP_PAIR_BYTES, dot, lit_intervals, occluded, raycast, shading_normals,
                                 shadow_halfspaces, triangle_normals)
 from .bvh_queries import SceneBvh
-from ..physics.light_texture import light_texture, textured, textured_in_scatter
-from .media import in_scatter_media, light_incident_media, media_tolerance, optical_depth
+from ..physics.light_texture import light_texture
+from .media import eye_transmittance, in_scatter_lit, incident_through
 from .translucency import TranslucentQueries, translucent_radiance
-from ..physics.radiometry import in_scatter_segments, light_incident, propagation_direction, rgb
+from ..physics.radiometry import propagation_direction, rgb
 from ..scene.model import Scene
 
 
@@ -112,7 +113,6 @@ def _radiance(scene: Scene, eye: np.ndarray, dirs: np.ndarray, prepared, quad: d
     tri = np.asarray(scene.geometry.triangles, dtype=np.float64).reshape(-1, 3, 3)
     medium = scene.medium
     sigma_s = rgb(medium.sigma_s)
-    sigma_t = sigma_s + rgb(medium.sigma_a)
     far = radiometry.effective_far(scene)
     t, idx = queries.raycast(eye, dirs, t_max=far)
     hit = idx >= 0
@@ -135,18 +135,14 @@ def _radiance(scene: Scene, eye: np.ndarray, dirs: np.ndarray, prepared, quad: d
             # Unlit where the surface itself turns away, whatever a smooth normal says (as
             # cl/visibility_prepare.cl's turned_away): no light through an opaque wall.
             cos_l = np.where(dot(nrm, to_light) > 0.0, np.maximum(0.0, dot(shading, to_light)), 0.0)
-            incident = light_incident(light, x, sigma_t) if medium.homogeneous else \
-                light_incident_media(light, medium, x)  # T_l over the light's path in the medium
-            lin = incident * cos_l[:, None] * light_texture(light, x)
+            lin = incident_through(light, medium, x) * cos_l[:, None] * light_texture(light, x)
             lit = np.flatnonzero(np.any(lin > 0, axis=1))
             if len(lit):
                 blocked = queries.occluded(x[lit], light, normals=nrm[lit])
                 lin[lit[blocked]] = 0.0
             irradiance += lin
         surf[hits] = np.asarray(scene.geometry.albedo, dtype=np.float64)[idx[hits]] / math.pi * irradiance
-    # T_e(D): e^{-σt·D}, or in a bounded or heterogeneous medium e^{-σt·∫ρ} (media.py)
-    depth = D if medium.homogeneous else optical_depth(medium, eye, dirs, 0.0, D)
-    transmittance = np.exp(-sigma_t * depth[:, None])
+    transmittance = eye_transmittance(medium, eye, dirs, D)
     out = surf * transmittance
     if parts is not None:
         parts["transmittance"] = transmittance
@@ -157,12 +153,7 @@ def _radiance(scene: Scene, eye: np.ndarray, dirs: np.ndarray, prepared, quad: d
         for index, (light, halfspaces) in enumerate(prepared):
             ray, a, b = queries.lit_intervals(eye, dirs, D, light, halfspaces,
                                               lamp_radius=radiometry.lamp_radius(scene))
-            if not medium.homogeneous:  # quadrature through the density (media.py)
-                seg = in_scatter_media(light, medium, eye, dirs[ray], a, b, tol=media_tolerance(quad["tol"]))
-            elif textured(light):  # cut at the texture's texel centres (clrays.physics.light_texture)
-                seg = textured_in_scatter(light, medium, eye, dirs[ray], a, b)
-            else:
-                seg = in_scatter_segments(light, medium, eye, dirs[ray], a, b, **quad)
+            seg = in_scatter_lit(light, medium, eye, dirs[ray], a, b, quad)
             for ch in range(3):
                 light_part = np.bincount(ray, weights=seg[:, ch], minlength=n)
                 out[:, ch] += light_part

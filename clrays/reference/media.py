@@ -25,8 +25,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..physics.light_texture import light_texture
-from ..physics.radiometry import light_incident, phase, propagation_direction, refined, rgb
+from ..physics.light_texture import light_texture, textured, textured_in_scatter
+from ..physics.radiometry import (in_scatter_segments, light_incident, phase, propagation_direction, refined,
+                                  rgb)
 from ..scene.model import Box, DirectionalLight, GridDensity, HeightDensity, Light, Medium
 
 #: Gauss–Legendre nodes per piece of a grid's optical depth: ρ is cubic there, 2 would do.
@@ -312,5 +313,35 @@ def _eye_depth_in_pieces(medium: Medium, origin, v, t, s) -> np.ndarray:
     return starts[..., None] + piece_depth(lo, np.clip(s, lo, t[:, 1:, None]))
 
 
-__all__ = ["media_tolerance", "clip_box", "medium_extent", "density_at", "optical_depth", "light_depth", "light_incident_media",
+# ------------------------------------------------- what `exact` and its translucent path call
+
+
+def incident_through(light: Light, medium: Medium, points) -> np.ndarray:
+    """Lin (N, 3) at surface points: e^{-σt·d} over the light's path in the homogeneous medium
+    (`radiometry.light_incident`), T_l in any other (`light_incident_media`)."""
+    if medium.homogeneous:
+        return light_incident(light, points, rgb(medium.sigma_s) + rgb(medium.sigma_a))
+    return light_incident_media(light, medium, points)
+
+
+def eye_transmittance(medium: Medium, origin, dirs, t) -> np.ndarray:
+    """T_e (N, 3) from the eye to distance t along each unit ray: e^{-σt·t}, or e^{-σt·∫ρ}."""
+    sigma_t = rgb(medium.sigma_s) + rgb(medium.sigma_a)
+    t = np.asarray(t, dtype=np.float64)
+    depth = t if medium.homogeneous else optical_depth(medium, origin, dirs, 0.0, t)
+    return np.exp(-sigma_t * depth[:, None])
+
+
+def in_scatter_lit(light: Light, medium: Medium, origin, dirs, a, b, quad: dict) -> np.ndarray:
+    """In-scattering (M, 3) of the lit segments [a, b]: `in_scatter_media` in a bounded or
+    heterogeneous medium; else a textured light's cut at its texels, or
+    `radiometry.in_scatter_segments` (`quad`: its panels and tol)."""
+    if not medium.homogeneous:
+        return in_scatter_media(light, medium, origin, dirs, a, b, tol=media_tolerance(quad["tol"]))
+    if textured(light):  # cut at the texture's texel centres (clrays.physics.light_texture)
+        return textured_in_scatter(light, medium, origin, dirs, a, b)
+    return in_scatter_segments(light, medium, origin, dirs, a, b, **quad)
+
+
+__all__ = ["incident_through", "eye_transmittance", "in_scatter_lit", "media_tolerance", "clip_box", "medium_extent", "density_at", "optical_depth", "light_depth", "light_incident_media",
            "in_scatter_media", "grid_values", "height_factor"]

@@ -159,11 +159,11 @@ def _brute_point_light(eye, d, D, light_position, intensity, sigma_s, sigma_t, r
     return _simpson(integrand, h), math.exp(-sigma_t * total_depth)
 
 
-def _box_scene(medium_box, grid=None, position=(0.3, 1.6, 6.0)):
+def _box_scene(medium_box, density=None, position=(0.3, 1.6, 6.0)):
     light = PointLight(v3(0.4, 3.2, -0.3), np.full(3, 20.0))
     scene = make_scene(grid_plane(0.0, 6.0, 2), lights=[light], width=8, height=6, sigma_s=SIGMA_S,
                        sigma_a=SIGMA_A, position=position, look_at=(0, 0.8, 0), fov_deg=60.0)
-    return replace(scene, medium=replace(scene.medium, bounds=medium_box, density=grid))
+    return replace(scene, medium=replace(scene.medium, bounds=medium_box, density=density))
 
 
 @pytest.mark.parametrize("eye", ["outside", "inside"])
@@ -236,3 +236,21 @@ def test_a_homogeneous_box_around_the_whole_scene_is_the_unbounded_medium():
     np.testing.assert_allclose(exact_pixels(replace(bounded, lights=(light,)), ys, xs),
                                exact_pixels(point_only, ys, xs), rtol=1e-6)
     assert np.all(exact_pixels(bounded, ys, xs) <= unbounded * (1 + 1e-9))
+
+
+def test_the_translucent_path_takes_the_same_medium():
+    """exact's path for scenes with translucent objects (reference/translucency.py) reads the
+    medium through the same functions: a half-clear pane behind the camera, which no ray or
+    light path meets, leaves a bounded height fog's image as the opaque path renders it."""
+    box = Box(v3(-1.5, 0.0, -1.2), v3(1.4, 2.5, 1.6))
+    scene = _box_scene(box, HeightDensity(0.5, 1.0))
+    pane = np.array([[[-1.0, 0.0, 9.0], [1.0, 0.0, 9.0], [0.0, 1.0, 9.5]]])
+    geometry = scene.geometry
+    triangles = np.concatenate([geometry.triangles, pane])
+    with_pane = replace(scene, geometry=replace(
+        geometry, triangles=triangles, albedo=np.concatenate([geometry.albedo, [[0.5, 0.5, 0.5]]]),
+        object_id=np.concatenate([geometry.object_id, [geometry.object_id.max() + 1]]),
+        normals=None, outward=None, opacity=np.concatenate([np.ones((geometry.count, 3)), [[0.5, 0.5, 0.5]]])))
+    assert with_pane.geometry.translucent
+    ys, xs = np.divmod(np.arange(48), 8)
+    np.testing.assert_allclose(exact_pixels(with_pane, ys, xs), exact_pixels(scene, ys, xs), rtol=1e-7)
