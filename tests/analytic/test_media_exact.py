@@ -254,3 +254,14 @@ def test_the_translucent_path_takes_the_same_medium():
     assert with_pane.geometry.translucent
     ys, xs = np.divmod(np.arange(48), 8)
     np.testing.assert_allclose(exact_pixels(with_pane, ys, xs), exact_pixels(scene, ys, xs), rtol=1e-7)
+
+
+def test_the_announced_time_of_exact_counts_a_grid():
+    """exact's estimate (the command line announces it) grows with a grid's planes squared."""
+    from clrays.reference.exact import GRID_SECONDS_PER_RAY_PLANE2, estimate_seconds
+
+    scene = _box_scene(None)
+    grid = GridDensity(np.ones((10, 20, 30), np.float32), Box(v3(0, 0, 0), v3(1, 1, 1)))
+    gridded = replace(scene, medium=replace(scene.medium, density=grid))
+    added = estimate_seconds(gridded) - estimate_seconds(scene)
+    assert added == pytest.approx(48 * GRID_SECONDS_PER_RAY_PLANE2 * 66 ** 2)
