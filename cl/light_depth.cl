@@ -12,6 +12,9 @@
  *         c---c-\-c---c
  *         |   |  \|   |
  *         c---c---c---c */
+/* Each node's march is made once a frame: finer steps than a per-sample march (medium.h's
+ * default 2 a voxel) quarter the midpoint rule's error across the voxel-centre kinks. */
+#define GRID_STEPS_PER_VOXEL 4.0f
 #include "medium.h"
 
 kernel void light_depth(global const medium_t* medium, global const float* density_grid,

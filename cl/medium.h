@@ -32,7 +32,9 @@
  * ρ·σ and ρ·length finite in float32 far below the base. */
 #define HEIGHT_EXPONENT_MAX 80.0f
 /* Midpoint steps per voxel side of a march through the grid, and the most steps a march takes. */
+#ifndef GRID_STEPS_PER_VOXEL
 #define GRID_STEPS_PER_VOXEL 2.0f
+#endif
 #define GRID_MARCH_MAX 4096
 
 #ifdef MEDIUM_VARYING

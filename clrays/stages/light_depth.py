@@ -7,7 +7,8 @@ Along each axis the optical-depth grid has one node more than the density grid h
 the first and last on the bounds, with between LIGHT_DEPTH_SIDE_MIN and LIGHT_DEPTH_SIDE_MAX
 intervals: optical depth along light rays is smoother than the density (an integral of it), so
 a large grid's is coarser (the march per node crosses the whole grid), and a coarse grid's is
-finer (its depth still bends within a voxel where light rays cross it obliquely).
+finer (its depth still bends within a voxel where light rays cross it obliquely). Each node
+marches in quarter-voxel steps (cl/light_depth.cl).
 """
 from __future__ import annotations
 
@@ -17,7 +18,7 @@ from ..device import Device, StageTimer
 
 #: The fewest and most intervals between nodes along a side of a light's optical-depth grid.
 LIGHT_DEPTH_SIDE_MIN = 16
-LIGHT_DEPTH_SIDE_MAX = 64
+LIGHT_DEPTH_SIDE_MAX = 32
 
 
 def light_depth_shape(grid_shape: tuple[int, int, int]) -> tuple[int, int, int]:
