@@ -12,10 +12,11 @@
  *         c---c-\-c---c
  *         |   |  \|   |
  *         c---c---c---c */
-/* Each node's march is made once a frame: finer steps than a per-sample march (medium.h's
- * default 2 a voxel) quarter the midpoint rule's error across the voxel-centre kinks. */
-#define GRID_STEPS_PER_VOXEL 4.0f
 #include "medium.h"
+
+/* Each node's march is made once a frame: finer steps than a per-sample march (medium.h's
+ * GRID_STEPS_PER_VOXEL) quarter the midpoint rule's error across the voxel-centre kinks. */
+#define LIGHT_DEPTH_STEPS_PER_VOXEL 4.0f
 
 kernel void light_depth(global const medium_t* medium, global const float* density_grid,
                         global const light_t* lights, global float* light_depth_grid)
@@ -28,6 +29,9 @@ kernel void light_depth(global const medium_t* medium, global const float* densi
     float3 node_position = medium->grid_min.xyz + node / last * (medium->grid_max.xyz - medium->grid_min.xyz);
     float3 towards;
     float reach = toward_light(lights + light_index, node_position, &towards);
+    float t0 = 0.0f;
     light_depth_grid[light_index * count + node_index] =
-        segment_depth(medium, density_grid, node_position, towards, 0.0f, reach);
+        medium_extent(medium, node_position, towards, &t0, &reach)
+            ? grid_march_depth(medium, density_grid, node_position, towards, t0, reach, LIGHT_DEPTH_STEPS_PER_VOXEL)
+            : 0.0f;
 }

@@ -32,9 +32,7 @@
  * ρ·σ and ρ·length finite in float32 far below the base. */
 #define HEIGHT_EXPONENT_MAX 80.0f
 /* Midpoint steps per voxel side of a march through the grid, and the most steps a march takes. */
-#ifndef GRID_STEPS_PER_VOXEL
 #define GRID_STEPS_PER_VOXEL 2.0f
-#endif
 #define GRID_MARCH_MAX 4096
 
 #ifdef MEDIUM_VARYING
@@ -121,16 +119,16 @@ inline float medium_density(global const medium_t* medium, global const float* d
     return rho;
 }
 
-/* ∫ρ ds over the grid by midpoint steps of at most 1/GRID_STEPS_PER_VOXEL voxel (and at
- * most GRID_MARCH_MAX steps): ρ is cubic between voxel-centre planes, so the error is
+/* ∫ρ ds over the grid by midpoint steps of at most 1/steps_per_voxel voxel (and at most
+ * GRID_MARCH_MAX steps): ρ is cubic between voxel-centre planes, so the error is
  * O(step²·ρ'') (docs/media.md). [t0, t1] already clipped to the medium's extent. */
 inline float grid_march_depth(global const medium_t* medium, global const float* density_grid,
-                              float3 o, float3 d, float t0, float t1)
+                              float3 o, float3 d, float t0, float t1, float steps_per_voxel)
 {
     float3 voxel = (medium->grid_max.xyz - medium->grid_min.xyz)
                    / (float3)((float)medium->grid_nx, (float)medium->grid_ny, (float)medium->grid_nz);
     float side = fmin(voxel.x, fmin(voxel.y, voxel.z));
-    int steps = (int)clamp(ceil((t1 - t0) * GRID_STEPS_PER_VOXEL / side), 1.0f, (float)GRID_MARCH_MAX);
+    int steps = (int)clamp(ceil((t1 - t0) * steps_per_voxel / side), 1.0f, (float)GRID_MARCH_MAX);
     float dt = (t1 - t0) / (float)steps, depth = 0.0f;
     for (int i = 0; i < steps; ++i) depth += medium_density(medium, density_grid, o + (t0 + ((float)i + 0.5f) * dt) * d);
     return depth * dt;
@@ -145,7 +143,7 @@ inline float segment_depth(global const medium_t* medium, global const float* de
 {
     if (!medium_extent(medium, o, d, &t0, &t1)) return 0.0f;
 #ifdef MEDIUM_GRID
-    return grid_march_depth(medium, density_grid, o, d, t0, t1);
+    return grid_march_depth(medium, density_grid, o, d, t0, t1, GRID_STEPS_PER_VOXEL);
 #else
     float length = t1 - t0;
 #ifdef MEDIUM_HEIGHT
