@@ -343,5 +343,6 @@ def in_scatter_lit(light: Light, medium: Medium, origin, dirs, a, b, quad: dict)
     return in_scatter_segments(light, medium, origin, dirs, a, b, **quad)
 
 
-__all__ = ["incident_through", "eye_transmittance", "in_scatter_lit", "media_tolerance", "clip_box", "medium_extent", "density_at", "optical_depth", "light_depth", "light_incident_media",
-           "in_scatter_media", "grid_values", "height_factor"]
+__all__ = ["incident_through", "eye_transmittance", "in_scatter_lit", "media_tolerance", "clip_box", "medium_extent",
+           "density_at", "optical_depth", "light_depth", "light_incident_media", "in_scatter_media", "grid_values",
+           "height_factor"]

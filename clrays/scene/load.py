@@ -34,8 +34,8 @@ from . import density_sources
 from .animation import Animation, DensityDrift, Key, ObjectRig, Track
 from .files import FileRefused, read_regular_file, scene_files
 from .fields import (ANIMATION, BOX, CAMERA, DENSITIES, FORMAT_VERSION, GLTF, IMAGE, LIGHTS, MAX_IMAGE_PIXELS,
-                     MAX_POWER, MEDIUM, OBJECT, OBJECTS, PHASES, QUATERNION_TOLERANCE, RENDER, ROTATE, SHADOW_FILTER, TOP, TRANSFORM,
-                     TRANSPARENCY, Field, kinds)
+                     MAX_POWER, MEDIUM, OBJECT, OBJECTS, PHASES, QUATERNION_TOLERANCE, RENDER, ROTATE, SHADOW_FILTER,
+                     TOP, TRANSFORM, TRANSPARENCY, Field, kinds)
 from .limits import MAX_COORDINATE, MAX_LIGHTS, MAX_OBJECTS, MAX_SCENE_BYTES, MAX_TRIANGLES
 from .model import (Box, Camera, Density, DirectionalLight, Geometry, HeightDensity, Image, Light, LightTexture,
                     Medium, Phase, PointLight, Render, Scene, ShadowFilter, SpotLight, Transparency)
@@ -278,8 +278,7 @@ def _density(node: Node, base_dir: Path) -> tuple[Density, DensityDrift | None]:
         return HeightDensity(base=_read(fields["base"], m["base"]),
                              scale_height=_read(fields["scale_height"], m["scale_height"])), None
     bounds = _bounds(m["bounds"])
-    offset = vec3(m["offset"]) if "offset" in m else np.asarray(fields["offset"].default, dtype=np.float64)
-    _within_float32(m["offset"] if "offset" in m else node, "an offset", offset)
+    offset = _offset(m["offset"]) if "offset" in m else np.asarray(fields["offset"].default, dtype=np.float64)
     if kind == "grid":
         file = m["file"]
         if not isinstance(file.value, str) or not file.value.strip():
@@ -301,6 +300,13 @@ def _density(node: Node, base_dir: Path) -> tuple[Density, DensityDrift | None]:
                  _read(fields["seed"], m.get("seed")), resolution)
         drift = DensityDrift(bounds, noise=noise, where=f"{node.where}: {node.label}")
     return drift.at(offset), drift
+
+
+def _offset(node: Node) -> np.ndarray:
+    """A grid's or the noise's offset: a vec3 within ±MAX_COORDINATE."""
+    offset = vec3(node)
+    _within_float32(node, "an offset", offset)
+    return offset
 
 
 def _three(node: Node) -> list[Node]:
@@ -790,14 +796,8 @@ _MEDIUM_TRACKS: dict[str, _Reader] = {
     "sigma_s": (lambda n: _read(MEDIUM["sigma_s"], n), "linear"),
     "sigma_a": (lambda n: _read(MEDIUM["sigma_a"], n), "linear"),
     "g": (lambda n: _read(PHASES["hg"]["g"], n), "linear"),
-    "offset": (lambda n: _within_offset(n), "linear"),
+    "offset": (lambda n: _offset(n), "linear"),
 }
-
-
-def _within_offset(node: Node) -> np.ndarray:
-    offset = vec3(node)
-    _within_float32(node, "an offset", offset)
-    return offset
 
 
 def _keys(node: Node, tracks: dict[str, _Reader], easing: str) -> tuple[dict[str, Track], dict[str, list[Node]]]:
@@ -974,11 +974,15 @@ def _scene(root: Node, filename: str, source: Path | str | None, overrides: Sequ
     imported, fps = _gltf(m["gltf"], base_dir, "camera" in m) if "gltf" in m else (None, None)
     rigs: list[ObjectRig] = []
     textures = TextureCache()  # a file that several lights name is read once, and shared
+    # Sections are read (and fail) in the order the format lists them.
+    image = _image(m["image"])
+    camera = _camera(m["camera"]) if "camera" in m else imported.camera
+    lights = tuple(_light(n, base_dir, textures) for n in _lights(m["lights"])) if "lights" in m else ()
     medium, drift = _medium(m.get("medium"), base_dir)
-    scene = Scene(  # sections are read (and fail) in the order the format lists them
-        image=_image(m["image"]),
-        camera=_camera(m["camera"]) if "camera" in m else imported.camera,
-        lights=tuple(_light(n, base_dir, textures) for n in _lights(m["lights"])) if "lights" in m else (),
+    scene = Scene(
+        image=image,
+        camera=camera,
+        lights=lights,
         medium=medium,
         background=_read(TOP["background"], m.get("background")),
         geometry=_geometry(m.get("objects"), base_dir, rigs if "animation" in m else None),
