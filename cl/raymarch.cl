@@ -4,11 +4,13 @@
  * (STEP_SPACING, docs/design.md §4.8), optionally jittered, with a shadow-map lookup per
  * sample.
  * Reads frame, views, lights, shadow_depth, camera_depth, offsets, light_textures,
- * texels (a light's texture multiplies it per sample, docs/light-textures.md), and with
- * translucent objects the translucency stage's layers (translucency.h); writes scatter
- * (one float4 per camera sample, rgb radiance). */
+ * texels (a light's texture multiplies it per sample, docs/light-textures.md), with
+ * translucent objects the translucency stage's layers (translucency.h), and in a bounded or
+ * heterogeneous medium its density and optical depths (medium.h, docs/media.md); writes
+ * scatter (one float4 per camera sample, rgb radiance). */
 #include "light_texture.h"
 #include "translucency.h"
+#include "medium.h"
 
 /* MBOIT's one march (transparency_walk.cl's, docs/design.md, the camera side): built with
  * TRANSPARENCY_WEIGHTED_WALK, the kernel marches only the samples with translucent films, up
@@ -58,7 +60,7 @@ kernel void raymarch(global const frame_t* frame, global const view_t* views,
                      global const light_t* lights, global const uint* shadow_depth,
                      global const uint* camera_depth, global const float2* offsets,
                      global const light_texture_t* light_textures, global const float4* texels,
-                     global float4* scatter TRANSLUCENCY_ARGS WEIGHTED_WALK_ARGS)
+                     global float4* scatter TRANSLUCENCY_ARGS MEDIUM_ARGS WEIGHTED_WALK_ARGS)
 {
 #ifdef TRANSPARENCY_WEIGHTED_WALK
     if ((int)get_global_id(0) >= walk_count) return;
@@ -96,6 +98,9 @@ kernel void raymarch(global const frame_t* frame, global const view_t* views,
             begin = fmax(begin, camera_ray_start(frame, dir));
             if (!(end > begin)) continue;
         }
+#ifdef MEDIUM_VARYING /* and only where it meets medium: the box, the grid's bounds */
+        if (!medium_extent(medium, origin, dir, &begin, &end)) continue;
+#endif
         float dt = (end - begin) / (float)frame->steps;
         int directional = light->type == LIGHT_DIRECTIONAL;
         int unshadowed = eye_in_lamp(light, frame->lamp_radius);
@@ -126,6 +131,12 @@ kernel void raymarch(global const frame_t* frame, global const view_t* views,
         float edge_cos = h * edge_norm, edge_sin = x_begin * edge_norm;
         float path_end = light_path(t0, h, x_begin), path_begin, x;
 #endif
+#ifdef MEDIUM_VARYING
+        /* The eye's optical depth ∫ρ to the sample: closed form for box and height fog; in a
+         * grid, summed along the march (trapezoids between samples) from its value at `begin`. */
+        float eye_depth = segment_depth(medium, density_grid, origin, dir, 0.0f, begin);
+        float t_before = begin, rho_before = medium_density(medium, density_grid, origin + begin * dir);
+#endif
         for (int i = 0; i < frame->steps; ++i) {
             float t = begin + ((float)i + u) * dt;
 #if STEP_SPACING == STEP_SPACING_EQUIANGULAR
@@ -143,6 +154,15 @@ kernel void raymarch(global const frame_t* frame, global const view_t* views,
             }
 #endif
             float3 p = origin + t * dir;
+#ifdef MEDIUM_VARYING
+            float rho = medium_density(medium, density_grid, p);
+#ifdef MEDIUM_GRID
+            eye_depth += 0.5f * (rho_before + rho) * (t - t_before);
+            t_before = t;
+            rho_before = rho;
+#endif
+            if (rho == 0.0f) continue;
+#endif
             float d = directional ? 0.0f : length(p - light->position.xyz);
             if (!directional && d < frame->lamp_radius) continue; /* no medium in the lamp */
             float3 to_light;
@@ -162,6 +182,19 @@ kernel void raymarch(global const frame_t* frame, global const view_t* views,
              * σt·(1 + d'), d' = -to_light·dir: integrated exactly over [start, start + dt],
              * so a step longer than the mean free path (dense fog) still weighs right. */
             float3 weight;
+#ifdef MEDIUM_VARYING
+            /* In a varying medium, the midpoint rule: ρ·e^{-σt·(eye depth + light depth)} times the
+             * step's length at the sample (ds/dθ·Δθ for an equiangular step). */
+            float step_length = dt;
+#if STEP_SPACING == STEP_SPACING_EQUIANGULAR
+            if (equiangular) step_length = (h * h + x * x) / h * theta_step;
+#endif
+#ifndef MEDIUM_GRID
+            eye_depth = segment_depth(medium, density_grid, origin, dir, 0.0f, t);
+#endif
+            weight = exp(-sigma_t * (eye_depth + light_path_depth(medium, density_grid, light_depth_grid, light, l, p)))
+                     * (rho * step_length);
+#else
 #if STEP_SPACING == STEP_SPACING_EQUIANGULAR
             /* An equiangular step: ∫ e^{-σt·(s + d)} ds over it is (h² + x²)/h · ∫ e^{-σt·path(θ)} dθ
              * (ds/dθ; not d²/h, which differs where h was raised to the lamp's radius), the path
@@ -178,6 +211,7 @@ kernel void raymarch(global const frame_t* frame, global const view_t* views,
                 float path = t + d - (1.0f + d_rate) * u * dt;
                 weight = exp(-sigma_t * path) * step_integral(sigma_t * (1.0f + d_rate), dt);
             }
+#endif /* MEDIUM_VARYING */
 #ifdef TRANSPARENCY_WEIGHTED_WALK
             weight *= fog_weight(&films, t, depth_range, moment_bias);
 #endif

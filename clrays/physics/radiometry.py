@@ -333,17 +333,24 @@ def in_scatter_segments(light: Light, medium: Medium, origins: np.ndarray, dirs:
         return res
 
     live = np.flatnonzero(b > a)
-    est = estimate(live, panels)
-    p, todo = panels, np.arange(len(live))
+    out[live] = refined(estimate, live, panels, tol, max_panels)
+    return out
+
+
+def refined(estimate, items: np.ndarray, panels: int, tol: float | None, max_panels: int) -> np.ndarray:
+    """`estimate(items, p)` (len(items), 3) with p = `panels`, then, for the items whose estimate
+    still moves by more than `tol` relative, with twice the panels, until none moves or
+    `max_panels` is reached (tol=None: the first estimate)."""
+    est = estimate(items, panels)
+    p, todo = panels, np.arange(len(items))
     # Adaptive refinement: only the segments whose estimate still moves get more panels.
     while tol is not None and len(todo) and 2 * p <= max_panels:
         p *= 2
-        finer = estimate(live[todo], p)
+        finer = estimate(items[todo], p)
         moved = np.any(np.abs(finer - est[todo]) > tol * np.abs(finer), axis=1)
         est[todo] = finer
         todo = todo[moved]
-    out[live] = est
-    return out
+    return est
 
 
 def in_scatter_unoccluded(light: Light, medium: Medium, origins: np.ndarray, dirs: np.ndarray, D, **quad) -> np.ndarray:

@@ -33,9 +33,10 @@ from ..physics import radiometry
 from .bvh_queries import SceneBvh, _clip_pairs
 from ..physics.geometry import (_SHADOW_OFFSET_REL, _T_MIN_REL, _ray_range, _scale, dot, shading_normals,
                                 shadow_halfspaces, triangle_normals)
-from ..physics.light_texture import light_texture, textured, textured_in_scatter
-from ..physics.radiometry import (in_scatter_segments, light_incident, light_position, propagation_direction, rgb)
-from ..scene.camera import from_ray_starts, near_gain, ray_starts
+from ..physics.light_texture import light_texture
+from ..physics.radiometry import light_position, propagation_direction, rgb
+from ..scene.camera import from_ray_starts, ray_starts
+from .media import eye_transmittance, in_scatter_lit, incident_through, near_gain
 from ..scene.model import Light, Scene
 
 
@@ -235,7 +236,6 @@ def _surface_radiance(scene: Scene, queries: TranslucentQueries, prepared, x, di
     of its binary shadow ray."""
 
     tri = np.asarray(scene.geometry.triangles, dtype=np.float64).reshape(-1, 3, 3)
-    sigma_t = rgb(scene.medium.sigma_s) + rgb(scene.medium.sigma_a)
     nrm = triangle_normals(tri[tri_index])
     nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
     shading = shading_normals(scene.geometry, tri, tri_index, x, nrm)
@@ -247,7 +247,7 @@ def _surface_radiance(scene: Scene, queries: TranslucentQueries, prepared, x, di
         to_light = -propagation_direction(light, x)
         # Unlit where the surface itself turns away (reference/exact.py, turned_away on the device).
         cos_l = np.where(dot(nrm, to_light) > 0.0, np.maximum(0.0, dot(shading, to_light)), 0.0)
-        lin = light_incident(light, x, sigma_t) * cos_l[:, None] * light_texture(light, x)
+        lin = incident_through(light, scene.medium, x) * cos_l[:, None] * light_texture(light, x)
         lit = np.flatnonzero(np.any(lin > 0, axis=1))
         if len(lit):
             lin[lit] *= queries.transmittance_to_light(x[lit], light, nrm[lit])
@@ -262,7 +262,6 @@ def translucent_radiance(scene: Scene, eye: np.ndarray, dirs: np.ndarray, prepar
     n = len(dirs)
     medium = scene.medium
     sigma_s = rgb(medium.sigma_s)
-    sigma_t = sigma_s + rgb(medium.sigma_a)
     far = radiometry.effective_far(scene)
     t, idx = queries.first_opaque_hit(eye, dirs, far)
     hit = idx >= 0
@@ -278,12 +277,12 @@ def translucent_radiance(scene: Scene, eye: np.ndarray, dirs: np.ndarray, prepar
     if len(hits):
         surf[hits] = _surface_radiance(scene, queries, prepared, eye + t[hits, None] * dirs[hits], dirs[hits],
                                        idx[hits])
-    out = after * surf * np.exp(-sigma_t * D[:, None])
+    out = after * surf * eye_transmittance(medium, eye, dirs, D)
     if len(cam_ray):
         scene_tri = queries.translucent_index[cam_tri]
         films = _surface_radiance(scene, queries, prepared, eye + cam_t[:, None] * dirs[cam_ray], dirs[cam_ray],
                                   scene_tri)
-        films *= before * (1.0 - cam_clear) * np.exp(-sigma_t * cam_t[:, None])
+        films *= before * (1.0 - cam_clear) * eye_transmittance(medium, eye, dirs[cam_ray], cam_t)
         for ch in range(3):
             out[:, ch] += np.bincount(cam_ray, weights=films[:, ch], minlength=n)
     if np.any(sigma_s > 0):
@@ -291,15 +290,11 @@ def translucent_radiance(scene: Scene, eye: np.ndarray, dirs: np.ndarray, prepar
             ray, a, b, transmittance = queries.lit_pieces(eye, dirs, D, light, halfspaces,
                                                           radiometry.lamp_radius(scene), (cam_ray, cam_t, cam_clear))
             ray, a, b, transmittance = from_ray_starts(ray, a, b, starts, transmittance)
-            if textured(light):
-                seg = textured_in_scatter(light, medium, eye, dirs[ray], a, b)
-            else:
-                seg = in_scatter_segments(light, medium, eye, dirs[ray], a, b, **quad)
-            seg = seg * transmittance
+            seg = in_scatter_lit(light, medium, eye, dirs[ray], a, b, quad) * transmittance
             for ch in range(3):
                 out[:, ch] += np.bincount(ray, weights=seg[:, ch], minlength=n)
     if scene.camera.near > 0.0:  # light attenuated from each ray's start (as cl/shade.cl)
-        out *= near_gain(starts, D, sigma_t)
+        out *= near_gain(medium, eye, dirs, starts, D)
     return out
 
 

@@ -21,7 +21,7 @@ from typing import Iterator, Literal, Mapping
 
 import numpy as np
 
-from .model import Geometry, Medium, Phase, Scene
+from .model import Box, Geometry, GridDensity, Medium, Phase, Scene
 from .geometry import flat_normals
 from .transforms import affine, quat_rotate, quat_to_matrix, slerp, transform_normals, transform_points
 
@@ -135,6 +135,30 @@ class ObjectRig:
 
 
 @dataclass(frozen=True)
+class DensityDrift:
+    """A grid or noise density whose `offset` has keys (`medium: [{frame, offset}]`): a grid's
+    `values` move with the offset (its `bounds` as written, at offset 0); noise is baked
+    again over `bounds` at each offset, from `noise` = (frequency, octaves, seed,
+    resolution) (clrays.scene.density_sources.bake_noise). `where` names the field for a
+    failed bake."""
+
+    bounds: Box
+    values: np.ndarray | None = None
+    noise: tuple | None = None
+    where: str = ""
+
+    def at(self, offset) -> GridDensity:
+        offset = np.asarray(offset, dtype=np.float64)
+        if self.noise is None:
+            return GridDensity(self.values, Box(self.bounds.min + offset, self.bounds.max + offset))
+        from .density_sources import bake_noise
+
+        frequency, octaves, seed, resolution = self.noise
+        return GridDensity(bake_noise(frequency, octaves, seed, offset, self.bounds, resolution, self.where),
+                           self.bounds)
+
+
+@dataclass(frozen=True)
 class Animation:
     """Keyframed tracks and the frame range: see the module docstring."""
 
@@ -144,7 +168,8 @@ class Animation:
     camera: Mapping[str, Track] = field(default_factory=dict)  # position, look_at, up, orientation, fov_deg
     lights: Mapping[int, Mapping[str, Track]] = field(default_factory=dict)  # light index → its tracks
     objects: Mapping[int, tuple[ObjectRig, Mapping[str, Track]]] = field(default_factory=dict)
-    medium: Mapping[str, Track] = field(default_factory=dict)  # sigma_s, sigma_a, g
+    medium: Mapping[str, Track] = field(default_factory=dict)  # sigma_s, sigma_a, g, offset
+    drift: DensityDrift | None = None  # the density an `offset` track moves
 
     @property
     def frames(self) -> range:
@@ -184,6 +209,8 @@ class Animation:
         changes = {name: self.medium[name].at(frame) for name in ("sigma_s", "sigma_a") if name in self.medium}
         if "g" in self.medium:
             changes["phase"] = Phase(type="hg", g=float(self.medium["g"].at(frame)))
+        if "offset" in self.medium:
+            changes["density"] = self.drift.at(self.medium["offset"].at(frame))
         return replace(medium, **changes)
 
     def _geometry(self, scene: Scene, frame: float) -> Geometry:

@@ -182,7 +182,47 @@ MEDIUM = Section("medium", (
     Field("sigma_s", "RGB", 0.0, low=0.0, notes="scattering coefficient, 1 / scene unit"),
     Field("sigma_a", "RGB", 0.0, low=0.0, notes="absorption coefficient, 1 / scene unit"),
     Field("phase", "mapping", shown_default="`{type: isotropic}`", notes="phase function, below"),
+    Field("bounds", "mapping", shown_default="everywhere",
+          notes="`{min: vec3, max: vec3}`: the medium exists only inside this box ([bounds and density]"
+                "(#bounds-and-density))"),
+    Field("density", "mapping", shown_default="1 everywhere",
+          notes="a factor on `sigma_s` and `sigma_a`: `height`, `grid` or `noise` ([bounds and density]"
+                "(#bounds-and-density))"),
 ))
+
+#: `medium.bounds` and a density grid's `bounds`: an axis-aligned box.
+BOX = Section("medium.bounds", (
+    Field("min", "vec3", REQUIRED, notes="scene units"),
+    Field("max", "vec3", REQUIRED, rule="greater than `min` on every axis", notes="scene units"),
+))
+
+#: The noise grid's voxels along x, y and z when `resolution` is left out.
+NOISE_RESOLUTION = (64, 64, 64)
+
+DENSITIES = _typed("medium.density", {
+    "height": (
+        Field("base", "number", REQUIRED, notes="the height y where the factor is 1, scene units"),
+        Field("scale_height", "number", REQUIRED, 0.0, low_open=True,
+              notes="scene units: the factor exp(−(y − base)/scale_height) falls by e per this rise"),
+    ),
+    "grid": (
+        Field("file", "string", REQUIRED, rule="`.npy` of axes z, y, x (`.vdb`/`.nvdb` with the `vdb` extra); "
+                                               "finite, ≥ 0",
+              notes="relative paths start at the YAML file's folder"),
+        Field("bounds", "mapping", REQUIRED, notes="`{min, max}`: the box the grid fills; 0 outside it"),
+        Field("offset", "vec3", (0.0, 0.0, 0.0), notes="scene units: moves the grid; animatable, so fog drifts"),
+    ),
+    "noise": (
+        Field("bounds", "mapping", REQUIRED, notes="`{min, max}`: the box the baked noise fills; 0 outside it"),
+        Field("frequency", "number", 1.0, 0.0, low_open=True, notes="cycles per scene unit of the first octave"),
+        Field("octaves", "integer", 4, 1, 12, notes="fBm octaves, each twice the frequency of the one before"),
+        Field("seed", "integer", 0, 0, 2 ** 31 - 1),
+        Field("offset", "vec3", (0.0, 0.0, 0.0),
+              notes="scene units: where in the noise the box samples; animatable (baked again per frame)"),
+        Field("resolution", "`[nx, ny, nz]`", NOISE_RESOLUTION, 1, rule="integers; at most the grid's voxel limit "
+              "in all", notes="voxels the noise is baked to along x, y, z"),
+    ),
+})
 
 PHASES = _typed("medium.phase", {
     "isotropic": (),
@@ -437,7 +477,7 @@ ANIMATION = Section("animation", (
           notes="`i` indexes `lights`; keys of that light's own fields (below)"),
     Field("objects", "list of `{object: i, keys: [...]}`",
           notes="`i` indexes `objects`; keys of `translate`, `rotate`, `scale`"),
-    Field("medium", "list of keys", notes="keys of `sigma_s`, `sigma_a`, `g`"),
+    Field("medium", "list of keys", notes="keys of `sigma_s`, `sigma_a`, `g`, `offset`"),
 ))
 
 GLTF = Section("gltf", (
@@ -454,5 +494,5 @@ GLTF = Section("gltf", (
 
 #: Every section, by the name the docs' markers use, in the order of the format.
 SECTIONS: dict[str, Section] = {section.name: section for section in (
-    TOP, IMAGE, CAMERA, *LIGHTS.values(), MEDIUM, *PHASES.values(), OBJECT, *OBJECTS.values(), TRANSFORM,
-    ROTATE, RENDER, SHADOW_FILTER, TRANSPARENCY, ANIMATION, GLTF)}
+    TOP, IMAGE, CAMERA, *LIGHTS.values(), MEDIUM, *PHASES.values(), BOX, *DENSITIES.values(), OBJECT,
+    *OBJECTS.values(), TRANSFORM, ROTATE, RENDER, SHADOW_FILTER, TRANSPARENCY, ANIMATION, GLTF)}

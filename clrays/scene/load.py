@@ -30,14 +30,15 @@ from ..errors import SceneError
 from ..exposure import parse_exposure
 from ..passes import pass_problem
 from ..structs import CONVEX_OUTSIDE_ONLY
-from .animation import Animation, Key, ObjectRig, Track
+from . import density_sources
+from .animation import Animation, DensityDrift, Key, ObjectRig, Track
 from .files import FileRefused, read_regular_file, scene_files
-from .fields import (ANIMATION, CAMERA, FORMAT_VERSION, GLTF, IMAGE, LIGHTS, MAX_IMAGE_PIXELS, MAX_POWER, MEDIUM,
-                     OBJECT, OBJECTS, PHASES, QUATERNION_TOLERANCE, RENDER, ROTATE, SHADOW_FILTER, TOP, TRANSFORM,
-                     TRANSPARENCY, Field, kinds)
+from .fields import (ANIMATION, BOX, CAMERA, DENSITIES, FORMAT_VERSION, GLTF, IMAGE, LIGHTS, MAX_IMAGE_PIXELS,
+                     MAX_POWER, MEDIUM, OBJECT, OBJECTS, PHASES, QUATERNION_TOLERANCE, RENDER, ROTATE, SHADOW_FILTER,
+                     TOP, TRANSFORM, TRANSPARENCY, Field, kinds)
 from .limits import MAX_COORDINATE, MAX_LIGHTS, MAX_OBJECTS, MAX_SCENE_BYTES, MAX_TRIANGLES
-from .model import (Camera, DirectionalLight, Geometry, Image, Light, LightTexture, Medium, Phase, PointLight, Render,
-                    Scene, ShadowFilter, SpotLight, Transparency)
+from .model import (Box, Camera, Density, DirectionalLight, Geometry, HeightDensity, Image, Light, LightTexture,
+                    Medium, Phase, PointLight, Render, Scene, ShadowFilter, SpotLight, Transparency)
 from .textures import TextureCache, TextureError
 from .transforms import (affine, matrix_to_quat, quat_to_matrix, rotation_axis_angle, rotation_euler,
                          transform_normals, transform_points)
@@ -269,13 +270,73 @@ def _phase(node: Node) -> Phase:
     return Phase(type="hg", g=_read(PHASES["hg"]["g"], m["g"]))
 
 
-def _medium(node: Node | None) -> Medium:
+def _medium(node: Node | None, base_dir: Path = Path(".")) -> tuple[Medium, DensityDrift | None]:
+    """The medium, and what an animated `offset` of its grid or noise density moves."""
     if node is None:
-        return Medium(sigma_s=np.zeros(3), sigma_a=np.zeros(3))
+        return Medium(sigma_s=np.zeros(3), sigma_a=np.zeros(3)), None
     m = mapping(node, optional=MEDIUM.optional)
+    density, drift = _density(m["density"], base_dir) if "density" in m else (None, None)
     return Medium(sigma_s=_read(MEDIUM["sigma_s"], m.get("sigma_s")),
                   sigma_a=_read(MEDIUM["sigma_a"], m.get("sigma_a")),
-                  phase=_phase(m["phase"]) if "phase" in m else Phase())
+                  phase=_phase(m["phase"]) if "phase" in m else Phase(),
+                  bounds=_bounds(m["bounds"]) if "bounds" in m else None, density=density), drift
+
+
+def _bounds(node: Node) -> Box:
+    """`{min: vec3, max: vec3}` with max > min on every axis."""
+    m = mapping(node, BOX.required)
+    low, high = _point(m["min"]), _point(m["max"])
+    for axis, name in enumerate("xyz"):
+        if not high[axis] > low[axis]:
+            node.fail("max > min on every axis", f"{name}: min {low[axis]:g}, max {high[axis]:g}")
+    return Box(low, high)
+
+
+def _density(node: Node, base_dir: Path) -> tuple[Density, DensityDrift | None]:
+    """`medium.density`: a height fog, a grid file or noise baked to a grid (with, for a grid
+    or noise, the `DensityDrift` that its offset's keys move)."""
+    kind, m = typed(node, kinds(DENSITIES))
+    fields = DENSITIES[kind]
+    if kind == "height":
+        return HeightDensity(base=_read(fields["base"], m["base"]),
+                             scale_height=_read(fields["scale_height"], m["scale_height"])), None
+    bounds = _bounds(m["bounds"])
+    offset = _offset(m["offset"]) if "offset" in m else np.asarray(fields["offset"].default, dtype=np.float64)
+    if kind == "grid":
+        file = m["file"]
+        if not isinstance(file.value, str) or not file.value.strip():
+            file.fail("a grid file path (.npy)")
+        path = Path(file.value)
+        values = density_sources.load_grid_file(path if path.is_absolute() else base_dir / path,
+                                                f"{file.where}: {file.label}")
+        values.flags.writeable = False  # shared by every frame of a drifting grid
+        drift = DensityDrift(bounds, values=values)
+    else:
+        resolution_node = m.get("resolution")
+        resolution = fields["resolution"].default if resolution_node is None else tuple(
+            integer(item, fields["resolution"].low) for item in _three(resolution_node))
+        voxels = math.prod(resolution)
+        if voxels > density_sources.GRID_VOXELS_MAX:  # counted before baking
+            resolution_node.fail(f"at most {density_sources.GRID_VOXELS_MAX} voxels in all",
+                                 f"{' × '.join(map(str, resolution))} = {voxels}")
+        noise = (_read(fields["frequency"], m.get("frequency")), _read(fields["octaves"], m.get("octaves")),
+                 _read(fields["seed"], m.get("seed")), resolution)
+        drift = DensityDrift(bounds, noise=noise, where=f"{node.where}: {node.label}")
+    return drift.at(offset), drift
+
+
+def _offset(node: Node) -> np.ndarray:
+    """A grid's or the noise's offset: a vec3 within ±MAX_COORDINATE."""
+    offset = vec3(node)
+    _within_float32(node, "an offset", offset)
+    return offset
+
+
+def _three(node: Node) -> list[Node]:
+    """A list of exactly 3 items."""
+    if not isinstance(node.value, list) or len(node.value) != 3:
+        node.fail("a list of 3 integers [nx, ny, nz]")
+    return node.value
 
 
 def _render(node: Node | None) -> Render:
@@ -758,6 +819,7 @@ _MEDIUM_TRACKS: dict[str, _Reader] = {
     "sigma_s": (lambda n: _read(MEDIUM["sigma_s"], n), "linear"),
     "sigma_a": (lambda n: _read(MEDIUM["sigma_a"], n), "linear"),
     "g": (lambda n: _read(PHASES["hg"]["g"], n), "linear"),
+    "offset": (lambda n: _offset(n), "linear"),
 }
 
 
@@ -800,7 +862,7 @@ def _indexed_tracks(node: Node, what: str, count: int, tracks_of: Callable[[int]
     return found
 
 
-def _animation(node: Node, scene: Scene, rigs: list[ObjectRig]) -> Animation:
+def _animation(node: Node, scene: Scene, rigs: list[ObjectRig], drift: DensityDrift | None = None) -> Animation:
     m = mapping(node, ANIMATION.required, ANIMATION.optional)
     fps = _read(ANIMATION["fps"], m.get("fps"))
     frames, frames_field = m["frames"], ANIMATION["frames"]
@@ -837,8 +899,11 @@ def _animation(node: Node, scene: Scene, rigs: list[ObjectRig]) -> Animation:
     if "g" in medium and scene.medium.phase.type != "hg":
         medium_nodes["g"][0].fail("a medium with phase {type: hg, g: ...} (only then is there a g to animate)",
                                   f"{show(medium_nodes['g'][0])} with phase {scene.medium.phase.type!r}")
+    if "offset" in medium and drift is None:
+        medium_nodes["offset"][0].fail("a medium with a grid or noise density (only then is there an offset to "
+                                       "animate)", show(medium_nodes["offset"][0]))
     animation = Animation(
-        fps=fps, first=first, last=last, camera=camera, medium=medium,
+        fps=fps, first=first, last=last, camera=camera, medium=medium, drift=drift if "offset" in medium else None,
         lights={i: tracks for i, (tracks, _) in lights.items()},
         objects={i: (rigs[i], tracks) for i, (tracks, _) in objects.items()},
     )
@@ -934,23 +999,34 @@ def _scene(root: Node, filename: str, source: Path | str | None, overrides: Sequ
     imported, fps = _gltf(m["gltf"], base_dir, own_camera) if "gltf" in m else (None, None)
     rigs: list[ObjectRig] = []
     textures = TextureCache()  # a file that several lights name is read once, and shared
-    scene = Scene(  # sections are read (and fail) in the order the format lists them
-        image=_image(m["image"]),
-        camera=_scene_camera(m.get("camera"), own_camera, imported),
-        lights=tuple(_light(n, base_dir, textures) for n in _lights(m["lights"])) if "lights" in m else (),
-        medium=_medium(m.get("medium")),
+    # Sections are read (and fail) in the order the format lists them.
+    image = _image(m["image"])
+    camera = _scene_camera(m.get("camera"), own_camera, imported)
+    lights = tuple(_light(n, base_dir, textures) for n in _lights(m["lights"])) if "lights" in m else ()
+    medium, drift = _medium(m.get("medium"), base_dir)
+    scene = Scene(
+        image=image,
+        camera=camera,
+        lights=lights,
+        medium=medium,
         background=_read(TOP["background"], m.get("background")),
         geometry=_geometry(m.get("objects"), base_dir, rigs if "animation" in m else None),
         render=_render(m.get("render")),
         source=Path(source) if source is not None else None,
     )
     if imported is not None:
+        # A YAML medium that only places the fog (bounds, density) keeps the file's default fog's σ.
+        own_sigma = "medium" in m and not (isinstance(m["medium"].value, dict)
+                                           and m["medium"].value.keys() <= {"bounds", "density"})
         scene = gltf_files.merge(scene, imported, own_camera=own_camera, own_animation="animation" in m, fps=fps,
-                                 own_medium="medium" in m)
+                                 own_medium=own_sigma)
+        if not own_sigma and "medium" in m:
+            scene = dataclasses.replace(scene, medium=dataclasses.replace(
+                scene.medium, bounds=medium.bounds, density=medium.density))
     if "render" in m and isinstance(m["render"].value, dict):
         _check_aovs(scene, m["render"].value.get("aovs"))
     if "animation" in m:
-        scene = dataclasses.replace(scene, animation=_animation(m["animation"], scene, rigs))
+        scene = dataclasses.replace(scene, animation=_animation(m["animation"], scene, rigs, drift))
     return scene
 
 

@@ -10,6 +10,7 @@ from ..device import Device, StageTimer
 from ..inputs import FrameBuffers
 from ..scene.model import STEP_SPACINGS
 from .features import feature_args, feature_defines, present
+from .medium import medium_feature
 from .raster import RasterResult
 
 
@@ -38,7 +39,7 @@ def raymarch(device: Device, buffers: FrameBuffers, rastered: RasterResult, scat
     `only_light`: march that light alone (a render pass of its in-scattering)."""
     work_items, label = buffers.inputs.samples, "raymarch"
     # STEP_SPACING 0: equiangular, 1: uniform (clrays.structs.STEP_SPACING_*)
-    features = present(layers)
+    features = present(layers, medium_feature(device, buffers, timer))  # cl/raymarch.cl's argument order
     defines = feature_defines(features, {"STEP_SPACING": STEP_SPACINGS.index(buffers.inputs.scene.render.step_spacing)})
     extra = feature_args(features)
     if only_light is not None:

@@ -1,0 +1,38 @@
+"""Stage light_depth: for a medium with a density grid, each light's optical depth ∫ρ ds from
+every node of a grid spanning the density grid's bounds to the light (docs/media.md), so the
+kernels find a sample's light transmittance e^{-σt·depth} by one trilinear lookup
+(cl/medium.h `light_path_depth`). Host side of `cl/light_depth.cl`.
+
+Along each axis the optical-depth grid has one node more than the density grid has voxels,
+the first and last on the bounds, with between LIGHT_DEPTH_SIDE_MIN and LIGHT_DEPTH_SIDE_MAX
+intervals: optical depth along light rays is smoother than the density (an integral of it), so
+a large grid's is coarser (the march per node crosses the whole grid), and a coarse grid's is
+finer (its depth still bends within a voxel where light rays cross it obliquely). Each node
+marches in quarter-voxel steps (cl/light_depth.cl).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..device import Device, StageTimer
+
+#: The fewest and most intervals between nodes along a side of a light's optical-depth grid.
+LIGHT_DEPTH_SIDE_MIN = 16
+LIGHT_DEPTH_SIDE_MAX = 32
+
+
+def light_depth_shape(grid_shape: tuple[int, int, int]) -> tuple[int, int, int]:
+    """(nz, ny, nx) nodes of a light's optical-depth grid for a density grid of `grid_shape`."""
+    return tuple(min(max(int(n), LIGHT_DEPTH_SIDE_MIN), LIGHT_DEPTH_SIDE_MAX) + 1 for n in grid_shape)
+
+
+def light_depth(device: Device, params, density_grid, lights, light_count: int,
+                shape: tuple[int, int, int], timer: StageTimer, defines: dict):
+    """A device buffer of `light_count` optical-depth grids of `shape` (nz, ny, nx), float32,
+    light after light; `params` the medium_t buffer, `density_grid` its values, `lights` the
+    frame's light_t buffer, `defines` the medium's build defines (MEDIUM_GRID among them)."""
+    count = int(np.prod(shape))
+    out = device.buffer(nbytes=4 * count * max(light_count, 1))
+    kernel = device.kernel("light_depth", "light_depth", defines)
+    timer.add("light_depth", kernel(device.queue, (count, light_count), None, params, density_grid, lights, out))
+    return out
