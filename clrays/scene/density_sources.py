@@ -1,0 +1,288 @@
+"""Where a medium's density grid comes from (docs/density-sources.md): a file, or procedural
+noise baked to a grid. Each returns the grid's density factors as float32 of shape
+(nz, ny, nx), C-contiguous, finite and ≥ 0, for `model.GridDensity.values`.
+
+    values = load_grid_file(Path("smoke.npy"), "scenes/smoke.yaml: medium.density.file")
+    values = bake_noise(0.5, 5, 7, (0, 0, 0), box, (64, 32, 64), "scenes/x.yaml: medium.density")
+
+- `.npy`: a 3D array indexed [z, y, x] of floats (16, 32 or 64 bits), integers or booleans;
+  its shape and dtype are read from the header and checked before the data is (no pickles).
+- `.vdb`: OpenVDB, through tinyvdb (the `vdb` extra, imported only here); the float grid
+  named `density` (or the file's one float grid), its active voxels densified over their
+  bounding box.
+- noise: OpenSimplex2 fBm through pyfastnoiselite (the `noise` extra), mapped to
+  max(0, 1 + 3·fbm).
+
+Every problem raises SceneError with one line that starts with `where` (the file and field)
+and names the bad value; sizes are checked against GRID_VOXELS_MAX before anything of that
+size is allocated.
+"""
+from __future__ import annotations
+
+import io
+import math
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from ..errors import SceneError
+from .files import FileRefused, read_regular_file
+from .image_files import ImageFileError, npy_header
+from .model import Box
+
+#: The largest grid accepted, in voxels: 256³, 64 MiB as float32 (the device holds it and a
+#: per-light optical-depth grid beside it; docs/limits.md).
+GRID_VOXELS_MAX = 256 ** 3
+#: The largest grid file read: a float64 `.npy` at GRID_VOXELS_MAX, with room for its header.
+#: A `.vdb` holds its active voxels (4 bytes each, less compressed) and its tree's masks.
+MAX_GRID_FILE_BYTES = GRID_VOXELS_MAX * 8 + (1 << 20)
+GRID_FORMATS = (".npy", ".vdb", ".nvdb")
+#: Octaves of fBm: each halves the feature size (lacunarity 2); past 16 they are finer than
+#: float32 coordinates resolve, and each costs a full pass over the grid.
+MAX_NOISE_OCTAVES = 16
+#: Noise is evaluated in slabs of this many voxels, so its float32 coordinates (12 bytes a
+#: voxel, twice: the axes' grids and their stack) stay under 100 MiB whatever the grid's size.
+_NOISE_CHUNK_VOXELS = 1 << 22
+#: density = max(0, 1 + NOISE_CONTRAST·fbm): fbm (normalised to [-1, 1], standard deviation
+#: about 0.26 at 5 octaves) around a mean density of 1, so σs and σa keep their meaning as
+#: the medium's mean coefficients, with wisps up to ~3.6 and about a tenth of the box clear
+#: (docs/density-sources.md).
+NOISE_CONTRAST = 3.0
+
+
+def check_grid(values, where: str) -> np.ndarray:
+    """`values` as a density grid: float32 (nz, ny, nx), C-contiguous.
+
+    Raises SceneError (one line starting with `where`) for an array that is not numbers,
+    not 3D or empty, larger than GRID_VOXELS_MAX (checked before it is converted), or that
+    holds NaN or infinite values (their count and the first one's [z, y, x] index),
+    negative values, or values beyond float32."""
+    grid = np.asarray(values)
+    if grid.dtype.kind not in "biuf" or grid.dtype.fields is not None:
+        raise SceneError(f"{where}: an array of dtype {grid.dtype}, not numbers")
+    _check_shape(grid.shape, where)
+    bad = ~np.isfinite(grid)
+    if bad.any():
+        first = _index(np.argwhere(bad)[0])
+        raise SceneError(f"{where}: {int(bad.sum())} non-finite density value(s), the first {grid[first]} at "
+                         f"[z, y, x] = {list(first)}")
+    negative = grid < 0
+    if negative.any():
+        first = _index(np.argwhere(negative)[0])
+        raise SceneError(f"{where}: {int(negative.sum())} negative density value(s), the first {grid[first]:g} at "
+                         f"[z, y, x] = {list(first)}: a density factor is ≥ 0")
+    if grid.dtype.itemsize > 4 and float(grid.max()) > float(np.finfo(np.float32).max):
+        raise SceneError(f"{where}: a density value of {float(grid.max()):g}, beyond float32 "
+                         f"({np.finfo(np.float32).max:.3g})")
+    return np.ascontiguousarray(grid, dtype=np.float32)
+
+
+def load_grid_file(path: Path, where: str) -> np.ndarray:
+    """The density grid in a `.npy` or `.vdb` file (module docstring), through `check_grid`.
+
+    Raises SceneError (one line starting with `where`) for a missing, unreadable or
+    oversized file (MAX_GRID_FILE_BYTES), an unknown extension, a broken header, a grid over
+    GRID_VOXELS_MAX voxels (from the header, before the data is read), bad values, and a
+    `.vdb` without the `vdb` extra installed."""
+    suffix = Path(path).suffix.lower()
+    if suffix not in GRID_FORMATS:
+        raise SceneError(f"{where}: a {suffix or 'file without an extension'} file, not one of "
+                         f"{', '.join(GRID_FORMATS)}")
+    if suffix == ".nvdb":
+        # tinyvdb's Python API reads NanoVDB voxels one call at a time and cannot list a
+        # grid's active voxels, so a NanoVDB grid could not be densified in reasonable time.
+        raise SceneError(f"{where}: NanoVDB (.nvdb) grids are not read; convert it to OpenVDB "
+                         f"(nanovdb_convert file.nvdb file.vdb) or to a .npy array")
+    try:
+        data = read_regular_file(path, MAX_GRID_FILE_BYTES,
+                                 too_big_hint=f"a density grid holds at most {GRID_VOXELS_MAX} voxels")
+    except FileRefused as exc:
+        raise SceneError(f"{where}: {path}: {exc}") from None
+    grid = check_grid(_npy_grid(data, where) if suffix == ".npy" else _vdb_grid(data, where), where)
+    # A float32 .npy comes back as a view of the file's bytes, read-only: the scene owns its own.
+    return grid if grid.flags.writeable else grid.copy()
+
+
+def bake_noise(frequency: float, octaves: int, seed: int, offset: Sequence[float], bounds: Box,
+               resolution: Sequence[int], where: str) -> np.ndarray:
+    """Procedural fBm density over `bounds`, baked to a grid float32 (nz, ny, nx) ≥ 0.
+
+    frequency: noise cells per scene unit (> 0). octaves: fBm octaves in [1, 16], each of
+    twice the frequency and half the amplitude of the one before. seed: an integer that
+    fits in 32 bits; the same seed gives the same bits. offset: (x, y, z) in scene units,
+    how far the pattern has moved: the density at p is that of p − offset, so animating
+    offset makes the fog drift by it. bounds: the box the grid covers. resolution: voxels
+    along (x, y, z), as the box's corners are written; each voxel is sampled at its centre.
+    The density is max(0, 1 + NOISE_CONTRAST·fbm) (module docstring). Needs the `noise`
+    extra (pyfastnoiselite)."""
+    shape_xyz = _noise_resolution(resolution, where)
+    frequency = _finite(frequency, f"{where}.frequency")
+    if frequency <= 0:
+        raise SceneError(f"{where}.frequency: expected a number > 0, got {frequency:g}")
+    if isinstance(octaves, bool) or not isinstance(octaves, (int, np.integer)) \
+            or not 1 <= octaves <= MAX_NOISE_OCTAVES:
+        raise SceneError(f"{where}.octaves: expected an integer in [1, {MAX_NOISE_OCTAVES}], got {octaves!r}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not -2**31 <= seed < 2**31:
+        raise SceneError(f"{where}.seed: expected an integer in [-2³¹, 2³¹), got {seed!r}")
+    shift = np.array([_finite(v, f"{where}.offset") for v in _three(offset, f"{where}.offset")])
+    low, high = np.asarray(bounds.min, dtype=np.float64), np.asarray(bounds.max, dtype=np.float64)
+    fast_noise = _import_extra("pyfastnoiselite.pyfastnoiselite", "noise", "noise", where)
+
+    noise = fast_noise.FastNoiseLite(seed=int(seed))
+    noise.noise_type = fast_noise.NoiseType.NoiseType_OpenSimplex2
+    noise.fractal_type = fast_noise.FractalType.FractalType_FBm
+    noise.fractal_octaves = int(octaves)
+    noise.frequency = 1.0  # coordinates go in already scaled, in float64 before they are rounded to float32
+    nx, ny, nz = shape_xyz
+    # Voxel centres, moved back by the offset and scaled to noise cells, per axis.
+    axes = [(((low[axis] + (np.arange(n) + 0.5) * (high[axis] - low[axis]) / n) - shift[axis]) * frequency)
+            .astype(np.float32) for axis, n in enumerate(shape_xyz)]
+    values = np.empty(nz * ny * nx, dtype=np.float32)
+    slab = max(1, _NOISE_CHUNK_VOXELS // (ny * nx))
+    for z0 in range(0, nz, slab):
+        z, y, x = np.meshgrid(axes[2][z0:z0 + slab], axes[1], axes[0], indexing="ij")
+        coords = np.stack([x.ravel(), y.ravel(), z.ravel()])
+        values[z0 * ny * nx:z0 * ny * nx + coords.shape[1]] = noise.gen_from_coords(coords)
+    np.maximum(1.0 + NOISE_CONTRAST * values, 0.0, out=values)
+    return values.reshape(nz, ny, nx)
+
+
+# --------------------------------------------------------------------------- .npy
+
+def _npy_grid(data: bytes, where: str) -> np.ndarray:
+    """A `.npy` file's array, its shape and dtype checked from the header before the data is
+    read, then viewed in place (no copy but the caller's float32 one)."""
+    from numpy.lib import format as npy_format
+
+    stream = io.BytesIO(data)
+    try:  # the header alone first: a grid too large is refused before its size is compared with the file's
+        version = npy_format.read_magic(stream)
+        read_header = npy_format.read_array_header_1_0 if version == (1, 0) else npy_format.read_array_header_2_0
+        shape, fortran_order, dtype = read_header(stream)
+    except (ValueError, SyntaxError, TypeError, EOFError) as exc:
+        detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise SceneError(f"{where}: not a .npy array ({detail[:120]})") from None
+    if dtype.hasobject or dtype.kind not in "biuf" or dtype.fields is not None:
+        raise SceneError(f"{where}: an array of dtype {dtype}, not numbers")
+    _check_shape(shape, where)
+    try:
+        shape, dtype, data_offset = npy_header(data)  # and the data's size against the file's
+    except ImageFileError as exc:
+        raise SceneError(f"{where}: {exc}") from None
+    flat = np.frombuffer(data, dtype=dtype, count=math.prod(shape), offset=data_offset)
+    return flat.reshape(shape, order="F" if fortran_order else "C")
+
+
+# --------------------------------------------------------------------------- .vdb
+
+def _vdb_grid(data: bytes, where: str) -> np.ndarray:
+    """The density grid of an OpenVDB file: the float grid named `density`, or the file's
+    one float grid; its active voxels, densified over their bounding box to [z, y, x]
+    (inactive voxels inside it are 0). The grid's transform is not used: the scene's
+    `bounds` place it."""
+    tinyvdb = _import_extra("tinyvdb", "vdb", "reading .vdb files", where)
+    try:
+        vdb_file = tinyvdb.from_bytes(data)
+        try:
+            vdb_file.read_grids()
+            grid = _density_grid(vdb_file, where)
+            sparse = grid.to_sparse()
+            stored = grid.metadata.get("file_voxel_count")
+        finally:
+            vdb_file.close()
+    except (tinyvdb.VDBError, OSError, ValueError) as exc:
+        detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise SceneError(f"{where}: not a readable OpenVDB file ({detail[:120]})") from None
+    count = int(sparse["count"])
+    if stored is not None and int(stored) > count:
+        raise SceneError(f"{where}: the grid holds {int(stored)} active voxels, {int(stored) - count} of them in "
+                         f"tiles, which are not read; voxelize its active tiles before saving")
+    if count == 0:
+        raise SceneError(f"{where}: the grid has no active voxels: an empty grid")
+    xyz = np.frombuffer(sparse["coords"], dtype=np.int32).reshape(count, 3).astype(np.int64)
+    low, high = xyz.min(axis=0), xyz.max(axis=0)
+    _check_shape(tuple(int(n) for n in (high - low + 1)[::-1]), where)
+    values = np.frombuffer(sparse["values"], dtype=np.float32, count=count)
+    grid_zyx = np.zeros(tuple(int(n) for n in (high - low + 1)[::-1]), dtype=np.float32)
+    index = xyz - low
+    grid_zyx[index[:, 2], index[:, 1], index[:, 0]] = values
+    return grid_zyx
+
+
+def _density_grid(vdb_file, where: str):
+    """The grid a `.vdb` file's density is read from: its float grid named `density`, or its
+    only float grid; a fog volume, not a level set."""
+    names = [vdb_file.grid_name(i) for i in range(vdb_file.grid_count)]
+    floats = [i for i in range(vdb_file.grid_count) if vdb_file.grid_type_name(i) == "Tree_float_5_4_3"]
+    chosen = [i for i in floats if names[i] == "density"] or (floats if len(floats) == 1 else [])
+    if not chosen:
+        found = ", ".join(f"{name} ({vdb_file.grid_type_name(i)})" for i, name in enumerate(names)) or "no grids"
+        raise SceneError(f"{where}: no float grid named `density` and not one float grid to take instead "
+                         f"(the file holds {found})")
+    grid = vdb_file.grid(chosen[0])
+    if grid.metadata.get("class") == "level set":
+        raise SceneError(f"{where}: grid `{names[chosen[0]]}` is a level set (signed distances), not a fog "
+                         f"volume of densities")
+    return grid
+
+
+# --------------------------------------------------------------------------- shared checks
+
+def _check_shape(shape, where: str) -> None:
+    """A grid's shape: 3D, no empty axis, at most GRID_VOXELS_MAX voxels (counted as Python
+    integers, so a header's 10¹² cannot overflow)."""
+    shape = tuple(int(n) for n in shape)
+    if len(shape) != 3:
+        raise SceneError(f"{where}: an array of shape {shape}, not a 3D grid indexed [z, y, x]")
+    if min(shape) < 1:
+        raise SceneError(f"{where}: an empty grid of shape {shape}")
+    voxels = math.prod(shape)
+    if voxels > GRID_VOXELS_MAX:
+        raise SceneError(f"{where}: a grid of {' × '.join(map(str, shape))} = {voxels:.4g} voxels, more than the "
+                         f"limit of {GRID_VOXELS_MAX} (256³)")
+
+
+def _noise_resolution(resolution, where: str) -> tuple[int, int, int]:
+    """A noise grid's voxels along (x, y, z), checked against the limit before any allocation."""
+    counts = _three(resolution, f"{where}.resolution")
+    if not all(isinstance(n, (int, np.integer)) and not isinstance(n, bool) for n in counts):
+        raise SceneError(f"{where}.resolution: expected three integers, got {list(counts)!r}")
+    nx, ny, nz = (int(n) for n in counts)
+    _check_shape((nz, ny, nx), f"{where}.resolution")
+    return nx, ny, nz
+
+
+def _three(values, where: str) -> tuple:
+    try:
+        items = tuple(values)
+    except TypeError:
+        items = ()
+    if len(items) != 3:
+        raise SceneError(f"{where}: expected three values (x, y, z), got {values!r}")
+    return items
+
+
+def _finite(value, where: str) -> float:
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise SceneError(f"{where}: expected a number, got {value!r}") from None
+    if not math.isfinite(number):
+        raise SceneError(f"{where}: expected a finite number, got {value!r}")
+    return number
+
+
+def _index(index) -> tuple[int, ...]:
+    return tuple(int(i) for i in index)
+
+
+def _import_extra(module: str, extra: str, purpose: str, where: str):
+    """An optional dependency, imported only when a scene needs it; one line naming the
+    extra that installs it when it is missing."""
+    import importlib
+
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        raise SceneError(f"{where}: {purpose} needs the `{extra}` extra: pip install 'clrays[{extra}]'") from None

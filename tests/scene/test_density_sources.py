@@ -1,0 +1,290 @@
+"""Density grids from files and noise (clrays/scene/density_sources.py): each loader on real
+files, the header checks that refuse a grid before allocating it, bad values, and the
+optional extras' one-line errors when they are missing.
+
+The .vdb files in tests/scene/data were written by libopenvdb 12.0 (tests/scene/data/
+make_vdb_files.py says how), so the reader is tested on files it did not write.
+"""
+from __future__ import annotations
+
+import io
+import sys
+import tracemalloc
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from clrays.errors import SceneError
+from clrays.scene.density_sources import (GRID_VOXELS_MAX, NOISE_CONTRAST, bake_noise, check_grid,
+                                          load_grid_file)
+from clrays.scene.model import Box
+
+DATA = Path(__file__).parent / "data"
+WHERE = "scenes/smoke.yaml: medium.density.file"
+NOISE_WHERE = "scenes/smoke.yaml: medium.density"
+
+
+def refused(call, match: str) -> str:
+    """The one line SceneError says for `call()`, which must match `match` and name the field."""
+    with pytest.raises(SceneError, match=match) as info:
+        call()
+    message = str(info.value)
+    assert "\n" not in message, message
+    assert message.startswith("scenes/smoke.yaml: medium.density"), message
+    return message
+
+
+def save_npy(path: Path, array) -> Path:
+    np.save(path, array, allow_pickle=False)
+    return path
+
+
+def npy_claiming(path: Path, shape, dtype="<f4") -> Path:
+    """A .npy file whose header claims `shape` but holds 16 bytes of data."""
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(header, {"descr": dtype, "fortran_order": False, "shape": tuple(shape)})
+    path.write_bytes(header.getvalue() + bytes(16))  # the header writer writes the magic too
+    return path
+
+
+#: What a refusal "before allocating" may allocate: the file's 1 MiB read buffer and change,
+#: where the grids refused here would take terabytes.
+SMALL_BYTES = 8 << 20
+
+
+def peak_allocation(call) -> int:
+    """Bytes allocated at the peak while `call()` raises SceneError."""
+    tracemalloc.start()
+    try:
+        with pytest.raises(SceneError):
+            call()
+        return tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
+# --------------------------------------------------------------------------- .npy
+
+
+def test_a_float32_npy_reads_as_the_same_bits(tmp_path):
+    values = np.random.default_rng(1).random((3, 4, 5), dtype=np.float32)
+    grid = load_grid_file(save_npy(tmp_path / "g.npy", values), WHERE)
+    assert grid.dtype == np.float32 and grid.flags.c_contiguous and grid.flags.writeable
+    assert grid.tobytes() == values.tobytes()
+
+
+@pytest.mark.parametrize("dtype", ["<f2", ">f4", "<f8", "<i2", "<u1", "|b1"])
+def test_other_number_types_become_float32(tmp_path, dtype):
+    values = (np.arange(24).reshape(2, 3, 4) % 7).astype(dtype)
+    grid = load_grid_file(save_npy(tmp_path / "g.npy", values), WHERE)
+    assert grid.dtype == np.float32 and grid.shape == (2, 3, 4)
+    np.testing.assert_array_equal(grid, values.astype(np.float64))
+
+
+def test_a_fortran_ordered_npy_keeps_its_indexing(tmp_path):
+    values = np.asfortranarray(np.arange(60, dtype=np.float32).reshape(3, 4, 5))
+    grid = load_grid_file(save_npy(tmp_path / "g.npy", values), WHERE)
+    assert grid.flags.c_contiguous
+    np.testing.assert_array_equal(grid, values)
+
+
+def test_a_header_claiming_a_trillion_voxels_is_refused_before_allocating(tmp_path):
+    path = npy_claiming(tmp_path / "huge.npy", (10_000, 10_000, 10_000))
+    message = refused(lambda: load_grid_file(path, WHERE), "more than the limit")
+    assert "10000 × 10000 × 10000" in message and str(GRID_VOXELS_MAX) in message
+    assert peak_allocation(lambda: load_grid_file(path, WHERE)) < SMALL_BYTES
+
+
+def test_one_voxel_over_the_cap_is_refused(tmp_path):
+    refused(lambda: load_grid_file(npy_claiming(tmp_path / "g.npy", (256, 256, 257)), WHERE),
+            "256 × 256 × 257 = .* voxels, more than the limit of 16777216")
+
+
+def test_a_header_claiming_more_data_than_the_file_holds_is_refused(tmp_path):
+    refused(lambda: load_grid_file(npy_claiming(tmp_path / "g.npy", (8, 8, 8)), WHERE),
+            "claims 8 × 8 × 8 of float32 .* but the file holds 16 bytes")
+
+
+@pytest.mark.parametrize("shape, match", [((4, 4), r"shape \(4, 4\), not a 3D grid"),
+                                          ((2, 2, 2, 2), "not a 3D grid"),
+                                          ((3, 0, 2), r"an empty grid of shape \(3, 0, 2\)")])
+def test_an_npy_that_is_no_grid_is_refused(tmp_path, shape, match):
+    refused(lambda: load_grid_file(save_npy(tmp_path / "g.npy", np.zeros(shape, np.float32)), WHERE), match)
+
+
+def test_objects_and_complex_numbers_are_refused(tmp_path):
+    pickled = tmp_path / "objects.npy"
+    np.save(pickled, np.array([[[{"a": 1}]]], dtype=object), allow_pickle=True)
+    refused(lambda: load_grid_file(pickled, WHERE), "dtype object, not numbers")
+    refused(lambda: load_grid_file(save_npy(tmp_path / "c.npy", np.zeros((2, 2, 2), np.complex64)), WHERE),
+            "dtype complex64, not numbers")
+
+
+def test_a_file_that_is_not_an_npy_is_refused(tmp_path):
+    path = tmp_path / "g.npy"
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(100))
+    refused(lambda: load_grid_file(path, WHERE), "not a .npy array")
+
+
+def test_a_missing_file_and_an_unknown_extension_are_one_line(tmp_path):
+    message = refused(lambda: load_grid_file(tmp_path / "nowhere.npy", WHERE), "No such file")
+    assert "nowhere.npy" in message
+    refused(lambda: load_grid_file(tmp_path / "g.raw", WHERE), r"a \.raw file, not one of \.npy, \.vdb, \.nvdb")
+
+
+def test_nanovdb_is_refused_with_what_to_do(tmp_path):
+    refused(lambda: load_grid_file(tmp_path / "g.nvdb", WHERE), r"NanoVDB \(\.nvdb\) grids are not read; convert")
+
+
+# --------------------------------------------------------------------------- bad values
+
+
+def test_nan_and_infinity_give_their_count_and_first_index(tmp_path):
+    values = np.ones((3, 4, 5), np.float32)
+    values[1, 2, 3] = np.nan
+    values[2, 0, 0] = np.inf
+    refused(lambda: load_grid_file(save_npy(tmp_path / "g.npy", values), WHERE),
+            r"2 non-finite density value\(s\), the first nan at \[z, y, x\] = \[1, 2, 3\]")
+
+
+def test_negative_density_is_refused(tmp_path):
+    values = np.ones((3, 4, 5))
+    values[0, 3, 1] = -0.25
+    refused(lambda: load_grid_file(save_npy(tmp_path / "g.npy", values), WHERE),
+            r"1 negative density value\(s\), the first -0.25 at \[z, y, x\] = \[0, 3, 1\]")
+
+
+def test_a_float64_value_beyond_float32_is_refused():
+    refused(lambda: check_grid(np.full((1, 1, 2), 1e39), WHERE), "a density value of 1e\\+39, beyond float32")
+
+
+def test_check_grid_refuses_a_grid_over_the_cap_before_converting_it():
+    # A broadcast view: 256 × 256 × 257 voxels that take 8 bytes of memory.
+    view = np.broadcast_to(np.float64(1.0), (256, 256, 257))
+    assert peak_allocation(lambda: check_grid(view, WHERE)) < SMALL_BYTES
+
+
+def test_check_grid_returns_float32_c_contiguous():
+    values = np.arange(24, dtype=np.float64).reshape(2, 3, 4)[:, ::-1, :]
+    grid = check_grid(values, WHERE)
+    assert grid.dtype == np.float32 and grid.flags.c_contiguous
+    np.testing.assert_array_equal(grid, values)
+
+
+# --------------------------------------------------------------------------- .vdb
+
+
+def test_an_openvdb_density_grid_is_densified_over_its_active_voxels():
+    pytest.importorskip("tinyvdb")
+    grid = load_grid_file(DATA / "density.vdb", WHERE)  # beside a `temperature` grid: the one named density
+    expected = np.load(DATA / "density_expected.npy")
+    assert grid.dtype == np.float32 and grid.shape == (3, 4, 5)
+    assert grid.tobytes() == expected.tobytes()
+
+
+def test_a_vdb_with_nan_is_refused(tmp_path):
+    tinyvdb = pytest.importorskip("tinyvdb")
+    vdb_file = tinyvdb.open(str(DATA / "density.vdb"))
+    vdb_file.read_grids()
+    index = [vdb_file.grid_name(i) for i in range(vdb_file.grid_count)].index("density")
+    sparse = vdb_file.grid(index).to_sparse()
+    values = np.frombuffer(sparse["values"], np.float32).copy()
+    values[7] = np.nan
+    vdb_file.replace_grid_from_sparse(index, sparse["coords"], values.tobytes(), "density")
+    (tmp_path / "nan.vdb").write_bytes(vdb_file.to_bytes())
+    vdb_file.close()
+    refused(lambda: load_grid_file(tmp_path / "nan.vdb", WHERE), r"1 non-finite density value\(s\), the first nan")
+
+
+def test_vdb_tiles_and_level_sets_are_refused():
+    pytest.importorskip("tinyvdb")
+    refused(lambda: load_grid_file(DATA / "tiles.vdb", WHERE), "512 active voxels, 512 of them in tiles")
+    refused(lambda: load_grid_file(DATA / "level_set.vdb", WHERE), "grid `surface` is a level set")
+
+
+def test_a_broken_vdb_is_one_line(tmp_path):
+    pytest.importorskip("tinyvdb")
+    path = tmp_path / "g.vdb"
+    path.write_bytes((DATA / "density.vdb").read_bytes()[:200])
+    refused(lambda: load_grid_file(path, WHERE), "not a readable OpenVDB file")
+    path.write_bytes(b"not a vdb at all")
+    refused(lambda: load_grid_file(path, WHERE), "not a readable OpenVDB file")
+
+
+def test_a_vdb_without_the_extra_names_it(monkeypatch):
+    monkeypatch.setitem(sys.modules, "tinyvdb", None)  # as if not installed: importing it raises ImportError
+    refused(lambda: load_grid_file(DATA / "density.vdb", WHERE),
+            r"reading \.vdb files needs the `vdb` extra: pip install 'clrays\[vdb\]'")
+
+
+# --------------------------------------------------------------------------- noise
+
+BOX = Box(np.array([0.0, 0.0, 0.0]), np.array([8.0, 4.0, 2.0]))
+
+
+def noise(**changes):
+    arguments = dict(frequency=0.7, octaves=4, seed=11, offset=(0.0, 0.0, 0.0), bounds=BOX,
+                     resolution=(16, 8, 4), where=NOISE_WHERE)
+    arguments.update(changes)
+    return bake_noise(**arguments)
+
+
+def test_noise_is_a_float32_grid_of_resolution_x_y_z():
+    pytest.importorskip("pyfastnoiselite")
+    grid = noise()
+    assert grid.dtype == np.float32 and grid.shape == (4, 8, 16) and grid.flags.c_contiguous
+    assert grid.min() >= 0.0 and np.isfinite(grid).all()
+    assert grid.std() > 0.1  # a pattern, not a constant
+    assert grid.max() <= 1.0 + NOISE_CONTRAST
+
+
+def test_the_same_seed_gives_the_same_bits_and_another_seed_another_pattern():
+    pytest.importorskip("pyfastnoiselite")
+    assert noise().tobytes() == noise().tobytes()
+    assert not np.array_equal(noise(), noise(seed=12))
+
+
+def test_an_offset_moves_the_pattern_by_as_much():
+    pytest.importorskip("pyfastnoiselite")
+    # Voxels of 0.5 units along x: an offset of one voxel moves the pattern one voxel along +x.
+    still, moved = noise(), noise(offset=(0.5, 0.0, 0.0))
+    assert moved[:, :, 1:].tobytes() == still[:, :, :-1].tobytes()
+    assert not np.array_equal(moved, still)
+    up = noise(offset=(0.0, 0.5, 0.0))  # 8 voxels over 4 units along y
+    assert up[:, 1:, :].tobytes() == still[:, :-1, :].tobytes()
+
+
+def test_noise_in_slabs_is_the_same_as_in_one_piece(monkeypatch):
+    pytest.importorskip("pyfastnoiselite")
+    from clrays.scene import density_sources
+
+    whole = noise()
+    monkeypatch.setattr(density_sources, "_NOISE_CHUNK_VOXELS", 16 * 8)  # one z slice a slab
+    assert noise().tobytes() == whole.tobytes()
+
+
+@pytest.mark.parametrize("changes, match", [
+    (dict(frequency=0.0), r"medium.density.frequency: expected a number > 0, got 0"),
+    (dict(frequency=float("nan")), r"medium.density.frequency: expected a finite number"),
+    (dict(octaves=0), r"medium.density.octaves: expected an integer in \[1, 16\], got 0"),
+    (dict(octaves=2.5), r"medium.density.octaves: expected an integer"),
+    (dict(seed=2**31), r"medium.density.seed: expected an integer in"),
+    (dict(offset=(0, 1)), r"medium.density.offset: expected three values"),
+    (dict(offset=(0, float("inf"), 0)), r"medium.density.offset: expected a finite number"),
+    (dict(resolution=(16, 0, 4)), r"medium.density.resolution: an empty grid"),
+    (dict(resolution=(16, 8.5, 4)), r"medium.density.resolution: expected three integers"),
+])
+def test_bad_noise_settings_are_one_line(changes, match):
+    refused(lambda: noise(**changes), match)
+
+
+def test_a_noise_resolution_over_the_cap_is_refused_before_allocating():
+    call = lambda: noise(resolution=(100_000, 100_000, 100_000))
+    refused(call, r"100000 × 100000 × 100000 = 1e\+15 voxels, more than the limit")
+    assert peak_allocation(call) < SMALL_BYTES
+
+
+def test_noise_without_the_extra_names_it(monkeypatch):
+    monkeypatch.setitem(sys.modules, "pyfastnoiselite.pyfastnoiselite", None)
+    refused(noise, r"noise needs the `noise` extra: pip install 'clrays\[noise\]'")
