@@ -187,6 +187,10 @@ def _vdb_grid(data: bytes, where: str) -> np.ndarray:
         try:
             vdb_file.read_grids()
             grid = _density_grid(vdb_file, where)
+            active = int(grid.active_voxel_count())
+            if active > GRID_VOXELS_MAX:  # they could not fit the dense grid: refused before they are listed
+                raise SceneError(f"{where}: a grid of {active} active voxels, more than the limit of "
+                                 f"{GRID_VOXELS_MAX} (256³)")
             sparse = grid.to_sparse()
             stored = grid.metadata.get("file_voxel_count")
         finally:

@@ -183,18 +183,42 @@ def test_an_openvdb_density_grid_is_densified_over_its_active_voxels():
     assert grid.tobytes() == expected.tobytes()
 
 
-def test_a_vdb_with_nan_is_refused(tmp_path):
+def test_a_vdb_over_the_cap_is_refused_from_its_active_voxel_count(monkeypatch):
+    pytest.importorskip("tinyvdb")
+    from clrays.scene import density_sources
+
+    monkeypatch.setattr(density_sources, "GRID_VOXELS_MAX", 59)  # the density grid's 60 voxels, one too many
+    refused(lambda: load_grid_file(DATA / "density.vdb", WHERE), "a grid of 60 active voxels, more than the limit of 59")
+    monkeypatch.setattr(density_sources, "GRID_VOXELS_MAX", 60)
+    assert load_grid_file(DATA / "density.vdb", WHERE).shape == (3, 4, 5)
+
+
+def rewritten_vdb(tmp_path, name: str, coords_xyz, values) -> Path:
+    """density.vdb with its density grid replaced by these voxels, by tinyvdb's own writer."""
     tinyvdb = pytest.importorskip("tinyvdb")
     vdb_file = tinyvdb.open(str(DATA / "density.vdb"))
     vdb_file.read_grids()
     index = [vdb_file.grid_name(i) for i in range(vdb_file.grid_count)].index("density")
-    sparse = vdb_file.grid(index).to_sparse()
-    values = np.frombuffer(sparse["values"], np.float32).copy()
-    values[7] = np.nan
-    vdb_file.replace_grid_from_sparse(index, sparse["coords"], values.tobytes(), "density")
-    (tmp_path / "nan.vdb").write_bytes(vdb_file.to_bytes())
+    vdb_file.replace_grid_from_sparse(index, np.asarray(coords_xyz, np.int32).tobytes(),
+                                      np.asarray(values, np.float32).tobytes(), "density")
+    path = tmp_path / name
+    path.write_bytes(vdb_file.to_bytes())
     vdb_file.close()
-    refused(lambda: load_grid_file(tmp_path / "nan.vdb", WHERE), r"1 non-finite density value\(s\), the first nan")
+    return path
+
+
+def test_two_vdb_voxels_far_apart_are_refused_before_densifying(tmp_path):
+    path = rewritten_vdb(tmp_path, "far.vdb", [[0, 0, 0], [1000, 1000, 1000]], [1.0, 1.0])
+    message = refused(lambda: load_grid_file(path, WHERE), "1001 × 1001 × 1001 = .* voxels, more than the limit")
+    assert peak_allocation(lambda: load_grid_file(path, WHERE)) < SMALL_BYTES, message
+
+
+def test_a_vdb_with_nan_is_refused(tmp_path):
+    values = np.load(DATA / "density_expected.npy").transpose(2, 1, 0).ravel()  # [x, y, z] order, as the coordinates
+    coords = np.stack(np.meshgrid(np.arange(2, 7), np.arange(-1, 3), np.arange(3, 6), indexing="ij"), -1).reshape(-1, 3)
+    values[7] = np.nan
+    path = rewritten_vdb(tmp_path, "nan.vdb", coords, values)
+    refused(lambda: load_grid_file(path, WHERE), r"1 non-finite density value\(s\), the first nan")
 
 
 def test_vdb_tiles_and_level_sets_are_refused():
