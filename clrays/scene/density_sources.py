@@ -126,7 +126,12 @@ def bake_noise(frequency: float, octaves: int, seed: int, offset: Sequence[float
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not -2**31 <= seed < 2**31:
         raise SceneError(f"{where}.seed: expected an integer in [-2³¹, 2³¹), got {seed!r}")
     shift = np.array([_finite(v, f"{where}.offset") for v in _three(offset, f"{where}.offset")])
-    low, high = np.asarray(bounds.min, dtype=np.float64), np.asarray(bounds.max, dtype=np.float64)
+    low, high = (np.array([_finite(v, f"{where}.bounds") for v in _three(corner, f"{where}.bounds")])
+                 for corner in (bounds.min, bounds.max))
+    if (low > high).any():
+        axis = int(np.argmax(low > high))
+        raise SceneError(f"{where}.bounds: min {'xyz'[axis]} = {low[axis]:g} is more than max {'xyz'[axis]} = "
+                         f"{high[axis]:g}")
     fast_noise = _import_extra("pyfastnoiselite.pyfastnoiselite", "noise", "noise", where)
 
     noise = fast_noise.FastNoiseLite(seed=int(seed))
@@ -273,7 +278,7 @@ def _finite(value, where: str) -> float:
     except (TypeError, ValueError):
         raise SceneError(f"{where}: expected a number, got {value!r}") from None
     if not math.isfinite(number):
-        raise SceneError(f"{where}: expected a finite number, got {value!r}")
+        raise SceneError(f"{where}: expected a finite number, got {number}")
     return number
 
 

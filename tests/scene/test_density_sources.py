@@ -297,6 +297,8 @@ def test_noise_in_slabs_is_the_same_as_in_one_piece(monkeypatch):
     (dict(offset=(0, 1)), r"medium.density.offset: expected three values"),
     (dict(offset=(0, float("inf"), 0)), r"medium.density.offset: expected a finite number"),
     (dict(resolution=(16, 0, 4)), r"medium.density.resolution: an empty grid"),
+    (dict(bounds=Box(np.zeros(3), np.array([1.0, -1.0, 1.0]))), r"medium.density.bounds: min y = 0 is more than max y = -1"),
+    (dict(bounds=Box(np.zeros(3), np.array([1.0, np.nan, 1.0]))), r"medium.density.bounds: expected a finite number"),
     (dict(resolution=(16, 8.5, 4)), r"medium.density.resolution: expected three integers"),
 ])
 def test_bad_noise_settings_are_one_line(changes, match):
