@@ -122,9 +122,9 @@ def bake_noise(frequency: float, octaves: int, seed: int, offset: Sequence[float
         raise SceneError(f"{where}.frequency: expected a number > 0, got {frequency:g}")
     if isinstance(octaves, bool) or not isinstance(octaves, (int, np.integer)) \
             or not 1 <= octaves <= MAX_NOISE_OCTAVES:
-        raise SceneError(f"{where}.octaves: expected an integer in [1, {MAX_NOISE_OCTAVES}], got {octaves!r}")
+        raise SceneError(f"{where}.octaves: expected an integer in [1, {MAX_NOISE_OCTAVES}], got {_shown(octaves)}")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not -2**31 <= seed < 2**31:
-        raise SceneError(f"{where}.seed: expected an integer in [-2³¹, 2³¹), got {seed!r}")
+        raise SceneError(f"{where}.seed: expected an integer in [-2³¹, 2³¹), got {_shown(seed)}")
     shift = np.array([_finite(v, f"{where}.offset") for v in _three(offset, f"{where}.offset")])
     low, high = (np.array([_finite(v, f"{where}.bounds") for v in _three(corner, f"{where}.bounds")])
                  for corner in (bounds.min, bounds.max))
@@ -256,7 +256,7 @@ def _noise_resolution(resolution, where: str) -> tuple[int, int, int]:
     """A noise grid's voxels along (x, y, z), checked against the limit before any allocation."""
     counts = _three(resolution, f"{where}.resolution")
     if not all(isinstance(n, (int, np.integer)) and not isinstance(n, bool) for n in counts):
-        raise SceneError(f"{where}.resolution: expected three integers, got {list(counts)!r}")
+        raise SceneError(f"{where}.resolution: expected three integers, got [{', '.join(map(_shown, counts))}]")
     nx, ny, nz = (int(n) for n in counts)
     _check_shape((nz, ny, nx), f"{where}.resolution")
     return nx, ny, nz
@@ -280,6 +280,11 @@ def _finite(value, where: str) -> float:
     if not math.isfinite(number):
         raise SceneError(f"{where}: expected a finite number, got {number}")
     return number
+
+
+def _shown(value) -> str:
+    """A value as the user wrote it: numbers plainly (numpy's repr says np.int64(40)), anything else quoted."""
+    return str(value) if isinstance(value, (int, float, np.number)) else repr(value)
 
 
 def _index(index) -> tuple[int, ...]:
