@@ -37,7 +37,7 @@ GRID_VOXELS_MAX = 256 ** 3
 #: The largest grid file read: a float64 `.npy` at GRID_VOXELS_MAX, with room for its header.
 #: A `.vdb` holds its active voxels (4 bytes each, less compressed) and its tree's masks.
 MAX_GRID_FILE_BYTES = GRID_VOXELS_MAX * 8 + (1 << 20)
-GRID_FORMATS = (".npy", ".vdb", ".nvdb")
+GRID_FORMATS = (".npy", ".vdb")
 #: Octaves of fBm: each halves the feature size (lacunarity 2); past 16 they are finer than
 #: float32 coordinates resolve, and each costs a full pass over the grid.
 MAX_NOISE_OCTAVES = 16
@@ -60,21 +60,21 @@ def check_grid(values, where: str) -> np.ndarray:
     negative values, or values beyond float32."""
     grid = np.asarray(values)
     if grid.dtype.kind not in "biuf" or grid.dtype.fields is not None:
-        raise SceneError(f"{where}: an array of dtype {grid.dtype}, not numbers")
+        raise SceneError(f"{where}: expected an array of numbers, got dtype {grid.dtype}")
     _check_shape(grid.shape, where)
     bad = ~np.isfinite(grid)
     if bad.any():
         first = _index(np.argwhere(bad)[0])
-        raise SceneError(f"{where}: {int(bad.sum())} non-finite density value(s), the first {grid[first]} at "
-                         f"[z, y, x] = {list(first)}")
+        raise SceneError(f"{where}: expected finite densities, got {int(bad.sum())} NaN or infinite, the first "
+                         f"{grid[first]} at [z, y, x] = {list(first)}")
     negative = grid < 0
     if negative.any():
         first = _index(np.argwhere(negative)[0])
-        raise SceneError(f"{where}: {int(negative.sum())} negative density value(s), the first {grid[first]:g} at "
-                         f"[z, y, x] = {list(first)}: a density factor is ≥ 0")
+        raise SceneError(f"{where}: expected densities ≥ 0, got {grid[first]:g} at [z, y, x] = {list(first)} "
+                         f"({int(negative.sum())} negative in all)")
     if grid.dtype.itemsize > 4 and float(grid.max()) > float(np.finfo(np.float32).max):
-        raise SceneError(f"{where}: a density value of {float(grid.max()):g}, beyond float32 "
-                         f"({np.finfo(np.float32).max:.3g})")
+        raise SceneError(f"{where}: expected densities within float32 (≤ {np.finfo(np.float32).max:.3g}), "
+                         f"got {float(grid.max()):g}")
     return np.ascontiguousarray(grid, dtype=np.float32)
 
 
@@ -86,14 +86,14 @@ def load_grid_file(path: Path, where: str) -> np.ndarray:
     GRID_VOXELS_MAX voxels (from the header, before the data is read), bad values, and a
     `.vdb` without the `vdb` extra installed."""
     suffix = Path(path).suffix.lower()
-    if suffix not in GRID_FORMATS:
-        raise SceneError(f"{where}: a {suffix or 'file without an extension'} file, not one of "
-                         f"{', '.join(GRID_FORMATS)}")
     if suffix == ".nvdb":
         # tinyvdb's Python API reads NanoVDB voxels one call at a time and cannot list a
         # grid's active voxels, so a NanoVDB grid could not be densified in reasonable time.
-        raise SceneError(f"{where}: NanoVDB (.nvdb) grids are not read; convert it to OpenVDB "
-                         f"(nanovdb_convert file.nvdb file.vdb) or to a .npy array")
+        raise SceneError(f"{where}: expected a .npy or .vdb file, got a NanoVDB (.nvdb) file, which clrays does "
+                         f"not read: convert it to OpenVDB (nanovdb_convert file.nvdb file.vdb) or to .npy")
+    if suffix not in GRID_FORMATS:
+        raise SceneError(f"{where}: expected a .npy or .vdb file, got a {suffix or 'file without an extension'} "
+                         f"file")
     try:
         data = read_regular_file(path, MAX_GRID_FILE_BYTES,
                                  too_big_hint=f"a density grid holds at most {GRID_VOXELS_MAX} voxels")
@@ -130,8 +130,8 @@ def bake_noise(frequency: float, octaves: int, seed: int, offset: Sequence[float
                  for corner in (bounds.min, bounds.max))
     if (low > high).any():
         axis = int(np.argmax(low > high))
-        raise SceneError(f"{where}.bounds: min {'xyz'[axis]} = {low[axis]:g} is more than max {'xyz'[axis]} = "
-                         f"{high[axis]:g}")
+        raise SceneError(f"{where}.bounds: expected max ≥ min on every axis, got {'xyz'[axis]}: min "
+                         f"{low[axis]:g}, max {high[axis]:g}")
     fast_noise = _import_extra("pyfastnoiselite.pyfastnoiselite", "noise", "noise", where)
 
     noise = fast_noise.FastNoiseLite(seed=int(seed))
@@ -167,9 +167,9 @@ def _npy_grid(data: bytes, where: str) -> np.ndarray:
         shape, fortran_order, dtype = read_header(stream)
     except (ValueError, SyntaxError, TypeError, EOFError) as exc:
         detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise SceneError(f"{where}: not a .npy array ({detail[:120]})") from None
+        raise SceneError(f"{where}: expected a .npy array, got a file that is not one ({detail[:120]})") from None
     if dtype.hasobject or dtype.kind not in "biuf" or dtype.fields is not None:
-        raise SceneError(f"{where}: an array of dtype {dtype}, not numbers")
+        raise SceneError(f"{where}: expected an array of numbers, got dtype {dtype}")
     _check_shape(shape, where)
     try:
         shape, dtype, data_offset = npy_header(data)  # and the data's size against the file's
@@ -194,21 +194,22 @@ def _vdb_grid(data: bytes, where: str) -> np.ndarray:
             grid = _density_grid(vdb_file, where)
             active = int(grid.active_voxel_count())
             if active > GRID_VOXELS_MAX:  # they could not fit the dense grid: refused before they are listed
-                raise SceneError(f"{where}: a grid of {active} active voxels, more than the limit of "
-                                 f"{GRID_VOXELS_MAX} (256³)")
+                raise SceneError(f"{where}: expected at most {GRID_VOXELS_MAX} voxels, got {active} active "
+                                 f"voxels")
             sparse = grid.to_sparse()
             stored = grid.metadata.get("file_voxel_count")
         finally:
             vdb_file.close()
     except (tinyvdb.VDBError, OSError, ValueError) as exc:
         detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise SceneError(f"{where}: not a readable OpenVDB file ({detail[:120]})") from None
+        raise SceneError(f"{where}: expected an OpenVDB file, got one that cannot be read ({detail[:120]})") \
+            from None
     count = int(sparse["count"])
     if stored is not None and int(stored) > count:
-        raise SceneError(f"{where}: the grid holds {int(stored)} active voxels, {int(stored) - count} of them in "
-                         f"tiles, which are not read; voxelize its active tiles before saving")
+        raise SceneError(f"{where}: expected active voxels, got {int(stored)}, {int(stored) - count} of them in "
+                         f"tiles, which are not read: voxelize the grid's active tiles before saving it")
     if count == 0:
-        raise SceneError(f"{where}: the grid has no active voxels: an empty grid")
+        raise SceneError(f"{where}: expected a grid with active voxels, got none")
     xyz = np.frombuffer(sparse["coords"], dtype=np.int32).reshape(count, 3).astype(np.int64)
     low, high = xyz.min(axis=0), xyz.max(axis=0)
     _check_shape(tuple(int(n) for n in (high - low + 1)[::-1]), where)
@@ -227,12 +228,11 @@ def _density_grid(vdb_file, where: str):
     chosen = [i for i in floats if names[i] == "density"] or (floats if len(floats) == 1 else [])
     if not chosen:
         found = ", ".join(f"{name} ({vdb_file.grid_type_name(i)})" for i, name in enumerate(names)) or "no grids"
-        raise SceneError(f"{where}: no float grid named `density` and not one float grid to take instead "
-                         f"(the file holds {found})")
+        raise SceneError(f"{where}: expected a float grid named `density` or a single float grid, got {found}")
     grid = vdb_file.grid(chosen[0])
     if grid.metadata.get("class") == "level set":
-        raise SceneError(f"{where}: grid `{names[chosen[0]]}` is a level set (signed distances), not a fog "
-                         f"volume of densities")
+        raise SceneError(f"{where}: expected a fog volume of densities, got grid `{names[chosen[0]]}`, a level set "
+                         f"(signed distances)")
     return grid
 
 
@@ -243,13 +243,18 @@ def _check_shape(shape, where: str) -> None:
     integers, so a header's 10¹² cannot overflow)."""
     shape = tuple(int(n) for n in shape)
     if len(shape) != 3:
-        raise SceneError(f"{where}: an array of shape {shape}, not a 3D grid indexed [z, y, x]")
+        raise SceneError(f"{where}: expected a 3D grid (axes z, y, x), got shape {shape}")
     if min(shape) < 1:
-        raise SceneError(f"{where}: an empty grid of shape {shape}")
-    voxels = math.prod(shape)
+        raise SceneError(f"{where}: expected at least one voxel along each axis, got shape {shape}")
+    _check_voxels(shape, where)
+
+
+def _check_voxels(counts: Sequence[int], where: str) -> None:
+    """At most GRID_VOXELS_MAX voxels, `counts` along the axes in the order the user wrote them."""
+    voxels = math.prod(counts)
     if voxels > GRID_VOXELS_MAX:
-        raise SceneError(f"{where}: a grid of {' × '.join(map(str, shape))} = {voxels:.4g} voxels, more than the "
-                         f"limit of {GRID_VOXELS_MAX} (256³)")
+        raise SceneError(f"{where}: expected at most {GRID_VOXELS_MAX} voxels, got {voxels} "
+                         f"({' × '.join(map(str, counts))})")
 
 
 def _noise_resolution(resolution, where: str) -> tuple[int, int, int]:
@@ -258,7 +263,9 @@ def _noise_resolution(resolution, where: str) -> tuple[int, int, int]:
     if not all(isinstance(n, (int, np.integer)) and not isinstance(n, bool) for n in counts):
         raise SceneError(f"{where}.resolution: expected three integers, got [{', '.join(map(_shown, counts))}]")
     nx, ny, nz = (int(n) for n in counts)
-    _check_shape((nz, ny, nx), f"{where}.resolution")
+    if min(nx, ny, nz) < 1:
+        raise SceneError(f"{where}.resolution: expected integers ≥ 1, got [{nx}, {ny}, {nz}]")
+    _check_voxels((nx, ny, nz), f"{where}.resolution")
     return nx, ny, nz
 
 
