@@ -38,6 +38,8 @@ GRID_VOXELS_MAX = 256 ** 3
 #: A `.vdb` holds its active voxels (4 bytes each, less compressed) and its tree's masks.
 MAX_GRID_FILE_BYTES = GRID_VOXELS_MAX * 8 + (1 << 20)
 GRID_FORMATS = (".npy", ".vdb")
+#: OpenVDB's name for a FloatGrid's tree (a half-float grid is saved under the same name).
+_VDB_FLOAT_GRID = "Tree_float_5_4_3"
 #: Octaves of fBm: each halves the feature size (lacunarity 2); past 16 they are finer than
 #: float32 coordinates resolve, and each costs a full pass over the grid.
 MAX_NOISE_OCTAVES = 16
@@ -206,15 +208,17 @@ def _vdb_grid(data: bytes, where: str) -> np.ndarray:
             from None
     count = int(sparse["count"])
     if stored is not None and int(stored) > count:
-        raise SceneError(f"{where}: expected active voxels, got {int(stored)}, {int(stored) - count} of them in "
-                         f"tiles, which are not read: voxelize the grid's active tiles before saving it")
+        raise SceneError(f"{where}: expected every active value stored as a voxel, got {int(stored)} active voxels, "
+                         f"{int(stored) - count} of them in tiles, which are not read: voxelize the grid's active "
+                         f"tiles before saving it")
     if count == 0:
         raise SceneError(f"{where}: expected a grid with active voxels, got none")
     xyz = np.frombuffer(sparse["coords"], dtype=np.int32).reshape(count, 3).astype(np.int64)
-    low, high = xyz.min(axis=0), xyz.max(axis=0)
-    _check_shape(tuple(int(n) for n in (high - low + 1)[::-1]), where)
+    low = xyz.min(axis=0)
+    shape_zyx = tuple(int(n) for n in (xyz.max(axis=0) - low + 1)[::-1])
+    _check_shape(shape_zyx, where)
     values = np.frombuffer(sparse["values"], dtype=np.float32, count=count)
-    grid_zyx = np.zeros(tuple(int(n) for n in (high - low + 1)[::-1]), dtype=np.float32)
+    grid_zyx = np.zeros(shape_zyx, dtype=np.float32)
     index = xyz - low
     grid_zyx[index[:, 2], index[:, 1], index[:, 0]] = values
     return grid_zyx
@@ -224,7 +228,7 @@ def _density_grid(vdb_file, where: str):
     """The grid a `.vdb` file's density is read from: its float grid named `density`, or its
     only float grid; a fog volume, not a level set."""
     names = [vdb_file.grid_name(i) for i in range(vdb_file.grid_count)]
-    floats = [i for i in range(vdb_file.grid_count) if vdb_file.grid_type_name(i) == "Tree_float_5_4_3"]
+    floats = [i for i in range(vdb_file.grid_count) if vdb_file.grid_type_name(i) == _VDB_FLOAT_GRID]
     chosen = [i for i in floats if names[i] == "density"] or (floats if len(floats) == 1 else [])
     if not chosen:
         found = ", ".join(f"{name} ({vdb_file.grid_type_name(i)})" for i, name in enumerate(names)) or "no grids"

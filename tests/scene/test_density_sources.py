@@ -195,14 +195,15 @@ def test_a_vdb_over_the_cap_is_refused_from_its_active_voxel_count(monkeypatch):
     assert load_grid_file(DATA / "density.vdb", WHERE).shape == (3, 4, 5)
 
 
-def rewritten_vdb(tmp_path, name: str, coords_xyz, values) -> Path:
-    """density.vdb with its density grid replaced by these voxels, by tinyvdb's own writer."""
+def rewritten_vdb(tmp_path, name: str, coords_xyz, values, grid_name="density") -> Path:
+    """density.vdb with its density grid replaced by these voxels (and renamed `grid_name`),
+    by tinyvdb's own writer."""
     tinyvdb = pytest.importorskip("tinyvdb")
     vdb_file = tinyvdb.open(str(DATA / "density.vdb"))
     vdb_file.read_grids()
     index = [vdb_file.grid_name(i) for i in range(vdb_file.grid_count)].index("density")
     vdb_file.replace_grid_from_sparse(index, np.asarray(coords_xyz, np.int32).tobytes(),
-                                      np.asarray(values, np.float32).tobytes(), "density")
+                                      np.asarray(values, np.float32).tobytes(), grid_name)
     path = tmp_path / name
     path.write_bytes(vdb_file.to_bytes())
     vdb_file.close()
@@ -223,9 +224,15 @@ def test_a_vdb_with_nan_is_refused(tmp_path):
     refused(lambda: load_grid_file(path, WHERE), r"expected finite densities, got 1 NaN or infinite, the first nan")
 
 
+def test_a_vdb_of_two_float_grids_none_named_density_is_refused(tmp_path):
+    path = rewritten_vdb(tmp_path, "smoke.vdb", [[0, 0, 0]], [1.0], grid_name="smoke")
+    refused(lambda: load_grid_file(path, WHERE), r"expected a float grid named `density` or a single float grid, "
+                                                 r"got temperature \(Tree_float_5_4_3\), smoke \(Tree_float_5_4_3\)")
+
+
 def test_vdb_tiles_and_level_sets_are_refused():
     pytest.importorskip("tinyvdb")
-    refused(lambda: load_grid_file(DATA / "tiles.vdb", WHERE), "expected active voxels, got 512, 512 of them in tiles")
+    refused(lambda: load_grid_file(DATA / "tiles.vdb", WHERE), "got 512 active voxels, 512 of them in tiles")
     refused(lambda: load_grid_file(DATA / "level_set.vdb", WHERE), "expected a fog volume of densities, got grid `surface`, a level set")
 
 
