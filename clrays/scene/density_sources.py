@@ -38,6 +38,10 @@ GRID_VOXELS_MAX = 256 ** 3
 #: A `.vdb` holds its active voxels (4 bytes each, less compressed) and its tree's masks.
 MAX_GRID_FILE_BYTES = GRID_VOXELS_MAX * 8 + (1 << 20)
 GRID_FORMATS = (".npy", ".vdb")
+#: Active voxels in all the grids of a `.vdb` (its density and the temperature, velocity or
+#: flame grids a simulation cache holds beside it), from its statistics, before it is read:
+#: tinyvdb reads every grid of the file.
+VDB_ACTIVE_VOXELS_MAX = 4 * GRID_VOXELS_MAX
 #: OpenVDB's name for a FloatGrid's tree (a half-float grid is saved under the same name).
 _VDB_FLOAT_GRID = "Tree_float_5_4_3"
 #: Octaves of fBm: each halves the feature size (lacunarity 2); past 16 they are finer than
@@ -189,6 +193,7 @@ def _vdb_grid(data: bytes, where: str) -> np.ndarray:
     (inactive voxels inside it are 0). The grid's transform is not used: the scene's
     `bounds` place it."""
     tinyvdb = _import_extra("tinyvdb", "vdb", "reading .vdb files", where)
+    _check_vdb_header(data, where)
     try:
         vdb_file = tinyvdb.from_bytes(data)
         try:
@@ -225,19 +230,99 @@ def _vdb_grid(data: bytes, where: str) -> np.ndarray:
 
 
 def _density_grid(vdb_file, where: str):
-    """The grid a `.vdb` file's density is read from: its float grid named `density`, or its
-    only float grid; a fog volume, not a level set."""
+    """The grid a `.vdb` file's density is read from (`_density_index`); a fog volume, not a
+    level set."""
     names = [vdb_file.grid_name(i) for i in range(vdb_file.grid_count)]
-    floats = [i for i in range(vdb_file.grid_count) if vdb_file.grid_type_name(i) == _VDB_FLOAT_GRID]
-    chosen = [i for i in floats if names[i] == "density"] or (floats if len(floats) == 1 else [])
-    if not chosen:
-        found = ", ".join(f"{name} ({vdb_file.grid_type_name(i)})" for i, name in enumerate(names)) or "no grids"
-        raise SceneError(f"{where}: expected a float grid named `density` or a single float grid, got {found}")
-    grid = vdb_file.grid(chosen[0])
+    index = _density_index(names, [vdb_file.grid_type_name(i) for i in range(vdb_file.grid_count)], where)
+    grid = vdb_file.grid(index)
     if grid.metadata.get("class") == "level set":
-        raise SceneError(f"{where}: expected a fog volume of densities, got grid `{names[chosen[0]]}`, a level set "
+        raise SceneError(f"{where}: expected a fog volume of densities, got grid `{names[index]}`, a level set "
                          f"(signed distances)")
     return grid
+
+
+def _density_index(names: list[str], types: list[str], where: str) -> int:
+    """Which of a `.vdb` file's grids holds the density: its float grid named `density`, or
+    its only float grid."""
+    floats = [i for i, grid_type in enumerate(types) if grid_type == _VDB_FLOAT_GRID]
+    chosen = [i for i in floats if names[i] == "density"] or (floats if len(floats) == 1 else [])
+    if not chosen:
+        found = ", ".join(f"{name} ({grid_type})" for name, grid_type in zip(names, types)) or "no grids"
+        raise SceneError(f"{where}: expected a float grid named `density` or a single float grid, got {found}")
+    return chosen[0]
+
+
+def _check_vdb_header(data: bytes, where: str) -> None:
+    """Refuse a `.vdb` whose own statistics say it is too large, before tinyvdb reads its
+    trees: the density grid's bounding box over GRID_VOXELS_MAX voxels, or more than
+    VDB_ACTIVE_VOXELS_MAX active voxels in all its grids. OpenVDB writes these statistics
+    (`file_bbox_min`, `file_bbox_max`, `file_voxel_count`) in each grid's metadata; a file
+    without them, or that does not parse as expected, is left to tinyvdb and the checks on
+    what it read."""
+    grids = _vdb_grid_statistics(data)
+    if not grids:
+        return
+    names, types = [grid[0] for grid in grids], [grid[1] for grid in grids]
+    total = sum(stats.get("file_voxel_count", 0) for _, _, stats in grids)
+    if total > VDB_ACTIVE_VOXELS_MAX:
+        raise SceneError(f"{where}: expected at most {VDB_ACTIVE_VOXELS_MAX} active voxels in all the file's grids, "
+                         f"got {total} in {len(grids)} grids (save the density grid alone)")
+    stats = grids[_density_index(names, types, where)][2]
+    if "file_bbox_min" in stats and "file_bbox_max" in stats:
+        extent = np.array(stats["file_bbox_max"], dtype=np.int64) - np.array(stats["file_bbox_min"], dtype=np.int64) + 1
+        if (extent > 0).all():
+            _check_shape(tuple(int(n) for n in extent[::-1]), where)
+
+
+def _vdb_grid_statistics(data: bytes) -> list[tuple[str, str, dict]] | None:
+    """(name, type, {file_voxel_count: int, file_bbox_min/max: (x, y, z)}) of each grid in an
+    OpenVDB file, from its grid descriptors and metadata (format 222 and later, with grid
+    offsets, as OpenVDB 3 and later write), or None where the file is not that."""
+    import struct
+
+    position = 0
+
+    def take(count: int) -> bytes:
+        nonlocal position
+        if count < 0 or position + count > len(data):
+            raise ValueError("past the end")
+        position += count
+        return data[position - count:position]
+
+    def number(form: str):
+        return struct.unpack("<" + form, take(struct.calcsize(form)))[0]
+
+    def text() -> str:
+        return take(number("I")).decode("latin-1")
+
+    def metadata() -> dict[str, tuple[str, bytes]]:
+        return {text(): (text(), take(number("I"))) for _ in range(number("i"))}
+
+    try:
+        if number("q") != 0x56444220 or number("I") < 222:
+            return None
+        take(8)  # the library's version
+        if take(1) != b"\x01":  # no grid offsets: descriptors cannot be read without the trees
+            return None
+        take(36)  # the file's UUID
+        metadata()
+        grids = []
+        for _ in range(number("i")):
+            name, grid_type, _parent = text(), text(), text()
+            grid_start, _, grid_end = number("q"), number("q"), number("q")
+            position = grid_start
+            take(4)  # the grid's compression flags
+            stats = {}
+            for key, (value_type, value) in metadata().items():
+                if key == "file_voxel_count" and value_type == "int64" and len(value) == 8:
+                    stats[key] = struct.unpack("<q", value)[0]
+                elif key in ("file_bbox_min", "file_bbox_max") and value_type == "vec3i" and len(value) == 12:
+                    stats[key] = struct.unpack("<3i", value)
+            grids.append((name.split("\x1e")[0], grid_type.removesuffix("_HalfFloat"), stats))
+            position = grid_end
+        return grids
+    except (ValueError, struct.error, UnicodeDecodeError):
+        return None
 
 
 # --------------------------------------------------------------------------- shared checks

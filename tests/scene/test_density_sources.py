@@ -185,14 +185,9 @@ def test_an_openvdb_density_grid_is_densified_over_its_active_voxels():
     assert grid.tobytes() == expected.tobytes()
 
 
-def test_a_vdb_over_the_cap_is_refused_from_its_active_voxel_count(monkeypatch):
-    pytest.importorskip("tinyvdb")
-    from clrays.scene import density_sources
-
-    monkeypatch.setattr(density_sources, "GRID_VOXELS_MAX", 59)  # the density grid's 60 voxels, one too many
-    refused(lambda: load_grid_file(DATA / "density.vdb", WHERE), "expected at most 59 voxels, got 60 active voxels")
-    monkeypatch.setattr(density_sources, "GRID_VOXELS_MAX", 60)
-    assert load_grid_file(DATA / "density.vdb", WHERE).shape == (3, 4, 5)
+#: The index coordinates of density.vdb's voxels, [x, y, z] in x-major order (as its values
+#: transposed to [x, y, z] and flattened).
+DENSITY_XYZ = np.stack(np.meshgrid(np.arange(2, 7), np.arange(-1, 3), np.arange(3, 6), indexing="ij"), -1).reshape(-1, 3)
 
 
 def rewritten_vdb(tmp_path, name: str, coords_xyz, values, grid_name="density") -> Path:
@@ -210,6 +205,35 @@ def rewritten_vdb(tmp_path, name: str, coords_xyz, values, grid_name="density") 
     return path
 
 
+def test_a_vdb_over_the_cap_is_refused_from_its_statistics_before_it_is_read(monkeypatch):
+    tinyvdb = pytest.importorskip("tinyvdb")
+    from clrays.scene import density_sources
+
+    monkeypatch.setattr(density_sources, "GRID_VOXELS_MAX", 59)  # the density grid's box of 60 voxels, one too many
+    monkeypatch.setattr(tinyvdb, "from_bytes", lambda data: pytest.fail("the file was read"))
+    refused(lambda: load_grid_file(DATA / "density.vdb", WHERE), r"expected at most 59 voxels, got 60 \(3 × 4 × 5\)")
+
+
+def test_a_vdb_of_too_many_active_voxels_in_all_its_grids_is_refused_before_it_is_read(monkeypatch):
+    tinyvdb = pytest.importorskip("tinyvdb")
+    from clrays.scene import density_sources
+
+    monkeypatch.setattr(density_sources, "VDB_ACTIVE_VOXELS_MAX", 63)  # density's 60 and temperature's 4
+    monkeypatch.setattr(tinyvdb, "from_bytes", lambda data: pytest.fail("the file was read"))
+    refused(lambda: load_grid_file(DATA / "density.vdb", WHERE),
+            r"expected at most 63 active voxels in all the file's grids, got 64 in 2 grids")
+
+
+def test_a_vdb_without_statistics_over_the_cap_is_refused_from_what_was_read(tmp_path, monkeypatch):
+    """tinyvdb's writer leaves out OpenVDB's statistics: the counts come from the grid read."""
+    from clrays.scene import density_sources
+
+    path = rewritten_vdb(tmp_path, "plain.vdb", DENSITY_XYZ, np.ones(len(DENSITY_XYZ)))
+    assert load_grid_file(path, WHERE).shape == (3, 4, 5)
+    monkeypatch.setattr(density_sources, "GRID_VOXELS_MAX", 59)
+    refused(lambda: load_grid_file(path, WHERE), "expected at most 59 voxels, got 60 active voxels")
+
+
 def test_two_vdb_voxels_far_apart_are_refused_before_densifying(tmp_path):
     path = rewritten_vdb(tmp_path, "far.vdb", [[0, 0, 0], [1000, 1000, 1000]], [1.0, 1.0])
     message = refused(lambda: load_grid_file(path, WHERE), r"expected at most \d+ voxels, got 1003003001 \(1001 × 1001 × 1001\)")
@@ -218,9 +242,8 @@ def test_two_vdb_voxels_far_apart_are_refused_before_densifying(tmp_path):
 
 def test_a_vdb_with_nan_is_refused(tmp_path):
     values = np.load(DATA / "density_expected.npy").transpose(2, 1, 0).ravel()  # [x, y, z] order, as the coordinates
-    coords = np.stack(np.meshgrid(np.arange(2, 7), np.arange(-1, 3), np.arange(3, 6), indexing="ij"), -1).reshape(-1, 3)
     values[7] = np.nan
-    path = rewritten_vdb(tmp_path, "nan.vdb", coords, values)
+    path = rewritten_vdb(tmp_path, "nan.vdb", DENSITY_XYZ, values)
     refused(lambda: load_grid_file(path, WHERE), r"expected finite densities, got 1 NaN or infinite, the first nan")
 
 
