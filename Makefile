@@ -3,8 +3,9 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
-# The extras the suite needs (pyproject.toml): web is the Draco and meshopt decoders.
-EXTRAS := test,bench,distributed,video,web
+# The extras the suite needs (pyproject.toml): web is the Draco and meshopt decoders; vdb and
+# noise read density grids from OpenVDB files and bake them from noise.
+EXTRAS := test,bench,distributed,video,web,vdb,noise
 
 .PHONY: demo test test-device test-slow bench results info intel-cpu clean
 

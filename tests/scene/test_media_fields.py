@@ -3,6 +3,8 @@ load into (clrays/scene/model.py: Box, HeightDensity, GridDensity), an animated 
 offset, a glTF scene's default fog placed by YAML, and every bad input as one line."""
 from __future__ import annotations
 
+import sys
+
 from pathlib import Path
 
 import numpy as np
@@ -103,7 +105,8 @@ density: {type: noise, frequency: 0.5, octaves: 3, seed: 9, bounds: {min: [0, 0,
     assert calls[-1][3] == (1.5, 0.0, 0.0)
 
 
-def test_noise_without_its_extra_is_one_line_naming_it(tmp_path):
+def test_noise_without_its_extra_is_one_line_naming_it(tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "pyfastnoiselite.pyfastnoiselite", None)  # as if not installed
     _fails(tmp_path, "density: {type: noise, bounds: {min: [0, 0, 0], max: [1, 1, 1]}}", r"`noise` extra",
            error=ClraysError)
 
