@@ -4,7 +4,6 @@ offset, a glTF scene's default fog placed by YAML, and every bad input as one li
 from __future__ import annotations
 
 import sys
-
 from pathlib import Path
 
 import numpy as np
