@@ -44,7 +44,7 @@ MAX_BINNED_EDGES = 4 * 2**20
 #: that cross its half-plane, those whose arc ends in a neighbouring bin. At 16 entries an edge
 #: those two make up an eighth of the entries on average. On scenes/lattice.yaml (13 k outline edges) the
 #: 4096 bins where none held over 256 edges gave a ray 132 edges to read for 82 that cross it;
-#: 16384 bins give it 95, for 296 k entries (9 MiB).
+#: 16384 bins give it 95, for 296 k entries (9.5 MB).
 ENTRIES_PER_EDGE = 16
 
 
@@ -194,13 +194,14 @@ def alpha_bins(ends: np.ndarray, u: np.ndarray, w: np.ndarray) -> tuple[int, np.
             return None
         bins *= 2
     # the entries, edge by edge nearest the light ray first, then put in bin order by a
-    # stable sort: each bin keeps that order
+    # stable sort, so each bin keeps that order (on 16-bit keys numpy's stable sort is a
+    # radix sort: 6 ms for the lattice's 296 k entries, where 32-bit keys took 28)
     nearest_first = np.argsort(distance, kind="stable")
     edge = np.repeat(nearest_first, spans[nearest_first])
     step = np.arange(len(edge)) - np.repeat(np.cumsum(spans[nearest_first]) - spans[nearest_first],
                                             spans[nearest_first])
     where = np.remainder(first[edge] + step, bins)
-    order = np.argsort(where.astype(np.int32), kind="stable")
+    order = np.argsort(where.astype(np.uint16 if bins <= 2**16 else np.int64), kind="stable")
     offsets = np.zeros(bins + 1, np.int32)
     offsets[1:] = np.cumsum(counts)
     return bins, offsets, edge[order], distance
