@@ -68,7 +68,7 @@ def _edges_read_and_crossing(seen, samples: int = 2000) -> tuple[float, float]:
 
 def test_finer_bins_read_fewer_edges_and_make_the_same_image(renderer, monkeypatch):
     """The lattice from its own camera: with the bins doubled only until none holds over 256
-    edges (4096), a ray read 1.6× the edges that cross its half-plane (132 for 82, 160×90);
+    edges (4096), a ray read 1.6× the edges that cross its half-plane (132 for 82);
     doubled on towards 16 entries per edge (16384), 1.16×. The crossings a ray finds are the
     same, in the same order, so the image is the same to the bit."""
     scene = load_scene(LATTICE, overrides=["image.width=96", "image.height=54"])
