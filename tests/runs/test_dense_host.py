@@ -1,7 +1,14 @@
-"""Lights below the error budget (clrays/light_skip.py): the bound holds a light's own image
+"""Dense scenes and many lights.
+
+Lights below the error budget (clrays/light_skip.py): the bound holds a light's own image
 from above, a negligible light is left out of a frame of lights in turn within the budget
 and `--stats` says so, a guess that fails the check after the frame renders the light after
-all, and what no bound covers is never left out."""
+all, and what no bound covers is never left out.
+
+The host steps of a dense mesh: a binary PLY of triangles read in numpy as trimesh reads it
+(clrays/scene/ply.py), anything else left to trimesh; the Morton code's bit spread and the
+smooth normals' flat fallback the same as before, and the farthest vertex found through
+boxes the same as through every vertex."""
 from __future__ import annotations
 
 import math
@@ -11,9 +18,12 @@ import numpy as np
 import pytest
 
 from clrays import light_skip
+from clrays.scene import geometry as geometry_module
+from clrays.scene.geometry import MORTON_BITS, flat_normals, load_mesh, smooth_normals
 from clrays.light_skip import SKIP_BUDGET, candidates, contribution_bound, mean_luminance
 from clrays.scene.load import load_scene
-from clrays.scene.model import DirectionalLight, PointLight
+from clrays.scene.model import DirectionalLight, PointLight, _farthest_squared
+from clrays.scene.ply import read_binary_triangles
 from clrays.session import Renderer
 from conftest import run_cli
 
@@ -100,3 +110,111 @@ def test_what_no_bound_covers_is_never_skipped(scene):
     assert contribution_bound(replace(scene, lights=(scene.lights[0], dark)), 1) == 0.0
     assert candidates(scene, enabled=False) == ((), 0.0)
     assert candidates(replace(scene, lights=scene.lights[1:])) == ((), 0.0)  # one light is never left out
+
+
+# ---------------------------------------------------------------- the host steps of a dense mesh
+
+def _ply(vertices: np.ndarray, faces: np.ndarray, order: str = "<", vertex_extra: str = "", counts=None) -> bytes:
+    """A binary PLY file: float x y z (and a uchar `vertex_extra` property set to 7), faces as
+    lists of `counts` (default 3) int corners."""
+    form = {"<": "binary_little_endian", ">": "binary_big_endian"}[order]
+    fields = [("x", order + "f4"), ("y", order + "f4"), ("z", order + "f4")] + ([(vertex_extra, "u1")] if vertex_extra else [])
+    points = np.zeros(len(vertices), fields)
+    for axis, name in enumerate("xyz"):
+        points[name] = vertices[:, axis]
+    if vertex_extra:
+        points[vertex_extra] = 7
+    rows = np.zeros(len(faces), [("n", "u1"), ("v", order + "i4", faces.shape[1])])
+    rows["n"], rows["v"] = faces.shape[1] if counts is None else counts, faces
+    header = (f"ply\nformat {form} 1.0\ncomment made by a test\nelement vertex {len(vertices)}\nproperty float x\n"
+              f"property float y\nproperty float z\n" + (f"property uchar {vertex_extra}\n" if vertex_extra else "")
+              + f"element face {len(faces)}\nproperty list uchar int vertex_indices\nend_header\n")
+    return header.encode() + points.tobytes() + rows.tobytes()
+
+
+def _trimesh_read(data: bytes):
+    import io
+
+    import trimesh
+
+    mesh = trimesh.load(io.BytesIO(data), file_type="ply", process=False)
+    return np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64)
+
+
+@pytest.mark.parametrize("order, extra", [("<", ""), (">", ""), ("<", "red")])
+def test_a_binary_ply_of_triangles_reads_as_trimesh_reads_it(order, extra):
+    rng = np.random.default_rng(11)
+    vertices, faces = rng.normal(size=(50, 3)), rng.integers(0, 50, (80, 3))
+    data = _ply(vertices, faces, order, extra)
+    read = read_binary_triangles(data)
+    assert read is not None
+    for got, expected in zip(read, _trimesh_read(data)):
+        assert got.dtype == expected.dtype
+        np.testing.assert_array_equal(got, expected)
+
+
+def test_a_mesh_file_loads_the_same_without_trimesh(tmp_path, monkeypatch):
+    vertices, faces = _boxes(5)
+    path = tmp_path / "boxes.ply"
+    path.write_bytes(_ply(vertices, faces))
+    fast = load_mesh(path)
+    monkeypatch.setattr(geometry_module, "read_binary_triangles", lambda data: None)
+    slow = load_mesh(path)
+    assert fast[2] == slow[2] != 0  # closed boxes
+    for got, expected in zip(fast[:2], slow[:2]):
+        np.testing.assert_array_equal(got, expected)
+
+
+def test_other_ply_files_are_left_to_trimesh():
+    vertices, faces = _boxes(1)
+    whole = _ply(vertices, faces)
+    assert read_binary_triangles(whole) is not None
+    assert read_binary_triangles(whole + b"\0") is None  # bytes left over
+    assert read_binary_triangles(whole[:-1]) is None  # bytes missing
+    assert read_binary_triangles(_ply(vertices, faces, counts=4)) is None  # a face that says 4 corners
+    quads = np.concatenate([faces[:2], faces[:2, :1]], axis=1)
+    assert read_binary_triangles(_ply(vertices, quads)) is None
+    assert read_binary_triangles(_ply(vertices, faces, vertex_extra="nx")) is None  # vertex normals: trimesh's
+    assert read_binary_triangles(whole.replace(b"binary_little_endian", b"ascii", 1)) is None
+    assert read_binary_triangles(b"solid x\n") is None
+
+
+def test_the_morton_spread_puts_bit_i_at_bit_3i():
+    cells = np.random.default_rng(3).integers(0, 1 << MORTON_BITS, 5000).astype(np.uint64)
+    expected = np.zeros_like(cells)
+    for bit in range(MORTON_BITS):
+        expected |= ((cells >> np.uint64(bit)) & np.uint64(1)) << np.uint64(3 * bit)
+    np.testing.assert_array_equal(geometry_module._every_third_bit(cells), expected)
+
+
+def test_smooth_normals_take_the_face_normal_only_where_a_corner_has_none():
+    # two faces wound opposite ways over vertices 0, 1, 2: their sums cancel at vertex 2
+    vertices = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    faces = np.array([[0, 1, 2], [0, 2, 1], [0, 1, 3]])
+    normals = smooth_normals(vertices, faces)
+    flat = flat_normals(vertices[faces])
+    np.testing.assert_array_equal(normals[0, 2], flat[0, 2])  # vertex 2 of each cancelling face: its own
+    np.testing.assert_array_equal(normals[1, 1], flat[1, 1])
+    # vertex 0: the third face's normal, on the cancelling faces too (not their own)
+    np.testing.assert_array_equal(normals[0, 0], flat[2, 0])
+    assert not np.array_equal(normals[0, 0], flat[0, 0])
+
+
+def _boxes(count: int) -> tuple[np.ndarray, np.ndarray]:
+    """A row of `count` closed boxes, 12 triangles each, sharing no vertex: (vertices, faces)."""
+    from clrays.scene.geometry import box_triangles
+
+    triangles = box_triangles(np.zeros(3), np.ones(3) * 0.5)[None] + np.arange(count)[:, None, None, None] * [1.0, 0, 0]
+    vertices = triangles.reshape(-1, 3)
+    return vertices, np.arange(len(vertices)).reshape(-1, 3)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_farthest_vertex_by_boxes_is_the_farthest_of_every_vertex(seed):
+    rng = np.random.default_rng(seed)
+    corners = rng.normal(size=(64 * 100 + 17, 3))
+    corners[rng.integers(len(corners))] *= 50  # one far vertex, anywhere in its block
+    kept = {}
+    for point in (np.zeros(3), rng.normal(size=3) * 10, corners[5]):
+        expected = ((corners - point) ** 2).sum(axis=1).max()
+        assert _farthest_squared(corners, point, lambda key, compute: kept.setdefault(key, compute())) == expected
