@@ -13,8 +13,11 @@ into account, so it holds whatever the shadows are; every transmittance is at mo
 
 (∫ dt / (h² + t²) over a whole line is π / h; the lamp's ball holds no medium, so no ray
 passes nearer than its radius, physics/radiometry.py.) h is bounded below from the cone
-around the camera's frustum (its half-diagonal angle). A skipped light's visibility is 0,
-so shade adds nothing of it, and its in-scattering is not added.
+around the camera's frustum (its half-diagonal angle). Behind the camera (every ray within
+90° of the cone leads away from the light), a ray's distance r from it grows from D, the
+light's from the eye, so ∫ dt / r² ≤ π / 2D, and light reaches the eye only scattered back
+(cosθ ≤ 0), where a forward Henyey–Greenstein phase is at most ρ(0). A skipped light's
+visibility is 0, so shade adds nothing of it, and its in-scattering is not added.
 
 The proof ends after the frame: the kept lights' image has a mean luminance M_kept at most
 the whole frame's (every light adds radiance ≥ 0), so where the skipped bounds sum to at
@@ -58,10 +61,10 @@ class SkippedLights:
     allowed: float
 
     def describe(self) -> str:
-        """One line for `--stats`."""
+        """One line for `--stats` (the first 16 indices)."""
+        listed = " ".join(str(index) for index in self.indices[:16]) + (" …" if len(self.indices) > 16 else "")
         return (f"{len(self.indices)} of {self.lights} lights below the error budget, skipped "
-                f"(their bound {self.bound:.3g} ≤ {SKIP_BUDGET:g} × the mean luminance = {self.allowed:.3g}): "
-                + " ".join(str(index) for index in self.indices))
+                f"(their bound {self.bound:.3g} ≤ {SKIP_BUDGET:g} × the mean luminance = {self.allowed:.3g}): {listed}")
 
 
 def contribution_bound(scene: Scene, index: int) -> float:
@@ -86,28 +89,33 @@ def contribution_bound(scene: Scene, index: int) -> float:
     sigma_s = float(np.max(scene.medium.sigma_s))
     in_scatter = 0.0
     if sigma_s > 0:
-        g = abs(float(scene.medium.phase.g)) if scene.medium.phase.type == "hg" else 0.0
-        phase_max = (1 + g) / (4 * math.pi * (1 - g) ** 2)  # Henyey–Greenstein at cosθ = ±1
-        passing = max(_nearest_camera_ray(scene, position), lamp_radius(scene))
-        in_scatter = sigma_s * phase_max * intensity * math.pi / passing
+        nearest, behind = _nearest_camera_ray(scene, position)
+        g = float(scene.medium.phase.g) if scene.medium.phase.type == "hg" else 0.0
+        if behind and g >= 0:  # scattered back only: ρ(cosθ ≤ 0) ≤ ρ(0)
+            phase_max = (1 - g * g) / (4 * math.pi * (1 + g * g) ** 1.5)
+        else:  # Henyey–Greenstein at cosθ = ±1
+            phase_max = (1 + abs(g)) / (4 * math.pi * (1 - abs(g)) ** 2)
+        along_ray = math.pi / (2 * nearest) if behind else math.pi / max(nearest, lamp_radius(scene))
+        in_scatter = sigma_s * phase_max * intensity * along_ray
     return float(LUMINANCE.sum()) * (surface + in_scatter)  # every channel at I_max: luminance weights sum
 
 
-def _nearest_camera_ray(scene: Scene, position: np.ndarray) -> float:
-    """A lower bound on the distance from `position` to any camera ray: rays lie in the cone
-    of the frustum's half-diagonal angle about the view direction."""
+def _nearest_camera_ray(scene: Scene, position: np.ndarray) -> tuple[float, bool]:
+    """(a lower bound on the distance from `position` to any camera ray, whether every ray
+    leads away from it): rays lie in the cone of the frustum's half-diagonal angle about the
+    view direction."""
     camera, image = scene.camera, scene.image
     to_light = position - np.asarray(camera.position, np.float64)
     distance = float(np.linalg.norm(to_light))
     if distance == 0:
-        return 0.0
+        return 0.0, False
     forward = camera_basis(camera)[2]
     half_diagonal = math.atan(math.hypot(*half_extents(camera, image)))
     off_axis = math.acos(float(np.clip(np.dot(to_light, forward) / distance, -1.0, 1.0)))
     outside = off_axis - half_diagonal
     if outside <= 0:
-        return 0.0
-    return distance * math.sin(outside) if outside < math.pi / 2 else distance
+        return 0.0, False
+    return (distance * math.sin(outside), False) if outside < math.pi / 2 else (distance, True)
 
 
 def candidates(scene: Scene, enabled: bool = True) -> tuple[tuple[int, ...], float]:
