@@ -43,7 +43,7 @@ from .stages.raster_culling import geometry_boxes
 SKIP_BUDGET = 1e-3
 #: Before the frame, a light is a candidate where the skipped bounds sum to at most
 #: SKIP_BUDGET × this × the largest light's bound: a guess at the mean luminance the check
-#: after the frame needs (a wrong guess costs the skipped lights' turns, never the image).
+#: after the frame needs (a wrong guess costs the frame again with every light, never the image).
 CHOOSE_FRACTION = 1e-2
 #: Rec. 709 luminance of linear RGB, as the error is measured (clrays.reference.metrics).
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])

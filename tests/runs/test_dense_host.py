@@ -112,6 +112,12 @@ def test_what_no_bound_covers_is_never_skipped(scene):
     assert candidates(replace(scene, lights=scene.lights[1:])) == ((), 0.0)  # one light is never left out
 
 
+def test_the_luminance_is_the_one_the_error_is_measured_in():
+    from clrays.reference import metrics
+
+    np.testing.assert_array_equal(light_skip.LUMINANCE, metrics._LUMINANCE)
+
+
 # ---------------------------------------------------------------- the host steps of a dense mesh
 
 def _ply(vertices: np.ndarray, faces: np.ndarray, order: str = "<", vertex_extra: str = "", counts=None) -> bytes:
