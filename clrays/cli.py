@@ -516,6 +516,8 @@ def _print_stats(result) -> None:
                    f"interpolated, {counts.fixed_up} fixed up (walked their own rays)")
     if result.shadow_rays is not None:
         click.echo(f"  shadows    {result.shadow_rays} shadow rays (surface samples × lights the maps left undecided)")
+    if result.skipped_lights is not None:
+        click.echo(f"  lights     {result.skipped_lights.describe()}")
     click.echo(f"  device memory {result.device_bytes / 2**20:.1f} MiB")
     steps = host_steps.taken()
     if steps:

@@ -46,6 +46,7 @@ from .device import Device, StageTimer
 from .errors import ClraysError
 from .frame_memory import EVERY_LIGHT_VISIBILITY, IN_SCATTER, ONE_LIGHT_IN_SCATTER, frame_buffer_bytes
 from .inputs import FrameBuffers, FrameInputs, frame_inputs, frame_sizes, upload, without_walled_off_light
+from .light_skip import SKIP_BUDGET, SkippedLights, candidates, mean_luminance
 from .light_turns import RaysSum, add_visibility_column, lights_in_turn, one_light_buffers
 from .physics.radiometry import effective_far
 from .passes import assemble, per_light_indices, samples_to_pixels
@@ -143,6 +144,7 @@ class RenderResult:
     shadow_rays: int | None = None  # exact surface shadows: the entries (sample × light) the maps left to a ray
     passes: dict[str, np.ndarray] | None = None  # the render passes asked for (clrays.passes), by name; else None
     host_waits: int = 0  # times the host waited for the device within the frame (Device.host_waits), the image's read too
+    skipped_lights: SkippedLights | None = None  # lights left out below the error budget (clrays.light_skip)
 
     def without_pixels(self) -> RenderResult:
         """This result without its image and passes (written to files): its times and counts
@@ -213,7 +215,7 @@ class PendingFrame:
         image = unread.image
         if self.key is not None:  # kept for an identical frame, now that it holds the image
             renderer.cache.put("frame", self.key, (image, self._stages, unread.textures, unread.samples, rays,
-                                                   passes))
+                                                   passes, unread.skipped_lights))
         stage_ms = self._timer.milliseconds()
         wall_ms = (time.perf_counter() - self._start) * 1e3
         # A kept frame's image is shared with the cache: the caller gets a copy to change.
@@ -245,13 +247,19 @@ class Frame:
     progress: object = None  # of raymarch's march, as Renderer.render's `progress`
     reads: list = field(default_factory=list)  # events of the reads left for PendingFrame.result (shade's)
     light_scatter: dict[int, np.ndarray] = field(default_factory=dict)  # per-light passes: light → (samples, 4)
+    skipped: tuple[tuple[int, ...], float] = ((), 0.0)  # lights in turn: (lights left out, their bound) (light_skip.py)
+    skip_lights: bool = True  # lights in turn: whether lights below the error budget are left out (light_skip.py)
 
 
 class Renderer:
     """Renders scenes on one OpenCL device: a session that keeps built kernels and, with
-    `reuse` (default), recent stage results (`cache_entries` per stage and light)."""
+    `reuse` (default), recent stage results (`cache_entries` per stage and light);
+    `skip_lights` (default): a frame of lights in turn leaves out the lights below the
+    error budget (clrays.light_skip)."""
 
-    def __init__(self, device: Device | str | None = None, reuse: bool = True, cache_entries: int = 3):
+    def __init__(self, device: Device | str | None = None, reuse: bool = True, cache_entries: int = 3,
+                 skip_lights: bool = True):
+        self.skip_lights = skip_lights
         self._device = device if isinstance(device, Device) else None
         self._device_spec = device if isinstance(device, str) else None
         self.reuse = reuse
@@ -314,7 +322,7 @@ class Renderer:
         # A frame identical to a kept one: its image, and every stage counts as reused.
         found, kept = self.cache.get("frame", key) if key is not None else (False, None)
         reads = []  # the events of the frame's reads left for `result()` (Device.deferred_waits)
-        image, stages, textures, samples, rays, passes = kept if found else \
+        image, stages, textures, samples, rays, passes, skipped = kept if found else \
             self._frame(scene, method, reuse, timer, progress, reads)
         status = record.status() or {stage: REUSED for stage in stages}
         device_bytes = self._device.allocated_bytes if self._device is not None else 0
@@ -322,7 +330,7 @@ class Renderer:
         if self._device is not None:
             self._device.end_frame(device_bytes)
         unread = RenderResult(image, method, {}, 0.0, device_bytes, status, timer.host_labels, scene.render,
-                              textures, samples, rays, None, host_waits)
+                              textures, samples, rays, None, host_waits, skipped)
         pending = PendingFrame(self, unread, stages, passes, reads, timer, start, None if found else key, use_cache)
         if reads:
             self._in_flight.append(pending)
@@ -331,16 +339,18 @@ class Renderer:
             self.device.queue.flush()
         return pending
 
-    def _frame(self, scene: Scene, method: str, reuse: Reuse, timer: StageTimer, progress: bool, reads: list):
+    def _frame(self, scene: Scene, method: str, reuse: Reuse, timer: StageTimer, progress: bool, reads: list,
+               skip_lights: bool = True):
         """(image, stage labels, epipolar texture sizes, sample counts, shadow rays, render
-        passes or None) of one frame: the pipeline of the module docstring, one line per stage.
-        The image's reads are enqueued, their events added to `reads`: the image and the
-        passes' terms are there once the last is done, and the passes are a function that
-        assembles them then."""
+        passes or None, the lights skipped or None) of one frame: the pipeline of the module
+        docstring, one line per stage. The image's reads are enqueued, their events added to
+        `reads`: the image and the passes' terms are there once the last is done, and the
+        passes are a function that assembles them then. `skip_lights`: as the renderer's;
+        False for the frame again with every light, where those it left out fail the check."""
         if method == "exact":
             return self._exact(scene, reuse, timer, progress)
         frame = self._upload(scene, method, reuse, timer)  # the scene in eye space, packed into device structs
-        frame.progress, frame.reads = progress, reads
+        frame.progress, frame.reads, frame.skip_lights = progress, reads, skip_lights and self.skip_lights
         in_turn = lights_in_turn(frame.scene, method)  # each light's maps, trees and visibility apart (light_turns.py)
         frame.rastered, frame.maps = self._raster(frame.buffers, frame.keys, reuse, timer,  # raster: depths, maps
                                                   maps=not in_turn)
@@ -353,9 +363,12 @@ class Renderer:
             VOLUME_METHODS[method](self, frame)  # raymarch; or per light rectify → minmax → integrand → traverse
             visible, rays = self._visibility(frame.occluders, frame.rastered, frame.keys, reuse, timer)  # visibility
         image, passes = self._shade(frame, visible)  # shade: surfaces, attenuation, + in-scattering
+        skipped = self._skipped_lights(frame, image)  # lights in turn: those left out, checked against the image
+        if frame.skipped[0] and skipped is None:  # over the budget after all (shade wrote over the in-scattering)
+            return self._frame(scene, method, reuse, timer, progress, reads, skip_lights=False)
         # The stages that ran: a frame identical to this one counts them reused (not the skipped ones).
         ran = tuple(stage for stage, status in reuse.record.status().items() if status != SKIPPED)
-        return image, ran, tuple(frame.textures), frame.samples, rays, passes
+        return image, ran, tuple(frame.textures), frame.samples, rays, passes, skipped
 
     def _upload(self, scene: Scene, method: str, reuse: Reuse, timer: StageTimer) -> Frame:
         """The frame's inputs checked against the device and uploaded, with their stage keys."""
@@ -409,8 +422,13 @@ class Renderer:
         visibility copied into the frame's column for it. Returns (visibility per sample
         and light, shadow rays) as `_visibility`."""
         lights = len(frame.scene.lights)
-        medium = not self._no_medium(frame)
         visible = EVERY_LIGHT_VISIBILITY.allocate(self.device, frame_sizes(frame.buffers.inputs))
+        # lights whose bound is below the error budget take no turn: visibility 0, no in-scattering
+        # (not where a render pass shows a light alone)
+        frame.skipped = candidates(frame.scene, frame.skip_lights and not per_light_indices(frame.scene.render.aovs))
+        if frame.skipped[0]:
+            self.device.fill(visible, np.float32(0), 4 * frame.buffers.inputs.samples * lights)
+        medium = not self._no_medium(frame)
         kept = {}  # the BVH: over the frame's triangles, the same for every light, built once a frame
 
         def frame_bvh(buffers: FrameBuffers, keys: StageKeys):
@@ -418,10 +436,23 @@ class Renderer:
                 kept["bvh"] = self._bvh(buffers, keys, frame.reuse, frame.timer)
             return kept["bvh"]
 
-        rays = [self._light_in_turn(frame, index, medium, visible, frame_bvh) for index in range(lights)]
+        rays = [self._light_in_turn(frame, index, medium, visible, frame_bvh) for index in range(lights)
+                if index not in frame.skipped[0]]
         if medium:
             frame.reuse.record.note(VOLUME_STAGES[frame.method][-1], COMPUTED)
         return visible, RaysSum(rays)
+
+    def _skipped_lights(self, frame: Frame, image: np.ndarray) -> SkippedLights | None:
+        """The lights the frame left out (clrays.light_skip), where their bound is within
+        SKIP_BUDGET of the kept lights' mean luminance: that waits for the image. None where
+        none was left out, or the bound is over (then the frame renders again with them)."""
+        indices, bound = frame.skipped
+        if not indices:
+            return None
+        for event in frame.reads[-1:]:  # the queue is in order: the last read holds the image
+            self.device.wait(event)
+        allowed = SKIP_BUDGET * mean_luminance(image)
+        return SkippedLights(indices, len(frame.scene.lights), bound, allowed) if bound <= allowed else None
 
     def _light_in_turn(self, frame: Frame, index: int, medium: bool, visible, frame_bvh) -> int:
         """One light of `_lights_in_turn`; what it allocates goes when it returns (on a
@@ -653,7 +684,7 @@ class Renderer:
             lights = parts["lights"]
             passes = assemble(scene.render.aovs, parts["transmittance"], parts["attenuated_surface"], lights.sum(axis=0),
                               parts["depth"], dict(enumerate(lights)))
-        return image, ("exact",), (), None, None, passes
+        return image, ("exact",), (), None, None, passes, None
 
     def _raster(self, buffers: FrameBuffers, keys: StageKeys, reuse: Reuse, timer: StageTimer, maps: bool = True):
         """The raster stage, each part kept while its inputs are: the camera's depth and
