@@ -189,4 +189,16 @@ typedef struct {
     int _pad0;
 } textured_integrand_t;
 
+/* Where the medium is and how dense (docs/media.md; cl/medium.h evaluates it), eye space:
+ * σs and σa (frame_t) are scaled by density(x) = in_box(x)·exp(-(y - height_base)/H).
+ * Only a scene whose medium is not homogeneous builds the kernels that read it (MEDIUM_FIELD). */
+typedef struct {
+    float4 box_min;      /* the box the medium fills, eye space (bounded) */
+    float4 box_max;
+    float height_base;   /* eye-space y where the height density is 1 */
+    float inv_scale_height; /* 1/H of the height density; 0: density 1 */
+    int bounded;         /* 0: the medium fills all space */
+    int _pad0;
+} medium_t;
+
 #endif

@@ -43,6 +43,16 @@
 #define PASSES_ARGS
 #endif
 
+/* A medium with bounds or a density builds shade with MEDIUM_FIELD (medium.h): a surface's light
+ * is attenuated along the light's path through it (T_l), and its radiance along the camera ray
+ * (T_e), lane by lane; exp(-σt·d) otherwise, and those images are unchanged. */
+#ifdef MEDIUM_FIELD
+#include "medium.h"
+#define MEDIUM_ARGS , global const medium_t* medium
+#else
+#define MEDIUM_ARGS
+#endif
+
 /* A vector quantity over the lanes: each component a float8. */
 typedef struct {
     float_lanes x, y, z;
@@ -152,7 +162,9 @@ ALWAYS_INLINE vec_lanes smooth_normal_lanes(global const float4* tri_vertices, g
     return select_lanes((det != 0.0f) & (n_length > 0.0f), normalised, flat);
 }
 
-
+#ifdef MEDIUM_FIELD /* (its lane loops call medium.h's float3 code: walk.h's case, common.h) */
+NOT_ACROSS_WORK_ITEMS
+#endif
 kernel void shade(global const frame_t* frame, global const view_t* views,
                   global const light_t* lights, global const uint* shadow_depth,
                   global const uint* camera_depth, global const int* tri_id,
@@ -161,7 +173,7 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                   global const float2* offsets, global const float4* scatter,
                   global const float* visible_exact, global const light_texture_t* light_textures,
                   global const float4* texels, global float4* image TRANSLUCENCY_ARGS SURFACE_THROUGH_ARGS
-                  TRANSPARENCY_ARGS PASSES_ARGS)
+                  TRANSPARENCY_ARGS PASSES_ARGS MEDIUM_ARGS)
 {
     int pixels = frame->width * frame->height, first = get_global_id(0) * LANES;
     if (first >= pixels) return;
@@ -255,6 +267,14 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                 if (light->type == LIGHT_DIRECTIONAL) {
                     to_light = splat_lanes(-light->direction.xyz);
                     incident = splat_lanes(light->power.xyz);
+#ifdef MEDIUM_FIELD /* T_l: the part of the light's path inside the medium */
+                    for (int k = 0; k < LANES; ++k) {
+                        float3 through = medium_light_through(medium, light, sigma_t, lane_of(p, k));
+                        incident.x[k] *= through.x;
+                        incident.y[k] *= through.y;
+                        incident.z[k] *= through.z;
+                    }
+#endif
                 } else {
                     vec_lanes w = sub_lanes(p, splat_lanes(light->position.xyz));
                     float_lanes d2 = squared_length_lanes(w.x, w.y, w.z);
@@ -262,7 +282,17 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                     vec_lanes away = {-w.x / d, -w.y / d, -w.z / d};
                     to_light = select_lanes(d > 0.0f, away, splat_lanes((float3)(0.0f, 1.0f, 0.0f)));
                     float_lanes falloff = fmax_lanes(d2, 1e-30f);
+#ifdef MEDIUM_FIELD /* T_l along the path from the light */
+                    vec_lanes attenuated;
+                    for (int k = 0; k < LANES; ++k) {
+                        float3 through = medium_light_through(medium, light, sigma_t, lane_of(p, k));
+                        attenuated.x[k] = through.x;
+                        attenuated.y[k] = through.y;
+                        attenuated.z[k] = through.z;
+                    }
+#else
                     vec_lanes attenuated = attenuation_lanes(sigma_t, d);
+#endif
                     vec_lanes lit = {light->power.x * attenuated.x / falloff, light->power.y * attenuated.y / falloff,
                                      light->power.z * attenuated.z / falloff};
                     incident = lit;
@@ -329,7 +359,17 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
             load_records_run(scatter, first, &in_scatter.x, &in_scatter.y, &in_scatter.z, &unused);
         else
             in_scatter = gather_xyz(scatter, sample, 0);
+#ifdef MEDIUM_FIELD /* T_e: the part of the camera ray inside the medium */
+        vec_lanes to_eye;
+        for (int k = 0; k < LANES; ++k) {
+            float3 through = medium_eye_transmittance(medium, sigma_t, lane_of(origin, k), lane_of(dir, k), distance[k]);
+            to_eye.x[k] = through.x;
+            to_eye.y[k] = through.y;
+            to_eye.z[k] = through.z;
+        }
+#else
         vec_lanes to_eye = attenuation_lanes(sigma_t, distance);
+#endif
 #ifdef SHADE_TRANSPARENCY
         vec_lanes through = gather_xyz(transmittance, sample, 0), front = gather_xyz(in_front, sample, 0);
         total.x += through.x * (surface.x * to_eye.x + in_scatter.x) + front.x;

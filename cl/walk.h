@@ -78,6 +78,12 @@ typedef struct {
     relief_shadow_t relief; /* the reliefs' shadow along the ray (relief_cuts.h), once the first walk found it */
     int relief_found;
 #endif
+#ifdef MEDIUM_FIELD
+    medium_ray_t medium; /* the ray's prefix of in-scattering (medium.h), once the first walk built it */
+    int medium_built;
+    float3 medium_dir;     /* the ray's unit direction ... */
+    float medium_distance; /* ... and length, which the prefix is built along */
+#endif
 } ray_span_t;
 
 /* The unit direction of camera sample `sample` (its pixel's ray through its offset):
@@ -117,6 +123,10 @@ ALWAYS_INLINE int finish_span(global const epipolar_t* ep, global const frame_t*
 #ifdef RELIEF_CUTS
     span->relief_found = 0;
 #endif
+#ifdef MEDIUM_FIELD
+    span->medium_built = 0;
+    span->medium_distance = distance;
+#endif
     if (!(span->gamma_end > span->gamma_begin) || integrand->no_extent) return 0;
     /* The lamp (lighting.h): a ray that passes within its radius of a point or spot light
      * leaves out the chord inside it, as exact does; this keeps a ray through the light
@@ -134,6 +144,9 @@ ALWAYS_INLINE int finish_span(global const epipolar_t* ep, global const frame_t*
                                          span->gamma_end);
     }
     span->ray = integrand_row(integrand, beta, sin_beta, cos_beta);
+#ifdef MEDIUM_FIELD
+    span->ray.medium = &span->medium;
+#endif
     return 1;
 }
 
@@ -147,6 +160,9 @@ inline int ray_span_in_wedge(global const epipolar_t* ep, global const frame_t* 
     float beta = ray_beta(ep, dir, &sin_beta, &cos_beta);
 #ifdef SHAFT_EDGES
     span->dir = dir;
+#endif
+#ifdef MEDIUM_FIELD
+    span->medium_dir = dir;
 #endif
     float2 lit = lit_sweep(atan2_approx(distance * sin_beta, ep->d_el - distance * cos_beta), wedge);
     span->gamma_begin = lit.x;
@@ -170,6 +186,9 @@ inline int ray_span(global const epipolar_t* ep, global const light_t* light, gl
     int directional = light->type == LIGHT_DIRECTIONAL;
 #ifdef SHAFT_EDGES
     span->dir = dir;
+#endif
+#ifdef MEDIUM_FIELD
+    span->medium_dir = dir;
 #endif
     /* The ray from the eye starts at γ = atan2(+0, d_el) = +0: no arc tangent for it. */
     span->gamma_begin = 0.0f;
@@ -318,6 +337,14 @@ inline float3 row_radiance(global const epipolar_t* ep, global const float2* tre
     global const float* row_prefix = features->prefix + i * prefix_stride;
 #else
     global const float* row_prefix = 0; /* (read only for a textured light) */
+#endif
+#ifdef MEDIUM_FIELD /* once per ray: its rows share its prefix */
+    if (!span->medium_built) {
+        medium_ray_build(features->medium, frame, ep, in->light_type == LIGHT_DIRECTIONAL, in->amplitude.xyz,
+                         span->medium_dir, span->medium_distance, span->ray.sin_beta, span->ray.cos_beta,
+                         &span->medium);
+        span->medium_built = 1;
+    }
 #endif
 #ifdef TRANSLUCENT_LAYERS /* a row that translucent layers cross: texel by texel (translucent_walk.h) */
     if (features->layer_rows[i]) {

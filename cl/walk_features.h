@@ -11,11 +11,13 @@
  *                        run's ends on its blockers' silhouettes (shaft_edges.h)
  *   RELIEF_CUTS          the reliefs' outline seen from the light, which the walk cuts in
  *                        its ray's own half-plane (relief_cuts.h; with SHAFT_EDGES only)
+ *   MEDIUM_FIELD         where the medium is and how dense (medium.h): each ray's lit runs come
+ *                        from its own prefix of in-scattering instead of the integrand tables
  *   TRANSPARENCY_WEIGHTED_WALK  MBOIT's fog weight along the ray, in pieces (the kernel
  *                        fills them itself: transparency_walk.cl)
  *
  * A walking kernel takes WALK_FEATURE_ARGS after its own arguments, in this order: light
- * texture, translucent layers, shaft edges, relief cuts; `walk_features_t features; ATTACH_WALK_FEATURES(features)`
+ * texture, translucent layers, shaft edges, relief cuts, medium field; `walk_features_t features; ATTACH_WALK_FEATURES(features)`
  * hands them on. Without a feature its arguments and members are not there at all, and the
  * kernel is the one it was before the feature existed. */
 #ifndef CLRAYS_WALK_FEATURES_H
@@ -52,6 +54,9 @@ typedef struct {
     int relief_bins;
     int relief_eye_count; /* the reliefs' triangles between the eye and the light */
 #endif
+#ifdef MEDIUM_FIELD
+    global const medium_t* medium;
+#endif
 #ifdef TRANSPARENCY_WEIGHTED_WALK
     float piece_gamma[WALK_PIECES + 2];
     float4 piece_weight[WALK_PIECES + 1];
@@ -81,6 +86,10 @@ typedef struct {
 #define ATTACH_RELIEF_CUTS(f) (f).relief_edges = relief_edges; (f).relief_bin_offsets = relief_bin_offsets; \
     (f).relief_bins = relief_bins; (f).relief_eye_count = relief_eye_count;
 #endif
+#ifdef MEDIUM_FIELD
+#define MEDIUM_FIELD_ARGS , global const medium_t* medium
+#define ATTACH_MEDIUM_FIELD(f) (f).medium = medium;
+#endif
 /* A feature not built: no arguments, nothing to hand on. */
 #ifndef LIGHT_TEXTURE_ARGS
 #define LIGHT_TEXTURE_ARGS
@@ -101,8 +110,13 @@ typedef struct {
 #define ATTACH_RELIEF_CUTS(f)
 #endif
 
-#define WALK_FEATURE_ARGS LIGHT_TEXTURE_ARGS RECTIFIED_LAYER_ARGS SHAFT_EDGE_ARGS RELIEF_CUT_ARGS
+#ifndef MEDIUM_FIELD_ARGS
+#define MEDIUM_FIELD_ARGS
+#define ATTACH_MEDIUM_FIELD(f)
+#endif
+
+#define WALK_FEATURE_ARGS LIGHT_TEXTURE_ARGS RECTIFIED_LAYER_ARGS SHAFT_EDGE_ARGS RELIEF_CUT_ARGS MEDIUM_FIELD_ARGS
 #define ATTACH_WALK_FEATURES(features) ATTACH_LIGHT_TEXTURE(features) ATTACH_RECTIFIED_LAYERS(features) \
-    ATTACH_SHAFT_EDGES(features) ATTACH_RELIEF_CUTS(features)
+    ATTACH_SHAFT_EDGES(features) ATTACH_RELIEF_CUTS(features) ATTACH_MEDIUM_FIELD(features)
 
 #endif

@@ -56,6 +56,7 @@ from .stages.relief_cuts import ReliefCuts, cuts_reliefs, relief_cuts, relief_ou
 from .stages.shaft_edges import ShaftEdges, edge_neighbours, edge_windings, keeps_blockers, shaft_edge_sides
 from .stages.integrand import integrand, integrand_table_size
 from .stages.lamp import eye_in_lamp, lamp_in_scatter
+from .stages.medium_field import MediumField, medium_field
 from .stages.light_texture import light_texture
 from .physics.light_texture import textured
 from .stages.minmax import minmax
@@ -243,6 +244,7 @@ class Frame:
     progress: object = None  # of raymarch's march, as Renderer.render's `progress`
     reads: list = field(default_factory=list)  # events of the reads left for PendingFrame.result (shade's)
     light_scatter: dict[int, np.ndarray] = field(default_factory=dict)  # per-light passes: light → (samples, 4)
+    medium: MediumField | None = None  # where the medium is and how dense (stages/medium_field.py), or None
 
 
 class Renderer:
@@ -362,7 +364,8 @@ class Renderer:
         refuse_translucency(scene, method)  # (volume_moments: no transmittance term)
         buffers = upload(self.device, inputs)
         occluders = opaque_occluder_buffers(self.device, buffers)  # (translucent triangles block no shadow ray)
-        return Frame(scene, method, buffers, StageKeys(buffers.inputs), reuse, timer, occluders)
+        medium = medium_field(self.device, scene.medium, inputs.eye_ws, method)  # a box or a density: its params
+        return Frame(scene, method, buffers, StageKeys(buffers.inputs), reuse, timer, occluders, medium=medium)
 
     def _raymarch_volume(self, frame: Frame) -> None:
         """Method raymarch's volume stage, the brute-force reference: every light at once."""
@@ -479,7 +482,7 @@ class Renderer:
         edges = None if epipolar.unshadowed else self._shaft_edges(buffers, epipolar, keys, reuse, timer)
         features = walk_features(  # what the walks carry (stages/features.py, cl/walk_features.h)
             texture, None if frame.layers is None else rectify_layers(device, buffers, frame.layers, epipolar, timer),
-            edges, reliefs)
+            edges, reliefs, medium=frame.medium)
         # A relief's shafts, finer than the lines are apart, run along them: a camera sample
         # between two lines is neither's, and walks its own rays (docs/design.md §4.5).
         if frame.scene.render.sampling == "epipolar" and not epipolar.unshadowed and reliefs is None:  # traverse
@@ -553,7 +556,7 @@ class Renderer:
         aovs = frame.scene.render.aovs
         with device.deferred_waits(frame.reads):  # the image is read when the frame's result is asked for
             image = shade(device, buffers, rastered, frame.in_scatter.adding(), timer, visible, layers, through,
-                          transparency, passes=bool(aovs))
+                          transparency, passes=bool(aovs), medium=frame.medium)
         frame.reuse.record.note("shade", COMPUTED)
         if not aovs:
             return image, None

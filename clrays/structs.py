@@ -210,10 +210,16 @@ textured_integrand_dtype = np.dtype([
     ("gamma_samples", np.int32), ("slices", np.int32), ("textured", np.int32), ("_pad0", np.int32),
 ])
 
+medium_dtype = np.dtype([
+    ("box_min", _f4), ("box_max", _f4),
+    ("height_base", np.float32), ("inv_scale_height", np.float32), ("bounded", np.int32), ("_pad0", np.int32),
+])
+
 #: C struct name → dtype, for the layout test.
 STRUCTS = {"view_t": view_dtype, "light_t": light_dtype, "frame_t": frame_dtype,
            "epipolar_t": epipolar_dtype, "integrand_t": integrand_dtype,
-           "light_texture_t": light_texture_dtype, "textured_integrand_t": textured_integrand_dtype}
+           "light_texture_t": light_texture_dtype, "textured_integrand_t": textured_integrand_dtype,
+           "medium_t": medium_dtype}
 
 
 def float4(v, w: float = 0.0) -> np.ndarray:

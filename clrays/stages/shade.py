@@ -15,14 +15,16 @@ GROUP = 64
 
 
 def shade(device: Device, buffers: FrameBuffers, rastered: RasterResult, scatter, timer: StageTimer,
-          visible=None, layers=None, surface_through=None, transparency=None, passes: bool = False):
+          visible=None, layers=None, surface_through=None, transparency=None, passes: bool = False, medium=None):
     """Returns linear radiance, (H, W, 3) float32. `visible`: the visibility stage's answer
     (float per sample and light), read where `render.surface_shadows` is `exact`.
     `transparency`: the transparency stage's (transmittance, in_front) buffers, which a scene
     with translucent objects composites with (clrays.stages.transparency); None otherwise.
     `passes`: also return, per pixel, the terms of the render passes (clrays.passes) as
     (H, W, 3, 4) float32: (mean transmittance, nearest depth), (mean attenuated surface
-    radiance, 0), (mean in-scattering, 0); only then is their buffer allocated."""
+    radiance, 0), (mean in-scattering, 0); only then is their buffer allocated.
+    `medium`: the frame's MediumField (clrays.stages.medium_field) where the medium has bounds or
+    a density, which then attenuates surfaces along the light's path and the camera ray."""
     image = buffers.inputs.scene.image
     pixels = image.width * image.height
     # With one sample per pixel each work-item writes its pixels where it read their
@@ -45,6 +47,8 @@ def shade(device: Device, buffers: FrameBuffers, rastered: RasterResult, scatter
     if passes:
         terms = device.buffer(nbytes=48 * pixels)
         defines, extra = {**(defines or {}), "SHADE_PASSES": 1}, extra + (terms,)
+    if medium is not None:
+        defines, extra = {**(defines or {}), **medium.defines()}, extra + medium.args()
     work_items = -(-pixels // (LANES * GROUP)) * GROUP
     if rastered.depth_in_keys:  # (read only by the map's own surface test: stages/raster.py depth_in_keys)
         defines = {**(defines or {}), "SHADOW_DEPTH_IN_KEYS": 1}
