@@ -189,16 +189,23 @@ typedef struct {
     int _pad0;
 } textured_integrand_t;
 
-/* Where the medium is and how dense (docs/media.md; cl/medium.h evaluates it), eye space:
- * σs and σa (frame_t) are scaled by density(x) = in_box(x)·exp(-(y - height_base)/H).
- * Only a scene whose medium is not homogeneous builds the kernels that read it (MEDIUM_FIELD). */
+/* A bounded or heterogeneous medium (docs/media.md; cl/medium.h reads it), in eye space.
+ * Which parts are read is a build choice: MEDIUM_BOUNDED (the box), MEDIUM_HEIGHT (the
+ * exponential height density), MEDIUM_GRID (a dense density grid, and the per-light
+ * optical-depth grids of cl/light_depth.cl). The homogeneous medium builds none of them. */
 typedef struct {
-    float4 box_min;      /* the box the medium fills, eye space (bounded) */
+    float4 box_min;       /* MEDIUM_BOUNDED: the medium exists only inside [box_min, box_max] */
     float4 box_max;
-    float height_base;   /* eye-space y where the height density is 1 */
-    float inv_scale_height; /* 1/H of the height density; 0: density 1 */
-    int bounded;         /* 0: the medium fills all space */
-    int _pad0;
+    float4 grid_min;      /* MEDIUM_GRID: the grid's bounds; voxel (i, j, k) is centred at */
+    float4 grid_max;      /*   grid_min + (i + ½, j + ½, k + ½)·(grid_max - grid_min)/(nx, ny, nz) */
+    float height_base;    /* MEDIUM_HEIGHT: ρ = exp(-(y - height_base)/scale_height) */
+    float scale_height;
+    int grid_nx;          /* density voxels, x fastest: values[(k·ny + j)·nx + i] */
+    int grid_ny;
+    int grid_nz;
+    int depth_nx;         /* optical-depth grid per light, over the grid's bounds: */
+    int depth_ny;         /*   light l's voxels start at l·depth_nx·depth_ny·depth_nz */
+    int depth_nz;
 } medium_t;
 
 #endif

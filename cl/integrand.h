@@ -19,8 +19,9 @@
 #define CLRAYS_INTEGRAND_H
 #include "lighting.h"
 #include "atan2_approx.h"
-#ifdef MEDIUM_FIELD
 #include "medium.h"
+#ifdef MEDIUM_VARYING
+#include "medium_walk.h"
 #endif
 
 /* SIN_BETA_MIN, the clamp of sinβ in every 1/sinβ, comes from clrays/structs.py (-D): the
@@ -99,8 +100,8 @@ typedef struct {
     int row;         /* table row j ... */
     float row_t;     /* ... and the fraction towards row j + 1 */
     float cos_beta;
-#ifdef MEDIUM_FIELD
-    const medium_ray_t* medium; /* the ray's own prefix (medium.h), which replaces the tables */
+#ifdef MEDIUM_VARYING
+    const medium_ray_t* medium; /* the ray's own prefix (medium_walk.h), which replaces the tables */
 #endif
 } integrand_row_t;
 
@@ -119,7 +120,7 @@ inline integrand_row_t integrand_row(global const integrand_t* in, float beta, f
 inline float3 segment_radiance(global const integrand_t* in, global const float* tables,
                                global const frame_t* frame, const integrand_row_t* r, float gamma0, float gamma1)
 {
-#ifdef MEDIUM_FIELD /* a bounded or dense medium: the tables (homogeneous) are not read */
+#ifdef MEDIUM_VARYING /* a bounded or heterogeneous medium: the tables (homogeneous) are not read */
     return medium_ray_segment(r->medium, gamma0, gamma1);
 #endif
     if (in->mode == INTEGRAND_ANALYTIC) {

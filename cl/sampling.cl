@@ -241,7 +241,7 @@ ALWAYS_INLINE int radiance_breaks(float3 a, float3 b, float threshold)
     return inline_fabs(la - lb) > threshold * inline_fmax(la, lb);
 }
 
-#ifdef MEDIUM_FIELD
+#ifdef MEDIUM_VARYING
 /* medium_faces of line sample j of slice i's ray up to its distance. */
 inline int line_sample_faces(global const epipolar_t* ep, global const float2* ranges, global const float4* sides,
                              global const medium_t* m, global const float2* samples, int i, int j, int n)
@@ -304,8 +304,8 @@ kernel void line_scatter(global const frame_t* frame, global const view_t* views
  *   line between them), so that the fill draws no straight line across it. Not 1 ×: over
  *   `step` samples the light's own falloff often changes radiance by a few percent, and
  *   refining on it walked many more samples for no error gained on the bench scenes. In a
- *   medium with a box (MEDIUM_FIELD), also where the two rays cross the box by different
- *   faces: a kink of the in-scattering that the threshold does not see. A
+ *   medium with a box or a grid (MEDIUM_VARYING), also where the two rays cross its faces
+ *   differently: a kink of the in-scattering that the threshold does not see. A
  *   refined sample is marked LINE_REFINED, so that every decision sees line_scatter's
  *   samples (LINE_COMPUTED) only.
  * - Fill: each sample still LINE_LEFT is linear in j between the computed samples either
@@ -337,9 +337,10 @@ kernel void line_refine_fill(global const frame_t* frame, global const light_t* 
         while (known[left] != LINE_COMPUTED) --left;
         while (known[right] != LINE_COMPUTED) ++right;
         int breaks = radiance_breaks(samples[left].xyz, samples[right].xyz, 4.0f * threshold);
-#ifdef MEDIUM_FIELD /* or an edge of the medium's box crosses the line between them (medium.h) */
-        breaks = breaks || line_sample_faces(ep, ranges, sides, features.medium, line + i * n, i, left, length)
-                               != line_sample_faces(ep, ranges, sides, features.medium, line + i * n, i, right, length);
+#ifdef MEDIUM_VARYING /* or an edge of the medium's box or grid crosses the line between them (medium_walk.h) */
+        breaks = breaks || line_sample_faces(ep, ranges, sides, features.medium.medium, line + i * n, i, left, length)
+                               != line_sample_faces(ep, ranges, sides, features.medium.medium, line + i * n, i, right,
+                                                    length);
 #endif
         if (breaks) {
             float3 computed = line_sample_radiance(frame, lights, ep, tree, integrand, tables, &features, ranges, sides,

@@ -43,15 +43,10 @@
 #define PASSES_ARGS
 #endif
 
-/* A medium with bounds or a density builds shade with MEDIUM_FIELD (medium.h): a surface's light
- * is attenuated along the light's path through it (T_l), and its radiance along the camera ray
- * (T_e), lane by lane; exp(-σt·d) otherwise, and those images are unchanged. */
-#ifdef MEDIUM_FIELD
+/* A bounded or heterogeneous medium builds shade with MEDIUM_VARYING (medium.h): a surface's
+ * light is attenuated along the light's path through it (T_l), and its radiance along the
+ * camera ray (T_e), lane by lane; exp(-σt·d) otherwise, and those images are unchanged. */
 #include "medium.h"
-#define MEDIUM_ARGS , global const medium_t* medium
-#else
-#define MEDIUM_ARGS
-#endif
 
 /* A vector quantity over the lanes: each component a float8. */
 typedef struct {
@@ -162,7 +157,7 @@ ALWAYS_INLINE vec_lanes smooth_normal_lanes(global const float4* tri_vertices, g
     return select_lanes((det != 0.0f) & (n_length > 0.0f), normalised, flat);
 }
 
-#ifdef MEDIUM_FIELD /* (its lane loops call medium.h's float3 code: walk.h's case, common.h) */
+#ifdef MEDIUM_VARYING /* (its lane loops call medium.h's float3 code: walk.h's case, common.h) */
 NOT_ACROSS_WORK_ITEMS
 #endif
 kernel void shade(global const frame_t* frame, global const view_t* views,
@@ -267,9 +262,10 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                 if (light->type == LIGHT_DIRECTIONAL) {
                     to_light = splat_lanes(-light->direction.xyz);
                     incident = splat_lanes(light->power.xyz);
-#ifdef MEDIUM_FIELD /* T_l: the part of the light's path inside the medium */
+#ifdef MEDIUM_VARYING /* T_l: the part of the light's path inside the medium */
                     for (int k = 0; k < LANES; ++k) {
-                        float3 through = medium_light_through(medium, light, sigma_t, lane_of(p, k));
+                        float3 through = exp(-sigma_t * light_path_depth(medium, density_grid, light_depth_grid, light,
+                                                                         l, lane_of(p, k)));
                         incident.x[k] *= through.x;
                         incident.y[k] *= through.y;
                         incident.z[k] *= through.z;
@@ -282,10 +278,11 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                     vec_lanes away = {-w.x / d, -w.y / d, -w.z / d};
                     to_light = select_lanes(d > 0.0f, away, splat_lanes((float3)(0.0f, 1.0f, 0.0f)));
                     float_lanes falloff = fmax_lanes(d2, 1e-30f);
-#ifdef MEDIUM_FIELD /* T_l along the path from the light */
+#ifdef MEDIUM_VARYING /* T_l along the path from the light */
                     vec_lanes attenuated;
                     for (int k = 0; k < LANES; ++k) {
-                        float3 through = medium_light_through(medium, light, sigma_t, lane_of(p, k));
+                        float3 through = exp(-sigma_t * light_path_depth(medium, density_grid, light_depth_grid, light,
+                                                                         l, lane_of(p, k)));
                         attenuated.x[k] = through.x;
                         attenuated.y[k] = through.y;
                         attenuated.z[k] = through.z;
@@ -359,10 +356,11 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
             load_records_run(scatter, first, &in_scatter.x, &in_scatter.y, &in_scatter.z, &unused);
         else
             in_scatter = gather_xyz(scatter, sample, 0);
-#ifdef MEDIUM_FIELD /* T_e: the part of the camera ray inside the medium */
+#ifdef MEDIUM_VARYING /* T_e: the part of the camera ray inside the medium */
         vec_lanes to_eye;
         for (int k = 0; k < LANES; ++k) {
-            float3 through = medium_eye_transmittance(medium, sigma_t, lane_of(origin, k), lane_of(dir, k), distance[k]);
+            float3 through = exp(-sigma_t * segment_depth(medium, density_grid, lane_of(origin, k), lane_of(dir, k),
+                                                          0.0f, distance[k]));
             to_eye.x[k] = through.x;
             to_eye.y[k] = through.y;
             to_eye.z[k] = through.z;

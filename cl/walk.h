@@ -78,8 +78,8 @@ typedef struct {
     relief_shadow_t relief; /* the reliefs' shadow along the ray (relief_cuts.h), once the first walk found it */
     int relief_found;
 #endif
-#ifdef MEDIUM_FIELD
-    medium_ray_t medium; /* the ray's prefix of in-scattering (medium.h), once the first walk built it */
+#ifdef MEDIUM_VARYING
+    medium_ray_t medium; /* the ray's prefix of in-scattering (medium_walk.h), once the first walk built it */
     int medium_built;
     float3 medium_dir;     /* the ray's unit direction ... */
     float medium_distance; /* ... and length, which the prefix is built along */
@@ -123,7 +123,7 @@ ALWAYS_INLINE int finish_span(global const epipolar_t* ep, global const frame_t*
 #ifdef RELIEF_CUTS
     span->relief_found = 0;
 #endif
-#ifdef MEDIUM_FIELD
+#ifdef MEDIUM_VARYING
     span->medium_built = 0;
     span->medium_distance = distance;
 #endif
@@ -144,7 +144,7 @@ ALWAYS_INLINE int finish_span(global const epipolar_t* ep, global const frame_t*
                                          span->gamma_end);
     }
     span->ray = integrand_row(integrand, beta, sin_beta, cos_beta);
-#ifdef MEDIUM_FIELD
+#ifdef MEDIUM_VARYING
     span->ray.medium = &span->medium;
 #endif
     return 1;
@@ -161,7 +161,7 @@ inline int ray_span_in_wedge(global const epipolar_t* ep, global const frame_t* 
 #ifdef SHAFT_EDGES
     span->dir = dir;
 #endif
-#ifdef MEDIUM_FIELD
+#ifdef MEDIUM_VARYING
     span->medium_dir = dir;
 #endif
     float2 lit = lit_sweep(atan2_approx(distance * sin_beta, ep->d_el - distance * cos_beta), wedge);
@@ -187,7 +187,7 @@ inline int ray_span(global const epipolar_t* ep, global const light_t* light, gl
 #ifdef SHAFT_EDGES
     span->dir = dir;
 #endif
-#ifdef MEDIUM_FIELD
+#ifdef MEDIUM_VARYING
     span->medium_dir = dir;
 #endif
     /* The ray from the eye starts at γ = atan2(+0, d_el) = +0: no arc tangent for it. */
@@ -338,9 +338,9 @@ inline float3 row_radiance(global const epipolar_t* ep, global const float2* tre
 #else
     global const float* row_prefix = 0; /* (read only for a textured light) */
 #endif
-#ifdef MEDIUM_FIELD /* once per ray: its rows share its prefix */
+#ifdef MEDIUM_VARYING /* once per ray: its rows share its prefix */
     if (!span->medium_built) {
-        medium_ray_build(features->medium, frame, ep, in->light_type == LIGHT_DIRECTIONAL, in->amplitude.xyz,
+        medium_ray_build(&features->medium, frame, ep, in->light_type == LIGHT_DIRECTIONAL, in->amplitude.xyz,
                          span->medium_dir, span->medium_distance, span->ray.sin_beta, span->ray.cos_beta,
                          &span->medium);
         span->medium_built = 1;

@@ -303,6 +303,7 @@ class FrameBuffers:
     tri_albedo: object
     light_textures: object = None
     texels: object = None
+    medium: object = None  # a bounded or heterogeneous medium's kernel feature (clrays.stages.medium)
 
 
 def upload(device: Device, inputs: FrameInputs) -> FrameBuffers:

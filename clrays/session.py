@@ -56,7 +56,7 @@ from .stages.relief_cuts import ReliefCuts, cuts_reliefs, relief_cuts, relief_ou
 from .stages.shaft_edges import ShaftEdges, edge_neighbours, edge_windings, keeps_blockers, shaft_edge_sides
 from .stages.integrand import integrand, integrand_table_size
 from .stages.lamp import eye_in_lamp, lamp_in_scatter
-from .stages.medium_field import MediumField, medium_field
+from .stages.medium import medium_feature
 from .stages.light_texture import light_texture
 from .physics.light_texture import textured
 from .stages.minmax import minmax
@@ -73,7 +73,7 @@ from .stages.translucency import (opaque_occluder_buffers, rectify_layers, refus
 from .stages.transparency import (Films, composite, opaque_camera_vertices, translucent_films, translucent_triangles,
                                   transparency_of)
 from .stages.transparency_walk import transparency_march, transparency_walk
-from .stages.volume_moments import volume_moments
+from .stages.volume_moments import refuse_varying_medium, volume_moments
 from .stages.visibility import (TOUCHING_NODES_PER_ENTRY, bound_atlas, bvh_topology_of, ray_list_limit, upload_bvh,
                                 visibility, visibility_bound, visibility_prepare)
 
@@ -244,7 +244,6 @@ class Frame:
     progress: object = None  # of raymarch's march, as Renderer.render's `progress`
     reads: list = field(default_factory=list)  # events of the reads left for PendingFrame.result (shade's)
     light_scatter: dict[int, np.ndarray] = field(default_factory=dict)  # per-light passes: light → (samples, 4)
-    medium: MediumField | None = None  # where the medium is and how dense (stages/medium_field.py), or None
 
 
 class Renderer:
@@ -362,10 +361,10 @@ class Renderer:
         inputs = frame_inputs(scene)
         check_device_memory(self.device, inputs)
         refuse_translucency(scene, method)  # (volume_moments: no transmittance term)
+        refuse_varying_medium(scene, method)  # (volume_moments: the homogeneous integrand only)
         buffers = upload(self.device, inputs)
         occluders = opaque_occluder_buffers(self.device, buffers)  # (translucent triangles block no shadow ray)
-        medium = medium_field(self.device, scene.medium, inputs.eye_ws, method)  # a box or a density: its params
-        return Frame(scene, method, buffers, StageKeys(buffers.inputs), reuse, timer, occluders, medium=medium)
+        return Frame(scene, method, buffers, StageKeys(buffers.inputs), reuse, timer, occluders)
 
     def _raymarch_volume(self, frame: Frame) -> None:
         """Method raymarch's volume stage, the brute-force reference: every light at once."""
@@ -482,7 +481,7 @@ class Renderer:
         edges = None if epipolar.unshadowed else self._shaft_edges(buffers, epipolar, keys, reuse, timer)
         features = walk_features(  # what the walks carry (stages/features.py, cl/walk_features.h)
             texture, None if frame.layers is None else rectify_layers(device, buffers, frame.layers, epipolar, timer),
-            edges, reliefs, medium=frame.medium)
+            edges, reliefs, medium_feature(device, buffers, timer))  # (a bounded or heterogeneous medium)
         # A relief's shafts, finer than the lines are apart, run along them: a camera sample
         # between two lines is neither's, and walks its own rays (docs/design.md §4.5).
         if frame.scene.render.sampling == "epipolar" and not epipolar.unshadowed and reliefs is None:  # traverse
@@ -556,7 +555,7 @@ class Renderer:
         aovs = frame.scene.render.aovs
         with device.deferred_waits(frame.reads):  # the image is read when the frame's result is asked for
             image = shade(device, buffers, rastered, frame.in_scatter.adding(), timer, visible, layers, through,
-                          transparency, passes=bool(aovs), medium=frame.medium)
+                          transparency, passes=bool(aovs), medium=medium_feature(device, buffers, timer))
         frame.reuse.record.note("shade", COMPUTED)
         if not aovs:
             return image, None

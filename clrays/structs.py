@@ -211,8 +211,10 @@ textured_integrand_dtype = np.dtype([
 ])
 
 medium_dtype = np.dtype([
-    ("box_min", _f4), ("box_max", _f4),
-    ("height_base", np.float32), ("inv_scale_height", np.float32), ("bounded", np.int32), ("_pad0", np.int32),
+    ("box_min", _f4), ("box_max", _f4), ("grid_min", _f4), ("grid_max", _f4),
+    ("height_base", np.float32), ("scale_height", np.float32),
+    ("grid_nx", np.int32), ("grid_ny", np.int32), ("grid_nz", np.int32),
+    ("depth_nx", np.int32), ("depth_ny", np.int32), ("depth_nz", np.int32),
 ])
 
 #: C struct name → dtype, for the layout test.

@@ -23,8 +23,8 @@ def shade(device: Device, buffers: FrameBuffers, rastered: RasterResult, scatter
     `passes`: also return, per pixel, the terms of the render passes (clrays.passes) as
     (H, W, 3, 4) float32: (mean transmittance, nearest depth), (mean attenuated surface
     radiance, 0), (mean in-scattering, 0); only then is their buffer allocated.
-    `medium`: the frame's MediumField (clrays.stages.medium_field) where the medium has bounds or
-    a density, which then attenuates surfaces along the light's path and the camera ray."""
+    `medium`: the frame's MediumFeature (clrays.stages.medium) where the medium is bounded or
+    heterogeneous, which then attenuates surfaces along the light's path and the camera ray."""
     image = buffers.inputs.scene.image
     pixels = image.width * image.height
     # With one sample per pixel each work-item writes its pixels where it read their

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..device import Device, StageTimer
+from ..errors import ClraysError
 from ..inputs import FrameBuffers
 from .features import WalkFeature, feature_args, feature_defines
 from .integrand import DeviceIntegrand
@@ -28,6 +29,15 @@ VOLUME_MOMENT_BIAS = 3e-6
 #: point / spot: 1 part 42 / 13 / 11 %, 4 parts 4.1 / 3.1 / 3.5 %, 8 parts 1.3 / 2.1 /
 #: 1.1 %, 16 parts 0.5 / 0.9 / 0.9 %; the cost grows with the parts.
 MOMENT_CHUNKS = 8
+
+
+def refuse_varying_medium(scene, method: str) -> None:
+    """One line for volume_moments in a bounded or heterogeneous medium (docs/media.md): its
+    reconstruction weights a ray's lit fraction by the range's unshadowed radiance from the
+    homogeneous integrand tables, which such a medium does not have."""
+    if method == "volume_moments" and not scene.medium.homogeneous:
+        raise ClraysError(f"{scene.source or 'scene'}: render.method volume_moments: medium.bounds and "
+                          "medium.density need method minmax (or raymarch, exact)")
 
 
 def _double_prefix(device: Device) -> bool:
