@@ -101,7 +101,7 @@ typedef struct {
     float row_t;     /* ... and the fraction towards row j + 1 */
     float cos_beta;
 #ifdef MEDIUM_VARYING
-    const medium_ray_t* medium; /* the ray's own prefix (medium_walk.h), which replaces the tables */
+    medium_ray_t* medium; /* the ray's own prefix (medium_walk.h), which replaces the tables */
 #endif
 } integrand_row_t;
 

@@ -12,7 +12,7 @@
 
 /* Nodes of a ray's prefix (docs/media.md, "Precision"). */
 #ifndef MEDIUM_NODES
-#define MEDIUM_NODES 64
+#define MEDIUM_NODES 32
 #endif
 
 /* A ray's prefix ends where the least attenuated channel's optical depth from the eye reaches
@@ -93,14 +93,28 @@ inline float3 medium_interval_part(float3 a, float3 b, float t)
     return select(linear, a * t * ratio, positive);
 }
 
-/* One camera ray's in-scattering prefix in its light's γ: f the integrand per unit γ at the
- * nodes, g = G its prefix, nodes evenly spaced over [gamma_in, gamma_out], the γ of the ray's
- * part that meets the medium (up to WALK_DEPTH_END). */
+/* One camera ray's in-scattering prefix in its light's γ: at rising nodes gamma[k] over the
+ * γ of the ray's part that meets the medium (up to WALK_DEPTH_END), f the integrand per unit
+ * γ and g = G its prefix. */
+/* What a ray's prefix is built from: kept until its first lit run asks for it, so that a ray
+ * in shadow all along builds none. */
 typedef struct {
-    float gamma_in;
-    float gamma_out;
-    float step;       /* (gamma_out − gamma_in)/(MEDIUM_NODES − 1), 0: an empty ray */
-    float inv_step;
+    walk_medium_t where;
+    global const frame_t* frame;
+    global const epipolar_t* ep;
+    int directional;
+    float3 amplitude;
+    float3 dir;
+    float distance;
+    float sin_beta;
+    float cos_beta;
+} medium_ray_source_t;
+
+typedef struct {
+    int built; /* 0: only `source` is set */
+    medium_ray_source_t source;
+    int nodes; /* MEDIUM_NODES, or 0: the ray meets no medium */
+    float gamma[MEDIUM_NODES];
     float3 f[MEDIUM_NODES];
     float3 g[MEDIUM_NODES];
 #if defined(MEDIUM_HEIGHT) && !defined(MEDIUM_BOUNDED) && !defined(MEDIUM_GRID)
@@ -139,7 +153,7 @@ inline float3 medium_sun_segment(const medium_ray_t* ray, float gamma0, float ga
 inline float walk_distance(int directional, float d_el, float sin_beta, float cos_beta, float gamma)
 {
     if (directional) return gamma / sin_beta;
-    float sin_gamma = sin(gamma), cos_gamma = cos(gamma);
+    float cos_gamma, sin_gamma = sincos(gamma, &cos_gamma);
     float sin_sum = sin_beta * cos_gamma + cos_beta * sin_gamma;
     return sin_sum > 0.0f ? d_el * sin_gamma / sin_sum : INFINITY;
 }
@@ -156,6 +170,10 @@ inline float walk_gamma(int directional, float d_el, float sin_beta, float cos_b
  * replaced by density·T_e·T_l:
  *   point/spot   σs·I·ρ(cos(β+γ))·density·T_e·T_l / (d_el·sinβ)
  *   directional  σs·E·ρ(cosβ)·density·T_e·T_l / sinβ
+ * The nodes of a point or spot light's ray: half evenly spaced in γ, which follow the light's
+ * falloff and phase near it, half in distance, which follow the density and the attenuation
+ * where the ray runs away from the light (γ squeezes that part), merged in order; a
+ * directional light's γ is the distance (times sinβ), so all of them evenly spaced.
  * T_e sums the optical depth node to node (a grid is marched once along the ray); T_l is
  * medium.h's light_path_depth (closed form, or the light's optical-depth grid). */
 inline void medium_ray_build(const walk_medium_t* w, global const frame_t* frame, global const epipolar_t* ep,
@@ -165,8 +183,7 @@ inline void medium_ray_build(const walk_medium_t* w, global const frame_t* frame
     global const medium_t* m = w->medium;
     float s_in = 0.0f, s_out = distance;
     float3 sigma_t = frame->sigma_t.xyz;
-    ray->step = 0.0f;
-    ray->gamma_in = ray->gamma_out = 0.0f;
+    ray->nodes = 0;
 #ifdef WALK_SUN_CLOSED_FORM
     ray->sun_closed_form = directional;
     if (directional) {
@@ -197,18 +214,35 @@ inline void medium_ray_build(const walk_medium_t* w, global const frame_t* frame
     }
 #endif
     float d_el = ep->d_el;
-    ray->gamma_in = walk_gamma(directional, d_el, sin_beta, cos_beta, s_in);
-    ray->gamma_out = walk_gamma(directional, d_el, sin_beta, cos_beta, s_out);
-    if (!(ray->gamma_out > ray->gamma_in)) return;
-    ray->step = (ray->gamma_out - ray->gamma_in) / (float)(MEDIUM_NODES - 1);
-    ray->inv_step = 1.0f / ray->step;
+    float gamma_in = walk_gamma(directional, d_el, sin_beta, cos_beta, s_in);
+    float gamma_out = walk_gamma(directional, d_el, sin_beta, cos_beta, s_out);
+    if (!(gamma_out > gamma_in)) return;
+    ray->nodes = MEDIUM_NODES;
+    int even_gamma = directional ? MEDIUM_NODES : MEDIUM_NODES / 2 + 1; /* with both ends */
+    int even_s = MEDIUM_NODES - even_gamma;                               /* between the ends */
+    float gamma_step = (gamma_out - gamma_in) / (float)(even_gamma - 1);
+    float s_step = (s_out - s_in) / (float)(even_s + 1);
     float3 scale = amplitude / (directional ? sin_beta : d_el * sin_beta);
-    float3 previous = (float3)(0.0f);
     float eye_depth = segment_depth(m, w->density_grid, (float3)(0.0f), dir, 0.0f, s_in), s_before = s_in;
+    int next_gamma = 1, next_s = 1; /* the first node is the entry: (gamma_in, s_in) */
+    float gamma = gamma_in, s = s_in;
     for (int k = 0; k < MEDIUM_NODES; ++k) {
-        float gamma = k == MEDIUM_NODES - 1 ? ray->gamma_out : ray->gamma_in + (float)k * ray->step;
-        float s = k == 0 ? s_in : (k == MEDIUM_NODES - 1 ? s_out
-                                   : clamp(walk_distance(directional, d_el, sin_beta, cos_beta, gamma), s_before, s_out));
+        if (k > 0) { /* the nearer of the next node evenly spaced in γ and the next in s */
+            float gamma_a = next_gamma == even_gamma - 1 ? gamma_out : gamma_in + (float)next_gamma * gamma_step;
+            float s_a = next_gamma == even_gamma - 1 ? s_out : walk_distance(directional, d_el, sin_beta, cos_beta, gamma_a);
+            float s_b = next_s <= even_s ? s_in + (float)next_s * s_step : INFINITY;
+            if (s_b < s_a) {
+                s = s_b;
+                gamma = walk_gamma(directional, d_el, sin_beta, cos_beta, s_b);
+                ++next_s;
+            } else {
+                s = s_a;
+                gamma = gamma_a;
+                ++next_gamma;
+            }
+            s = clamp(s, s_before, s_out);
+            gamma = clamp(gamma, ray->gamma[k - 1], gamma_out); /* rising, whatever the rounding */
+        }
         eye_depth += segment_depth(m, w->density_grid, (float3)(0.0f), dir, s_before, s);
         s_before = s;
         float3 x = s * dir;
@@ -221,30 +255,44 @@ inline void medium_ray_build(const walk_medium_t* w, global const frame_t* frame
                                                  w->lights + ep->light_index, ep->light_index, x);
             f = scale * (phase_function(frame, cos_theta) * density) * exp(-sigma_t * (eye_depth + light_depth));
         }
+        ray->gamma[k] = gamma;
         ray->f[k] = f;
-        ray->g[k] = k == 0 ? (float3)(0.0f) : ray->g[k - 1] + ray->step * medium_interval_part(previous, f, 1.0f);
-        previous = f;
+        ray->g[k] = k == 0 ? (float3)(0.0f)
+                           : ray->g[k - 1] + (gamma - ray->gamma[k - 1]) * medium_interval_part(ray->f[k - 1], f, 1.0f);
     }
 }
 
-/* G(γ): 0 before the medium, the whole ray's after it, medium_interval_part between nodes. */
+/* G(γ): 0 before the medium, the whole ray's after it, medium_interval_part between the nodes
+ * around γ (a bisection). */
 inline float3 medium_ray_prefix(const medium_ray_t* ray, float gamma)
 {
-    if (!(gamma > ray->gamma_in)) return (float3)(0.0f);
-    if (!(gamma < ray->gamma_out)) return ray->g[MEDIUM_NODES - 1];
-    float u = (gamma - ray->gamma_in) * ray->inv_step;
-    int k = min((int)u, MEDIUM_NODES - 2);
-    return ray->g[k] + ray->step * medium_interval_part(ray->f[k], ray->f[k + 1], u - (float)k);
+    if (!(gamma > ray->gamma[0])) return (float3)(0.0f);
+    if (!(gamma < ray->gamma[MEDIUM_NODES - 1])) return ray->g[MEDIUM_NODES - 1];
+    int lo = 0, hi = MEDIUM_NODES - 1; /* gamma[lo] ≤ γ < gamma[hi] */
+    while (hi - lo > 1) {
+        int mid = (lo + hi) >> 1;
+        if (ray->gamma[mid] <= gamma) lo = mid;
+        else hi = mid;
+    }
+    float width = ray->gamma[hi] - ray->gamma[lo];
+    float t = width > 0.0f ? (gamma - ray->gamma[lo]) / width : 0.0f;
+    return ray->g[lo] + width * medium_interval_part(ray->f[lo], ray->f[hi], t);
 }
 
-/* A lit run's in-scattering, [γ0, γ1) of the ray. */
-inline float3 medium_ray_segment(const medium_ray_t* ray, float gamma0, float gamma1)
+/* A lit run's in-scattering, [γ0, γ1) of the ray; its first builds the ray's prefix. */
+inline float3 medium_ray_segment(medium_ray_t* ray, float gamma0, float gamma1)
 {
     if (!(gamma1 > gamma0)) return (float3)(0.0f);
+    if (!ray->built) {
+        const medium_ray_source_t* from = &ray->source;
+        medium_ray_build(&from->where, from->frame, from->ep, from->directional, from->amplitude, from->dir,
+                         from->distance, from->sin_beta, from->cos_beta, ray);
+        ray->built = 1;
+    }
 #ifdef WALK_SUN_CLOSED_FORM
     if (ray->sun_closed_form) return medium_sun_segment(ray, gamma0, gamma1);
 #endif
-    if (!(ray->step > 0.0f)) return (float3)(0.0f);
+    if (!ray->nodes) return (float3)(0.0f);
     return medium_ray_prefix(ray, gamma1) - medium_ray_prefix(ray, gamma0);
 }
 

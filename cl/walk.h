@@ -79,8 +79,8 @@ typedef struct {
     int relief_found;
 #endif
 #ifdef MEDIUM_VARYING
-    medium_ray_t medium; /* the ray's prefix of in-scattering (medium_walk.h), once the first walk built it */
-    int medium_built;
+    medium_ray_t medium; /* the ray's prefix of in-scattering (medium_walk.h), built by its first lit run */
+    int medium_built;    /* whether medium.source is set */
     float3 medium_dir;     /* the ray's unit direction ... */
     float medium_distance; /* ... and length, which the prefix is built along */
 #endif
@@ -338,11 +338,13 @@ inline float3 row_radiance(global const epipolar_t* ep, global const float2* tre
 #else
     global const float* row_prefix = 0; /* (read only for a textured light) */
 #endif
-#ifdef MEDIUM_VARYING /* once per ray: its rows share its prefix */
+#ifdef MEDIUM_VARYING /* once per ray: its rows share its prefix, which its first lit run builds */
     if (!span->medium_built) {
-        medium_ray_build(&features->medium, frame, ep, in->light_type == LIGHT_DIRECTIONAL, in->amplitude.xyz,
-                         span->medium_dir, span->medium_distance, span->ray.sin_beta, span->ray.cos_beta,
-                         &span->medium);
+        medium_ray_source_t source = {features->medium, frame, ep, in->light_type == LIGHT_DIRECTIONAL,
+                                      in->amplitude.xyz, span->medium_dir, span->medium_distance,
+                                      span->ray.sin_beta, span->ray.cos_beta};
+        span->medium.source = source;
+        span->medium.built = 0;
         span->medium_built = 1;
     }
 #endif

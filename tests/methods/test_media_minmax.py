@@ -46,19 +46,51 @@ def clip_box(medium, o, d, t0, t1):
     return np.maximum(t0, near.max(axis=-1)), np.minimum(t1, far.min(axis=-1))
 
 
+#: Midpoint steps of the reference's march through a grid (optical depths there).
+GRID_MARCH_STEPS = 96
+
+
+def grid_density(grid, x):
+    """Trilinear between voxel centres, held at the outermost centres out to the bounds, 0 beyond."""
+    values = np.asarray(grid.values, np.float64)
+    lo, hi = np.asarray(grid.bounds.min, float), np.asarray(grid.bounds.max, float)
+    size = np.array(values.shape[::-1], float)  # (nx, ny, nz)
+    c = (x - lo) / (hi - lo) * size
+    outside = np.any((c < 0) | (c > size), axis=-1)
+    c = np.clip(c - 0.5, 0, size - 1)
+    cell = np.minimum(np.floor(c).astype(int), np.maximum(size.astype(int) - 2, 0))
+    f = c - cell
+    out = np.zeros(x.shape[:-1])
+    for corner in np.ndindex(2, 2, 2):
+        index = np.minimum(cell + corner, size.astype(int) - 1)
+        weight = np.prod(np.where(np.array(corner, bool), f, 1 - f), axis=-1)
+        out += weight * values[index[..., 2], index[..., 1], index[..., 0]]
+    return np.where(outside, 0.0, out)
+
+
 def density(medium, x):
     """The density factor at points x (..., 3), box not tested."""
     if isinstance(medium.density, HeightDensity):
         return np.exp(-(x[..., 1] - medium.density.base) / medium.density.scale_height)
+    if isinstance(medium.density, GridDensity):
+        return grid_density(medium.density, x)
     return np.ones(x.shape[:-1])
 
 
 def optical_depth(medium, o, d, t0, t1):
-    """∫ density over o + t·d, t ∈ [t0, t1] ∩ box (per unit σt), t1 may be inf: closed form."""
+    """∫ density over o + t·d, t ∈ [t0, t1] ∩ box (per unit σt), t1 may be inf: closed form;
+    a grid by GRID_MARCH_STEPS midpoint steps over the part inside its bounds."""
     a, b = clip_box(medium, o, d, t0, t1)
+    if isinstance(medium.density, GridDensity):
+        a, b = clip_box(dataclasses.replace(medium, bounds=medium.density.bounds), o, d, a, b)
     empty = ~(b > a)
     a = np.where(empty, 0.0, a)
     b = np.where(empty, 0.0, b)
+    if isinstance(medium.density, GridDensity):
+        u = (np.arange(GRID_MARCH_STEPS) + 0.5) / GRID_MARCH_STEPS
+        t = a[..., None] + (b - a)[..., None] * u
+        points = np.asarray(o)[..., None, :] + t[..., None] * np.asarray(d)[..., None, :]
+        return grid_density(medium.density, points).mean(axis=-1) * (b - a)
     if not isinstance(medium.density, HeightDensity):
         return np.where(empty, 0.0, np.where(np.isinf(b), 0.0, b - a))
     h, base = medium.density.scale_height, medium.density.base
@@ -89,20 +121,22 @@ def unattenuated_incident(light, x):
     return radiometry.light_incident(light, x, np.zeros(3))
 
 
-def segment_in_scatter(scene, light, eye, dirs, a, b):
+def segment_in_scatter(scene, light, eye, dirs, a, b, panels=GL_PANELS):
     """∫_a^b σs·density·ρ(cosθ)·Lin·T_e·T_l ds per interval (N, 3), a and b clipped to the box;
     point and spot lights in s = s0 + h·tanφ (the 1/r² peak spread evenly), the sun in s."""
     medium = scene.medium
     sigma_s, sigma_t = radiometry.rgb(medium.sigma_s), radiometry.rgb(medium.sigma_s) + radiometry.rgb(medium.sigma_a)
     a, b = clip_box(medium, eye, dirs, a, b)
+    if isinstance(medium.density, GridDensity):
+        a, b = clip_box(dataclasses.replace(medium, bounds=medium.density.bounds), eye, dirs, a, b)
     keep = b > a
     out = np.zeros((len(dirs), 3))
     if not np.any(keep):
         return out
     dirs, a, b = dirs[keep], a[keep], b[keep]
     nodes, weights = np.polynomial.legendre.leggauss(GL_NODES)
-    u = (np.arange(GL_PANELS)[:, None] + 0.5 * (nodes[None, :] + 1)).ravel() / GL_PANELS  # (P·G,) in (0, 1)
-    w = np.tile(weights, GL_PANELS) / (2 * GL_PANELS)
+    u = (np.arange(panels)[:, None] + 0.5 * (nodes[None, :] + 1)).ravel() / panels  # (P·G,) in (0, 1)
+    w = np.tile(weights, panels) / (2 * panels)
     position = radiometry.light_position(light)
     if position is None:  # s linear in u
         s = a[:, None] + (b - a)[:, None] * u[None, :]
@@ -129,7 +163,7 @@ def segment_in_scatter(scene, light, eye, dirs, a, b):
     return out
 
 
-def reference_image(scene):
+def reference_image(scene, panels=GL_PANELS):
     """The float64 radiance image (H, W, 3) of one sample per pixel at its centre."""
     assert scene.image.spp == 1
     medium = scene.medium
@@ -166,7 +200,7 @@ def reference_image(scene):
     for light in scene.lights:
         ray, a, b = queries.lit_intervals(eye, dirs, depth, light, shadow_halfspaces(light, tri),
                                           lamp_radius=radiometry.lamp_radius(scene))
-        part = segment_in_scatter(scene, light, eye, dirs[ray], a, b)
+        part = segment_in_scatter(scene, light, eye, dirs[ray], a, b, panels)
         for channel in range(3):
             out[:, channel] += np.bincount(ray, weights=part[:, channel], minlength=len(dirs))
     return out.reshape(scene.image.height, scene.image.width, 3)
@@ -242,6 +276,22 @@ CASES = {
 }
 
 
+def blob_grid(n=12):
+    """A smooth lump of fog, n³ voxels over a 6 × 4 × 6 box: densest off-centre, 0.05 at its rim."""
+    z, y, x = np.meshgrid(*[(np.arange(n) + 0.5) / n for _ in range(3)], indexing="ij")
+    values = 0.05 + 2.0 * np.exp(-((x - 0.4) ** 2 + (y - 0.35) ** 2 + (z - 0.5) ** 2) / 0.08)
+    return GridDensity(values.astype(np.float32), _box([-3, 0, -3], [3, 4, 3]))
+
+
+#: name → scene with a density grid (their reference marches: fewer pixels and panels).
+GRID_CASES = {
+    "point light, a grid": lambda: _scene(LAMP, density=blob_grid()),
+    "sun through a window, a grid in a box": lambda: _scene(WINDOW, bounds=_box([-8, 0, -20], [8, 6, -4.2]),
+                                                            density=dataclasses.replace(
+                                                                blob_grid(), bounds=_box([-4, 0, -10], [4, 5, -4.2]))),
+}
+
+
 @pytest.fixture(scope="module")
 def renderer():
     return Renderer(reuse=False)
@@ -257,6 +307,38 @@ def test_minmax_against_quadrature(renderer, name, sampling):
     assert np.all(np.isfinite(image))
     error = relative_rmse(image, reference)
     assert error <= 0.005, f"{name}: relative RMSE {error:.4g}"
+
+
+@pytest.mark.parametrize("name", list(GRID_CASES))
+def test_minmax_with_a_grid_against_quadrature(renderer, name):
+    scene = GRID_CASES[name]()
+    scene = dataclasses.replace(scene, image=dataclasses.replace(scene.image, width=40, height=24))
+    image = renderer.render(scene, "minmax").image.astype(np.float64)
+    reference = reference_image(scene, panels=12)
+    error = relative_rmse(image, reference)
+    assert error <= 0.005, f"{name}: relative RMSE {error:.4g}"
+
+
+@pytest.mark.parametrize("name", ["point light, camera outside the box", "spot light, box and height fog"])
+def test_passes_carry_the_medium(renderer, name):
+    """The render passes in a bounded, height-fog medium: `transmittance` is T_e to the first
+    surface (to `far` for the background) of this medium, and the image is still
+    surface × transmittance + in_scatter."""
+    scene = CASES[name]()
+    scene = dataclasses.replace(scene, render=dataclasses.replace(
+        scene.render, aovs=("in_scatter", "transmittance", "surface", "depth")))
+    result = renderer.render(scene, "minmax")
+    image, passes = result.image.astype(np.float64), result.passes
+    eye = np.asarray(scene.camera.position, float)
+    dirs = primary_rays(scene.camera, scene.image, sample_offsets(1))[:, :, 0, :].reshape(-1, 3)
+    depth = np.where(np.isinf(passes["depth"]), radiometry.effective_far(scene), passes["depth"]).reshape(-1)
+    sigma_t = radiometry.rgb(scene.medium.sigma_s) + radiometry.rgb(scene.medium.sigma_a)
+    expected = np.exp(-optical_depth(scene.medium, np.broadcast_to(eye, dirs.shape), dirs, np.zeros(len(dirs)),
+                                     depth)[:, None] * sigma_t)
+    np.testing.assert_allclose(passes["transmittance"].reshape(-1, 3), expected, rtol=1e-4)
+    assert np.any(np.abs(expected - np.exp(-sigma_t * depth[:, None])) > 0.05)  # not the unbounded medium's
+    beauty = passes["surface"] * passes["transmittance"] + passes["in_scatter"]
+    assert np.abs(beauty - image).max() <= 1e-4 * image.max()
 
 
 def test_the_box_and_the_density_change_the_image(renderer):
