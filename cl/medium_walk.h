@@ -83,9 +83,16 @@ inline float3 mean_exp3(float3 x)
 
 /* ∫_0^t of the integrand between nodes of values a and b, in units of the step: a·(b/a)^u
  * integrated, a·t·(e^{qt} − 1)/(qt) with q = ln(b/a), exact where the integrand is exponential
- * (attenuation: docs/media.md); linear where either is 0. t = 1 gives the whole interval. */
-inline float3 medium_interval_part(float3 a, float3 b, float t)
+ * (attenuation: docs/media.md); linear where either is 0. t = 1 gives the whole interval.
+ * `grey`: the channels are in proportion, and share one ratio (their sums'). */
+inline float3 medium_interval_part(float3 a, float3 b, float t, int grey)
 {
+    if (grey) { /* the channels in proportion (one σt): one ratio b/a for all three */
+        float a_sum = a.x + a.y + a.z, b_sum = b.x + b.y + b.z;
+        if (!(a_sum > 0.0f && b_sum > 0.0f)) return t * (a + (0.5f * t) * (b - a));
+        float qt = log(b_sum / a_sum) * t;
+        return a * (t * (fabs(qt) < 1e-4f ? 1.0f + 0.5f * qt : expm1(qt) / qt));
+    }
     int3 positive = isgreater(a, (float3)(0.0f)) & isgreater(b, (float3)(0.0f));
     float3 qt = select((float3)(0.0f), log(b / a) * t, positive);
     float3 ratio = select(expm1(qt) / qt, 1.0f + 0.5f * qt, isless(fabs(qt), (float3)(1e-4f)));
@@ -114,6 +121,7 @@ typedef struct {
     int built; /* 0: only `source` is set */
     medium_ray_source_t source;
     int nodes; /* MEDIUM_NODES, or 0: the ray meets no medium */
+    int grey;  /* one σt in every channel: the nodes' f in proportion, one exponential for T */
     float gamma[MEDIUM_NODES];
     float3 f[MEDIUM_NODES];
     float3 g[MEDIUM_NODES];
@@ -184,6 +192,7 @@ inline void medium_ray_build(const walk_medium_t* w, global const frame_t* frame
     float s_in = 0.0f, s_out = distance;
     float3 sigma_t = frame->sigma_t.xyz;
     ray->nodes = 0;
+    ray->grey = sigma_t.x == sigma_t.y && sigma_t.x == sigma_t.z;
 #ifdef WALK_SUN_CLOSED_FORM
     ray->sun_closed_form = directional;
     if (directional) {
@@ -250,15 +259,18 @@ inline void medium_ray_build(const walk_medium_t* w, global const frame_t* frame
         float3 f = (float3)(0.0f);
         if (density > 0.0f) {
             /* cosθ between the light's propagation and the way to the eye (docs/integrand.md) */
-            float cos_theta = directional ? cos_beta : cos_beta * cos(gamma) - sin_beta * sin(gamma);
+            float cos_gamma, sin_gamma = sincos(gamma, &cos_gamma);
+            float cos_theta = directional ? cos_beta : cos_beta * cos_gamma - sin_beta * sin_gamma;
             float light_depth = light_path_depth(w->medium, w->density_grid, w->light_depth_grid,
                                                  w->lights + ep->light_index, ep->light_index, x);
-            f = scale * (phase_function(frame, cos_theta) * density) * exp(-sigma_t * (eye_depth + light_depth));
+            float depth = eye_depth + light_depth;
+            float3 through = ray->grey ? (float3)(exp(-sigma_t.x * depth)) : exp(-sigma_t * depth);
+            f = scale * (phase_function(frame, cos_theta) * density) * through;
         }
         ray->gamma[k] = gamma;
         ray->f[k] = f;
         ray->g[k] = k == 0 ? (float3)(0.0f)
-                           : ray->g[k - 1] + (gamma - ray->gamma[k - 1]) * medium_interval_part(ray->f[k - 1], f, 1.0f);
+                           : ray->g[k - 1] + (gamma - ray->gamma[k - 1]) * medium_interval_part(ray->f[k - 1], f, 1.0f, ray->grey);
     }
 }
 
@@ -276,7 +288,7 @@ inline float3 medium_ray_prefix(const medium_ray_t* ray, float gamma)
     }
     float width = ray->gamma[hi] - ray->gamma[lo];
     float t = width > 0.0f ? (gamma - ray->gamma[lo]) / width : 0.0f;
-    return ray->g[lo] + width * medium_interval_part(ray->f[lo], ray->f[hi], t);
+    return ray->g[lo] + width * medium_interval_part(ray->f[lo], ray->f[hi], t, ray->grey);
 }
 
 /* A lit run's in-scattering, [γ0, γ1) of the ray; its first builds the ray's prefix. */

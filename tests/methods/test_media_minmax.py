@@ -341,6 +341,19 @@ def test_passes_carry_the_medium(renderer, name):
     assert np.abs(beauty - image).max() <= 1e-4 * image.max()
 
 
+def test_epipolar_refines_where_the_box_edges_cross(renderer):
+    """Epipolar sampling against pixel sampling (the same walk on every ray) where a box's
+    edges cross the epipolar lines: line_refine_fill computes the samples between neighbours
+    that cross the box by different faces (medium_faces), which the radiance threshold alone
+    left to the fill (7.4e-3 of the peak at worst without it, 1.7e-3 with it)."""
+    scene = CASES["sun through a window into a fog box"]()
+    scene = dataclasses.replace(scene, image=dataclasses.replace(scene.image, width=160, height=96))
+    images = {sampling: renderer.render(dataclasses.replace(scene, render=dataclasses.replace(
+        scene.render, sampling=sampling)), "minmax").image.astype(np.float64) for sampling in ("pixel", "epipolar")}
+    worst = np.abs(images["epipolar"] - images["pixel"]).max() / images["pixel"].max()
+    assert worst <= 3e-3, f"epipolar against pixel sampling: {worst:.2e} of the peak"
+
+
 def test_the_box_and_the_density_change_the_image(renderer):
     """The cases are not the homogeneous medium in disguise: bounds and density each move
     the image by far more than the tolerance."""
