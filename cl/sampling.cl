@@ -467,6 +467,39 @@ inline float3 gather_ray(global const frame_t* frame, global const view_t* views
     return dir;
 }
 
+#ifdef MEDIUM_VARYING
+/* A slice's line cannot stand for a camera sample whose ray crosses the medium's box or grid
+ * by other faces (medium_faces) than either of the two line samples it would be interpolated
+ * from: an edge of the box lies between them, where the in-scattering has a kink. Near the
+ * epipole a box's edge can run along the lines, between two that the refine computed. */
+#define GATHER_MEDIUM_ARGS , global const float4* sides MEDIUM_ARGS
+ALWAYS_INLINE int_lanes medium_breaks_lanes(global const epipolar_t* ep, global const float2* ranges,
+                                            global const int* lengths, global const float4* sides,
+                                            global const medium_t* medium, int_lanes i, float_lanes q,
+                                            float_lanes dx, float_lanes dy, float_lanes dz, float_lanes distance)
+{
+    int breaks[LANES];
+    for (int k = 0; k < LANES; ++k) {
+        int slice = i[k], length = lengths[slice];
+        float2 range = ranges[slice];
+        breaks[k] = 0;
+        if (!(range.x < range.y) || length < 2) continue;
+        float f = clamp((q[k] - range.x) / (range.y - range.x), 0.0f, 1.0f) * (float)(length - 1);
+        int j = min((int)f, length - 2);
+        int own = medium_faces(medium, (float3)(dx[k], dy[k], dz[k]), distance[k]);
+        for (int end = j; end <= j + 1; ++end) {
+            float q_end, sin_beta;
+            line_q(ranges, slice, end, length, &q_end);
+            if (medium_faces(medium, line_direction(ep, sides, slice, q_end, &sin_beta), distance[k]) != own)
+                breaks[k] = -1;
+        }
+    }
+    return vload8(0, breaks);
+}
+#else
+#define GATHER_MEDIUM_ARGS
+#endif
+
 /* Per LANES camera samples: add each of its two slices' interpolated radiance,
  * weighted as traverse blends them, to `scatter` (with `overwrite`, write it there: the
  * first light's, into a buffer not cleared); flag the sample in `fixup_flags` (a bit per slice)
@@ -477,7 +510,7 @@ kernel void gather(global const frame_t* frame, global const view_t* views, glob
                    global const epipolar_t* ep, global const uint* camera_depth, global const float2* offsets,
                    global const float2* ranges, global const float2* line, global const float4* radiance, int n,
                    global const int* lengths, float threshold, float epipole_sin, int samples, int overwrite,
-                   global float4* scatter, global uchar* fixup_flags)
+                   global float4* scatter, global uchar* fixup_flags GATHER_MEDIUM_ARGS)
 {
     int first = get_global_id(0) * LANES;
     /* lanes past the last sample compute the last one again, and store nothing */
@@ -524,6 +557,10 @@ kernel void gather(global const frame_t* frame, global const view_t* views, glob
                         & same_distance(between0, between1, 4.0f * threshold);
     int_lanes from0 = stands0 & (same_distance(between0, distance, threshold) | blended);
     int_lanes from1 = stands1 & (same_distance(between1, distance, threshold) | blended);
+#ifdef MEDIUM_VARYING
+    from0 &= ~medium_breaks_lanes(ep, ranges, lengths, sides, medium, i0, q, dx, dy, dz, distance);
+    from1 &= ~medium_breaks_lanes(ep, ranges, lengths, sides, medium, i1, q, dx, dy, dz, distance);
+#endif
     float_lanes w0 = from0 ? 1.0f - t : 0.0f, w1 = from1 ? t : 0.0f; /* the slices' weights, as traverse's */
     float_lanes red = (w0 * r0 + w1 * r1) / scale, green = (w0 * g0 + w1 * g1) / scale;
     float_lanes blue = (w0 * b0 + w1 * b1) / scale;
