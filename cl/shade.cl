@@ -48,6 +48,35 @@
  * camera ray (T_e), lane by lane; exp(-σt·d) otherwise, and those images are unchanged. */
 #include "medium.h"
 
+#ifdef MEDIUM_GRID
+/* A surface's optical depth to light `source` through the grid, looked up in the light's
+ * optical-depth grid: the density is 0 outside the grid's bounds, so a p outside them takes the
+ * value where its path towards the light enters them (none: 0), and one on them that rounding
+ * put outside (a grid fitted to the scene: its floor, its walls) is moved in, where
+ * light_path_depth looks up instead of marching through the grid for every pixel. */
+inline float grid_path_depth(global const medium_t* medium, global const float* density_grid,
+                             global const float* depth_grid, global const light_t* source, int index, float3 p)
+{
+    float3 lo = medium->grid_min.xyz, hi = medium->grid_max.xyz;
+    float3 towards;
+    float reach = INFINITY;
+    if (source->type == LIGHT_DIRECTIONAL) {
+        towards = -source->direction.xyz;
+    } else {
+        float3 w = source->position.xyz - p;
+        reach = length(w);
+        if (!(reach > 0.0f)) return 0.0f;
+        towards = w / reach;
+    }
+    float t0 = 0.0f, t1 = reach;
+    if (!clip_to_box(lo, hi, p, towards, &t0, &t1)) return 0.0f;
+    return light_path_depth(medium, density_grid, depth_grid, source, index, clamp(p + t0 * towards, lo, hi));
+}
+#define SURFACE_LIGHT_DEPTH(light, l, p) grid_path_depth(medium, density_grid, light_depth_grid, light, l, p)
+#else
+#define SURFACE_LIGHT_DEPTH(light, l, p) light_path_depth(medium, density_grid, light_depth_grid, light, l, p)
+#endif
+
 /* A vector quantity over the lanes: each component a float8. */
 typedef struct {
     float_lanes x, y, z;
@@ -264,8 +293,7 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                     incident = splat_lanes(light->power.xyz);
 #ifdef MEDIUM_VARYING /* T_l: the part of the light's path inside the medium */
                     for (int k = 0; k < LANES; ++k) {
-                        float3 through = exp(-sigma_t * light_path_depth(medium, density_grid, light_depth_grid, light,
-                                                                         l, lane_of(p, k)));
+                        float3 through = exp(-sigma_t * SURFACE_LIGHT_DEPTH(light, l, lane_of(p, k)));
                         incident.x[k] *= through.x;
                         incident.y[k] *= through.y;
                         incident.z[k] *= through.z;
@@ -281,8 +309,7 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
 #ifdef MEDIUM_VARYING /* T_l along the path from the light */
                     vec_lanes attenuated;
                     for (int k = 0; k < LANES; ++k) {
-                        float3 through = exp(-sigma_t * light_path_depth(medium, density_grid, light_depth_grid, light,
-                                                                         l, lane_of(p, k)));
+                        float3 through = exp(-sigma_t * SURFACE_LIGHT_DEPTH(light, l, lane_of(p, k)));
                         attenuated.x[k] = through.x;
                         attenuated.y[k] = through.y;
                         attenuated.z[k] = through.z;
