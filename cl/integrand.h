@@ -19,6 +19,10 @@
 #define CLRAYS_INTEGRAND_H
 #include "lighting.h"
 #include "atan2_approx.h"
+#include "medium.h"
+#ifdef MEDIUM_VARYING
+#include "medium_walk.h"
+#endif
 
 /* SIN_BETA_MIN, the clamp of sinβ in every 1/sinβ, comes from clrays/structs.py (-D): the
  * host's tables use the same one. */
@@ -96,6 +100,9 @@ typedef struct {
     int row;         /* table row j ... */
     float row_t;     /* ... and the fraction towards row j + 1 */
     float cos_beta;
+#ifdef MEDIUM_VARYING
+    medium_ray_t* medium; /* the ray's own prefix (medium_walk.h), which replaces the tables */
+#endif
 } integrand_row_t;
 
 inline integrand_row_t integrand_row(global const integrand_t* in, float beta, float sin_beta, float cos_beta)
@@ -113,6 +120,9 @@ inline integrand_row_t integrand_row(global const integrand_t* in, float beta, f
 inline float3 segment_radiance(global const integrand_t* in, global const float* tables,
                                global const frame_t* frame, const integrand_row_t* r, float gamma0, float gamma1)
 {
+#ifdef MEDIUM_VARYING /* a bounded or heterogeneous medium: the tables (homogeneous) are not read */
+    return medium_ray_segment(r->medium, gamma0, gamma1);
+#endif
     if (in->mode == INTEGRAND_ANALYTIC) {
         if (in->light_type == LIGHT_DIRECTIONAL) {
             /* σs·E·ρ(cos β)·e^{-σt·s0}·(1 - e^{-σt·Δs})/σt, → Δs as σt → 0 (s = γ/sin β). */

@@ -241,6 +241,17 @@ ALWAYS_INLINE int radiance_breaks(float3 a, float3 b, float threshold)
     return inline_fabs(la - lb) > threshold * inline_fmax(la, lb);
 }
 
+#ifdef MEDIUM_VARYING
+/* medium_faces of line sample j of slice i's ray up to its distance. */
+inline int line_sample_faces(global const epipolar_t* ep, global const float2* ranges, global const float4* sides,
+                             global const medium_t* m, global const float2* samples, int i, int j, int n)
+{
+    float q, sin_beta;
+    line_q(ranges, i, j, n, &q);
+    return medium_faces(m, line_direction(ep, sides, i, q, &sin_beta), samples[j].x);
+}
+#endif
+
 /* What line_scatter and line_refine_fill know of a line sample (`state`, a byte each). */
 #define LINE_LEFT 0     /* not computed (yet): interpolated by the fill */
 #define LINE_COMPUTED 1 /* computed by line_scatter, or on a slice that misses the screen */
@@ -292,7 +303,9 @@ kernel void line_scatter(global const frame_t* frame, global const view_t* views
  *   computed either side differ by more than 4 × the threshold (a shadow edge crosses the
  *   line between them), so that the fill draws no straight line across it. Not 1 ×: over
  *   `step` samples the light's own falloff often changes radiance by a few percent, and
- *   refining on it walked many more samples for no error gained on the bench scenes. A
+ *   refining on it walked many more samples for no error gained on the bench scenes. In a
+ *   medium with a box or a grid (MEDIUM_VARYING), also where the two rays cross its faces
+ *   differently: a kink of the in-scattering that the threshold does not see. A
  *   refined sample is marked LINE_REFINED, so that every decision sees line_scatter's
  *   samples (LINE_COMPUTED) only.
  * - Fill: each sample still LINE_LEFT is linear in j between the computed samples either
@@ -323,7 +336,13 @@ kernel void line_refine_fill(global const frame_t* frame, global const light_t* 
         int left = j - 1, right = j + 1;
         while (known[left] != LINE_COMPUTED) --left;
         while (known[right] != LINE_COMPUTED) ++right;
-        if (radiance_breaks(samples[left].xyz, samples[right].xyz, 4.0f * threshold)) {
+        int breaks = radiance_breaks(samples[left].xyz, samples[right].xyz, 4.0f * threshold);
+#ifdef MEDIUM_VARYING /* or an edge of the medium's box or grid crosses the line between them (medium_walk.h) */
+        breaks = breaks || line_sample_faces(ep, ranges, sides, features.medium.medium, line + i * n, i, left, length)
+                               != line_sample_faces(ep, ranges, sides, features.medium.medium, line + i * n, i, right,
+                                                    length);
+#endif
+        if (breaks) {
             float3 computed = line_sample_radiance(frame, lights, ep, tree, integrand, tables, &features, ranges, sides,
                                                    wedge, line[i * n + j].x, i, j, length, &walks);
             samples[j].xyz = computed;
@@ -448,6 +467,39 @@ inline float3 gather_ray(global const frame_t* frame, global const view_t* views
     return dir;
 }
 
+#ifdef MEDIUM_VARYING
+/* A slice's line cannot stand for a camera sample whose ray crosses the medium's box or grid
+ * by other faces (medium_faces) than either of the two line samples it would be interpolated
+ * from: an edge of the box lies between them, where the in-scattering has a kink. Near the
+ * epipole a box's edge can run along the lines, between two that the refine computed. */
+#define GATHER_MEDIUM_ARGS , global const float4* sides MEDIUM_ARGS
+ALWAYS_INLINE int_lanes medium_breaks_lanes(global const epipolar_t* ep, global const float2* ranges,
+                                            global const int* lengths, global const float4* sides,
+                                            global const medium_t* medium, int_lanes i, float_lanes q,
+                                            float_lanes dx, float_lanes dy, float_lanes dz, float_lanes distance)
+{
+    int breaks[LANES];
+    for (int k = 0; k < LANES; ++k) {
+        int slice = i[k], length = lengths[slice];
+        float2 range = ranges[slice];
+        breaks[k] = 0;
+        if (!(range.x < range.y) || length < 2) continue;
+        float f = clamp((q[k] - range.x) / (range.y - range.x), 0.0f, 1.0f) * (float)(length - 1);
+        int j = min((int)f, length - 2);
+        int own = medium_faces(medium, (float3)(dx[k], dy[k], dz[k]), distance[k]);
+        for (int end = j; end <= j + 1; ++end) {
+            float q_end, sin_beta;
+            line_q(ranges, slice, end, length, &q_end);
+            if (medium_faces(medium, line_direction(ep, sides, slice, q_end, &sin_beta), distance[k]) != own)
+                breaks[k] = -1;
+        }
+    }
+    return vload8(0, breaks);
+}
+#else
+#define GATHER_MEDIUM_ARGS
+#endif
+
 /* Per LANES camera samples: add each of its two slices' interpolated radiance,
  * weighted as traverse blends them, to `scatter` (with `overwrite`, write it there: the
  * first light's, into a buffer not cleared); flag the sample in `fixup_flags` (a bit per slice)
@@ -458,7 +510,7 @@ kernel void gather(global const frame_t* frame, global const view_t* views, glob
                    global const epipolar_t* ep, global const uint* camera_depth, global const float2* offsets,
                    global const float2* ranges, global const float2* line, global const float4* radiance, int n,
                    global const int* lengths, float threshold, float epipole_sin, int samples, int overwrite,
-                   global float4* scatter, global uchar* fixup_flags)
+                   global float4* scatter, global uchar* fixup_flags GATHER_MEDIUM_ARGS)
 {
     int first = get_global_id(0) * LANES;
     /* lanes past the last sample compute the last one again, and store nothing */
@@ -505,6 +557,10 @@ kernel void gather(global const frame_t* frame, global const view_t* views, glob
                         & same_distance(between0, between1, 4.0f * threshold);
     int_lanes from0 = stands0 & (same_distance(between0, distance, threshold) | blended);
     int_lanes from1 = stands1 & (same_distance(between1, distance, threshold) | blended);
+#ifdef MEDIUM_VARYING
+    from0 &= ~medium_breaks_lanes(ep, ranges, lengths, sides, medium, i0, q, dx, dy, dz, distance);
+    from1 &= ~medium_breaks_lanes(ep, ranges, lengths, sides, medium, i1, q, dx, dy, dz, distance);
+#endif
     float_lanes w0 = from0 ? 1.0f - t : 0.0f, w1 = from1 ? t : 0.0f; /* the slices' weights, as traverse's */
     float_lanes red = (w0 * r0 + w1 * r1) / scale, green = (w0 * g0 + w1 * g1) / scale;
     float_lanes blue = (w0 * b0 + w1 * b1) / scale;

@@ -22,6 +22,40 @@
 
 /* SURFACE_BIAS_TEXELS, the surface shadow test's depth tolerance: clrays/structs.py (-D). */
 
+/* A bounded or heterogeneous medium builds shade with MEDIUM_VARYING (medium.h): a surface's
+ * light is attenuated along the light's path through it (T_l), and its radiance along the
+ * camera ray (T_e), lane by lane; exp(-σt·d) otherwise, and those images are unchanged. */
+#include "medium.h"
+
+#ifdef MEDIUM_GRID
+/* A surface's optical depth to light `source` through the grid, looked up in the light's
+ * optical-depth grid: the density is 0 outside the grid's bounds, so a p outside them takes the
+ * value where its path towards the light enters them (none: 0), and one on them that rounding
+ * put outside (a grid fitted to the scene: its floor, its walls) is moved in, where
+ * light_path_depth looks up instead of marching through the grid for every pixel. */
+inline float grid_path_depth(global const medium_t* medium, global const float* density_grid,
+                             global const float* depth_grid, global const light_t* source, int index, float3 p)
+{
+    float3 lo = medium->grid_min.xyz, hi = medium->grid_max.xyz;
+    float3 towards;
+    float reach = INFINITY;
+    if (source->type == LIGHT_DIRECTIONAL) {
+        towards = -source->direction.xyz;
+    } else {
+        float3 w = source->position.xyz - p;
+        reach = length(w);
+        if (!(reach > 0.0f)) return 0.0f;
+        towards = w / reach;
+    }
+    float t0 = 0.0f, t1 = reach;
+    if (!clip_to_box(lo, hi, p, towards, &t0, &t1)) return 0.0f;
+    return light_path_depth(medium, density_grid, depth_grid, source, index, clamp(p + t0 * towards, lo, hi));
+}
+#define SURFACE_LIGHT_DEPTH(light, l, p) grid_path_depth(medium, density_grid, light_depth_grid, light, l, p)
+#else
+#define SURFACE_LIGHT_DEPTH(light, l, p) light_path_depth(medium, density_grid, light_depth_grid, light, l, p)
+#endif
+
 /* A vector quantity over the lanes: each component a float8. */
 typedef struct {
     float_lanes x, y, z;
@@ -131,7 +165,9 @@ ALWAYS_INLINE vec_lanes smooth_normal_lanes(global const float4* tri_vertices, g
     return select_lanes((det != 0.0f) & (n_length > 0.0f), normalised, flat);
 }
 
-
+#ifdef MEDIUM_VARYING /* (its lane loops call medium.h's float3 code: walk.h's case, common.h) */
+NOT_ACROSS_WORK_ITEMS
+#endif
 kernel void shade(global const frame_t* frame, global const view_t* views,
                   global const light_t* lights, global const uint* shadow_depth,
                   global const uint* camera_depth, global const int* tri_id,
@@ -232,6 +268,14 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                 if (light->type == LIGHT_DIRECTIONAL) {
                     to_light = splat_lanes(-light->direction.xyz);
                     incident = splat_lanes(light->power.xyz);
+#ifdef MEDIUM_VARYING /* T_l: the part of the light's path inside the medium */
+                    for (int k = 0; k < LANES; ++k) {
+                        float3 through = exp(-sigma_t * SURFACE_LIGHT_DEPTH(light, l, lane_of(p, k)));
+                        incident.x[k] *= through.x;
+                        incident.y[k] *= through.y;
+                        incident.z[k] *= through.z;
+                    }
+#endif
                 } else {
                     vec_lanes w = sub_lanes(p, splat_lanes(light->position.xyz));
                     float_lanes d2 = squared_length_lanes(w.x, w.y, w.z);
@@ -239,7 +283,17 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                     vec_lanes away = {-w.x / d, -w.y / d, -w.z / d};
                     to_light = select_lanes(d > 0.0f, away, splat_lanes((float3)(0.0f, 1.0f, 0.0f)));
                     float_lanes falloff = fmax_lanes(d2, 1e-30f);
+#ifdef MEDIUM_VARYING /* T_l along the path from the light */
+                    vec_lanes attenuated;
+                    for (int k = 0; k < LANES; ++k) {
+                        float3 through = exp(-sigma_t * SURFACE_LIGHT_DEPTH(light, l, lane_of(p, k)));
+                        attenuated.x[k] = through.x;
+                        attenuated.y[k] = through.y;
+                        attenuated.z[k] = through.z;
+                    }
+#else
                     vec_lanes attenuated = attenuation_lanes(sigma_t, d);
+#endif
                     vec_lanes lit = {light->power.x * attenuated.x / falloff, light->power.y * attenuated.y / falloff,
                                      light->power.z * attenuated.z / falloff};
                     incident = lit;
@@ -308,19 +362,44 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
             load_records_run(scatter, first, &in_scatter.x, &in_scatter.y, &in_scatter.z, &unused);
         else
             in_scatter = gather_xyz(scatter, sample, 0);
+#ifdef MEDIUM_VARYING /* T_e: the part of the camera ray inside the medium */
+        vec_lanes to_eye;
+        for (int k = 0; k < LANES; ++k) {
+            float3 through = exp(-sigma_t * segment_depth(medium, density_grid, lane_of(origin, k), lane_of(dir, k),
+                                                          0.0f, distance[k]));
+            to_eye.x[k] = through.x;
+            to_eye.y[k] = through.y;
+            to_eye.z[k] = through.z;
+        }
+#else
         vec_lanes to_eye = attenuation_lanes(sigma_t, distance);
+#endif
         /* camera.near: the sample's ray starts at t0 (lighting.h's camera_ray_start), where the
-         * eye's transmittance is measured from: the surface is attenuated over D − t0, and what
-         * the volume stage gathered from t0 on (attenuated from the eye) is times e^{σt·t0}. A
-         * surface nearer than t0 is seen, unattenuated (docs/limits.md). */
+         * eye's transmittance is measured from: the surface is attenuated over [t0, D], and what
+         * the volume stage gathered from t0 on (attenuated from the eye) is divided by T_e(t0),
+         * e^{σt·t0} in a homogeneous medium. A surface nearer than t0 is seen, unattenuated
+         * (docs/limits.md). */
         int from_near = frame->near_plane.w > 0.0f;
         vec_lanes near_gain;
         if (from_near) {
             float_lanes start = fmin_lanes(frame->near_plane.w / dot_lanes(dir.x, dir.y, dir.z, frame->near_plane.x,
                                                                            frame->near_plane.y, frame->near_plane.z),
                                            distance);
+#ifdef MEDIUM_VARYING
+            for (int k = 0; k < LANES; ++k) {
+                float3 gain = exp(sigma_t * segment_depth(medium, density_grid, lane_of(origin, k), lane_of(dir, k),
+                                                          0.0f, start[k]));
+                near_gain.x[k] = gain.x;
+                near_gain.y[k] = gain.y;
+                near_gain.z[k] = gain.z;
+            }
+            to_eye.x *= near_gain.x;
+            to_eye.y *= near_gain.y;
+            to_eye.z *= near_gain.z;
+#else
             to_eye = attenuation_lanes(sigma_t, distance - start);
             near_gain = attenuation_lanes(sigma_t, -start);
+#endif
             in_scatter.x *= near_gain.x;
             in_scatter.y *= near_gain.y;
             in_scatter.z *= near_gain.z;

@@ -9,12 +9,15 @@
  *                         per sample and light, given with exact surface shadows
  *   SHADE_TRANSPARENCY    the transparency stage's films composited before the camera
  *   SHADE_PASSES          the render passes' terms, written (clrays/passes.py)
+ *   MEDIUM_VARYING        a bounded or heterogeneous medium (medium.h, docs/media.md): its
+ *                         parameters, density grid and each light's optical-depth grid
  *
  * shade takes SHADE_FEATURE_ARGS after its own arguments, in this order. Without a group its
  * arguments are not there at all, and the kernel is the one it was without the feature. */
 #ifndef CLRAYS_SHADE_FEATURES_H
 #define CLRAYS_SHADE_FEATURES_H
 #include "light_texture.h"
+#include "medium.h"
 #include "translucency.h"
 
 #ifdef LIGHT_TEXTURE_LOOKUP
@@ -51,6 +54,7 @@
 #define PASSES_ARGS
 #endif
 
-#define SHADE_FEATURE_ARGS LIGHT_TEXTURE_LOOKUP_ARGS TRANSLUCENCY_ARGS SURFACE_THROUGH_ARGS TRANSPARENCY_ARGS PASSES_ARGS
+#define SHADE_FEATURE_ARGS \
+    LIGHT_TEXTURE_LOOKUP_ARGS TRANSLUCENCY_ARGS SURFACE_THROUGH_ARGS TRANSPARENCY_ARGS PASSES_ARGS MEDIUM_ARGS
 
 #endif

@@ -78,6 +78,12 @@ typedef struct {
     relief_shadow_t relief; /* the reliefs' shadow along the ray (relief_cuts.h), once the first walk found it */
     int relief_found;
 #endif
+#ifdef MEDIUM_VARYING
+    medium_ray_t medium; /* the ray's prefix of in-scattering (medium_walk.h), built by its first lit run */
+    int medium_built;    /* whether medium.source is set */
+    float3 medium_dir;     /* the ray's unit direction ... */
+    float medium_distance; /* ... and length, which the prefix is built along */
+#endif
 } ray_span_t;
 
 /* The unit direction of camera sample `sample` (its pixel's ray through its offset):
@@ -125,6 +131,10 @@ ALWAYS_INLINE int finish_span(global const epipolar_t* ep, global const frame_t*
                                         : atan2_approx(start * sin_beta, ep->d_el - start * cos_beta);
         span->gamma_begin = inline_fmax(span->gamma_begin, gamma_start);
     }
+#ifdef MEDIUM_VARYING
+    span->medium_built = 0;
+    span->medium_distance = distance;
+#endif
     if (!(span->gamma_end > span->gamma_begin) || integrand->no_extent) return 0;
     /* The lamp (lighting.h): a ray that passes within its radius of a point or spot light
      * leaves out the chord inside it, as exact does; this keeps a ray through the light
@@ -142,6 +152,9 @@ ALWAYS_INLINE int finish_span(global const epipolar_t* ep, global const frame_t*
                                          span->gamma_end);
     }
     span->ray = integrand_row(integrand, beta, sin_beta, cos_beta);
+#ifdef MEDIUM_VARYING
+    span->ray.medium = &span->medium;
+#endif
     return 1;
 }
 
@@ -155,6 +168,9 @@ inline int ray_span_in_wedge(global const epipolar_t* ep, global const frame_t* 
     float beta = ray_beta(ep, dir, &sin_beta, &cos_beta);
 #ifdef SHAFT_EDGES
     span->dir = dir;
+#endif
+#ifdef MEDIUM_VARYING
+    span->medium_dir = dir;
 #endif
     float2 lit = lit_sweep(atan2_approx(distance * sin_beta, ep->d_el - distance * cos_beta), wedge);
     span->gamma_begin = lit.x;
@@ -178,6 +194,9 @@ inline int ray_span(global const epipolar_t* ep, global const light_t* light, gl
     int directional = light->type == LIGHT_DIRECTIONAL;
 #ifdef SHAFT_EDGES
     span->dir = dir;
+#endif
+#ifdef MEDIUM_VARYING
+    span->medium_dir = dir;
 #endif
     /* The ray from the eye starts at γ = atan2(+0, d_el) = +0: no arc tangent for it. */
     span->gamma_begin = 0.0f;
@@ -326,6 +345,16 @@ inline float3 row_radiance(global const epipolar_t* ep, global const float2* tre
     global const float* row_prefix = features->prefix + i * prefix_stride;
 #else
     global const float* row_prefix = 0; /* (read only for a textured light) */
+#endif
+#ifdef MEDIUM_VARYING /* once per ray: its rows share its prefix, which its first lit run builds */
+    if (!span->medium_built) {
+        medium_ray_source_t source = {features->medium, frame, ep, in->light_type == LIGHT_DIRECTIONAL,
+                                      in->amplitude.xyz, span->medium_dir, span->medium_distance,
+                                      span->ray.sin_beta, span->ray.cos_beta};
+        span->medium.source = source;
+        span->medium.built = 0;
+        span->medium_built = 1;
+    }
 #endif
 #ifdef TRANSLUCENT_LAYERS /* a row that translucent layers cross: texel by texel (translucent_walk.h) */
     if (features->layer_rows[i]) {

@@ -11,17 +11,24 @@
  *                        run's ends on its blockers' silhouettes (shaft_edges.h)
  *   RELIEF_CUTS          the reliefs' outline seen from the light, which the walk cuts in
  *                        its ray's own half-plane (relief_cuts.h; with SHAFT_EDGES only)
+ *   MEDIUM_VARYING       a bounded or heterogeneous medium (medium.h; MEDIUM_BOUNDED, _HEIGHT,
+ *                        _GRID): each ray's lit runs come from its own prefix of in-scattering
+ *                        (medium_walk.h) instead of the integrand tables
  *   TRANSPARENCY_WEIGHTED_WALK  MBOIT's fog weight along the ray, in pieces (the kernel
  *                        fills them itself: transparency_walk.cl)
  *
  * A walking kernel takes WALK_FEATURE_ARGS after its own arguments, in this order: light
- * texture, translucent layers, shaft edges, relief cuts; `walk_features_t features; ATTACH_WALK_FEATURES(features)`
+ * texture, translucent layers, shaft edges, relief cuts, the medium (MEDIUM_ARGS); `walk_features_t features; ATTACH_WALK_FEATURES(features)`
  * hands them on. Without a feature its arguments and members are not there at all, and the
  * kernel is the one it was before the feature existed. */
 #ifndef CLRAYS_WALK_FEATURES_H
 #define CLRAYS_WALK_FEATURES_H
 
 #include "common.h"
+#include "medium.h"
+#ifdef MEDIUM_VARYING
+#include "medium_walk.h"
+#endif
 
 /* edge_sides' bit for a triangle whose normal points to the light's side of its plane. */
 #define FACES_LIGHT 8u
@@ -52,6 +59,9 @@ typedef struct {
     int relief_bins;
     int relief_eye_count; /* the reliefs' triangles between the eye and the light */
 #endif
+#ifdef MEDIUM_VARYING
+    walk_medium_t medium;
+#endif
 #ifdef TRANSPARENCY_WEIGHTED_WALK
     float piece_gamma[WALK_PIECES + 2];
     float4 piece_weight[WALK_PIECES + 1];
@@ -81,6 +91,10 @@ typedef struct {
 #define ATTACH_RELIEF_CUTS(f) (f).relief_edges = relief_edges; (f).relief_bin_offsets = relief_bin_offsets; \
     (f).relief_bins = relief_bins; (f).relief_eye_count = relief_eye_count;
 #endif
+#ifdef MEDIUM_VARYING /* (MEDIUM_ARGS: medium.h; a walking kernel's light_t buffer is `lights`) */
+#define ATTACH_MEDIUM(f) (f).medium.medium = medium; (f).medium.density_grid = density_grid; \
+    (f).medium.light_depth_grid = light_depth_grid; (f).medium.lights = lights;
+#endif
 /* A feature not built: no arguments, nothing to hand on. */
 #ifndef LIGHT_TEXTURE_ARGS
 #define LIGHT_TEXTURE_ARGS
@@ -101,8 +115,12 @@ typedef struct {
 #define ATTACH_RELIEF_CUTS(f)
 #endif
 
-#define WALK_FEATURE_ARGS LIGHT_TEXTURE_ARGS RECTIFIED_LAYER_ARGS SHAFT_EDGE_ARGS RELIEF_CUT_ARGS
+#ifndef ATTACH_MEDIUM
+#define ATTACH_MEDIUM(f)
+#endif
+
+#define WALK_FEATURE_ARGS LIGHT_TEXTURE_ARGS RECTIFIED_LAYER_ARGS SHAFT_EDGE_ARGS RELIEF_CUT_ARGS MEDIUM_ARGS
 #define ATTACH_WALK_FEATURES(features) ATTACH_LIGHT_TEXTURE(features) ATTACH_RECTIFIED_LAYERS(features) \
-    ATTACH_SHAFT_EDGES(features) ATTACH_RELIEF_CUTS(features)
+    ATTACH_SHAFT_EDGES(features) ATTACH_RELIEF_CUTS(features) ATTACH_MEDIUM(features)
 
 #endif

@@ -60,6 +60,7 @@ from .stages.shaft_edges import (EDGE_NEIGHBOURS, ShaftEdges, edge_neighbours, e
                                   shaft_edge_sides)
 from .stages.integrand import integrand, integrand_table_size
 from .stages.lamp import eye_in_lamp, lamp_in_scatter
+from .stages.medium import medium_feature
 from .stages.light_texture import light_texture
 from .physics.light_texture import textured
 from .stages.minmax import minmax
@@ -75,7 +76,7 @@ from .stages.translucency import (opaque_occluder_buffers, rectify_layers, refus
                                   surface_transmittance, translucency)
 from .stages.transparency import Films, composite, opaque_camera_vertices, translucent_films, translucent_triangles
 from .stages.transparency_walk import transparency_march, transparency_walk
-from .stages.volume_moments import volume_moments
+from .stages.volume_moments import refuse_varying_medium, volume_moments
 from .stages.visibility import (bound_atlas, bvh_topology_of, upload_bvh, visibility, visibility_bound,
                                 visibility_prepare)
 
@@ -376,6 +377,7 @@ class Renderer:
         inputs = frame_inputs(scene)
         check_device_memory(self.device, inputs)
         refuse_translucency(scene, method)  # (volume_moments: no transmittance term)
+        refuse_varying_medium(scene, method)  # (volume_moments: the homogeneous integrand only)
         buffers = upload(self.device, inputs)
         occluders = opaque_occluder_buffers(self.device, buffers)  # (translucent triangles block no shadow ray)
         return Frame(scene, method, buffers, StageKeys(buffers.inputs), reuse, timer, occluders)
@@ -513,7 +515,7 @@ class Renderer:
         edges = None if epipolar.unshadowed else self._shaft_edges(buffers, epipolar, keys, reuse, timer)
         features = walk_features(  # what the walks carry (stages/features.py, cl/walk_features.h)
             texture, None if frame.layers is None else rectify_layers(device, buffers, frame.layers, epipolar, timer),
-            edges, reliefs)
+            edges, reliefs, medium_feature(device, buffers, timer))  # (a bounded or heterogeneous medium)
         # A relief's shafts, finer than the lines are apart, run along them: a camera sample
         # between two lines is neither's, and walks its own rays (docs/design.md §4.5).
         if frame.scene.render.sampling == "epipolar" and not epipolar.unshadowed and reliefs is None:  # traverse
@@ -589,7 +591,7 @@ class Renderer:
         aovs = frame.scene.render.aovs
         with device.deferred_waits(frame.reads):  # the image is read when the frame's result is asked for
             image = shade(device, buffers, rastered, frame.in_scatter.adding(), timer, visible, features,
-                          passes=bool(aovs))
+                          passes=bool(aovs), medium=medium_feature(device, buffers, timer))
         frame.reuse.record.note("shade", COMPUTED)
         if not aovs:
             return image, None

@@ -2,7 +2,8 @@
 cl/walk_features.h (docs/design.md §4.5, "Features of the walk"): a light's texture (stage
 light_texture: `TextureTables`), its rectified translucent layers (stage translucency:
 `RectifiedLayers`), the blockers that place its runs' ends (clrays/stages/shaft_edges.py:
-`ShaftEdges`) and the reliefs it cuts itself (clrays/stages/relief_cuts.py: `ReliefCuts`).
+`ShaftEdges`), the reliefs it cuts itself (clrays/stages/relief_cuts.py: `ReliefCuts`) and
+where the medium is and how dense (clrays/stages/medium_field.py: `MediumField`).
 Each offers its build defines (`defines()`) and its kernel arguments (`args()`); a walking kernel built with a feature's defines takes its arguments after its
 own, in the order of `walk_features` (the kernel's WALK_FEATURE_ARGS). A feature the frame
 does not have is None, adds nothing, and leaves the kernel as it was without it.
@@ -19,10 +20,11 @@ class WalkFeature(Protocol):
 
 
 def walk_features(texture: WalkFeature | None, layers: WalkFeature | None,
-                  edges: WalkFeature | None = None, reliefs: WalkFeature | None = None) -> tuple[WalkFeature, ...]:
+                  edges: WalkFeature | None = None, reliefs: WalkFeature | None = None,
+                  medium: WalkFeature | None = None) -> tuple[WalkFeature, ...]:
     """The features a walk carries, in cl/walk_features.h's order: texture, layers, edges,
-    reliefs."""
-    return present(texture, layers, edges, reliefs)
+    reliefs, medium."""
+    return present(texture, layers, edges, reliefs, medium)
 
 
 def present(*features: WalkFeature | None) -> tuple[WalkFeature, ...]:

@@ -21,6 +21,7 @@ from ..scene.model import TRAVERSALS, DirectionalLight, SpotLight
 from ..scene.camera import camera_basis, half_extents
 from .integrand import DeviceIntegrand
 from .features import WalkFeature, feature_args, feature_defines
+from .medium import MediumFeature
 from .raster import RasterResult
 from ..scene.camera import poles_on_screen
 from .rectify import Epipolar, slice_sides
@@ -264,9 +265,12 @@ def epipolar_sampling(device: Device, buffers: FrameBuffers, rastered: RasterRes
         integrand.params, integrand.data, ranges_buffer, sides, wedges, line, n32, lengths, step, threshold, radiance,
         state, walks, *walked)
     fixup_flags = device.buffer(nbytes=samples)  # per camera sample: a bit per slice fix_up walks
+    # a bounded or heterogeneous medium: gather compares the faces a sample's and its line samples' rays cross
+    medium = [(sides, *feature.args()) for feature in features if isinstance(feature, MediumFeature)]
     run("gather", (-(-samples // LANES),), None, buffers.params, buffers.views, buffers.lights,
         epipolar.buffer, rastered.camera_depth, buffers.offsets, ranges_buffer, line, radiance, n32, lengths, threshold,
-        np.float32(epipole_sin(inputs.scene, light)), np.int32(samples), np.int32(overwrite), scatter, fixup_flags)
+        np.float32(epipole_sin(inputs.scene, light)), np.int32(samples), np.int32(overwrite), scatter, fixup_flags,
+        *(medium[0] if medium else ()))
     fixups, counts = fixup_list(device, fixup_flags, sizes, walks, runs * slices, run)
     run("fix_up", *device.list_launch(samples), buffers.params, buffers.views, buffers.lights, epipolar.buffer,
         epipolar.tree, integrand.params, integrand.data, rastered.camera_depth, buffers.offsets, fixups, counts,

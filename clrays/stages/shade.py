@@ -107,13 +107,15 @@ def shade_features(device: Device, buffers: FrameBuffers, layers=None, surface_t
 
 
 def shade(device: Device, buffers: FrameBuffers, rastered: RasterResult, scatter, timer: StageTimer,
-          visible=None, features: tuple[WalkFeature, ...] = (), passes: bool = False):
+          visible=None, features: tuple[WalkFeature, ...] = (), passes: bool = False, medium=None):
     """Returns linear radiance, (H, W, 3) float32. `visible`: the visibility stage's answer
     (float per sample and light), read where `render.surface_shadows` is `exact`.
     `features`: `shade_features`'s groups. `passes`: also return, per pixel, the terms of the
     render passes (clrays.passes) as (H, W, 3, 4) float32: (mean transmittance, nearest
     depth), (mean attenuated surface radiance, 0), (mean in-scattering, 0); only then is
-    their buffer allocated."""
+    their buffer allocated. `medium`: the frame's MediumFeature (clrays.stages.medium)
+    where the medium is bounded or heterogeneous, which then attenuates surfaces along the
+    light's path and the camera ray (cl/shade_features.h's last group)."""
     image, sizes = buffers.inputs.scene.image, frame_sizes(buffers.inputs)
     pixels = image.width * image.height
     # With one sample per pixel each work-item writes its pixels where it read their
@@ -123,7 +125,7 @@ def shade(device: Device, buffers: FrameBuffers, rastered: RasterResult, scatter
     if visible is None:
         visible = device.buffer(nbytes=4)  # never read: the map decides
     terms = PASS_TERMS.allocate(device, sizes) if passes else None
-    features = features + present(None if terms is None else PassTerms(terms))
+    features = features + present(None if terms is None else PassTerms(terms), medium)
     defines = {"LANES": LANES}
     if rastered.depth_in_keys:  # (read only by the map's own surface test: stages/raster.py depth_in_keys)
         defines["SHADOW_DEPTH_IN_KEYS"] = 1

@@ -13,6 +13,7 @@ import numpy as np
 
 from ..buffers import BufferDecl
 from ..device import Device, StageTimer
+from ..errors import ClraysError
 from ..inputs import FrameBuffers, frame_sizes
 from .features import WalkFeature, feature_args, feature_defines
 from .integrand import DeviceIntegrand
@@ -34,6 +35,15 @@ MOMENT_CHUNKS = 8
 MOMENT_PREFIX = {
     True: BufferDecl("moment prefix sums (double)", 32, lambda sizes: sizes.slices * (sizes.tree_gamma + 1)),
     False: BufferDecl("moment prefix sums", 16, lambda sizes: sizes.slices * (sizes.tree_gamma + 1))}
+
+
+def refuse_varying_medium(scene, method: str) -> None:
+    """One line for volume_moments in a bounded or heterogeneous medium (docs/media.md): its
+    reconstruction weights a ray's lit fraction by the range's unshadowed radiance from the
+    homogeneous integrand tables, which such a medium does not have."""
+    if method == "volume_moments" and not scene.medium.homogeneous:
+        raise ClraysError(f"{scene.source or 'scene'}: render.method volume_moments: medium.bounds and "
+                          "medium.density need method minmax (or raymarch, exact)")
 
 
 def _double_prefix(device: Device) -> bool:
