@@ -21,6 +21,7 @@ from clrays.reference.metrics import depth_edges, depth_map, image_error
 from clrays.scene.camera import camera_basis, primary_rays
 from clrays.scene.geometry import box_triangles
 from clrays.scene.load import load_scene, parse_scene
+from clrays.scene.model import Box, HeightDensity
 from conftest import DirectionalLight, PointLight, SpotLight, grid_plane, make_scene, run_cli, v3
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -121,6 +122,26 @@ def test_the_device_methods_follow_exact_with_a_near_distance(renderer, kind, me
     print(f"{kind} {method} near 1.2 against exact: {error}; exact without near: {from_eye}")
     assert error.rmse < bound, error
     assert from_eye.rmse > 5 * bound  # what near changes is well beyond the bound
+
+
+#: A bounded height fog (docs/media.md) that the camera stands in: the near factor is then
+#: 1 / T_e(t0) of that medium, not e^{σt·t0}.
+BOUNDED_HEIGHT_FOG = dict(bounds=Box(v3(-4.0, 0.0, -4.0), v3(4.0, 5.0, 6.0)), density=HeightDensity(0.0, 1.5))
+
+
+@pytest.mark.parametrize("kind", ["point", "directional"])
+@pytest.mark.parametrize("method", ["minmax", "raymarch"])
+def test_a_near_distance_in_a_bounded_height_fog_follows_exact(renderer, kind, method):
+    bound, settings = METHODS[method]
+    scene = _occluder_scene(LIGHTS[kind], 1.2, **settings)
+    scene = replace(scene, medium=replace(scene.medium, **BOUNDED_HEIGHT_FOG))
+    exact = renderer.render(scene, "exact").image
+    edges = depth_edges(depth_map(scene))
+    error = image_error(renderer.render(scene, method).image, exact, edges)
+    from_eye = image_error(renderer.render(_near(scene, 0.0), "exact").image, exact, edges)
+    print(f"{kind} {method} near 1.2 in bounded height fog against exact: {error}; exact without near: {from_eye}")
+    assert error.rmse < bound, error
+    assert from_eye.rmse > 2 * bound  # what near changes is beyond the bound
 
 
 def test_volume_moments_follows_raymarch_with_a_near_distance(renderer):
