@@ -22,6 +22,15 @@ Scenes (Blender's Z up; the exporter writes glTF's Y up):
   point  a 1000 W point light (radius 0) over a floor, a box casting its shadow
   spot   a hard 70° spot of 2000 W (spot_blend 0, radius 0) through a slot between two plates
   sun    a 5 W/m² sun (angle 0) through a window with bars in a wall
+and, with the fog in meshes of a volume-only material (Volume Scatter + Absorption) and no
+World volume, as a Blender user makes bounded fog:
+  sunroom  the sun through the barred window into a roofed room, all in a 40 m fog cube,
+           exported with the file: clrays takes it as `medium.bounds.object` (docs/media.md)
+  boxes    the point light over two fog boxes, the camera in one, its rays leaving it and
+           entering the other; the boxes are added after the export, and clrays gets their
+           union as a 0/1 density grid (boxes.density.npy, written beside the .glb)
+  height   the point scene in height fog, σ·exp(−(z − z0)/H) from Geometry Position and
+           Math nodes, in the 40 m cube: clrays's `density: {type: height}` on glTF's y
 
 Cycles is set up as clrays renders: Diffuse BSDF (Lambert) of the glTF base colour, one
 homogeneous isotropic medium in the World (Volume Scatter + Volume Absorption, densities σs
@@ -34,6 +43,10 @@ needs a setting:
   volume, infinite, absorbs a sun whole; in the sun scene the medium is left out of shadow
   rays (Light Path "Is Shadow Ray"), unless --sun-through-fog. Point and spot light is
   attenuated, e^(−σt·d), in both.
+Fog in a mesh has two settings of its own: rays cross the mesh's surface (transparent, as a
+volume-only material's is) as transparent bounces, so that count is not 0; and Cycles
+ray-marches a procedural density (height fog) in steps of a tenth of the object's bounds
+times the material's Volume Step Rate, which is set to 0.02 (8 cm in the 40 m cube).
 """
 from __future__ import annotations
 
@@ -67,10 +80,10 @@ SCENES = {
 FOG_CUBE = {"name": "fog", "centre": (0.0, 0.0, 19.0), "size": 40.0}
 #: `height`: the density exp(−(z − base)/scale_height), Blender's z (glTF's y), m.
 HEIGHT_FOG = {"base": 0.0, "scale_height": 2.0}
-#: `boxes`: the two fog boxes (min, max corners, Blender coordinates, m), on the 0.25 m voxel grid
-#: that gives clrays the same fog (`boxes_grid`).
+#: `boxes`: the two fog boxes (min, max corners, Blender coordinates, m), on the 1/16 m voxel grid
+#: that gives clrays the same fog (`boxes_grid`): finer voxels narrow the ramp at its faces.
 FOG_BOXES = (((-4.0, -4.0, -0.5), (0.0, 0.0, 3.0)), ((1.0, 0.5, -0.5), (4.0, 4.0, 3.0)))
-GRID_STEP = 0.25
+GRID_STEP = 0.0625
 
 
 def clear() -> None:
