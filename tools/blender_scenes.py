@@ -22,6 +22,15 @@ Scenes (Blender's Z up; the exporter writes glTF's Y up):
   point  a 1000 W point light (radius 0) over a floor, a box casting its shadow
   spot   a hard 70° spot of 2000 W (spot_blend 0, radius 0) through a slot between two plates
   sun    a 5 W/m² sun (angle 0) through a window with bars in a wall
+and, with the fog in meshes of a volume-only material (Volume Scatter + Absorption) and no
+World volume, as a Blender user makes bounded fog:
+  sunroom  the sun through the barred window into a roofed room, all in a 40 m fog cube,
+           exported with the file: clrays takes it as `medium.bounds.object` (docs/media.md)
+  boxes    the point light over two fog boxes, the camera in one, its rays leaving it and
+           entering the other; the boxes are added after the export, and clrays gets their
+           union as a 0/1 density grid (boxes.density.npy, written beside the .glb)
+  height   the point scene in height fog, σ·exp(−(z − z0)/H) from Geometry Position and
+           Math nodes, in the 40 m cube: clrays's `density: {type: height}` on glTF's y
 
 Cycles is set up as clrays renders: Diffuse BSDF (Lambert) of the glTF base colour, one
 homogeneous isotropic medium in the World (Volume Scatter + Volume Absorption, densities σs
@@ -34,6 +43,10 @@ needs a setting:
   volume, infinite, absorbs a sun whole; in the sun scene the medium is left out of shadow
   rays (Light Path "Is Shadow Ray"), unless --sun-through-fog. Point and spot light is
   attenuated, e^(−σt·d), in both.
+Fog in a mesh has two settings of its own: rays cross the mesh's surface (transparent, as a
+volume-only material's is) as transparent bounces, so that count is not 0; and Cycles
+ray-marches a procedural density (height fog) in steps of a tenth of the object's bounds
+times the material's Volume Step Rate, which is set to 0.02 (8 cm in the 40 m cube).
 """
 from __future__ import annotations
 
@@ -57,7 +70,20 @@ SCENES = {
     "spot": {"sigma_s": 0.2, "sigma_a": 0.0,
              "light": {"type": "SPOT", "energy": 2000.0, "spot_size_deg": 70.0, "spot_blend": 0.0}},
     "sun": {"sigma_s": 0.1, "sigma_a": 0.02, "light": {"type": "SUN", "energy": 5.0}},
+    # Fog in meshes (a volume-only material) rather than the World: the sun's light is attenuated
+    # on its way through the cube, as clrays's bounded medium does.
+    "sunroom": {"sigma_s": 0.04, "sigma_a": 0.01, "light": {"type": "SUN", "energy": 5.0}, "fog": "cube"},
+    "boxes": {"sigma_s": 0.25, "sigma_a": 0.05, "light": {"type": "POINT", "energy": 1000.0}, "fog": "boxes"},
+    "height": {"sigma_s": 0.2, "sigma_a": 0.05, "light": {"type": "POINT", "energy": 1000.0}, "fog": "height"},
 }
+#: The 40 m fog cube of `sunroom` and `height` (Blender coordinates, m), its node's name in the glTF.
+FOG_CUBE = {"name": "fog", "centre": (0.0, 0.0, 19.0), "size": 40.0}
+#: `height`: the density exp(−(z − base)/scale_height), Blender's z (glTF's y), m.
+HEIGHT_FOG = {"base": 0.0, "scale_height": 2.0}
+#: `boxes`: the two fog boxes (min, max corners, Blender coordinates, m), on the 1/16 m voxel grid
+#: that gives clrays the same fog (`boxes_grid`): finer voxels narrow the ramp at its faces.
+FOG_BOXES = (((-4.0, -4.0, -0.5), (0.0, 0.0, 3.0)), ((1.0, 0.5, -0.5), (4.0, 4.0, 3.0)))
+GRID_STEP = 0.0625
 
 
 def clear() -> None:
@@ -142,14 +168,33 @@ def build(name: str, spec: dict, clip_start: float) -> None:
             box(f"bar_{y:+.1f}", (-2, y, 2.0), (0.2, 0.1, 2.0), light_grey)
         light(spec, (-4.0, 1.0, 5.0), (0.0, 0.0, 1.0))
         camera((5.0, -4.5, 2.2), (-0.5, 0.3, 1.2), clip_start)
+    elif name == "sunroom":  # the sun scene's wall and window under a roof: a room, in the fog cube
+        box("floor", (0, 0, -0.05), (12, 12, 0.1), grey)
+        box("wall_low", (-2, 0, 0.5), (0.2, 12, 1.0), light_grey)
+        box("wall_high", (-2, 0, 3.5), (0.2, 12, 1.0), light_grey)
+        box("wall_near", (-2, -3.5, 2.0), (0.2, 5.0, 2.0), light_grey)
+        box("wall_far", (-2, 3.5, 2.0), (0.2, 5.0, 2.0), light_grey)
+        for y in (-0.5, 0.0, 0.5):
+            box(f"bar_{y:+.1f}", (-2, y, 2.0), (0.2, 0.1, 2.0), light_grey)
+        box("roof", (2.5, 0, 4.05), (9.2, 12, 0.1), light_grey)
+        box("back", (6.95, 0, 2.0), (0.1, 12, 4.0), light_grey)
+        light(spec, (-4.0, 1.0, 5.0), (0.0, 0.0, 1.0))
+        camera((5.0, -4.5, 2.2), (-0.5, 0.3, 1.2), clip_start)
+    elif name == "boxes":  # the camera in one fog box, looking through clear air into the other
+        box("floor", (0, 0, -0.05), (10, 10, 0.1), grey)
+        box("occluder", (1.0, -1.5, 0.5), (1, 1, 1), light_grey)
+        light(spec, (0.5, 0.0, 3.5), (0.5, 0.0, 0.0))
+        camera((-3.0, -3.5, 2.0), (2.5, 2.0, 0.8), clip_start)
+    elif name == "height":  # the point scene in height fog, in the fog cube
+        box("floor", (0, 0, -0.05), (8, 8, 0.1), grey)
+        box("occluder", (0, 0, 0.5), (1, 1, 1), light_grey)
+        light(spec, (0.6, 0.4, 3.0), (0.6, 0.4, 0.0))
+        camera((5.5, -5.5, 4.0), (0, 0, 0.8), clip_start)
 
 
-def world_fog(sigma_s: float, sigma_a: float, shadow_rays: bool) -> None:
-    world = bpy.data.worlds.new("world")
-    bpy.context.scene.world = world
-    world.use_nodes = True
-    nodes, links = world.node_tree.nodes, world.node_tree.links
-    nodes["Background"].inputs["Strength"].default_value = 0.0
+def scatter_absorb(nodes, links, output):
+    """Volume Scatter (isotropic, white) + Volume Absorption (black: σa = its density) into
+    `output`: their Density inputs are σs and σa per metre."""
     scatter = nodes.new("ShaderNodeVolumeScatter")
     scatter.inputs["Color"].default_value = (1, 1, 1, 1)
     scatter.inputs["Anisotropy"].default_value = 0.0
@@ -158,6 +203,86 @@ def world_fog(sigma_s: float, sigma_a: float, shadow_rays: bool) -> None:
     add = nodes.new("ShaderNodeAddShader")
     links.new(scatter.outputs[0], add.inputs[0])
     links.new(absorb.outputs[0], add.inputs[1])
+    links.new(add.outputs[0], output)
+    return scatter, absorb
+
+
+def fog_material(name: str, sigma_s: float, sigma_a: float, height: dict | None = None) -> bpy.types.Material:
+    """A volume-only material (Volume Scatter + Volume Absorption, σs and σa per metre, no Surface):
+    Blender's fog in a mesh. With `height`, both densities times exp(−(z − base)/scale_height) of
+    the shading point's world-space z (Geometry Position), built from Math nodes."""
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    nodes.remove(nodes["Principled BSDF"])
+    scatter, absorb = scatter_absorb(nodes, links, nodes["Material Output"].inputs["Volume"])
+    if height is None:
+        scatter.inputs["Density"].default_value = sigma_s
+        absorb.inputs["Density"].default_value = sigma_a
+        return mat
+    # Height fog: a procedural density is ray-marched, in steps of a tenth of the object's bounds
+    # times the step rate (4 m in the 40 m cube): 0.02 makes them 8 cm, fine against 2 m.
+    mat.cycles.volume_step_rate = 0.02
+    position = nodes.new("ShaderNodeNewGeometry")
+    z = nodes.new("ShaderNodeSeparateXYZ")
+    links.new(position.outputs["Position"], z.inputs[0])
+    exponent = nodes.new("ShaderNodeMath")
+    exponent.operation = "MULTIPLY_ADD"  # z × (−1/H) + base/H
+    links.new(z.outputs["Z"], exponent.inputs[0])
+    exponent.inputs[1].default_value = -1.0 / height["scale_height"]
+    exponent.inputs[2].default_value = height["base"] / height["scale_height"]
+    factor = nodes.new("ShaderNodeMath")
+    factor.operation = "EXPONENT"
+    links.new(exponent.outputs[0], factor.inputs[0])
+    for node, sigma in ((scatter, sigma_s), (absorb, sigma_a)):
+        scale = nodes.new("ShaderNodeMath")
+        scale.operation = "MULTIPLY"
+        links.new(factor.outputs[0], scale.inputs[0])
+        scale.inputs[1].default_value = sigma
+        links.new(scale.outputs[0], node.inputs["Density"])
+    return mat
+
+
+def fog_cube(mat) -> None:
+    """The 40 m cube of FOG_CUBE holding the fog material."""
+    size = FOG_CUBE["size"]
+    box(FOG_CUBE["name"], FOG_CUBE["centre"], (size, size, size), mat)
+
+
+def boxes_grid(out: Path) -> tuple[Path, tuple, tuple]:
+    """The two fog boxes of `boxes` as a clrays density grid (.npy, axes z, y, x of glTF, 1 inside a
+    box, 0 outside) and its bounds (glTF coordinates: x, z, −y of Blender's). The boxes' faces lie
+    halfway between voxel centres, where clrays's trilinear ramp crosses 1/2: a ray through a face
+    gathers the same optical depth as through the sharp box."""
+    def gltf(point):  # Blender (x, y, z) → glTF (x, z, −y)
+        return np.array([point[0], point[2], -point[1]])
+    corners = np.array([gltf(p) for box_ in FOG_BOXES for p in box_])
+    low, high = corners.min(axis=0) - GRID_STEP, corners.max(axis=0) + GRID_STEP  # a voxel of 0 around
+    counts = np.rint((high - low) / GRID_STEP).astype(int)
+    centres = [low[a] + (np.arange(counts[a]) + 0.5) * GRID_STEP for a in range(3)]
+    grid = np.zeros(counts[::-1])
+    for box_ in FOG_BOXES:
+        lo, hi = np.minimum(gltf(box_[0]), gltf(box_[1])), np.maximum(gltf(box_[0]), gltf(box_[1]))
+        inside = [(c > lo[a]) & (c < hi[a]) for a, c in enumerate(centres)]
+        grid[np.ix_(inside[2], inside[1], inside[0])] = 1.0
+    path = out / "boxes.density.npy"
+    np.save(path, grid)
+    return path, tuple(low.round(6)), tuple(high.round(6))
+
+
+def black_world() -> bpy.types.World:
+    """A World of no light (and, unless `world_fog` adds one, no volume)."""
+    world = bpy.data.worlds.new("world")
+    bpy.context.scene.world = world
+    world.use_nodes = True
+    world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0
+    return world
+
+
+def world_fog(sigma_s: float, sigma_a: float, shadow_rays: bool) -> None:
+    world = black_world()
+    nodes, links = world.node_tree.nodes, world.node_tree.links
+    scatter, absorb = scatter_absorb(nodes, links, nodes["World Output"].inputs["Volume"])
     if shadow_rays:
         scatter.inputs["Density"].default_value = sigma_s
         absorb.inputs["Density"].default_value = sigma_a
@@ -170,13 +295,14 @@ def world_fog(sigma_s: float, sigma_a: float, shadow_rays: bool) -> None:
             scale.inputs[1].default_value = -sigma
             scale.inputs[2].default_value = sigma
             links.new(scale.outputs[0], node.inputs["Density"])
-    links.new(add.outputs[0], nodes["World Output"].inputs["Volume"])
 
 
 def render_diffuse() -> None:
     """Each material's Principled BSDF becomes a Diffuse BSDF (roughness 0: Lambert) of its base colour."""
     for mat in bpy.data.materials:
         nodes, links = mat.node_tree.nodes, mat.node_tree.links
+        if "Principled BSDF" not in nodes:  # a fog material
+            continue
         principled = nodes["Principled BSDF"]
         diffuse = nodes.new("ShaderNodeBsdfDiffuse")
         diffuse.inputs["Color"].default_value = principled.inputs["Base Color"].default_value
@@ -200,9 +326,10 @@ def cycles_settings(samples: int, seed: int) -> None:
     cycles.filter_width = 1.0
     cycles.light_sampling_threshold = 0.0
     cycles.max_bounces = 0
-    for bounces in ("diffuse_bounces", "glossy_bounces", "transmission_bounces", "volume_bounces",
-                    "transparent_max_bounces"):
+    for bounces in ("diffuse_bounces", "glossy_bounces", "transmission_bounces", "volume_bounces"):
         setattr(cycles, bounces, 0)
+    # Rays cross a fog mesh's surface (a volume-only material: transparent) as a transparent bounce.
+    cycles.transparent_max_bounces = 16
     cycles.sample_clamp_direct = cycles.sample_clamp_indirect = 0.0
     scene.view_settings.view_transform = "Standard"
     scene.view_settings.look = "None"
@@ -301,8 +428,29 @@ def main() -> None:
     bpy.context.scene.render.threads = args.threads
     glb = args.out / f"{args.scene}{args.tag}.glb"
     # Blender's defaults (lighting mode Standard, +Y up) with the lights and camera included
+    fog = setup.get("fog", "world")
+    clrays_medium = ""
+    if fog in ("cube", "height"):  # the cube is exported, as users' files hold it: clrays takes it as the bounds
+        height = HEIGHT_FOG if fog == "height" else None
+        fog_cube(fog_material("fog_volume", setup["sigma_s"], setup["sigma_a"], height))
+        clrays_medium = f" --set medium.bounds.object={FOG_CUBE['name']}"
+        if height is not None:  # Blender's z is glTF's y
+            clrays_medium += (f" --set medium.density.type=height --set medium.density.base={height['base']}"
+                              f" --set medium.density.scale_height={height['scale_height']}")
+    # Blender's defaults (lighting mode Standard, +Y up) with the lights and camera included
     bpy.ops.export_scene.gltf(filepath=str(glb), export_format="GLB", export_lights=True, export_cameras=True)
-    world_fog(setup["sigma_s"], setup["sigma_a"], shadow_rays=setup["light"]["type"] != "SUN" or args.sun_through_fog)
+    if fog == "boxes":  # added after the export: clrays has one medium, the boxes' union as a density grid
+        mat = fog_material("fog_volume", setup["sigma_s"], setup["sigma_a"])
+        for k, (lo, hi) in enumerate(FOG_BOXES):
+            box(f"fog_{k}", tuple((a + b) / 2 for a, b in zip(lo, hi)), tuple(b - a for a, b in zip(lo, hi)), mat)
+        grid, low, high = boxes_grid(args.out)
+        clrays_medium = (f" --set medium.density.type=grid --set medium.density.file={grid.resolve()}"
+                         f" --set 'medium.density.bounds={{min: {list(low)}, max: {list(high)}}}'"
+                         f" --set 'medium.bounds={{min: {list(low)}, max: {list(high)}}}'")
+    black_world()
+    if fog == "world":
+        world_fog(setup["sigma_s"], setup["sigma_a"],
+                  shadow_rays=setup["light"]["type"] != "SUN" or args.sun_through_fog)
     render_diffuse()
     exr = args.out / f"{args.scene}{args.tag}.cycles.s{args.seed}.exr"
     bpy.context.scene.render.filepath = str(exr)
@@ -312,7 +460,8 @@ def main() -> None:
     np.save(args.out / f"{args.scene}{args.tag}.cycles.s{args.seed}.npy", np.ascontiguousarray(pixels))
     print(f"clrays render {glb} -o {args.out / f'{args.scene}{args.tag}.clrays.npy'} --device intel "
           f"--set image.width={WIDTH} --set image.height={HEIGHT} --set image.spp=256 "
-          f"--set medium.sigma_s={setup['sigma_s']} --set medium.sigma_a={setup['sigma_a']} --set render.method=exact")
+          f"--set medium.sigma_s={setup['sigma_s']} --set medium.sigma_a={setup['sigma_a']}{clrays_medium} "
+          f"--set render.method=exact")
 
 
 if __name__ == "__main__":

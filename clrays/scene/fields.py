@@ -183,8 +183,8 @@ MEDIUM = Section("medium", (
     Field("sigma_a", "RGB", 0.0, low=0.0, notes="absorption coefficient, 1 / scene unit"),
     Field("phase", "mapping", shown_default="`{type: isotropic}`", notes="phase function, below"),
     Field("bounds", "mapping", shown_default="everywhere",
-          notes="`{min: vec3, max: vec3}`: the medium exists only inside this box ([bounds and density]"
-                "(#bounds-and-density))"),
+          notes="`{min: vec3, max: vec3}`: the medium exists only inside this box; with `gltf`, "
+                "`{object: NAME}` takes the box of a mesh node ([bounds and density](#bounds-and-density))"),
     Field("density", "mapping", shown_default="1 everywhere",
           notes="a factor on `sigma_s` and `sigma_a`: `height`, `grid` or `noise` ([bounds and density]"
                 "(#bounds-and-density))"),
@@ -194,6 +194,12 @@ MEDIUM = Section("medium", (
 BOX = Section("medium.bounds", (
     Field("min", "vec3", REQUIRED, notes="scene units"),
     Field("max", "vec3", REQUIRED, rule="greater than `min` on every axis", notes="scene units"),
+))
+
+#: `medium.bounds` from a glTF file: a fog volume's mesh node (Blender's cube of a volume-only material).
+VOLUME_OBJECT = Section("medium.bounds.object", (
+    Field("object", "string", REQUIRED, rule="one mesh node of this name in the `gltf` file, not animated",
+          notes="the box around its mesh (world space) bounds the medium; the node is no geometry"),
 ))
 
 #: The noise grid's voxels along x, y and z when `resolution` is left out.
@@ -494,5 +500,5 @@ GLTF = Section("gltf", (
 
 #: Every section, by the name the docs' markers use, in the order of the format.
 SECTIONS: dict[str, Section] = {section.name: section for section in (
-    TOP, IMAGE, CAMERA, *LIGHTS.values(), MEDIUM, *PHASES.values(), BOX, *DENSITIES.values(), OBJECT,
+    TOP, IMAGE, CAMERA, *LIGHTS.values(), MEDIUM, *PHASES.values(), BOX, VOLUME_OBJECT, *DENSITIES.values(), OBJECT,
     *OBJECTS.values(), TRANSFORM, ROTATE, RENDER, SHADOW_FILTER, TRANSPARENCY, ANIMATION, GLTF)}

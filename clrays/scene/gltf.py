@@ -203,6 +203,7 @@ class Imported:
     camera_node: int | None  # None: the default view
     graph: NodeGraph
     duration: float | None  # seconds of animation, None without one
+    volume_bounds: tuple[np.ndarray, np.ndarray] | None = None  # the fog node's world box (`volume_node`)
 
 
 # --------------------------------------------------------------------------- reading JSON with paths
@@ -811,13 +812,15 @@ def _decoded_mean(reader: _Reader, where: str, data: bytes) -> np.ndarray:
     return counts @ linear / max(width * height, 1)
 
 
-def _meshes(reader: _Reader, graph: NodeGraph, world: dict[int, np.ndarray], channels: tuple[_Channel, ...]):
-    """Each mesh primitive placed by each node of the scene: (instances, world triangles, normals,
-    albedo, outward). An instance keeps its own triangles only when the file has `channels`;
-    a skinned or morphed one keeps its Deformation (clrays.scene.gltf_motion)."""
+def _meshes(reader: _Reader, graph: NodeGraph, world: dict[int, np.ndarray], channels: tuple[_Channel, ...],
+            skipped: int | None = None):
+    """Each mesh primitive placed by each node of the scene but `skipped` (a fog volume's node):
+    (instances, world triangles, normals, albedo, outward). An instance keeps its own triangles
+    only when the file has `channels`; a skinned or morphed one keeps its Deformation
+    (clrays.scene.gltf_motion)."""
     nodes, meshes = reader.items("nodes"), reader.items("meshes")
     placed = [(index, reader.index(nodes[index], "mesh", f"nodes.{index}", "meshes"))
-              for index in graph.order if "mesh" in nodes[index]]
+              for index in graph.order if "mesh" in nodes[index] and index != skipped]
     total, objects = 0, 0
     budget = gltf_motion.MotionBudget(reader)
     for node, mesh in placed:  # counted before anything is read: a few bytes of JSON may ask for millions
@@ -872,6 +875,55 @@ def _meshes(reader: _Reader, graph: NodeGraph, world: dict[int, np.ndarray], cha
             outward.append(np.full(count, primitives.closed_outward(placed_vertices, faces), np.int8))
             start += count
     return instances, tris, normals, albedo, outward
+
+
+def volume_node(reader: _Reader, graph: NodeGraph, name: str) -> int:
+    """The node named `name` whose mesh bounds a fog volume (`medium.bounds: {object: NAME}`):
+    one node of the scene with a mesh, not moved by an animation (the bounds are one box).
+    glTF names need not be unique (glTF 2.0 §5, "name": "not necessarily unique"), so two
+    nodes of that name are refused rather than one picked."""
+    nodes = reader.items("nodes")
+    found = [index for index in graph.order if "mesh" in nodes[index] and nodes[index].get("name") == name]
+    if not found:
+        names = sorted({nodes[i]["name"] for i in graph.order if "mesh" in nodes[i]
+                        and isinstance(nodes[i].get("name"), str)})
+        raise SceneError(f"{reader.file}: nodes: expected a node with a mesh named {name!r} for medium.bounds.object, "
+                         f"got {', '.join(map(repr, names[:8])) + (' …' if len(names) > 8 else '') or 'no named mesh node'}")
+    if len(found) > 1:
+        raise SceneError(f"{reader.file}: nodes: expected one node named {name!r} for medium.bounds.object, got "
+                         f"{len(found)} (nodes.{found[0]}, nodes.{found[1]}); rename one in the file")
+    node = found[0]
+    moved, ancestor = {channel.node for channel in graph.channels}, node
+    while ancestor >= 0:
+        if ancestor in moved:
+            reader.fail(f"nodes.{node}", "a fog volume's node that no animation moves (medium.bounds is one box)",
+                        f"{name!r}, animated by nodes.{ancestor}'s keys")
+        ancestor = int(graph.parents[ancestor])
+    if gltf_motion.instance_count(reader, nodes[node], f"nodes.{node}") != 1:
+        reader.fail(f"nodes.{node}", "a fog volume's node placing its mesh once (medium.bounds is one box)",
+                    "EXT_mesh_gpu_instancing copies")
+    return node
+
+
+def _volume_bounds(reader: _Reader, node: int, matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The world box around the triangles of `node`'s mesh (placed by `matrix`)."""
+    mesh = reader.index(reader.items("nodes")[node], "mesh", f"nodes.{node}", "meshes")
+    points = []
+    for p, primitive in enumerate(reader.get(reader.items("meshes")[mesh], "primitives", f"meshes.{mesh}", "list")):
+        path = f"meshes.{mesh}.primitives.{p}"
+        if not isinstance(primitive, dict):
+            reader.fail(path, "an object", primitive)
+        shape = _primitive(reader, primitive, path)
+        if shape is not None:
+            points.append(transform_points(matrix, shape[0].reshape(-1, 3)))
+    if not points:
+        reader.fail(f"meshes.{mesh}", "a fog volume's mesh with triangles (medium.bounds.object)", "none")
+    low, high = mesh_bounds(np.concatenate(points))
+    flat = [axis for axis in range(3) if not high[axis] > low[axis]]
+    if flat:
+        reader.fail(f"nodes.{node}", "a fog volume's mesh with extent along x, y and z (medium.bounds.object)",
+                    f"a box flat in {'xyz'[flat[0]]}")
+    return low, high
 
 
 def _primitive(reader: _Reader, primitive: dict, path: str):
@@ -1388,6 +1440,28 @@ def _notify_unrendered(reader: _Reader, graph: NodeGraph, camera_count: int) -> 
         _notify(f"{reader.file}: not rendered: {'; '.join(parts)}", verbose=True)
 
 
+def _notify_fog_like(reader: _Reader, graph: NodeGraph) -> None:
+    """A notice naming the mesh nodes whose material has no pbrMetallicRoughness: what Blender's
+    exporter writes for a volume-only material (a fog cube). The glTF 2.0 spec gives such a
+    material the defaults (§5.19: "When undefined, all the default values of
+    pbrMetallicRoughness MUST apply"), a white surface, so clrays draws it, and says how to
+    make it the fog's bounds instead (`medium.bounds.object`)."""
+    nodes, meshes, materials = reader.items("nodes"), reader.items("meshes"), reader.items("materials")
+    bare = {i for i, material in enumerate(materials) if isinstance(material, dict)
+            and not {"pbrMetallicRoughness", "extensions", "normalTexture", "emissiveTexture"} & material.keys()}
+    named = []
+    for i in graph.order:
+        mesh = nodes[i].get("mesh")
+        if isinstance(mesh, int) and 0 <= mesh < len(meshes) and isinstance(nodes[i].get("name"), str) and any(
+                isinstance(primitive, dict) and primitive.get("material") in bare
+                for primitive in meshes[mesh].get("primitives") or []):
+            named.append(nodes[i]["name"])
+    if named:
+        _notify(f"{reader.file}: {_first_few([repr(name) for name in named])}: a material without "
+                f"pbrMetallicRoughness (Blender's volume-only fog material is written so), drawn as a white "
+                f"surface; if it is a fog volume, --set medium.bounds.object={named[0]}")
+
+
 def _first_few(paths: list[str], count: int = 3) -> str:
     return ", ".join(paths[:count]) + (f" and {len(paths) - count} more" if len(paths) > count else "")
 
@@ -1525,9 +1599,12 @@ def _check_animated_poses(reader: "_Reader", graph: NodeGraph, instances, light_
                     f"a scale that may reach {norm_lo[camera_node]:.3g}, bounded from the keys of it and its parents")
 
 
-def import_gltf(path: Path, file: str | None = None, camera: str | None = None, light_scale: float = 1.0) -> Imported:
+def import_gltf(path: Path, file: str | None = None, camera: str | None = None, light_scale: float = 1.0,
+                volume: str | None = None) -> Imported:
     """Read a glTF 2.0 file: `camera` names the camera to take (the first otherwise),
-    `light_scale` multiplies every light's power. `file` names it in messages."""
+    `light_scale` multiplies every light's power. `file` names it in messages. `volume` names
+    the node whose mesh only bounds the fog (`medium.bounds: {object: NAME}`): it is left out
+    of the geometry and its world box is `volume_bounds`."""
     path = Path(path)
     file = file or str(path)
     reader = _open(path, file)
@@ -1539,7 +1616,9 @@ def import_gltf(path: Path, file: str | None = None, camera: str | None = None, 
             reader.fail(f"nodes.{node}", "a transform that, with its parents', stays finite in float32",
                         f"a world matrix entry of {float(np.abs(world[node]).max()):.3g}")
     channels, duration = _channels(reader, graph)
-    instances, tris, normals, albedo, outward = _meshes(reader, graph, world, channels)
+    fog_node = volume_node(reader, replace(graph, channels=channels), volume) if volume is not None else None
+    volume_bounds = _volume_bounds(reader, fog_node, world[fog_node]) if fog_node is not None else None
+    instances, tris, normals, albedo, outward = _meshes(reader, graph, world, channels, skipped=fog_node)
     lights, light_nodes = _lights(reader, graph, world, light_scale)
     triangles = np.concatenate(tris) if tris else np.zeros((0, 3, 3))
     del tris
@@ -1550,6 +1629,8 @@ def import_gltf(path: Path, file: str | None = None, camera: str | None = None, 
     cameras = _cameras(reader, graph, world)
     scene_camera, camera_node = _camera(reader, cameras, camera, world, bounds)
     _notify_unrendered(reader, graph, len(cameras))
+    if volume is None:
+        _notify_fog_like(reader, graph)
     _check_coordinates(reader, triangles, lights, scene_camera)
     # The nodes' channels; a weights channel is its Deformation's (gltf_motion).
     graph = NodeGraph(graph.parents, graph.order, graph.matrices, graph.trs,
@@ -1564,7 +1645,7 @@ def import_gltf(path: Path, file: str | None = None, camera: str | None = None, 
                     outward=np.concatenate(outward) if outward else np.zeros(0, np.int8),
                     object_count=len(instances), instances=tuple(instances), lights=tuple(lights),
                     light_nodes=tuple(light_nodes), camera=scene_camera, camera_node=camera_node, graph=graph,
-                    duration=duration)
+                    duration=duration, volume_bounds=volume_bounds)
 
 
 def merge(scene: Scene, imported: Imported, own_camera: bool, own_animation: bool, fps: float,

@@ -33,7 +33,7 @@ from ..structs import CONVEX_OUTSIDE_ONLY
 from . import density_sources
 from .animation import Animation, DensityDrift, Key, ObjectRig, Track
 from .files import FileRefused, read_regular_file, scene_files
-from .fields import (ANIMATION, BOX, CAMERA, DENSITIES, FORMAT_VERSION, GLTF, IMAGE, LIGHTS, MAX_IMAGE_PIXELS,
+from .fields import (ANIMATION, BOX, VOLUME_OBJECT, CAMERA, DENSITIES, FORMAT_VERSION, GLTF, IMAGE, LIGHTS, MAX_IMAGE_PIXELS,
                      MAX_POWER, MEDIUM, OBJECT, OBJECTS, PHASES, QUATERNION_TOLERANCE, RENDER, ROTATE, SHADOW_FILTER,
                      TOP, TRANSFORM, TRANSPARENCY, Field, kinds)
 from .limits import MAX_COORDINATE, MAX_LIGHTS, MAX_OBJECTS, MAX_SCENE_BYTES, MAX_TRIANGLES
@@ -279,7 +279,20 @@ def _medium(node: Node | None, base_dir: Path = Path(".")) -> tuple[Medium, Dens
     return Medium(sigma_s=_read(MEDIUM["sigma_s"], m.get("sigma_s")),
                   sigma_a=_read(MEDIUM["sigma_a"], m.get("sigma_a")),
                   phase=_phase(m["phase"]) if "phase" in m else Phase(),
-                  bounds=_bounds(m["bounds"]) if "bounds" in m else None, density=density), drift
+                  bounds=_bounds(m["bounds"]) if "bounds" in m and not _volume_object(node) else None,
+                  density=density), drift
+
+
+def _volume_object(medium: Node | None) -> Node | None:
+    """`medium.bounds: {object: NAME}`'s name: a glTF node whose mesh bounds the fog (the box
+    around it) and is no geometry; None for a `{min, max}` box or no bounds."""
+    bounds = medium.value.get("bounds") if medium is not None and isinstance(medium.value, dict) else None
+    if bounds is None or not isinstance(bounds.value, dict) or "object" not in bounds.value:
+        return None
+    name = mapping(bounds, VOLUME_OBJECT.required)["object"]
+    if not isinstance(name.value, str) or not name.value:
+        name.fail("the name of a glTF node with a mesh")
+    return name
 
 
 def _bounds(node: Node) -> Box:
@@ -996,7 +1009,10 @@ def _scene(root: Node, filename: str, source: Path | str | None, overrides: Sequ
     base_dir = Path(source).parent if source is not None else Path.cwd()
     # With gltf, a camera of `near` alone adjusts the file's camera rather than replacing it.
     own_camera = "camera" in m and not ("gltf" in m and _near_alone(m["camera"]))
-    imported, fps = _gltf(m["gltf"], base_dir, own_camera) if "gltf" in m else (None, None)
+    volume = _volume_object(m.get("medium"))
+    if volume is not None and "gltf" not in m:
+        volume.fail("a glTF node's name, with a `gltf` file to find it in", f"{volume.value!r} without gltf")
+    imported, fps = _gltf(m["gltf"], base_dir, own_camera, volume) if "gltf" in m else (None, None)
     rigs: list[ObjectRig] = []
     textures = TextureCache()  # a file that several lights name is read once, and shared
     # Sections are read (and fail) in the order the format lists them.
@@ -1023,6 +1039,9 @@ def _scene(root: Node, filename: str, source: Path | str | None, overrides: Sequ
         if not own_sigma and "medium" in m:
             scene = dataclasses.replace(scene, medium=dataclasses.replace(
                 scene.medium, bounds=medium.bounds, density=medium.density))
+        if imported.volume_bounds is not None:
+            scene = dataclasses.replace(scene, medium=dataclasses.replace(
+                scene.medium, bounds=Box(*imported.volume_bounds)))
     if "render" in m and isinstance(m["render"].value, dict):
         _check_aovs(scene, m["render"].value.get("aovs"))
     if "animation" in m:
@@ -1030,8 +1049,10 @@ def _scene(root: Node, filename: str, source: Path | str | None, overrides: Sequ
     return scene
 
 
-def _gltf(node: Node, base_dir: Path, own_camera: bool) -> tuple[gltf_files.Imported, float]:
-    """`gltf: {file, camera, light_scale, fps}`: the file read (clrays.scene.gltf), and its fps."""
+def _gltf(node: Node, base_dir: Path, own_camera: bool,
+          volume: Node | None = None) -> tuple[gltf_files.Imported, float]:
+    """`gltf: {file, camera, light_scale, fps}`: the file read (clrays.scene.gltf), and its fps;
+    `volume`, `medium.bounds.object`, names its fog node."""
     if isinstance(node.value, dict) and "file" not in node.value and "camera" in node.value:
         node.fail("a glTF file to take the camera from (`--camera` names a camera of a glTF scene)",
                   "no gltf.file")
@@ -1048,7 +1069,8 @@ def _gltf(node: Node, base_dir: Path, own_camera: bool) -> tuple[gltf_files.Impo
         camera = str(m["camera"].value)
     path = Path(file.value)
     path = path if path.is_absolute() else base_dir / path
-    imported = gltf_files.import_gltf(path, str(path), camera, _read(GLTF["light_scale"], m.get("light_scale")))
+    imported = gltf_files.import_gltf(path, str(path), camera, _read(GLTF["light_scale"], m.get("light_scale")),
+                                      volume.value if volume is not None else None)
     return imported, _read(GLTF["fps"], m.get("fps"))
 
 
