@@ -43,6 +43,23 @@ inline float own_surface_slack(global const light_t* light, global const view_t*
     return depth - nearest + margin;
 }
 
+/* Whether a sample at p (normal n, on triangle tri) whose depth in its texel is at most the
+ * bias above the bound there is lit after all: its own surface's slack across the texel
+ * covers the difference (own_surface_slack, at the shadow ray's start). */
+inline int lit_within_own_slack(global const frame_t* frame, global const view_t* views,
+                                global const light_t* light, global const float4* tri_vertices, int tri, float3 p,
+                                float3 n, float depth, float bound_depth)
+{
+    float3 to_light;
+    light_reaches(light, frame->sigma_t.xyz, p, &to_light);
+    float3 start = shadow_ray_start(light, p, n, to_light);
+    global const view_t* view = views + light_view_index(light, start);
+    float reach = 0.0f; /* of the sample's triangle from the view's origin */
+    for (int k = 0; k < 3; ++k)
+        reach = inline_fmax(reach, exact_length(tri_vertices[3 * tri + k].xyz - view->origin.xyz));
+    return depth <= bound_depth + own_surface_slack(light, view, start, n, depth, reach);
+}
+
 /* The per-sample helpers below are written with inline_math.h's functions (the
  * library's operations in its order: the same bits) so that the per-sample kernels make
  * no library call on their common path (docs/design.md §4.5, "Cost on PoCL"). */
@@ -143,18 +160,10 @@ inline void decide_entry(global const frame_t* frame, global const view_t* views
         }
         /* Lit when depth ≤ bound + min(bias, slack), both ≥ 0: the slack's trigonometry
          * only within the bias (same answer as computing it first). */
-        if (depth <= bound_depth + SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth)) {
-            float3 to_light;
-            light_reaches(light, frame->sigma_t.xyz, p, &to_light);
-            float3 start = shadow_ray_start(light, p, n, to_light);
-            global const view_t* view = views + light_view_index(light, start);
-            float reach = 0.0f; /* of the sample's triangle from the view's origin */
-            for (int k = 0; k < 3; ++k)
-                reach = inline_fmax(reach, exact_length(tri_vertices[3 * tri + k].xyz - view->origin.xyz));
-            if (depth <= bound_depth + own_surface_slack(light, view, start, n, depth, reach)) {
-                out[l] = 1.0f;
-                return;
-            }
+        if (depth <= bound_depth + SURFACE_BIAS_TEXELS * shadow_texel_size(light, depth)
+            && lit_within_own_slack(frame, views, light, tri_vertices, tri, p, n, depth, bound_depth)) {
+            out[l] = 1.0f;
+            return;
         }
         float3 lookup = shadow_lookup(light, p, n);
         if (blocked_all_around(light, views, shadow_depth, lookup, p, n)) {
@@ -167,9 +176,10 @@ inline void decide_entry(global const frame_t* frame, global const view_t* views
 }
 
 /* decide_entry on LANES consecutive samples and one light at once. A lane within the bias
- * of its bound, whose own surface's slack decides (acos, cos), takes decide_entry alone;
- * 0, having written nothing, where a lane needs exact_length's library call. An
- * orthographic camera is never sent here. */
+ * of its bound has only its own surface's slack worked out alone (lit_within_own_slack);
+ * where that leaves it, it takes the 3 × 3 test with the others, in lanes, rather than the
+ * whole decision again (tests/stages/test_visibility_cost.py). 0, having written nothing,
+ * where a lane needs exact_length's library call. An orthographic camera is never sent here. */
 ALWAYS_INLINE int decide_lanes(global const frame_t* frame, global const view_t* views, global const light_t* lights,
                                int l, global const uint* shadow_depth, global const uint* bound,
                                global const int* writer, global const int2* map_read, global const uint* camera_depth,
@@ -211,7 +221,7 @@ ALWAYS_INLINE int decide_lanes(global const frame_t* frame, global const view_t*
     }
     int_lanes lit = pending & ((address == MAP_TEXEL_OUTSIDE) | (texel & ((depth <= bound_depth) | only_own)));
     int_lanes heavy = pending & texel & !lit;
-    int_lanes blocked = (int_lanes)(0), slack = (int_lanes)(0);
+    int_lanes blocked = (int_lanes)(0);
     if (any_lanes(heavy)) {
         /* camera_surface_point */
         float_lanes distance = load_run((global const float*)camera_depth, first);
@@ -226,8 +236,16 @@ ALWAYS_INLINE int decide_lanes(global const frame_t* frame, global const view_t*
         nx = facing_away ? -nx : nx, ny = facing_away ? -ny : ny, nz = facing_away ? -nz : nz;
         float_lanes bias_size = light->type == LIGHT_DIRECTIONAL ? (float_lanes)(light->texel_angle)
                                                                  : depth * light->texel_angle;
-        slack = heavy & (depth <= bound_depth + SURFACE_BIAS_TEXELS * bias_size); /* decide_entry's, lane by lane */
-        heavy &= !slack;
+        /* Within the bias of the bound, the own surface's slack decides, lane by lane; a lane
+         * it leaves takes the 3 × 3 test with the others, in lanes. */
+        int_lanes slack = heavy & (depth <= bound_depth + SURFACE_BIAS_TEXELS * bias_size);
+        if (any_lanes(slack))
+            for (int k = 0; k < LANES; ++k)
+                if (slack[k]
+                    && lit_within_own_slack(frame, views, light, tri_vertices, tri[k], (float3)(px[k], py[k], pz[k]),
+                                            (float3)(nx[k], ny[k], nz[k]), depth[k], bound_depth[k]))
+                    lit[k] = -1;
+        heavy &= !lit;
         /* lookup = shadow_lookup (lighting.h) lane by lane, then blocked_all_around */
         float3 position = light->position.xyz;
         float_lanes wx = px - position.x, wy = py - position.y, wz = pz - position.z;
@@ -279,7 +297,7 @@ ALWAYS_INLINE int decide_lanes(global const frame_t* frame, global const view_t*
                 blocked &= !(lookup_depth <= stored + tolerance) & !own_plane;
             }
     }
-    if (runs && !any_lanes(slack)) { /* the answers as one run of stores; the lanes left listed in turn */
+    if (runs) { /* the answers as one run of stores; the lanes left listed in turn */
         float_lanes decided = lit ? 1.0f : (blocked ? 0.0f : answer);
         *(global float8_at_float*)(visible + first) = pending ? decided : answer;
         int_lanes listed = pending & !lit & !blocked;
@@ -293,10 +311,7 @@ ALWAYS_INLINE int decide_lanes(global const frame_t* frame, global const view_t*
     }
     for (int k = 0; k < LANES; ++k) {
         if (!pending[k]) continue;
-        if (slack[k]) {
-            decide_entry(frame, views, lights, shadow_depth, bound, writer, map_read, camera_depth, tri_id, tri_vertices,
-                         tri_normal, offsets, visible, ray_entries, ray_count, first + k, l);
-        } else if (lit[k]) {
+        if (lit[k]) {
             visible[entry[k]] = 1.0f;
         } else if (blocked[k]) {
             visible[entry[k]] = 0.0f;

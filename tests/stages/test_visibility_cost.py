@@ -1,0 +1,80 @@
+"""The visibility decision's cost cut (cl/visibility.cl decide_lanes): a lane within the bias
+of its bound map has only its own surface's slack worked out on its own
+(lit_within_own_slack); where the slack leaves it, it takes the 3 × 3 test with the other
+lanes, in lanes, instead of the whole decision again one sample at a time (decide_entry).
+The invariant this relies on: the lanes' 3 × 3 test gives such a lane decide_entry's answer,
+so every entry's decision, hence every image, is the one decided sample by sample. And the
+images stay within 0.5 % relative RMSE of `exact` at small sizes."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import clrays.stages.visibility as stage
+from clrays.device import Device
+from clrays.reference.metrics import depth_edges, depth_map, image_error
+from clrays.scene.load import load_scene
+from clrays import session
+from clrays.session import Renderer
+from conftest import make_scene
+from test_visibility_bound import LIGHTS, _triangles
+
+SCENES = Path(__file__).resolve().parents[2] / "scenes"
+
+
+def _decision(device, monkeypatch, scene, defines):
+    """(visible per sample and light, the shadow rays cast) of a frame whose visibility kernel
+    is built with `defines`."""
+    real_kernel, real_visibility, kept = Device.kernel, stage.visibility, {}
+
+    def kernel(self, stage_name, name, extra=None):
+        if stage_name == "visibility" and name == "visibility" and defines:
+            extra = {**(extra or {}), **defines}
+        return real_kernel(self, stage_name, name, extra)
+
+    def visibility(device, buffers, *args, **kwargs):
+        visible, rays = real_visibility(device, buffers, *args, **kwargs)
+        entries = buffers.inputs.samples * max(len(buffers.inputs.scene.lights), 1)
+        kept["visible"], kept["rays"] = device.read(visible, entries, np.float32), int(rays)
+        return visible, rays
+
+    monkeypatch.setattr(Device, "kernel", kernel)
+    monkeypatch.setattr(session, "visibility", visibility)  # (the name the frame calls)
+    Renderer(device, reuse=False).render(scene)
+    monkeypatch.undo()
+    assert "visible" in kept, "the frame ran no visibility stage"
+    return kept["visible"], kept["rays"]
+
+
+# behind's floor is lit at a grazing angle far from the eye: many lanes within the bias of
+# their bound, some of which the own slack leaves to the 3 × 3 test; grate's slats over a
+# floor give shadow edges every few texels.
+@pytest.mark.parametrize("name, size", [("behind", (160, 90)), ("behind", (203, 117)), ("grate", (160, 90)),
+                                        ("demo", (160, 90))])
+def test_the_decision_in_lanes_is_the_one_sample_by_sample(device, monkeypatch, name, size):
+    width, height = size
+    scene = load_scene(SCENES / f"{name}.yaml", overrides=[f"image.width={width}", f"image.height={height}"])
+    lanes, lane_rays = _decision(device, monkeypatch, scene, None)
+    alone, alone_rays = _decision(device, monkeypatch, scene, {"DECIDE_ONE_BY_ONE": 1})
+    np.testing.assert_array_equal(lanes.view(np.int32), alone.view(np.int32))
+    assert lane_rays == alone_rays
+    assert 0.0 < (lanes == 0.0).mean() < 1.0  # some entries shadowed, some lit: the test decides something
+
+
+@pytest.mark.parametrize("kind", LIGHTS)
+def test_several_lights_of_every_type_decide_as_one_by_one(device, monkeypatch, kind):
+    # two lights: the entries are no run of samples, so the lanes' answers are stored one by one
+    scene = make_scene(_triangles(), [LIGHTS[kind], LIGHTS["point"]], width=37, height=23, spp=2, shadow_map=64)
+    lanes, lane_rays = _decision(device, monkeypatch, scene, None)
+    alone, alone_rays = _decision(device, monkeypatch, scene, {"DECIDE_ONE_BY_ONE": 1})
+    np.testing.assert_array_equal(lanes.view(np.int32), alone.view(np.int32))
+    assert lane_rays == alone_rays
+
+
+@pytest.mark.parametrize("name", ["demo", "behind", "sun", "grate"])
+def test_small_images_stay_within_half_a_percent_of_exact(renderer, name):
+    scene = load_scene(SCENES / f"{name}.yaml", overrides=["image.width=96", "image.height=54"])
+    exact = renderer.render(scene, "exact").image
+    error = image_error(renderer.render(scene, "minmax").image, exact, depth_edges(depth_map(scene)))
+    print(f"{name} 96×54, minmax against exact: {error}")
+    assert error.rmse < 0.005
