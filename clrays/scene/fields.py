@@ -374,7 +374,7 @@ RENDER = Section("render", (
                 "miss its holes (the lattice at 1280×720: 0.20 % against `exact`, 1.56 % from the map); "
                 "`texels` at the texel boundary, as raymarch does: on the bench "
                 "scenes at 1280×720 a frame 1.1–1.3 × faster for 1.3–4.7 × the error against `exact` "
-                "([docs/design.md](design.md) §4.5, bench/RESULTS.md \"Accuracy: every scene at every size\"); e.g. "
+                "([docs/design.md](design.md) §4.5, bench/RESULTS.md history, \"Shaft edges on the blockers\"); e.g. "
                 "`--set render.shaft_edges=texels`", read_by=("minmax",)),
     Field("line_samples", "integer", Render.line_samples, 2, 16384,
           shown_default=f"from the image: half its diagonal in pixels, in [{MIN_LINE_SAMPLES}, {MAX_LINE_SAMPLES}]",
