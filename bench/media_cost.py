@@ -17,7 +17,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from stage_times import REPO, check_scenes, frame_arguments  # noqa: E402  (bench/, beside this script)
+from harness import REPO, check_scenes, frame_arguments  # noqa: E402  (bench/, beside this script)
 from clrays.scene.load import load_scene  # noqa: E402
 from clrays.scene.model import Box, GridDensity, HeightDensity  # noqa: E402
 from clrays.session import Renderer  # noqa: E402

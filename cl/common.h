@@ -207,6 +207,10 @@ typedef struct {
     int depth_nx;         /* optical-depth grid per light: nodes spanning the grid's bounds, */
     int depth_ny;         /*   light l's voxels start at l·depth_nx·depth_ny·depth_nz */
     int depth_nz;
+    int eye_depth_index;  /* the eye's optical-depth grid follows the lights': at this index */
+    int _pad0;
+    int _pad1;
+    int _pad2;
 } medium_t;
 
 #endif

@@ -1,6 +1,6 @@
 /* medium.h — a bounded or heterogeneous medium's density ρ(x) (a factor on σs and σa) and
  * optical depths ∫ρ ds (docs/media.md), in eye space. Reads medium_t, the density grid and
- * the per-light optical-depth grids (cl/light_depth.cl writes them); writes nothing.
+ * the lights' and the eye's optical-depth grids (cl/light_depth.cl writes them); writes nothing.
  *
  * Built with any of MEDIUM_BOUNDED (the box), MEDIUM_HEIGHT (ρ = exp(-(y - base)/H)) and
  * MEDIUM_GRID (trilinear between voxel centres, 0 outside the grid's bounds); without them
@@ -173,6 +173,18 @@ inline float toward_light(global const light_t* light, float3 p, float3* towards
     return reach;
 }
 
+#ifdef MEDIUM_GRID
+/* Optical-depth grid `index` (a light's, or the eye's at medium->eye_depth_index; written by
+ * cl/light_depth.cl) at p, trilinear between its nodes, p clamped into the grid's bounds. */
+inline float depth_grid_lookup(global const medium_t* medium, global const float* light_depth_grid, int index,
+                               float3 p)
+{
+    int count = medium->depth_nx * medium->depth_ny * medium->depth_nz;
+    return nodes_trilinear(light_depth_grid + index * count, medium->depth_nx, medium->depth_ny, medium->depth_nz,
+                           medium->grid_min.xyz, medium->grid_max.xyz, p);
+}
+#endif
+
 /* ∫ρ ds from p to light `light_index` (to infinity against a directional light's direction):
  * closed form for box and height fog; in a grid, the light's optical-depth grid looked up
  * trilinearly between its nodes (cl/light_depth.cl), or, for a point outside the grid's bounds (a surface),
@@ -182,13 +194,26 @@ inline float light_path_depth(MEDIUM_PARAMS, global const light_t* light, int li
     float3 towards;
     float reach = toward_light(light, p, &towards);
 #ifdef MEDIUM_GRID
-    if (all(p >= medium->grid_min.xyz) && all(p <= medium->grid_max.xyz)) {
-        int count = medium->depth_nx * medium->depth_ny * medium->depth_nz;
-        return nodes_trilinear(light_depth_grid + light_index * count, medium->depth_nx, medium->depth_ny,
-                               medium->depth_nz, medium->grid_min.xyz, medium->grid_max.xyz, p);
-    }
+    if (all(p >= medium->grid_min.xyz) && all(p <= medium->grid_max.xyz))
+        return depth_grid_lookup(medium, light_depth_grid, light_index, p);
 #endif
     return segment_depth(medium, density_grid, p, towards, 0.0f, reach);
+}
+
+/* ∫ρ ds along a camera ray o + t·d (d unit), t ∈ [0, t1]. In a grid, for a ray from the eye
+ * (eye space's origin: a perspective camera's), the eye's optical-depth grid looked up where
+ * the ray last is in the medium before t1 (ρ = 0 beyond): one lookup, not a march through
+ * every voxel on the way; otherwise segment_depth. */
+inline float eye_path_depth(MEDIUM_PARAMS, float3 o, float3 d, float t1)
+{
+#ifdef MEDIUM_GRID
+    if (all(o == 0.0f)) {
+        float t0 = 0.0f;
+        if (!medium_extent(medium, o, d, &t0, &t1)) return 0.0f;
+        return depth_grid_lookup(medium, light_depth_grid, medium->eye_depth_index, t1 * d);
+    }
+#endif
+    return segment_depth(medium, density_grid, o, d, 0.0f, t1);
 }
 
 #endif /* MEDIUM_VARYING */

@@ -182,8 +182,8 @@ inline float walk_gamma(int directional, float d_el, float sin_beta, float cos_b
  * falloff and phase near it, half in distance, which follow the density and the attenuation
  * where the ray runs away from the light (γ squeezes that part), merged in order; a
  * directional light's γ is the distance (times sinβ), so all of them evenly spaced.
- * T_e sums the optical depth node to node (a grid is marched once along the ray); T_l is
- * medium.h's light_path_depth (closed form, or the light's optical-depth grid). */
+ * T_e sums the optical depth node to node (in a grid, a lookup in the eye's optical-depth
+ * grid); T_l is medium.h's light_path_depth (closed form, or the light's optical-depth grid). */
 inline void medium_ray_build(const walk_medium_t* w, global const frame_t* frame, global const epipolar_t* ep,
                              int directional, float3 amplitude, float3 dir, float distance, float sin_beta,
                              float cos_beta, medium_ray_t* ray)
@@ -252,7 +252,11 @@ inline void medium_ray_build(const walk_medium_t* w, global const frame_t* frame
             s = clamp(s, s_before, s_out);
             gamma = clamp(gamma, ray->gamma[k - 1], gamma_out); /* rising, whatever the rounding */
         }
+#ifdef MEDIUM_GRID /* one lookup in the eye's optical-depth grid, not a march node to node */
+        eye_depth = eye_path_depth(m, w->density_grid, w->light_depth_grid, (float3)(0.0f), dir, s);
+#else
         eye_depth += segment_depth(m, w->density_grid, (float3)(0.0f), dir, s_before, s);
+#endif
         s_before = s;
         float3 x = s * dir;
         float density = walk_density(w, x);

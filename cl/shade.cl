@@ -365,8 +365,8 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
 #ifdef MEDIUM_VARYING /* T_e: the part of the camera ray inside the medium */
         vec_lanes to_eye;
         for (int k = 0; k < LANES; ++k) {
-            float3 through = exp(-sigma_t * segment_depth(medium, density_grid, lane_of(origin, k), lane_of(dir, k),
-                                                          0.0f, distance[k]));
+            float3 through = exp(-sigma_t * eye_path_depth(medium, density_grid, light_depth_grid, lane_of(origin, k),
+                                                           lane_of(dir, k), distance[k]));
             to_eye.x[k] = through.x;
             to_eye.y[k] = through.y;
             to_eye.z[k] = through.z;
@@ -387,8 +387,8 @@ kernel void shade(global const frame_t* frame, global const view_t* views,
                                            distance);
 #ifdef MEDIUM_VARYING
             for (int k = 0; k < LANES; ++k) {
-                float3 gain = exp(sigma_t * segment_depth(medium, density_grid, lane_of(origin, k), lane_of(dir, k),
-                                                          0.0f, start[k]));
+                float3 gain = exp(sigma_t * eye_path_depth(medium, density_grid, light_depth_grid, lane_of(origin, k),
+                                                           lane_of(dir, k), start[k]));
                 near_gain.x[k] = gain.x;
                 near_gain.y[k] = gain.y;
                 near_gain.z[k] = gain.z;

@@ -215,6 +215,7 @@ medium_dtype = np.dtype([
     ("height_base", np.float32), ("scale_height", np.float32),
     ("grid_nx", np.int32), ("grid_ny", np.int32), ("grid_nz", np.int32),
     ("depth_nx", np.int32), ("depth_ny", np.int32), ("depth_nz", np.int32),
+    ("eye_depth_index", np.int32), ("_pad0", np.int32), ("_pad1", np.int32), ("_pad2", np.int32),
 ])
 
 #: C struct name → dtype, for the layout test.

@@ -7,8 +7,12 @@ Along each axis the optical-depth grid has one node more than the density grid h
 the first and last on the bounds, with between LIGHT_DEPTH_SIDE_MIN and LIGHT_DEPTH_SIDE_MAX
 intervals: optical depth along light rays is smoother than the density (an integral of it), so
 a large grid's is coarser (the march per node crosses the whole grid), and a coarse grid's is
-finer (its depth still bends within a voxel where light rays cross it obliquely). Each node
+finer (its depth still bends within a voxel where light rays cross it obliquely: with 16
+intervals the eye's depth on a 4³ grid was 2.7 % off at worst, with 32, 0.39 %). Each node
 marches in quarter-voxel steps (cl/light_depth.cl).
+
+The eye has one too, after the lights' (medium_t.eye_depth_index): a camera ray's T_e to a
+point in the grid is then one lookup rather than a march through every voxel on the way.
 """
 from __future__ import annotations
 
@@ -17,7 +21,7 @@ import numpy as np
 from ..device import Device, StageTimer
 
 #: The fewest and most intervals between nodes along a side of a light's optical-depth grid.
-LIGHT_DEPTH_SIDE_MIN = 16
+LIGHT_DEPTH_SIDE_MIN = 32
 LIGHT_DEPTH_SIDE_MAX = 32
 
 
@@ -28,11 +32,12 @@ def light_depth_shape(grid_shape: tuple[int, int, int]) -> tuple[int, int, int]:
 
 def light_depth(device: Device, params, density_grid, lights, light_count: int,
                 shape: tuple[int, int, int], timer: StageTimer, defines: dict):
-    """A device buffer of `light_count` optical-depth grids of `shape` (nz, ny, nx), float32,
-    light after light; `params` the medium_t buffer, `density_grid` its values, `lights` the
-    frame's light_t buffer, `defines` the medium's build defines (MEDIUM_GRID among them)."""
+    """A device buffer of `light_count` + 1 optical-depth grids of `shape` (nz, ny, nx), float32,
+    light after light and the eye's last (`params`' eye_depth_index is `light_count`); `params`
+    the medium_t buffer, `density_grid` its values, `lights` the frame's light_t buffer,
+    `defines` the medium's build defines (MEDIUM_GRID among them)."""
     count = int(np.prod(shape))
-    out = device.buffer(nbytes=4 * count * max(light_count, 1))
+    out = device.buffer(nbytes=4 * count * (light_count + 1))
     kernel = device.kernel("light_depth", "light_depth", defines)
-    timer.add("light_depth", kernel(device.queue, (count, light_count), None, params, density_grid, lights, out))
+    timer.add("light_depth", kernel(device.queue, (count, light_count + 1), None, params, density_grid, lights, out))
     return out

@@ -1,7 +1,7 @@
 """A bounded or heterogeneous medium as a feature of the kernels that sample the medium
 (docs/media.md; the device side is cl/medium.h): its build defines (MEDIUM_BOUNDED,
 MEDIUM_HEIGHT, MEDIUM_GRID) and its kernel arguments (MEDIUM_ARGS: the medium_t, the density
-grid, the lights' optical-depth grids), as the features of clrays.stages.features offer them.
+grid, the lights' and the eye's optical-depth grids), as the features of clrays.stages.features offer them.
 
 A homogeneous medium (`Medium.homogeneous`) has no feature: `medium_feature` returns None,
 the kernels build without the defines and keep their bits.
@@ -22,8 +22,8 @@ from .light_depth import light_depth, light_depth_shape
 @dataclass
 class MediumFeature:
     """The medium on the device: `params` (medium_t), `density_grid` (float, the grid's
-    values or one unused float) and `light_depth_grid` (each light's optical depths, or one
-    unused float), made for the light_t buffer `lights`."""
+    values or one unused float) and `light_depth_grid` (each light's optical depths, then the
+    eye's, or one unused float), made for the light_t buffer `lights`."""
 
     build_defines: dict
     params: object
@@ -81,12 +81,13 @@ def medium_feature(device: Device, buffers: FrameBuffers, timer: StageTimer) -> 
         return buffers.medium
     defines = medium_defines(medium)
     params_host = medium_params(medium, buffers.inputs.eye_ws)
+    light_count = int(buffers.inputs.params["light_count"])
+    params_host["eye_depth_index"] = light_count
     params = device.buffer(params_host.reshape(1), writable=False)
     unused = lambda: device.buffer(np.zeros(1, np.float32), writable=False)
     if isinstance(medium.density, GridDensity):
         density_grid = device.buffer(np.ascontiguousarray(medium.density.values, dtype=np.float32), writable=False)
         shape = light_depth_shape(medium.density.values.shape)
-        light_count = int(buffers.inputs.params["light_count"])
         depth_grid = light_depth(device, params, density_grid, buffers.lights, light_count, shape, timer, defines)
     else:
         density_grid, depth_grid = unused(), unused()
