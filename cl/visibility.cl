@@ -70,6 +70,27 @@ inline int lit_within_own_slack(global const frame_t* frame, global const view_t
 #define VISIBILITY_SHADOWED_TEST 1
 #endif
 
+/* With reliefs, the first of their triangles (they come after all others: place_reliefs):
+ * the 3 × 3 test holds only where none of the nine texels was drawn by a relief, whose
+ * holes, finer than a texel, it would miss; those samples cast their rays. The triangle is
+ * the keys' other word, so the maps' depths must be their keys (SHADOW_DEPTH_IN_KEYS). */
+#ifdef VISIBILITY_RELIEF_FIRST
+#if !SHADOW_DEPTH_IN_KEYS
+#error "VISIBILITY_RELIEF_FIRST reads the shadow maps' keys: build with SHADOW_DEPTH_IN_KEYS"
+#endif
+#define SHADOW_TRIANGLE_AT(i) (2 * (i) + 1 - KEY_DEPTH_WORD)
+#endif
+
+/* Whether shadow-map texel i (clamped, of the whole atlas) was drawn by a relief's triangle. */
+ALWAYS_INLINE int drawn_by_relief(global const uint* shadow_depth, int i)
+{
+#ifdef VISIBILITY_RELIEF_FIRST
+    return (int)shadow_depth[SHADOW_TRIANGLE_AT(i)] >= VISIBILITY_RELIEF_FIRST; /* none: -1 */
+#else
+    return 0;
+#endif
+}
+
 /* The depth, along the ray of texel centre (tx, ty) of a view, of the plane through p
  * with normal n: where that ray meets the sample's own plane; not positive where it does
  * not (behind the origin, or parallel: ±INFINITY or NaN). With the view's right, up and
@@ -115,6 +136,7 @@ ALWAYS_INLINE int blocked_all_around(global const light_t* light, global const v
             float stored = shadow_texel(view, shadow_depth, tx + i, ty + j);
             if (depth <= stored + tolerance) return 0;
             int cx = inline_clamp_int(tx + i, 0, view->width - 1), cy = inline_clamp_int(ty + j, 0, view->height - 1);
+            if (drawn_by_relief(shadow_depth, view->depth_offset + cy * view->width + cx)) return 0;
             float own = own_plane_depth(view, p, n, cx, cy);
             if (own > 0.0f && stored + tolerance >= own) return 0;
         }
@@ -287,8 +309,12 @@ ALWAYS_INLINE int decide_lanes(global const frame_t* frame, global const view_t*
         int perspective = light->type != LIGHT_DIRECTIONAL;
         for (int j = 0; j < 3; ++j)
             for (int i = 0; i < 3; ++i) {
-                float_lanes stored = LOAD_LANES((global const float*)shadow_depth,
-                                                SHADOW_DEPTH_AT(v.depth_offset + cys[j] * v.width + cxs[i]));
+                int_lanes texel_index = v.depth_offset + cys[j] * v.width + cxs[i];
+                float_lanes stored = LOAD_LANES((global const float*)shadow_depth, SHADOW_DEPTH_AT(texel_index));
+#ifdef VISIBILITY_RELIEF_FIRST /* drawn_by_relief */
+                blocked &= as_int8(LOAD_LANES((global const float*)shadow_depth, SHADOW_TRIANGLE_AT(texel_index)))
+                           < VISIBILITY_RELIEF_FIRST;
+#endif
                 float_lanes t = perspective
                                     ? num * sqrt_lanes(1.0f + spread_x[i] + spread_y[j])
                                           / (along_forward + across_x[i] + across_y[j])

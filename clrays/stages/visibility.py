@@ -398,12 +398,8 @@ def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, pr
     entries = inputs.samples * max(len(inputs.scene.lights), 1)
     ray_entries = RAY_ENTRIES.allocate(device, frame_sizes(inputs))
     ray_count = device.buffer(np.zeros(2, np.int32))  # rays, and those with no texel
-    # A relief's holes are finer than the map's texels, and the 3 × 3 test calls a sample seen
-    # through one shadowed (docs/design.md §4.6): with a relief, a sample the maps do not
-    # call lit casts its ray.
-    defines = {"VISIBILITY_SHADOWED_TEST": 0} if inputs.scene.geometry.reliefs else {}
-    if rastered.depth_in_keys:  # the maps' depths are their keys' depth words (stages/raster.py depth_in_keys)
-        defines["SHADOW_DEPTH_IN_KEYS"] = 1
+    defines = {"SHADOW_DEPTH_IN_KEYS": 1} if rastered.depth_in_keys else {}  # (stages/raster.py depth_in_keys)
+    defines.update(relief_defines(inputs.scene.geometry, rastered.depth_in_keys))
     timer.add("visibility", device.kernel("visibility", "visibility", defines)(
         device.queue, (-(-inputs.samples // PREPARE_LANES),), None, buffers.params, buffers.views, buffers.lights,
         rastered.shadow_depth, bound.bound, bound.writer, prepared.map_read, rastered.camera_depth, rastered.tri_id,
@@ -444,6 +440,29 @@ def visibility(device: Device, buffers: FrameBuffers, rastered: RasterResult, pr
         _cast_through_bvh(device, buffers, rastered, prepared, bvh(), ray_entries, ray_count, int(rays),
                           (route, np.int32(structs.VISIBILITY_ROUTE_ANY)), timer)
     return prepared.visible, int(rays)
+
+
+def relief_defines(geometry, depth_in_keys: bool) -> dict:
+    """The visibility kernel's defines for a geometry's reliefs. A relief's holes are finer
+    than the map's texels, and the 3 × 3 test calls a sample seen through one shadowed
+    (docs/visibility.md): where the maps' depths are their keys, which carry each texel's
+    triangle, and the reliefs' triangles are the last ones (`place_reliefs`), the test skips
+    a sample whose nine texels hold a relief's triangle (`VISIBILITY_RELIEF_FIRST`); else
+    it is built without the test, and every sample the maps do not call lit casts its ray."""
+    if not geometry.reliefs:
+        return {}
+    first = relief_first_triangle(geometry)
+    if not depth_in_keys or first is None:
+        return {"VISIBILITY_SHADOWED_TEST": 0}
+    return {"VISIBILITY_RELIEF_FIRST": first}
+
+
+def relief_first_triangle(geometry) -> int | None:
+    """The index of the reliefs' first triangle where their triangles are the geometry's
+    last (`place_reliefs` puts them there for the pre-warp), None otherwise."""
+    rows = sorted((record.rows.start, record.rows.stop) for record in geometry.reliefs)
+    contiguous = all(stop == next_start for (_, stop), (next_start, _) in zip(rows, rows[1:]))
+    return rows[0][0] if contiguous and rows[-1][1] == geometry.count else None
 
 
 def bvh_ahead(device: Device) -> bool:

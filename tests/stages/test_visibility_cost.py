@@ -5,6 +5,7 @@ lanes, in lanes, instead of the whole decision again one sample at a time (decid
 The invariant this relies on: the lanes' 3 × 3 test gives such a lane decide_entry's answer,
 so every entry's decision, hence every image, is the one decided sample by sample. And the
 images stay within 0.5 % relative RMSE of `exact` at small sizes."""
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +13,7 @@ import pytest
 
 import clrays.stages.visibility as stage
 from clrays.device import Device
+from clrays.inputs import frame_inputs
 from clrays.reference.metrics import depth_edges, depth_map, image_error
 from clrays.scene.load import load_scene
 from clrays import session
@@ -78,3 +80,34 @@ def test_small_images_stay_within_half_a_percent_of_exact(renderer, name):
     error = image_error(renderer.render(scene, "minmax").image, exact, depth_edges(depth_map(scene)))
     print(f"{name} 96×54, minmax against exact: {error}")
     assert error.rmse < 0.005
+
+
+# The lattice's relief has holes finer than a shadow-map texel, which the 3 × 3 test misses:
+# with reliefs it holds only where none of the nine texels was drawn by a relief's triangle
+# (VISIBILITY_RELIEF_FIRST), and every other sample the maps leave casts its ray, as a build
+# without the test (VISIBILITY_SHADOWED_TEST 0) casts one for each.
+@pytest.mark.parametrize("size", [(160, 90), (320, 180)])
+def test_the_relief_aware_shadowed_test_gives_the_rays_answers_on_the_lattice(device, monkeypatch, size):
+    width, height = size
+    scene = load_scene(SCENES / "lattice.yaml", overrides=[f"image.width={width}", f"image.height={height}"])
+    assert "VISIBILITY_RELIEF_FIRST" in stage.relief_defines(frame_inputs(scene).scene.geometry, True)
+    relief_aware, relief_aware_rays = _decision(device, monkeypatch, scene, None)
+    every_ray, every_rays = _decision(device, monkeypatch, scene, {"VISIBILITY_SHADOWED_TEST": 0})
+    np.testing.assert_array_equal(relief_aware.view(np.int32), every_ray.view(np.int32))
+    print(f"lattice {width}×{height}: {relief_aware_rays} rays with the relief-aware test, {every_rays} without")
+    assert relief_aware_rays < every_rays / 2  # the test decides most of the shadowed samples
+
+
+def test_the_reliefs_first_triangle_only_where_they_are_last():
+    scene = load_scene(SCENES / "lattice.yaml")
+    placed = frame_inputs(scene).scene.geometry
+    first = stage.relief_first_triangle(placed)
+    assert first == placed.count - sum(r.rows.stop - r.rows.start for r in placed.reliefs)
+    assert 0 < first < placed.count
+    # a relief that is not last: no relief-aware test, the test is built off
+    record = placed.reliefs[0]
+    moved = replace(placed, reliefs=(replace(record, rows=slice(0, record.rows.stop - record.rows.start)),))
+    assert stage.relief_first_triangle(moved) is None
+    assert stage.relief_defines(moved, True) == {"VISIBILITY_SHADOWED_TEST": 0}
+    # without keys the texels' triangles are unknown
+    assert stage.relief_defines(placed, False) == {"VISIBILITY_SHADOWED_TEST": 0}
