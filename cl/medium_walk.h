@@ -10,7 +10,8 @@
 #include "medium.h"
 #include "lighting.h"
 
-/* Nodes of a ray's prefix (docs/media.md, "Precision"). */
+/* Nodes of a ray's prefix (docs/media.md, "Precision"); a grid's follow its voxels, set by the
+ * host (clrays.stages.medium.walk_nodes). */
 #ifndef MEDIUM_NODES
 #define MEDIUM_NODES 32
 #endif

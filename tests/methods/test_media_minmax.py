@@ -513,9 +513,11 @@ def test_volume_moments_refused_in_one_line(renderer):
 
 @pytest.mark.slow
 @pytest.mark.xfail(reason="scenes/smoke.yaml's 48×32×48 noise grid (voxels 0.125 m, the top octave's wavelength "
-                          "0.28 m) is finer than the walk's 32 nodes and the light's 33³ optical-depth grid resolve: "
-                          "minmax 8.4 % / 5.0 % and raymarch 2.7 % against exact at 96×64 / 160×90 "
-                          "(bench/errors.py smoke --pixels 400); 96 nodes: 4.0 %", strict=True)
+                          "0.28 m) varies across pixels faster than epipolar sampling interpolates: with nodes "
+                          "and depth grids that follow the voxels (256 nodes a ray, 97×65×97 depth nodes) minmax "
+                          "is 2.2 % / 2.1 % against exact at 96×64 / 160×90 (0.78 % / 0.61 % with "
+                          "render.sampling: pixel), raymarch 1.0 % / 1.6 % (bench/errors.py smoke --pixels 400); "
+                          "before, 8.4 % / 5.0 % and 2.8 %; this test at 32×18: 0.63 %", strict=True)
 def test_the_smoke_scene_within_half_a_percent_of_exact(renderer):
     from pathlib import Path
 
