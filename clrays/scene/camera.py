@@ -84,13 +84,6 @@ def from_ray_starts(ray: np.ndarray, a: np.ndarray, b: np.ndarray, starts: np.nd
     return (ray[keep], a[keep], b[keep], *(values[keep] for values in more))
 
 
-def near_gain(starts: np.ndarray, depth: np.ndarray, sigma_t: np.ndarray) -> np.ndarray:
-    """(N, 3) e^{σt·min(t0, D)}: what turns light attenuated from the eye into light
-    attenuated from the ray's start t0 (`ray_starts`), as a surface at D (or the fog in front
-    of it) has it. A surface nearer than t0 stays as seen from the eye, unattenuated."""
-    return np.exp(sigma_t * np.minimum(starts, depth)[:, None])
-
-
 def slice_basis(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unit u, w with (u, w, axis) orthonormal: α = atan2(v·w, v·u)."""
     helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
