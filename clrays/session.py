@@ -788,6 +788,9 @@ def _near_gain(scene: Scene) -> np.ndarray | float:
     t0. 1.0 without near."""
     if scene.camera.near == 0.0:
         return 1.0
+    if not scene.medium.homogeneous:  # its gain is 1/T_e(t0), which only shade has (cl/shade.cl)
+        raise ClraysError(f"{scene.source or 'scene'}: render.aovs: the per-light in-scattering passes with "
+                          f"camera.near > 0 need a homogeneous medium (no medium.bounds or medium.density)")
     starts = ray_starts(scene.camera, primary_rays(scene.camera, scene.image).reshape(-1, 3))
     gain = np.ones((len(starts), 4))
     gain[:, :3] = np.exp(np.outer(starts, scene.medium.sigma_t))

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from clrays.errors import SceneError
+from clrays.errors import ClraysError, SceneError
 from clrays.reference.exact import exact_pixels
 from clrays.reference.metrics import depth_edges, depth_map, image_error
 from clrays.scene.camera import camera_basis, primary_rays
@@ -176,6 +176,16 @@ def test_the_passes_measure_from_each_rays_start(renderer):
                                atol=1e-7)
     image = result.passes["surface"] * result.passes["transmittance"] + result.passes["in_scatter"]
     np.testing.assert_allclose(image, result.image, rtol=1e-4, atol=1e-6)
+
+
+def test_per_light_passes_with_a_near_distance_in_a_bounded_fog_are_refused_in_one_line(renderer):
+    """Their gain would be 1/T_e(t0) of the medium, which the host does not have: refused, not wrong."""
+    scene = _occluder_scene(LIGHTS["point"], 1.2)
+    scene = replace(scene, medium=replace(scene.medium, **BOUNDED_HEIGHT_FOG),
+                    render=replace(scene.render, aovs=("in_scatter", "in_scatter_light0")))
+    with pytest.raises(ClraysError, match=r"render\.aovs: the per-light in-scattering passes with camera\.near > 0 "
+                                          r"need a homogeneous medium"):
+        renderer.render(scene, "minmax")
 
 
 @pytest.mark.parametrize("kind", ["gathered", "depth_peeling"])
